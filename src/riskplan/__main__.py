@@ -1,0 +1,3 @@
+from riskplan.cli import main
+
+main()

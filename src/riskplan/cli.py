@@ -1,0 +1,109 @@
+"""The ``riskplan`` command.
+
+Each area registers its subcommands from ``riskplan/commands/<area>.py``; those
+modules import only typer at import time and the heavy libraries inside each
+command, so ``riskplan --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import logging
+import os
+from pathlib import Path
+
+import typer
+
+app = typer.Typer(
+    name="riskplan",
+    help="Risk-aware motion planning for medical robots.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_show_locals=False,
+)
+
+# Areas in pipeline order. Each module defines ``register(app: typer.Typer) -> None``.
+AREAS = ("robot", "dataset", "kinematics", "collision", "tissue")
+# Benchmarks: ``riskplan.bench.<area>.run(quick: bool) -> dict``.
+BENCH_AREAS = ("robot", "kinematics", "collision", "tissue")
+
+
+def _setup_threads() -> None:
+    # torch and SciPy share few cores; one thread each is faster here (see docs/architecture.md).
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+    os.environ.setdefault("MPLBACKEND", "Agg")
+    os.environ.setdefault("RAY_AUTH_MODE", "disabled")
+
+
+@app.callback()
+def _main(verbose: bool = typer.Option(False, "--verbose", "-v", help="Log diagnostics to stderr.")) -> None:
+    _setup_threads()
+    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+
+
+@app.command()
+def demo(
+    out: Path = typer.Option(Path("demo-out"), "--out", "-o", help="Folder for report.html and figures."),
+    seed: int = typer.Option(0, help="Master seed."),
+    workers: int = typer.Option(0, help="Worker processes (0: one per core)."),
+) -> None:
+    """Run the main job on embedded defaults and write OUT/report.html."""
+    from riskplan.experiments.demo import run_demo
+
+    path = run_demo(out, seed=seed, workers=workers or None)
+    typer.echo(f"report: {path}")
+
+
+@app.command()
+def bench(
+    area: str = typer.Argument(..., help=f"One of: {', '.join(BENCH_AREAS)}."),
+    json_out: bool = typer.Option(False, "--json", help="Print one JSON object of figures."),
+    quick: bool = typer.Option(False, "--quick", help="Fewer repetitions (for smoke tests)."),
+) -> None:
+    """Measure the speed figures of one area."""
+    if area not in BENCH_AREAS:
+        raise typer.BadParameter(f"unknown area {area!r}; expected one of {', '.join(BENCH_AREAS)}", param_hint="AREA")
+    _limit_torch_threads()
+    mod = importlib.import_module(f"riskplan.bench.{area}")
+    figures = mod.run(quick=quick)
+    if json_out:
+        typer.echo(json.dumps(figures))
+    else:
+        from rich.console import Console
+        from rich.table import Table
+
+        table = Table(title=f"riskplan bench {area}")
+        table.add_column("figure")
+        table.add_column("value", justify="right")
+        for k, v in figures.items():
+            table.add_row(k, f"{v:.4g}" if isinstance(v, float) else str(v))
+        Console().print(table)
+
+
+def _limit_torch_threads() -> None:
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+    except ImportError:  # pragma: no cover
+        pass
+
+
+for _area in AREAS:
+    importlib.import_module(f"riskplan.commands.{_area}").register(app)
+
+
+def main() -> None:
+    from riskplan.errors import RiskplanError
+
+    try:
+        app()
+    except RiskplanError as exc:
+        typer.secho(f"error: {exc}", fg="red", err=True)
+        raise SystemExit(2) from exc
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

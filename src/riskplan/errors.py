@@ -1,0 +1,99 @@
+"""One exception hierarchy for riskplan.
+
+Every error the library raises on purpose derives from :class:`RiskplanError`, and
+also from the builtin a caller would expect (``ValueError`` for bad arguments,
+``RuntimeError`` for numerical failure, ``ImportError`` for a missing optional
+dependency), so ``except ValueError`` keeps working for code that does not know
+riskplan.
+
+=============================  ==========================  =====================================
+class                          builtin base                raised when
+=============================  ==========================  =====================================
+``InvalidInputError``          ``ValueError``              an argument has the wrong shape, type,
+                                                           range, or is not finite
+``RobotDescriptionError``      ``ValueError``              a robot TOML file is malformed (names
+                                                           the key)
+``DataFormatError``            ``ValueError``              a data set / model file is corrupted or
+                                                           does not match what it is used with
+``ConvergenceError``           ``RuntimeError``            an iterative solver did not converge
+                                                           (carries the residual)
+``ElementInversionError``      ``RuntimeError``            a finite element inverted (det F <= 0)
+``MissingDependencyError``     ``ImportError``             an optional extra is not installed
+=============================  ==========================  =====================================
+"""
+
+from __future__ import annotations
+
+
+class RiskplanError(Exception):
+    """Base class of every error raised on purpose by riskplan."""
+
+
+class InvalidInputError(RiskplanError, ValueError):
+    """An argument is malformed: wrong shape, type or range, or not finite.
+
+    The message names the argument and what was expected.
+    """
+
+
+class RobotDescriptionError(InvalidInputError):
+    """A robot description (TOML) is malformed; ``key`` names the offending entry."""
+
+    def __init__(self, message: str, key: str | None = None):
+        super().__init__(message)
+        self.key = key
+
+
+class DataFormatError(InvalidInputError):
+    """A file (data set, model checkpoint) is corrupted or does not match its use."""
+
+
+class ConvergenceError(RiskplanError, RuntimeError):
+    """An iterative solver stopped without meeting its tolerance.
+
+    Attributes
+    ----------
+    residual:
+        The last residual norm the solver reached (``None`` if not applicable).
+    iterations:
+        Iterations performed.
+    """
+
+    def __init__(self, message: str, residual: float | None = None, iterations: int | None = None):
+        super().__init__(message)
+        self.residual = residual
+        self.iterations = iterations
+
+
+class ElementInversionError(RiskplanError, RuntimeError):
+    """A finite element inverted (``det F <= 0``) during a nonlinear solve.
+
+    Attributes
+    ----------
+    elements:
+        Indices of the inverted elements.
+    min_jacobian:
+        The smallest ``det F`` seen.
+    """
+
+    def __init__(self, message: str, elements=None, min_jacobian: float | None = None):
+        super().__init__(message)
+        self.elements = elements
+        self.min_jacobian = min_jacobian
+
+
+class MissingDependencyError(RiskplanError, ImportError):
+    """An optional dependency is needed for this feature but is not installed."""
+
+
+def require(module: str, extra: str):
+    """Import ``module`` or raise :class:`MissingDependencyError` naming the pip extra."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise MissingDependencyError(
+            f"{module!r} is required for this feature; install it with "
+            f"`pip install 'riskplan[{extra}]'`"
+        ) from exc

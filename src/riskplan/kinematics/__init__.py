@@ -1,6 +1,11 @@
 """Learned probabilistic kinematics: Gaussian mixtures and the mixture density network
-(MDN paper, sections III-IV)."""
+(MDN paper, sections III-IV).
 
+``load_model(path) -> MDNModel``; ``model.predict(displacements (..., m)) -> GaussianMixture``.
+"""
+
+from riskplan.kinematics.mdn import MDN, MDNModel, Normalisation
 from riskplan.kinematics.mixture import GaussianMixture
+from riskplan.kinematics.model_io import load_model, save_model
 
-__all__ = ["GaussianMixture"]
+__all__ = ["MDN", "GaussianMixture", "MDNModel", "Normalisation", "load_model", "save_model"]

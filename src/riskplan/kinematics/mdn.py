@@ -1,0 +1,372 @@
+"""The mixture density network (MDN paper, section III, Fig. 2) and the trained model.
+
+Network: normalised tendon displacements ``(..., m)`` → shared fully connected trunk →
+three separate fully connected heads producing, for each of ``K`` components,
+
+* a weight logit (weights through a softmax, eq. 1 requires ``w >= 0, sum w = 1``),
+* a mean ``mu_k`` (``d = 3``),
+* the ``d(d+1)/2`` unconstrained entries of ``U_k``: strictly-upper entries are used
+  as they are, diagonal entries through ``exp`` (eq. 2), so ``Sigma_k^{-1} = Ubar_k^T Ubar_k``
+  (eq. 3) is positive definite for any network output.
+
+The loss is the mean negative log-likelihood of a configuration's ground-truth points
+(the loss after eq. 7), with ``log |Sigma^{-1}|^{1/2} = sum_j log diag(Ubar)_j`` (eqs. 4-6).
+
+The network works in normalised coordinates: inputs ``(d - input_mean) / input_scale``
+and points ``(x - output_centre) / output_scale`` (per axis). :class:`MDNModel` maps the
+mixture back to metres: ``mu = c + s * mu_n`` and ``Ubar = Ubar_n diag(1/s)`` (still
+upper triangular), so ``log p(x) = log p_n(x_n) - sum log s``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from torch import nn
+
+from riskplan._validation import as_array
+from riskplan.errors import InvalidInputError
+from riskplan.kinematics.mixture import GaussianMixture
+
+# exp of a raw diagonal entry is clamped to exp(+-LOG_DIAG_BOUND): eq. 2 holds exactly inside this
+# range (standard deviations from 2e-9 to 5e8 in normalised units), and outside it the output and its
+# gradient stay finite instead of overflowing for extreme inputs.
+LOG_DIAG_BOUND = 20.0
+ACTIVATIONS = ("silu", "tanh", "relu")
+# Displacements may exceed the robot's limits by this much (rounding in files and conversions).
+LIMIT_SLACK = 1e-9
+
+
+def n_cholesky_entries(d: int) -> int:
+    return d * (d + 1) // 2
+
+
+def _act_module(name: str) -> nn.Module:
+    return {"silu": nn.SiLU, "tanh": nn.Tanh, "relu": nn.ReLU}[name]()
+
+
+def _mlp(n_in: int, widths, n_out: int, activation: str) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for w in widths:
+        layers += [nn.Linear(n_in, w), _act_module(activation)]
+        n_in = w
+    layers.append(nn.Linear(n_in, n_out))
+    return nn.Sequential(*layers)
+
+
+class MDN(nn.Module):
+    """Fig. 2: trunk + separate heads for weights, means and the unconstrained ``U``.
+
+    ``forward(x (..., m))`` returns ``(log_weights (..., K), means (..., K, d),
+    precision_cholesky (..., K, d, d))`` in normalised coordinates.
+    """
+
+    def __init__(
+        self,
+        n_inputs: int,
+        n_components: int,
+        dim: int = 3,
+        hidden=(64, 64),
+        head_hidden=(32,),
+        activation: str = "silu",
+    ):
+        super().__init__()
+        if n_inputs < 1 or n_components < 1 or dim < 1:
+            raise InvalidInputError(f"MDN: need n_inputs, n_components, dim >= 1, got {n_inputs}, {n_components}, {dim}")
+        if activation not in ACTIVATIONS:
+            raise InvalidInputError(f"activation: expected one of {ACTIVATIONS}, got {activation!r}")
+        hidden, head_hidden = tuple(int(h) for h in hidden), tuple(int(h) for h in head_hidden)
+        if not hidden or any(h < 1 for h in hidden + head_hidden):
+            raise InvalidInputError(f"hidden: expected at least one positive width, got {hidden} (heads {head_hidden})")
+        self.n_inputs, self.n_components, self.dim = n_inputs, n_components, dim
+        self.hidden, self.head_hidden, self.activation = hidden, head_hidden, activation
+        trunk: list[nn.Module] = []
+        n = n_inputs
+        for w in hidden:
+            trunk += [nn.Linear(n, w), _act_module(activation)]
+            n = w
+        self.trunk = nn.Sequential(*trunk)
+        K, T = n_components, n_cholesky_entries(dim)
+        self.weight_head = _mlp(n, head_hidden, K, activation)
+        self.mean_head = _mlp(n, head_hidden, K * dim, activation)
+        self.chol_head = _mlp(n, head_hidden, K * T, activation)
+        rows, cols = torch.triu_indices(dim, dim)
+        self.register_buffer("_flat_index", rows * dim + cols, persistent=False)
+        self.register_buffer("_is_diag", rows == cols, persistent=False)
+        self._init_output_layers()
+
+    def _init_output_layers(self) -> None:
+        # Start from a sensible mixture: equal weights, means spread like the normalised data (unit
+        # scale), covariances of the data's scale (U = I), so the first NLL is moderate.
+        with torch.no_grad():
+            for head in (self.weight_head, self.chol_head):
+                head[-1].weight.mul_(0.1)
+                head[-1].bias.zero_()
+
+    def architecture(self) -> dict:
+        return {
+            "n_inputs": self.n_inputs,
+            "n_components": self.n_components,
+            "dim": self.dim,
+            "hidden": list(self.hidden),
+            "head_hidden": list(self.head_hidden),
+            "activation": self.activation,
+        }
+
+    def raw(self, x: torch.Tensor):
+        """Head outputs ``(logits (..., K), means (..., K*d), u_raw (..., K*T))``."""
+        h = self.trunk(x)
+        return self.weight_head(h), self.mean_head(h), self.chol_head(h)
+
+    def forward(self, x: torch.Tensor):
+        logits, mu, u_raw = self.raw(x)
+        batch = x.shape[:-1]
+        K, d = self.n_components, self.dim
+        log_w = torch.log_softmax(logits, dim=-1)
+        means = mu.reshape(*batch, K, d)
+        u = build_precision_cholesky(u_raw.reshape(*batch, K, -1), d, self._flat_index, self._is_diag)
+        return log_w, means, u
+
+
+def build_precision_cholesky(u_raw: torch.Tensor, d: int, flat_index=None, is_diag=None) -> torch.Tensor:
+    """Eq. 2: ``Ubar_jk = U_jk`` for ``j < k``, ``exp(U_jj)`` on the diagonal, zero below.
+
+    ``u_raw (..., K, d(d+1)/2)`` lists the upper triangle row by row
+    (``torch.triu_indices`` order); returns ``(..., K, d, d)``. The diagonal's raw
+    values are clamped to ``[-LOG_DIAG_BOUND, LOG_DIAG_BOUND]`` before ``exp``.
+    """
+    if flat_index is None:
+        rows, cols = torch.triu_indices(d, d, device=u_raw.device)
+        flat_index, is_diag = rows * d + cols, rows == cols
+    vals = torch.where(is_diag, torch.exp(torch.clamp(u_raw, -LOG_DIAG_BOUND, LOG_DIAG_BOUND)), u_raw)
+    out = u_raw.new_zeros(*u_raw.shape[:-1], d * d)
+    out = out.index_copy(out.ndim - 1, flat_index, vals)
+    return out.reshape(*u_raw.shape[:-1], d, d)
+
+
+def mixture_log_prob(log_weights: torch.Tensor, means: torch.Tensor, u: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+    """Eq. 1 with eqs. 4-6, from log-weights (stable for weights that underflow to zero).
+
+    ``log_weights (..., K)``, ``means (..., K, d)``, ``u (..., K, d, d)``, ``points (..., N, d)``
+    → ``(..., N)``: ``logsumexp_k [log w_k + sum_j log U_k,jj - ||U_k (x - mu_k)||^2 / 2] - d/2 log 2 pi``.
+    """
+    d = means.shape[-1]
+    diff = points.unsqueeze(-3) - means.unsqueeze(-2)  # (..., K, N, d)
+    y = torch.einsum("...kij,...knj->...kni", u, diff)
+    sq = (y * y).sum(-1)
+    logdet = torch.log(torch.diagonal(u, dim1=-2, dim2=-1)).sum(-1)
+    comp = logdet.unsqueeze(-1) - 0.5 * sq
+    return torch.logsumexp(log_weights.unsqueeze(-1) + comp, dim=-2) - 0.5 * d * math.log(2.0 * math.pi)
+
+
+def mdn_nll(net: MDN, x: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+    """The paper's loss (after eq. 7): mean over configurations and points of ``-log p(x | y)``.
+
+    ``x (B, m)`` normalised inputs, ``points (B, N, d)`` normalised points; scalar.
+    """
+    log_w, means, u = net(x)
+    return -mixture_log_prob(log_w, means, u, points).mean()
+
+
+@dataclass(frozen=True)
+class Normalisation:
+    """Affine maps of inputs and points (fitted on the training split)."""
+
+    input_mean: np.ndarray
+    input_scale: np.ndarray
+    output_centre: np.ndarray
+    output_scale: np.ndarray
+
+    @classmethod
+    def fit(cls, displacements: np.ndarray, points: np.ndarray) -> Normalisation:
+        """Inputs: mean/std per tendon; points: mean/std per axis over all points."""
+        im = displacements.mean(0)
+        isd = displacements.std(0)
+        isd = np.where(isd > 0, isd, 1.0)
+        flat = points.reshape(-1, points.shape[-1]).astype(np.float64)
+        oc = flat.mean(0)
+        osd = flat.std(0)
+        osd = np.where(osd > 0, osd, 1.0)
+        return cls(im, isd, oc, osd)
+
+    def to_json(self) -> dict:
+        return {k: np.asarray(getattr(self, k), dtype=np.float64).tolist() for k in ("input_mean", "input_scale", "output_centre", "output_scale")}
+
+    @classmethod
+    def from_json(cls, obj: dict) -> Normalisation:
+        return cls(*(np.asarray(obj[k], dtype=np.float64) for k in ("input_mean", "input_scale", "output_centre", "output_scale")))
+
+    @property
+    def log_scale_sum(self) -> float:
+        """``sum log s``: NLL in metres = NLL in normalised units + this."""
+        return float(np.log(self.output_scale).sum())
+
+
+@dataclass(eq=False)
+class MDNModel:
+    """A trained MDN with its normalisation and the robot it was trained for.
+
+    ``predict(displacements (..., m)) -> GaussianMixture`` in the robot's base frame, metres.
+    """
+
+    net: MDN
+    normalisation: Normalisation
+    limits: np.ndarray  # (m, 2)
+    robot_toml: str = ""
+    robot_name: str = ""
+    metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.net.eval()
+        self._fast = None
+        self._robot = None
+
+    @property
+    def n_components(self) -> int:
+        return self.net.n_components
+
+    @property
+    def n_tendons(self) -> int:
+        return self.net.n_inputs
+
+    @property
+    def robot(self):
+        """The robot rebuilt from the TOML stored with the model (``None`` if it cannot be)."""
+        if self._robot is None and self.robot_toml:
+            from riskplan.kinematics.data import robot_from_toml
+
+            self._robot = robot_from_toml(self.robot_toml)
+        return self._robot
+
+    # ----------------------------------------------------------- validation
+    def check_displacements(self, displacements, name: str = "displacements") -> np.ndarray:
+        """Validate ``(..., m)`` displacements: tendon count, finite, within the robot's limits."""
+        d = as_array(displacements, name, min_ndim=1)
+        if d.shape[-1] != self.n_tendons:
+            raise InvalidInputError(f"{name}: expected last dimension {self.n_tendons} (tendons of robot {self.robot_name!r}), got shape {d.shape}")
+        lo, hi = self.limits[:, 0], self.limits[:, 1]
+        slack = LIMIT_SLACK * np.maximum(1.0, np.abs(self.limits).max())
+        bad = (d < lo - slack) | (d > hi + slack)
+        if bad.any():
+            idx = tuple(int(i) for i in np.argwhere(bad)[0])
+            j = idx[-1]
+            raise InvalidInputError(
+                f"{name}: value {d[idx]:.6g} at index {idx} is outside tendon {j}'s displacement limits [{lo[j]:.6g}, {hi[j]:.6g}]"
+            )
+        return d
+
+    # ------------------------------------------------------------- predict
+    def mixture(self, displacements: torch.Tensor) -> GaussianMixture:
+        """Differentiable torch path (no input validation): ``(..., m)`` tensor → mixture in metres."""
+        p = next(self.net.parameters())
+        n = self.normalisation
+        x = (displacements.to(p.dtype) - torch.as_tensor(n.input_mean, dtype=p.dtype)) / torch.as_tensor(n.input_scale, dtype=p.dtype)
+        log_w, mu, u = self.net(x)
+        c = torch.as_tensor(n.output_centre, dtype=p.dtype)
+        s = torch.as_tensor(n.output_scale, dtype=p.dtype)
+        return GaussianMixture(torch.exp(log_w), c + s * mu, u / s, validate=False)
+
+    def predict(self, displacements, dtype: torch.dtype = torch.float64) -> GaussianMixture:
+        """Gaussian mixture of the robot's geometry for displacements ``(..., m)`` [m].
+
+        Returns a :class:`GaussianMixture` with batch shape ``(...)``, ``K`` components,
+        ``d = 3``, base frame, metres. Raises :class:`InvalidInputError` for a wrong number
+        of tendons, NaN/inf, or displacements outside the robot's limits.
+
+        Evaluated with fused NumPy matrix products (float64) rather than the torch
+        module: for one configuration this avoids torch's per-operation overhead.
+        """
+        d = self.check_displacements(displacements)
+        w, mu, u = self._forward_numpy(d)
+        return GaussianMixture(
+            torch.from_numpy(w).to(dtype), torch.from_numpy(mu).to(dtype), torch.from_numpy(u).to(dtype), validate=False
+        )
+
+    def _forward_numpy(self, d: np.ndarray):
+        if self._fast is None:
+            self._fast = _FusedNumpyMDN(self.net, self.normalisation)
+        return self._fast(d)
+
+
+class _FusedNumpyMDN:
+    """The MDN forward pass as a few NumPy products (float64).
+
+    The three heads read the same trunk output, so their first layers are stacked into
+    one matrix and their later layers into block-diagonal matrices: one product per
+    layer for all heads. Input normalisation is folded into the first layer and the
+    output de-normalisation into the last, so a call is ``len(layers)`` products plus
+    a softmax and the eq. 2 scatter.
+    """
+
+    def __init__(self, net: MDN, norm: Normalisation):
+        import scipy.linalg
+
+        def lin(layer):
+            return layer.weight.detach().double().numpy().T.copy(), layer.bias.detach().double().numpy().copy()
+
+        trunk = [lin(m) for m in net.trunk if isinstance(m, nn.Linear)]
+        # fold (x - mean) / scale into the first layer: W' = W / scale, b' = b - (mean/scale) W
+        W0, b0 = trunk[0]
+        W0s = W0 / norm.input_scale[:, None]
+        trunk[0] = (W0s, b0 - (norm.input_mean[:, None] * W0s).sum(0))
+        heads = [[lin(m) for m in h if isinstance(m, nn.Linear)] for h in (net.weight_head, net.mean_head, net.chol_head)]
+        K, d = net.n_components, net.dim
+        T = n_cholesky_entries(d)
+        # de-normalise means in the last layer: mu = c + s * mu_n
+        Wm, bm = heads[1][-1]
+        s_rep = np.tile(norm.output_scale, K)
+        heads[1][-1] = (Wm * s_rep[None, :], bm * s_rep + np.tile(norm.output_centre, K))
+        fused = []
+        for i in range(len(heads[0])):
+            Ws = [h[i][0] for h in heads]
+            bs = [h[i][1] for h in heads]
+            W = np.concatenate(Ws, axis=1) if i == 0 else scipy.linalg.block_diag(*Ws)
+            fused.append((np.ascontiguousarray(W), np.concatenate(bs)))
+        self.layers = trunk + fused
+        self.n_trunk = len(trunk)
+        self.activation = net.activation
+        self.K, self.d, self.T = K, d, T
+        rows, cols = np.triu_indices(d)
+        self.flat_index = rows * d + cols
+        self.diag_pos = np.flatnonzero(rows == cols)
+        # Ubar = Ubar_n diag(1/s): scale column j by 1/s_j
+        self.col_scale = np.tile((1.0 / norm.output_scale)[cols], K)
+        self.diag_cols = np.concatenate([k * T + self.diag_pos for k in range(K)])
+
+    def _act(self, h):
+        # in place: h is a fresh product owned by this call
+        if self.activation == "silu":
+            t = np.negative(h)
+            with np.errstate(over="ignore"):
+                np.exp(t, out=t)
+            t += 1.0
+            h /= t
+            return h
+        if self.activation == "tanh":
+            return np.tanh(h, out=h)
+        return np.maximum(h, 0.0, out=h)
+
+    def __call__(self, x: np.ndarray):
+        batch = x.shape[:-1]
+        h = x.reshape(-1, x.shape[-1])
+        n_layers = len(self.layers)
+        for i, (W, b) in enumerate(self.layers):
+            h = h @ W
+            h += b
+            if i < n_layers - 1:
+                h = self._act(h)
+        K, d, T = self.K, self.d, self.T
+        logits, mu, ur = h[:, :K], h[:, K : K + K * d], h[:, K + K * d :]
+        logits = logits - logits.max(-1, keepdims=True)
+        w = np.exp(logits)
+        w /= w.sum(-1, keepdims=True)
+        ur = ur.copy()
+        ur[:, self.diag_cols] = np.exp(np.clip(ur[:, self.diag_cols], -LOG_DIAG_BOUND, LOG_DIAG_BOUND))
+        ur *= self.col_scale
+        B = h.shape[0]
+        u = np.zeros((B, K, d * d))
+        u[:, :, self.flat_index] = ur.reshape(B, K, T)
+        return w.reshape(*batch, K), mu.reshape(*batch, K, d), u.reshape(*batch, K, d, d)

@@ -1,0 +1,145 @@
+"""Saving and loading trained MDN models: ``weights.pt`` + ``model.json`` in a folder.
+
+``weights.pt`` is a torch ``state_dict`` (loaded with ``weights_only=True``, no pickled
+code). ``model.json`` holds everything else: format and versions, architecture,
+input/output normalisation, the robot (TOML text, name, tendon count, displacement
+limits), the data set's content hash, training options and history, and the SHA-256
+of ``weights.pt``. Both files are written atomically, weights first; the hash in the
+JSON detects a weights file that does not belong to it (torn or corrupted writes).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import platform
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from riskplan.errors import DataFormatError, InvalidInputError
+from riskplan.io import atomic_path, write_json_atomic
+from riskplan.kinematics.mdn import MDN, MDNModel, Normalisation
+
+FORMAT = "riskplan-mdn"
+FORMAT_VERSION = 1
+WEIGHTS_NAME = "weights.pt"
+META_NAME = "model.json"
+# keys written by save_model itself (a loaded model's metadata keeps only the others)
+_RESERVED = frozenset(
+    ("format", "format_version", "versions", "architecture", "normalisation", "robot", "weights_file", "weights_sha256")
+)
+
+
+def _versions() -> dict:
+    from riskplan.kinematics.data import _version
+
+    return {"riskplan": _version(), "torch": torch.__version__, "numpy": np.__version__, "python": platform.python_version()}
+
+
+def save_model(model: MDNModel, path) -> Path:
+    """Write ``path/weights.pt`` and ``path/model.json`` (atomically); returns ``path``."""
+    path = Path(path)
+    path.mkdir(parents=True, exist_ok=True)
+    buf = io.BytesIO()
+    torch.save(model.net.state_dict(), buf)
+    blob = buf.getvalue()
+    with atomic_path(path / WEIGHTS_NAME, suffix=".pt") as tmp:
+        tmp.write_bytes(blob)
+    p = next(model.net.parameters())
+    meta = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "versions": _versions(),
+        "architecture": {**model.net.architecture(), "dtype": str(p.dtype).removeprefix("torch.")},
+        "normalisation": model.normalisation.to_json(),
+        "robot": {
+            "name": model.robot_name,
+            "n_tendons": model.n_tendons,
+            "displacement_limits": np.asarray(model.limits, dtype=np.float64).tolist(),
+            "toml": model.robot_toml,
+        },
+        "weights_file": WEIGHTS_NAME,
+        "weights_sha256": hashlib.sha256(blob).hexdigest(),
+        **{k: v for k, v in model.metadata.items() if k not in _RESERVED},
+    }
+    write_json_atomic(path / META_NAME, meta)
+    return path
+
+
+def load_model(path, robot=None) -> MDNModel:
+    """Load a model folder written by :func:`save_model`.
+
+    ``robot``: optional robot (anything with ``toml_text()``) the model must belong to.
+    Raises :class:`DataFormatError` naming the problem: missing files, corrupted JSON or
+    weights, weights that do not match the metadata, or a model of another robot.
+    """
+    path = Path(path)
+    if path.is_file() and path.name in (META_NAME, WEIGHTS_NAME):
+        path = path.parent
+    meta_path = path / META_NAME
+    if not meta_path.is_file():
+        raise DataFormatError(f"model {str(path)!r}: no {META_NAME} (not a model folder)")
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise DataFormatError(f"model {str(path)!r}: {META_NAME} is corrupted ({exc})") from exc
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise DataFormatError(f"model {str(path)!r}: {META_NAME} has format={meta.get('format') if isinstance(meta, dict) else None!r}, expected {FORMAT!r}")
+    if meta.get("format_version") != FORMAT_VERSION:
+        raise DataFormatError(f"model {str(path)!r}: format_version={meta.get('format_version')!r} is not supported (expected {FORMAT_VERSION})")
+    try:
+        arch = meta["architecture"]
+        norm = Normalisation.from_json(meta["normalisation"])
+        rob = meta["robot"]
+        limits = np.asarray(rob["displacement_limits"], dtype=np.float64)
+        weights_file = path / meta.get("weights_file", WEIGHTS_NAME)
+        expected_hash = meta["weights_sha256"]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise DataFormatError(f"model {str(path)!r}: {META_NAME} lacks or has a malformed entry ({type(exc).__name__}: {exc})") from exc
+    if not weights_file.is_file():
+        raise DataFormatError(f"model {str(path)!r}: weights file {weights_file.name!r} is missing")
+    blob = weights_file.read_bytes()
+    got = hashlib.sha256(blob).hexdigest()
+    if got != expected_hash:
+        raise DataFormatError(
+            f"model {str(path)!r}: {weights_file.name} does not match {META_NAME} (SHA-256 {got[:12]}... != {expected_hash[:12]}...); "
+            "the file is corrupted or from another model"
+        )
+    try:
+        state = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=True)
+        net = MDN(
+            int(arch["n_inputs"]), int(arch["n_components"]), int(arch.get("dim", 3)),
+            tuple(arch["hidden"]), tuple(arch["head_hidden"]), arch.get("activation", "silu"),
+        )
+        net = net.to(getattr(torch, arch.get("dtype", "float32")))
+        net.load_state_dict(state)
+    except (InvalidInputError, KeyError, TypeError, RuntimeError, ValueError, AttributeError) as exc:
+        raise DataFormatError(f"model {str(path)!r}: weights do not fit the architecture in {META_NAME} ({type(exc).__name__}: {exc})") from exc
+    m = net.n_inputs
+    if limits.shape != (m, 2) or norm.input_mean.shape != (m,) or norm.output_scale.shape != (3,):
+        raise DataFormatError(
+            f"model {str(path)!r}: metadata shapes disagree with {m} tendons (limits {limits.shape}, input_mean {norm.input_mean.shape})"
+        )
+    extra = {k: v for k, v in meta.items() if k not in _RESERVED}
+    model = MDNModel(net, norm, limits, rob.get("toml", ""), rob.get("name", ""), extra)
+    if robot is not None:
+        check_robot(model, robot)
+    return model
+
+
+def check_robot(model: MDNModel, robot) -> None:
+    """Raise :class:`DataFormatError` if ``robot`` is not the robot ``model`` was trained for."""
+    from riskplan.kinematics.data import _normalise_toml
+
+    m = int(getattr(robot, "n_tendons", model.n_tendons))
+    name = getattr(robot, "name", "?")
+    if m != model.n_tendons:
+        raise DataFormatError(f"model was trained for robot {model.robot_name!r} with {model.n_tendons} tendons; robot {name!r} has {m}")
+    toml = robot.toml_text() if hasattr(robot, "toml_text") else str(robot)
+    if _normalise_toml(toml) != _normalise_toml(model.robot_toml):
+        raise DataFormatError(
+            f"model was trained for robot {model.robot_name!r}; robot {name!r} has a different description (robot TOML differs)"
+        )

@@ -1,0 +1,421 @@
+"""Obstacle environments: closed triangle meshes (3-D) or simple polygons (2-D).
+
+An :class:`Environment` is a set of solid obstacles, each bounded by closed, consistently
+oriented faces (triangles in 3-D, polygon edges in 2-D). Obstacles may overlap; an obstacle
+may have several shells (a hollow body wall is an outer shell plus an inverted inner shell).
+"Inside the environment" means inside at least one obstacle (winding number >= 1).
+
+Closest-point queries in 3-D use libigl's AABB tree (measured against coal/python-fcl and
+trimesh in ``riskplan.bench.collision``: libigl answers a batch in one call with no Python
+loop, so it is the fastest here for the batch sizes we use). The collision estimators do not
+need world-space closest points: they work on whitened faces directly (``_kernels``).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from riskplan.collision import _kernels as K
+from riskplan.collision.geometry import (
+    check_closed_mesh,
+    check_simple_polygon,
+    extrude_polygon,
+    signed_volume,
+    whiten,
+)
+from riskplan.errors import InvalidInputError
+
+log = logging.getLogger(__name__)
+
+
+class Environment:
+    """Solid obstacles in ``d = 2`` or ``3`` dimensions.
+
+    Attributes
+    ----------
+    vertices : (V, d) float64
+    faces : (F, d) int64
+        Triangles (3-D) or directed polygon edges (2-D); outward-oriented.
+    face_obstacle : (F,) int64
+        Obstacle index of each face.
+    names : tuple[str, ...]
+        One name per obstacle.
+
+    Build with :meth:`from_meshes`, :meth:`from_polygons`, :meth:`from_arrays` or :meth:`load`.
+    """
+
+    def __init__(self, vertices, faces, face_obstacle=None, names=None, *, validate: bool = True):
+        V = np.ascontiguousarray(vertices, dtype=np.float64)
+        F = np.ascontiguousarray(faces, dtype=np.int64)
+        if V.ndim != 2 or V.shape[1] not in (2, 3):
+            raise InvalidInputError(f"vertices: expected shape (V, 2) or (V, 3), got {V.shape}")
+        d = V.shape[1]
+        if F.ndim != 2 or F.shape[1] != d:
+            raise InvalidInputError(
+                f"faces: expected shape (F, {d}) ({'triangles' if d == 3 else 'segments'} for d={d}), got {F.shape}"
+            )
+        if F.shape[0] == 0:
+            raise InvalidInputError("environment is empty: no obstacle faces")
+        fo = np.zeros(len(F), dtype=np.int64) if face_obstacle is None else np.ascontiguousarray(face_obstacle, dtype=np.int64)
+        if fo.shape != (len(F),):
+            raise InvalidInputError(f"face_obstacle: expected shape ({len(F)},), got {fo.shape}")
+        n_obs = int(fo.max()) + 1
+        if names is None:
+            names = tuple(f"obstacle{i}" for i in range(n_obs))
+        names = tuple(str(n) for n in names)
+        if len(names) != n_obs:
+            raise InvalidInputError(f"names: expected {n_obs} names (one per obstacle), got {len(names)}")
+        if validate:
+            if not np.all(np.isfinite(V)):
+                raise InvalidInputError("vertices: contain NaN or inf")
+            if fo.min() < 0:
+                raise InvalidInputError("face_obstacle: negative obstacle index")
+            for i in range(n_obs):
+                sel = F[fo == i]
+                if d == 3:
+                    check_closed_mesh(V, sel, f"obstacle {names[i]!r}")
+                else:
+                    _check_closed_polyline(V, sel, f"obstacle {names[i]!r}")
+        self.vertices = V
+        self.faces = F
+        self.face_obstacle = fo
+        self.names = names
+
+    # ------------------------------------------------------------ constructors
+    @classmethod
+    def from_meshes(cls, meshes, names=None, *, fix_orientation: bool = True) -> Environment:
+        """One obstacle per mesh; a mesh is a ``trimesh.Trimesh`` or a ``(vertices (V,3), faces (F,3))`` pair.
+
+        Each mesh must be closed (watertight), edge-manifold, consistently oriented and free of
+        degenerate triangles, else :class:`InvalidInputError`. A mesh with negative enclosed volume
+        (inward normals) is flipped when ``fix_orientation``.
+        """
+        meshes = list(meshes)
+        if not meshes:
+            raise InvalidInputError("meshes: environment is empty (no obstacles given)")
+        if names is not None and len(names) != len(meshes):
+            raise InvalidInputError(f"names: expected {len(meshes)} names, got {len(names)}")
+        names = list(names) if names is not None else [f"obstacle{i}" for i in range(len(meshes))]
+        Vs, Fs, owners = [], [], []
+        offset = 0
+        for i, m in enumerate(meshes):
+            if hasattr(m, "vertices") and hasattr(m, "faces"):
+                V, F = np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
+            else:
+                try:
+                    V, F = m
+                except (TypeError, ValueError) as exc:
+                    raise InvalidInputError(f"meshes[{i}]: expected a Trimesh or a (vertices, faces) pair") from exc
+                V, F = np.asarray(V, dtype=np.float64), np.asarray(F, dtype=np.int64)
+            if V.ndim != 2 or V.shape[1] != 3:
+                raise InvalidInputError(f"meshes[{i}] ({names[i]!r}): vertices must have shape (V, 3), got {V.shape}")
+            if F.ndim != 2 or F.shape[1] != 3:
+                raise InvalidInputError(f"meshes[{i}] ({names[i]!r}): faces must have shape (F, 3) triangles, got {F.shape}")
+            if not np.all(np.isfinite(V)):
+                raise InvalidInputError(f"meshes[{i}] ({names[i]!r}): vertices contain NaN or inf")
+            check_closed_mesh(V, F, f"mesh {names[i]!r}")
+            if signed_volume(V, F) < 0:
+                if not fix_orientation:
+                    raise InvalidInputError(f"mesh {names[i]!r}: faces point inwards (negative enclosed volume)")
+                log.info("mesh %r had inward normals; flipped", names[i])
+                F = F[:, ::-1]
+            Vs.append(V)
+            Fs.append(F + offset)
+            owners.append(np.full(len(F), i, dtype=np.int64))
+            offset += len(V)
+        return cls(np.vstack(Vs), np.vstack(Fs), np.concatenate(owners), names, validate=False)
+
+    @classmethod
+    def from_polygons(cls, polygons, names=None) -> Environment:
+        """2-D environment: one solid obstacle per simple polygon ``(k, 2)`` (any orientation).
+
+        Polygons are re-oriented counter-clockwise. Self-intersecting, degenerate or
+        zero-area polygons raise :class:`InvalidInputError`.
+        """
+        polygons = list(polygons)
+        if not polygons:
+            raise InvalidInputError("polygons: environment is empty (no obstacles given)")
+        if names is not None and len(names) != len(polygons):
+            raise InvalidInputError(f"names: expected {len(polygons)} names, got {len(names)}")
+        Vs, Fs, owners = [], [], []
+        offset = 0
+        for i, p in enumerate(polygons):
+            arr = np.asarray(p, dtype=np.float64)
+            if arr.ndim != 2 or arr.shape[1] != 2:
+                raise InvalidInputError(f"polygons[{i}]: expected shape (k, 2), got {arr.shape}")
+            if not np.all(np.isfinite(arr)):
+                raise InvalidInputError(f"polygons[{i}]: contains NaN or inf")
+            arr = check_simple_polygon(arr, f"polygons[{i}]")
+            k = len(arr)
+            idx = np.arange(k)
+            Vs.append(arr)
+            Fs.append(np.column_stack([idx, (idx + 1) % k]) + offset)
+            owners.append(np.full(k, i, dtype=np.int64))
+            offset += k
+        return cls(np.vstack(Vs), np.vstack(Fs), np.concatenate(owners), names, validate=False)
+
+    @classmethod
+    def from_arrays(cls, vertices, faces, face_obstacle=None, names=None) -> Environment:
+        """From raw arrays: ``vertices (V, d)``, ``faces (F, d)`` (triangles for d=3, edges for d=2).
+
+        Every obstacle (``face_obstacle``, default all one obstacle) is checked to be closed.
+        """
+        return cls(vertices, faces, face_obstacle, names, validate=True)
+
+    @classmethod
+    def load(cls, paths, *, split: bool = False, names=None) -> Environment:
+        """Load STL/OBJ/PLY/OFF file(s) with trimesh; one obstacle per file.
+
+        ``split=True`` makes each connected component its own obstacle (do not use it for
+        hollow bodies whose inner shell is a separate component).
+        """
+        import trimesh
+
+        if isinstance(paths, (str, Path)):
+            paths = [paths]
+        meshes, mesh_names = [], []
+        for p in paths:
+            p = Path(p)
+            if not p.exists():
+                raise InvalidInputError(f"mesh file not found: {p}")
+            try:
+                m = trimesh.load(p, force="mesh", process=True)
+            except Exception as exc:  # trimesh raises many types for unreadable files
+                raise InvalidInputError(f"{p}: cannot read mesh ({exc})") from exc
+            if len(m.faces) == 0:
+                raise InvalidInputError(f"{p}: mesh has no faces")
+            parts = m.split(only_watertight=False) if split else [m]
+            for j, part in enumerate(parts):
+                meshes.append(part)
+                mesh_names.append(p.stem if len(parts) == 1 else f"{p.stem}_{j}")
+        return cls.from_meshes(meshes, names=names or mesh_names)
+
+    # ------------------------------------------------------------- properties
+    @property
+    def dim(self) -> int:
+        return self.vertices.shape[1]
+
+    @property
+    def n_faces(self) -> int:
+        return self.faces.shape[0]
+
+    @property
+    def n_obstacles(self) -> int:
+        return len(self.names)
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """``(2, d)``: lower and upper corner of the vertices."""
+        return np.stack([self.vertices.min(0), self.vertices.max(0)])
+
+    def __repr__(self) -> str:
+        kind = "triangles" if self.dim == 3 else "edges"
+        return f"Environment(d={self.dim}, obstacles={self.n_obstacles}, {kind}={self.n_faces})"
+
+    def obstacle(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(vertices, faces)`` of obstacle ``i`` (faces re-indexed)."""
+        F = self.faces[self.face_obstacle == i]
+        used, inv = np.unique(F, return_inverse=True)
+        return self.vertices[used], inv.reshape(F.shape)
+
+    def subset(self, obstacles) -> Environment:
+        """A new environment with only the named (or indexed) obstacles."""
+        idx = [self.names.index(o) if isinstance(o, str) else int(o) for o in obstacles]
+        parts = [self.obstacle(i) for i in idx]
+        if self.dim == 3:
+            return Environment.from_meshes(parts, names=[self.names[i] for i in idx], fix_orientation=False)
+        Vs, Fs, owners, off = [], [], [], 0
+        for j, (V, F) in enumerate(parts):
+            Vs.append(V)
+            Fs.append(F + off)
+            owners.append(np.full(len(F), j))
+            off += len(V)
+        return Environment(np.vstack(Vs), np.vstack(Fs), np.concatenate(owners), [self.names[i] for i in idx], validate=False)
+
+    def to_trimesh(self):
+        """All obstacles as one ``trimesh.Trimesh`` (3-D only)."""
+        import trimesh
+
+        if self.dim != 3:
+            raise InvalidInputError("to_trimesh: only 3-D environments are meshes; use extrude() first")
+        return trimesh.Trimesh(self.vertices, self.faces, process=False)
+
+    def save(self, path) -> Path:
+        """Write all obstacles to one mesh file (format from the suffix: .stl, .obj, .ply), atomically."""
+        from riskplan.io import atomic_path
+
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            self.to_trimesh().export(tmp, file_type=path.suffix.lstrip(".").lower() or "stl")
+        return path
+
+    def extrude(self, z0: float = -1.0, z1: float = 1.0) -> Environment:
+        """3-D environment of the prisms ``polygon x [z0, z1]`` (2-D environments of convex polygons)."""
+        if self.dim != 2:
+            raise InvalidInputError("extrude: environment is already 3-D")
+        meshes = []
+        for i in range(self.n_obstacles):
+            V, F = self.obstacle(i)
+            order = _polygon_order(F)
+            meshes.append(extrude_polygon(V[order], z0, z1))
+        return Environment.from_meshes(meshes, names=self.names)
+
+    def whitened(self, mean, precision_cholesky) -> Environment:
+        """The environment in the whitened frame ``y = U (x - mu)`` of one Gaussian (eq. 8).
+
+        ``mean (d,)``, ``precision_cholesky (d, d)``. Orientation is preserved (det U > 0).
+        """
+        mu = _as_point(mean, "mean", self.dim)
+        u = np.asarray(precision_cholesky, dtype=np.float64)
+        if u.shape != (self.dim, self.dim):
+            raise InvalidInputError(f"precision_cholesky: expected shape ({self.dim}, {self.dim}), got {u.shape}")
+        Vw = whiten(self.vertices, mu, u)
+        return Environment(Vw, self.faces, self.face_obstacle, self.names, validate=False)
+
+    # ------------------------------------------------------------- caches
+    @cached_property
+    def _spheres(self) -> tuple[np.ndarray, np.ndarray]:
+        t = self.vertices[self.faces]
+        c = t.mean(axis=1)
+        r = np.linalg.norm(t - c[:, None, :], axis=2).max(axis=1)
+        return np.ascontiguousarray(c), np.ascontiguousarray(r * (1 + 1e-12) + 1e-300)
+
+    @cached_property
+    def _rotation(self) -> np.ndarray:
+        # A fixed generic rotation: rays along its x axis avoid the axis-aligned edges and
+        # vertices of typical meshes (a ray through an edge would be counted twice or not at all).
+        q, _ = np.linalg.qr(np.random.default_rng(7919).normal(size=(3, 3)))
+        return q * np.sign(np.linalg.det(q))
+
+    @cached_property
+    def _ray_grid(self):
+        Vr = np.ascontiguousarray(self.vertices @ self._rotation.T)
+        t = Vr[self.faces][:, :, 1:]
+        lo, hi = t.min(axis=1), t.max(axis=1)
+        origin = lo.min(axis=0)
+        ext = np.maximum(hi.max(axis=0) - origin, 1e-12)
+        side = int(min(512, max(1, math.ceil(math.sqrt(self.n_faces / 2)))))
+        shape = np.array([side, side], dtype=np.int64)
+        cell = ext / side * (1 + 1e-9)
+        start, items = K.build_grid(np.ascontiguousarray(lo), np.ascontiguousarray(hi), origin, cell, shape)
+        return Vr, origin, cell, shape, start, items
+
+    @cached_property
+    def _box_grid(self):
+        t = self.vertices[self.faces]
+        lo, hi = t.min(axis=1), t.max(axis=1)
+        origin = lo.min(axis=0)
+        ext = np.maximum(hi.max(axis=0) - origin, 1e-12)
+        side = int(min(128, max(1, math.ceil((self.n_faces / 2) ** (1 / 3)))))
+        shape = np.full(3, side, dtype=np.int64)
+        cell = ext / side * (1 + 1e-9)
+        start, items = K.build_grid(np.ascontiguousarray(lo), np.ascontiguousarray(hi), origin, cell, shape)
+        return origin, cell, shape, start, items
+
+    @cached_property
+    def _aabb(self):
+        import igl
+
+        tree = igl.AABB()
+        tree.init(self.vertices, self.faces)
+        return tree
+
+    # ------------------------------------------------------------- queries
+    def winding_number(self, points) -> np.ndarray:
+        """Integer winding number of points ``(..., d)`` = number of obstacles containing them; ``(...,)``."""
+        P, shape = _as_points(points, self.dim)
+        if self.dim == 3:
+            Vr, origin, cell, shape_g, start, items = self._ray_grid
+            Pr = np.ascontiguousarray(P @ self._rotation.T)
+            w = K.winding_numbers_3d(Vr, self.faces, Pr, origin, cell, shape_g, start, items)
+        else:
+            w = K.winding_numbers_2d(self.vertices, self.faces, P)
+        return w.reshape(shape)
+
+    def contains(self, points) -> np.ndarray:
+        """``(...,)`` bool: True where a point ``(..., d)`` lies inside at least one obstacle."""
+        return self.winding_number(points) > 0
+
+    def closest_points(self, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Closest surface points: ``(distance (...,), closest (..., d), face (...,))``."""
+        P, shape = _as_points(points, self.dim)
+        if self.dim == 3 and len(P):
+            sq, face, closest = self._aabb.squared_distance(self.vertices, self.faces, P)
+            dist = np.sqrt(np.maximum(sq, 0.0))
+        else:
+            dist, closest, face = K.closest_points_brute(self.vertices, self.faces, P)
+        return dist.reshape(shape), closest.reshape(shape + (self.dim,)), face.reshape(shape)
+
+    def signed_distance(self, points) -> np.ndarray:
+        """Distance to the nearest surface, negative inside an obstacle; ``(...,)``."""
+        dist, _, _ = self.closest_points(points)
+        return np.where(self.contains(points), -dist, dist)
+
+    def segments_collide(self, start, end) -> np.ndarray:
+        """``(...,)`` bool: True where the segment ``start -> end`` (each ``(..., d)``) touches an obstacle.
+
+        A segment collides if an endpoint is inside an obstacle or it crosses a surface.
+        """
+        P0, shape = _as_points(start, self.dim, "start")
+        P1, shape1 = _as_points(end, self.dim, "end")
+        if shape != shape1:
+            raise InvalidInputError(f"start and end: shapes differ ({shape} vs {shape1})")
+        inside = self.contains(P0) | self.contains(P1)
+        if self.dim == 3:
+            origin, cell, shape_g, start_g, items = self._box_grid
+            cross = K.segments_hit_3d(self.vertices, self.faces, P0, P1, origin, cell, shape_g, start_g, items)
+        else:
+            cross = K.segments_hit_2d(self.vertices, self.faces, P0, P1)
+        return (inside | cross).reshape(shape)
+
+
+def _as_points(points, d: int, name: str = "points") -> tuple[np.ndarray, tuple]:
+    arr = np.asarray(points, dtype=np.float64)
+    if arr.ndim == 0 or arr.shape[-1] != d:
+        raise InvalidInputError(f"{name}: expected shape (..., {d}) for a {d}-D environment, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InvalidInputError(f"{name}: contains NaN or inf")
+    return np.ascontiguousarray(arr.reshape(-1, d)), arr.shape[:-1]
+
+
+def _as_point(p, name: str, d: int) -> np.ndarray:
+    arr = np.asarray(p, dtype=np.float64)
+    if arr.shape != (d,):
+        raise InvalidInputError(f"{name}: expected shape ({d},), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InvalidInputError(f"{name}: contains NaN or inf")
+    return arr
+
+
+def _check_closed_polyline(V: np.ndarray, F: np.ndarray, name: str) -> None:
+    if len(F) < 3:
+        raise InvalidInputError(f"{name}: a polygon needs at least 3 edges, got {len(F)}")
+    if F.min() < 0 or F.max() >= len(V):
+        raise InvalidInputError(f"{name}: edge indices out of range [0, {len(V)})")
+    if np.any(F[:, 0] == F[:, 1]):
+        raise InvalidInputError(f"{name}: degenerate edge (repeated vertex index)")
+    out = np.bincount(F[:, 0], minlength=len(V))
+    inn = np.bincount(F[:, 1], minlength=len(V))
+    used = (out + inn) > 0
+    if np.any(out[used] != 1) or np.any(inn[used] != 1):
+        raise InvalidInputError(f"{name}: edges do not form closed, simple, consistently oriented loops")
+    lengths = np.linalg.norm(V[F[:, 1]] - V[F[:, 0]], axis=1)
+    if np.any(lengths <= 1e-12 * (float(np.ptp(V[used], axis=0).max()) or 1.0)):
+        raise InvalidInputError(f"{name}: zero-length edge")
+
+
+def _polygon_order(F: np.ndarray) -> np.ndarray:
+    """Vertex order of one closed loop of directed edges."""
+    nxt = dict(zip(F[:, 0].tolist(), F[:, 1].tolist()))
+    start = int(F[0, 0])
+    order = [start]
+    v = nxt[start]
+    while v != start:
+        order.append(v)
+        v = nxt[v]
+    return np.asarray(order)

@@ -1,0 +1,144 @@
+"""Pure array helpers for obstacle geometry: whitening, mesh checks, polygon checks, extrusion.
+
+Whitening (MDN paper eq. 8): for a Gaussian ``N(mu, Sigma)`` with ``Sigma^{-1} = U^T U``,
+``y = U (x - mu)`` maps the Gaussian to ``N(0, I)`` and the Mahalanobis distance
+``sqrt((x - mu)^T Sigma^{-1} (x - mu))`` to the Euclidean norm ``|y|``. It is linear, so
+triangles stay triangles and segments stay segments.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from riskplan.errors import InvalidInputError
+
+
+def whiten(points, mean, precision_cholesky) -> np.ndarray:
+    """``y = U (x - mu)`` (eq. 8) for points ``(..., N, d)``, mean ``(..., d)``, ``U (..., d, d)``.
+
+    Returns ``(..., N, d)``. Leading axes broadcast.
+    """
+    x = np.asarray(points, dtype=np.float64)
+    mu = np.asarray(mean, dtype=np.float64)
+    u = np.asarray(precision_cholesky, dtype=np.float64)
+    return np.einsum("...ij,...nj->...ni", u, x - mu[..., None, :])
+
+
+def unwhiten(points, mean, precision_cholesky) -> np.ndarray:
+    """Inverse of :func:`whiten`: ``x = mu + U^{-1} y``; shapes as in :func:`whiten`."""
+    y = np.asarray(points, dtype=np.float64)
+    u = np.asarray(precision_cholesky, dtype=np.float64)
+    sol = np.linalg.solve(u[..., None, :, :], y[..., :, :, None])[..., 0]
+    return np.asarray(mean, dtype=np.float64)[..., None, :] + sol
+
+
+def mahalanobis(points, mean, precision_cholesky) -> np.ndarray:
+    """``sqrt((x - mu)^T U^T U (x - mu))`` for points ``(..., N, d)``; returns ``(..., N)``."""
+    return np.linalg.norm(whiten(points, mean, precision_cholesky), axis=-1)
+
+
+def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Areas ``(F,)`` of triangles ``faces (F, 3)`` over ``vertices (V, 3)``."""
+    t = vertices[faces]
+    return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+
+
+def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Signed volume enclosed by closed triangles (positive for outward orientation)."""
+    t = vertices[faces]
+    return float(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0)
+
+
+def check_closed_mesh(vertices: np.ndarray, faces: np.ndarray, name: str) -> None:
+    """Raise :class:`InvalidInputError` unless the triangles form closed, edge-manifold,
+    consistently oriented surfaces without degenerate faces.
+
+    Every directed edge ``(a, b)`` must occur exactly once and its reverse ``(b, a)`` exactly
+    once: an edge used by more than two faces is non-manifold, an edge used once is a hole,
+    an edge used twice in the same direction means inconsistent orientation.
+    """
+    if len(faces) == 0:
+        raise InvalidInputError(f"{name}: mesh has no faces")
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise InvalidInputError(f"{name}: face indices out of range [0, {len(vertices)})")
+    if np.any((faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])):
+        raise InvalidInputError(f"{name}: degenerate face (repeated vertex index)")
+    scale = float(np.ptp(vertices, axis=0).max()) or 1.0
+    area = triangle_areas(vertices, faces)
+    bad = np.flatnonzero(area <= 1e-12 * scale * scale)
+    if bad.size:
+        raise InvalidInputError(f"{name}: {bad.size} degenerate (zero-area) triangles, first is face {int(bad[0])}")
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    nv = len(vertices)
+    key = e[:, 0].astype(np.int64) * nv + e[:, 1]
+    uniq, counts = np.unique(key, return_counts=True)
+    if np.any(counts > 1):
+        k = uniq[counts > 1][0]
+        raise InvalidInputError(
+            f"{name}: non-manifold or inconsistently oriented mesh (directed edge {int(k // nv)}->{int(k % nv)} "
+            f"is used by {int(counts[counts > 1][0])} faces)"
+        )
+    rev = e[:, 1].astype(np.int64) * nv + e[:, 0]
+    has_rev = np.isin(rev, uniq)
+    if not np.all(has_rev):
+        i = int(np.flatnonzero(~has_rev)[0])
+        raise InvalidInputError(
+            f"{name}: mesh is not closed (watertight): edge {int(e[i, 0])}-{int(e[i, 1])} has only one face "
+            f"({int((~has_rev).sum())} open edges)"
+        )
+
+
+def check_simple_polygon(poly: np.ndarray, name: str) -> np.ndarray:
+    """Validate a polygon ``(k, 2)`` and return it counter-clockwise.
+
+    Rejects fewer than 3 vertices, repeated consecutive vertices, zero area and
+    self-intersections (non-adjacent edges that touch or cross).
+    """
+    if poly.ndim != 2 or poly.shape[1] != 2 or poly.shape[0] < 3:
+        raise InvalidInputError(f"{name}: expected a (k >= 3, 2) vertex array, got shape {poly.shape}")
+    nxt = np.roll(poly, -1, axis=0)
+    seg = nxt - poly
+    scale = float(np.ptp(poly, axis=0).max()) or 1.0
+    if np.any(np.linalg.norm(seg, axis=1) <= 1e-12 * scale):
+        raise InvalidInputError(f"{name}: repeated consecutive vertices (zero-length edge)")
+    area = 0.5 * float(np.sum(poly[:, 0] * nxt[:, 1] - nxt[:, 0] * poly[:, 1]))
+    if abs(area) <= 1e-12 * scale * scale:
+        raise InvalidInputError(f"{name}: polygon has zero area (degenerate)")
+    k = len(poly)
+    if k > 3:
+        a, b = poly, nxt
+        # orientation tests for every pair of edges (k is small for tissue polygons)
+        def orient(p, q, r):
+            return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
+
+        A, B = a[:, None], b[:, None]
+        C, D = a[None, :], b[None, :]
+        d1, d2 = orient(C, D, A), orient(C, D, B)
+        d3, d4 = orient(A, B, C), orient(A, B, D)
+        cross = (np.sign(d1) * np.sign(d2) <= 0) & (np.sign(d3) * np.sign(d4) <= 0)
+        i, j = np.triu_indices(k, 1)
+        adjacent = (j == i + 1) | ((i == 0) & (j == k - 1))
+        hit = cross[i, j] & ~adjacent
+        if np.any(hit):
+            h = int(np.flatnonzero(hit)[0])
+            raise InvalidInputError(f"{name}: polygon self-intersects (edges {int(i[h])} and {int(j[h])})")
+    return poly if area > 0 else poly[::-1].copy()
+
+
+def extrude_polygon(poly: np.ndarray, z0: float, z1: float) -> tuple[np.ndarray, np.ndarray]:
+    """Closed, outward-oriented triangle mesh of the prism ``poly x [z0, z1]`` (``poly`` CCW).
+
+    Caps are fan-triangulated through their centroid, so the polygon must be star-shaped
+    w.r.t. its vertex centroid (true for convex polygons); used for 2-D/3-D consistency checks.
+    """
+    k = len(poly)
+    c = poly.mean(axis=0)
+    bottom = np.column_stack([poly, np.full(k, z0)])
+    top = np.column_stack([poly, np.full(k, z1)])
+    V = np.vstack([bottom, top, [[c[0], c[1], z0], [c[0], c[1], z1]]])
+    cb, ct = 2 * k, 2 * k + 1
+    faces = []
+    for i in range(k):
+        j = (i + 1) % k
+        faces += [[i, j, k + j], [i, k + j, k + i], [cb, j, i], [ct, k + i, k + j]]
+    return V, np.asarray(faces, dtype=np.int64)

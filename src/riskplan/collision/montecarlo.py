@@ -1,0 +1,217 @@
+"""Monte Carlo reference for the collision bounds (seeded), with binomial confidence intervals.
+
+* :func:`monte_carlo_probability` — a mixture batch ``(...)``: draw points and count those
+  inside obstacles. ``combine="weighted"`` draws from the mixture (the quantity bounded by
+  eq. 9); ``combine="union"`` draws one point from every component per trial and counts a
+  trial as a collision if any is inside (the quantity bounded by the union variant).
+* :func:`monte_carlo_trajectory` — mixtures ``(..., T)``: per trial one draw per state,
+  independent across states (the model behind eq. 10); optionally the segments between
+  consecutive draws are checked too.
+* :func:`paths_collide` — caller-supplied sample paths ``(..., T, d)`` (e.g. correlated
+  LQG-MP state samples): points inside obstacles and segments crossing them.
+* :func:`binomial_interval` — Wilson score or Clopper-Pearson (exact) interval.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from riskplan._validation import as_generator
+from riskplan.collision.environment import Environment
+from riskplan.collision.mixture import COMBINES, mixture_arrays
+from riskplan.errors import InvalidInputError
+
+INTERVALS = ("wilson", "clopper-pearson")
+# points per chunk (bounds memory at about 100 MB of float64 temporaries)
+CHUNK = 1 << 18
+
+
+@dataclass(frozen=True)
+class MonteCarloEstimate:
+    """``hits`` collisions in ``n`` trials; ``probability = hits / n`` and its interval ``[low, high]``
+    at ``confidence`` (all arrays ``(...,)``)."""
+
+    probability: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    hits: np.ndarray
+    n: int
+    confidence: float
+    method: str
+
+
+def binomial_interval(hits, n: int, confidence: float = 0.95, method: str = "wilson") -> tuple[np.ndarray, np.ndarray]:
+    """Two-sided ``confidence`` interval for a binomial proportion ``hits / n``.
+
+    ``wilson``: Wilson score interval. ``clopper-pearson``: exact interval from Beta quantiles
+    (never below nominal coverage).
+    """
+    from scipy.special import betaincinv, ndtri
+
+    k = np.asarray(hits, dtype=np.float64)
+    if n <= 0:
+        raise InvalidInputError(f"n: expected > 0 trials, got {n}")
+    if np.any((k < 0) | (k > n)):
+        raise InvalidInputError("hits: must lie in [0, n]")
+    if not (0 < confidence < 1):
+        raise InvalidInputError(f"confidence: expected in (0, 1), got {confidence}")
+    alpha = 1.0 - confidence
+    if method == "wilson":
+        z = ndtri(1 - alpha / 2)
+        p = k / n
+        den = 1 + z * z / n
+        centre = (p + z * z / (2 * n)) / den
+        half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
+        low, high = centre - half, centre + half
+        low = np.where(k == 0, 0.0, low)
+        high = np.where(k == n, 1.0, high)
+    elif method == "clopper-pearson":
+        with np.errstate(invalid="ignore"):
+            low = np.where(k == 0, 0.0, betaincinv(k, n - k + 1, alpha / 2))
+            high = np.where(k == n, 1.0, betaincinv(k + 1, n - k, 1 - alpha / 2))
+    else:
+        raise InvalidInputError(f"method: expected one of {INTERVALS}, got {method!r}")
+    return np.clip(low, 0.0, 1.0), np.clip(high, 0.0, 1.0)
+
+
+def _sample_components(rng, w, m, uinv, n, combine):
+    """Draws ``(B, n, S, d)``: S=1 point from the mixture (weighted) or S=K, one per component (union)."""
+    B, K, d = m.shape
+    if combine == "weighted":
+        cdf = np.cumsum(w, axis=-1)
+        cdf[:, -1] = np.inf  # guards round-off: every uniform falls in some component
+        u = rng.random((B, n))
+        comp = (u[..., None] >= cdf[:, None, :]).sum(-1)  # (B, n)
+        comp = np.minimum(comp, K - 1)[..., None]  # (B, n, 1)
+    else:
+        comp = np.broadcast_to(np.arange(K), (B, n, K))
+    z = rng.standard_normal(comp.shape + (d,))
+    bi = np.arange(B)[:, None, None]
+    mu = m[bi, comp]  # (B, n, S, d)
+    L = uinv[bi, comp]  # (B, n, S, d, d)
+    return mu + np.einsum("...ij,...j->...i", L, z)
+
+
+def _check_n(n_samples) -> int:
+    n = int(n_samples)
+    if n <= 0:
+        raise InvalidInputError(f"n_samples: expected > 0, got {n_samples}")
+    return n
+
+
+def monte_carlo_probability(
+    mixture,
+    environment: Environment,
+    n_samples: int = 10_000,
+    *,
+    combine: str = "weighted",
+    seed=None,
+    confidence: float = 0.95,
+    interval: str = "wilson",
+    validate: bool = True,
+) -> MonteCarloEstimate:
+    """Estimate the collision probability of a mixture batch ``(...)`` by sampling.
+
+    ``combine="weighted"``: fraction of points drawn from the mixture that lie inside obstacles
+    (what eq. 9 bounds). ``combine="union"``: fraction of trials in which at least one of K
+    points, one per component drawn independently, lies inside (what the union bound bounds).
+    ``seed``: int, ``None`` or ``numpy.random.Generator``. Returns a :class:`MonteCarloEstimate`.
+    """
+    if combine not in COMBINES:
+        raise InvalidInputError(f"combine: expected one of {COMBINES}, got {combine!r}")
+    n = _check_n(n_samples)
+    w, m, u = mixture_arrays(mixture, environment.dim, validate=validate)
+    shape = w.shape[:-1]
+    K, d = m.shape[-2], m.shape[-1]
+    w, m, u = w.reshape(-1, K), m.reshape(-1, K, d), u.reshape(-1, K, d, d)
+    uinv = np.linalg.inv(u)
+    rng = as_generator(seed)
+    hits = np.zeros(w.shape[0], dtype=np.int64)
+    per = max(1, CHUNK // (w.shape[0] * (K if combine == "union" else 1)))
+    done = 0
+    while done < n:
+        c = min(per, n - done)
+        x = _sample_components(rng, w, m, uinv, c, combine)  # (B, c, S, d)
+        inside = environment.contains(x).any(-1)  # (B, c)
+        hits += inside.sum(-1)
+        done += c
+    low, high = binomial_interval(hits, n, confidence, interval)
+    return MonteCarloEstimate(
+        probability=(hits / n).reshape(shape),
+        low=low.reshape(shape),
+        high=high.reshape(shape),
+        hits=hits.reshape(shape),
+        n=n,
+        confidence=confidence,
+        method=interval,
+    )
+
+
+def paths_collide(paths, environment: Environment, *, segments: bool = True) -> np.ndarray:
+    """``(...,)`` bool: True where a path ``(..., T, d)`` has a point inside an obstacle or
+    (``segments``) a segment between consecutive points crossing one."""
+    x = np.asarray(paths, dtype=np.float64)
+    d = environment.dim
+    if x.ndim < 2 or x.shape[-1] != d:
+        raise InvalidInputError(f"paths: expected shape (..., T, {d}), got {x.shape}")
+    hit = environment.contains(x).any(-1)
+    if segments and x.shape[-2] > 1:
+        hit = hit | environment.segments_collide(x[..., :-1, :], x[..., 1:, :]).any(-1)
+    return hit
+
+
+def monte_carlo_trajectory(
+    mixtures,
+    environment: Environment,
+    n_samples: int = 10_000,
+    *,
+    combine: str = "weighted",
+    segments: bool = False,
+    seed=None,
+    confidence: float = 0.95,
+    interval: str = "wilson",
+    validate: bool = True,
+) -> MonteCarloEstimate:
+    """Estimate ``P(exists t: x_t in collision)`` for mixtures with batch shape ``(..., T)``.
+
+    Each trial draws every state independently (``combine`` as in
+    :func:`monte_carlo_probability`); with ``segments`` the straight segments between
+    consecutive draws are checked as well. Returns estimates of shape ``(...,)``.
+    """
+    if combine not in COMBINES:
+        raise InvalidInputError(f"combine: expected one of {COMBINES}, got {combine!r}")
+    n = _check_n(n_samples)
+    w, m, u = mixture_arrays(mixtures, environment.dim, validate=validate)
+    if w.ndim < 2:
+        raise InvalidInputError("mixtures: expected a batch axis of states (batch shape (..., T))")
+    shape, T = w.shape[:-2], w.shape[-2]
+    K, d = m.shape[-2], m.shape[-1]
+    w, m, u = w.reshape(-1, K), m.reshape(-1, K, d), u.reshape(-1, K, d, d)
+    uinv = np.linalg.inv(u)
+    B = w.shape[0] // T
+    rng = as_generator(seed)
+    hits = np.zeros(B, dtype=np.int64)
+    S = K if combine == "union" else 1
+    per = max(1, CHUNK // (w.shape[0] * S))
+    done = 0
+    while done < n:
+        c = min(per, n - done)
+        x = _sample_components(rng, w, m, uinv, c, combine).reshape(B, T, c, S, d)
+        hit = environment.contains(x).any(-1).any(1)  # (B, c)
+        if segments and T > 1:
+            seg = environment.segments_collide(x[:, :-1], x[:, 1:])  # (B, T-1, c, S)
+            hit = hit | seg.any(-1).any(1)
+        hits += hit.sum(-1)
+        done += c
+    low, high = binomial_interval(hits, n, confidence, interval)
+    return MonteCarloEstimate(
+        probability=(hits / n).reshape(shape),
+        low=low.reshape(shape),
+        high=high.reshape(shape),
+        hits=hits.reshape(shape),
+        n=n,
+        confidence=confidence,
+        method=interval,
+    )

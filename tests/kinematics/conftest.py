@@ -67,3 +67,22 @@ def synth_small(tmp_path_factory):
     """A tiny synthetic data set (24 configurations) for fast plumbing tests."""
     root = tmp_path_factory.mktemp("synth_small")
     return make_synthetic(root / "small.h5", 24, seed=3, starts=1, points=128)
+
+
+# Small network settings that fit the synthetic mixture in a few seconds.
+FAST = dict(hidden=(32, 32), head_hidden=(16,), batch_size=16, lr=5e-3)
+
+
+@pytest.fixture(scope="session")
+def trained(synth_paths, tmp_path_factory):
+    """A K=2 model trained on the synthetic training set (float64), saved to a folder."""
+    import torch
+
+    from riskplan.kinematics.data import read_point_clouds
+    from riskplan.kinematics.training import TrainConfig, train
+
+    torch.set_num_threads(1)
+    out = tmp_path_factory.mktemp("model")
+    cfg = TrainConfig(n_components=2, epochs=30, early_stop_patience=100, dtype="float64", **FAST)
+    res = train(read_point_clouds(synth_paths[0]), cfg, out=out)
+    return res, out

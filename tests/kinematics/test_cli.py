@@ -1,0 +1,39 @@
+import json
+
+from typer.testing import CliRunner
+
+from riskplan.cli import app
+
+runner = CliRunner()
+
+
+def test_train_predict_evaluate_cli(synth_paths, tmp_path):
+    train, test = synth_paths
+    out = tmp_path / "m"
+    r = runner.invoke(app, ["train", "--data", str(train), "--components", "2", "--out", str(out), "--epochs", "2",
+                            "--hidden", "16,16", "--head-hidden", "8"])
+    assert r.exit_code == 0, r.output
+    assert (out / "model.json").is_file()
+    r = runner.invoke(app, ["train", "--data", str(train), "--components", "2", "--out", str(out), "--epochs", "3",
+                            "--hidden", "16,16", "--head-hidden", "8", "--resume"])
+    assert r.exit_code == 0, r.output
+    assert "3 epochs" in r.output
+    r = runner.invoke(app, ["predict", "--model", str(out), "--displacements", "0.01,0.02;0.0,0.0", "--json"])
+    assert r.exit_code == 0, r.output
+    obj = json.loads(r.output)
+    assert len(obj["weights"]) == 2 and len(obj["means"][0]) == 2
+    r = runner.invoke(app, ["evaluate", "--model", str(out), "--data", str(test), "--out", str(tmp_path / "ev"), "--samples", "512"])
+    assert r.exit_code == 0, r.output
+    ev = json.loads((tmp_path / "ev" / "evaluation.json").read_text())
+    assert set(ev["calibration"]) == {"0.5", "0.9", "0.95"}
+    assert (tmp_path / "ev" / "fig5_samples_vs_truth.png").is_file()
+    assert (tmp_path / "ev" / "fig5_samples_vs_truth.html").is_file()
+
+
+def test_predict_bad_input_is_clean_error(trained):
+    from riskplan.errors import InvalidInputError
+
+    _, out = trained
+    r = runner.invoke(app, ["predict", "--model", str(out), "--displacements", "0.01,0.02,0.03"])
+    assert r.exit_code != 0
+    assert isinstance(r.exception, InvalidInputError)

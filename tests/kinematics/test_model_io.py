@@ -1,0 +1,85 @@
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from riskplan.errors import DataFormatError
+from riskplan.kinematics import load_model, save_model
+from riskplan.kinematics.model_io import META_NAME, WEIGHTS_NAME, check_robot
+
+
+class _Robot:
+    def __init__(self, toml, n=2, name="r"):
+        self._toml, self.n_tendons, self.name = toml, n, name
+
+    def toml_text(self):
+        return self._toml
+
+
+def test_roundtrip_identical_predictions(trained, rng, tmp_path):
+    res, out = trained
+    loaded = load_model(out)
+    d = rng.uniform(-0.005, 0.035, size=(11, 2))
+    a, b = res.model.predict(d), loaded.predict(d)
+    for name in ("weights", "means", "precision_cholesky"):
+        assert torch.equal(getattr(a, name), getattr(b, name)), name
+    assert loaded.n_components == 2 and loaded.n_tendons == 2
+    np.testing.assert_array_equal(loaded.limits, res.model.limits)
+    meta = json.loads((out / META_NAME).read_text())
+    for key in ("versions", "architecture", "normalisation", "robot", "data", "training", "weights_sha256"):
+        assert key in meta
+    assert meta["data"]["content_hash"] == res.model.metadata["data"]["content_hash"]
+    # save again from the loaded model: same files
+    save_model(loaded, tmp_path / "again")
+    c = load_model(tmp_path / "again").predict(d)
+    assert torch.equal(c.means, a.means)
+    assert json.loads((tmp_path / "again" / META_NAME).read_text())["format_version"] == 1
+
+
+def test_other_robot_rejected(trained):
+    _, out = trained
+    m = load_model(out)
+    load_model(out, robot=_Robot(m.robot_toml))
+    with pytest.raises(DataFormatError, match="different description"):
+        load_model(out, robot=_Robot('name = "another"\n'))
+    with pytest.raises(DataFormatError, match="tendons"):
+        check_robot(m, _Robot(m.robot_toml, n=4))
+
+
+def _copy(src, dst):
+    dst.mkdir()
+    for name in (META_NAME, WEIGHTS_NAME):
+        (dst / name).write_bytes((src / name).read_bytes())
+    return dst
+
+
+def test_corrupted_files_rejected(trained, tmp_path):
+    _, out = trained
+    m = _copy(out, tmp_path / "a")
+    w = (m / WEIGHTS_NAME).read_bytes()
+    (m / WEIGHTS_NAME).write_bytes(w[:-10] + bytes(10))
+    with pytest.raises(DataFormatError, match="SHA-256"):
+        load_model(m)
+    m = _copy(out, tmp_path / "b")
+    (m / META_NAME).write_text((m / META_NAME).read_text()[:100])
+    with pytest.raises(DataFormatError, match="corrupted"):
+        load_model(m)
+    m = _copy(out, tmp_path / "c")
+    meta = json.loads((m / META_NAME).read_text())
+    del meta["normalisation"]
+    (m / META_NAME).write_text(json.dumps(meta))
+    with pytest.raises(DataFormatError, match="normalisation"):
+        load_model(m)
+    m = _copy(out, tmp_path / "d")
+    meta = json.loads((m / META_NAME).read_text())
+    meta["architecture"]["n_components"] = 3  # weights of a K=2 network
+    (m / META_NAME).write_text(json.dumps(meta))
+    with pytest.raises(DataFormatError, match="architecture"):
+        load_model(m)
+    m = _copy(out, tmp_path / "e")
+    (m / WEIGHTS_NAME).unlink()
+    with pytest.raises(DataFormatError, match="missing"):
+        load_model(m)
+    with pytest.raises(DataFormatError, match="not a model folder"):
+        load_model(tmp_path / "nothing")

@@ -1,0 +1,385 @@
+"""Scenario 1 of the deformable-planning paper (Patil, van den Berg & Alterovitz, RSS 2011,
+section V-A): a car without reverse — a planar model of a bevel-tip steerable needle —
+moving through a deformable unit square fixed at its four corners.
+
+Robot (paper V-A, Euler update with time step τ):
+
+    x_{t+1} = x_t + τ v_t cos θ_t
+    y_{t+1} = y_t + τ v_t sin θ_t
+    θ_{t+1} = θ_t + τ v_t tan φ_t / (r_min tan φ_max)
+
+with ``v ∈ [0, v_max]``, ``φ ∈ [−φ_max, φ_max]``, ``v_max = 0.5``, ``φ_max = π/3``,
+``τ = 0.1``, ``r_min = 0.25``; at ``|φ| = φ_max`` the curvature is ``1/r_min``.
+
+Tissue: isotropic linear elasticity (plane stress, unit thickness) on a triangle mesh of
+the unit square with the four corner nodes fixed. After each step the robot pushes the
+tissue with a force of magnitude ``f_int = params.force_scale`` (nominal 1) in its
+direction of motion, ``f = f_int (cos θ, sin θ)``, applied as a point load at the
+material point under the robot; the quasi-static displacement is ``u = K⁻¹ f``.
+Obstacles and the goal region are embedded in the tissue: they are polygons of material
+points whose current positions are ``X + u(X)`` (barycentric interpolation of ``u``).
+
+Modelling choices the paper leaves open (documented in docs/scenarios.md):
+
+* the load acts at the reference point equal to the robot position (with small-strain
+  linear elasticity the difference from the current configuration is second order);
+* the force is applied whatever the speed (the needle pushes whenever it is in the
+  tissue; this keeps ``g`` smooth in ``v`` for numerical linearisation), and is zero
+  once the robot has left the tissue;
+* the robot's kinematics are not changed by the tissue (the paper's update equations);
+  the tissue changes where obstacles and the goal are.
+
+Reduced state ``x = (x, y, θ)``; sensing ``z = (x, y) + n``, ``n ~ N(0, σ² I)``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from riskplan._validation import as_array
+from riskplan.errors import InvalidInputError
+from riskplan.scenarios import _geometry as geo
+from riskplan.scenarios.simulator import (
+    SimParams,
+    SimState,
+    apply_actuation_noise,
+    check_control,
+    frozen_array,
+    gaussian_noise,
+)
+
+__all__ = ["NeedleConfig", "NeedleState", "NeedleScenario", "car_step"]
+
+
+def car_step(pose, v, phi, *, tau: float = 0.1, r_min: float = 0.25, phi_max: float = math.pi / 3):
+    """One Euler step of the paper's car (section V-A); batched over leading axes.
+
+    ``pose (..., 3)`` = (x, y, θ); ``v (...)``, ``phi (...)``. Returns ``(..., 3)``:
+    ``(x + τ v cos θ, y + τ v sin θ, θ + τ v tan φ / (r_min tan φ_max))``. No validation.
+    """
+    if np.ndim(pose) == 1 and np.ndim(v) == 0 and np.ndim(phi) == 0:  # scalar fast path
+        th = float(pose[2])
+        s = tau * float(v)
+        return np.array(
+            [pose[0] + s * math.cos(th), pose[1] + s * math.sin(th), th + s * math.tan(phi) / (r_min * math.tan(phi_max))]
+        )
+    pose = np.asarray(pose, dtype=np.float64)
+    th = pose[..., 2]
+    out = np.empty(np.broadcast_shapes(pose.shape, np.shape(v) + (3,), np.shape(phi) + (3,)))
+    out[..., 0] = pose[..., 0] + tau * v * np.cos(th)
+    out[..., 1] = pose[..., 1] + tau * v * np.sin(th)
+    out[..., 2] = th + tau * v * np.tan(phi) / (r_min * math.tan(phi_max))
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class NeedleState(SimState):
+    """Full state of the needle scenario: ``pose (3,)`` = (x, y, θ) plus the tissue
+    displacement ``(n_nodes, 2)`` of the current push, the step index and the mesh size."""
+
+    pose: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self):
+        super().__post_init__()
+        object.__setattr__(self, "pose", frozen_array(self.pose))
+
+
+def _default_obstacles():
+    return (
+        geo.circle_polygon((0.42, 0.62), 0.11, 20),
+        geo.rectangle_polygon((0.56, 0.16), (0.68, 0.46)),
+        geo.circle_polygon((0.25, 0.25), 0.08, 16),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class NeedleConfig:
+    """Geometry and constants of the needle scenario (paper V-A values by default).
+
+    ``obstacles``: polygons ``(k, 2)`` of material points (reference configuration);
+    ``goal_center``/``goal_radius``: the goal disk (a 24-gon of material points);
+    ``sensing_std``: standard deviation of each position measurement.
+    """
+
+    width: float = 1.0
+    height: float = 1.0
+    start: tuple[float, float, float] = (0.05, 0.45, 0.0)
+    goal_center: tuple[float, float] = (0.85, 0.62)
+    goal_radius: float = 0.07
+    obstacles: tuple = field(default_factory=_default_obstacles)
+    v_max: float = 0.5
+    phi_max: float = math.pi / 3
+    tau: float = 0.1
+    r_min: float = 0.25
+    sensing_std: float = 0.01
+    plane: str = "stress"
+
+    def __post_init__(self):
+        for name in ("width", "height", "goal_radius", "v_max", "phi_max", "tau", "r_min", "sensing_std"):
+            v = float(getattr(self, name))
+            if not math.isfinite(v) or v <= 0:
+                raise InvalidInputError(f"{name}: must be finite and > 0, got {v!r}")
+        if self.phi_max >= math.pi / 2:
+            raise InvalidInputError(f"phi_max: must be < pi/2, got {self.phi_max}")
+        as_array(self.start, "start", shape=(3,))
+        obs = tuple(frozen_array(as_array(p, f"obstacles[{i}]", shape=(None, 2))) for i, p in enumerate(self.obstacles))
+        object.__setattr__(self, "obstacles", obs)
+
+    @property
+    def corners(self) -> np.ndarray:
+        return geo.rectangle_polygon((0.0, 0.0), (self.width, self.height))
+
+    @property
+    def goal_polygon(self) -> np.ndarray:
+        return geo.circle_polygon(self.goal_center, self.goal_radius, 24)
+
+
+class _MeshData:
+    """Cached per element count: mesh, assembled stiffness parts (via a base model),
+    point locator, and the interpolator of [obstacle vertices, goal polygon, goal centre]."""
+
+    def __init__(self, cfg: NeedleConfig, n_elements: int):
+        from riskplan.deformable import LinearElasticModel, Material, locate, mesh_polygon
+
+        mesh = mesh_polygon(cfg.corners, n_elements)
+        self.mesh = mesh
+        self.base = LinearElasticModel(mesh, Material(50.0, 0.4, plane=cfg.plane), mesh.vertex_nodes)
+        self.locator = geo.PointLocator(mesh.nodes, mesh.triangles)
+        pts = np.concatenate([*cfg.obstacles, cfg.goal_polygon, np.asarray(cfg.goal_center, dtype=np.float64)[None]])
+        self.interp = locate(mesh, pts)
+        self.obstacle_slices = np.cumsum([0] + [len(p) for p in cfg.obstacles])
+        k = int(self.obstacle_slices[-1])
+        self.goal_slice = slice(k, k + 24)
+        self.goal_center_index = k + 24
+
+
+class _NeedleModel:
+    """Cached per ``(E, ν, n_elements)``: the linear FEM model and its flexibility
+    (Green's) matrix over all DOFs, so a point load costs a 6-row gather."""
+
+    def __init__(self, data: _MeshData, params: SimParams, plane: str):
+        from riskplan.deformable import Material
+
+        self.data = data
+        self.model = data.base.with_material(Material(params.youngs_modulus, params.poissons_ratio, plane=plane))
+        n = 2 * data.mesh.n_nodes
+        free = self.model.free_dofs
+        green = np.zeros((n, n))
+        # K_ff⁻¹ on the free DOFs; a force at a fixed DOF is taken by the support.
+        # Symmetric, so row k is the displacement response to a unit force at DOF k.
+        green[np.ix_(free, free)] = self.model.solve_free(np.eye(len(free)))
+        green.setflags(write=False)
+        self.green = green
+
+
+class NeedleScenario:
+    """The needle / car scenario as a :class:`~riskplan.scenarios.simulator.Simulator`.
+
+    Parameters
+    ----------
+    config: :class:`NeedleConfig` (paper values by default).
+    distribution: parameter distribution S used by :meth:`sample_params` (default: the
+        nominal case, i.e. always ``nominal_params``).
+    cache_size: FEM models kept (one per distinct ``(E, ν, n_elements)``).
+
+    Dimensions: controls ``(v, φ)`` (q = 2), reduced state ``(x, y, θ)`` (p = 3),
+    measurements ``(x, y)`` (2).
+    """
+
+    control_dim = 2
+    state_dim = 3
+    obs_dim = 2
+    name = "needle"
+
+    def __init__(self, config: NeedleConfig | None = None, distribution=None, cache_size: int = 32):
+        self.config = config or NeedleConfig()
+        self.distribution = distribution
+        self._bounds = np.array([[0.0, self.config.v_max], [-self.config.phi_max, self.config.phi_max]])
+        self._bounds.setflags(write=False)
+        self._models: OrderedDict = OrderedDict()
+        self._meshes: dict = {}
+        self._cache_size = int(cache_size)
+        H = np.zeros((2, 3))
+        H[0, 0] = H[1, 1] = 1.0
+        H.setflags(write=False)
+        self.observation_matrix = H
+        cov = self.config.sensing_std**2 * np.eye(2)
+        cov.setflags(write=False)
+        self.sensing_cov = cov
+
+    # ---- protocol ------------------------------------------------------------------
+    @property
+    def control_bounds(self) -> np.ndarray:
+        """``[[0, v_max], [−φ_max, φ_max]]``."""
+        return self._bounds
+
+    @property
+    def nominal_params(self) -> SimParams:
+        """E = 50, ν = 0.4, 175 elements, f_int = 1, no actuation noise."""
+        if self.distribution is not None:
+            return self.distribution.planning_params
+        return SimParams()
+
+    def sample_params(self, seed=None) -> SimParams:
+        """One draw from ``distribution`` (the nominal parameters if there is none)."""
+        if self.distribution is None:
+            return self.nominal_params
+        return self.distribution.sample(seed)
+
+    def mesh_data(self, n_elements: int) -> _MeshData:
+        """Mesh, locator and interpolators for an element count (cached)."""
+        d = self._meshes.get(n_elements)
+        if d is None:
+            d = self._meshes[n_elements] = _MeshData(self.config, n_elements)
+        return d
+
+    def model(self, params: SimParams | None = None) -> _NeedleModel:
+        """The cached FEM model for ``params`` (built on first use)."""
+        params = params or self.nominal_params
+        key = params.material_key
+        m = self._models.get(key)
+        if m is None:
+            m = _NeedleModel(self.mesh_data(params.n_elements), params, self.config.plane)
+            self._models[key] = m
+            if len(self._models) > self._cache_size:
+                self._models.popitem(last=False)
+        else:
+            self._models.move_to_end(key)
+        return m
+
+    def initial_state(self, params: SimParams | None = None, pose=None) -> NeedleState:
+        """Robot at ``config.start`` (or ``pose (3,)``), undeformed tissue, ``t = 0``."""
+        params = params or self.nominal_params
+        d = self.mesh_data(params.n_elements)
+        p = self.config.start if pose is None else pose
+        p = as_array(p, "pose", shape=(3,))
+        return NeedleState(t=0, displacement=np.zeros((d.mesh.n_nodes, 2)), n_elements=params.n_elements, pose=p)
+
+    def _check_state(self, state, params: SimParams) -> None:
+        if not isinstance(state, NeedleState):
+            raise InvalidInputError(f"state: expected a NeedleState, got {type(state).__name__}")
+        if state.n_elements != params.n_elements:
+            raise InvalidInputError(
+                f"state: lives on a {state.n_elements}-element mesh but params.n_elements = {params.n_elements}"
+            )
+
+    def step(self, state: NeedleState, control, params: SimParams | None = None) -> NeedleState:
+        """``y_{t+1} = g(y_t, u_t, s)`` (paper eq. 1 with the V-A car and a linear FEM).
+
+        ``control (2,)`` = (v, φ) inside :attr:`control_bounds` (else
+        :class:`InvalidInputError`). With actuation noise in ``params`` the applied
+        control is ``clip(u + w_t)``. The tissue displacement is the quasi-static
+        response to ``f_int (cos θ_{t+1}, sin θ_{t+1})`` at the new robot position.
+        """
+        params = params or self.nominal_params
+        self._check_state(state, params)
+        u = check_control(control, self._bounds)
+        u = apply_actuation_noise(u, params, state.t, self._bounds)
+        cfg = self.config
+        pose = car_step(state.pose, u[0], u[1], tau=cfg.tau, r_min=cfg.r_min, phi_max=cfg.phi_max)
+        disp = self._tissue_response(pose, params)
+        return NeedleState(t=state.t + 1, displacement=disp, n_elements=state.n_elements, pose=pose)
+
+    def _tissue_response(self, pose: np.ndarray, params: SimParams) -> np.ndarray:
+        m = self.model(params)
+        d = m.data
+        n_nodes = d.mesh.n_nodes
+        if params.force_scale == 0.0:
+            return np.zeros((n_nodes, 2))
+        elem, lam = d.locator.locate(pose[:2])
+        if elem < 0:  # the robot has left the tissue: nothing to push
+            return np.zeros((n_nodes, 2))
+        nodes = d.mesh.triangles[elem]
+        fx = params.force_scale * math.cos(pose[2])
+        fy = params.force_scale * math.sin(pose[2])
+        dofs = np.concatenate([2 * nodes, 2 * nodes + 1])
+        vals = np.concatenate([lam * fx, lam * fy])
+        return (vals @ m.green[dofs]).reshape(n_nodes, 2)
+
+    def nodal_forces(self, state: NeedleState, params: SimParams | None = None) -> np.ndarray:
+        """The consistent nodal forces ``(n_nodes, 2)`` the robot applies in ``state``
+        (what ``state.displacement`` balances; for residual checks and plots)."""
+        params = params or self.nominal_params
+        self._check_state(state, params)
+        d = self.mesh_data(state.n_elements)
+        f = np.zeros((d.mesh.n_nodes, 2))
+        if state.t == 0:
+            return f  # the initial state is undeformed: the robot has not pushed yet
+        elem, lam = d.locator.locate(state.pose[:2])
+        if elem >= 0 and params.force_scale > 0:
+            dirn = params.force_scale * np.array([math.cos(state.pose[2]), math.sin(state.pose[2])])
+            f[d.mesh.triangles[elem]] += lam[:, None] * dirn[None]
+        return f
+
+    def reduced(self, state: NeedleState) -> np.ndarray:
+        """``x = (x, y, θ)`` (a copy)."""
+        return np.array(state.pose)
+
+    def observe(self, x, noise=None, rng=None) -> np.ndarray:
+        """``z = H x + n`` (paper eq. 3): position only. ``noise (2,)`` given explicitly,
+        or drawn from ``N(0, σ² I)`` with ``rng``; zero if neither is given."""
+        x = as_array(x, "x", shape=(3,))
+        return self.observation_matrix @ x + gaussian_noise(self.sensing_cov, noise, rng, 2)
+
+    # ---- geometry of a state -----------------------------------------------------------
+    def _data(self, state) -> _MeshData:
+        if not isinstance(state, NeedleState):
+            raise InvalidInputError(f"state: expected a NeedleState, got {type(state).__name__}")
+        return self.mesh_data(state.n_elements)
+
+    def _points(self, state: NeedleState) -> np.ndarray:
+        return self._data(state).interp.positions(state.displacement)
+
+    def obstacles(self, state: NeedleState) -> list[np.ndarray]:
+        """Deformed obstacle polygons ``[(k_i, 2)]`` in ``state``."""
+        pts = self._points(state)
+        s = self._data(state).obstacle_slices
+        return [pts[s[i] : s[i + 1]] for i in range(len(s) - 1)]
+
+    def goal(self, state: NeedleState) -> np.ndarray:
+        """Deformed goal polygon ``(24, 2)``."""
+        return self._points(state)[self._data(state).goal_slice]
+
+    def goal_center(self, state: NeedleState) -> np.ndarray:
+        """Current position ``(2,)`` of the material point at the goal's centre."""
+        return self._points(state)[self._data(state).goal_center_index]
+
+    def inside(self, state: NeedleState) -> bool:
+        """Whether the robot is in the tissue (the reference square)."""
+        x, y = state.pose[0], state.pose[1]
+        return bool(0.0 <= x <= self.config.width and 0.0 <= y <= self.config.height)
+
+    def in_collision(self, state: NeedleState) -> bool:
+        """Robot position inside a deformed obstacle."""
+        p = state.pose[None, :2]
+        return any(bool(geo.points_in_polygon(p, poly)[0]) for poly in self.obstacles(state))
+
+    def in_goal(self, state: NeedleState) -> bool:
+        """Robot position inside the deformed goal polygon."""
+        return bool(geo.points_in_polygon(state.pose[None, :2], self.goal(state))[0])
+
+    def goal_distance(self, state: NeedleState) -> float:
+        """Distance from the robot to the (deformed) goal centre."""
+        return float(np.linalg.norm(state.pose[:2] - self.goal_center(state)))
+
+    def deformed_nodes(self, state: NeedleState) -> np.ndarray:
+        """Current node positions ``(n_nodes, 2)``."""
+        return self._data(state).mesh.nodes + state.displacement
+
+    def path(self, states) -> np.ndarray:
+        """Robot positions ``(T, 2)`` along a list of states."""
+        return np.array([s.pose[:2] for s in states])
+
+    def random_controls(self, n_steps: int, seed=None) -> np.ndarray:
+        """``(n_steps, 2)`` random controls: speed in ``[0.6, 1] v_max``, steering a
+        smoothed random walk inside the bounds (for demos and tests)."""
+        from riskplan._validation import as_generator
+
+        gen = as_generator(seed)
+        v = gen.uniform(0.6, 1.0, n_steps) * self.config.v_max
+        phi = np.clip(np.cumsum(gen.normal(0.0, 0.25, n_steps)) * 0.5, -1, 1) * self.config.phi_max
+        return np.stack([v, phi], axis=1)

@@ -1,0 +1,36 @@
+"""FEM tissue simulators (paper: Patil, van den Berg, Alterovitz, RSS 2011, sections III, V).
+
+2-D P1 triangle meshes of a polygon with a requested element count, linear elasticity
+with a cached factorisation, compressible neo-Hookean (and St Venant-Kirchhoff)
+hyperelasticity with Newton's method, consistent nodal forces for point / patch /
+body / traction loads, and barycentric interpolation at material points.
+See ``docs/deformable.md`` for equations and the API.
+"""
+
+from riskplan.deformable.linear import LinearElasticModel, element_strains, element_stresses
+from riskplan.deformable.loads import body_load, patch_load, patch_weights, point_load, traction_load
+from riskplan.deformable.locate import Interpolator, contains, locate
+from riskplan.deformable.material import Material
+from riskplan.deformable.mesh import TissueMesh, mesh_polygon, rectangle
+
+__all__ = [
+    "TissueMesh",
+    "mesh_polygon",
+    "rectangle",
+    "Material",
+    "LinearElasticModel",
+    "element_strains",
+    "element_stresses",
+    "Interpolator",
+    "locate",
+    "contains",
+    "point_load",
+    "patch_load",
+    "patch_weights",
+    "body_load",
+    "traction_load",
+]
+
+from riskplan.deformable.neohookean import HyperelasticModel, NeoHookeanModel, SolveInfo  # noqa: E402
+
+__all__ += ["HyperelasticModel", "NeoHookeanModel", "SolveInfo"]

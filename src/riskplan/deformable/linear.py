@@ -1,0 +1,181 @@
+"""Linear elastic FEM (P1 triangles) with a cached factorisation (paper V-A: "an isotropic,
+linearly elastic material and ... a linear FEM simulator").
+
+Weak form: find u ∈ V (u = ū on the fixed nodes) with
+
+    ∫_Ω σ(u) : ε(v) dx = Σ_a f_a · v(X_a)     for all v ∈ V₀,
+    ε(u) = ½(∇u + ∇uᵀ),  σ = λ₂ tr(ε) I + 2 μ ε,
+
+assembled with scikit-fem (``ElementVector(ElementTriP1())``, interleaved DOFs
+``[u_x0, u_y0, u_x1, ...]``, so ``u.reshape(N, 2)`` is the nodal displacement). The
+stiffness is kept as ``K = λ₂ K_λ + μ K_μ``, so a new material costs one factorisation
+and no re-assembly (:meth:`LinearElasticModel.with_material`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from riskplan._validation import as_array
+from riskplan.deformable.material import Material
+from riskplan.deformable.mesh import TissueMesh
+from riskplan.errors import InvalidInputError, require
+
+#: Free-DOF count up to which the reduced stiffness is inverted densely (a dense
+#: mat-vec beats a sparse triangular solve for small systems).
+DENSE_MAX_DOFS = 700
+
+
+def assemble_stiffness_parts(mesh: TissueMesh):
+    """``(K_λ, K_μ)``: the P1 stiffness matrices ``(2N, 2N)`` (CSR) for ``λ=1, μ=0`` and
+    ``λ=0, μ=1`` (so ``K = λ K_λ + μ K_μ``), assembled with scikit-fem."""
+    skfem = require("skfem", "fem")
+    from skfem.models.elasticity import linear_elasticity
+
+    basis = skfem.Basis(mesh.to_skfem(), skfem.ElementVector(skfem.ElementTriP1()), intorder=1)
+    K_lam = skfem.asm(linear_elasticity(1.0, 0.0), basis).tocsr()
+    K_mu = skfem.asm(linear_elasticity(0.0, 1.0), basis).tocsr()
+    return K_lam, K_mu
+
+
+def _fixed_node_array(fixed_nodes, n_nodes: int) -> np.ndarray:
+    fixed = np.unique(np.asarray(fixed_nodes, dtype=np.int64).reshape(-1)) if fixed_nodes is not None else None
+    if fixed is None or fixed.size == 0:
+        raise InvalidInputError("fixed_nodes: at least one node must be fixed (else rigid motions are free)")
+    if fixed.min() < 0 or fixed.max() >= n_nodes:
+        raise InvalidInputError(f"fixed_nodes: indices must lie in [0, {n_nodes - 1}]")
+    return fixed
+
+
+def _check_rigid(mesh: TissueMesh, fixed: np.ndarray) -> None:
+    if fixed.size == 1:
+        raise InvalidInputError(
+            "fixed_nodes: one fixed node leaves the rotation about it free; fix at least two distinct nodes"
+        )
+
+
+class LinearElasticModel:
+    """Linear elasticity on ``mesh`` with the nodes ``fixed_nodes`` held (both components).
+
+    Parameters
+    ----------
+    mesh: :class:`TissueMesh`
+    material: :class:`Material`
+    fixed_nodes: ``(F,)`` node indices with prescribed displacement (zero unless given
+        per solve).
+
+    Attributes: ``K`` (2N×2N CSR stiffness), ``free_dofs``, ``fixed_dofs`` (flat,
+    interleaved), ``fixed_nodes``.
+    """
+
+    def __init__(self, mesh: TissueMesh, material: Material, fixed_nodes, *, _parts=None):
+        if not isinstance(mesh, TissueMesh):
+            raise InvalidInputError(f"mesh: expected a TissueMesh, got {type(mesh).__name__}")
+        if not isinstance(material, Material):
+            raise InvalidInputError(f"material: expected a Material, got {type(material).__name__}")
+        self.mesh = mesh
+        self.material = material
+        self.fixed_nodes = _fixed_node_array(fixed_nodes, mesh.n_nodes)
+        _check_rigid(mesh, self.fixed_nodes)
+        self._parts = _parts if _parts is not None else assemble_stiffness_parts(mesh)
+        lam, mu = material.lame
+        self.K = (lam * self._parts[0] + mu * self._parts[1]).tocsr()
+        n = 2 * mesh.n_nodes
+        mask = np.ones(n, dtype=bool)
+        self.fixed_dofs = np.sort(np.concatenate([2 * self.fixed_nodes, 2 * self.fixed_nodes + 1]))
+        mask[self.fixed_dofs] = False
+        self.free_dofs = np.flatnonzero(mask)
+        self._K_ff = self.K[self.free_dofs][:, self.free_dofs].tocsc()
+        self._K_fc = self.K[self.free_dofs][:, self.fixed_dofs].tocsr()
+        self._n = n
+        self._factorise()
+
+    def _factorise(self) -> None:
+        from scipy.sparse.linalg import splu
+
+        nf = len(self.free_dofs)
+        if nf <= DENSE_MAX_DOFS:
+            import scipy.linalg
+
+            # K_ff is symmetric positive definite: Cholesky, then the explicit inverse
+            Kd = self._K_ff.toarray()
+            c = scipy.linalg.cho_factor(Kd)
+            self._inv = scipy.linalg.cho_solve(c, np.eye(nf))
+            self._lu = None
+        else:
+            self._inv = None
+            self._lu = splu(self._K_ff)
+
+    # ---- construction helpers -------------------------------------------------------
+    def with_material(self, material: Material) -> "LinearElasticModel":
+        """The same mesh and supports with another material (re-uses the assembly)."""
+        return LinearElasticModel(self.mesh, material, self.fixed_nodes, _parts=self._parts)
+
+    @property
+    def n_dofs(self) -> int:
+        return self._n
+
+    # ---- solves ---------------------------------------------------------------------
+    def solve_free(self, f_free: np.ndarray) -> np.ndarray:
+        """``K_ff⁻¹ f_free`` for ``f_free (n_free,)`` or ``(n_free, k)`` (no validation)."""
+        if self._inv is not None:
+            return self._inv @ f_free
+        return self._lu.solve(f_free)
+
+    def solve_flat(self, f: np.ndarray) -> np.ndarray:
+        """Displacement ``(2N,)`` for nodal forces ``f (2N,)`` (interleaved), zero
+        displacement at the fixed nodes. Hot path: no validation."""
+        u = np.zeros(self._n)
+        u[self.free_dofs] = self.solve_free(f[self.free_dofs])
+        return u
+
+    def solve(self, nodal_forces, fixed_values=None) -> np.ndarray:
+        """Solve ``K u = f`` for ``u (N, 2)``.
+
+        ``nodal_forces (N, 2)``: forces at all nodes (entries at fixed nodes are ignored;
+        see :meth:`reactions`). ``fixed_values (F, 2)``: prescribed displacements of
+        ``fixed_nodes`` (in sorted node order), default zero:
+        ``u_f = K_ff⁻¹ (f_f − K_fc ū)``.
+        """
+        f = as_array(nodal_forces, "nodal_forces", shape=(self.mesh.n_nodes, 2)).reshape(-1)
+        u = np.zeros(self._n)
+        rhs = f[self.free_dofs]
+        if fixed_values is not None:
+            ub = as_array(fixed_values, "fixed_values", shape=(len(self.fixed_nodes), 2)).reshape(-1)
+            u[self.fixed_dofs] = ub
+            rhs = rhs - self._K_fc @ ub
+        u[self.free_dofs] = self.solve_free(rhs)
+        return u.reshape(-1, 2)
+
+    def residual(self, u, nodal_forces) -> np.ndarray:
+        """Out-of-balance forces ``(K u − f)`` at the free DOFs, as ``(N, 2)`` with zeros
+        at the fixed nodes."""
+        r = self.K @ np.asarray(u, dtype=np.float64).reshape(-1) - np.asarray(nodal_forces, dtype=np.float64).reshape(-1)
+        r[self.fixed_dofs] = 0.0
+        return r.reshape(-1, 2)
+
+    def reactions(self, u) -> np.ndarray:
+        """Support reactions ``(F, 2)`` at the fixed nodes: ``(K u)`` there."""
+        return (self.K @ np.asarray(u, dtype=np.float64).reshape(-1))[self.fixed_dofs].reshape(-1, 2)
+
+    def energy(self, u) -> float:
+        """Strain energy ``½ uᵀ K u``."""
+        x = np.asarray(u, dtype=np.float64).reshape(-1)
+        return 0.5 * float(x @ (self.K @ x))
+
+
+def element_strains(mesh: TissueMesh, u) -> np.ndarray:
+    """Small strains ``ε = sym ∇u`` ``(T, 2, 2)`` (constant per P1 element) for ``u (N, 2)``."""
+    from riskplan.deformable.neohookean import shape_gradients
+
+    G = shape_gradients(mesh)  # (T, 3, 2)
+    grad = np.einsum("tai,taj->tij", np.asarray(u, dtype=np.float64)[mesh.triangles], G)
+    return 0.5 * (grad + np.swapaxes(grad, 1, 2))
+
+
+def element_stresses(mesh: TissueMesh, material: Material, u) -> np.ndarray:
+    """Linear stresses ``σ = λ₂ tr(ε) I + 2 μ ε`` ``(T, 2, 2)`` for ``u (N, 2)``."""
+    eps = element_strains(mesh, u)
+    lam, mu = material.lame
+    tr = eps[:, 0, 0] + eps[:, 1, 1]
+    return 2.0 * mu * eps + lam * tr[:, None, None] * np.eye(2)

@@ -205,7 +205,7 @@ class Normalisation:
         return float(np.log(self.output_scale).sum())
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, repr=False)
 class MDNModel:
     """A trained MDN with its normalisation and the robot it was trained for.
 
@@ -231,6 +231,13 @@ class MDNModel:
     @property
     def n_tendons(self) -> int:
         return self.net.n_inputs
+
+    def __repr__(self) -> str:
+        a = self.net.architecture()
+        return (
+            f"MDNModel(robot={self.robot_name!r}, tendons={self.n_tendons}, K={self.n_components}, "
+            f"hidden={a['hidden']}, heads={a['head_hidden']}, activation={a['activation']!r})"
+        )
 
     @property
     def robot(self):

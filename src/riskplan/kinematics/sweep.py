@@ -118,13 +118,13 @@ def _sweep_one(task: tuple) -> dict:
     from riskplan.kinematics.evaluation import component_weight_stats, mode_collapse, nll_per_config
     from riskplan.kinematics.training import train
 
-    train_path, test_path, K, cfg_json, out_dir, threshold = task
+    train_path, test_path, K, cfg_json, out_dir, threshold, max_seconds = task
     torch.set_num_threads(1)
     t0 = time.perf_counter()
     cfg = TrainConfig.from_json({**cfg_json, "n_components": K})
     train_data = read_point_clouds(train_path)
     test_data = read_point_clouds(test_path)
-    res = train(train_data, cfg, out=out_dir)
+    res = train(train_data, cfg, out=out_dir, max_seconds=max_seconds)
     nll = float(nll_per_config(res.model, test_data).mean())
     ws = component_weight_stats(res.model, test_data.displacements)
     return {
@@ -151,11 +151,13 @@ def sweep(
     collapse_threshold: float = DEFAULT_COLLAPSE_THRESHOLD,
     nll_tolerance: float = DEFAULT_NLL_TOLERANCE,
     on_result=None,
+    max_seconds_per_k: float | None = None,
 ) -> SweepResult:
     """Train one model per ``K`` in ``components`` and score it on ``test_path`` (Fig. 4).
 
     Models go to ``out/K{K}/``. ``workers > 1`` trains several ``K`` at once in
     processes. ``on_result(index, entry_dict)`` reports each finished ``K``.
+    ``max_seconds_per_k``: wall-clock budget of each training (see ``train(max_seconds=)``).
     Both data sets are checked (readable, non-empty, same robot) before any training.
     """
     from riskplan.kinematics.data import check_compatible, read_point_clouds
@@ -174,7 +176,7 @@ def sweep(
     check_compatible(tr, te, what="test set")
     del tr, te
     out = Path(out)
-    tasks = [(str(train_path), str(test_path), K, config.to_json(), str(out / f"K{K}"), collapse_threshold) for K in components]
+    tasks = [(str(train_path), str(test_path), K, config.to_json(), str(out / f"K{K}"), collapse_threshold, max_seconds_per_k) for K in components]
     backend = "serial" if workers <= 1 or len(tasks) == 1 else "local"
     results = map_tasks(_sweep_one, tasks, backend=backend, workers=max(1, workers), chunksize=1, on_result=on_result)
     entries = [SweepEntry(**r) for r in results]

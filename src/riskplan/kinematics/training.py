@@ -191,6 +191,7 @@ def train(
     resume: bool = False,
     on_epoch: Callable[[EpochRecord], None] | None = None,
     on_step: Callable[[int, int, float], None] | None = None,
+    max_seconds: float | None = None,
 ) -> TrainResult:
     """Fit an MDN to ``data``; returns the best-validation model.
 
@@ -198,7 +199,9 @@ def train(
     best model (``weights.pt`` + ``model.json``, see :mod:`riskplan.kinematics.model_io`).
     ``resume``: continue from ``out/checkpoint.pt`` (the data set must be the same, by
     content hash). ``on_epoch(record)`` and ``on_step(step, steps_per_epoch, loss)``
-    report progress. Reported NLLs are nats per point with positions in metres.
+    report progress. ``max_seconds``: stop after the first epoch that ends past this
+    wall-clock budget (the result is still the best model so far). Reported NLLs are
+    nats per point with positions in metres.
 
     Raises :class:`DataFormatError` for unusable data or a mismatched checkpoint, before
     any training, and :class:`ConvergenceError` if training keeps producing non-finite losses.
@@ -246,6 +249,7 @@ def train(
     B = min(config.batch_size, n_train)
     steps = math.ceil(n_train / B)
     stopped_early = since_best >= config.early_stop_patience and best_epoch >= 0
+    t_start = time.perf_counter()
 
     for epoch in range(start_epoch, config.epochs):
         if stopped_early:
@@ -334,6 +338,9 @@ def train(
             )
         if on_epoch is not None:
             on_epoch(rec)
+        if max_seconds is not None and time.perf_counter() - t_start > max_seconds:
+            log.info("time budget of %.0f s spent after epoch %d", max_seconds, epoch)
+            break
 
     if best_state is None:
         if not history:

@@ -1,9 +1,156 @@
-"""`riskplan` subcommands for the tissue area (heavy imports stay inside the commands)."""
+"""`riskplan tissue ...`: simulate the deformable-tissue scenarios (heavy imports stay
+inside the commands).
+
+Controls file format (``--controls FILE``): a ``(T, q)`` table of controls, one step per
+row — ``q = 2`` for the needle (``v, phi``), ``q = 6`` for the manipulation scenario
+(``F1x, F1y, F2x, F2y, F3x, F3y``):
+
+* ``.csv`` / ``.txt``: comma-separated numbers; lines starting with ``#`` and a first
+  line that does not parse as numbers (a header) are skipped;
+* ``.json``: a list of rows ``[[v, phi], ...]`` or an object ``{"controls": [[...], ...]}``.
+"""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import typer
+
+SCENARIOS = ("needle", "manipulation")
+
+
+def read_controls(path, control_dim: int):
+    """Read a ``(T, control_dim)`` controls table from CSV/TXT or JSON (see module docstring)."""
+    import json
+
+    import numpy as np
+
+    from riskplan._validation import as_array
+    from riskplan.errors import DataFormatError
+
+    path = Path(path)
+    if not path.is_file():
+        raise DataFormatError(f"controls: no such file {str(path)!r}")
+    text = path.read_text()
+    if path.suffix.lower() == ".json":
+        try:
+            obj = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise DataFormatError(f"controls: {path.name} is not valid JSON ({exc})") from exc
+        if isinstance(obj, dict):
+            if "controls" not in obj:
+                raise DataFormatError(f"controls: {path.name} has no 'controls' key")
+            obj = obj["controls"]
+        rows = obj
+    else:
+        rows = []
+        for i, line in enumerate(text.splitlines()):
+            line = line.strip()
+            if not line or line.startswith("#"):
+                continue
+            try:
+                rows.append([float(v) for v in line.replace(";", ",").split(",") if v.strip() != ""])
+            except ValueError as exc:
+                if not rows and i == 0:
+                    continue  # header line
+                raise DataFormatError(f"controls: {path.name} line {i + 1} is not a row of numbers ({exc})") from exc
+    try:
+        arr = np.asarray(rows, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise DataFormatError(f"controls: {path.name} rows have different lengths or non-numbers") from exc
+    if arr.ndim != 2 or arr.shape[0] == 0:
+        raise DataFormatError(f"controls: expected a non-empty (T, {control_dim}) table, got shape {arr.shape}")
+    return as_array(arr, "controls", shape=(None, control_dim))
+
+
+def make_scenario(name: str, case: str):
+    """The scenario ``name`` with the parameter distribution of uncertainty ``case``."""
+    from riskplan.errors import InvalidInputError
+    from riskplan.scenarios.uncertainty import get_case
+
+    if name == "needle":
+        from riskplan.scenarios.needle import NeedleScenario
+
+        sim = NeedleScenario()
+        sim.distribution = get_case(case, sim.nominal_params)
+    elif name == "manipulation":
+        from riskplan.scenarios.manipulation import ManipulationScenario
+
+        sim = ManipulationScenario()
+        sim.distribution = get_case(case, sim.nominal_params, actuation_cov=sim.actuation_cov())
+    else:
+        raise InvalidInputError(f"scenario: expected one of {', '.join(SCENARIOS)}, got {name!r}")
+    return sim
 
 
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
+    sub = typer.Typer(help="Deformable-tissue scenarios (FEM): simulate, render frames and GIFs.", no_args_is_help=True)
+    app.add_typer(sub, name="tissue")
+
+    @sub.command("simulate")
+    def simulate(
+        scenario: str = typer.Option("needle", "--scenario", help="needle | manipulation"),
+        controls: str = typer.Option("random", "--controls", help="FILE (CSV or JSON, one (T, q) row per step) or 'random'"),
+        out: Path = typer.Option(..., "--out", help="output folder for frames, GIF and summary.json"),
+        case: str = typer.Option("nominal", "--case", help="nominal | material-low | material-high | actuation | mesh | force"),
+        steps: int = typer.Option(None, "--steps", help="steps to run (default: all rows of FILE, or 30 needle / 20 manipulation)"),
+        seed: int = typer.Option(0, "--seed", help="seed of the parameter draw and of random controls"),
+        max_frames: int = typer.Option(40, "--max-frames", help="at most this many PNG frames / GIF frames"),
+    ) -> None:
+        """Run one simulation and write PNG frames, an animated GIF and summary.json."""
+        import numpy as np
+
+        from riskplan.commands._progress import progress_bar
+        from riskplan.errors import InvalidInputError
+        from riskplan.io import write_json_atomic
+        from riskplan.scenarios.plotting import save_frames, save_gif
+
+        sim = make_scenario(scenario, case)
+        if steps is not None and steps < 1:
+            raise InvalidInputError(f"steps: expected >= 1, got {steps}")
+        params = sim.sample_params(seed)
+        if controls == "random":
+            n = steps or (30 if scenario == "needle" else 20)
+            u = sim.random_controls(n, seed)
+        else:
+            u = read_controls(controls, sim.control_dim)
+            if steps is not None:
+                if steps > len(u):
+                    raise InvalidInputError(f"steps: {steps} exceeds the {len(u)} rows of {controls}")
+                u = u[:steps]
+        out.mkdir(parents=True, exist_ok=True)
+        states = [sim.initial_state(params)]
+        with progress_bar() as bar:
+            task = bar.add_task(f"simulate {scenario}", total=len(u), status="")
+            for k in range(len(u)):
+                states.append(sim.step(states[-1], u[k], params))
+                bar.update(task, advance=1, status=f"goal dist {sim.goal_distance(states[-1]):.3f}")
+            frames = save_frames(sim, states, out / "frames", max_frames=max_frames)
+            gif = save_gif(sim, states, out / f"{scenario}.gif", max_frames=max_frames)
+        collided = [s.t for s in states if sim.in_collision(s)]
+        summary = {
+            "scenario": scenario,
+            "case": case,
+            "seed": seed,
+            "steps": len(u),
+            "params": {
+                "youngs_modulus": params.youngs_modulus,
+                "poissons_ratio": params.poissons_ratio,
+                "n_elements": params.n_elements,
+                "force_scale": params.force_scale,
+                "actuation_cov": params.actuation_cov,
+            },
+            "mesh_elements": int(sim.mesh_data(params.n_elements).mesh.n_elements),
+            "final_reduced_state": np.asarray(sim.reduced(states[-1])).tolist(),
+            "final_goal_distance": sim.goal_distance(states[-1]),
+            "reached_goal": bool(sim.in_goal(states[-1])),
+            "collision_steps": collided,
+            "gif": gif.name,
+            "frames": [p.name for p in frames],
+        }
+        write_json_atomic(out / "summary.json", summary)
+        typer.echo(
+            f"{scenario} ({case}): {len(u)} steps, final goal distance {summary['final_goal_distance']:.4f}, "
+            f"{'collision at steps ' + str(collided[:5]) if collided else 'no collision'}; wrote {out / gif.name}"
+        )

@@ -1,0 +1,234 @@
+"""Needle / car scenario (paper V-A): kinematics against closed forms, tissue coupling
+against the FEM model and an independent interpolation (scikit-fem probes), snapshot /
+restore, bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from riskplan.errors import InvalidInputError
+from riskplan.scenarios import _geometry as geo
+from riskplan.scenarios.needle import NeedleConfig, NeedleScenario, NeedleState, car_step
+from riskplan.scenarios.simulator import SimParams, rollout
+
+TAU, RMIN, PHIMAX = 0.1, 0.25, math.pi / 3
+
+
+def test_straight_line_for_zero_steering(tol):
+    pose = np.array([0.1, 0.2, 0.7])
+    for _ in range(9):
+        pose = car_step(pose, 0.4, 0.0)
+    expected = np.array([0.1, 0.2]) + 9 * TAU * 0.4 * np.array([math.cos(0.7), math.sin(0.7)])
+    np.testing.assert_allclose(pose[:2], expected, **tol["float64_ref"])
+    assert pose[2] == 0.7
+
+
+@pytest.mark.parametrize("phi", [0.3, -0.8, PHIMAX])
+def test_constant_steering_vertices_lie_on_circle(phi, tol):
+    """Euler steps of constant length s and heading increment Δ are the vertices of a
+    regular polygon inscribed in a circle of radius R = s / (2 sin(Δ/2))."""
+    v = 0.45
+    s = TAU * v
+    delta = s * math.tan(phi) / (RMIN * math.tan(PHIMAX))
+    th0 = 0.4
+    p = np.array([0.3, 0.3, th0])
+    pts = [p[:2]]
+    for _ in range(30):
+        p = car_step(p, v, phi)
+        pts.append(p[:2])
+    pts = np.array(pts)
+    R = s / (2 * math.sin(abs(delta) / 2))
+    # centre: perpendicular to the chord direction (θ0 + Δ/2) at distance R cos(Δ/2) from the chord midpoint
+    side = math.copysign(1.0, delta)
+    mid = 0.5 * (pts[0] + pts[1])
+    a = th0 + side * math.pi / 2
+    centre = mid + R * math.cos(delta / 2) * np.array([math.cos(a), math.sin(a)])
+    np.testing.assert_allclose(np.linalg.norm(pts - centre, axis=1), R, **tol["float64_ref"])
+    np.testing.assert_allclose(p[2], th0 + 30 * delta, **tol["float64_ref"])
+    # continuous-time radius L = r_min tan φ_max / tan φ is the s -> 0 limit
+    L = RMIN * math.tan(PHIMAX) / abs(math.tan(phi))
+    assert abs(R - L) / L < s**2 / (20 * L**2)
+
+
+def test_minimum_turning_radius_at_bound(tol):
+    """At |φ| = φ_max the curvature is exactly 1/r_min: heading changes by s / r_min."""
+    pose = car_step(np.array([0.0, 0.0, 0.0]), 0.5, PHIMAX)
+    np.testing.assert_allclose(pose[2], TAU * 0.5 / RMIN, **tol["float64_ref"])
+    pose = car_step(np.array([0.0, 0.0, 0.0]), 0.5, -PHIMAX)
+    np.testing.assert_allclose(pose[2], -TAU * 0.5 / RMIN, **tol["float64_ref"])
+
+
+def test_car_step_batch_equals_loop(rng, tol):
+    poses = rng.uniform(-1, 1, (7, 3))
+    v = rng.uniform(0, 0.5, 7)
+    phi = rng.uniform(-PHIMAX, PHIMAX, 7)
+    batch = car_step(poses, v, phi)
+    loop = np.array([car_step(poses[i], v[i], phi[i]) for i in range(7)])
+    np.testing.assert_allclose(batch, loop, **tol["float64_exact"])
+
+
+def test_step_matches_car_kinematics(needle, tol):
+    s0 = needle.initial_state()
+    s1 = needle.step(s0, [0.35, -0.4])
+    np.testing.assert_allclose(s1.pose, car_step(s0.pose, 0.35, -0.4), **tol["float64_exact"])
+    np.testing.assert_allclose(needle.reduced(s1), s1.pose, **tol["float64_exact"])
+    assert s1.t == 1 and s0.t == 0
+
+
+def _controls(n, seed=0):
+    g = np.random.default_rng(seed)
+    return np.stack([g.uniform(0.2, 0.5, n), g.uniform(-0.6, 0.6, n)], axis=1)
+
+
+def test_deterministic_and_snapshot_restore_bit_identical(needle):
+    p = SimParams(actuation_cov=((0.01, 0.0), (0.0, 0.02)), actuation_seed=5)
+    u = _controls(12)
+    states = rollout(needle, needle.initial_state(p), u, p)
+    snap = states[6]
+    again = rollout(needle, snap, u[6:], p)
+    for a, b in zip(states[6:], again):
+        assert a.identical(b)
+    # a fresh scenario object (empty caches) gives the same bits
+    other = NeedleScenario()
+    again2 = rollout(other, snap, u[6:], p)
+    assert states[-1].identical(again2[-1])
+    # stepping never mutates the input state
+    before = snap.displacement.copy()
+    needle.step(snap, u[6], p)
+    assert np.array_equal(before, snap.displacement)
+
+
+def test_equilibrium_residual_after_each_step(needle):
+    p = SimParams()
+    states = rollout(needle, needle.initial_state(p), _controls(10, 1), p)
+    model = needle.model(p).model
+    for s in states[1:]:
+        f = needle.nodal_forces(s, p)
+        r = model.residual(s.displacement, f)
+        assert np.linalg.norm(r) <= 1e-10 * max(1.0, np.linalg.norm(f))
+        np.testing.assert_allclose(np.linalg.norm(f.sum(0)), p.force_scale, rtol=1e-12, atol=1e-12)
+
+
+def test_flexibility_matrix_equals_fem_solve(needle, tol):
+    p = SimParams(youngs_modulus=40.0, poissons_ratio=0.3, n_elements=300)
+    s = needle.step(needle.initial_state(p, pose=(0.4, 0.45, 0.3)), [0.5, 0.2], p)
+    ref = needle.model(p).model.solve(needle.nodal_forces(s, p))
+    np.testing.assert_allclose(s.displacement, ref, rtol=1e-9, atol=1e-12)
+
+
+def test_force_direction_and_support_reactions(needle, tol):
+    p = SimParams(force_scale=1.5)
+    s = needle.step(needle.initial_state(p, pose=(0.5, 0.5, 0.0)), [0.5, 0.9], p)
+    reactions = needle.model(p).model.reactions(s.displacement)
+    th = s.pose[2]
+    np.testing.assert_allclose(reactions.sum(0), -1.5 * np.array([math.cos(th), math.sin(th)]), rtol=1e-9, atol=1e-10)
+    # the tissue near the robot moves along the push
+    d = needle.mesh_data(175)
+    elem, lam = d.locator.locate(s.pose[:2])
+    u_tip = lam @ s.displacement[d.mesh.triangles[elem]]
+    assert u_tip @ np.array([math.cos(th), math.sin(th)]) > 0
+
+
+def test_displacement_linear_in_force_scale(needle, tol):
+    s0 = needle.initial_state(pose=(0.3, 0.6, -0.2))
+    u1 = needle.step(s0, [0.4, 0.1], SimParams(force_scale=1.0)).displacement
+    u2 = needle.step(s0, [0.4, 0.1], SimParams(force_scale=2.0)).displacement
+    np.testing.assert_allclose(u2, 2 * u1, **tol["float64_ref"])
+    u0 = needle.step(s0, [0.4, 0.1], SimParams(force_scale=0.0)).displacement
+    assert np.all(u0 == 0.0)
+
+
+def test_obstacles_and_goal_move_with_tissue(needle, tol):
+    """Embedded points follow the P1 interpolant of the FEM displacement; checked
+    against scikit-fem's own interpolation (``basis.probes``)."""
+    import skfem
+
+    p = SimParams()
+    s = needle.step(needle.initial_state(p, pose=(0.6, 0.6, 0.5)), [0.5, 0.0], p)
+    mesh = needle.mesh_data(175).mesh
+    basis = skfem.Basis(mesh.to_skfem(), skfem.ElementTriP1())
+    cfg = needle.config
+    ref_pts = np.concatenate([*cfg.obstacles, cfg.goal_polygon, np.asarray(cfg.goal_center)[None]])
+    P = basis.probes(ref_pts.T)
+    expected = ref_pts + np.stack([P @ s.displacement[:, 0], P @ s.displacement[:, 1]], axis=1)
+    got = np.concatenate([*needle.obstacles(s), needle.goal(s), needle.goal_center(s)[None]])
+    np.testing.assert_allclose(got, expected, **tol["float64_ref"])
+    assert np.abs(got - ref_pts).max() > 1e-3  # they did move
+
+
+def test_embedded_mesh_nodes_move_exactly_with_nodes(tol):
+    """An obstacle whose vertices are mesh nodes moves by the nodal displacement."""
+    from riskplan.deformable import mesh_polygon
+
+    base = NeedleConfig()
+    mesh = mesh_polygon(base.corners, 175)
+    interior = np.flatnonzero(np.all((mesh.nodes > 0.2) & (mesh.nodes < 0.8), axis=1))[:3]
+    tri = mesh.nodes[interior]
+    sim = NeedleScenario(NeedleConfig(obstacles=(tri,)))
+    s = sim.step(sim.initial_state(pose=(0.1, 0.5, 0.0)), [0.5, 0.3])
+    np.testing.assert_allclose(sim.obstacles(s)[0], tri + s.displacement[interior], **tol["float64_ref"])
+
+
+def test_robot_outside_tissue_pushes_nothing(needle):
+    s = needle.initial_state(pose=(0.98, 0.5, 0.0))
+    s1 = needle.step(s, [0.5, 0.0])
+    assert not needle.inside(s1)
+    assert np.all(s1.displacement == 0.0) and np.all(np.isfinite(s1.pose))
+
+
+def test_collision_and_goal_predicates(needle):
+    cfg = needle.config
+    c = cfg.obstacles[0].mean(0)
+    s = needle.initial_state(pose=(c[0], c[1], 0.0))
+    assert needle.in_collision(s)
+    g = needle.initial_state(pose=(*cfg.goal_center, 0.0))
+    assert needle.in_goal(g) and not needle.in_collision(g)
+    assert needle.goal_distance(g) == 0.0
+    assert not needle.in_goal(needle.initial_state())
+
+
+def test_observe_noise(needle, rng, tol):
+    x = np.array([0.2, 0.3, 1.0])
+    np.testing.assert_array_equal(needle.observe(x), [0.2, 0.3])
+    np.testing.assert_allclose(needle.observe(x, noise=[0.01, -0.01]), [0.21, 0.29], **tol["float64_exact"])
+    z = np.array([needle.observe(x, rng=rng) for _ in range(3000)]) - x[:2]
+    sd = needle.config.sensing_std
+    assert np.all(np.abs(z.mean(0)) < 4 * sd / np.sqrt(3000))
+    assert np.all(np.abs(z.var(0) / sd**2 - 1) < 4 * np.sqrt(2 / 3000))
+    with pytest.raises(InvalidInputError):
+        needle.observe([0.1, 0.2])
+
+
+@pytest.mark.parametrize(
+    "control", [[0.51, 0.0], [-1e-9, 0.0], [0.2, PHIMAX + 1e-9], [0.2, -PHIMAX - 0.1], [np.nan, 0.0], [0.2, np.inf], [0.2]]
+)
+def test_bad_controls(needle, control):
+    with pytest.raises(InvalidInputError, match="control"):
+        needle.step(needle.initial_state(), control)
+
+
+def test_state_mesh_mismatch_and_type(needle):
+    s = needle.initial_state()
+    with pytest.raises(InvalidInputError, match="n_elements"):
+        needle.step(s, [0.1, 0.0], SimParams(n_elements=300))
+    with pytest.raises(InvalidInputError, match="NeedleState"):
+        needle.step("state", [0.1, 0.0])
+    with pytest.raises(InvalidInputError):
+        needle.initial_state(pose=(0.1, np.nan, 0.0))
+
+
+def test_obstacle_outside_body_rejected():
+    sim = NeedleScenario(NeedleConfig(obstacles=(geo.circle_polygon((1.02, 0.5), 0.05),)))
+    with pytest.raises(InvalidInputError, match="outside the body"):
+        sim.initial_state()
+
+
+def test_mesh_case_states_are_consistent(needle):
+    for n in (50, 1000):
+        p = SimParams(n_elements=n)
+        s = rollout(needle, needle.initial_state(p), _controls(5, n), p)[-1]
+        assert s.displacement.shape == (needle.mesh_data(n).mesh.n_nodes, 2)
+        assert np.all(np.isfinite(s.displacement))

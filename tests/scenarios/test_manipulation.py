@@ -1,0 +1,143 @@
+"""Internal-point manipulation scenario (paper V-B): neo-Hookean steps in equilibrium,
+snapshot / restore, reduced state and sensing layout, collisions, failures surfaced."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
+from riskplan.scenarios import _geometry as geo
+from riskplan.scenarios.manipulation import ManipulationConfig, ManipulationScenario
+from riskplan.scenarios.simulator import SimParams, rollout
+
+
+def _controls(sim, n, seed=0):
+    return sim.random_controls(n, seed)
+
+
+def test_zero_force_leaves_object_undeformed(manip):
+    s = manip.step(manip.initial_state(), np.zeros(6))
+    assert np.all(s.displacement == 0.0)
+    x = manip.reduced(s)
+    np.testing.assert_array_equal(x[:2], manip.config.target)
+
+
+def test_deterministic_and_snapshot_restore_bit_identical(manip):
+    p = SimParams()
+    u = _controls(manip, 6, 2)
+    states = rollout(manip, manip.initial_state(p), u, p)
+    again = rollout(manip, states[3], u[3:], p)
+    for a, b in zip(states[3:], again):
+        assert a.identical(b)
+    fresh = ManipulationScenario()
+    assert rollout(fresh, states[3], u[3:], p)[-1].identical(states[-1])
+
+
+def test_equilibrium_residual_after_each_step(manip):
+    p = SimParams()
+    states = rollout(manip, manip.initial_state(p), _controls(manip, 6, 3), p)
+    model = manip.model(p)
+    for s in states[1:]:
+        f = manip.nodal_forces(s)
+        r = model.residual(s.displacement, f)
+        assert np.linalg.norm(r) <= 1e-8 * np.linalg.norm(f) + 1e-12
+        assert np.all(model.jacobians(s.displacement) > 0)
+
+
+def test_patch_loads_carry_the_commanded_force(manip, tol):
+    p = SimParams(force_scale=0.7)
+    u = np.array([0.5, -0.2, 0.1, 0.3, -0.4, 1.0])
+    s = manip.step(manip.initial_state(p), u, p)
+    np.testing.assert_allclose(s.forces, 0.7 * u.reshape(3, 2), **tol["float64_exact"])
+    np.testing.assert_allclose(manip.nodal_forces(s).sum(0), 0.7 * u.reshape(3, 2).sum(0), **tol["float64_ref"])
+
+
+def test_small_forces_match_linear_elasticity(manip):
+    """For a small load the neo-Hookean response equals linear elasticity to first order."""
+    from riskplan.deformable import LinearElasticModel, Material
+
+    p = SimParams()
+    d = manip.mesh_data(p.n_elements)
+    lin = LinearElasticModel(d.mesh, Material(p.youngs_modulus, p.poissons_ratio, plane=manip.config.plane), d.fixed)
+    u = np.array([0.3, -0.2, 0.1, 0.4, -0.3, 0.2]) * 1e-3
+    s = manip.step(manip.initial_state(p), u, p)
+    ref = lin.solve(manip.nodal_forces(s))
+    err = np.abs(s.displacement - ref).max() / np.abs(ref).max()
+    assert err < 1e-2
+
+
+def test_reduced_state_and_sensing_layout(manip, rng, tol):
+    p = SimParams()
+    s = manip.step(manip.initial_state(p), np.array([0.5, 0.5, 0.0, 0.5, 0.0, 0.5]), p)
+    x = manip.reduced(s)
+    assert x.shape == (manip.state_dim,) == (2 + 2 * manip.config.n_boundary,)
+    np.testing.assert_allclose(x[:2], manip.target(s), **tol["float64_exact"])
+    np.testing.assert_allclose(x[2:].reshape(-1, 2), manip.boundary_points(s), **tol["float64_exact"])
+    z = manip.observe(x)
+    np.testing.assert_allclose(z, x[2:], **tol["float64_exact"])  # the target is not sensed
+    zs = np.array([manip.observe(x, rng=rng) for _ in range(2000)]) - x[2:]
+    sd = manip.config.sensing_std
+    assert np.abs(zs.std() / sd - 1) < 0.05
+
+
+def test_sensed_points_lie_on_free_boundary():
+    cfg = ManipulationConfig()
+    pts = cfg.boundary_points()
+    d = geo.point_polygon_distance(pts, cfg.outline)
+    assert np.all(d < 1e-12)
+    seg = cfg.fixed_segment
+    assert np.all(geo.point_polygon_distance(pts, seg) > 1e-3)
+
+
+def test_fixed_edge_does_not_move(manip):
+    s = manip.step(manip.initial_state(), np.full(6, 1.0))
+    d = manip.mesh_data(s.n_elements)
+    assert len(d.fixed) >= 2
+    assert np.all(s.displacement[d.fixed] == 0.0)
+
+
+def test_collision_with_obstacle(manip):
+    s0 = manip.initial_state()
+    assert not manip.in_collision(s0)
+    # pull both left-edge manipulators towards the obstacle
+    s = manip.step(s0, np.array([-1.5, 0.3, -1.5, -0.3, -1.0, 0.0]))
+    assert manip.in_collision(s)
+    assert manip.manipulator_positions(s)[:2, 0].min() < -0.1
+
+
+def test_mesh_sizes_and_actuation_noise(manip):
+    p = SimParams(n_elements=60, actuation_cov=manip.actuation_cov(), actuation_seed=9)
+    states = rollout(manip, manip.initial_state(p), _controls(manip, 4, 4), p)
+    assert all(np.all(np.isfinite(s.displacement)) for s in states)
+    assert np.all(np.abs(states[-1].forces) <= manip.config.f_max)
+
+
+@pytest.mark.parametrize("control", [np.full(6, 1.6), [0, 0, 0, 0, 0, np.nan], np.zeros(5)])
+def test_bad_controls(manip, control):
+    with pytest.raises(InvalidInputError, match="control"):
+        manip.step(manip.initial_state(), control)
+
+
+def test_bad_config():
+    with pytest.raises(InvalidInputError, match="obstacle"):
+        ManipulationConfig(obstacle=geo.circle_polygon((0.5, 0.5), 0.1))
+    with pytest.raises(InvalidInputError, match="f_max"):
+        ManipulationConfig(f_max=0.0)
+    sim = ManipulationScenario(ManipulationConfig(manipulators=np.array([[0.0, 0.3], [-0.5, 0.8], [0.5, 1.0]])))
+    with pytest.raises(InvalidInputError):
+        sim.initial_state()
+
+
+def test_solver_failure_is_reported_with_context():
+    """A huge force on a tiny patch drives the solve to inversion / non-convergence:
+    the error names the step and the forces, and keeps the solver's details."""
+    sim = ManipulationScenario(ManipulationConfig(f_max=1e4, patch_radius=0.03))
+    p = SimParams(n_elements=60)
+    with pytest.raises((ElementInversionError, ConvergenceError), match="manipulation step t=0") as info:
+        sim.step(sim.initial_state(p), np.array([-1e4, 0.0, 0.0, 0.0, 0.0, -1e4]), p)
+    exc = info.value
+    if isinstance(exc, ElementInversionError):
+        assert exc.elements is not None and exc.min_jacobian <= 0
+    else:
+        assert exc.residual is not None and np.isfinite(exc.residual)

@@ -83,3 +83,18 @@ def test_corrupted_files_rejected(trained, tmp_path):
         load_model(m)
     with pytest.raises(DataFormatError, match="not a model folder"):
         load_model(tmp_path / "nothing")
+
+
+def test_roundtrip_float32_model(synth_small, rng, tmp_path):
+    from conftest import FAST
+
+    from riskplan.kinematics.data import read_point_clouds
+    from riskplan.kinematics.training import TrainConfig, train
+
+    res = train(read_point_clouds(synth_small), TrainConfig(n_components=3, epochs=2, dtype="float32", **FAST), out=tmp_path / "m")
+    loaded = load_model(tmp_path / "m")
+    assert next(loaded.net.parameters()).dtype == torch.float32
+    d = rng.uniform(0.0, 0.03, size=(5, 2))
+    for name in ("weights", "means", "precision_cholesky"):
+        assert torch.equal(getattr(res.model.predict(d), name), getattr(loaded.predict(d), name))
+        assert torch.equal(getattr(res.model.predict(d, dtype=torch.float32), name), getattr(loaded.predict(d, dtype=torch.float32), name))

@@ -186,9 +186,9 @@ class Normalisation:
         im = displacements.mean(0)
         isd = displacements.std(0)
         isd = np.where(isd > 0, isd, 1.0)
-        flat = points.reshape(-1, points.shape[-1]).astype(np.float64)
-        oc = flat.mean(0)
-        osd = flat.std(0)
+        flat = points.reshape(-1, points.shape[-1])  # no float64 copy of a large cloud array
+        oc = flat.mean(0, dtype=np.float64)
+        osd = flat.std(0, dtype=np.float64)
         osd = np.where(osd > 0, osd, 1.0)
         return cls(im, isd, oc, osd)
 

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import torch
+from scipy.special import expit as _expit
 from torch import nn
 
 from riskplan._validation import as_array
@@ -287,10 +288,10 @@ class MDNModel:
         module: for one configuration this avoids torch's per-operation overhead.
         """
         d = self.check_displacements(displacements)
-        w, mu, u = self._forward_numpy(d)
-        return GaussianMixture(
-            torch.from_numpy(w).to(dtype), torch.from_numpy(mu).to(dtype), torch.from_numpy(u).to(dtype), validate=False
-        )
+        w, mu, u = (torch.from_numpy(a) for a in self._forward_numpy(d))
+        if dtype != torch.float64:
+            w, mu, u = w.to(dtype), mu.to(dtype), u.to(dtype)
+        return GaussianMixture(w, mu, u, validate=False)
 
     def _forward_numpy(self, d: np.ndarray):
         if self._fast is None:
@@ -346,11 +347,7 @@ class _FusedNumpyMDN:
     def _act(self, h):
         # in place: h is a fresh product owned by this call
         if self.activation == "silu":
-            t = np.negative(h)
-            with np.errstate(over="ignore"):
-                np.exp(t, out=t)
-            t += 1.0
-            h /= t
+            h *= _expit(h)  # logistic sigmoid ufunc: no overflow warnings, no error-state context
             return h
         if self.activation == "tanh":
             return np.tanh(h, out=h)

@@ -235,7 +235,7 @@ class HyperelasticModel:
     def _internal(self, u_flat: np.ndarray, tangent: bool):
         F = self._F(u_flat)
         J = F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
-        if self.law == "neohookean" and np.any(J <= 0.0):
+        if np.any(J <= 0.0):  # also for SVK, whose energy does not forbid inversion
             return None, None, None, J
         W, P, A = self._law(F, self._lam, self._mu, tangent)
         fe = element_forces(P, self._G, self._areas)
@@ -255,7 +255,7 @@ class HyperelasticModel:
 
     def energy(self, u) -> float:
         """Stored energy ``Σ_e A_e W(F_e)``; raises :class:`ElementInversionError` if some
-        ``det F ≤ 0`` (neo-Hookean)."""
+        ``det F ≤ 0`` (for both laws: an inverted element is not a physical state)."""
         e, _, _, J = self._internal(self._check_u(u), tangent=False)
         if e is None:
             self._raise_inverted(J)
@@ -282,10 +282,9 @@ class HyperelasticModel:
         uf = self._check_u(u)
         if full:
             F = self._F(uf)
-            if self.law == "neohookean":
-                J = F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
-                if np.any(J <= 0):
-                    self._raise_inverted(J)
+            J = F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
+            if np.any(J <= 0):
+                self._raise_inverted(J)
             _, _, A = self._law(F, self._lam, self._mu, True)
             Ke = element_tangents(A, self._G, self._areas)
             r = np.repeat(self._edofs, 6, axis=1).ravel()

@@ -1,0 +1,195 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from riskplan.deformable import (
+    HyperelasticModel,
+    LinearElasticModel,
+    Material,
+    NeoHookeanModel,
+    locate,
+    mesh_polygon,
+    patch_load,
+    rectangle,
+)
+from riskplan.deformable.neohookean import neohookean_energy_stress, svk_energy_stress
+from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
+
+LAWS = {"neohookean": neohookean_energy_stress, "svk": svk_energy_stress}
+
+
+def _random_F(rng, n=5):
+    return np.eye(2) + 0.3 * rng.normal(size=(n, 2, 2))
+
+
+@pytest.mark.parametrize("law", ["neohookean", "svk"])
+def test_stress_and_tangent_are_derivatives(law, rng, tol):
+    """P = ∂W/∂F and A = ∂P/∂F by central differences (float64)."""
+    F = _random_F(rng)
+    F = F[np.linalg.det(F) > 0.2]
+    lam, mu = 3.0, 1.7
+    W, P, A = LAWS[law](F, lam, mu)
+    h = 1e-6
+    P_fd = np.zeros_like(P)
+    A_fd = np.zeros_like(A)
+    for k in range(2):
+        for L in range(2):
+            dF = np.zeros((2, 2))
+            dF[k, L] = h
+            Wp, Pp, _ = LAWS[law](F + dF, lam, mu, False)
+            Wm, Pm, _ = LAWS[law](F - dF, lam, mu, False)
+            P_fd[:, k, L] = (Wp - Wm) / (2 * h)
+            A_fd[:, :, :, k, L] = (Pp - Pm) / (2 * h)
+    np.testing.assert_allclose(P, P_fd, rtol=1e-7, atol=1e-7)
+    np.testing.assert_allclose(A, A_fd, rtol=1e-7, atol=1e-7)
+    # major symmetry A_iJkL = A_kLiJ (hyperelastic)
+    np.testing.assert_allclose(A, np.einsum("tiJkL->tkLiJ", A), **tol["float64_exact"])
+
+
+@pytest.mark.parametrize("law", ["neohookean", "svk"])
+def test_assembled_tangent_equals_fd_of_residual(poly200, rng, law):
+    mat = Material(50.0, 0.4, plane="strain")
+    model = HyperelasticModel(poly200, mat, poly200.vertex_nodes[:2], law=law)
+    u = 0.02 * rng.normal(size=(poly200.n_nodes, 2))
+    u[model.fixed_nodes] = 0.0
+    K = model.tangent(u, full=True).toarray()
+    h = 1e-6
+    cols = rng.choice(2 * poly200.n_nodes, 12, replace=False)
+    for c in cols:
+        du = np.zeros(2 * poly200.n_nodes)
+        du[c] = h
+        fp = model.internal_forces((u.ravel() + du).reshape(-1, 2)).ravel()
+        fm = model.internal_forces((u.ravel() - du).reshape(-1, 2)).ravel()
+        np.testing.assert_allclose(K[:, c], (fp - fm) / (2 * h), rtol=1e-6, atol=1e-6 * np.abs(K).max())
+    # internal forces are the gradient of the stored energy
+    g = np.array([(model.energy((u.ravel() + h * e).reshape(-1, 2)) - model.energy((u.ravel() - h * e).reshape(-1, 2))) / (2 * h) for e in np.eye(2 * poly200.n_nodes)[cols]])
+    np.testing.assert_allclose(g, model.internal_forces(u).ravel()[cols], rtol=1e-6, atol=1e-8)
+    # reduced tangent is the free-free block of the full one
+    Kr = model.tangent(u).toarray()
+    np.testing.assert_allclose(Kr, K[np.ix_(model.free_dofs, model.free_dofs)], rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("plane", ["stress", "strain"])
+def test_tangent_at_rest_is_linear_stiffness(square175, plane, tol):
+    """Independent assembly paths: scikit-fem linear K vs our vectorised tangent at u = 0."""
+    mat = Material(50.0, 0.4, plane=plane)
+    lin = LinearElasticModel(square175, mat, square175.vertex_nodes)
+    nh = NeoHookeanModel(square175, mat, square175.vertex_nodes)
+    K0 = nh.tangent(np.zeros((square175.n_nodes, 2)), full=True)
+    np.testing.assert_allclose(K0.toarray(), lin.K.toarray(), rtol=0, atol=1e-12 * abs(lin.K).max())
+
+
+@pytest.fixture(scope="module")
+def manip():
+    verts = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    mesh = mesh_polygon(verts, 175)
+    be = mesh.boundary_edges
+    # fixed: the bottom-right part of the boundary (x >= 0.6 on y = 0, and y <= 0.4 on x = 1)
+    nb = mesh.nodes
+    fixed = np.flatnonzero(((nb[:, 1] == 0.0) & (nb[:, 0] >= 0.6)) | ((nb[:, 0] == 1.0) & (nb[:, 1] <= 0.4)))
+    mat = Material(50.0, 0.4)
+    # moderate load: min det F ~ 0.95 (ten times it gives min det F ~ 0.2)
+    f = 0.1 * (patch_load(mesh, [0.0, 0.5], 0.15, [4.0, 1.0]) + patch_load(mesh, [0.5, 1.0], 0.15, [0.0, -3.0]))
+    assert len(be) > 0
+    return mesh, mat, fixed, f
+
+
+def test_small_loads_nonlinear_matches_linear(manip):
+    mesh, mat, fixed, f = manip
+    lin = LinearElasticModel(mesh, mat, fixed)
+    nh = NeoHookeanModel(mesh, mat, fixed)
+    diffs = []
+    for s in (1e-3, 1e-2, 1e-1):
+        ul, un = lin.solve(s * f), nh.solve(s * f)
+        diffs.append(np.linalg.norm(un - ul) / np.linalg.norm(ul))
+    diffs = np.array(diffs)
+    # the relative difference is O(load): ~10x per decade, and small at small loads
+    assert diffs[0] < 1e-3, diffs
+    np.testing.assert_allclose(diffs[1:] / diffs[:-1], 10.0, rtol=0.1)
+
+
+@pytest.mark.parametrize("law", ["neohookean", "svk"])
+def test_equilibrium_after_solve_and_warm_start(manip, law):
+    mesh, mat, fixed, f = manip
+    nh = HyperelasticModel(mesh, mat, fixed, law=law)
+    u, info = nh.solve_with_info(f)
+    r = nh.residual(u, f)
+    assert np.linalg.norm(r) <= nh.rtol * np.linalg.norm(f) + nh.atol
+    assert info.residual == pytest.approx(np.linalg.norm(r[~np.isin(np.arange(mesh.n_nodes), fixed)]), rel=1e-6, abs=1e-12)
+    assert info.min_jacobian > 0
+    # a slightly different load: warm start needs fewer Newton iterations than a cold one
+    f2 = 1.02 * f
+    cold = nh.solve_with_info(f2)[1]
+    u2, warm = nh.solve_with_info(f2, u0=u)
+    assert warm.iterations < cold.iterations
+    assert np.linalg.norm(nh.residual(u2, f2)) <= nh.rtol * np.linalg.norm(f2) + nh.atol
+    # same equilibrium from either start
+    np.testing.assert_allclose(u2, nh.solve(f2), rtol=0, atol=1e-8)
+
+
+def test_large_deformation_and_load_steps(manip):
+    mesh, mat, fixed, f = manip
+    nh = NeoHookeanModel(mesh, mat, fixed)
+    u1, i1 = nh.solve_with_info(8 * f)
+    u4, i4 = nh.solve_with_info(8 * f, load_steps=4)
+    assert i4.load_steps == 4
+    np.testing.assert_allclose(u1, u4, rtol=0, atol=1e-8)
+    assert i1.min_jacobian < 0.9  # genuinely nonlinear regime
+    lin = LinearElasticModel(mesh, mat, fixed).solve(8 * f)
+    assert np.linalg.norm(u1 - lin) / np.linalg.norm(lin) > 0.02
+
+
+def test_deterministic(manip):
+    mesh, mat, fixed, f = manip
+    a = NeoHookeanModel(mesh, mat, fixed).solve(2 * f)
+    b = NeoHookeanModel(mesh, mat, fixed).solve(2 * f)
+    assert np.array_equal(a, b)
+
+
+def test_point_load_inverts_then_raises(manip):
+    """A huge point load cannot be carried without inversion: ElementInversionError or
+    ConvergenceError, never a NaN state."""
+    mesh, mat, fixed, _ = manip
+    nh = NeoHookeanModel(mesh, mat, fixed, max_iter=8)
+    f = locate(mesh, [[0.3, 0.6]]).spread(np.array([[0.0, -100.0]]))
+    with pytest.raises((ElementInversionError, ConvergenceError)) as exc:
+        nh.solve(f, load_steps=1)
+    if isinstance(exc.value, ElementInversionError):
+        assert len(exc.value.elements) > 0 and exc.value.min_jacobian <= 0
+    else:
+        assert exc.value.residual is not None and np.isfinite(exc.value.residual)
+
+
+def test_inverted_warm_start_is_rejected(manip):
+    mesh, mat, fixed, f = manip
+    nh = NeoHookeanModel(mesh, mat, fixed)
+    u0 = np.zeros((mesh.n_nodes, 2))
+    free = np.setdiff1d(np.arange(mesh.n_nodes), fixed)
+    u0[free] = -2.0 * mesh.nodes[free]  # mirrors the body through the origin: det F < 0
+    with pytest.raises(ElementInversionError) as exc:
+        nh.solve(f, u0=u0)
+    assert exc.value.min_jacobian <= 0
+    with pytest.raises(ElementInversionError):
+        nh.energy(u0)
+
+
+def test_convergence_error_carries_residual(manip):
+    mesh, mat, fixed, f = manip
+    nh = NeoHookeanModel(mesh, mat, fixed, max_iter=1)
+    with pytest.raises(ConvergenceError) as exc:
+        nh.solve_with_info(8 * f, max_halvings=0)
+    assert exc.value.residual > 0
+
+
+def test_bad_input(manip):
+    mesh, mat, fixed, f = manip
+    with pytest.raises(InvalidInputError, match="law"):
+        HyperelasticModel(mesh, mat, fixed, law="mooney")
+    nh = NeoHookeanModel(mesh, mat, fixed)
+    with pytest.raises(InvalidInputError, match="load_steps"):
+        nh.solve(f, load_steps=0)
+    with pytest.raises(InvalidInputError, match="u0"):
+        nh.solve(f, u0=np.zeros((3, 2)))
+    with pytest.raises(InvalidInputError, match="nodal_forces"):
+        nh.solve(np.full_like(f, np.nan))

@@ -70,3 +70,14 @@ def backbone_mixture(positions, n_components: int = 5, *, radius: float = 0.01, 
     covs = np.stack(covs, axis=-3)
     w = np.full(means.shape[:-1], 1.0 / n_components)
     return GaussianMixture.from_covariances(w, means, covs)
+
+
+def robot_mixture(robot, displacements, n_components: int = 5, *, radius: float = 0.01, sigma: float = 0.003):
+    """Mixture over the body of ``robot`` at tendon ``displacements (..., m)``.
+
+    Uses the robot's deterministic model (``robot.solve_displacements(d).positions``, base frame)
+    and :func:`backbone_mixture`; a stand-in for a trained MDN when none is available.
+    """
+    d = np.asarray(displacements, dtype=np.float64)
+    shape = robot.solve_displacements(d)
+    return backbone_mixture(np.asarray(shape.positions, dtype=np.float64), n_components, radius=radius, sigma=sigma)

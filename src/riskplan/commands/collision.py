@@ -1,9 +1,148 @@
-"""`riskplan` subcommands for the collision area (heavy imports stay inside the commands)."""
+"""`riskplan` subcommands for the collision area (heavy imports stay inside the commands).
+
+* ``riskplan env chest --out chest.stl [--seed N] [--view chest.png] [--html chest.html]``
+* ``riskplan collision --env chest|FILE [--model M | --arc K,PHI] --displacements d1,d2,...``
+* ``riskplan collision-table --out docs-table.md`` (bound vs Monte Carlo in the chest)
+"""
 
 from __future__ import annotations
+
+import json
+from pathlib import Path
 
 import typer
 
 
+def _floats(text: str | None, name: str) -> list[float] | None:
+    from riskplan.errors import InvalidInputError
+
+    if text is None:
+        return None
+    try:
+        return [float(v) for v in text.replace(";", ",").split(",") if v.strip()]
+    except ValueError as exc:
+        raise InvalidInputError(f"{name}: expected comma-separated numbers, got {text!r}") from exc
+
+
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
+    env_app = typer.Typer(help="Build obstacle environments (meshes) for planning.", no_args_is_help=True)
+    app.add_typer(env_app, name="env")
+
+    @env_app.command("chest")
+    def env_chest(
+        out: Path = typer.Option(Path("chest.stl"), "--out", "-o", help="Mesh file to write (.stl, .obj, .ply)."),
+        seed: int = typer.Option(0, help="Seed of the organ shape variation."),
+        subdivisions: int = typer.Option(3, help="Icosphere subdivisions of the organ/wall meshes (3: ~12k triangles)."),
+        view: Path = typer.Option(None, "--view", help="Write a PNG view (exterior and interior)."),
+        html: Path = typer.Option(None, "--html", help="Write an interactive plotly HTML view."),
+    ) -> None:
+        """Build the procedural chest cavity (MDN paper Fig. 6) and write it as one mesh file.
+
+        A JSON sidecar OUT.json records the seed, parameters, insertion point and robot base frame.
+        """
+        from riskplan.io import write_json_atomic
+        from riskplan.scenarios.chest import build_chest, chest_figure, chest_plotly
+
+        chest = build_chest(seed, subdivisions=subdivisions)
+        chest.save(out)
+        meta = out.with_suffix(out.suffix + ".json")
+        write_json_atomic(meta, chest.metadata())
+        typer.echo(f"chest: {chest.n_triangles} triangles, {chest.environment.n_obstacles} obstacles -> {out} (+ {meta.name})")
+        if view is not None:
+            import matplotlib
+
+            matplotlib.use("Agg")
+            fig = chest_figure(chest)
+            fig.savefig(view, dpi=110, bbox_inches="tight")
+            typer.echo(f"view: {view}")
+        if html is not None:
+            chest_plotly(chest).write_html(html, include_plotlyjs="cdn")
+            typer.echo(f"html: {html}")
+
+    @app.command("collision")
+    def collision(
+        env: str = typer.Option("chest", "--env", help="'chest' (procedural, robot base frame) or a mesh file given in the robot base frame."),
+        displacements: str = typer.Option(None, "--displacements", "-d", help="Tendon displacements (m), comma-separated; ';' separates configurations."),
+        model: Path = typer.Option(None, "--model", help="Trained MDN model (riskplan kinematics train). Default: robot backbone mixture."),
+        arc: str = typer.Option(None, "--arc", help="Constant-curvature geometry instead of a robot: 'kappa,phi' (1/m, rad)."),
+        robot: str = typer.Option("paper", "--robot", help="Robot name or TOML file for the backbone fallback."),
+        method: str = typer.Option("bound", help="bound (eq. 9) | union | monte_carlo | monte_carlo_union."),
+        samples: int = typer.Option(20000, help="Monte Carlo samples (also used for the reference interval)."),
+        seed: int = typer.Option(0, help="Seed (chest shape and Monte Carlo)."),
+        json_out: bool = typer.Option(False, "--json", help="Print JSON."),
+    ) -> None:
+        """P(collision) of the robot's geometry distribution at given configurations."""
+        import numpy as np
+
+        from riskplan.collision import Environment, monte_carlo_probability, probability_of_collision
+        from riskplan.errors import InvalidInputError
+
+        if env == "chest":
+            from riskplan.scenarios.chest import build_chest
+
+            environment = build_chest(seed).base_environment
+        else:
+            environment = Environment.load(env)
+        configs = []
+        if arc is not None:
+            from riskplan.collision.robot_geometry import arc_backbone, backbone_mixture
+
+            ka = _floats(arc, "--arc")
+            if len(ka) != 2:
+                raise InvalidInputError("--arc: expected 'kappa,phi'")
+            gm = backbone_mixture(arc_backbone(ka[0], ka[1])[None], 5)
+            configs = [ka]
+        else:
+            if displacements is None:
+                raise InvalidInputError("--displacements (or --arc) is required")
+            configs = [_floats(c, "--displacements") for c in displacements.split(";")]
+            d = np.asarray(configs, dtype=np.float64)
+            if model is not None:
+                from riskplan.kinematics import load_model
+
+                gm = load_model(model).predict(d)
+            else:
+                from riskplan.collision.robot_geometry import robot_mixture
+                from riskplan.robots import load_robot
+
+                gm = robot_mixture(load_robot(robot), d)
+        p = probability_of_collision(gm, environment, method, n_samples=samples, seed=seed)
+        mc = monte_carlo_probability(gm, environment, samples, seed=seed)
+        rows = [
+            {"config": c, "probability": float(p[i]), "method": method, "monte_carlo": float(mc.probability[i]),
+             "mc_low": float(mc.low[i]), "mc_high": float(mc.high[i])}
+            for i, c in enumerate(configs)
+        ]
+        if json_out:
+            typer.echo(json.dumps(rows))
+            return
+        from rich.console import Console
+        from rich.table import Table
+
+        table = Table(title=f"P(collision), {environment}")
+        for col in ("config", method, "Monte Carlo", "95% interval"):
+            table.add_column(col)
+        for r in rows:
+            table.add_row(str(r["config"]), f"{r['probability']:.4g}", f"{r['monte_carlo']:.4g}", f"[{r['mc_low']:.4g}, {r['mc_high']:.4g}]")
+        Console().print(table)
+
+    @app.command("collision-table")
+    def collision_table(
+        out: Path = typer.Option(None, "--out", "-o", help="Write the markdown table here (default: print)."),
+        samples: int = typer.Option(100_000, help="Monte Carlo samples per configuration."),
+        seed: int = typer.Option(0, help="Seed of the chest and of the sampling."),
+        model: Path = typer.Option(None, "--model", help="Trained MDN model; default: robot backbone (or arc) mixtures."),
+    ) -> None:
+        """Bound vs Monte Carlo (95 % intervals) for a set of robot configurations in the chest."""
+        from riskplan.experiments.collision_table import collision_table as make_table, to_markdown
+
+        rows, meta = make_table(seed=seed, n_samples=samples, model_path=model)
+        text = to_markdown(rows, meta)
+        if out is None:
+            typer.echo(text)
+        else:
+            from riskplan.io import write_text_atomic
+
+            write_text_atomic(out, text)
+            typer.echo(f"table: {out}")

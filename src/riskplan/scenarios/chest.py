@@ -204,9 +204,10 @@ def build_chest(seed: int = 0, params: ChestParams | None = None, **overrides) -
     spine.apply_translation([0.0, -B - params.spine_radius + params.spine_protrusion, 0.0])
     meshes["spine"] = spine
 
-    # diaphragm dome: top at h - diaphragm_gap, wide enough to meet the wall
+    # diaphragm dome: top at h - diaphragm_gap, bottom at the floor of the body wall, wide
+    # enough to meet the wall all around (it seals the cavity from below)
     top = h - params.diaphragm_gap
-    dsemi = (A * 1.05, B * 1.05, 0.12)
+    dsemi = (A * 1.05, B * 1.05, 0.5 * (top + C + t))
     meshes["diaphragm"] = _ellipsoid((0, 0, top - dsemi[2]), dsemi, sub, rng, noise * 0.3)
 
     # lungs (base at h + lung_gap), compressed upwards by the effusion

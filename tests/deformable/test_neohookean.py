@@ -193,3 +193,34 @@ def test_bad_input(manip):
         nh.solve(f, u0=np.zeros((3, 2)))
     with pytest.raises(InvalidInputError, match="nodal_forces"):
         nh.solve(np.full_like(f, np.nan))
+
+
+def test_fast_neohookean_tangent_equals_generic(poly200, rng, tol):
+    """Contracted neo-Hookean element matrices == generic 4th-order-tangent path."""
+    from riskplan.deformable.neohookean import (
+        _det_inv,
+        element_tangents,
+        neohookean_element_tangents,
+        shape_gradients,
+    )
+
+    F = np.eye(2) + 0.2 * rng.normal(size=(poly200.n_elements, 2, 2))
+    F = F[np.linalg.det(F) > 0.1]
+    G, ar = shape_gradients(poly200)[: len(F)], poly200.areas[: len(F)]
+    _, _, A = neohookean_energy_stress(F, 3.0, 1.7)
+    J, Finv = _det_inv(F)
+    fast = neohookean_element_tangents(Finv, np.log(J), G, ar, 3.0, 1.7)
+    slow = np.einsum("t,tiJkL,taJ,tbL->taibk", ar, A, G, G).reshape(-1, 6, 6)
+    np.testing.assert_allclose(fast, slow, rtol=1e-12, atol=1e-12 * np.abs(slow).max())
+    np.testing.assert_allclose(element_tangents(A, G, ar), slow, rtol=1e-12, atol=1e-12 * np.abs(slow).max())
+
+
+def test_banded_solver_equals_sparse_lu(manip, rng, tol):
+    from scipy.sparse.linalg import spsolve
+
+    mesh, mat, fixed, f = manip
+    nh = NeoHookeanModel(mesh, mat, fixed)
+    u = nh.solve(5 * f)
+    st = nh._evaluate(u.ravel().copy())
+    r = rng.normal(size=len(nh.free_dofs))
+    np.testing.assert_allclose(nh._factor(st)(r), spsolve(nh.tangent(u), r), **tol["float64_ref"])

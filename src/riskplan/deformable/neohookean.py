@@ -122,14 +122,36 @@ _LAW_FUNCS = {"neohookean": neohookean_energy_stress, "svk": svk_energy_stress}
 
 def element_forces(P: np.ndarray, G: np.ndarray, areas: np.ndarray) -> np.ndarray:
     """Internal forces ``(T, 3, 2)``: ``f_{a,i} = A_e Σ_J P_iJ ∇N_aJ``."""
-    return np.einsum("t,tiJ,taJ->tai", areas, P, G)
+    return np.matmul(G, np.swapaxes(P, 1, 2)) * areas[:, None, None]
 
 
 def element_tangents(A: np.ndarray, G: np.ndarray, areas: np.ndarray) -> np.ndarray:
     """Element stiffness ``(T, 6, 6)`` in local DOF order ``(a, i)``:
-    ``K_{ai,bk} = A_e Σ_JL A_iJkL ∇N_aJ ∇N_bL``."""
-    K = np.einsum("t,tiJkL,taJ,tbL->taibk", areas, A, G, G)
-    return K.reshape(len(areas), 6, 6)
+    ``K_{ai,bk} = A_e Σ_JL A_iJkL ∇N_aJ ∇N_bL`` (any law, from its 4th-order tangent)."""
+    T = len(areas)
+    X = np.matmul(A.reshape(T, 8, 2), np.swapaxes(G, 1, 2))  # (T, (i,J,k), b)
+    X = X.reshape(T, 2, 2, 2, 3).transpose(0, 2, 1, 3, 4).reshape(T, 2, 12)  # (T, J, (i,k,b))
+    K = np.matmul(G, X) * areas[:, None, None]  # (T, a, (i,k,b))
+    return K.reshape(T, 3, 2, 2, 3).transpose(0, 1, 2, 4, 3).reshape(T, 6, 6)
+
+
+def neohookean_element_tangents(Finv: np.ndarray, lnJ: np.ndarray, G: np.ndarray, areas: np.ndarray,
+                                lam: float, mu: float) -> np.ndarray:
+    """Neo-Hookean element stiffness ``(T, 6, 6)`` without forming the 4th-order tangent.
+
+    With ``h_a = F⁻ᵀ ∇N_a`` the tangent contracts to
+    ``K_{ai,bk} = A_e [μ δ_ik ∇N_a·∇N_b + λ h_ai h_bk + (μ − λ ln J) h_bi h_ak]``
+    (equal to :func:`element_tangents` of :func:`neohookean_energy_stress`'s ``A``).
+    """
+    T = len(areas)
+    h = np.matmul(G, Finv).reshape(T, 6)  # h[t, (a,i)] = Σ_J G_aJ Finv_Ji
+    O = h[:, :, None] * h[:, None, :]  # (T, (a,i), (b,k)): h_ai h_bk
+    swapped = O.reshape(T, 3, 2, 3, 2).transpose(0, 3, 2, 1, 4).reshape(T, 6, 6)  # h_bi h_ak
+    GG = np.matmul(G, np.swapaxes(G, 1, 2))  # (T, a, b)
+    K = lam * O + (mu - lam * lnJ)[:, None, None] * swapped
+    K[:, 0::2, 0::2] += mu * GG
+    K[:, 1::2, 1::2] += mu * GG
+    return K * areas[:, None, None]
 
 
 # ---------------------------------------------------------------------------------------
@@ -147,12 +169,21 @@ class SolveInfo:
     min_jacobian: float
 
 
+class _State:
+    """Everything evaluated at one displacement (internal, per Newton iterate)."""
+
+    __slots__ = ("u", "energy", "fint", "J", "F", "Finv", "lnJ")
+
+
 class HyperelasticModel:
     """Hyperelastic P1 model on ``mesh`` with ``fixed_nodes`` held at zero displacement.
 
-    ``law``: ``"neohookean"`` (default) or ``"svk"``. Tolerances: a state is in
-    equilibrium when ``‖r_free‖ ≤ rtol ‖f_ref‖ + atol`` with ``f_ref`` the external load
-    of the solve (or, for a zero load, the internal forces at the start).
+    ``law``: ``"neohookean"`` (default) or ``"svk"``. A state is in equilibrium when
+    ``‖r_free‖ ≤ rtol · f_ref + atol``, ``f_ref`` the larger of the external load norm
+    and the load balanced by the warm start. Linear systems: the reduced tangent is
+    ordered by reverse Cuthill-McKee once and factorised as a banded Cholesky matrix
+    (symmetric positive definite at stable states); when Cholesky fails (indefinite
+    tangent) a sparse LU is used instead.
     """
 
     def __init__(
@@ -186,6 +217,7 @@ class HyperelasticModel:
         self._G = shape_gradients(mesh)
         self._areas = mesh.areas
         self._tri = mesh.triangles
+        self._tri_flat = np.ascontiguousarray(mesh.triangles.ravel())
         n = 2 * mesh.n_nodes
         self._n = n
         mask = np.ones(n, dtype=bool)
@@ -193,35 +225,48 @@ class HyperelasticModel:
         mask[fixed_dofs] = False
         self.fixed_dofs = fixed_dofs
         self.free_dofs = np.flatnonzero(mask)
-        self._free_mask = mask
         self._build_pattern()
 
     def _build_pattern(self) -> None:
-        """CSC pattern of the reduced tangent and, for each of the T·36 element entries,
-        its slot in that pattern (or -1 when it touches a fixed DOF)."""
+        """Index maps from the T·36 element-matrix entries to (a) the reduced CSC matrix
+        and (b) the upper band of its RCM-permuted form (entries touching a fixed DOF,
+        and for (b) lower-triangle entries, are dropped)."""
         from scipy import sparse
+        from scipy.sparse.csgraph import reverse_cuthill_mckee
 
+        self._sparse = sparse
         dofs = (2 * self._tri[:, :, None] + np.arange(2)[None, None, :]).reshape(-1, 6)  # (T, 6)
         self._edofs = dofs
+        nf = len(self.free_dofs)
         red = np.full(self._n, -1, dtype=np.int64)
-        red[self.free_dofs] = np.arange(len(self.free_dofs))
+        red[self.free_dofs] = np.arange(nf)
         r = red[np.repeat(dofs, 6, axis=1)].ravel()
         c = red[np.tile(dofs, (1, 6))].ravel()
         keep = (r >= 0) & (c >= 0)
-        nf = len(self.free_dofs)
-        # encode entry -> unique (col, row) key; CSC sorts by column then row
-        key = c[keep] * nf + r[keep]
+        r, c = r[keep], c[keep]
+        key = c * nf + r  # CSC order: by column, then row
         uniq, slot = np.unique(key, return_inverse=True)
+        self._keep = np.flatnonzero(keep)
         self._slot = slot.ravel()
-        self._keep = keep
-        rows = uniq % nf
-        cols = uniq // nf
-        indptr = np.searchsorted(cols, np.arange(nf + 1))
-        self._csc_shape = (nf, nf)
-        self._csc_indices = rows.astype(np.int32)
-        self._csc_indptr = indptr.astype(np.int32)
         self._nnz = len(uniq)
-        self._sparse = sparse
+        self._csc_shape = (nf, nf)
+        self._csc_indices = (uniq % nf).astype(np.int32)
+        self._csc_indptr = np.searchsorted(uniq // nf, np.arange(nf + 1)).astype(np.int32)
+        # banded Cholesky layout (upper form of scipy.linalg.cholesky_banded)
+        pattern = sparse.csc_matrix(
+            (np.ones(self._nnz), self._csc_indices, self._csc_indptr), shape=self._csc_shape
+        )
+        perm = reverse_cuthill_mckee(pattern.tocsr(), symmetric_mode=True)
+        pos = np.empty(nf, dtype=np.int64)
+        pos[perm] = np.arange(nf)
+        pr, pc = pos[r], pos[c]
+        upper = pr <= pc
+        bw = int(np.max(pc[upper] - pr[upper])) if np.any(upper) else 0
+        self._band_perm = perm
+        self._bw = bw
+        self._band_sel = self._keep[upper]
+        self._band_slot = (bw + pr[upper] - pc[upper]) * nf + pc[upper]
+        self._band_size = (bw + 1) * nf
 
     # ---- pure evaluations -------------------------------------------------------------
     def _F(self, u_flat: np.ndarray) -> np.ndarray:
@@ -232,41 +277,87 @@ class HyperelasticModel:
         F = self._F(np.asarray(u, dtype=np.float64).reshape(-1))
         return F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
 
-    def _internal(self, u_flat: np.ndarray, tangent: bool):
+    def _evaluate(self, u_flat: np.ndarray) -> _State:
+        """Energy and internal forces at ``u``; ``energy is None`` if an element inverted."""
+        st = _State()
+        st.u = u_flat
         F = self._F(u_flat)
-        J = F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
+        J, Finv = _det_inv(F)
+        st.F, st.J, st.Finv = F, J, Finv
         if np.any(J <= 0.0):  # also for SVK, whose energy does not forbid inversion
-            return None, None, None, J
-        W, P, A = self._law(F, self._lam, self._mu, tangent)
+            st.energy = None
+            return st
+        if self.law == "neohookean":
+            lnJ = np.log(J)
+            FinvT = np.swapaxes(Finv, 1, 2)
+            I1 = np.einsum("tij,tij->t", F, F)
+            W = 0.5 * self._mu * (I1 - 2.0 - 2.0 * lnJ) + 0.5 * self._lam * lnJ**2
+            P = self._mu * (F - FinvT) + (self._lam * lnJ)[:, None, None] * FinvT
+            st.lnJ = lnJ
+        else:
+            W, P, _ = self._law(F, self._lam, self._mu, False)
         fe = element_forces(P, self._G, self._areas)
         fint = np.empty(self._n)
-        fint[0::2] = np.bincount(self._tri.ravel(), fe[:, :, 0].ravel(), minlength=self.mesh.n_nodes)
-        fint[1::2] = np.bincount(self._tri.ravel(), fe[:, :, 1].ravel(), minlength=self.mesh.n_nodes)
-        energy = float(self._areas @ W)
-        Kred = None
-        if tangent:
-            Ke = element_tangents(A, self._G, self._areas)
-            data = np.bincount(self._slot, Ke.reshape(-1)[self._keep], minlength=self._nnz)
-            Kred = self._sparse.csc_matrix((data, self._csc_indices, self._csc_indptr), shape=self._csc_shape)
-        return energy, fint, Kred, J
+        n_nodes = self.mesh.n_nodes
+        fint[0::2] = np.bincount(self._tri_flat, fe[:, :, 0].ravel(), minlength=n_nodes)
+        fint[1::2] = np.bincount(self._tri_flat, fe[:, :, 1].ravel(), minlength=n_nodes)
+        st.energy = float(self._areas @ W)
+        st.fint = fint
+        return st
+
+    def _element_tangents(self, st: _State) -> np.ndarray:
+        if self.law == "neohookean":
+            return neohookean_element_tangents(st.Finv, st.lnJ, self._G, self._areas, self._lam, self._mu)
+        _, _, A = self._law(st.F, self._lam, self._mu, True)
+        return element_tangents(A, self._G, self._areas)
+
+    def _csc(self, Ke_flat: np.ndarray):
+        data = np.bincount(self._slot, Ke_flat[self._keep], minlength=self._nnz)
+        return self._sparse.csc_matrix((data, self._csc_indices, self._csc_indptr), shape=self._csc_shape)
+
+    def _factor(self, st: _State):
+        """A solver ``r -> K⁻¹ r`` for the reduced tangent at ``st``."""
+        import scipy.linalg
+
+        Ke = self._element_tangents(st).reshape(-1)
+        ab = np.bincount(self._band_slot, Ke[self._band_sel], minlength=self._band_size)
+        ab = ab.reshape(self._bw + 1, -1)
+        try:
+            cb = scipy.linalg.cholesky_banded(ab, lower=False, check_finite=False)
+        except np.linalg.LinAlgError:
+            from scipy.sparse.linalg import splu
+
+            try:
+                lu = splu(self._csc(Ke))
+            except RuntimeError as exc:
+                raise ConvergenceError(f"Newton: singular tangent ({exc})") from exc
+            return lu.solve
+        perm = self._band_perm
+
+        def solve(r):
+            x = np.empty_like(r)
+            x[perm] = scipy.linalg.cho_solve_banded((cb, False), r[perm], check_finite=False)
+            return x
+
+        return solve
 
     def _check_u(self, u, name="u") -> np.ndarray:
         return as_array(u, name, shape=(self.mesh.n_nodes, 2)).reshape(-1).copy()
 
+    def _evaluate_checked(self, u) -> _State:
+        st = self._evaluate(self._check_u(u))
+        if st.energy is None:
+            self._raise_inverted(st.J)
+        return st
+
     def energy(self, u) -> float:
         """Stored energy ``Σ_e A_e W(F_e)``; raises :class:`ElementInversionError` if some
         ``det F ≤ 0`` (for both laws: an inverted element is not a physical state)."""
-        e, _, _, J = self._internal(self._check_u(u), tangent=False)
-        if e is None:
-            self._raise_inverted(J)
-        return e
+        return self._evaluate_checked(u).energy
 
     def internal_forces(self, u) -> np.ndarray:
         """Internal nodal forces ``f_int (N, 2)`` (all nodes, reactions included)."""
-        e, fint, _, J = self._internal(self._check_u(u), tangent=False)
-        if e is None:
-            self._raise_inverted(J)
-        return fint.reshape(-1, 2)
+        return self._evaluate_checked(u).fint.reshape(-1, 2)
 
     def residual(self, u, nodal_forces) -> np.ndarray:
         """``f_int(u) − f_ext`` ``(N, 2)``, zero at fixed nodes."""
@@ -278,22 +369,14 @@ class HyperelasticModel:
     def tangent(self, u, *, full: bool = False):
         """Tangent stiffness ``∂f_int/∂u`` at ``u (N, 2)``: the reduced ``(n_free, n_free)``
         CSC matrix over ``free_dofs`` (default) or, with ``full=True``, the ``(2N, 2N)``
-        matrix over all DOFs."""
-        uf = self._check_u(u)
-        if full:
-            F = self._F(uf)
-            J = F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
-            if np.any(J <= 0):
-                self._raise_inverted(J)
-            _, _, A = self._law(F, self._lam, self._mu, True)
-            Ke = element_tangents(A, self._G, self._areas)
-            r = np.repeat(self._edofs, 6, axis=1).ravel()
-            c = np.tile(self._edofs, (1, 6)).ravel()
-            return self._sparse.csr_matrix((Ke.ravel(), (r, c)), shape=(self._n, self._n))
-        e, _, K, J = self._internal(uf, tangent=True)
-        if e is None:
-            self._raise_inverted(J)
-        return K
+        CSR matrix over all DOFs."""
+        st = self._evaluate_checked(u)
+        Ke = self._element_tangents(st)
+        if not full:
+            return self._csc(Ke.reshape(-1))
+        r = np.repeat(self._edofs, 6, axis=1).ravel()
+        c = np.tile(self._edofs, (1, 6)).ravel()
+        return self._sparse.csr_matrix((Ke.ravel(), (r, c)), shape=(self._n, self._n))
 
     def _raise_inverted(self, J: np.ndarray, context: str = ""):
         bad = np.flatnonzero(J <= 0.0)
@@ -306,56 +389,54 @@ class HyperelasticModel:
 
     # ---- Newton -------------------------------------------------------------------
     def _newton(self, u: np.ndarray, f: np.ndarray, fscale: float):
-        """Newton + backtracking on Π from ``u`` (flat, modified in place) for load ``f``.
+        """Newton + backtracking on Π from ``u`` (flat) for the load ``f`` (flat).
         Returns (u, iterations, residual) or raises."""
-        from scipy.sparse.linalg import splu
-
         free = self.free_dofs
-        energy, fint, K, J = self._internal(u, tangent=True)
-        if energy is None:
-            self._raise_inverted(J, " at the start of a load step")
+        st = self._evaluate(u)
+        if st.energy is None:
+            self._raise_inverted(st.J, " at the start of a load step")
         tol = self.rtol * fscale + self.atol
+        f_free = f[free]
+        r = st.fint[free] - f_free
+        rn = float(np.linalg.norm(r))
         for it in range(self.max_iter + 1):
-            r = fint[free] - f[free]
-            rn = float(np.linalg.norm(r))
             if rn <= tol:
-                return u, it, rn
+                return st.u, it, rn
             if it == self.max_iter:
                 break
             try:
-                du = splu(K).solve(-r)
-            except RuntimeError as exc:  # singular tangent
-                raise ConvergenceError(f"Newton: singular tangent ({exc})", residual=rn, iterations=it) from exc
-            pi0 = energy - float(f @ u)
+                du = -self._factor(st)(r)
+            except ConvergenceError as exc:
+                exc.residual, exc.iterations = rn, it
+                raise
+            pi0 = st.energy - float(f @ st.u)
             slope = float(r @ du)  # directional derivative of Π along du
-            if slope >= 0.0:
+            if not slope < 0.0:
                 # not a descent direction (indefinite tangent): steepest descent instead
                 du = -r
                 slope = -rn * rn
             alpha = 1.0
             J_bad = None
             for _ in range(40):
-                trial = u.copy()
+                trial = st.u.copy()
                 trial[free] += alpha * du
-                e1, fint1, K1, J1 = self._internal(trial, tangent=True)
-                if e1 is None:
-                    J_bad = J1
+                st1 = self._evaluate(trial)
+                if st1.energy is None:
+                    J_bad = st1.J
                     alpha *= 0.5
                     continue
-                pi1 = e1 - float(f @ trial)
-                r1 = float(np.linalg.norm(fint1[free] - f[free]))
+                r1 = st1.fint[free] - f_free
+                rn1 = float(np.linalg.norm(r1))
                 # Armijo on Π, or (near the solution, where Π is flat to round-off)
                 # a decrease of the residual norm
-                if pi1 <= pi0 + 1e-4 * alpha * slope or r1 < 0.5 * rn:
+                if st1.energy - float(f @ trial) <= pi0 + 1e-4 * alpha * slope or rn1 < 0.5 * rn:
                     break
                 alpha *= 0.5
             else:
                 if J_bad is not None:
                     self._raise_inverted(J_bad, " in every line-search trial")
-                raise ConvergenceError(
-                    f"Newton line search failed (residual {rn:.3g})", residual=rn, iterations=it
-                )
-            u, energy, fint, K = trial, e1, fint1, K1
+                raise ConvergenceError(f"Newton line search failed (residual {rn:.3g})", residual=rn, iterations=it)
+            st, r, rn = st1, r1, rn1
         raise ConvergenceError(
             f"Newton did not converge in {self.max_iter} iterations (residual {rn:.3g}, tolerance {tol:.3g})",
             residual=rn,
@@ -370,21 +451,22 @@ class HyperelasticModel:
         ``nodal_forces`` in ``load_steps`` equal increments; a failed increment is
         halved up to ``max_halvings`` times. Raises :class:`ElementInversionError`
         (names the elements) or :class:`ConvergenceError` (carries the residual).
+        Deterministic: the result depends only on the arguments.
         """
         f = as_array(nodal_forces, "nodal_forces", shape=(self.mesh.n_nodes, 2)).reshape(-1).copy()
         f[self.fixed_dofs] = 0.0
-        if int(load_steps) < 1:
-            raise InvalidInputError(f"load_steps: expected an int >= 1, got {load_steps}")
+        if isinstance(load_steps, bool) or not isinstance(load_steps, (int, np.integer)) or load_steps < 1:
+            raise InvalidInputError(f"load_steps: expected an int >= 1, got {load_steps!r}")
         if u0 is None:
             u = np.zeros(self._n)
             f0 = np.zeros(self._n)
         else:
             u = self._check_u(u0, "u0")
             u[self.fixed_dofs] = 0.0
-            e, fint, _, J = self._internal(u, tangent=False)
-            if e is None:
-                self._raise_inverted(J, " in u0")
-            f0 = fint.copy()
+            st = self._evaluate(u)
+            if st.energy is None:
+                self._raise_inverted(st.J, " in u0")
+            f0 = st.fint.copy()
             f0[self.fixed_dofs] = 0.0
         fscale = max(float(np.linalg.norm(f[self.free_dofs])), float(np.linalg.norm(f0[self.free_dofs])))
         if fscale == 0.0:
@@ -394,9 +476,9 @@ class HyperelasticModel:
         rn = 0.0
         while s < 1.0 - 1e-15:
             s1 = min(1.0, s + ds)
-            fs = f0 + s1 * (f - f0)
+            fs = f if s1 == 1.0 else f0 + s1 * (f - f0)
             try:
-                u_new, it, rn = self._newton(u.copy(), fs, fscale)
+                u_new, it, rn = self._newton(u, fs, fscale)
             except (ConvergenceError, ElementInversionError) as exc:
                 if halvings >= max_halvings:
                     raise exc

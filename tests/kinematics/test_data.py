@@ -1,7 +1,7 @@
 import h5py
 import numpy as np
 import pytest
-from conftest import make_synthetic
+from tests.kinematics.conftest import make_synthetic
 
 from riskplan.errors import DataFormatError
 from riskplan.kinematics.data import check_compatible, content_hash, read_point_clouds

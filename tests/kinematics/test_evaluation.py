@@ -75,7 +75,7 @@ def test_nll_per_config_matches_direct(trained, synth_paths, tol):
 
 
 def test_evaluate_other_robot_rejected(trained, tmp_path):
-    from conftest import make_synthetic
+    from tests.kinematics.conftest import make_synthetic
 
     res, _ = trained
     other = read_point_clouds(make_synthetic(tmp_path / "o.h5", 4, seed=0, starts=1, points=8, toml='name = "x"\n'))

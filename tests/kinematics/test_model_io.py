@@ -86,7 +86,7 @@ def test_corrupted_files_rejected(trained, tmp_path):
 
 
 def test_roundtrip_float32_model(synth_small, rng, tmp_path):
-    from conftest import FAST
+    from tests.kinematics.conftest import FAST
 
     from riskplan.kinematics.data import read_point_clouds
     from riskplan.kinematics.training import TrainConfig, train

@@ -1,7 +1,7 @@
 import json
 
 import pytest
-from conftest import FAST, make_synthetic
+from tests.kinematics.conftest import FAST, make_synthetic
 
 from riskplan.errors import DataFormatError, InvalidInputError
 from riskplan.kinematics import load_model

@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 import torch
-from conftest import COV, FAST, make_synthetic, sample_true, true_mixture
+from tests.kinematics.conftest import COV, FAST, make_synthetic, sample_true, true_mixture
 
 from riskplan.errors import ConvergenceError, DataFormatError, InvalidInputError
 from riskplan.kinematics import GaussianMixture

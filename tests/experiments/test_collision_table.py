@@ -1,0 +1,34 @@
+"""Bound-vs-Monte-Carlo table and the collision demo stage, at small scale."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from riskplan.experiments.collision_table import collision_table, to_markdown
+
+
+def test_table_bound_covers_monte_carlo():
+    rows, meta = collision_table(seed=0, n_samples=3000, use_robot=False, trajectory_steps=5)
+    assert meta["triangles"] > 3000 and len(rows) == meta["configurations"] + 1
+    for r in rows:
+        assert 0 <= r["bound"] <= 1 and r["mc_low"] <= r["mc"] <= r["mc_high"]
+        assert r["bound"] >= r["mc_low"] - 1e-12, r
+        if not np.isnan(r["union"]):
+            assert r["union"] >= r["mc_union_low"] - 1e-12, r
+            assert r["union"] >= r["bound"] - 1e-12
+    assert rows[0]["bound"] < 0.05  # home is nearly free
+    assert max(r["bound"] for r in rows) > 0.2  # bent shapes touch organs
+    text = to_markdown(rows, meta)
+    assert text.count("\n|") == len(rows) + 2  # header separator + rows (the header starts after a blank line)
+
+
+def test_demo_stage(tmp_path):
+    from riskplan.experiments import demo_collision
+    from riskplan.experiments.report import Report
+
+    report = Report(tmp_path)
+    ctx = {"out": tmp_path}
+    demo_collision.run(report, ctx, seed=0, workers=1)
+    report.write()
+    assert (tmp_path / "collision_chest.png").exists() and (tmp_path / "collision_sweep.png").exists()
+    assert ctx["environment"].n_faces == ctx["chest"].n_triangles

@@ -100,10 +100,12 @@ def test_fixed_edge_does_not_move(manip):
 def test_collision_with_obstacle(manip):
     s0 = manip.initial_state()
     assert not manip.in_collision(s0)
-    # pull both left-edge manipulators towards the obstacle
-    s = manip.step(s0, np.array([-1.5, 0.3, -1.5, -0.3, -1.0, 0.0]))
+    # all manipulators push down-left: the object swings about its fixed edge into the obstacle
+    s = manip.step(s0, np.full(6, -1.5))
     assert manip.in_collision(s)
-    assert manip.manipulator_positions(s)[:2, 0].min() < -0.1
+    assert manip.outline(s)[:, 1].min() < manip.config.obstacle[:, 1].max()
+    # pushing only the lower-left corner down does not reach it
+    assert not manip.in_collision(manip.step(s0, np.array([-1.5, -1.5, 0, 0, 0, 0])))
 
 
 def test_mesh_sizes_and_actuation_noise(manip):

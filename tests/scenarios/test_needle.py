@@ -112,11 +112,18 @@ def test_equilibrium_residual_after_each_step(needle):
         np.testing.assert_allclose(np.linalg.norm(f.sum(0)), p.force_scale, rtol=1e-12, atol=1e-12)
 
 
-def test_flexibility_matrix_equals_fem_solve(needle, tol):
-    p = SimParams(youngs_modulus=40.0, poissons_ratio=0.3, n_elements=300)
+@pytest.mark.parametrize("n_elements,dense", [(300, True), (1000, False)])
+def test_response_equals_fem_solve(needle, n_elements, dense):
+    """Both response paths (dense flexibility matrix, sparse factorisation) equal a
+    plain FEM solve of the step's nodal forces."""
+    p = SimParams(youngs_modulus=40.0, poissons_ratio=0.3, n_elements=n_elements)
+    assert (needle.model(p).green is not None) == dense
     s = needle.step(needle.initial_state(p, pose=(0.4, 0.45, 0.3)), [0.5, 0.2], p)
-    ref = needle.model(p).model.solve(needle.nodal_forces(s, p))
+    f = needle.nodal_forces(s, p)
+    ref = needle.model(p).model.solve(f)
     np.testing.assert_allclose(s.displacement, ref, rtol=1e-9, atol=1e-12)
+    r = needle.model(p).model.residual(s.displacement, f)
+    assert np.linalg.norm(r) <= 1e-10
 
 
 def test_force_direction_and_support_reactions(needle, tol):

@@ -70,7 +70,7 @@ class ManipulationConfig:
     target: tuple[float, float] = (0.45, 0.5)
     goal_center: tuple[float, float] = (0.33, 0.3)
     goal_radius: float = 0.04
-    obstacle: np.ndarray = field(default_factory=lambda: geo.circle_polygon((-0.2, 0.45), 0.08, 20))
+    obstacle: np.ndarray = field(default_factory=lambda: geo.circle_polygon((-0.25, 0.2), 0.07, 20))
     patch_radius: float = 0.1
     n_boundary: int = 12
     f_max: float = 1.5

@@ -90,9 +90,9 @@ class NeedleState(SimState):
 
 def _default_obstacles():
     return (
-        geo.circle_polygon((0.42, 0.62), 0.11, 20),
-        geo.rectangle_polygon((0.56, 0.16), (0.68, 0.46)),
-        geo.circle_polygon((0.25, 0.25), 0.08, 16),
+        geo.circle_polygon((0.40, 0.71), 0.12, 20),
+        geo.rectangle_polygon((0.55, 0.12), (0.68, 0.42)),
+        geo.circle_polygon((0.25, 0.24), 0.08, 16),
     )
 
 
@@ -157,9 +157,16 @@ class _MeshData:
         self.goal_center_index = k + 24
 
 
+#: Free-DOF count up to which the dense flexibility matrix is kept (the planning mesh of
+#: 175 elements has ~210); larger meshes solve with the sparse factorisation per step.
+GREEN_MAX_DOFS = 700
+
+
 class _NeedleModel:
-    """Cached per ``(E, ν, n_elements)``: the linear FEM model and its flexibility
-    (Green's) matrix over all DOFs, so a point load costs a 6-row gather."""
+    """Cached per ``(E, ν, n_elements)``: the linear FEM model and, for meshes with at
+    most ``GREEN_MAX_DOFS`` free DOFs, its flexibility (Green's) matrix over all DOFs, so a
+    point load costs a 6-row gather. Which path a model uses depends only on its mesh,
+    so results never depend on the cache history."""
 
     def __init__(self, data: _MeshData, params: SimParams, plane: str):
         from riskplan.deformable import Material
@@ -168,12 +175,23 @@ class _NeedleModel:
         self.model = data.base.with_material(Material(params.youngs_modulus, params.poissons_ratio, plane=plane))
         n = 2 * data.mesh.n_nodes
         free = self.model.free_dofs
-        green = np.zeros((n, n))
-        # K_ff⁻¹ on the free DOFs; a force at a fixed DOF is taken by the support.
-        # Symmetric, so row k is the displacement response to a unit force at DOF k.
-        green[np.ix_(free, free)] = self.model.solve_free(np.eye(len(free)))
-        green.setflags(write=False)
-        self.green = green
+        self.n_dofs = n
+        self.green = None
+        if len(free) <= GREEN_MAX_DOFS:
+            green = np.zeros((n, n))
+            # K_ff⁻¹ on the free DOFs; a force at a fixed DOF is taken by the support.
+            # Symmetric, so row k is the displacement response to a unit force at DOF k.
+            green[np.ix_(free, free)] = self.model.solve_free(np.eye(len(free)))
+            green.setflags(write=False)
+            self.green = green
+
+    def response(self, dofs: np.ndarray, vals: np.ndarray) -> np.ndarray:
+        """Displacement ``(n_nodes, 2)`` for nodal force values ``vals`` at flat ``dofs``."""
+        if self.green is not None:
+            return (vals @ self.green[dofs]).reshape(-1, 2)
+        f = np.zeros(self.n_dofs)
+        np.add.at(f, dofs, vals)
+        return self.model.solve_flat(f).reshape(-1, 2)
 
 
 class NeedleScenario:
@@ -298,7 +316,7 @@ class NeedleScenario:
         fy = params.force_scale * math.sin(pose[2])
         dofs = np.concatenate([2 * nodes, 2 * nodes + 1])
         vals = np.concatenate([lam * fx, lam * fy])
-        return (vals @ m.green[dofs]).reshape(n_nodes, 2)
+        return m.response(dofs, vals)
 
     def nodal_forces(self, state: NeedleState, params: SimParams | None = None) -> np.ndarray:
         """The consistent nodal forces ``(n_nodes, 2)`` the robot applies in ``state``

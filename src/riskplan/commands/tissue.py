@@ -44,6 +44,7 @@ def read_controls(path, control_dim: int):
         rows = obj
     else:
         rows = []
+        header_seen = False
         for i, line in enumerate(text.splitlines()):
             line = line.strip()
             if not line or line.startswith("#"):
@@ -51,8 +52,9 @@ def read_controls(path, control_dim: int):
             try:
                 rows.append([float(v) for v in line.replace(";", ",").split(",") if v.strip() != ""])
             except ValueError as exc:
-                if not rows and i == 0:
-                    continue  # header line
+                if not rows and not header_seen:
+                    header_seen = True
+                    continue  # one header line before the data
                 raise DataFormatError(f"controls: {path.name} line {i + 1} is not a row of numbers ({exc})") from exc
     try:
         arr = np.asarray(rows, dtype=np.float64)

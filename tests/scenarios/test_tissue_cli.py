@@ -1,0 +1,71 @@
+"""`riskplan tissue simulate` end to end (small runs) and the controls file formats."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from riskplan.cli import app
+from riskplan.commands.tissue import read_controls
+from riskplan.errors import DataFormatError, InvalidInputError
+
+runner = CliRunner()
+
+
+def test_simulate_needle_from_csv(tmp_path):
+    ctrl = tmp_path / "u.csv"
+    ctrl.write_text("# speed, steering\nv,phi\n0.5,0.0\n0.5,0.3\n0.4,-0.2\n")
+    out = tmp_path / "out"
+    r = runner.invoke(app, ["tissue", "simulate", "--scenario", "needle", "--controls", str(ctrl), "--out", str(out), "--case", "material-high", "--seed", "2"])
+    assert r.exit_code == 0, r.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["steps"] == 3 and summary["case"] == "material-high"
+    assert summary["params"]["youngs_modulus"] != 50.0
+    assert (out / "needle.gif").is_file() and len(list((out / "frames").glob("*.png"))) == 4
+
+
+def test_simulate_manipulation_random_json(tmp_path):
+    out = tmp_path / "m"
+    r = runner.invoke(app, ["tissue", "simulate", "--scenario", "manipulation", "--controls", "random", "--out", str(out), "--steps", "3", "--max-frames", "2"])
+    assert r.exit_code == 0, r.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert len(summary["final_reduced_state"]) == 26 and summary["steps"] == 3
+
+
+def test_simulate_rejects_bad_input(tmp_path):
+    ctrl = tmp_path / "u.json"
+    ctrl.write_text(json.dumps({"controls": [[0.9, 0.0]]}))  # speed above v_max
+    r = runner.invoke(app, ["tissue", "simulate", "--controls", str(ctrl), "--out", str(tmp_path / "o")])
+    assert r.exit_code != 0
+    r = runner.invoke(app, ["tissue", "simulate", "--scenario", "liver", "--out", str(tmp_path / "o")])
+    assert r.exit_code != 0
+    r = runner.invoke(app, ["tissue", "simulate", "--case", "bogus", "--out", str(tmp_path / "o")])
+    assert r.exit_code != 0
+
+
+def test_read_controls_formats(tmp_path, tol):
+    a = tmp_path / "a.json"
+    a.write_text("[[0.1, 0.2], [0.3, 0.4]]")
+    np.testing.assert_allclose(read_controls(a, 2), [[0.1, 0.2], [0.3, 0.4]], **tol["float64_exact"])
+    b = tmp_path / "b.txt"
+    b.write_text("0.1,0.2\n\n0.3,0.4\n")
+    np.testing.assert_allclose(read_controls(b, 2), [[0.1, 0.2], [0.3, 0.4]], **tol["float64_exact"])
+    bad = tmp_path / "c.csv"
+    bad.write_text("0.1,0.2\n0.3\n")
+    with pytest.raises(DataFormatError):
+        read_controls(bad, 2)
+    bad.write_text("0.1,0.2,0.3\n")
+    with pytest.raises(InvalidInputError):
+        read_controls(bad, 2)
+    bad.write_text("0.1,nan\n")
+    with pytest.raises(InvalidInputError):
+        read_controls(bad, 2)
+    with pytest.raises(DataFormatError):
+        read_controls(tmp_path / "missing.csv", 2)
+    j = tmp_path / "d.json"
+    j.write_text("{not json")
+    with pytest.raises(DataFormatError):
+        read_controls(j, 2)

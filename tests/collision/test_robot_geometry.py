@@ -33,3 +33,26 @@ def test_backbone_mixture():
     np.testing.assert_allclose(cov[0, :, 0, 0], 0.01**2 / 4 + 0.002**2, **TOL["float64_ref"])
     with pytest.raises(InvalidInputError):
         backbone_mixture(np.zeros((5, 3)), 5)
+
+
+class _ArcRobot:
+    """Duck-typed robot: tendon j bends towards angle 2*pi*j/m with curvature 200 * d_j (1/m per m)."""
+
+    n_tendons = 4
+    displacement_limits = np.array([[-0.01, 0.04]] * 4)
+
+    def solve_displacements(self, d):
+        from types import SimpleNamespace
+
+        d = np.asarray(d, dtype=np.float64)
+        ang = 2 * np.pi * np.arange(4) / 4
+        v = (d * 200.0) @ np.column_stack([np.cos(ang), np.sin(ang)])
+        return SimpleNamespace(positions=arc_backbone(np.linalg.norm(v, axis=-1), np.arctan2(v[..., 1], v[..., 0])))
+
+
+def test_robot_mixture_uses_robot_backbone():
+    from riskplan.collision.robot_geometry import robot_mixture
+
+    gm = robot_mixture(_ArcRobot(), np.array([[0.0, 0, 0, 0], [0.02, 0, 0, 0]]))
+    ref = backbone_mixture(arc_backbone(np.array([0.0, 4.0]), 0.0), 5)
+    np.testing.assert_allclose(gm.means.numpy(), ref.means.numpy(), **TOL["float64_ref"])

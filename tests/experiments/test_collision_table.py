@@ -32,3 +32,12 @@ def test_demo_stage(tmp_path):
     report.write()
     assert (tmp_path / "collision_chest.png").exists() and (tmp_path / "collision_sweep.png").exists()
     assert ctx["environment"].n_faces == ctx["chest"].n_triangles
+
+
+def test_table_with_robot_configurations():
+    from tests.collision.test_robot_geometry import _ArcRobot
+
+    rows, meta = collision_table(seed=0, n_samples=1000, robot=_ArcRobot(), trajectory_steps=3)
+    assert meta["geometry"] == "robot backbone"
+    assert rows[0]["label"].startswith("home") and len(rows) == 4 * 2 + 2 + 1
+    assert all(r["bound"] >= r["mc_low"] - 1e-12 for r in rows)

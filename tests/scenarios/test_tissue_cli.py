@@ -69,3 +69,12 @@ def test_read_controls_formats(tmp_path, tol):
     j.write_text("{not json")
     with pytest.raises(DataFormatError):
         read_controls(j, 2)
+
+
+def test_step_cost_keys():
+    from riskplan.commands.tissue import step_costs
+
+    out = step_costs(quick=True)
+    for n in (175, 1000):
+        for key in (f"needle_step_us_{n}", f"needle_step_and_collision_us_{n}", f"manipulation_step_ms_{n}", f"manipulation_reduced_us_{n}"):
+            assert out[key] > 0

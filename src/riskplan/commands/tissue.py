@@ -85,10 +85,52 @@ def make_scenario(name: str, case: str):
     return sim
 
 
+def step_costs(quick: bool = False) -> dict:
+    """Median cost of one scenario step (the planner's unit of work), warm caches.
+
+    Needle: ``step`` at a pose inside the square, and ``step`` + ``in_collision``;
+    manipulation: ``step`` from an equilibrium under forces 0.5 to a small force change
+    (warm-started Newton), and ``reduced``. Keys name the unit and the element count.
+    """
+    import numpy as np
+
+    from riskplan.bench._timing import median_time
+    from riskplan.scenarios.manipulation import ManipulationScenario
+    from riskplan.scenarios.needle import NeedleScenario
+    from riskplan.scenarios.simulator import SimParams
+
+    reps = 200 if quick else 2000
+    out = {}
+    nd = NeedleScenario()
+    for n in (175, 1000):
+        p = SimParams(n_elements=n)
+        s = nd.initial_state(p, pose=(0.3, 0.45, 0.2))
+        u = np.array([0.5, 0.3])
+        out[f"needle_step_us_{n}"] = round(1e6 * median_time(lambda: nd.step(s, u, p), repeats=reps, warmup=20), 1)
+        out[f"needle_step_and_collision_us_{n}"] = round(
+            1e6 * median_time(lambda: nd.in_collision(nd.step(s, u, p)), repeats=reps, warmup=20), 1
+        )
+    ms = ManipulationScenario()
+    for n in (175, 1000):
+        p = SimParams(n_elements=n)
+        s = ms.step(ms.initial_state(p), np.full(6, 0.5), p)
+        u = np.full(6, 0.5) + 0.05 * np.array([1.0, -1.0, 0.5, 0.2, -0.3, 0.1])
+        out[f"manipulation_step_ms_{n}"] = round(1e3 * median_time(lambda: ms.step(s, u, p), repeats=10 if quick else 40, warmup=2), 2)
+        out[f"manipulation_reduced_us_{n}"] = round(1e6 * median_time(lambda: ms.reduced(s), repeats=reps, warmup=10), 1)
+    return out
+
+
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
     sub = typer.Typer(help="Deformable-tissue scenarios (FEM): simulate, render frames and GIFs.", no_args_is_help=True)
     app.add_typer(sub, name="tissue")
+
+    @sub.command("step-cost")
+    def step_cost(quick: bool = typer.Option(False, "--quick", help="fewer repeats")) -> None:
+        """Print the median cost of one needle / manipulation step as JSON."""
+        import json
+
+        typer.echo(json.dumps(step_costs(quick)))
 
     @sub.command("simulate")
     def simulate(

@@ -374,7 +374,12 @@ class NeedleScenario:
     def in_collision(self, state: NeedleState) -> bool:
         """Robot position inside a deformed obstacle."""
         p = state.pose[None, :2]
-        return any(bool(geo.points_in_polygon(p, poly)[0]) for poly in self.obstacles(state))
+        x, y = float(p[0, 0]), float(p[0, 1])
+        for poly in self.obstacles(state):
+            lo, hi = poly.min(0), poly.max(0)
+            if lo[0] <= x <= hi[0] and lo[1] <= y <= hi[1] and geo.points_in_polygon(p, poly)[0]:
+                return True
+        return False
 
     def in_goal(self, state: NeedleState) -> bool:
         """Robot position inside the deformed goal polygon."""

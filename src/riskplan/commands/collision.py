@@ -104,7 +104,11 @@ def register(app: typer.Typer) -> None:
                 gm = load_model(model).predict(d)
             else:
                 from riskplan.collision.robot_geometry import robot_mixture
-                from riskplan.robots import load_robot
+
+                try:
+                    from riskplan.robots import load_robot
+                except ImportError as exc:
+                    raise InvalidInputError("no robot model is available here; pass --model or --arc") from exc
 
                 gm = robot_mixture(load_robot(robot), d)
         p = probability_of_collision(gm, environment, method, n_samples=samples, seed=seed)

@@ -27,6 +27,10 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     env = chest.base_environment
     ctx["chest"], ctx["environment"] = chest, env
     model, robot = ctx.get("model"), ctx.get("robot")
+    if model is None and robot is None:
+        from riskplan.experiments.collision_table import _default_robot
+
+        robot = _default_robot()  # None until a robot model is installed: arcs then
     kind, make, configs, labels = _geometry_source(model=model, robot=robot if model is None else None)
     Report.text(
         sec,

@@ -79,14 +79,13 @@ def precision_cholesky_from_covariance(covariance) -> np.ndarray:
     if np.any(np.abs(cov - np.swapaxes(cov, -1, -2)) > 1e-10 * max(scale, 1e-300)):
         raise InvalidInputError("covariance: not symmetric")
     try:
-        lower = np.linalg.cholesky(cov)
-        # Sigma = L L^T  =>  Sigma^{-1} = L^{-T} L^{-1};  U must be upper with U^T U = Sigma^{-1}.
+        np.linalg.cholesky(cov)  # fails unless Sigma is positive definite
+        # Sigma^{-1} = L_p L_p^T (lower Cholesky of the precision), so U = L_p^T is upper with U^T U = Sigma^{-1}.
         prec = np.linalg.inv(cov)
         prec = 0.5 * (prec + np.swapaxes(prec, -1, -2))
         lp = np.linalg.cholesky(prec)
     except np.linalg.LinAlgError as exc:
         raise InvalidInputError("covariance: not positive definite") from exc
-    del lower
     return np.swapaxes(lp, -1, -2).copy()
 
 

@@ -449,7 +449,8 @@ class HyperelasticModel:
         ``u0 (N, 2)``: warm start (an equilibrium state, e.g. the previous simulator state);
         the load path then runs from ``f_int(u0)`` (the load ``u0`` balances) to
         ``nodal_forces`` in ``load_steps`` equal increments; a failed increment is
-        halved up to ``max_halvings`` times. Raises :class:`ElementInversionError`
+        halved (up to ``max_halvings`` halvings per solve) and grows back after
+        increments that converge in at most 4 iterations. Raises :class:`ElementInversionError`
         (names the elements) or :class:`ConvergenceError` (carries the residual).
         Deterministic: the result depends only on the arguments.
         """
@@ -489,6 +490,8 @@ class HyperelasticModel:
             iters += it
             steps += 1
             u, s = u_new, s1
+            if it <= 4:  # an easy increment: let the next one grow back towards 1/load_steps
+                ds = min(2.0 * ds, 1.0 / int(load_steps))
         J = self.jacobians(u.reshape(-1, 2))
         return u.reshape(-1, 2), SolveInfo(iterations=iters, load_steps=steps, residual=rn, min_jacobian=float(J.min()))
 

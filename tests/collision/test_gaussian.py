@@ -203,3 +203,16 @@ def test_precision_cholesky_from_covariance_roundtrip(rng):
     U = precision_cholesky_from_covariance(cov)
     np.testing.assert_allclose(U.T @ U, np.linalg.inv(cov), **TOL["float64_ref"])
     assert np.allclose(np.tril(U, -1), 0)
+
+
+def test_covariance_front_end_2d_lqg_case():
+    # LQG-MP style: a 2-D state Gaussian per time step against a polygon; equals the U form
+    env = Environment.from_polygons([[[1, -100], [200, -100], [200, 100], [1, 100]]])
+    means = np.array([[0.0, 0.0], [0.5, 3.0]])
+    covs = np.stack([np.diag([0.25, 1.0]), np.array([[0.04, 0.01], [0.01, 0.09]])])
+    from riskplan.collision import gaussian_bound_covariance
+
+    got = gaussian_bound_covariance(means, covs, env)
+    np.testing.assert_allclose(got, [1 - ndtr(2.0), 1 - ndtr(0.5 / 0.2)], **TOL["float64_ref"])
+    with pytest.raises(InvalidInputError, match="positive definite"):
+        gaussian_bound_covariance(means, -covs, env)

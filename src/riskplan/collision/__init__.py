@@ -19,6 +19,7 @@ from riskplan.collision.gaussian import (
     FreeRegion,
     free_region,
     gaussian_bound,
+    gaussian_bound_covariance,
     gaussian_bound_terms,
     precision_cholesky_from_covariance,
 )
@@ -81,6 +82,7 @@ __all__ = [
     "component_bounds",
     "free_region",
     "gaussian_bound",
+    "gaussian_bound_covariance",
     "gaussian_bound_terms",
     "mahalanobis",
     "mixture_bound",

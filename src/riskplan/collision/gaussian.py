@@ -194,3 +194,12 @@ def free_region(mean, precision_cholesky, environment: Environment, *, cutoff: f
     )
     normals = A @ u[0]
     return FreeRegion(normals=normals, offsets=B + normals @ mu[0], whitened_normals=A, distances=B)
+
+
+def gaussian_bound_covariance(means, covariances, environment: Environment, *, cutoff: float = DEFAULT_CUTOFF) -> np.ndarray:
+    """:func:`gaussian_bound` for Gaussians given by covariances ``(..., d, d)`` (e.g. LQG-MP state
+    distributions, deformable-planning paper section IV-D); returns ``(...,)``.
+
+    Raises :class:`InvalidInputError` for non-finite, non-symmetric or non-positive-definite covariances.
+    """
+    return gaussian_bound(means, precision_cholesky_from_covariance(covariances), environment, cutoff=cutoff)

@@ -118,7 +118,9 @@ def test_dense_and_sparse_paths_agree(square175, rng, tol, monkeypatch):
 
     monkeypatch.setattr(lin, "DENSE_MAX_DOFS", 0)
     sparse = LinearElasticModel(square175, mat, square175.vertex_nodes)
-    assert dense._inv is not None and sparse._lu is not None
+    assert dense._inv is not None and sparse._lu_solve is not None
+    F2 = rng.normal(size=(len(dense.free_dofs), 3))
+    np.testing.assert_allclose(sparse.solve_free(F2), dense.solve_free(F2), **tol["float64_ref"])
     np.testing.assert_allclose(dense.solve(f), sparse.solve(f), **tol["float64_ref"])
     np.testing.assert_allclose(dense.solve_flat(f.ravel()), dense.solve(f).ravel(), **tol["float64_exact"])
     np.testing.assert_allclose(dense.residual(dense.solve(f), f), 0.0, rtol=0, atol=1e-10)

@@ -22,8 +22,45 @@ from riskplan.deformable.mesh import TissueMesh
 from riskplan.errors import InvalidInputError, require
 
 #: Free-DOF count up to which the reduced stiffness is inverted densely (a dense
-#: mat-vec beats a sparse triangular solve for small systems).
+#: mat-vec beats banded triangular solves for small systems); above it an RCM-ordered
+#: banded Cholesky factorisation is used (SuperLU if that fails).
 DENSE_MAX_DOFS = 700
+
+
+def banded_cholesky_solver(cb: np.ndarray, perm: np.ndarray):
+    """``r -> K⁻¹ r`` from the upper banded Cholesky factor ``cb`` of ``K[perm][:, perm]``
+    (LAPACK ``pbtrs`` directly: the wrapper's checks cost more than the solve here)."""
+    from scipy.linalg import get_lapack_funcs
+
+    (pbtrs,) = get_lapack_funcs(("pbtrs",), (cb,))
+
+    def solve(r: np.ndarray) -> np.ndarray:
+        x, info = pbtrs(cb, r[perm], lower=0)
+        if info != 0:  # pragma: no cover - only for malformed arguments
+            raise RuntimeError(f"pbtrs failed with info={info}")
+        out = np.empty_like(x)
+        out[perm] = x
+        return out
+
+    return solve
+
+
+def banded_cholesky(K):
+    """Reverse Cuthill-McKee ordering + banded Cholesky of a sparse SPD matrix ``K``;
+    returns ``solve(r)`` (see :func:`banded_cholesky_solver`). Raises
+    ``numpy.linalg.LinAlgError`` if ``K`` is not positive definite."""
+    import scipy.linalg
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    K = K.tocsr()
+    perm = reverse_cuthill_mckee(K, symmetric_mode=True)
+    Kp = K[perm][:, perm].tocoo()
+    upper = Kp.row <= Kp.col
+    bw = int(np.max(Kp.col[upper] - Kp.row[upper]))
+    ab = np.zeros((bw + 1, K.shape[0]))
+    ab[bw + Kp.row[upper] - Kp.col[upper], Kp.col[upper]] = Kp.data[upper]
+    cb = scipy.linalg.cholesky_banded(ab, lower=False)
+    return banded_cholesky_solver(cb, perm)
 
 
 def assemble_stiffness_parts(mesh: TissueMesh):
@@ -101,10 +138,13 @@ class LinearElasticModel:
             Kd = self._K_ff.toarray()
             c = scipy.linalg.cho_factor(Kd)
             self._inv = scipy.linalg.cho_solve(c, np.eye(nf))
-            self._lu = None
+            self._lu_solve = None
         else:
             self._inv = None
-            self._lu = splu(self._K_ff)
+            try:
+                self._lu_solve = banded_cholesky(self._K_ff)
+            except np.linalg.LinAlgError:  # pragma: no cover - K_ff is SPD once rigid motions are fixed
+                self._lu_solve = splu(self._K_ff).solve
 
     # ---- construction helpers -------------------------------------------------------
     def with_material(self, material: Material) -> "LinearElasticModel":
@@ -120,7 +160,7 @@ class LinearElasticModel:
         """``K_ff⁻¹ f_free`` for ``f_free (n_free,)`` or ``(n_free, k)`` (no validation)."""
         if self._inv is not None:
             return self._inv @ f_free
-        return self._lu.solve(f_free)
+        return self._lu_solve(f_free)
 
     def solve_flat(self, f: np.ndarray) -> np.ndarray:
         """Displacement ``(2N,)`` for nodal forces ``f (2N,)`` (interleaved), zero

@@ -332,14 +332,9 @@ class HyperelasticModel:
             except RuntimeError as exc:
                 raise ConvergenceError(f"Newton: singular tangent ({exc})") from exc
             return lu.solve
-        perm = self._band_perm
+        from riskplan.deformable.linear import banded_cholesky_solver
 
-        def solve(r):
-            x = np.empty_like(r)
-            x[perm] = scipy.linalg.cho_solve_banded((cb, False), r[perm], check_finite=False)
-            return x
-
-        return solve
+        return banded_cholesky_solver(cb, self._band_perm)
 
     def _check_u(self, u, name="u") -> np.ndarray:
         return as_array(u, name, shape=(self.mesh.n_nodes, 2)).reshape(-1).copy()

@@ -128,3 +128,17 @@ def test_rollout_returns_all_states(needle):
     assert [s.t for s in states] == [0, 1, 2, 3, 4]
     with pytest.raises(InvalidInputError):
         rollout(needle, needle.initial_state(), np.zeros((4, 3)))
+
+
+def test_scenarios_pickle_without_caches(needle, manip):
+    """Worker processes receive scenarios by pickling: the copy drops the caches and
+    continues a stored state bit-identically."""
+    import pickle
+
+    for sim, u in ((needle, [0.4, 0.3]), (manip, [0.3, -0.2, 0.1, 0.2, -0.1, 0.3])):
+        s1 = sim.step(sim.initial_state(), u)
+        clone = pickle.loads(pickle.dumps(sim))
+        assert not clone._models and not clone._meshes
+        assert clone.step(s1, u).identical(sim.step(s1, u))
+        s2 = pickle.loads(pickle.dumps(s1))
+        assert s2.identical(s1) and not s2.displacement.flags.writeable

@@ -212,6 +212,14 @@ class ManipulationScenario:
         self._meshes: dict = {}
         self._cache_size = int(cache_size)
 
+    def __getstate__(self):
+        # caches hold factorisations (not picklable) and are cheap to rebuild: a scenario
+        # sent to a worker process travels as its configuration only
+        state = self.__dict__.copy()
+        state["_models"] = OrderedDict()
+        state["_meshes"] = {}
+        return state
+
     # ---- protocol ------------------------------------------------------------------
     @property
     def control_bounds(self) -> np.ndarray:

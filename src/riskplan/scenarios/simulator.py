@@ -182,6 +182,13 @@ class SimState:
         object.__setattr__(self, "n_elements", int(self.n_elements))
         object.__setattr__(self, "displacement", frozen_array(self.displacement))
 
+    def __setstate__(self, state: dict) -> None:
+        # unpickled arrays come back writeable: make them read-only again
+        for k, v in state.items():
+            if isinstance(v, np.ndarray):
+                v.setflags(write=False)
+            object.__setattr__(self, k, v)
+
     def arrays(self) -> dict[str, np.ndarray]:
         """All array fields by name (for comparisons and storage)."""
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if isinstance(getattr(self, f.name), np.ndarray)}

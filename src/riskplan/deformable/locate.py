@@ -44,25 +44,59 @@ def _mesh_maps(mesh: TissueMesh) -> np.ndarray:
     return maps
 
 
-def locate_points(maps: np.ndarray, points: np.ndarray, chunk: int = 256):
+def locate_points(maps: np.ndarray, points: np.ndarray, chunk: int = 256, candidates=None):
     """Containing element ``(P,)`` and barycentric weights ``(P, 3)`` of ``points (P, 2)``.
 
     Picks, for each point, the element whose smallest barycentric coordinate is largest;
     element ``-1`` when that value is below ``-INSIDE_TOL`` (outside the mesh).
+    ``candidates (P, k)``: optional element indices to try first (e.g. the elements with
+    the nearest centroids); points not found among them are searched exhaustively, so
+    the result does not depend on the candidates.
     """
     P = len(points)
-    elem = np.empty(P, dtype=np.int64)
+    elem = np.full(P, -1, dtype=np.int64)
     lam = np.empty((P, 3))
-    for s in range(0, P, chunk):
-        q = points[s : s + chunk]
-        # (T, 3, 2) @ (2, p) + (T, 3, 1) -> (T, 3, p)
+    todo = np.arange(P)
+    if candidates is not None and P:
+        b = np.einsum("pkij,pj->pki", maps[candidates][:, :, :, :2], points) + maps[candidates][:, :, :, 2]
+        worst = b.min(axis=2)  # (P, k)
+        j = worst.argmax(axis=1)
+        rows = np.arange(P)
+        ok = worst[rows, j] >= -INSIDE_TOL
+        elem[ok] = candidates[rows[ok], j[ok]]
+        lam[ok] = b[rows[ok], j[ok]]
+        todo = np.flatnonzero(~ok)
+    for s in range(0, len(todo), chunk):
+        idx = todo[s : s + chunk]
+        q = points[idx]
+        # (T, 3, 2) @ (2, p) + (T, 3, 1) -> (p, T, 3)
         b = np.einsum("tij,pj->pti", maps[:, :, :2], q) + maps[None, :, :, 2]
         worst = b.min(axis=2)  # (p, T)
         e = worst.argmax(axis=1)
         ok = worst[np.arange(len(q)), e] >= -INSIDE_TOL
-        elem[s : s + chunk] = np.where(ok, e, -1)
-        lam[s : s + chunk] = b[np.arange(len(q)), e]
+        elem[idx] = np.where(ok, e, -1)
+        lam[idx] = b[np.arange(len(q)), e]
     return elem, lam
+
+
+#: Above this many (point, element) pairs, candidates come from a k-d tree of centroids.
+_TREE_MIN_PAIRS = 4_000
+_TREE_K = 8
+
+
+def _locate_in_mesh(mesh: TissueMesh, pts: np.ndarray):
+    maps = _mesh_maps(mesh)
+    cand = None
+    if len(pts) * mesh.n_elements > _TREE_MIN_PAIRS:
+        tree = mesh.__dict__.get("_centroid_tree")
+        if tree is None:
+            from scipy.spatial import cKDTree
+
+            tree = cKDTree(mesh.nodes[mesh.triangles].mean(axis=1))
+            object.__setattr__(mesh, "_centroid_tree", tree)
+        k = min(_TREE_K, mesh.n_elements)
+        cand = tree.query(pts, k=k)[1].reshape(len(pts), k)
+    return locate_points(maps, pts, candidates=cand)
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,7 +161,7 @@ def locate(mesh: TissueMesh, points) -> Interpolator:
     if pts.ndim > 2:
         raise InvalidInputError(f"points: expected shape (P, 2) or (2,), got {pts.shape}")
     pts = np.ascontiguousarray(pts.reshape(-1, 2))
-    elem, lam = locate_points(_mesh_maps(mesh), pts)
+    elem, lam = _locate_in_mesh(mesh, pts)
     outside = np.flatnonzero(elem < 0)
     if outside.size:
         raise InvalidInputError(
@@ -143,6 +177,6 @@ def locate(mesh: TissueMesh, points) -> Interpolator:
 
 def contains(mesh: TissueMesh, points) -> np.ndarray:
     """``(P,)`` bool: which reference points ``(P, 2)`` lie in the mesh (no error)."""
-    pts = as_array(points, "points", last_dim=2).reshape(-1, 2)
-    elem, _ = locate_points(_mesh_maps(mesh), pts)
+    pts = np.ascontiguousarray(as_array(points, "points", last_dim=2).reshape(-1, 2))
+    elem, _ = _locate_in_mesh(mesh, pts)
     return elem >= 0

@@ -142,3 +142,16 @@ def test_scenarios_pickle_without_caches(needle, manip):
         assert clone.step(s1, u).identical(sim.step(s1, u))
         s2 = pickle.loads(pickle.dumps(s1))
         assert s2.identical(s1) and not s2.displacement.flags.writeable
+
+
+def test_make_scenario():
+    from riskplan.scenarios.simulator import make_scenario
+
+    sim = make_scenario("manipulation", "actuation")
+    p = sim.sample_params(1)
+    assert np.asarray(p.actuation_cov).shape == (6, 6)
+    assert make_scenario("needle", "mesh").nominal_params.n_elements == 175
+    with pytest.raises(InvalidInputError, match="scenario"):
+        make_scenario("liver")
+    with pytest.raises(InvalidInputError, match="case"):
+        make_scenario("needle", "bogus")

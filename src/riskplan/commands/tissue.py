@@ -66,23 +66,10 @@ def read_controls(path, control_dim: int):
 
 
 def make_scenario(name: str, case: str):
-    """The scenario ``name`` with the parameter distribution of uncertainty ``case``."""
-    from riskplan.errors import InvalidInputError
-    from riskplan.scenarios.uncertainty import get_case
+    """See :func:`riskplan.scenarios.simulator.make_scenario`."""
+    from riskplan.scenarios.simulator import make_scenario as _make
 
-    if name == "needle":
-        from riskplan.scenarios.needle import NeedleScenario
-
-        sim = NeedleScenario()
-        sim.distribution = get_case(case, sim.nominal_params)
-    elif name == "manipulation":
-        from riskplan.scenarios.manipulation import ManipulationScenario
-
-        sim = ManipulationScenario()
-        sim.distribution = get_case(case, sim.nominal_params, actuation_cov=sim.actuation_cov())
-    else:
-        raise InvalidInputError(f"scenario: expected one of {', '.join(SCENARIOS)}, got {name!r}")
-    return sim
+    return _make(name, case)
 
 
 def step_costs(quick: bool = False) -> dict:

@@ -46,7 +46,12 @@ __all__ = [
     "frozen_array",
     "rollout",
     "actuation_noise",
+    "make_scenario",
+    "SCENARIO_NAMES",
 ]
+
+#: Names accepted by :func:`make_scenario` (and the CLI ``--scenario`` option).
+SCENARIO_NAMES = ("needle", "manipulation")
 
 
 def frozen_array(value, dtype=np.float64) -> np.ndarray:
@@ -257,6 +262,27 @@ def rollout(sim: Simulator, state: SimState, controls, params: SimParams | None 
     for k in range(u.shape[0]):
         states.append(sim.step(states[-1], u[k], params))
     return states
+
+
+def make_scenario(name: str, case: str = "nominal"):
+    """The scenario ``name`` (:data:`SCENARIO_NAMES`) with the parameter distribution of
+    uncertainty ``case`` (:data:`riskplan.scenarios.uncertainty.CASE_NAMES`) as its S;
+    the manipulation scenario gets its own actuation covariance."""
+    from riskplan.scenarios.uncertainty import get_case
+
+    if name == "needle":
+        from riskplan.scenarios.needle import NeedleScenario
+
+        sim = NeedleScenario()
+        sim.distribution = get_case(case, sim.nominal_params)
+    elif name == "manipulation":
+        from riskplan.scenarios.manipulation import ManipulationScenario
+
+        sim = ManipulationScenario()
+        sim.distribution = get_case(case, sim.nominal_params, actuation_cov=sim.actuation_cov())
+    else:
+        raise InvalidInputError(f"scenario: expected one of {', '.join(SCENARIO_NAMES)}, got {name!r}")
+    return sim
 
 
 # --- helpers shared by the scenarios -------------------------------------------------------

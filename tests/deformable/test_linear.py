@@ -180,3 +180,18 @@ def test_model_input_errors(square175):
     bad[5, 1] = np.nan
     with pytest.raises(InvalidInputError, match="NaN"):
         model.solve(bad)
+
+
+@pytest.mark.parametrize("n", [175, 1000])
+def test_models_pickle_round_trip(n, rng, tol):
+    """Models travel to worker processes (riskplan.parallel): pickle gives the same solves."""
+    import pickle
+
+    from riskplan.deformable import NeoHookeanModel, locate
+
+    mesh = mesh_polygon(rectangle(), n)
+    mat = Material(50.0, 0.4)
+    f = locate(mesh, [[0.4, 0.6]]).spread(np.array([[1.0, -0.5]]))
+    for model in (LinearElasticModel(mesh, mat, mesh.vertex_nodes), NeoHookeanModel(mesh, mat, mesh.vertex_nodes)):
+        clone = pickle.loads(pickle.dumps(model))
+        np.testing.assert_allclose(clone.solve(f), model.solve(f), **tol["float64_exact"])

@@ -27,27 +27,38 @@ from riskplan.errors import InvalidInputError, require
 DENSE_MAX_DOFS = 700
 
 
-def banded_cholesky_solver(cb: np.ndarray, perm: np.ndarray):
+class BandedCholeskySolver:
     """``r -> K⁻¹ r`` from the upper banded Cholesky factor ``cb`` of ``K[perm][:, perm]``
-    (LAPACK ``pbtrs`` directly: the wrapper's checks cost more than the solve here)."""
-    from scipy.linalg import get_lapack_funcs
+    (LAPACK ``pbtrs`` called directly: the wrapper's checks cost more than the solve at
+    these sizes). Picklable (the LAPACK handle is looked up again after unpickling)."""
 
-    (pbtrs,) = get_lapack_funcs(("pbtrs",), (cb,))
+    def __init__(self, cb: np.ndarray, perm: np.ndarray):
+        self.cb = cb
+        self.perm = perm
+        self._pbtrs = None
 
-    def solve(r: np.ndarray) -> np.ndarray:
-        x, info = pbtrs(cb, r[perm], lower=0)
+    def __getstate__(self):
+        return {"cb": self.cb, "perm": self.perm}
+
+    def __setstate__(self, state):
+        self.__init__(state["cb"], state["perm"])
+
+    def __call__(self, r: np.ndarray) -> np.ndarray:
+        if self._pbtrs is None:
+            from scipy.linalg import get_lapack_funcs
+
+            (self._pbtrs,) = get_lapack_funcs(("pbtrs",), (self.cb,))
+        x, info = self._pbtrs(self.cb, r[self.perm], lower=0)
         if info != 0:  # pragma: no cover - only for malformed arguments
             raise RuntimeError(f"pbtrs failed with info={info}")
         out = np.empty_like(x)
-        out[perm] = x
+        out[self.perm] = x
         return out
-
-    return solve
 
 
 def banded_cholesky(K):
     """Reverse Cuthill-McKee ordering + banded Cholesky of a sparse SPD matrix ``K``;
-    returns ``solve(r)`` (see :func:`banded_cholesky_solver`). Raises
+    returns a :class:`BandedCholeskySolver` ``solve(r)``. Raises
     ``numpy.linalg.LinAlgError`` if ``K`` is not positive definite."""
     import scipy.linalg
     from scipy.sparse.csgraph import reverse_cuthill_mckee
@@ -60,7 +71,7 @@ def banded_cholesky(K):
     ab = np.zeros((bw + 1, K.shape[0]))
     ab[bw + Kp.row[upper] - Kp.col[upper], Kp.col[upper]] = Kp.data[upper]
     cb = scipy.linalg.cholesky_banded(ab, lower=False)
-    return banded_cholesky_solver(cb, perm)
+    return BandedCholeskySolver(cb, perm)
 
 
 def assemble_stiffness_parts(mesh: TissueMesh):
@@ -126,6 +137,12 @@ class LinearElasticModel:
         self._K_fc = self.K[self.free_dofs][:, self.fixed_dofs].tocsr()
         self._n = n
         self._factorise()
+
+    def __getstate__(self):
+        return {"mesh": self.mesh, "material": self.material, "fixed_nodes": self.fixed_nodes, "parts": self._parts}
+
+    def __setstate__(self, state):
+        self.__init__(state["mesh"], state["material"], state["fixed_nodes"], _parts=state["parts"])
 
     def _factorise(self) -> None:
         from scipy.sparse.linalg import splu

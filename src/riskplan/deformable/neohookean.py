@@ -234,7 +234,6 @@ class HyperelasticModel:
         from scipy import sparse
         from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-        self._sparse = sparse
         dofs = (2 * self._tri[:, :, None] + np.arange(2)[None, None, :]).reshape(-1, 6)  # (T, 6)
         self._edofs = dofs
         nf = len(self.free_dofs)
@@ -313,7 +312,9 @@ class HyperelasticModel:
 
     def _csc(self, Ke_flat: np.ndarray):
         data = np.bincount(self._slot, Ke_flat[self._keep], minlength=self._nnz)
-        return self._sparse.csc_matrix((data, self._csc_indices, self._csc_indptr), shape=self._csc_shape)
+        from scipy import sparse
+
+        return sparse.csc_matrix((data, self._csc_indices, self._csc_indptr), shape=self._csc_shape)
 
     def _factor(self, st: _State):
         """A solver ``r -> K⁻¹ r`` for the reduced tangent at ``st``."""
@@ -332,9 +333,9 @@ class HyperelasticModel:
             except RuntimeError as exc:
                 raise ConvergenceError(f"Newton: singular tangent ({exc})") from exc
             return lu.solve
-        from riskplan.deformable.linear import banded_cholesky_solver
+        from riskplan.deformable.linear import BandedCholeskySolver
 
-        return banded_cholesky_solver(cb, self._band_perm)
+        return BandedCholeskySolver(cb, self._band_perm)
 
     def _check_u(self, u, name="u") -> np.ndarray:
         return as_array(u, name, shape=(self.mesh.n_nodes, 2)).reshape(-1).copy()
@@ -371,7 +372,9 @@ class HyperelasticModel:
             return self._csc(Ke.reshape(-1))
         r = np.repeat(self._edofs, 6, axis=1).ravel()
         c = np.tile(self._edofs, (1, 6)).ravel()
-        return self._sparse.csr_matrix((Ke.ravel(), (r, c)), shape=(self._n, self._n))
+        from scipy import sparse
+
+        return sparse.csr_matrix((Ke.ravel(), (r, c)), shape=(self._n, self._n))
 
     def _raise_inverted(self, J: np.ndarray, context: str = ""):
         bad = np.flatnonzero(J <= 0.0)

@@ -224,3 +224,31 @@ def test_banded_solver_equals_sparse_lu(manip, rng, tol):
     st = nh._evaluate(u.ravel().copy())
     r = rng.normal(size=len(nh.free_dofs))
     np.testing.assert_allclose(nh._factor(st)(r), spsolve(nh.tangent(u), r), **tol["float64_ref"])
+
+
+@pytest.mark.parametrize("law", ["neohookean", "svk"])
+def test_nonlinear_patch_test_homogeneous_deformation(poly200, rng, law):
+    """A homogeneous deformation prescribed on the boundary is an exact discrete
+    equilibrium (constant P): interior nodes must reproduce u = (F − I) X + c."""
+    F = np.array([[1.3, 0.2], [-0.1, 0.85]])
+    c = np.array([0.05, -0.02])
+    exact = poly200.nodes @ (F - np.eye(2)).T + c
+    model = HyperelasticModel(poly200, Material(50.0, 0.4, plane="strain"), poly200.boundary_nodes, law=law)
+    u, info = model.solve_with_info(np.zeros((poly200.n_nodes, 2)), fixed_values=exact[model.fixed_nodes], load_steps=2)
+    np.testing.assert_allclose(u, exact, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(model.jacobians(u), np.linalg.det(F), rtol=1e-12, atol=0)
+
+
+def test_traction_patch_test_nonlinear(poly200):
+    """Constant first Piola stress P(F) applied as the dead traction P N on the reference
+    boundary, origin-free pins at two nodes with the exact values: u = (F − I) X."""
+    from riskplan.deformable import traction_load
+
+    F = np.array([[1.15, 0.1], [0.05, 0.9]])
+    mat = Material(50.0, 0.4, plane="strain")
+    _, P, _ = neohookean_energy_stress(F[None], mat.lam, mat.mu, False)
+    f = traction_load(poly200, lambda x, n: n @ P[0].T)
+    exact = poly200.nodes @ (F - np.eye(2)).T
+    model = NeoHookeanModel(poly200, mat, [0, 2])
+    u = model.solve(f, fixed_values=exact[model.fixed_nodes], load_steps=2)
+    np.testing.assert_allclose(u, exact, rtol=0, atol=1e-9)

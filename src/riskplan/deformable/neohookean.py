@@ -176,7 +176,8 @@ class _State:
 
 
 class HyperelasticModel:
-    """Hyperelastic P1 model on ``mesh`` with ``fixed_nodes`` held at zero displacement.
+    """Hyperelastic P1 model on ``mesh`` with ``fixed_nodes`` held (zero displacement
+    unless ``fixed_values`` is given to a solve).
 
     ``law``: ``"neohookean"`` (default) or ``"svk"``. A state is in equilibrium when
     ``‖r_free‖ ≤ rtol · f_ref + atol``, ``f_ref`` the larger of the external load norm
@@ -441,33 +442,64 @@ class HyperelasticModel:
             iterations=self.max_iter,
         )
 
-    def solve_with_info(self, nodal_forces, u0=None, *, load_steps: int = 1, max_halvings: int = 8):
+    def _dirichlet_predictor(self, u: np.ndarray, dub: np.ndarray) -> np.ndarray:
+        """Move the fixed DOFs by ``dub`` and the free ones by the linearised response
+        ``−K_ff⁻¹ K_fc dub`` (tangent at ``u``), so a prescribed motion does not crush
+        the elements next to the supports."""
+        st = self._evaluate(u)
+        if st.energy is None:
+            self._raise_inverted(st.J, " before a prescribed-displacement increment")
+        Kfull = self.tangent(u.reshape(-1, 2), full=True)
+        rhs = Kfull[self.free_dofs][:, self.fixed_dofs] @ dub
+        out = u.copy()
+        out[self.fixed_dofs] += dub
+        out[self.free_dofs] -= self._factor(st)(rhs)
+        return out
+
+    def solve_with_info(
+        self, nodal_forces, u0=None, *, fixed_values=None, load_steps: int = 1, max_halvings: int = 8
+    ):
         """Equilibrium displacement ``(N, 2)`` under dead nodal loads, plus :class:`SolveInfo`.
 
         ``u0 (N, 2)``: warm start (an equilibrium state, e.g. the previous simulator state);
         the load path then runs from ``f_int(u0)`` (the load ``u0`` balances) to
-        ``nodal_forces`` in ``load_steps`` equal increments; a failed increment is
-        halved (up to ``max_halvings`` halvings per solve) and grows back after
-        increments that converge in at most 4 iterations. Raises :class:`ElementInversionError`
-        (names the elements) or :class:`ConvergenceError` (carries the residual).
+        ``nodal_forces``, and the fixed nodes from ``u0``'s values to ``fixed_values
+        (F, 2)`` (prescribed displacements of ``fixed_nodes`` in sorted node order; default
+        zero), in ``load_steps`` equal increments (a prescribed-motion increment starts
+        from a linearised predictor). A failed increment is halved (up to
+        ``max_halvings`` halvings per solve) and grows back after increments that
+        converge in at most 4 iterations. Raises :class:`ElementInversionError` (names
+        the elements) or :class:`ConvergenceError` (carries the residual).
         Deterministic: the result depends only on the arguments.
         """
         f = as_array(nodal_forces, "nodal_forces", shape=(self.mesh.n_nodes, 2)).reshape(-1).copy()
         f[self.fixed_dofs] = 0.0
         if isinstance(load_steps, bool) or not isinstance(load_steps, (int, np.integer)) or load_steps < 1:
             raise InvalidInputError(f"load_steps: expected an int >= 1, got {load_steps!r}")
+        if fixed_values is None:
+            ub = np.zeros(len(self.fixed_dofs))
+        else:
+            ub = as_array(fixed_values, "fixed_values", shape=(len(self.fixed_nodes), 2)).reshape(-1)
         if u0 is None:
             u = np.zeros(self._n)
             f0 = np.zeros(self._n)
         else:
             u = self._check_u(u0, "u0")
-            u[self.fixed_dofs] = 0.0
             st = self._evaluate(u)
             if st.energy is None:
                 self._raise_inverted(st.J, " in u0")
             f0 = st.fint.copy()
             f0[self.fixed_dofs] = 0.0
+        ub0 = u[self.fixed_dofs].copy()
+        moving = bool(np.any(ub != ub0))
         fscale = max(float(np.linalg.norm(f[self.free_dofs])), float(np.linalg.norm(f0[self.free_dofs])))
+        if moving:
+            # forces of the order the prescribed motion produces: linear response to it
+            probe = np.zeros(self._n)
+            probe[self.fixed_dofs] = ub - ub0
+            st = self._evaluate(probe)
+            if st.energy is not None:
+                fscale = max(fscale, float(np.linalg.norm(st.fint[self.fixed_dofs])))
         if fscale == 0.0:
             fscale = 1.0
         s, ds = 0.0, 1.0 / int(load_steps)
@@ -477,7 +509,11 @@ class HyperelasticModel:
             s1 = min(1.0, s + ds)
             fs = f if s1 == 1.0 else f0 + s1 * (f - f0)
             try:
-                u_new, it, rn = self._newton(u, fs, fscale)
+                start = u
+                if moving:
+                    target = ub if s1 == 1.0 else ub0 + s1 * (ub - ub0)
+                    start = self._dirichlet_predictor(u, target - u[self.fixed_dofs])
+                u_new, it, rn = self._newton(start, fs, fscale)
             except (ConvergenceError, ElementInversionError) as exc:
                 if halvings >= max_halvings:
                     raise exc
@@ -493,9 +529,9 @@ class HyperelasticModel:
         J = self.jacobians(u.reshape(-1, 2))
         return u.reshape(-1, 2), SolveInfo(iterations=iters, load_steps=steps, residual=rn, min_jacobian=float(J.min()))
 
-    def solve(self, nodal_forces, u0=None, *, load_steps: int = 1) -> np.ndarray:
+    def solve(self, nodal_forces, u0=None, *, fixed_values=None, load_steps: int = 1) -> np.ndarray:
         """Equilibrium displacement ``(N, 2)``; see :meth:`solve_with_info`."""
-        return self.solve_with_info(nodal_forces, u0, load_steps=load_steps)[0]
+        return self.solve_with_info(nodal_forces, u0, fixed_values=fixed_values, load_steps=load_steps)[0]
 
 
 class NeoHookeanModel(HyperelasticModel):

@@ -252,3 +252,55 @@ def test_traction_patch_test_nonlinear(poly200):
     model = NeoHookeanModel(poly200, mat, [0, 2])
     u = model.solve(f, fixed_values=exact[model.fixed_nodes], load_steps=2)
     np.testing.assert_allclose(u, exact, rtol=0, atol=1e-9)
+
+
+@pytest.mark.slow
+def test_neohookean_convergence_rate_manufactured():
+    """Large-strain manufactured solution u* (max |∇u*| ≈ 0.6): body force b = −Div P(I + ∇u*)
+    (divergence by central differences of the exact stress field, error ~1e-9), all
+    boundary nodes fixed. P1 → ‖u − u_h‖_L2 = O(h²)."""
+    from riskplan.deformable import body_load
+
+    mat = Material(50.0, 0.3, plane="strain")
+    amp = 0.2
+    pi = np.pi
+
+    def u_exact(x):
+        X, Y = x[..., 0], x[..., 1]
+        return amp * np.stack([np.sin(pi * X) * np.sin(pi * Y), 4 * X * (1 - X) * Y * (1 - Y)], axis=-1)
+
+    def grad_exact(x):
+        X, Y = x[..., 0], x[..., 1]
+        g = lambda t: t * (1 - t)  # noqa: E731
+        gp = lambda t: 1 - 2 * t  # noqa: E731
+        row0 = np.stack([pi * np.cos(pi * X) * np.sin(pi * Y), pi * np.sin(pi * X) * np.cos(pi * Y)], -1)
+        row1 = 4 * np.stack([gp(X) * g(Y), g(X) * gp(Y)], -1)
+        return amp * np.stack([row0, row1], -2)
+
+    def P_exact(x):
+        F = np.eye(2) + grad_exact(x)
+        return neohookean_energy_stress(F.reshape(-1, 2, 2), mat.lam, mat.mu, False)[1]
+
+    def body(x):
+        h = 1e-5
+        div = np.zeros((len(x), 2))
+        for J in range(2):
+            e = np.zeros(2)
+            e[J] = h
+            div += (P_exact(x + e)[:, :, J] - P_exact(x - e)[:, :, J]) / (2 * h)
+        return -div
+
+    from riskplan.deformable.loads import _subdivided_rule
+
+    hs, errs = [], []
+    for n in (200, 800, 3200):
+        mesh = mesh_polygon(rectangle(), n)
+        model = NeoHookeanModel(mesh, mat, mesh.boundary_nodes)
+        uh = model.solve(body_load(mesh, body), load_steps=2)
+        bary, w = _subdivided_rule(2)
+        x = np.einsum("qa,tad->tqd", bary, mesh.nodes[mesh.triangles])
+        uq = np.einsum("qa,tad->tqd", bary, uh[mesh.triangles])
+        errs.append(np.sqrt(np.einsum("t,q,tqd->", mesh.areas, w, (uq - u_exact(x)) ** 2)))
+        hs.append(np.sqrt(mesh.area / n))
+    rate = np.polyfit(np.log(hs), np.log(errs), 1)[0]
+    assert 1.8 <= rate <= 2.3, (rate, errs)

@@ -195,3 +195,14 @@ def test_models_pickle_round_trip(n, rng, tol):
     for model in (LinearElasticModel(mesh, mat, mesh.vertex_nodes), NeoHookeanModel(mesh, mat, mesh.vertex_nodes)):
         clone = pickle.loads(pickle.dumps(model))
         np.testing.assert_allclose(clone.solve(f), model.solve(f), **tol["float64_exact"])
+
+
+def test_unsupported_part_is_reported():
+    """Two separate squares, only one held: singular stiffness -> InvalidInputError."""
+    from riskplan.deformable import TissueMesh
+
+    nodes = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [2, 0], [3, 0], [3, 1], [2, 1]], dtype=float)
+    tris = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    mesh = TissueMesh(nodes, tris)
+    with pytest.raises(InvalidInputError, match="singular"):
+        LinearElasticModel(mesh, Material(50.0, 0.4), [0, 1])

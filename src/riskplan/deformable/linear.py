@@ -145,23 +145,30 @@ class LinearElasticModel:
         self.__init__(state["mesh"], state["material"], state["fixed_nodes"], _parts=state["parts"])
 
     def _factorise(self) -> None:
+        import scipy.linalg
         from scipy.sparse.linalg import splu
 
         nf = len(self.free_dofs)
+        singular = InvalidInputError(
+            "fixed_nodes: the stiffness is singular (some part of the mesh is not held by the fixed nodes)"
+        )
         if nf <= DENSE_MAX_DOFS:
-            import scipy.linalg
-
             # K_ff is symmetric positive definite: Cholesky, then the explicit inverse
-            Kd = self._K_ff.toarray()
-            c = scipy.linalg.cho_factor(Kd)
+            try:
+                c = scipy.linalg.cho_factor(self._K_ff.toarray())
+            except np.linalg.LinAlgError as exc:
+                raise singular from exc
             self._inv = scipy.linalg.cho_solve(c, np.eye(nf))
             self._lu_solve = None
         else:
             self._inv = None
             try:
                 self._lu_solve = banded_cholesky(self._K_ff)
-            except np.linalg.LinAlgError:  # pragma: no cover - K_ff is SPD once rigid motions are fixed
-                self._lu_solve = splu(self._K_ff).solve
+            except np.linalg.LinAlgError:
+                try:
+                    self._lu_solve = splu(self._K_ff).solve
+                except RuntimeError as exc:
+                    raise singular from exc
 
     # ---- construction helpers -------------------------------------------------------
     def with_material(self, material: Material) -> "LinearElasticModel":

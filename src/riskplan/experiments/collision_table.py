@@ -57,11 +57,16 @@ def _geometry_source(model=None, model_path=None, robot=None):
 
 
 def _default_robot():
+    """The paper robot, or ``None`` (arcs are used then) when no robot model can be loaded."""
+    from riskplan.errors import RiskplanError
+
     try:
         from riskplan.robots import load_robot
-    except ImportError:
+
+        return load_robot("paper")
+    except (ImportError, RiskplanError) as exc:
+        log.warning("robot model unavailable (%s); using constant-curvature arcs", exc)
         return None
-    return load_robot("paper")
 
 
 def collision_table(

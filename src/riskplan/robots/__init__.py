@@ -1,0 +1,37 @@
+"""Tendon-driven continuum robots: Cosserat-rod statics, hysteresis, sensing (MDN paper, Secs. III-IV).
+
+>>> from riskplan.robots import load_robot
+>>> robot = load_robot("paper")
+>>> robot.solve_displacements([0.01, 0.0, 0.0, 0.0]).tip.shape
+(3,)
+"""
+
+from riskplan.robots.params import (
+    Backbone,
+    BasePose,
+    Disks,
+    Gravity,
+    HysteresisParams,
+    RobotParams,
+    Tendon,
+    params_to_toml,
+    parse_robot_toml,
+)
+from riskplan.robots.robot import PACKAGED_ROBOTS, RodShape, TendonRobot, load_robot, robot_from_toml
+
+__all__ = [
+    "Backbone",
+    "BasePose",
+    "Disks",
+    "Gravity",
+    "HysteresisParams",
+    "PACKAGED_ROBOTS",
+    "RobotParams",
+    "RodShape",
+    "Tendon",
+    "TendonRobot",
+    "load_robot",
+    "params_to_toml",
+    "parse_robot_toml",
+    "robot_from_toml",
+]

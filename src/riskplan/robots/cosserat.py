@@ -1,0 +1,608 @@
+"""Cosserat-rod statics of tendon-driven continuum robots with general tendon routing.
+
+Implements Rucker & Webster, "Statics and dynamics of continuum robots with general tendon
+routing and external loading", IEEE T-RO 27(6), 2011 (R&W below), in an equivalent
+"resultant" form that needs no shooting when there are no external loads.
+
+Model (body-frame strains ``v`` (shear/extension) and ``u`` (curvature/torsion), R&W eq. 2-4)::
+
+    p' = R v,        R' = R [u]x,
+    tendon i at body offset r_i(s) = rho_i(s) (cos theta_i(s), sin theta_i(s), 0),
+    tendon tangent  w_i = v + u x r_i + r_i',  t_i = w_i / |w_i|       (R&W eq. 10)
+
+Cut the robot *and its tendons* at ``s`` and take the distal part as one free body: the
+tendon-disk contact forces are internal to it, the tendon tension enters only where the
+tendons are cut. With ``N(s)``, ``M(s)`` the resultant force and moment (about ``p(s)``, world
+frame) carried through the cross-section by rod and tendons together::
+
+    N' = -f,   M' = -p' x N - l,   N(L) = F_tip, M(L) = L_tip                      (1)
+    K_se (v - v*) + sum_i tau_i t_i         = R^T N                               (2)
+    K_bt (u - u*) + sum_i tau_i r_i x t_i   = R^T M                               (3)
+
+(2)-(3) are R&W's constitutive law ``n = R K_se (v - v*)``, ``m = R K_bt (u - u*)`` with the
+tendon terms of their tip boundary condition (R&W eq. 17) carried to every ``s``; differentiating
+them along ``s`` gives R&W's ODE (their eq. 19, the ``A, B, G, H`` matrices). The Jacobian of
+(2)-(3) is exactly R&W's matrix ``[[K_se + A, G], [B, K_bt + H]]``. Without external loads
+``N = M = 0`` everywhere, so the strains at each ``s`` follow from a local 6x6 Newton solve of
+(2)-(3) and one RK4 pass integrates ``p, R`` (no shooting). With gravity or tip loads the base
+values ``N(0), M(0)`` are shot (Newton, finite-difference Jacobian) so that (1) holds at the tip.
+
+Tendon path length ``l_i = int_0^L |w_i| ds`` is integrated alongside (Simpson = RK4 for a
+state-independent integrand). Reference state: straight, unstretched (``v* = e3``, ``u* = 0``).
+
+Everything here is a pure array function (numba, ``cache=True``); ``robot.TendonRobot`` is the
+validating facade.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# status codes returned by the kernels
+OK = 0
+LOCAL_FAIL = 1
+OUTER_FAIL = 2
+
+
+@njit(cache=True)
+def _polyval(c, s):
+    out = 0.0
+    for k in range(c.shape[0] - 1, -1, -1):
+        out = out * s + c[k]
+    return out
+
+
+@njit(cache=True)
+def _dpolyval(c, s):
+    out = 0.0
+    for k in range(c.shape[0] - 1, 0, -1):
+        out = out * s + k * c[k]
+    return out
+
+
+@njit(cache=True)
+def tendon_offsets(theta_c, radius_c, s, rt, drt):
+    """Body-frame tendon offsets ``r_i(s)`` and derivatives ``r_i'(s)`` into ``rt, drt (m, 3)``.
+
+    ``theta_c (m, Kt)``, ``radius_c (m, Kr)``: polynomial coefficients (ascending powers of s).
+    """
+    m = theta_c.shape[0]
+    for i in range(m):
+        th = _polyval(theta_c[i], s)
+        dth = _dpolyval(theta_c[i], s)
+        r = _polyval(radius_c[i], s)
+        dr = _dpolyval(radius_c[i], s)
+        c = math.cos(th)
+        sn = math.sin(th)
+        rt[i, 0] = r * c
+        rt[i, 1] = r * sn
+        rt[i, 2] = 0.0
+        drt[i, 0] = dr * c - r * dth * sn
+        drt[i, 1] = dr * sn + r * dth * c
+        drt[i, 2] = 0.0
+
+
+@njit(cache=True)
+def _gauss_solve(A, b, n, nrhs):
+    """Solve ``A X = b`` in place (partial pivoting); ``A (n, n)``, ``b (n, nrhs)``. Returns False if singular."""
+    for k in range(n):
+        piv = k
+        big = abs(A[k, k])
+        for i in range(k + 1, n):
+            if abs(A[i, k]) > big:
+                big = abs(A[i, k])
+                piv = i
+        if big == 0.0:
+            return False
+        if piv != k:
+            for j in range(n):
+                tmp = A[k, j]
+                A[k, j] = A[piv, j]
+                A[piv, j] = tmp
+            for j in range(nrhs):
+                tmp = b[k, j]
+                b[k, j] = b[piv, j]
+                b[piv, j] = tmp
+        inv = 1.0 / A[k, k]
+        for i in range(k + 1, n):
+            f = A[i, k] * inv
+            if f != 0.0:
+                for j in range(k + 1, n):
+                    A[i, j] -= f * A[k, j]
+                for j in range(nrhs):
+                    b[i, j] -= f * b[k, j]
+    for k in range(n - 1, -1, -1):
+        for j in range(nrhs):
+            acc = b[k, j]
+            for i in range(k + 1, n):
+                acc -= A[k, i] * b[i, j]
+            b[k, j] = acc / A[k, k]
+    return True
+
+
+@njit(cache=True)
+def local_residual_jacobian(x, tau, rt, drt, nb, mb, kse, kbt, F, J):
+    """Residual ``F (6,)`` of eqs. (2)-(3) at strains ``x = (v, u)`` and its Jacobian ``J (6, 6)``.
+
+    ``J = [[K_se + A, G], [B, K_bt + H]]`` with ``A = sum tau_i (I - t_i t_i^T)/|w_i|``,
+    ``G = -A [r]x``, ``B = [r]x A``, ``H = -[r]x A [r]x`` per tendon (R&W eq. 13-16).
+    """
+    for a in range(6):
+        F[a] = 0.0
+        for b in range(6):
+            J[a, b] = 0.0
+    F[0] = kse[0] * x[0] - nb[0]
+    F[1] = kse[1] * x[1] - nb[1]
+    F[2] = kse[2] * (x[2] - 1.0) - nb[2]
+    F[3] = kbt[0] * x[3] - mb[0]
+    F[4] = kbt[1] * x[4] - mb[1]
+    F[5] = kbt[2] * x[5] - mb[2]
+    J[0, 0] = kse[0]
+    J[1, 1] = kse[1]
+    J[2, 2] = kse[2]
+    J[3, 3] = kbt[0]
+    J[4, 4] = kbt[1]
+    J[5, 5] = kbt[2]
+    m = tau.shape[0]
+    A = np.empty((3, 3))
+    Bm = np.empty((3, 3))
+    for i in range(m):
+        ti = tau[i]
+        if ti == 0.0:
+            continue
+        r0 = rt[i, 0]
+        r1 = rt[i, 1]
+        r2 = rt[i, 2]
+        w0 = x[0] + x[4] * r2 - x[5] * r1 + drt[i, 0]
+        w1 = x[1] + x[5] * r0 - x[3] * r2 + drt[i, 1]
+        w2 = x[2] + x[3] * r1 - x[4] * r0 + drt[i, 2]
+        nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        t0 = w0 / nw
+        t1 = w1 / nw
+        t2 = w2 / nw
+        c0 = r1 * t2 - r2 * t1
+        c1 = r2 * t0 - r0 * t2
+        c2 = r0 * t1 - r1 * t0
+        F[0] += ti * t0
+        F[1] += ti * t1
+        F[2] += ti * t2
+        F[3] += ti * c0
+        F[4] += ti * c1
+        F[5] += ti * c2
+        sc = ti / nw
+        tt = (t0, t1, t2)
+        for a in range(3):
+            for b in range(3):
+                A[a, b] = sc * ((1.0 if a == b else 0.0) - tt[a] * tt[b])
+        # Bm = A [r]x ; [r]x = [[0,-r2,r1],[r2,0,-r0],[-r1,r0,0]]
+        for a in range(3):
+            Bm[a, 0] = A[a, 1] * r2 - A[a, 2] * r1
+            Bm[a, 1] = -A[a, 0] * r2 + A[a, 2] * r0
+            Bm[a, 2] = A[a, 0] * r1 - A[a, 1] * r0
+        for a in range(3):
+            for b in range(3):
+                J[a, b] += A[a, b]
+                J[a, 3 + b] -= Bm[a, b]
+                J[3 + a, b] -= Bm[b, a]
+        # H = -[r]x Bm
+        for b in range(3):
+            J[3, 3 + b] -= -r2 * Bm[1, b] + r1 * Bm[2, b]
+            J[4, 3 + b] -= r2 * Bm[0, b] - r0 * Bm[2, b]
+            J[5, 3 + b] -= -r1 * Bm[0, b] + r0 * Bm[1, b]
+
+
+@njit(cache=True)
+def local_strains(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, J, rhs):
+    """Newton solve of eqs. (2)-(3) for ``x = (v, u)`` in place (``x`` is the warm start).
+
+    Stops when the Newton step's max-norm is below ``tol`` (the error after that step is
+    quadratically smaller). Returns the number of iterations, or -1 if it did not converge.
+    """
+    for it in range(maxit):
+        local_residual_jacobian(x, tau, rt, drt, nb, mb, kse, kbt, F, J)
+        for a in range(6):
+            rhs[a, 0] = -F[a]
+        if not _gauss_solve(J, rhs, 6, 1):
+            return -1
+        step = 0.0
+        for a in range(6):
+            x[a] += rhs[a, 0]
+            if abs(rhs[a, 0]) > step:
+                step = abs(rhs[a, 0])
+        if not step == step:  # NaN
+            return -1
+        if step <= tol:
+            return it + 1
+    return -1
+
+
+@njit(cache=True)
+def _tendon_speeds(x, rt, drt, out):
+    """``|w_i|`` for every tendon (path length per unit s)."""
+    m = rt.shape[0]
+    for i in range(m):
+        r0 = rt[i, 0]
+        r1 = rt[i, 1]
+        r2 = rt[i, 2]
+        w0 = x[0] + x[4] * r2 - x[5] * r1 + drt[i, 0]
+        w1 = x[1] + x[5] * r0 - x[3] * r2 + drt[i, 1]
+        w2 = x[2] + x[3] * r1 - x[4] * r0 + drt[i, 2]
+        out[i] = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+
+
+@njit(cache=True)
+def _rk4_pose_step(p, R, x0, xm, x1, h, pn, Rn):
+    """Classical RK4 step of ``p' = R v``, ``R' = R [u]x`` with strains known at s, s+h/2, s+h."""
+    k1R = np.empty((3, 3))
+    k2R = np.empty((3, 3))
+    k3R = np.empty((3, 3))
+    k4R = np.empty((3, 3))
+    Rs = np.empty((3, 3))
+    k1p = np.empty(3)
+    k2p = np.empty(3)
+    k3p = np.empty(3)
+    k4p = np.empty(3)
+    _deriv_pose(R, x0, k1R, k1p)
+    for a in range(3):
+        for b in range(3):
+            Rs[a, b] = R[a, b] + 0.5 * h * k1R[a, b]
+    _deriv_pose(Rs, xm, k2R, k2p)
+    for a in range(3):
+        for b in range(3):
+            Rs[a, b] = R[a, b] + 0.5 * h * k2R[a, b]
+    _deriv_pose(Rs, xm, k3R, k3p)
+    for a in range(3):
+        for b in range(3):
+            Rs[a, b] = R[a, b] + h * k3R[a, b]
+    _deriv_pose(Rs, x1, k4R, k4p)
+    for a in range(3):
+        pn[a] = p[a] + h / 6.0 * (k1p[a] + 2.0 * k2p[a] + 2.0 * k3p[a] + k4p[a])
+        for b in range(3):
+            Rn[a, b] = R[a, b] + h / 6.0 * (k1R[a, b] + 2.0 * k2R[a, b] + 2.0 * k3R[a, b] + k4R[a, b])
+
+
+@njit(cache=True)
+def _deriv_pose(R, x, dR, dp):
+    u0 = x[3]
+    u1 = x[4]
+    u2 = x[5]
+    for a in range(3):
+        dp[a] = R[a, 0] * x[0] + R[a, 1] * x[1] + R[a, 2] * x[2]
+        # R [u]x, columns: R(u x e_j)
+        dR[a, 0] = R[a, 1] * u2 - R[a, 2] * u1
+        dR[a, 1] = -R[a, 0] * u2 + R[a, 2] * u0
+        dR[a, 2] = R[a, 0] * u1 - R[a, 1] * u0
+
+
+@njit(cache=True)
+def shape_free(tau, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, x_out, lengths):
+    """Shape under tendon tensions ``tau (m,)`` without external loads (no shooting).
+
+    Outputs: ``p_out (n+1, 3)``, ``R_out (n+1, 3, 3)`` in the base frame, strains
+    ``x_out (n+1, 6)`` and tendon path lengths ``lengths (m,)``. Returns a status code.
+    """
+    m = tau.shape[0]
+    h = length / n_steps
+    rt = np.empty((m, 3))
+    drt = np.empty((m, 3))
+    F = np.empty(6)
+    J = np.empty((6, 6))
+    rhs = np.empty((6, 1))
+    zero = np.zeros(3)
+    sp = np.empty(m)
+    x0 = np.zeros(6)
+    x0[2] = 1.0
+    xm = np.empty(6)
+    x1 = np.empty(6)
+    tendon_offsets(theta_c, radius_c, 0.0, rt, drt)
+    if local_strains(x0, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, rhs) < 0:
+        return LOCAL_FAIL
+    for a in range(3):
+        p_out[0, a] = 0.0
+        for b in range(3):
+            R_out[0, a, b] = 1.0 if a == b else 0.0
+    for a in range(6):
+        x_out[0, a] = x0[a]
+    for i in range(m):
+        lengths[i] = 0.0
+    _tendon_speeds(x0, rt, drt, sp)
+    for i in range(m):
+        lengths[i] += sp[i]
+    for k in range(n_steps):
+        s = k * h
+        for a in range(6):
+            xm[a] = x0[a]
+        tendon_offsets(theta_c, radius_c, s + 0.5 * h, rt, drt)
+        if local_strains(xm, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, rhs) < 0:
+            return LOCAL_FAIL
+        _tendon_speeds(xm, rt, drt, sp)
+        for i in range(m):
+            lengths[i] += 4.0 * sp[i]
+        for a in range(6):
+            x1[a] = 2.0 * xm[a] - x0[a]
+        tendon_offsets(theta_c, radius_c, s + h, rt, drt)
+        if local_strains(x1, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, rhs) < 0:
+            return LOCAL_FAIL
+        _tendon_speeds(x1, rt, drt, sp)
+        w = 2.0 if k < n_steps - 1 else 1.0
+        for i in range(m):
+            lengths[i] += w * sp[i]
+        _rk4_pose_step(p_out[k], R_out[k], x0, xm, x1, h, p_out[k + 1], R_out[k + 1])
+        for a in range(6):
+            x_out[k + 1, a] = x1[a]
+            x0[a] = x1[a]
+    for i in range(m):
+        lengths[i] *= h / 6.0
+    return OK
+
+
+@njit(cache=True)
+def shape_free_batch(taus, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, lengths_out, status):
+    """Batched :func:`shape_free`: ``taus (B, m)`` -> ``p_out (B, n+1, 3)``, ``R_out (B, n+1, 3, 3)``."""
+    B = taus.shape[0]
+    x_out = np.empty((n_steps + 1, 6))
+    for b in range(B):
+        status[b] = shape_free(
+            taus[b], theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, p_out[b], R_out[b], x_out, lengths_out[b]
+        )
+
+
+@njit(cache=True)
+def lengths_and_jacobian(tau, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, lengths, dl):
+    """Tendon path lengths ``l (m,)`` and ``dl[i, j] = d l_i / d tau_j`` without external loads.
+
+    Uses Simpson's rule on the RK4 nodes; the sensitivity of the local strains is
+    ``dx/dtau_j = -J^{-1} [t_j; r_j x t_j]`` (implicit function theorem on eqs. (2)-(3)) and
+    ``d|w_i|/dx = [t_i; r_i x t_i]``. Returns a status code.
+    """
+    m = tau.shape[0]
+    h = length / n_steps
+    n_nodes = 2 * n_steps + 1
+    rt = np.empty((m, 3))
+    drt = np.empty((m, 3))
+    F = np.empty(6)
+    J = np.empty((6, 6))
+    rhs = np.empty((6, 1))
+    S = np.empty((6, m))
+    G = np.empty((6, m))
+    zero = np.zeros(3)
+    x = np.zeros(6)
+    x[2] = 1.0
+    xprev = x.copy()
+    for i in range(m):
+        lengths[i] = 0.0
+        for j in range(m):
+            dl[i, j] = 0.0
+    for node in range(n_nodes):
+        s = node * 0.5 * h
+        tendon_offsets(theta_c, radius_c, s, rt, drt)
+        if node >= 2:
+            for a in range(6):
+                tmp = x[a]
+                x[a] = 2.0 * x[a] - xprev[a]
+                xprev[a] = tmp
+        else:
+            for a in range(6):
+                xprev[a] = x[a]
+        if local_strains(x, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, rhs) < 0:
+            return LOCAL_FAIL
+        local_residual_jacobian(x, tau, rt, drt, zero, zero, kse, kbt, F, J)
+        if node == 0 or node == n_nodes - 1:
+            wgt = h / 6.0
+        elif node % 2 == 1:
+            wgt = 4.0 * h / 6.0
+        else:
+            wgt = 2.0 * h / 6.0
+        for i in range(m):
+            r0 = rt[i, 0]
+            r1 = rt[i, 1]
+            r2 = rt[i, 2]
+            w0 = x[0] + x[4] * r2 - x[5] * r1 + drt[i, 0]
+            w1 = x[1] + x[5] * r0 - x[3] * r2 + drt[i, 1]
+            w2 = x[2] + x[3] * r1 - x[4] * r0 + drt[i, 2]
+            nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+            t0 = w0 / nw
+            t1 = w1 / nw
+            t2 = w2 / nw
+            lengths[i] += wgt * nw
+            G[0, i] = t0
+            G[1, i] = t1
+            G[2, i] = t2
+            G[3, i] = r1 * t2 - r2 * t1
+            G[4, i] = r2 * t0 - r0 * t2
+            G[5, i] = r0 * t1 - r1 * t0
+            for a in range(6):
+                S[a, i] = -G[a, i]
+        if not _gauss_solve(J, S, 6, m):
+            return LOCAL_FAIL
+        for i in range(m):
+            for j in range(m):
+                acc = 0.0
+                for a in range(6):
+                    acc += G[a, i] * S[a, j]
+                dl[i, j] += wgt * acc
+    return OK
+
+
+@njit(cache=True)
+def solve_displacement_tensions(d, kinv, l0, tau0, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, tau, info):
+    """Tensions for tendon displacements ``d (m,)`` with compliant tendons and slack (no loads).
+
+    Complementarity (per tendon)::
+
+        g_i(tau) = l0_i - l_i(tau) + tau_i * kinv_i - d_i,   tau_i >= 0, g_i >= 0, tau_i g_i = 0
+
+    (pulling the actuator in by ``d_i`` shortens the tendon's rest length by ``d_i``; a taut
+    tendon stretches by ``tau_i / k_i``). Semismooth Newton on ``min(tau, g) = 0`` with the
+    analytic Jacobian of :func:`lengths_and_jacobian`, projected onto ``tau >= 0``.
+    ``tau0`` is the start. Writes ``tau``; ``info = [iterations, residual]``. Returns status.
+    """
+    m = d.shape[0]
+    lengths = np.empty(m)
+    dl = np.empty((m, m))
+    Jm = np.empty((m, m))
+    phi = np.empty((m, 1))
+    for i in range(m):
+        tau[i] = tau0[i]
+    res = 1e300
+    for it in range(outer_maxit):
+        st = lengths_and_jacobian(tau, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, lengths, dl)
+        if st != OK:
+            info[0] = it
+            info[1] = res
+            return st
+        res = 0.0
+        for i in range(m):
+            g = l0[i] - lengths[i] + tau[i] * kinv[i] - d[i]
+            if tau[i] <= g:
+                phi[i, 0] = -tau[i]
+                for j in range(m):
+                    Jm[i, j] = 0.0
+                Jm[i, i] = 1.0
+                r = tau[i] * 1e-3  # compare tensions in N with lengths in m at 1 mm/N
+            else:
+                phi[i, 0] = -g
+                for j in range(m):
+                    Jm[i, j] = -dl[i, j]
+                Jm[i, i] += kinv[i]
+                r = g
+            if abs(r) > res:
+                res = abs(r)
+        if res <= dtol:
+            info[0] = it
+            info[1] = res
+            return OK
+        if not _gauss_solve(Jm, phi, m, 1):
+            info[0] = it
+            info[1] = res
+            return OUTER_FAIL
+        for i in range(m):
+            tau[i] = max(tau[i] + phi[i, 0], 0.0)
+    info[0] = outer_maxit
+    info[1] = res
+    return OUTER_FAIL
+
+
+@njit(cache=True)
+def solve_displacement_batch(ds, kinv, l0, tau0s, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus, infos, status):
+    """Batched :func:`solve_displacement_tensions` over ``ds (B, m)``."""
+    for b in range(ds.shape[0]):
+        status[b] = solve_displacement_tensions(
+            ds[b], kinv, l0, tau0s[b], theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus[b], infos[b]
+        )
+
+
+# ----------------------------------------------------------------------------- loaded case
+@njit(cache=True)
+def _deriv_loaded(y, s, tau, theta_c, radius_c, kse, kbt, f, x, tol, maxit, rt, drt, F, J, rhs, sp, dy):
+    """Right-hand side of (1) with the strains from (2)-(3); ``y = (p, R (row-major), N, M, l)``.
+
+    ``x`` is the warm start and receives the strains. Returns False if the local solve failed.
+    """
+    m = tau.shape[0]
+    nb = np.empty(3)
+    mb = np.empty(3)
+    R = np.empty((3, 3))
+    dR = np.empty((3, 3))
+    dp = np.empty(3)
+    for a in range(3):
+        for b in range(3):
+            R[a, b] = y[3 + 3 * a + b]
+    N0 = y[12]
+    N1 = y[13]
+    N2 = y[14]
+    for a in range(3):
+        nb[a] = R[0, a] * N0 + R[1, a] * N1 + R[2, a] * N2
+        mb[a] = R[0, a] * y[15] + R[1, a] * y[16] + R[2, a] * y[17]
+    tendon_offsets(theta_c, radius_c, s, rt, drt)
+    if local_strains(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, J, rhs) < 0:
+        return False
+    _deriv_pose(R, x, dR, dp)
+    for a in range(3):
+        dy[a] = dp[a]
+        for b in range(3):
+            dy[3 + 3 * a + b] = dR[a, b]
+        dy[12 + a] = -f[a]
+    dy[15] = -(dp[1] * N2 - dp[2] * N1)
+    dy[16] = -(dp[2] * N0 - dp[0] * N2)
+    dy[17] = -(dp[0] * N1 - dp[1] * N0)
+    _tendon_speeds(x, rt, drt, sp)
+    for i in range(m):
+        dy[18 + i] = sp[i]
+    return True
+
+
+@njit(cache=True)
+def shape_loaded(tau, theta_c, radius_c, kse, kbt, length, n_steps, f, N0, M0, tol, maxit, Y):
+    """Integrate (1)-(3) from base values ``N0, M0`` with distributed force ``f (3,)`` (base frame).
+
+    ``Y (n+1, 18+m)`` receives the states ``(p, R row-major, N, M, l)``. Returns a status code.
+    """
+    m = tau.shape[0]
+    ny = 18 + m
+    h = length / n_steps
+    rt = np.empty((m, 3))
+    drt = np.empty((m, 3))
+    F = np.empty(6)
+    J = np.empty((6, 6))
+    rhs = np.empty((6, 1))
+    sp = np.empty(m)
+    x = np.zeros(6)
+    x[2] = 1.0
+    k1 = np.empty(ny)
+    k2 = np.empty(ny)
+    k3 = np.empty(ny)
+    k4 = np.empty(ny)
+    ys = np.empty(ny)
+    for a in range(ny):
+        Y[0, a] = 0.0
+    Y[0, 3] = 1.0
+    Y[0, 7] = 1.0
+    Y[0, 11] = 1.0
+    for a in range(3):
+        Y[0, 12 + a] = N0[a]
+        Y[0, 15 + a] = M0[a]
+    for k in range(n_steps):
+        s = k * h
+        y = Y[k]
+        if not _deriv_loaded(y, s, tau, theta_c, radius_c, kse, kbt, f, x, tol, maxit, rt, drt, F, J, rhs, sp, k1):
+            return LOCAL_FAIL
+        for a in range(ny):
+            ys[a] = y[a] + 0.5 * h * k1[a]
+        if not _deriv_loaded(ys, s + 0.5 * h, tau, theta_c, radius_c, kse, kbt, f, x, tol, maxit, rt, drt, F, J, rhs, sp, k2):
+            return LOCAL_FAIL
+        for a in range(ny):
+            ys[a] = y[a] + 0.5 * h * k2[a]
+        if not _deriv_loaded(ys, s + 0.5 * h, tau, theta_c, radius_c, kse, kbt, f, x, tol, maxit, rt, drt, F, J, rhs, sp, k3):
+            return LOCAL_FAIL
+        for a in range(ny):
+            ys[a] = y[a] + h * k3[a]
+        if not _deriv_loaded(ys, s + h, tau, theta_c, radius_c, kse, kbt, f, x, tol, maxit, rt, drt, F, J, rhs, sp, k4):
+            return LOCAL_FAIL
+        for a in range(ny):
+            Y[k + 1, a] = y[a] + h / 6.0 * (k1[a] + 2.0 * k2[a] + 2.0 * k3[a] + k4[a])
+    return OK
+
+
+def strains_along(tau, theta_c, radius_c, kse, kbt, s, nb=None, mb=None, tol=1e-12, maxit=50):
+    """Local strains ``(v, u)`` at arc lengths ``s (n,)`` (eqs. 2-3), ``-> (n, 6)``; for tests/diagnostics."""
+    tau = np.ascontiguousarray(tau, dtype=np.float64)
+    m = tau.shape[0]
+    rt = np.empty((m, 3))
+    drt = np.empty((m, 3))
+    F = np.empty(6)
+    J = np.empty((6, 6))
+    rhs = np.empty((6, 1))
+    out = np.empty((len(s), 6))
+    x = np.array([0.0, 0, 1, 0, 0, 0])
+    nb = np.zeros(3) if nb is None else np.asarray(nb, float)
+    mb = np.zeros(3) if mb is None else np.asarray(mb, float)
+    for k, sk in enumerate(s):
+        tendon_offsets(theta_c, radius_c, float(sk), rt, drt)
+        if local_strains(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, J, rhs) < 0:
+            raise RuntimeError("local strain solve failed")
+        out[k] = x
+    return out

@@ -1,0 +1,421 @@
+"""Robot descriptions: frozen dataclasses and the TOML format (docs/robots.md lists every key).
+
+A robot file describes the backbone (a Cosserat rod), the separator disks, any number of
+tendons with polynomial routing ``theta(s)``, ``r(s)`` (Rucker & Webster 2011, Sec. II), the
+tendon stiffness used for displacement input, limits, gravity, the base pose, and the
+hysteresis (path-dependence) parameters.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from riskplan.errors import RobotDescriptionError
+
+__all__ = [
+    "Backbone",
+    "Disks",
+    "Tendon",
+    "Gravity",
+    "BasePose",
+    "HysteresisParams",
+    "RobotParams",
+    "parse_robot_toml",
+    "load_robot_params",
+    "rpy_to_matrix",
+    "quaternion_to_matrix",
+]
+
+
+@dataclass(frozen=True)
+class Backbone:
+    """Elastic backbone rod (SI units). ``shear_modulus = E / (2 (1 + nu))`` unless given."""
+
+    length: float
+    outer_radius: float
+    inner_radius: float
+    youngs_modulus: float
+    shear_modulus: float
+    density: float
+    step: float
+
+    @property
+    def area(self) -> float:
+        return math.pi * (self.outer_radius**2 - self.inner_radius**2)
+
+    @property
+    def second_moment(self) -> float:
+        """Area moment ``I = pi (ro^4 - ri^4) / 4``; polar moment ``J = 2 I``."""
+        return math.pi * (self.outer_radius**4 - self.inner_radius**4) / 4.0
+
+    @property
+    def kse(self) -> np.ndarray:
+        """Diagonal of ``K_se = diag(G A, G A, E A)`` (shear, shear, extension)."""
+        A = self.area
+        return np.array([self.shear_modulus * A, self.shear_modulus * A, self.youngs_modulus * A])
+
+    @property
+    def kbt(self) -> np.ndarray:
+        """Diagonal of ``K_bt = diag(E I, E I, G J)`` (bending, bending, torsion)."""
+        I = self.second_moment
+        return np.array([self.youngs_modulus * I, self.youngs_modulus * I, self.shear_modulus * 2 * I])
+
+    @property
+    def n_steps(self) -> int:
+        """Number of integration steps: ``ceil(length / step)`` (the step is shortened to fit)."""
+        return max(1, int(math.ceil(self.length / self.step - 1e-9)))
+
+
+@dataclass(frozen=True)
+class Disks:
+    """Separator disks (geometry for sensing; mass smeared along the backbone under gravity)."""
+
+    count: int
+    radius: float
+    thickness: float
+    density: float
+    positions: tuple[float, ...]
+
+    @property
+    def mass(self) -> float:
+        return self.density * math.pi * self.radius**2 * self.thickness
+
+
+@dataclass(frozen=True)
+class Tendon:
+    """One tendon: routing ``theta(s) = sum_k theta[k] s^k`` (rad), ``r(s) = sum_k radius[k] s^k`` (m).
+
+    ``stiffness`` (N/m) is the series stiffness of the tendon between actuator and tip (inf:
+    inextensible). ``displacement_limits = (low, high)`` (m, positive pulls the tendon in),
+    ``max_tension`` (N).
+    """
+
+    name: str
+    theta: tuple[float, ...]
+    radius: tuple[float, ...]
+    stiffness: float
+    displacement_limits: tuple[float, float]
+    max_tension: float
+
+
+@dataclass(frozen=True)
+class Gravity:
+    enabled: bool = False
+    vector: tuple[float, float, float] = (0.0, 0.0, -9.81)
+
+
+@dataclass(frozen=True)
+class BasePose:
+    """Base frame in the world: ``x_world = position + rotation @ x_base``."""
+
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotation: tuple[tuple[float, ...], ...] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+    @property
+    def matrix(self) -> np.ndarray:
+        return np.array(self.rotation, dtype=np.float64)
+
+    @property
+    def is_identity(self) -> bool:
+        return bool(np.all(np.array(self.position) == 0.0) and np.all(self.matrix == np.eye(3)))
+
+
+@dataclass(frozen=True)
+class HysteresisParams:
+    """Play (backlash) operator per tendon plus per-run variation (see robots.hysteresis)."""
+
+    play: float = 0.0005
+    play_variation: float = 0.2
+    offset_std: float = 0.0001
+
+
+@dataclass(frozen=True)
+class RobotParams:
+    name: str
+    backbone: Backbone
+    disks: Disks
+    tendons: tuple[Tendon, ...]
+    gravity: Gravity = field(default_factory=Gravity)
+    base: BasePose = field(default_factory=BasePose)
+    hysteresis: HysteresisParams = field(default_factory=HysteresisParams)
+
+
+def rpy_to_matrix(rpy) -> np.ndarray:
+    """Roll-pitch-yaw (extrinsic x, then y, then z): ``R = Rz(yaw) Ry(pitch) Rx(roll)``."""
+    r, p, y = (float(a) for a in rpy)
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    Ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    Rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    return Rz @ Ry @ Rx
+
+
+def quaternion_to_matrix(q) -> np.ndarray:
+    """Unit quaternion ``(w, x, y, z)`` to a rotation matrix (normalised first)."""
+    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+# ---------------------------------------------------------------- parsing helpers
+def _num(table: dict, key: str, path: str, *, default=None, positive=False, nonneg=False, allow_inf=False) -> float:
+    full = f"{path}.{key}" if path else key
+    if key not in table:
+        if default is None:
+            raise RobotDescriptionError(f"robot description: missing key '{full}'", key=full)
+        return float(default)
+    val = table[key]
+    if isinstance(val, bool) or not isinstance(val, (int, float)):
+        raise RobotDescriptionError(f"robot description: '{full}' must be a number, got {val!r}", key=full)
+    val = float(val)
+    if math.isnan(val) or (math.isinf(val) and not allow_inf):
+        raise RobotDescriptionError(f"robot description: '{full}' must be finite, got {val}", key=full)
+    if positive and not val > 0:
+        raise RobotDescriptionError(f"robot description: '{full}' must be > 0, got {val}", key=full)
+    if nonneg and not val >= 0:
+        raise RobotDescriptionError(f"robot description: '{full}' must be >= 0, got {val}", key=full)
+    return val
+
+
+def _vec(table: dict, key: str, path: str, n: int | None, *, default=None) -> tuple[float, ...]:
+    full = f"{path}.{key}" if path else key
+    if key not in table:
+        if default is None:
+            raise RobotDescriptionError(f"robot description: missing key '{full}'", key=full)
+        return tuple(float(v) for v in default)
+    val = table[key]
+    if not isinstance(val, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in val):
+        raise RobotDescriptionError(f"robot description: '{full}' must be a list of numbers, got {val!r}", key=full)
+    if n is not None and len(val) != n:
+        raise RobotDescriptionError(f"robot description: '{full}' must have {n} entries, got {len(val)}", key=full)
+    if n is None and len(val) == 0:
+        raise RobotDescriptionError(f"robot description: '{full}' must not be empty", key=full)
+    out = tuple(float(v) for v in val)
+    if not all(math.isfinite(v) for v in out):
+        raise RobotDescriptionError(f"robot description: '{full}' must be finite, got {val!r}", key=full)
+    return out
+
+
+def _table(doc: dict, key: str, *, required=True) -> dict:
+    if key not in doc:
+        if required:
+            raise RobotDescriptionError(f"robot description: missing table '[{key}]'", key=key)
+        return {}
+    t = doc[key]
+    if not isinstance(t, dict):
+        raise RobotDescriptionError(f"robot description: '{key}' must be a table", key=key)
+    return t
+
+
+def _check_unknown(table: dict, allowed: set[str], path: str) -> None:
+    for k in table:
+        if k not in allowed:
+            full = f"{path}.{k}" if path else k
+            raise RobotDescriptionError(f"robot description: unknown key '{full}'", key=full)
+
+
+def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
+    """Parse and validate a robot TOML document (format: docs/robots.md).
+
+    Raises :class:`RobotDescriptionError` naming the offending key.
+    """
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise RobotDescriptionError(f"robot description: not valid TOML ({exc})", key=None) from exc
+    _check_unknown(doc, {"name", "backbone", "disks", "tendons", "gravity", "base", "hysteresis"}, "")
+    name = doc.get("name", default_name)
+    if not isinstance(name, str) or not name:
+        raise RobotDescriptionError("robot description: 'name' must be a non-empty string", key="name")
+
+    b = _table(doc, "backbone")
+    _check_unknown(
+        b,
+        {"length", "outer_radius", "inner_radius", "youngs_modulus", "shear_modulus", "poisson_ratio", "density", "step"},
+        "backbone",
+    )
+    length = _num(b, "length", "backbone", positive=True)
+    ro = _num(b, "outer_radius", "backbone", positive=True)
+    ri = _num(b, "inner_radius", "backbone", default=0.0, nonneg=True)
+    if ri >= ro:
+        raise RobotDescriptionError(
+            f"robot description: 'backbone.inner_radius' ({ri}) must be < outer_radius ({ro})", key="backbone.inner_radius"
+        )
+    E = _num(b, "youngs_modulus", "backbone", positive=True)
+    if "shear_modulus" in b and "poisson_ratio" in b:
+        raise RobotDescriptionError(
+            "robot description: give either 'backbone.shear_modulus' or 'backbone.poisson_ratio', not both",
+            key="backbone.shear_modulus",
+        )
+    if "shear_modulus" in b:
+        G = _num(b, "shear_modulus", "backbone", positive=True)
+    else:
+        nu = _num(b, "poisson_ratio", "backbone", default=0.3)
+        if not -1.0 < nu < 0.5:
+            raise RobotDescriptionError(
+                f"robot description: 'backbone.poisson_ratio' must lie in (-1, 0.5), got {nu}", key="backbone.poisson_ratio"
+            )
+        G = E / (2.0 * (1.0 + nu))
+    density = _num(b, "density", "backbone", default=1000.0, nonneg=True)
+    step = _num(b, "step", "backbone", default=0.005, positive=True)
+    if step > length:
+        raise RobotDescriptionError(f"robot description: 'backbone.step' ({step}) exceeds the length", key="backbone.step")
+    backbone = Backbone(length, ro, ri, E, G, density, step)
+
+    d = _table(doc, "disks", required=False)
+    _check_unknown(d, {"count", "radius", "thickness", "density", "positions"}, "disks")
+    count = d.get("count", 0)
+    if isinstance(count, bool) or not isinstance(count, int) or count < 0:
+        raise RobotDescriptionError(f"robot description: 'disks.count' must be an integer >= 0, got {count!r}", key="disks.count")
+    if "positions" in d:
+        pos = _vec(d, "positions", "disks", count if count else None)
+        if count == 0:
+            count = len(pos)
+    else:
+        pos = tuple(length * (k + 1) / count for k in range(count))
+    if any(not (0.0 <= p <= length) for p in pos):
+        raise RobotDescriptionError("robot description: 'disks.positions' must lie in [0, length]", key="disks.positions")
+    disks = Disks(
+        count,
+        _num(d, "radius", "disks", default=max(2 * ro, 0.01), positive=True),
+        _num(d, "thickness", "disks", default=0.002, nonneg=True),
+        _num(d, "density", "disks", default=0.0, nonneg=True),
+        pos,
+    )
+
+    tl = doc.get("tendons")
+    if not isinstance(tl, list) or len(tl) == 0:
+        raise RobotDescriptionError("robot description: at least one '[[tendons]]' entry is required", key="tendons")
+    tendons = []
+    for i, t in enumerate(tl):
+        path = f"tendons[{i}]"
+        if not isinstance(t, dict):
+            raise RobotDescriptionError(f"robot description: '{path}' must be a table", key=path)
+        _check_unknown(t, {"name", "theta", "radius", "stiffness", "displacement_limits", "max_tension"}, path)
+        tname = t.get("name", f"tendon-{i}")
+        if not isinstance(tname, str):
+            raise RobotDescriptionError(f"robot description: '{path}.name' must be a string", key=f"{path}.name")
+        theta = _vec(t, "theta", path, None)
+        radius = _vec(t, "radius", path, None)
+        # r(s) must stay positive along the backbone (checked on a fine grid)
+        ss = np.linspace(0.0, length, 201)
+        rs = np.polynomial.polynomial.polyval(ss, radius)
+        if np.any(rs <= 0):
+            raise RobotDescriptionError(f"robot description: '{path}.radius' gives r(s) <= 0 on [0, length]", key=f"{path}.radius")
+        k = _num(t, "stiffness", path, default=math.inf, positive=True, allow_inf=True)
+        lim = _vec(t, "displacement_limits", path, 2)
+        if not lim[0] < lim[1]:
+            raise RobotDescriptionError(
+                f"robot description: '{path}.displacement_limits' needs low < high, got {lim}", key=f"{path}.displacement_limits"
+            )
+        tmax = _num(t, "max_tension", path, positive=True)
+        tendons.append(Tendon(tname, theta, radius, k, (lim[0], lim[1]), tmax))
+
+    g = _table(doc, "gravity", required=False)
+    _check_unknown(g, {"enabled", "vector"}, "gravity")
+    enabled = g.get("enabled", False)
+    if not isinstance(enabled, bool):
+        raise RobotDescriptionError("robot description: 'gravity.enabled' must be true or false", key="gravity.enabled")
+    gravity = Gravity(enabled, _vec(g, "vector", "gravity", 3, default=(0.0, 0.0, -9.81)))
+
+    bp = _table(doc, "base", required=False)
+    _check_unknown(bp, {"position", "rpy", "quaternion", "rotation"}, "base")
+    position = _vec(bp, "position", "base", 3, default=(0.0, 0.0, 0.0))
+    given = [k for k in ("rpy", "quaternion", "rotation") if k in bp]
+    if len(given) > 1:
+        raise RobotDescriptionError(f"robot description: give only one of base.rpy/quaternion/rotation, got {given}", key=f"base.{given[1]}")
+    if "rpy" in bp:
+        Rm = rpy_to_matrix(_vec(bp, "rpy", "base", 3))
+    elif "quaternion" in bp:
+        q = _vec(bp, "quaternion", "base", 4)
+        if np.linalg.norm(q) < 1e-12:
+            raise RobotDescriptionError("robot description: 'base.quaternion' must be non-zero", key="base.quaternion")
+        Rm = quaternion_to_matrix(q)
+    elif "rotation" in bp:
+        rows = bp["rotation"]
+        if not isinstance(rows, list) or len(rows) != 3:
+            raise RobotDescriptionError("robot description: 'base.rotation' must be a 3x3 list", key="base.rotation")
+        Rm = np.array([_vec({"r": r}, "r", "base.rotation", 3) for r in rows])
+        if not np.allclose(Rm.T @ Rm, np.eye(3), atol=1e-6) or np.linalg.det(Rm) < 0:
+            raise RobotDescriptionError("robot description: 'base.rotation' must be a rotation matrix", key="base.rotation")
+    else:
+        Rm = np.eye(3)
+    base = BasePose(position, tuple(tuple(float(v) for v in row) for row in Rm))
+
+    h = _table(doc, "hysteresis", required=False)
+    _check_unknown(h, {"play", "play_variation", "offset_std"}, "hysteresis")
+    hyst = HysteresisParams(
+        _num(h, "play", "hysteresis", default=0.0005, nonneg=True),
+        _num(h, "play_variation", "hysteresis", default=0.2, nonneg=True),
+        _num(h, "offset_std", "hysteresis", default=0.0001, nonneg=True),
+    )
+    return RobotParams(name, backbone, disks, tuple(tendons), gravity, base, hyst)
+
+
+def load_robot_params(path: str | Path) -> tuple[RobotParams, str]:
+    """Read a robot TOML file; returns ``(params, text)``."""
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except OSError as exc:
+        raise RobotDescriptionError(f"robot description: cannot read {str(p)!r} ({exc})") from exc
+    return parse_robot_toml(text, default_name=p.stem), text
+
+
+def params_to_dict(p: RobotParams) -> dict:
+    """The TOML document (as a dict) that :func:`parse_robot_toml` turns back into ``p``."""
+    b = p.backbone
+    return {
+        "name": p.name,
+        "backbone": {
+            "length": b.length,
+            "outer_radius": b.outer_radius,
+            "inner_radius": b.inner_radius,
+            "youngs_modulus": b.youngs_modulus,
+            "shear_modulus": b.shear_modulus,
+            "density": b.density,
+            "step": b.step,
+        },
+        "disks": {
+            "count": p.disks.count,
+            "radius": p.disks.radius,
+            "thickness": p.disks.thickness,
+            "density": p.disks.density,
+            "positions": list(p.disks.positions),
+        },
+        "tendons": [
+            {
+                "name": t.name,
+                "theta": list(t.theta),
+                "radius": list(t.radius),
+                **({"stiffness": t.stiffness} if math.isfinite(t.stiffness) else {}),
+                "displacement_limits": list(t.displacement_limits),
+                "max_tension": t.max_tension,
+            }
+            for t in p.tendons
+        ],
+        "gravity": {"enabled": p.gravity.enabled, "vector": list(p.gravity.vector)},
+        "base": {"position": list(p.base.position), "rotation": [list(r) for r in p.base.rotation]},
+        "hysteresis": {
+            "play": p.hysteresis.play,
+            "play_variation": p.hysteresis.play_variation,
+            "offset_std": p.hysteresis.offset_std,
+        },
+    }
+
+
+def params_to_toml(p: RobotParams) -> str:
+    """TOML text of ``p`` (round-trips through :func:`parse_robot_toml`)."""
+    import tomli_w
+
+    return tomli_w.dumps(params_to_dict(p))

@@ -1,0 +1,422 @@
+"""``TendonRobot``: the validating facade over the Cosserat kernels (:mod:`riskplan.robots.cosserat`).
+
+It caches the per-robot arrays (routing polynomials, stiffness diagonals, rest lengths),
+checks inputs once at the boundary and places results in the world by the base pose.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, replace
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from riskplan._validation import as_array, check_range
+from riskplan.errors import ConvergenceError, InvalidInputError, RobotDescriptionError
+from riskplan.robots import cosserat
+from riskplan.robots.params import (
+    BasePose,
+    Gravity,
+    RobotParams,
+    params_to_toml,
+    parse_robot_toml,
+    quaternion_to_matrix,
+    rpy_to_matrix,
+)
+
+__all__ = ["RodShape", "TendonRobot", "load_robot", "robot_from_toml", "PACKAGED_ROBOTS"]
+
+log = logging.getLogger(__name__)
+
+PACKAGED_ROBOTS = {"paper": "paper_robot.toml"}
+
+LOCAL_TOL = 1e-10  # Newton step (strain units: 1 and 1/m) of the local strain solve
+LOCAL_MAXIT = 50
+DISP_TOL = 1e-12  # m, complementarity residual of the displacement -> tension solve
+DISP_MAXIT = 60
+SHOOT_TOL = 1e-11  # N m, tip-moment residual of the shooting solve
+SHOOT_MAXIT = 30
+
+
+@dataclass(frozen=True, eq=False)
+class RodShape:
+    """Robot shape(s) in the world frame (= base frame for the default base pose).
+
+    Attributes
+    ----------
+    s : (n,) arc length of the stations [m]
+    positions : (..., n, 3) backbone points [m]
+    rotations : (..., n, 3, 3) body frames; columns are the body axes (z = backbone tangent
+        direction of the unsheared rod)
+    tensions : (..., m) tendon tensions [N]
+    """
+
+    s: np.ndarray
+    positions: np.ndarray
+    rotations: np.ndarray
+    tensions: np.ndarray
+
+    @property
+    def tip(self) -> np.ndarray:
+        """``(..., 3)`` tip position."""
+        return self.positions[..., -1, :]
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        return self.tensions.shape[:-1]
+
+    def __getitem__(self, idx) -> RodShape:
+        if not self.batch_shape:
+            raise InvalidInputError("RodShape: a single shape cannot be indexed")
+        return RodShape(self.s, self.positions[idx], self.rotations[idx], self.tensions[idx])
+
+    def to_json(self) -> dict:
+        """``{"tip", "backbone", "tensions"}`` of a single shape (plain lists)."""
+        if self.batch_shape:
+            raise InvalidInputError("to_json: expected a single shape; index the batch first")
+        return {"tip": self.tip.tolist(), "backbone": self.positions.tolist(), "tensions": self.tensions.tolist()}
+
+
+def _poly_table(polys) -> np.ndarray:
+    K = max(len(c) for c in polys)
+    out = np.zeros((len(polys), K))
+    for i, c in enumerate(polys):
+        out[i, : len(c)] = c
+    return out
+
+
+class TendonRobot:
+    """A tendon-driven continuum robot described by :class:`RobotParams`.
+
+    >>> robot = load_robot("paper")
+    >>> robot.solve_displacements([0.01, 0, 0, 0]).tip.shape
+    (3,)
+    """
+
+    def __init__(self, params: RobotParams, toml_text: str | None = None):
+        self.params = params
+        self._toml = toml_text
+        bb = params.backbone
+        self._n = bb.n_steps
+        self._L = bb.length
+        self._theta = _poly_table([t.theta for t in params.tendons])
+        self._radius = _poly_table([t.radius for t in params.tendons])
+        self._kse = bb.kse
+        self._kbt = bb.kbt
+        self._kinv = np.array([0.0 if math.isinf(t.stiffness) else 1.0 / t.stiffness for t in params.tendons])
+        m = self.n_tendons
+        self._l0 = np.empty(m)
+        dl = np.empty((m, m))
+        st = cosserat.lengths_and_jacobian(
+            np.zeros(m), self._theta, self._radius, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, self._l0, dl
+        )
+        if st != cosserat.OK:  # pragma: no cover - the straight rod always solves
+            raise ConvergenceError("rest-length computation failed")
+        self._G0 = -dl  # d(shortening)/d tau at tau = 0, used for start values
+        d = params.disks
+        self._lam = bb.density * bb.area + d.count * d.mass / bb.length
+
+    # ------------------------------------------------------------------ description
+    @property
+    def name(self) -> str:
+        return self.params.name
+
+    @property
+    def n_tendons(self) -> int:
+        return len(self.params.tendons)
+
+    @property
+    def n_stations(self) -> int:
+        return self._n + 1
+
+    @property
+    def s(self) -> np.ndarray:
+        """``(n,)`` arc length of the output stations [m]."""
+        return np.linspace(0.0, self._L, self._n + 1)
+
+    @property
+    def displacement_limits(self) -> np.ndarray:
+        """``(m, 2)`` ``[low, high]`` per tendon [m]."""
+        return np.array([t.displacement_limits for t in self.params.tendons], dtype=float)
+
+    @property
+    def tension_limits(self) -> np.ndarray:
+        """``(m,)`` maximum tension per tendon [N]."""
+        return np.array([t.max_tension for t in self.params.tendons], dtype=float)
+
+    @property
+    def tendon_rest_lengths(self) -> np.ndarray:
+        """``(m,)`` tendon path lengths along the straight unloaded backbone [m]."""
+        return self._l0.copy()
+
+    @property
+    def loaded(self) -> bool:
+        """True when gravity is on (the shooting solver is used)."""
+        return bool(self.params.gravity.enabled and self._lam > 0 and any(self.params.gravity.vector))
+
+    def toml_text(self) -> str:
+        """The robot file (TOML) that rebuilds this robot."""
+        return self._toml if self._toml is not None else params_to_toml(self.params)
+
+    def with_base_pose(self, position=(0.0, 0.0, 0.0), *, rotation=None, rpy=None, quaternion=None) -> TendonRobot:
+        """The same robot with another base pose (give one of rotation matrix, rpy, quaternion)."""
+        given = [k for k, v in (("rotation", rotation), ("rpy", rpy), ("quaternion", quaternion)) if v is not None]
+        if len(given) > 1:
+            raise InvalidInputError(f"with_base_pose: give one orientation, got {given}")
+        pos = as_array(position, "position", shape=(3,))
+        if rotation is not None:
+            Rm = as_array(rotation, "rotation", shape=(3, 3))
+            if not np.allclose(Rm.T @ Rm, np.eye(3), atol=1e-8) or np.linalg.det(Rm) <= 0:
+                raise InvalidInputError("rotation: expected a proper rotation matrix (R^T R = I, det R = 1)")
+        elif quaternion is not None:
+            q = as_array(quaternion, "quaternion", shape=(4,))
+            if np.linalg.norm(q) < 1e-12:
+                raise InvalidInputError("quaternion: must be non-zero")
+            Rm = quaternion_to_matrix(q)
+        else:
+            Rm = rpy_to_matrix(as_array(rpy if rpy is not None else (0, 0, 0), "rpy", shape=(3,)))
+        base = BasePose(tuple(float(v) for v in pos), tuple(tuple(float(v) for v in r) for r in Rm))
+        return TendonRobot(replace(self.params, base=base))
+
+    def with_gravity(self, enabled: bool = True, vector=None) -> TendonRobot:
+        """The same robot with gravity switched on/off (``vector`` in the world frame, m/s^2)."""
+        vec = self.params.gravity.vector if vector is None else tuple(as_array(vector, "vector", shape=(3,)).tolist())
+        return TendonRobot(replace(self.params, gravity=Gravity(bool(enabled), vec)))
+
+    def __repr__(self) -> str:
+        return f"TendonRobot(name={self.name!r}, tendons={self.n_tendons}, length={self._L})"
+
+    # ---------------------------------------------------------------------- checks
+    def _check(self, value, name, low, high):
+        arr = as_array(value, name, min_ndim=1)
+        if arr.shape[-1] != self.n_tendons:
+            raise InvalidInputError(f"{name}: expected last dimension {self.n_tendons} (one per tendon), got shape {arr.shape}")
+        check_range(arr, name, low=low, high=high)
+        return arr
+
+    def _to_world(self, P, Rs, tau, batch) -> RodShape:
+        base = self.params.base
+        n = self._n + 1
+        if not base.is_identity:
+            Rb = base.matrix
+            P = P @ Rb.T + np.asarray(base.position)
+            Rs = np.einsum("ij,...jk->...ik", Rb, Rs)
+        return RodShape(self.s, P.reshape(batch + (n, 3)), Rs.reshape(batch + (n, 3, 3)), tau.reshape(batch + (self.n_tendons,)))
+
+    def _gravity_base(self) -> np.ndarray:
+        """Distributed force per unit length in the base frame [N/m]."""
+        return self._lam * (self.params.base.matrix.T @ np.asarray(self.params.gravity.vector, dtype=float))
+
+    # ---------------------------------------------------------------------- solving
+    def solve_tensions(self, tensions, *, validate: bool = True) -> RodShape:
+        """Shape for tendon tensions ``(..., m)`` [N], ``0 <= tension <= max_tension``.
+
+        Without gravity: local strain solves of eqs. (2)-(3) and one RK4 pass
+        (:func:`cosserat.shape_free`); with gravity: shooting on the base moment
+        (:func:`cosserat.shape_loaded`). Raises :class:`ConvergenceError` if a solve fails.
+        """
+        if validate:
+            tau = self._check(tensions, "tensions", 0.0, self.tension_limits)
+        else:
+            tau = np.asarray(tensions, dtype=float)
+        batch = tau.shape[:-1]
+        flat = np.ascontiguousarray(tau.reshape(-1, self.n_tendons))
+        B, n, m = flat.shape[0], self._n + 1, self.n_tendons
+        P = np.empty((B, n, 3))
+        Rs = np.empty((B, n, 3, 3))
+        if not self.loaded:
+            lengths = np.empty((B, m))
+            status = np.empty(B, dtype=np.int64)
+            cosserat.shape_free_batch(
+                flat, self._theta, self._radius, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, lengths, status
+            )
+            bad = np.flatnonzero(status != cosserat.OK)
+            if bad.size:
+                raise ConvergenceError(f"local strain solve failed for tensions {flat[bad[0]].tolist()}")
+        else:
+            for b in range(B):
+                Y = self._shoot(flat[b])
+                P[b] = Y[:, 0:3]
+                Rs[b] = Y[:, 3:12].reshape(n, 3, 3)
+        return self._to_world(P, Rs, flat, batch)
+
+    def _shoot(self, tau) -> np.ndarray:
+        """States ``(n+1, 18+m)`` of the loaded rod: ``N(0) = f L`` exactly, ``M(0)`` by Newton."""
+        m, n, L = self.n_tendons, self._n, self._L
+        f = self._gravity_base()
+        N0 = f * L
+        Y = np.empty((n + 1, 18 + m))
+        # start: base moment of the gravity load on the unloaded shape, M(0) = int p' x f (L - s) ds
+        P = np.empty((n + 1, 3))
+        Rs = np.empty((n + 1, 3, 3))
+        X = np.empty((n + 1, 6))
+        lengths = np.empty(m)
+        if cosserat.shape_free(tau, self._theta, self._radius, self._kse, self._kbt, L, n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths) != cosserat.OK:
+            raise ConvergenceError(f"local strain solve failed for tensions {tau.tolist()}")
+        mid = 0.5 * (P[1:] + P[:-1])
+        M0 = np.cross(mid - P[0], f).sum(0) * (L / n)
+        scale = max(1e-6, float(np.linalg.norm(f)) * L * L)
+
+        def residual(M):
+            st = cosserat.shape_loaded(tau, self._theta, self._radius, self._kse, self._kbt, L, n, f, N0, M, LOCAL_TOL, LOCAL_MAXIT, Y)
+            if st != cosserat.OK:
+                raise ConvergenceError(f"local strain solve failed while shooting (tensions {tau.tolist()})")
+            return Y[-1, 15:18].copy()
+
+        res = np.inf
+        for it in range(SHOOT_MAXIT):
+            r = residual(M0)
+            res = float(np.abs(r).max())
+            if res <= SHOOT_TOL * max(1.0, scale * 1e3):
+                return Y.copy()
+            Jm = np.empty((3, 3))
+            eps = 1e-6 * scale
+            for j in range(3):
+                Mp = M0.copy()
+                Mp[j] += eps
+                Jm[:, j] = (residual(Mp) - r) / eps
+            M0 = M0 - np.linalg.solve(Jm, r)
+        raise ConvergenceError(
+            f"shooting did not converge in {SHOOT_MAXIT} iterations (tip moment residual {res:.3g} N m)", residual=res, iterations=SHOOT_MAXIT
+        )
+
+    def solve_displacements(self, displacements, *, validate: bool = True) -> RodShape:
+        """Shape for tendon displacements ``(..., m)`` [m] (positive pulls the tendon in).
+
+        Tensions solve the complementarity problem (compliant tendons, slack allowed)::
+
+            g_i = l0_i - l_i(tau) + tau_i / k_i - d_i,  tau_i >= 0,  g_i >= 0,  tau_i g_i = 0
+
+        (:func:`cosserat.solve_displacement_tensions`). ``RodShape.tensions`` holds them. Solved
+        tensions above ``max_tension`` are returned with a logged warning (the limit bounds
+        tension *input*). Raises :class:`ConvergenceError` with the residual on failure.
+        """
+        if validate:
+            lim = self.displacement_limits
+            d = self._check(displacements, "displacements", lim[:, 0], lim[:, 1])
+        else:
+            d = np.asarray(displacements, dtype=float)
+        batch = d.shape[:-1]
+        flat = np.ascontiguousarray(d.reshape(-1, self.n_tendons))
+        tau = self.tensions_for_displacements(flat, validate=False)
+        over = tau > self.tension_limits * (1 + 1e-9)
+        if np.any(over):
+            log.warning("displacements need tensions above max_tension in %d configuration(s)", int(np.any(over, -1).sum()))
+        shape = self.solve_tensions(tau, validate=False)
+        n = self._n + 1
+        return RodShape(shape.s, shape.positions.reshape(batch + (n, 3)), shape.rotations.reshape(batch + (n, 3, 3)), tau.reshape(batch + (self.n_tendons,)))
+
+    def tensions_for_displacements(self, displacements, *, validate: bool = True) -> np.ndarray:
+        """Tensions ``(..., m)`` [N] that realise tendon displacements ``(..., m)`` (see :meth:`solve_displacements`)."""
+        if validate:
+            lim = self.displacement_limits
+            d = self._check(displacements, "displacements", lim[:, 0], lim[:, 1])
+        else:
+            d = np.asarray(displacements, dtype=float)
+        batch = d.shape[:-1]
+        flat = np.ascontiguousarray(d.reshape(-1, self.n_tendons))
+        B, m = flat.shape
+        if self.loaded:
+            tau = np.stack([self._tensions_loaded(flat[b]) for b in range(B)]) if B else np.zeros((0, m))
+            return tau.reshape(batch + (m,))
+        # start: the linearisation at tau = 0, (G0 + diag(1/k)) tau = d, clipped to tau >= 0
+        A0 = self._G0 + np.diag(self._kinv)
+        tau0 = np.ascontiguousarray(np.maximum(np.linalg.solve(A0, flat.T).T, 0.0))
+        tau = np.empty((B, m))
+        infos = np.empty((B, 2))
+        status = np.empty(B, dtype=np.int64)
+        cosserat.solve_displacement_batch(
+            flat, self._kinv, self._l0, tau0, self._theta, self._radius, self._kse, self._kbt, self._L, self._n,
+            LOCAL_TOL, LOCAL_MAXIT, DISP_TOL, DISP_MAXIT, tau, infos, status,
+        )  # fmt: skip
+        bad = np.flatnonzero(status != cosserat.OK)
+        if bad.size:
+            b = int(bad[0])
+            raise ConvergenceError(
+                f"tension solve for displacements {flat[b].tolist()} did not converge (residual {infos[b, 1]:.3g} m)",
+                residual=float(infos[b, 1]),
+                iterations=int(infos[b, 0]),
+            )
+        return tau.reshape(batch + (m,))
+
+    def tendon_lengths(self, tensions, *, validate: bool = True) -> np.ndarray:
+        """Tendon path lengths ``l_i = int |v + u x r_i + r_i'| ds`` ``(..., m)`` [m] for tensions ``(..., m)``."""
+        if validate:
+            tau = self._check(tensions, "tensions", 0.0, self.tension_limits)
+        else:
+            tau = np.asarray(tensions, dtype=float)
+        batch = tau.shape[:-1]
+        flat = np.ascontiguousarray(tau.reshape(-1, self.n_tendons))
+        m = self.n_tendons
+        out = np.empty(flat.shape)
+        for b in range(flat.shape[0]):
+            if self.loaded:
+                out[b] = self._shoot(flat[b])[-1, 18:]
+            else:
+                dl = np.empty((m, m))
+                if cosserat.lengths_and_jacobian(flat[b], self._theta, self._radius, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, out[b], dl) != cosserat.OK:
+                    raise ConvergenceError(f"local strain solve failed for tensions {flat[b].tolist()}")
+        return out.reshape(batch + (m,))
+
+    def displacements_for_tensions(self, tensions, *, validate: bool = True) -> np.ndarray:
+        """Actuator displacements ``d = l0 - l(tau) + tau / k`` ``(..., m)`` [m] that hold taut tendons at ``tensions``."""
+        tau = self._check(tensions, "tensions", 0.0, self.tension_limits) if validate else np.asarray(tensions, dtype=float)
+        return self._l0 - self.tendon_lengths(tau, validate=False) + tau * self._kinv
+
+    def _tensions_loaded(self, d) -> np.ndarray:
+        """Semismooth Newton on ``min(tau, g(tau)) = 0`` with finite differences (gravity on)."""
+        m = self.n_tendons
+        A0 = self._G0 + np.diag(self._kinv)
+        tau = np.maximum(np.linalg.solve(A0, d), 0.0)
+
+        def g(t):
+            return self._l0 - self._shoot(t)[-1, 18:] + t * self._kinv - d
+
+        res = np.inf
+        for it in range(DISP_MAXIT):
+            gv = g(tau)
+            act = tau > gv
+            phi = np.where(act, gv, tau)
+            res = float(np.abs(np.where(act, gv, tau * 1e-3)).max())
+            if res <= 1e-11:
+                return tau
+            Jm = np.eye(m)
+            for j in range(m):
+                eps = 1e-6 * max(1.0, tau[j])
+                tp = tau.copy()
+                tp[j] += eps
+                col = (g(tp) - gv) / eps
+                Jm[act, j] = col[act]
+            tau = np.maximum(tau - np.linalg.solve(Jm, phi), 0.0)
+        raise ConvergenceError(f"tension solve with gravity did not converge (residual {res:.3g} m)", residual=res, iterations=DISP_MAXIT)
+
+
+def _robot_text(name_or_path) -> tuple[str, str]:
+    key = str(name_or_path)
+    if key in PACKAGED_ROBOTS:
+        return resources.files("riskplan").joinpath("data", PACKAGED_ROBOTS[key]).read_text(), key
+    p = Path(key)
+    if not p.is_file():
+        raise RobotDescriptionError(
+            f"robot: {key!r} is neither a packaged robot ({', '.join(PACKAGED_ROBOTS)}) nor a TOML file", key="robot"
+        )
+    try:
+        return p.read_text(), p.stem
+    except OSError as exc:
+        raise RobotDescriptionError(f"robot: cannot read {key!r} ({exc})", key="robot") from exc
+
+
+def load_robot(name_or_path="paper") -> TendonRobot:
+    """A packaged robot by name (``"paper"``) or a robot TOML file path."""
+    if isinstance(name_or_path, TendonRobot):
+        return name_or_path
+    text, default = _robot_text(name_or_path)
+    return TendonRobot(parse_robot_toml(text, default_name=default), toml_text=text)
+
+
+def robot_from_toml(text: str) -> TendonRobot:
+    """Rebuild a robot from its TOML text (e.g. stored in a data set's metadata)."""
+    return TendonRobot(parse_robot_toml(text), toml_text=text)

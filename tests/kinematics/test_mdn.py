@@ -56,6 +56,19 @@ def test_numpy_fast_path_equals_torch(rng, tol):
         fast.validate()
 
 
+def test_numpy_fast_path_float32_network(rng, tol):
+    m = _model(rng)
+    m32 = MDNModel(m.net.float(), m.normalisation, LIMITS)
+    d = rng.uniform(-0.01, 0.04, size=(6, 4))
+    fast = m32.predict(d)
+    ref = m32.mixture(torch.as_tensor(d, dtype=torch.float32))
+    assert fast.dtype == torch.float64
+    np.testing.assert_allclose(fast.weights.numpy(), ref.weights.detach().numpy(), **tol["float32_ref"])
+    np.testing.assert_allclose(fast.means.numpy(), ref.means.detach().numpy(), rtol=1e-4, atol=1e-6)  # metres
+    u_ref = ref.precision_cholesky.detach().numpy()
+    np.testing.assert_allclose(fast.precision_cholesky.numpy(), u_ref, rtol=1e-4, atol=1e-4 * np.abs(u_ref).max())
+
+
 def test_predict_batch_equals_loop(rng, tol):
     m = _model(rng)
     d = rng.uniform(-0.01, 0.04, size=(2, 3, 4))

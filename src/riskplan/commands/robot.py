@@ -1,9 +1,117 @@
-"""`riskplan` subcommands for the robot area (heavy imports stay inside the commands)."""
+"""`riskplan robot ...` subcommands (heavy imports stay inside the commands).
+
+* ``riskplan robot shape --robot paper --displacements 0.01,0,0,0 [--json] [--plot FILE.png]``
+* ``riskplan robot shape --robot FILE.toml --tensions 1,0,0,0``
+* ``riskplan robot info --robot paper``
+"""
 
 from __future__ import annotations
+
+import json
+from pathlib import Path
 
 import typer
 
 
+def _floats(text: str, name: str) -> list[float]:
+    from riskplan.errors import InvalidInputError
+
+    try:
+        vals = [float(v) for v in text.replace(";", ",").split(",") if v.strip()]
+    except ValueError as exc:
+        raise InvalidInputError(f"{name}: expected comma-separated numbers, got {text!r}") from exc
+    if not vals:
+        raise InvalidInputError(f"{name}: expected comma-separated numbers, got {text!r}")
+    return vals
+
+
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
+    sub = typer.Typer(help="Tendon-driven continuum robots: shapes and descriptions.", no_args_is_help=True)
+    app.add_typer(sub, name="robot")
+
+    @sub.command("shape")
+    def shape(
+        robot: str = typer.Option("paper", "--robot", help="Packaged robot name ('paper') or a robot TOML file."),
+        displacements: str = typer.Option(None, "--displacements", "-d", help="Tendon displacements [m], comma-separated."),
+        tensions: str = typer.Option(None, "--tensions", "-t", help="Tendon tensions [N], comma-separated."),
+        gravity: bool = typer.Option(None, "--gravity/--no-gravity", help="Override the robot file's gravity setting."),
+        as_json: bool = typer.Option(False, "--json", help="Print {tip, backbone, tensions} as JSON."),
+        plot: Path = typer.Option(None, "--plot", help="Write a PNG of the backbone and disks."),
+    ) -> None:
+        """Solve the robot's shape for tendon displacements or tensions."""
+        from riskplan.errors import InvalidInputError
+        from riskplan.robots import load_robot
+
+        if (displacements is None) == (tensions is None):
+            raise InvalidInputError("give exactly one of --displacements and --tensions")
+        r = load_robot(robot)
+        if gravity is not None:
+            r = r.with_gravity(gravity)
+        if displacements is not None:
+            s = r.solve_displacements(_floats(displacements, "displacements"))
+        else:
+            s = r.solve_tensions(_floats(tensions, "tensions"))
+        if as_json:
+            typer.echo(json.dumps(s.to_json()))
+        else:
+            x, y, z = s.tip
+            typer.echo(f"robot {r.name}: tip = ({x:.6f}, {y:.6f}, {z:.6f}) m")
+            typer.echo("tensions [N]: " + ", ".join(f"{v:.4f}" for v in s.tensions))
+        if plot is not None:
+            import matplotlib
+
+            matplotlib.use("Agg")
+            from riskplan.io import atomic_path
+            from riskplan.robots.plotting import plot_shape
+
+            fig = plot_shape(s, r, title=f"{r.name}")
+            with atomic_path(plot) as tmp:
+                fig.savefig(tmp, dpi=110, bbox_inches="tight", format="png")
+            if not as_json:
+                typer.echo(f"plot: {plot}")
+
+    @sub.command("info")
+    def info(
+        robot: str = typer.Option("paper", "--robot", help="Packaged robot name ('paper') or a robot TOML file."),
+        as_json: bool = typer.Option(False, "--json", help="Print as JSON."),
+    ) -> None:
+        """Describe a robot: backbone, stiffness, tendons, limits, hysteresis."""
+        from riskplan.robots import load_robot
+
+        r = load_robot(robot)
+        p = r.params
+        b = p.backbone
+        d = {
+            "name": r.name,
+            "length_m": b.length,
+            "outer_radius_m": b.outer_radius,
+            "youngs_modulus_pa": b.youngs_modulus,
+            "shear_modulus_pa": b.shear_modulus,
+            "bending_stiffness_nm2": float(b.kbt[0]),
+            "steps": b.n_steps,
+            "disks": p.disks.count,
+            "gravity": p.gravity.enabled,
+            "tendons": [
+                {
+                    "name": t.name,
+                    "theta": list(t.theta),
+                    "radius": list(t.radius),
+                    "stiffness_n_per_m": t.stiffness,
+                    "displacement_limits_m": list(t.displacement_limits),
+                    "max_tension_n": t.max_tension,
+                }
+                for t in p.tendons
+            ],
+            "hysteresis": {"play_m": p.hysteresis.play, "play_variation": p.hysteresis.play_variation, "offset_std_m": p.hysteresis.offset_std},
+        }
+        if as_json:
+            typer.echo(json.dumps(d))
+            return
+        typer.echo(f"robot {d['name']}: length {b.length} m, {d['disks']} disks, EI = {d['bending_stiffness_nm2']:.4g} N m^2, {b.n_steps} steps")
+        for t in d["tendons"]:
+            typer.echo(
+                f"  {t['name']}: theta {t['theta']}, r {t['radius']}, k {t['stiffness_n_per_m']} N/m, "
+                f"d in {t['displacement_limits_m']} m, tension <= {t['max_tension_n']} N"
+            )
+        typer.echo(f"  hysteresis: {d['hysteresis']}; gravity {'on' if p.gravity.enabled else 'off'}")

@@ -85,6 +85,18 @@ def tendon_offsets(theta_c, radius_c, s, rt, drt):
         drt[i, 2] = 0.0
 
 
+def tendon_offset_table(theta_c, radius_c, length, n_steps):
+    """Offsets ``r_i``, ``r_i'`` at the ``2 n + 1`` RK4 nodes (steps and half steps): two arrays ``(2n+1, m, 3)``."""
+    n_nodes = 2 * n_steps + 1
+    m = theta_c.shape[0]
+    rt_all = np.empty((n_nodes, m, 3))
+    drt_all = np.empty((n_nodes, m, 3))
+    h = length / n_steps
+    for j in range(n_nodes):
+        tendon_offsets(theta_c, radius_c, j * 0.5 * h, rt_all[j], drt_all[j])
+    return rt_all, drt_all
+
+
 @njit(cache=True)
 def _gauss_solve(A, b, n, nrhs):
     """Solve ``A X = b`` in place (partial pivoting); ``A (n, n)``, ``b (n, nrhs)``. Returns False if singular."""
@@ -124,32 +136,53 @@ def _gauss_solve(A, b, n, nrhs):
 
 
 @njit(cache=True)
-def local_residual_jacobian(x, tau, rt, drt, nb, mb, kse, kbt, F, J):
-    """Residual ``F (6,)`` of eqs. (2)-(3) at strains ``x = (v, u)`` and its Jacobian ``J (6, 6)``.
-
-    ``J = [[K_se + A, G], [B, K_bt + H]]`` with ``A = sum tau_i (I - t_i t_i^T)/|w_i|``,
-    ``G = -A [r]x``, ``B = [r]x A``, ``H = -[r]x A [r]x`` per tendon (R&W eq. 13-16).
-    """
-    for a in range(6):
-        F[a] = 0.0
-        for b in range(6):
-            J[a, b] = 0.0
+def local_residual(x, tau, rt, drt, nb, mb, kse, kbt, F):
+    """Residual ``F (6,)`` of eqs. (2)-(3) at strains ``x = (v, u)``; returns ``max |F_a / K_aa|``
+    (an estimate of the strain error, since the Jacobian is dominated by ``diag(K_se, K_bt)``)."""
     F[0] = kse[0] * x[0] - nb[0]
     F[1] = kse[1] * x[1] - nb[1]
     F[2] = kse[2] * (x[2] - 1.0) - nb[2]
     F[3] = kbt[0] * x[3] - mb[0]
     F[4] = kbt[1] * x[4] - mb[1]
     F[5] = kbt[2] * x[5] - mb[2]
+    for i in range(tau.shape[0]):
+        ti = tau[i]
+        if ti == 0.0:
+            continue
+        r0 = rt[i, 0]
+        r1 = rt[i, 1]
+        r2 = rt[i, 2]
+        w0 = x[0] + x[4] * r2 - x[5] * r1 + drt[i, 0]
+        w1 = x[1] + x[5] * r0 - x[3] * r2 + drt[i, 1]
+        w2 = x[2] + x[3] * r1 - x[4] * r0 + drt[i, 2]
+        sc = ti / math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        F[0] += sc * w0
+        F[1] += sc * w1
+        F[2] += sc * w2
+        F[3] += sc * (r1 * w2 - r2 * w1)
+        F[4] += sc * (r2 * w0 - r0 * w2)
+        F[5] += sc * (r0 * w1 - r1 * w0)
+    e = 0.0
+    for a in range(3):
+        e = max(e, abs(F[a] / kse[a]), abs(F[3 + a] / kbt[a]))
+    return e
+
+
+@njit(cache=True)
+def local_jacobian(x, tau, rt, drt, kse, kbt, J):
+    """Jacobian ``J (6, 6)`` of eqs. (2)-(3): ``[[K_se + A, G], [B, K_bt + H]]`` with, per tendon,
+    ``A_i = tau_i (I - t_i t_i^T)/|w_i|``, ``G_i = -A_i [r_i]x``, ``B_i = [r_i]x A_i``,
+    ``H_i = -[r_i]x A_i [r_i]x`` (R&W eqs. 13-16)."""
+    for a in range(6):
+        for b in range(6):
+            J[a, b] = 0.0
     J[0, 0] = kse[0]
     J[1, 1] = kse[1]
     J[2, 2] = kse[2]
     J[3, 3] = kbt[0]
     J[4, 4] = kbt[1]
     J[5, 5] = kbt[2]
-    m = tau.shape[0]
-    A = np.empty((3, 3))
-    Bm = np.empty((3, 3))
-    for i in range(m):
+    for i in range(tau.shape[0]):
         ti = tau[i]
         if ti == 0.0:
             continue
@@ -163,59 +196,88 @@ def local_residual_jacobian(x, tau, rt, drt, nb, mb, kse, kbt, F, J):
         t0 = w0 / nw
         t1 = w1 / nw
         t2 = w2 / nw
-        c0 = r1 * t2 - r2 * t1
-        c1 = r2 * t0 - r0 * t2
-        c2 = r0 * t1 - r1 * t0
-        F[0] += ti * t0
-        F[1] += ti * t1
-        F[2] += ti * t2
-        F[3] += ti * c0
-        F[4] += ti * c1
-        F[5] += ti * c2
         sc = ti / nw
-        tt = (t0, t1, t2)
-        for a in range(3):
-            for b in range(3):
-                A[a, b] = sc * ((1.0 if a == b else 0.0) - tt[a] * tt[b])
-        # Bm = A [r]x ; [r]x = [[0,-r2,r1],[r2,0,-r0],[-r1,r0,0]]
-        for a in range(3):
-            Bm[a, 0] = A[a, 1] * r2 - A[a, 2] * r1
-            Bm[a, 1] = -A[a, 0] * r2 + A[a, 2] * r0
-            Bm[a, 2] = A[a, 0] * r1 - A[a, 1] * r0
-        for a in range(3):
-            for b in range(3):
-                J[a, b] += A[a, b]
-                J[a, 3 + b] -= Bm[a, b]
-                J[3 + a, b] -= Bm[b, a]
+        a00 = sc * (1.0 - t0 * t0)
+        a11 = sc * (1.0 - t1 * t1)
+        a22 = sc * (1.0 - t2 * t2)
+        a01 = -sc * t0 * t1
+        a02 = -sc * t0 * t2
+        a12 = -sc * t1 * t2
+        # Bm = A [r]x, [r]x = [[0,-r2,r1],[r2,0,-r0],[-r1,r0,0]]
+        b00 = a01 * r2 - a02 * r1
+        b01 = -a00 * r2 + a02 * r0
+        b02 = a00 * r1 - a01 * r0
+        b10 = a11 * r2 - a12 * r1
+        b11 = -a01 * r2 + a12 * r0
+        b12 = a01 * r1 - a11 * r0
+        b20 = a12 * r2 - a22 * r1
+        b21 = -a02 * r2 + a22 * r0
+        b22 = a02 * r1 - a12 * r0
+        J[0, 0] += a00
+        J[0, 1] += a01
+        J[0, 2] += a02
+        J[1, 0] += a01
+        J[1, 1] += a11
+        J[1, 2] += a12
+        J[2, 0] += a02
+        J[2, 1] += a12
+        J[2, 2] += a22
+        J[0, 3] -= b00
+        J[0, 4] -= b01
+        J[0, 5] -= b02
+        J[1, 3] -= b10
+        J[1, 4] -= b11
+        J[1, 5] -= b12
+        J[2, 3] -= b20
+        J[2, 4] -= b21
+        J[2, 5] -= b22
+        J[3, 0] -= b00
+        J[4, 0] -= b01
+        J[5, 0] -= b02
+        J[3, 1] -= b10
+        J[4, 1] -= b11
+        J[5, 1] -= b12
+        J[3, 2] -= b20
+        J[4, 2] -= b21
+        J[5, 2] -= b22
         # H = -[r]x Bm
-        for b in range(3):
-            J[3, 3 + b] -= -r2 * Bm[1, b] + r1 * Bm[2, b]
-            J[4, 3 + b] -= r2 * Bm[0, b] - r0 * Bm[2, b]
-            J[5, 3 + b] -= -r1 * Bm[0, b] + r0 * Bm[1, b]
+        J[3, 3] -= -r2 * b10 + r1 * b20
+        J[3, 4] -= -r2 * b11 + r1 * b21
+        J[3, 5] -= -r2 * b12 + r1 * b22
+        J[4, 3] -= r2 * b00 - r0 * b20
+        J[4, 4] -= r2 * b01 - r0 * b21
+        J[4, 5] -= r2 * b02 - r0 * b22
+        J[5, 3] -= -r1 * b00 + r0 * b10
+        J[5, 4] -= -r1 * b01 + r0 * b11
+        J[5, 5] -= -r1 * b02 + r0 * b12
+
+
+@njit(cache=True)
+def local_residual_jacobian(x, tau, rt, drt, nb, mb, kse, kbt, F, J):
+    """Residual (eqs. 2-3) and Jacobian at ``x``; see :func:`local_residual`, :func:`local_jacobian`."""
+    local_residual(x, tau, rt, drt, nb, mb, kse, kbt, F)
+    local_jacobian(x, tau, rt, drt, kse, kbt, J)
 
 
 @njit(cache=True)
 def local_strains(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, J, rhs):
     """Newton solve of eqs. (2)-(3) for ``x = (v, u)`` in place (``x`` is the warm start).
 
-    Stops when the Newton step's max-norm is below ``tol`` (the error after that step is
-    quadratically smaller). Returns the number of iterations, or -1 if it did not converge.
+    Stops when ``max |F_a / K_aa| <= tol``. Returns the number of Newton steps, or -1.
     """
     for it in range(maxit):
-        local_residual_jacobian(x, tau, rt, drt, nb, mb, kse, kbt, F, J)
+        e = local_residual(x, tau, rt, drt, nb, mb, kse, kbt, F)
+        if e <= tol:
+            return it
+        if not e == e:  # NaN
+            return -1
+        local_jacobian(x, tau, rt, drt, kse, kbt, J)
         for a in range(6):
             rhs[a, 0] = -F[a]
         if not _gauss_solve(J, rhs, 6, 1):
             return -1
-        step = 0.0
         for a in range(6):
             x[a] += rhs[a, 0]
-            if abs(rhs[a, 0]) > step:
-                step = abs(rhs[a, 0])
-        if not step == step:  # NaN
-            return -1
-        if step <= tol:
-            return it + 1
     return -1
 
 
@@ -235,33 +297,45 @@ def _tendon_speeds(x, rt, drt, out):
 
 @njit(cache=True)
 def _rk4_pose_step(p, R, x0, xm, x1, h, pn, Rn):
-    """Classical RK4 step of ``p' = R v``, ``R' = R [u]x`` with strains known at s, s+h/2, s+h."""
-    k1R = np.empty((3, 3))
-    k2R = np.empty((3, 3))
-    k3R = np.empty((3, 3))
-    k4R = np.empty((3, 3))
-    Rs = np.empty((3, 3))
-    k1p = np.empty(3)
-    k2p = np.empty(3)
-    k3p = np.empty(3)
-    k4p = np.empty(3)
-    _deriv_pose(R, x0, k1R, k1p)
+    """Classical RK4 step of ``p' = R v``, ``R' = R [u]x`` with strains known at s, s+h/2, s+h.
+
+    The ODE is linear in ``(p, R)`` row by row, so each row of ``R`` is stepped independently.
+    """
     for a in range(3):
-        for b in range(3):
-            Rs[a, b] = R[a, b] + 0.5 * h * k1R[a, b]
-    _deriv_pose(Rs, xm, k2R, k2p)
-    for a in range(3):
-        for b in range(3):
-            Rs[a, b] = R[a, b] + 0.5 * h * k2R[a, b]
-    _deriv_pose(Rs, xm, k3R, k3p)
-    for a in range(3):
-        for b in range(3):
-            Rs[a, b] = R[a, b] + h * k3R[a, b]
-    _deriv_pose(Rs, x1, k4R, k4p)
-    for a in range(3):
-        pn[a] = p[a] + h / 6.0 * (k1p[a] + 2.0 * k2p[a] + 2.0 * k3p[a] + k4p[a])
-        for b in range(3):
-            Rn[a, b] = R[a, b] + h / 6.0 * (k1R[a, b] + 2.0 * k2R[a, b] + 2.0 * k3R[a, b] + k4R[a, b])
+        q0 = R[a, 0]
+        q1 = R[a, 1]
+        q2 = R[a, 2]
+        # k1 (row of R [u]x and row . v)
+        k10 = q1 * x0[5] - q2 * x0[4]
+        k11 = -q0 * x0[5] + q2 * x0[3]
+        k12 = q0 * x0[4] - q1 * x0[3]
+        kp1 = q0 * x0[0] + q1 * x0[1] + q2 * x0[2]
+        s0 = q0 + 0.5 * h * k10
+        s1 = q1 + 0.5 * h * k11
+        s2 = q2 + 0.5 * h * k12
+        k20 = s1 * xm[5] - s2 * xm[4]
+        k21 = -s0 * xm[5] + s2 * xm[3]
+        k22 = s0 * xm[4] - s1 * xm[3]
+        kp2 = s0 * xm[0] + s1 * xm[1] + s2 * xm[2]
+        s0 = q0 + 0.5 * h * k20
+        s1 = q1 + 0.5 * h * k21
+        s2 = q2 + 0.5 * h * k22
+        k30 = s1 * xm[5] - s2 * xm[4]
+        k31 = -s0 * xm[5] + s2 * xm[3]
+        k32 = s0 * xm[4] - s1 * xm[3]
+        kp3 = s0 * xm[0] + s1 * xm[1] + s2 * xm[2]
+        s0 = q0 + h * k30
+        s1 = q1 + h * k31
+        s2 = q2 + h * k32
+        k40 = s1 * x1[5] - s2 * x1[4]
+        k41 = -s0 * x1[5] + s2 * x1[3]
+        k42 = s0 * x1[4] - s1 * x1[3]
+        kp4 = s0 * x1[0] + s1 * x1[1] + s2 * x1[2]
+        c = h / 6.0
+        Rn[a, 0] = q0 + c * (k10 + 2.0 * k20 + 2.0 * k30 + k40)
+        Rn[a, 1] = q1 + c * (k11 + 2.0 * k21 + 2.0 * k31 + k41)
+        Rn[a, 2] = q2 + c * (k12 + 2.0 * k22 + 2.0 * k32 + k42)
+        pn[a] = p[a] + c * (kp1 + 2.0 * kp2 + 2.0 * kp3 + kp4)
 
 
 @njit(cache=True)
@@ -278,7 +352,19 @@ def _deriv_pose(R, x, dR, dp):
 
 
 @njit(cache=True)
-def shape_free(tau, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, x_out, lengths):
+def _predict(xa, xb, xc, nhist, out):
+    """Warm start for the next node: polynomial extrapolation from the last 1-3 node solutions."""
+    for a in range(6):
+        if nhist >= 3:
+            out[a] = 3.0 * xa[a] - 3.0 * xb[a] + xc[a]
+        elif nhist == 2:
+            out[a] = 2.0 * xa[a] - xb[a]
+        else:
+            out[a] = xa[a]
+
+
+@njit(cache=True)
+def shape_free(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, x_out, lengths):
     """Shape under tendon tensions ``tau (m,)`` without external loads (no shooting).
 
     Outputs: ``p_out (n+1, 3)``, ``R_out (n+1, 3, 3)`` in the base frame, strains
@@ -286,8 +372,6 @@ def shape_free(tau, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, p_
     """
     m = tau.shape[0]
     h = length / n_steps
-    rt = np.empty((m, 3))
-    drt = np.empty((m, 3))
     F = np.empty(6)
     J = np.empty((6, 6))
     rhs = np.empty((6, 1))
@@ -297,7 +381,8 @@ def shape_free(tau, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, p_
     x0[2] = 1.0
     xm = np.empty(6)
     x1 = np.empty(6)
-    tendon_offsets(theta_c, radius_c, 0.0, rt, drt)
+    rt = rt_all[0]
+    drt = drt_all[0]
     if local_strains(x0, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, rhs) < 0:
         return LOCAL_FAIL
     for a in range(3):
@@ -311,19 +396,23 @@ def shape_free(tau, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, p_
     _tendon_speeds(x0, rt, drt, sp)
     for i in range(m):
         lengths[i] += sp[i]
+    xb = x0.copy()  # node solutions two and three half-steps back, for the predictor
+    xc = x0.copy()
+    nhist = 1
     for k in range(n_steps):
         s = k * h
-        for a in range(6):
-            xm[a] = x0[a]
-        tendon_offsets(theta_c, radius_c, s + 0.5 * h, rt, drt)
+        _predict(x0, xb, xc, nhist, xm)
+        rt = rt_all[2 * k + 1]
+        drt = drt_all[2 * k + 1]
         if local_strains(xm, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, rhs) < 0:
             return LOCAL_FAIL
         _tendon_speeds(xm, rt, drt, sp)
         for i in range(m):
             lengths[i] += 4.0 * sp[i]
-        for a in range(6):
-            x1[a] = 2.0 * xm[a] - x0[a]
-        tendon_offsets(theta_c, radius_c, s + h, rt, drt)
+        nhist = min(nhist + 1, 3)
+        _predict(xm, x0, xb, nhist, x1)
+        rt = rt_all[2 * k + 2]
+        drt = drt_all[2 * k + 2]
         if local_strains(x1, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, rhs) < 0:
             return LOCAL_FAIL
         _tendon_speeds(x1, rt, drt, sp)
@@ -331,8 +420,11 @@ def shape_free(tau, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, p_
         for i in range(m):
             lengths[i] += w * sp[i]
         _rk4_pose_step(p_out[k], R_out[k], x0, xm, x1, h, p_out[k + 1], R_out[k + 1])
+        nhist = min(nhist + 1, 3)
         for a in range(6):
             x_out[k + 1, a] = x1[a]
+            xc[a] = x0[a]
+            xb[a] = xm[a]
             x0[a] = x1[a]
     for i in range(m):
         lengths[i] *= h / 6.0
@@ -340,18 +432,18 @@ def shape_free(tau, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, p_
 
 
 @njit(cache=True)
-def shape_free_batch(taus, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, lengths_out, status):
+def shape_free_batch(taus, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, lengths_out, status):
     """Batched :func:`shape_free`: ``taus (B, m)`` -> ``p_out (B, n+1, 3)``, ``R_out (B, n+1, 3, 3)``."""
     B = taus.shape[0]
     x_out = np.empty((n_steps + 1, 6))
     for b in range(B):
         status[b] = shape_free(
-            taus[b], theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, p_out[b], R_out[b], x_out, lengths_out[b]
+            taus[b], rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, p_out[b], R_out[b], x_out, lengths_out[b]
         )
 
 
 @njit(cache=True)
-def lengths_and_jacobian(tau, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, lengths, dl):
+def lengths_and_jacobian(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl):
     """Tendon path lengths ``l (m,)`` and ``dl[i, j] = d l_i / d tau_j`` without external loads.
 
     Uses Simpson's rule on the RK4 nodes; the sensitivity of the local strains is
@@ -361,8 +453,6 @@ def lengths_and_jacobian(tau, theta_c, radius_c, kse, kbt, length, n_steps, tol,
     m = tau.shape[0]
     h = length / n_steps
     n_nodes = 2 * n_steps + 1
-    rt = np.empty((m, 3))
-    drt = np.empty((m, 3))
     F = np.empty(6)
     J = np.empty((6, 6))
     rhs = np.empty((6, 1))
@@ -377,8 +467,8 @@ def lengths_and_jacobian(tau, theta_c, radius_c, kse, kbt, length, n_steps, tol,
         for j in range(m):
             dl[i, j] = 0.0
     for node in range(n_nodes):
-        s = node * 0.5 * h
-        tendon_offsets(theta_c, radius_c, s, rt, drt)
+        rt = rt_all[node]
+        drt = drt_all[node]
         if node >= 2:
             for a in range(6):
                 tmp = x[a]
@@ -428,7 +518,7 @@ def lengths_and_jacobian(tau, theta_c, radius_c, kse, kbt, length, n_steps, tol,
 
 
 @njit(cache=True)
-def solve_displacement_tensions(d, kinv, l0, tau0, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, tau, info):
+def solve_displacement_tensions(d, kinv, l0, tau0, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, tau, info):
     """Tensions for tendon displacements ``d (m,)`` with compliant tendons and slack (no loads).
 
     Complementarity (per tendon)::
@@ -449,7 +539,7 @@ def solve_displacement_tensions(d, kinv, l0, tau0, theta_c, radius_c, kse, kbt, 
         tau[i] = tau0[i]
     res = 1e300
     for it in range(outer_maxit):
-        st = lengths_and_jacobian(tau, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, lengths, dl)
+        st = lengths_and_jacobian(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl)
         if st != OK:
             info[0] = it
             info[1] = res
@@ -487,17 +577,17 @@ def solve_displacement_tensions(d, kinv, l0, tau0, theta_c, radius_c, kse, kbt, 
 
 
 @njit(cache=True)
-def solve_displacement_batch(ds, kinv, l0, tau0s, theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus, infos, status):
+def solve_displacement_batch(ds, kinv, l0, tau0s, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus, infos, status):
     """Batched :func:`solve_displacement_tensions` over ``ds (B, m)``."""
     for b in range(ds.shape[0]):
         status[b] = solve_displacement_tensions(
-            ds[b], kinv, l0, tau0s[b], theta_c, radius_c, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus[b], infos[b]
+            ds[b], kinv, l0, tau0s[b], rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus[b], infos[b]
         )
 
 
 # ----------------------------------------------------------------------------- loaded case
 @njit(cache=True)
-def _deriv_loaded(y, s, tau, theta_c, radius_c, kse, kbt, f, x, tol, maxit, rt, drt, F, J, rhs, sp, dy):
+def _deriv_loaded(y, node, tau, rt_all, drt_all, kse, kbt, f, x, tol, maxit, F, J, rhs, sp, dy):
     """Right-hand side of (1) with the strains from (2)-(3); ``y = (p, R (row-major), N, M, l)``.
 
     ``x`` is the warm start and receives the strains. Returns False if the local solve failed.
@@ -517,7 +607,8 @@ def _deriv_loaded(y, s, tau, theta_c, radius_c, kse, kbt, f, x, tol, maxit, rt, 
     for a in range(3):
         nb[a] = R[0, a] * N0 + R[1, a] * N1 + R[2, a] * N2
         mb[a] = R[0, a] * y[15] + R[1, a] * y[16] + R[2, a] * y[17]
-    tendon_offsets(theta_c, radius_c, s, rt, drt)
+    rt = rt_all[node]
+    drt = drt_all[node]
     if local_strains(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, J, rhs) < 0:
         return False
     _deriv_pose(R, x, dR, dp)
@@ -536,7 +627,7 @@ def _deriv_loaded(y, s, tau, theta_c, radius_c, kse, kbt, f, x, tol, maxit, rt, 
 
 
 @njit(cache=True)
-def shape_loaded(tau, theta_c, radius_c, kse, kbt, length, n_steps, f, N0, M0, tol, maxit, Y):
+def shape_loaded(tau, rt_all, drt_all, kse, kbt, length, n_steps, f, N0, M0, tol, maxit, Y):
     """Integrate (1)-(3) from base values ``N0, M0`` with distributed force ``f (3,)`` (base frame).
 
     ``Y (n+1, 18+m)`` receives the states ``(p, R row-major, N, M, l)``. Returns a status code.
@@ -544,8 +635,6 @@ def shape_loaded(tau, theta_c, radius_c, kse, kbt, length, n_steps, f, N0, M0, t
     m = tau.shape[0]
     ny = 18 + m
     h = length / n_steps
-    rt = np.empty((m, 3))
-    drt = np.empty((m, 3))
     F = np.empty(6)
     J = np.empty((6, 6))
     rhs = np.empty((6, 1))
@@ -568,19 +657,19 @@ def shape_loaded(tau, theta_c, radius_c, kse, kbt, length, n_steps, f, N0, M0, t
     for k in range(n_steps):
         s = k * h
         y = Y[k]
-        if not _deriv_loaded(y, s, tau, theta_c, radius_c, kse, kbt, f, x, tol, maxit, rt, drt, F, J, rhs, sp, k1):
+        if not _deriv_loaded(y, 2 * k, tau, rt_all, drt_all, kse, kbt, f, x, tol, maxit, F, J, rhs, sp, k1):
             return LOCAL_FAIL
         for a in range(ny):
             ys[a] = y[a] + 0.5 * h * k1[a]
-        if not _deriv_loaded(ys, s + 0.5 * h, tau, theta_c, radius_c, kse, kbt, f, x, tol, maxit, rt, drt, F, J, rhs, sp, k2):
+        if not _deriv_loaded(ys, 2 * k + 1, tau, rt_all, drt_all, kse, kbt, f, x, tol, maxit, F, J, rhs, sp, k2):
             return LOCAL_FAIL
         for a in range(ny):
             ys[a] = y[a] + 0.5 * h * k2[a]
-        if not _deriv_loaded(ys, s + 0.5 * h, tau, theta_c, radius_c, kse, kbt, f, x, tol, maxit, rt, drt, F, J, rhs, sp, k3):
+        if not _deriv_loaded(ys, 2 * k + 1, tau, rt_all, drt_all, kse, kbt, f, x, tol, maxit, F, J, rhs, sp, k3):
             return LOCAL_FAIL
         for a in range(ny):
             ys[a] = y[a] + h * k3[a]
-        if not _deriv_loaded(ys, s + h, tau, theta_c, radius_c, kse, kbt, f, x, tol, maxit, rt, drt, F, J, rhs, sp, k4):
+        if not _deriv_loaded(ys, 2 * k + 2, tau, rt_all, drt_all, kse, kbt, f, x, tol, maxit, F, J, rhs, sp, k4):
             return LOCAL_FAIL
         for a in range(ny):
             Y[k + 1, a] = y[a] + h / 6.0 * (k1[a] + 2.0 * k2[a] + 2.0 * k3[a] + k4[a])

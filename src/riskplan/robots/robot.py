@@ -104,6 +104,7 @@ class TendonRobot:
         self._L = bb.length
         self._theta = _poly_table([t.theta for t in params.tendons])
         self._radius = _poly_table([t.radius for t in params.tendons])
+        self._rt, self._drt = cosserat.tendon_offset_table(self._theta, self._radius, self._L, self._n)
         self._kse = bb.kse
         self._kbt = bb.kbt
         self._kinv = np.array([0.0 if math.isinf(t.stiffness) else 1.0 / t.stiffness for t in params.tendons])
@@ -111,7 +112,7 @@ class TendonRobot:
         self._l0 = np.empty(m)
         dl = np.empty((m, m))
         st = cosserat.lengths_and_jacobian(
-            np.zeros(m), self._theta, self._radius, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, self._l0, dl
+            np.zeros(m), self._rt, self._drt, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, self._l0, dl
         )
         if st != cosserat.OK:  # pragma: no cover - the straight rod always solves
             raise ConvergenceError("rest-length computation failed")
@@ -231,7 +232,7 @@ class TendonRobot:
             lengths = np.empty((B, m))
             status = np.empty(B, dtype=np.int64)
             cosserat.shape_free_batch(
-                flat, self._theta, self._radius, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, lengths, status
+                flat, self._rt, self._drt, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, lengths, status
             )
             bad = np.flatnonzero(status != cosserat.OK)
             if bad.size:
@@ -254,14 +255,14 @@ class TendonRobot:
         Rs = np.empty((n + 1, 3, 3))
         X = np.empty((n + 1, 6))
         lengths = np.empty(m)
-        if cosserat.shape_free(tau, self._theta, self._radius, self._kse, self._kbt, L, n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths) != cosserat.OK:
+        if cosserat.shape_free(tau, self._rt, self._drt, self._kse, self._kbt, L, n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths) != cosserat.OK:
             raise ConvergenceError(f"local strain solve failed for tensions {tau.tolist()}")
         mid = 0.5 * (P[1:] + P[:-1])
         M0 = np.cross(mid - P[0], f).sum(0) * (L / n)
         scale = max(1e-6, float(np.linalg.norm(f)) * L * L)
 
         def residual(M):
-            st = cosserat.shape_loaded(tau, self._theta, self._radius, self._kse, self._kbt, L, n, f, N0, M, LOCAL_TOL, LOCAL_MAXIT, Y)
+            st = cosserat.shape_loaded(tau, self._rt, self._drt, self._kse, self._kbt, L, n, f, N0, M, LOCAL_TOL, LOCAL_MAXIT, Y)
             if st != cosserat.OK:
                 raise ConvergenceError(f"local strain solve failed while shooting (tensions {tau.tolist()})")
             return Y[-1, 15:18].copy()
@@ -329,7 +330,7 @@ class TendonRobot:
         infos = np.empty((B, 2))
         status = np.empty(B, dtype=np.int64)
         cosserat.solve_displacement_batch(
-            flat, self._kinv, self._l0, tau0, self._theta, self._radius, self._kse, self._kbt, self._L, self._n,
+            flat, self._kinv, self._l0, tau0, self._rt, self._drt, self._kse, self._kbt, self._L, self._n,
             LOCAL_TOL, LOCAL_MAXIT, DISP_TOL, DISP_MAXIT, tau, infos, status,
         )  # fmt: skip
         bad = np.flatnonzero(status != cosserat.OK)
@@ -357,7 +358,7 @@ class TendonRobot:
                 out[b] = self._shoot(flat[b])[-1, 18:]
             else:
                 dl = np.empty((m, m))
-                if cosserat.lengths_and_jacobian(flat[b], self._theta, self._radius, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, out[b], dl) != cosserat.OK:
+                if cosserat.lengths_and_jacobian(flat[b], self._rt, self._drt, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, out[b], dl) != cosserat.OK:
                     raise ConvergenceError(f"local strain solve failed for tensions {flat[b].tolist()}")
         return out.reshape(batch + (m,))
 

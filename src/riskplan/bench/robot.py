@@ -1,0 +1,70 @@
+"""``riskplan bench robot``: Cosserat-model speed (issue #2).
+
+Figures (median wall time, paper robot, no gravity, 5 mm step):
+
+* ``tension_single_ms`` — ``robot.solve_tensions`` for one configuration (validation included).
+* ``tension_batched_us_per_config`` — one ``solve_tensions`` call on 10,000 configurations.
+* ``displacement_single_ms`` — ``robot.solve_displacements`` for one configuration.
+* ``dataset_small_s`` — ``riskplan.datasets.generate_dataset(robot, "small", ...)`` wall time,
+  serial backend (None if the data-set module is not available).
+
+Anchors: the compiled C++ peer (Kuntz-Lab/interactive-rate-tendons) takes 66-73 us per
+configuration on a 2-core machine; the MDN paper quotes 0.39 ms for its Cosserat model.
+"""
+
+from __future__ import annotations
+
+import logging
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+N_BATCH = 10_000
+
+
+def _dataset_small_s() -> float | None:
+    """Time the small data set (sensing/datasets area); None if that module is missing."""
+    try:
+        from riskplan.datasets import generate_dataset
+    except ImportError:
+        return None
+    from riskplan.robots import load_robot
+
+    robot = load_robot("paper")
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        generate_dataset(robot, "small", Path(tmp) / "small.h5", seed=0, workers=1, backend="serial")
+        return time.perf_counter() - t0
+
+
+def run(quick: bool = False) -> dict:
+    from riskplan.bench._timing import median_time
+    from riskplan.robots import load_robot
+
+    robot = load_robot("paper")
+    rng = np.random.default_rng(0)
+    lim = robot.tension_limits
+    singles = rng.uniform(0.0, 1.0, (64, robot.n_tendons)) * lim * 0.5
+    it = iter(range(10**9))
+    t_single = median_time(lambda: robot.solve_tensions(singles[next(it) % 64]), repeats=50 if quick else 300, warmup=5)
+    n_batch = 1000 if quick else N_BATCH
+    batch = rng.uniform(0.0, 1.0, (n_batch, robot.n_tendons)) * lim * 0.5
+    t_batch = median_time(lambda: robot.solve_tensions(batch), repeats=3 if quick else 5, warmup=1)
+    dl = robot.displacement_limits
+    dsingles = rng.uniform(dl[:, 0], 0.5 * dl[:, 1], (64, robot.n_tendons))
+    t_disp = median_time(lambda: robot.solve_displacements(dsingles[next(it) % 64]), repeats=30 if quick else 200, warmup=3)
+    out = {
+        "tension_single_ms": t_single * 1e3,
+        "tension_batched_us_per_config": t_batch / n_batch * 1e6,
+        "displacement_single_ms": t_disp * 1e3,
+        "dataset_small_s": None,
+    }
+    try:
+        out["dataset_small_s"] = _dataset_small_s()
+    except Exception as exc:  # the data-set area may still be in progress; report the solver figures anyway
+        log.warning("dataset_small_s not measured: %s", exc)
+    return out

@@ -60,7 +60,7 @@ class BodyGeometry:
             backbone_radius=float(bb.outer_radius),
             disk_radius=float(dk.radius),
             disk_thickness=float(dk.thickness),
-            disk_s=tuple(float(x) for x in dk.positions(bb.length)),
+            disk_s=tuple(float(x) for x in dk.positions),
             spacing=float(spacing),
         )
 
@@ -115,7 +115,8 @@ def sample_tube(s, positions, rotations, radius: float, spacing: float, *, exclu
     P, R = interpolate_frames(s, positions, rotations, ss)
     phi = _ring_angles(radius, spacing)
     radial = np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=-1)  # body frame (a, 3)
-    N = np.einsum("...kij,aj->...kai", R, radial)  # (..., k, a, 3)
+    N = radial @ np.swapaxes(R, -1, -2)[..., :, :, :]  # (..., k, a, 3): N[k, a] = R_k radial_a
+
     pts = P[..., :, None, :] + radius * N
     shp = pts.shape[:-3] + (-1, 3)
     return pts.reshape(shp), N.reshape(shp)
@@ -133,7 +134,7 @@ def sample_cap(position, rotation, radius: float, spacing: float, *, exclude_bel
         dirs.append(np.stack([np.sin(pol) * np.cos(phi), np.sin(pol) * np.sin(phi), np.full_like(phi, np.cos(pol))], -1))
     d = np.concatenate(dirs)  # body frame unit vectors (a, 3)
     d = d[radius * d[:, 2] > exclude_below]
-    N = np.einsum("...ij,aj->...ai", rotation, d)
+    N = d @ np.swapaxes(rotation, -1, -2)
     return position[..., None, :] + radius * N, N
 
 
@@ -167,8 +168,9 @@ def sample_disk(position, rotation, radius: float, thickness: float, inner_radiu
         nrm.append(np.broadcast_to(np.array([0.0, 0.0, sign]), fp.shape))
     P = np.concatenate(pts)
     Nb = np.concatenate(nrm)
-    Pw = position[..., None, :] + np.einsum("...ij,aj->...ai", rotation, P)
-    Nw = np.einsum("...ij,aj->...ai", rotation, Nb)
+    Rt = np.swapaxes(rotation, -1, -2)
+    Pw = position[..., None, :] + P @ Rt
+    Nw = Nb @ Rt
     return Pw, Nw
 
 

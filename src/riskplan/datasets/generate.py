@@ -1,0 +1,272 @@
+"""Generate point-cloud data sets by the MDN paper's protocol (section III); resumable.
+
+One task per target configuration: for each of its ``S`` starts, a random start within the
+limits, the straight path start -> target through the hysteresis model, the Cosserat shape
+on arrival, the body surface and the two cameras' merged cloud, downsampled to ``P`` points.
+
+Randomness: target ``i`` of a split gets its own seed ``spawn_seeds([seed, k], C)[i]``
+(``k`` = 0 for train, 1 for test); inside a
+task, start ``j`` gets child ``j`` of that seed and splits it into the start draw, the
+per-run hysteresis variation and the camera noise. A configuration's data therefore depend
+only on (robot, protocol, split, seed, i): the same on the serial, local and Ray backends,
+and the same whether a generation ran in one go or was killed and resumed.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from riskplan.datasets import storage
+from riskplan.datasets.protocol import SPLITS, Protocol, _check_split, get_protocol, random_starts, straight_path, target_configurations
+from riskplan._validation import as_array, check_range
+from riskplan.errors import DataFormatError, InvalidInputError
+from riskplan.parallel import BACKENDS, imap_tasks, spawn_seeds
+
+log = logging.getLogger(__name__)
+
+
+@functools.lru_cache(maxsize=4)
+def _robot_from_toml(text: str):
+    from riskplan.robots import robot_from_toml
+
+    return robot_from_toml(text)
+
+
+@functools.lru_cache(maxsize=4)
+def _protocol_from_json(text: str) -> Protocol:
+    return Protocol.from_json(text)
+
+
+@functools.lru_cache(maxsize=8)
+def _body(robot_toml: str, spacing: float):
+    from riskplan.robots.geometry import BodyGeometry
+
+    return BodyGeometry.from_params(_robot_from_toml(robot_toml).params, spacing=spacing)
+
+
+def to_base_frame(robot, positions, rotations):
+    """Backbone frames from the world frame to the robot's base frame: ``x_b = R_b^T (x_w - p_b)``."""
+    base = robot.params.base
+    Rb = np.asarray(base.rotation, dtype=np.float64)
+    pb = np.asarray(base.position, dtype=np.float64)
+    return (positions - pb) @ Rb, np.einsum("ji,...jk->...ik", Rb, rotations)
+
+
+def arrive(robot, paths, seeds):
+    """Shapes on arrival after following commanded ``paths (S, T, m)`` through the hysteresis model.
+
+    Each path starts at rest at its first point (no lag; :meth:`HysteresisModel.initial_state`)
+    and draws its own run-to-run variation (play widths, zero offsets) from its entry of
+    ``seeds`` (one ``SeedSequence`` per path). Returns the effective displacements ``(S, m)``
+    and the :class:`~riskplan.robots.RodShape` batch ``(S,)`` (world frame).
+    """
+    from riskplan.robots.hysteresis import HysteresisModel
+
+    model = HysteresisModel(robot)
+    eff = np.stack([model.move(model.initial_state(p[0]), p, np.random.default_rng(sd))[1] for p, sd in zip(paths, seeds)])
+    return eff, robot.solve_displacements(eff)
+
+
+def simulate_target(robot, protocol: Protocol, target, seed, *, robot_toml: str | None = None, return_shapes: bool = False):
+    """The ``S`` clouds of one target configuration.
+
+    Parameters
+    ----------
+    robot: :class:`~riskplan.robots.TendonRobot`.
+    protocol: the protocol (starts, points, path steps, cameras, surface spacing).
+    target: ``(m,)`` target displacements (m), within the limits.
+    seed: int or ``SeedSequence`` of this target.
+
+    Returns
+    -------
+    dict with ``points (S, P, 3) float32`` (base frame, m), ``tips (S, 3)``, ``starts (S, m)``,
+    ``tensions (S, m)`` (N, on arrival)
+    and, with ``return_shapes``, the arrival ``shape`` (RodShape batch, base frame).
+    """
+    from riskplan.robots.cameras import capture
+    from riskplan.robots.geometry import BodyGeometry, sample_surface
+
+    S = protocol.n_starts
+    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
+    target = as_array(target, "target", shape=(robot.n_tendons,))
+    check_range(target, "target", low=lim[:, 0], high=lim[:, 1])
+    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    per_start = [c.spawn(3) for c in ss.spawn(S)]  # (start draw, hysteresis, camera) per start
+    starts = np.stack([random_starts(lim, 1, np.random.default_rng(c[0]))[0] for c in per_start])
+    paths = np.stack([straight_path(st, target, protocol.path_steps) for st in starts])
+    _, shape = arrive(robot, paths, [c[1] for c in per_start])
+    P, R = to_base_frame(robot, shape.positions, shape.rotations)
+    if robot_toml is not None:
+        body = _body(robot_toml, protocol.surface_spacing)
+    else:
+        body = BodyGeometry.from_params(robot.params, spacing=protocol.surface_spacing)
+    surf_p, surf_n = sample_surface(shape.s, P, R, body)
+    cams = protocol.camera_objects()
+    clouds = np.stack([capture(surf_p[j], surf_n[j], cams, protocol.n_points, seed=per_start[j][2]) for j in range(S)])
+    out = {"points": clouds.astype(np.float32), "tips": P[:, -1, :].copy(), "starts": starts,
+           "tensions": np.asarray(shape.tensions, dtype=np.float64)}
+    if return_shapes:
+        from riskplan.robots import RodShape
+
+        out["shape"] = RodShape(shape.s, P, R, shape.tensions)
+    return out
+
+
+def _task(item):
+    robot_toml, protocol_json, target, seed = item
+    robot = _robot_from_toml(robot_toml)
+    protocol = _protocol_from_json(protocol_json)
+    # Corners of the displacement box need more than max_tension: the solver warns once per
+    # call, which would flood a long generation; the tensions are stored for diagnosis instead.
+    rlog = logging.getLogger("riskplan.robots.robot")
+    level = rlog.level
+    rlog.setLevel(logging.ERROR)
+    try:
+        r = simulate_target(robot, protocol, target, seed, robot_toml=robot_toml)
+    finally:
+        rlog.setLevel(level)
+    return r["points"], r["tips"], r["starts"], r["tensions"]
+
+
+def _same(f, path, *, robot_toml, protocol_json, split, seed, displacements) -> None:
+    meta = storage.check_header(f, path)
+    problems = []
+    if meta["robot_toml"] != robot_toml:
+        problems.append("robot")
+    if storage._attr(f, "protocol") != protocol_json:
+        problems.append("protocol")
+    if meta.get("split") != split:
+        problems.append(f"split ({meta.get('split')!r} vs {split!r})")
+    if int(meta["seed"]) != int(seed):
+        problems.append(f"seed ({meta['seed']} vs {seed})")
+    if f["displacements"].shape != displacements.shape or not np.array_equal(f["displacements"][...], displacements):
+        problems.append("target configurations")
+    if problems:
+        raise DataFormatError(
+            f"{str(path)!r} was generated with a different {', '.join(problems)}; "
+            "choose another output or pass overwrite=True (--overwrite)"
+        )
+
+
+def generate_dataset(robot, preset="small", out="data.h5", *, split: str = "train", seed: int = 0,
+                     workers: int | None = None, backend: str = "local", progress: Callable[[int, int], None] | None = None,
+                     overwrite: bool = False, max_new: int | None = None, chunksize: int | None = None) -> Path:
+    """Generate (or resume) one split of a data set into the HDF5 file ``out``.
+
+    Parameters
+    ----------
+    robot: a :class:`~riskplan.robots.TendonRobot` or a robot name/path for ``load_robot``.
+    preset: preset name (``"paper"``, ``"small"``, ``"tiny"``), a :class:`Protocol` or its JSON.
+    out: output file. Work in progress lives in ``<out>.partial`` and is renamed onto ``out``
+        when every configuration is done.
+    split: ``"train"`` or ``"test"`` (disjoint sets of targets of the same protocol).
+    seed: master seed of the starts, hysteresis variation and camera noise.
+    workers, backend: parallel map (:func:`riskplan.parallel.imap_tasks`).
+    progress: ``progress(done, total)`` after each finished configuration.
+    overwrite: replace an existing ``out`` / ``<out>.partial`` made with other settings.
+    max_new: compute at most this many configurations in this call and leave the rest for a
+        later call (time-boxing; a call without it resumes and finishes).
+
+    Returns
+    -------
+    The path of the finished file, or of the partial file if ``max_new`` stopped early.
+    Resuming needs the same robot, protocol, split and seed, else :class:`DataFormatError`.
+    """
+    if isinstance(robot, (str, os.PathLike)):
+        from riskplan.robots import load_robot
+
+        robot = load_robot(robot)
+    protocol = get_protocol(preset)
+    split = _check_split(split)
+    if backend not in BACKENDS:
+        raise InvalidInputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
+    if not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InvalidInputError(f"seed: expected a non-negative integer, got {seed!r}")
+    if max_new is not None and max_new < 0:
+        raise InvalidInputError(f"max_new: expected >= 0, got {max_new}")
+    out = Path(out)
+    part = storage.partial_path(out)
+    robot_toml = robot.toml_text()
+    protocol_json = protocol.to_json()
+    targets = target_configurations(protocol, robot.displacement_limits, split)
+    C = len(targets)
+    if C == 0:
+        raise InvalidInputError(f"protocol: split {split!r} has no configurations")
+    settings = dict(robot_toml=robot_toml, protocol_json=protocol_json, split=split, seed=seed, displacements=targets)
+
+    import h5py
+
+    if out.exists():
+        if overwrite:
+            out.unlink()
+        else:
+            try:
+                with h5py.File(out, "r") as f:
+                    _same(f, out, **settings)
+                    complete = bool(storage._attr(f, "complete")) and bool(np.all(f["done"][...]))
+            except OSError as exc:
+                raise DataFormatError(f"{str(out)!r} exists and is not a readable HDF5 file ({exc})") from exc
+            if complete:
+                log.info("%s is already complete", out)
+                if progress is not None:
+                    progress(C, C)
+                return out
+            raise DataFormatError(f"{str(out)!r} exists but is incomplete; pass overwrite=True (--overwrite)")
+    if part.exists() and overwrite:
+        part.unlink()
+    if part.exists():
+        f = storage.open_existing(part)
+        try:
+            _same(f, part, **settings)
+        except BaseException:
+            f.close()
+            raise
+        log.info("resuming %s: %d of %d configurations done", part, int(f["done"][...].sum()), C)
+    else:
+        f = storage.create_file(part, displacements=targets, n_starts=protocol.n_starts, n_points=protocol.n_points,
+                                robot_toml=robot_toml, robot_name=robot.name, protocol_json=protocol_json, split=split, seed=seed)
+    try:
+        done = f["done"][...].astype(bool)
+        todo = np.flatnonzero(~done)
+        if max_new is not None:
+            todo = todo[:max_new]
+        seeds = spawn_seeds([seed, SPLITS.index(split)], C)  # train and test draw independently
+        n_done = int(done.sum())
+        if progress is not None:
+            progress(n_done, C)
+        items = [(robot_toml, protocol_json, targets[i], seeds[i]) for i in todo]
+        if chunksize is None:
+            nw = workers or 2
+            chunksize = max(1, min(8, len(items) // (4 * nw) if items else 1))
+        for k, (pts, tips, starts, tens) in imap_tasks(_task, items, backend=backend, workers=workers, chunksize=chunksize):
+            storage.write_config(f, int(todo[k]), pts, tips, starts, tens)
+            n_done += 1
+            if progress is not None:
+                progress(n_done, C)
+        finished = bool(np.all(f["done"][...]))
+        if finished:
+            storage.mark_complete(f)
+    finally:
+        f.close()
+    if finished:
+        os.replace(part, out)
+        return out
+    return part
+
+
+def generate_splits(robot, preset, stem, *, seed: int = 0, splits=("train", "test"), **kwargs) -> dict[str, Path]:
+    """Generate several splits: ``<stem>_train.h5`` and ``<stem>_test.h5`` (``stem`` without ``.h5``).
+
+    Each split uses the same ``seed``; the per-target seeds also depend on the split.
+    Returns ``{split: path}``.
+    """
+    stem = Path(stem)
+    if stem.suffix == ".h5":
+        stem = stem.with_suffix("")
+    return {sp: generate_dataset(robot, preset, stem.with_name(f"{stem.name}_{sp}.h5"), split=sp, seed=seed, **kwargs) for sp in splits}

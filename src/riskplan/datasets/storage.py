@@ -1,0 +1,265 @@
+"""HDF5 storage of point-cloud data sets (schema in ``docs/datasets.md``).
+
+Attributes: ``format="riskplan-dataset"``, ``format_version=1``, ``riskplan_version``,
+``robot_toml``, ``robot_name``, ``protocol`` (JSON), ``split``, ``seed``, ``created``,
+``complete``. Data sets: ``displacements (C, m) float64``, ``points (C, S, P, 3) float32``,
+``tips (C, S, 3) float64``, ``starts (C, S, m) float64``, ``tensions (C, S, m) float64``
+(diagnostic: tendon tensions on arrival), ``done (C,) bool``.
+
+Safe writes: a generation writes ``<out>.partial``; all data sets are allocated in full
+when the file is created (contiguous storage, so later writes touch raw data only, never
+HDF5 metadata). Each finished configuration's rows are written and flushed before its
+``done`` flag is set and flushed, so a killed run leaves at worst rows without their flag,
+which a resumed run recomputes. When every flag is set, ``complete`` is set and the file is
+renamed atomically onto ``<out>``.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from riskplan.errors import DataFormatError
+
+log = logging.getLogger(__name__)
+
+FORMAT = "riskplan-dataset"
+FORMAT_VERSION = 1
+DATASETS = ("displacements", "points", "tips", "starts", "tensions", "done")
+
+
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("riskplan")
+    except Exception:  # pragma: no cover - not installed
+        return "0+unknown"
+
+
+def _attr(f, key):
+    v = f.attrs.get(key)
+    if isinstance(v, bytes):
+        v = v.decode()
+    if isinstance(v, np.generic):
+        v = v.item()
+    return v
+
+
+def partial_path(out) -> Path:
+    out = Path(out)
+    return out.with_name(out.name + ".partial")
+
+
+def create_file(path, *, displacements, n_starts: int, n_points: int, robot_toml: str, robot_name: str,
+                protocol_json: str, split: str, seed: int):
+    """Create a data-set file with every data set allocated (``done`` all False); returns the open h5py File."""
+    import h5py
+
+    C, m = displacements.shape
+    f = h5py.File(path, "w")
+    try:
+        f.attrs["format"] = FORMAT
+        f.attrs["format_version"] = FORMAT_VERSION
+        f.attrs["riskplan_version"] = _version()
+        f.attrs["robot_toml"] = robot_toml
+        f.attrs["robot_name"] = robot_name
+        f.attrs["protocol"] = protocol_json
+        f.attrs["split"] = split
+        f.attrs["seed"] = int(seed)
+        f.attrs["created"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+        f.attrs["complete"] = False
+        f.create_dataset("displacements", data=np.asarray(displacements, dtype=np.float64))
+        # Writing zeros allocates the contiguous storage now: later row writes never change metadata.
+        f.create_dataset("points", data=np.zeros((C, n_starts, n_points, 3), dtype=np.float32))
+        f.create_dataset("tips", data=np.zeros((C, n_starts, 3), dtype=np.float64))
+        f.create_dataset("starts", data=np.zeros((C, n_starts, m), dtype=np.float64))
+        f.create_dataset("tensions", data=np.zeros((C, n_starts, m), dtype=np.float64))
+        f.create_dataset("done", data=np.zeros(C, dtype=bool))
+        f["points"].attrs["units"] = "m"
+        f["points"].attrs["frame"] = "robot base"
+        f["displacements"].attrs["units"] = "m"
+        f["tips"].attrs["units"] = "m"
+        f["starts"].attrs["units"] = "m"
+        f["tensions"].attrs["units"] = "N"
+        f.flush()
+    except BaseException:
+        f.close()
+        raise
+    return f
+
+
+def write_config(f, i: int, points, tips, starts, tensions) -> None:
+    """Write configuration ``i``'s rows, flush, then set and flush its ``done`` flag."""
+    f["points"][i] = np.asarray(points, dtype=np.float32)
+    f["tips"][i] = tips
+    f["starts"][i] = starts
+    f["tensions"][i] = tensions
+    f.flush()
+    f["done"][i] = True
+    f.flush()
+
+
+def mark_complete(f) -> None:
+    f.attrs["complete"] = True
+    f.attrs["completed"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    f.flush()
+
+
+def check_header(f, path) -> dict:
+    """Validate the format attributes and data-set shapes; return the attributes as a dict."""
+    fmt = _attr(f, "format")
+    if fmt != FORMAT:
+        raise DataFormatError(f"data set {str(path)!r}: attribute format={fmt!r}, expected {FORMAT!r}")
+    ver = _attr(f, "format_version")
+    if ver != FORMAT_VERSION:
+        raise DataFormatError(f"data set {str(path)!r}: format_version={ver!r}, this riskplan reads version {FORMAT_VERSION}")
+    for key in ("robot_toml", "robot_name", "protocol", "seed"):
+        if key not in f.attrs:
+            raise DataFormatError(f"data set {str(path)!r}: missing attribute {key!r}")
+    for key in DATASETS:
+        if key not in f:
+            raise DataFormatError(f"data set {str(path)!r}: missing data set {key!r}")
+    C, m = f["displacements"].shape if f["displacements"].ndim == 2 else (None, None)
+    if C is None:
+        raise DataFormatError(f"data set {str(path)!r}: displacements has shape {f['displacements'].shape}, expected (C, m)")
+    ps = f["points"].shape
+    if len(ps) != 4 or ps[0] != C or ps[3] != 3:
+        raise DataFormatError(f"data set {str(path)!r}: points has shape {ps}, expected (C={C}, S, P, 3)")
+    S = ps[1]
+    for key, want in (("tips", (C, S, 3)), ("starts", (C, S, m)), ("tensions", (C, S, m)), ("done", (C,))):
+        if f[key].shape != want:
+            raise DataFormatError(f"data set {str(path)!r}: {key} has shape {f[key].shape}, expected {want}")
+    try:
+        protocol = json.loads(_attr(f, "protocol"))
+    except (TypeError, json.JSONDecodeError) as exc:
+        raise DataFormatError(f"data set {str(path)!r}: attribute protocol is not valid JSON ({exc})") from exc
+    meta = {k: _attr(f, k) for k in f.attrs}
+    meta["protocol"] = protocol
+    return meta
+
+
+def open_existing(path):
+    """Open an existing data-set file for reading and writing (resumption); validates the header."""
+    import h5py
+
+    try:
+        f = h5py.File(path, "r+")
+    except OSError as exc:
+        raise DataFormatError(
+            f"partial data set {str(path)!r} cannot be opened ({exc}); delete it to start the generation afresh"
+        ) from exc
+    try:
+        check_header(f, path)
+    except BaseException:
+        f.close()
+        raise
+    return f
+
+
+@dataclass(eq=False)
+class Dataset:
+    """A point-cloud data set read from HDF5.
+
+    Attributes
+    ----------
+    displacements: ``(C, m)`` target tendon displacements (m).
+    points: ``(C, S, P, 3)`` float32 clouds, base frame (m); ``S`` starts per target.
+    tips: ``(C, S, 3)`` true tip positions on arrival (m, base frame).
+    starts: ``(C, S, m)`` starting configurations (m).
+    tensions: ``(C, S, m)`` tendon tensions on arrival (N).
+    done: ``(C,)`` which configurations have data (all True in a complete file).
+    metadata: the file attributes (``protocol`` parsed from JSON).
+    path: the file read.
+    """
+
+    displacements: np.ndarray
+    points: np.ndarray
+    tips: np.ndarray
+    starts: np.ndarray
+    tensions: np.ndarray
+    done: np.ndarray
+    metadata: dict
+    path: str = ""
+    _robot: object = field(default=None, repr=False)
+
+    @property
+    def n_configs(self) -> int:
+        return int(self.displacements.shape[0])
+
+    @property
+    def n_starts(self) -> int:
+        return int(self.points.shape[1])
+
+    @property
+    def n_points(self) -> int:
+        return int(self.points.shape[2])
+
+    @property
+    def n_tendons(self) -> int:
+        return int(self.displacements.shape[1])
+
+    @property
+    def complete(self) -> bool:
+        return bool(self.metadata.get("complete", False)) and bool(np.all(self.done))
+
+    @property
+    def protocol(self):
+        from riskplan.datasets.protocol import Protocol
+
+        return Protocol.from_json(json.dumps(self.metadata["protocol"]))
+
+    @property
+    def robot(self):
+        """The robot rebuilt from the stored TOML (:class:`riskplan.robots.TendonRobot`)."""
+        if self._robot is None:
+            from riskplan.robots import robot_from_toml
+
+            self._robot = robot_from_toml(self.metadata["robot_toml"])
+        return self._robot
+
+    def cloud(self, i: int) -> np.ndarray:
+        """All points of configuration ``i``, ``(S * P, 3)`` float32."""
+        return self.points[i].reshape(-1, 3)
+
+    def tip_spread(self) -> np.ndarray:
+        """``(C,)`` RMS distance of the arrival tips from their mean per target (m)."""
+        d = self.tips - self.tips.mean(axis=1, keepdims=True)
+        return np.sqrt((d**2).sum(-1).mean(-1))
+
+
+def load_dataset(path) -> Dataset:
+    """Read a data-set file; raise :class:`DataFormatError` naming the problem if it is not one.
+
+    The file must carry ``format="riskplan-dataset"`` and a supported ``format_version`` and
+    every data set of the schema with consistent shapes; points must be finite.
+    """
+    import h5py
+
+    path = Path(path)
+    if not path.is_file():
+        raise DataFormatError(f"data set {str(path)!r}: no such file")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise DataFormatError(f"data set {str(path)!r}: not a readable HDF5 file ({exc})") from exc
+    with f:
+        meta = check_header(f, path)
+        arrays = {k: f[k][...] for k in DATASETS}
+    if not np.all(np.isfinite(arrays["points"][arrays["done"]])):
+        raise DataFormatError(f"data set {str(path)!r}: points contain NaN or inf")
+    return Dataset(
+        displacements=arrays["displacements"].astype(np.float64),
+        points=arrays["points"],
+        tips=arrays["tips"],
+        starts=arrays["starts"],
+        tensions=arrays["tensions"],
+        done=arrays["done"].astype(bool),
+        metadata=meta,
+        path=str(path),
+    )

@@ -1,0 +1,253 @@
+"""Cosserat statics against independent oracles: closed-form arc, RK4 convergence rate,
+equilibrium residuals, an independent scipy solve_bvp of Rucker & Webster's ODE, gravity
+closed forms, rigid base pose."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from riskplan.robots import TendonRobot, load_robot
+from riskplan.robots import cosserat as C
+from tests.conftest import TOL
+
+
+@pytest.fixture(scope="module")
+def paper():
+    return load_robot("paper")
+
+
+def with_step(robot, step, **backbone):
+    bb = replace(robot.params.backbone, step=step, **backbone)
+    return TendonRobot(replace(robot.params, backbone=bb))
+
+
+def test_base_curvature_check_value(paper):
+    """DESIGN.md check: one straight tendon, tau = 1 N -> base curvature tau r / (E I) = 1.3819 1/m."""
+    x = C.strains_along(np.array([1.0, 0, 0, 0]), paper._theta, paper._radius, paper._kse, paper._kbt, [0.0])
+    assert x[0, 4] == pytest.approx(1.3819, abs=5e-5)
+    assert x[0, 4] == pytest.approx(0.008 / paper.params.backbone.kbt[0], rel=1e-12)
+
+
+@pytest.mark.parametrize("tau", [1.0, 7.5])
+def test_single_straight_tendon_is_circular_arc(paper, tau):
+    """Closed form with shear/extension: u = (0, tau r/EI, 0) and v = (0, 0, 1 - tau/EA) are
+    constant, so R(s) = Ry(k s) and p(s) = v3 ((1 - cos k s)/k, 0, sin(k s)/k)."""
+    robot = with_step(paper, 0.0005)  # 400 steps
+    shape = robot.solve_tensions([tau, 0, 0, 0])
+    bb = robot.params.backbone
+    k = tau * 0.008 / bb.kbt[0]
+    v3 = 1.0 - tau / bb.kse[2]
+    s = shape.s
+    exact = v3 * np.stack([(1 - np.cos(k * s)) / k, 0 * s, np.sin(k * s) / k], -1)
+    err = np.abs(shape.positions - exact).max() / bb.length
+    assert err <= 1e-6
+    Ry = np.stack([np.cos(k * s), 0 * s, -np.sin(k * s)], -1)  # first column of Ry(k s)
+    np.testing.assert_allclose(shape.rotations[:, :, 0], Ry, rtol=0, atol=1e-6)
+
+
+def test_rk4_fourth_order_convergence(paper):
+    """Tip error against a fine reference shrinks ~16x per halving of the step (helical + straight)."""
+    tau = [2.0, 0.0, 1.0, 6.0]
+    ref = with_step(paper, 0.2 / 640).solve_tensions(tau)
+    errs = []
+    for n in (10, 20, 40):
+        shp = with_step(paper, 0.2 / n).solve_tensions(tau)
+        errs.append(np.abs(shp.tip - ref.tip).max())
+    rates = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+    assert np.all(rates > 3.6), (errs, rates)
+
+
+def test_equilibrium_residuals(paper):
+    """Eqs. (2)-(3) hold at every station of the solution, and rotations stay orthonormal."""
+    tau = np.array([3.0, 0.5, 0.0, 8.0])
+    n = paper._n
+    P = np.empty((n + 1, 3))
+    R = np.empty((n + 1, 3, 3))
+    X = np.empty((n + 1, 6))
+    L = np.empty(4)
+    assert C.shape_free(tau, paper._rt, paper._drt, paper._kse, paper._kbt, paper._L, n, 1e-12, 50, P, R, X, L) == C.OK
+    F = np.empty(6)
+    z = np.zeros(3)
+    for k in range(n + 1):
+        e = C.local_residual(X[k], tau, paper._rt[2 * k], paper._drt[2 * k], z, z, paper._kse, paper._kbt, F)
+        assert e <= 1e-11
+    np.testing.assert_allclose(np.einsum("nji,njk->nik", R, R), np.broadcast_to(np.eye(3), R.shape), rtol=0, atol=1e-6)
+
+
+def test_jacobian_matches_finite_differences(paper, rng):
+    tau = np.array([3.0, 0.0, 1.0, 8.0])
+    x = np.array([0.01, -0.02, 0.99, 3.0, -5.0, 1.0])
+    rt, drt = paper._rt[17], paper._drt[17]
+    J = np.empty((6, 6))
+    C.local_jacobian(x, tau, rt, drt, paper._kse, paper._kbt, J)
+    F0, F1 = np.empty(6), np.empty(6)
+    z = np.zeros(3)
+    Jfd = np.empty((6, 6))
+    for j in range(6):
+        h = 1e-7
+        xp, xm = x.copy(), x.copy()
+        xp[j] += h
+        xm[j] -= h
+        C.local_residual(xp, tau, rt, drt, z, z, paper._kse, paper._kbt, F0)
+        C.local_residual(xm, tau, rt, drt, z, z, paper._kse, paper._kbt, F1)
+        Jfd[:, j] = (F0 - F1) / (2 * h)
+    np.testing.assert_allclose(J, Jfd, rtol=1e-6, atol=1e-8)
+
+
+def _hat(w):
+    """Skew matrices of vectors ``w (..., 3)`` -> ``(..., 3, 3)``."""
+    z = np.zeros_like(w[..., 0])
+    return np.stack(
+        [
+            np.stack([z, -w[..., 2], w[..., 1]], -1),
+            np.stack([w[..., 2], z, -w[..., 0]], -1),
+            np.stack([-w[..., 1], w[..., 0], z], -1),
+        ],
+        -2,
+    )
+
+
+def _rw_bvp(robot, tau, guess_n=41):
+    """Rucker & Webster 2011 eqs. (13)-(19) (no external load) solved with scipy's solve_bvp:
+    states p, R, v, u; p(0) = 0, R(0) = I; tip condition R&W eq. (17). Written from the paper,
+    sharing nothing with riskplan.robots.cosserat (vectorised over the mesh nodes)."""
+    from scipy.integrate import solve_bvp
+
+    bb = robot.params.backbone
+    Kse, Kbt = np.diag(bb.kse), np.diag(bb.kbt)
+    tendons = robot.params.tendons
+    P = np.polynomial.polynomial
+    e3 = np.array([0.0, 0.0, 1.0])
+
+    def routing(s):
+        s = np.atleast_1d(s)
+        out = []
+        for t in tendons:
+            d1 = P.polyder(t.theta) if len(t.theta) > 1 else [0.0]
+            d2 = P.polyder(t.theta, 2) if len(t.theta) > 2 else [0.0]
+            r1 = P.polyder(t.radius) if len(t.radius) > 1 else [0.0]
+            r2 = P.polyder(t.radius, 2) if len(t.radius) > 2 else [0.0]
+            th, dth, ddth = P.polyval(s, t.theta), P.polyval(s, d1), P.polyval(s, d2)
+            rho, drho, ddrho = P.polyval(s, t.radius), P.polyval(s, r1), P.polyval(s, r2)
+            c, sn, z = np.cos(th), np.sin(th), 0 * s
+            r = np.stack([rho * c, rho * sn, z], -1)
+            dr = np.stack([drho * c - rho * sn * dth, drho * sn + rho * c * dth, z], -1)
+            ddr = np.stack(
+                [
+                    ddrho * c - 2 * drho * sn * dth - rho * c * dth**2 - rho * sn * ddth,
+                    ddrho * sn + 2 * drho * c * dth - rho * sn * dth**2 + rho * c * ddth,
+                    z,
+                ],
+                -1,
+            )
+            out.append((r, dr, ddr))
+        return out
+
+    def rhs(s, Y):
+        K = Y.shape[1]
+        R = Y[3:12].T.reshape(K, 3, 3)
+        v, u = Y[12:15].T, Y[15:18].T
+        uh = _hat(u)
+        A = np.zeros((K, 3, 3))
+        G = np.zeros((K, 3, 3))
+        B = np.zeros((K, 3, 3))
+        H = np.zeros((K, 3, 3))
+        a = np.zeros((K, 3))
+        b = np.zeros((K, 3))
+        for ti, (r, dr, ddr) in zip(tau, routing(s)):
+            pd = np.einsum("kij,kj->ki", uh, r) + dr + v
+            npd = np.linalg.norm(pd, axis=-1)[:, None, None]
+            Ai = -ti * _hat(pd) @ _hat(pd) / npd**3
+            Gi = -Ai @ _hat(r)
+            ai = np.einsum("kij,kj->ki", Ai, np.einsum("kij,kj->ki", uh, pd) + np.einsum("kij,kj->ki", uh, dr) + ddr)
+            A += Ai
+            G += Gi
+            B += _hat(r) @ Ai
+            H += _hat(r) @ Gi
+            a += ai
+            b += np.einsum("kij,kj->ki", _hat(r), ai)
+        c = -np.einsum("kij,kj->ki", uh, u @ Kbt) - np.einsum("kij,kj->ki", _hat(v), (v - e3) @ Kse) - b
+        d = -np.einsum("kij,kj->ki", uh, (v - e3) @ Kse) - a
+        M = np.concatenate([np.concatenate([Kse + A, G], -1), np.concatenate([B, Kbt + H], -1)], -2)
+        vu = np.linalg.solve(M, np.concatenate([d, c], -1)[..., None])[..., 0]
+        dp = np.einsum("kij,kj->ki", R, v)
+        dR = (R @ uh).reshape(K, 9)
+        return np.concatenate([dp, dR, vu], -1).T
+
+    def bc(ya, yb):
+        v, u = yb[12:15], yb[15:18]
+        nsum = np.zeros(3)
+        msum = np.zeros(3)
+        for ti, (r, dr, _) in zip(tau, routing(bb.length)):
+            pd = np.cross(u, r[0]) + dr[0] + v
+            t = pd / np.linalg.norm(pd)
+            nsum += ti * t
+            msum += ti * np.cross(r[0], t)
+        return np.concatenate([ya[0:3], ya[3:12] - np.eye(3).ravel(), Kse @ (v - e3) + nsum, Kbt @ u + msum])
+
+    s = np.linspace(0, bb.length, guess_n)
+    Y = np.zeros((18, guess_n))
+    Y[2] = s
+    Y[3:12] = np.eye(3).ravel()[:, None]
+    Y[14] = 1.0
+    sol = solve_bvp(rhs, bc, s, Y, tol=1e-8, max_nodes=20000)
+    assert sol.status == 0, sol.message
+    return sol
+
+
+@pytest.mark.parametrize("tau", [[0.0, 0.0, 0.0, 4.0], [1.5, 0.0, 0.7, 3.0]])
+def test_helical_routing_against_independent_bvp(paper, tau):
+    sol = _rw_bvp(paper, np.array(tau))
+    shape = with_step(paper, 0.2 / 160).solve_tensions(tau)
+    ref = sol.sol(shape.s)
+    np.testing.assert_allclose(shape.positions, ref[0:3].T, rtol=0, atol=2e-6)
+    np.testing.assert_allclose(shape.rotations.reshape(-1, 9), ref[3:12].T, rtol=0, atol=2e-5)
+
+
+def _stiff(robot, factor=100.0):
+    bb = robot.params.backbone
+    return with_step(robot, bb.step, youngs_modulus=bb.youngs_modulus * factor, shear_modulus=bb.shear_modulus * factor)
+
+
+def test_gravity_small_deflection_cantilever(paper):
+    """Horizontal cantilever under its own weight: tip deflection q L^4 / (8 E I)."""
+    robot = _stiff(paper).with_base_pose(rpy=(0.0, np.pi / 2, 0.0)).with_gravity(True, (0.0, 0.0, -9.81))
+    shape = robot.solve_tensions([0.0, 0.0, 0.0, 0.0])
+    q = robot._lam * 9.81
+    bb = robot.params.backbone
+    w = q * bb.length**4 / (8 * bb.kbt[0])
+    assert -shape.tip[2] == pytest.approx(w, rel=2e-3)
+    assert shape.tip[0] == pytest.approx(bb.length, rel=1e-3)
+
+
+def test_gravity_along_backbone_compresses_linearly(paper):
+    """Upright robot, gravity along -z: pure compression, tip z = L - q L^2 / (2 E A)."""
+    robot = paper.with_gravity(True, (0.0, 0.0, -9.81))
+    shape = robot.solve_tensions([0.0, 0.0, 0.0, 0.0])
+    q = robot._lam * 9.81
+    bb = robot.params.backbone
+    np.testing.assert_allclose(shape.tip, [0, 0, bb.length - q * bb.length**2 / (2 * bb.kse[2])], rtol=0, atol=1e-12)
+
+
+def test_gravity_tension_shape_is_in_equilibrium(paper):
+    """With gravity and tensions the shot solution meets the free-tip condition N(L) = M(L) = 0."""
+    robot = paper.with_gravity(True, (9.81, 0.0, 0.0))
+    Y = robot._shoot(np.array([1.0, 0.5, 0.0, 2.0]))
+    assert np.abs(Y[-1, 12:15]).max() <= 1e-12
+    assert np.abs(Y[-1, 15:18]).max() <= 1e-10
+    free = robot.with_gravity(False).solve_tensions([1.0, 0.5, 0.0, 2.0])
+    assert np.linalg.norm(Y[-1, 0:3] - free.tip) > 1e-3  # gravity visibly moves the tip
+
+
+def test_base_pose_transforms_rigidly(paper):
+    tau = [2.0, 0.0, 1.0, 3.0]
+    base = paper.solve_tensions(tau)
+    pos = np.array([0.1, -0.2, 0.3])
+    moved = paper.with_base_pose(pos, rpy=(0.3, -0.7, 1.1))
+    R = moved.params.base.matrix
+    shp = moved.solve_tensions(tau)
+    np.testing.assert_allclose(shp.positions, base.positions @ R.T + pos, **TOL["float64_exact"])
+    np.testing.assert_allclose(shp.rotations, R @ base.rotations, **TOL["float64_exact"])

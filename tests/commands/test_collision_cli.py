@@ -32,3 +32,11 @@ def test_collision_arc_json():
 def test_collision_requires_configuration():
     res = runner.invoke(app, ["collision"])
     assert res.exit_code != 0
+
+
+def test_collision_robot_configurations():
+    res = runner.invoke(app, ["collision", "-d", "0,0,0,0;0.02,0,0,0", "--samples", "2000", "--json"])
+    assert res.exit_code == 0, res.output
+    rows = json.loads(res.output)
+    assert len(rows) == 2 and rows[1]["probability"] > rows[0]["probability"]
+    assert all(r["probability"] >= r["mc_low"] for r in rows)

@@ -28,8 +28,13 @@ def test_recommend_rule():
     assert recommend(ks, nll, [[], [], [2], [], []], 0.05) == 4
     # the best K collapsed: the best non-collapsed K within tolerance of the overall best, else the best non-collapsed
     assert recommend(ks, nll, [[], [], [1], [1], [0]], 0.05) == 2
+    # a K whose training diverged (NaN) is never recommended
+    assert recommend([1, 2, 3], [-5.0, float("nan"), -5.02], [[], [], []], 0.05) == 1
+    assert recommend([1, 2], [float("nan"), -4.0], [[], []], 0.0) == 2
     with pytest.raises(InvalidInputError):
         recommend([], [], [], 0.05)
+    with pytest.raises(InvalidInputError):
+        recommend([1], [float("nan")], [[]], 0.05)
 
 
 def test_sweep_small(synth_paths, tmp_path):

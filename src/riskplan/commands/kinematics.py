@@ -190,6 +190,7 @@ def register(app: typer.Typer) -> None:
         plt.close(fig)
         for e in res.entries:
             flag = f"  collapsed components {e.collapsed}" if e.collapsed else ""
+            flag += f"  FAILED: {e.error}" if e.error else ""
             typer.echo(f"K={e.n_components:2d}  test NLL {e.test_nll:9.4f}{flag}")
         typer.echo(f"recommended K = {res.recommended} ({res.rule}); results in {out}")
 

@@ -62,6 +62,7 @@ class SweepEntry:
     epochs: int
     seconds: float
     model_path: str
+    error: str = ""  # why this K produced no model (training diverged), else empty
 
 
 @dataclass
@@ -99,8 +100,11 @@ def recommend(components, test_nll, collapsed, nll_tolerance: float = DEFAULT_NL
     nll = np.asarray(test_nll, dtype=np.float64)
     if len(components) == 0 or len(components) != len(nll):
         raise InvalidInputError("recommend: components and test_nll must be non-empty and of equal length")
+    if not np.isfinite(nll).any():
+        raise InvalidInputError("recommend: no K has a finite test NLL")
     best = np.nanmin(nll)
-    ok = [i for i, c in enumerate(collapsed) if not c] or list(range(len(components)))
+    finite = [i for i in range(len(components)) if np.isfinite(nll[i])]
+    ok = [i for i in finite if not collapsed[i]] or finite
     cand = [components[i] for i in ok if nll[i] <= best + nll_tolerance]
     if not cand:  # all non-collapsed K are far from the best: take the best among them
         i = min(ok, key=lambda j: nll[j])
@@ -116,6 +120,7 @@ def _sweep_one(task: tuple) -> dict:
 
     from riskplan.kinematics.data import read_point_clouds
     from riskplan.kinematics.evaluation import component_weight_stats, mode_collapse, nll_per_config
+    from riskplan.errors import ConvergenceError
     from riskplan.kinematics.training import train
 
     train_path, test_path, K, cfg_json, out_dir, threshold, max_seconds = task
@@ -124,7 +129,14 @@ def _sweep_one(task: tuple) -> dict:
     cfg = TrainConfig.from_json({**cfg_json, "n_components": K})
     train_data = read_point_clouds(train_path)
     test_data = read_point_clouds(test_path)
-    res = train(train_data, cfg, out=out_dir, max_seconds=max_seconds)
+    try:
+        res = train(train_data, cfg, out=out_dir, max_seconds=max_seconds)
+    except ConvergenceError as exc:  # one diverging K must not sink the whole sweep; it is reported
+        log.warning("K=%d: %s", K, exc)
+        return {
+            "n_components": K, "test_nll": float("nan"), "val_nll": float("nan"), "weight_mean": [], "weight_p99": [],
+            "collapsed": [], "epochs": 0, "seconds": time.perf_counter() - t0, "model_path": "", "error": str(exc),
+        }
     nll = float(nll_per_config(res.model, test_data).mean())
     ws = component_weight_stats(res.model, test_data.displacements)
     return {

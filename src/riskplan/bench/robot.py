@@ -41,7 +41,7 @@ def _dataset_small_s() -> float | None:
         return time.perf_counter() - t0
 
 
-def run(quick: bool = False) -> dict:
+def run(quick: bool = False, *, include_dataset: bool = True) -> dict:
     from riskplan.bench._timing import median_time
     from riskplan.robots import load_robot
 
@@ -64,7 +64,8 @@ def run(quick: bool = False) -> dict:
         "dataset_small_s": None,
     }
     try:
-        out["dataset_small_s"] = _dataset_small_s()
+        if include_dataset:
+            out["dataset_small_s"] = _dataset_small_s()
     except Exception as exc:  # the data-set area may still be in progress; report the solver figures anyway
         log.warning("dataset_small_s not measured: %s", exc)
     return out

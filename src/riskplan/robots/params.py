@@ -391,7 +391,7 @@ def params_to_dict(p: RobotParams) -> dict:
             "radius": p.disks.radius,
             "thickness": p.disks.thickness,
             "density": p.disks.density,
-            "positions": list(p.disks.positions),
+            **({"positions": list(p.disks.positions)} if p.disks.count else {}),
         },
         "tendons": [
             {

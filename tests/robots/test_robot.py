@@ -1,0 +1,131 @@
+"""TendonRobot facade: contract, batching, displacement <-> tension round trip, bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from riskplan.errors import ConvergenceError, InvalidInputError, RobotDescriptionError
+from riskplan.robots import RodShape, load_robot, robot_from_toml
+from riskplan.robots import robot as robot_module
+from tests.conftest import TOL
+
+
+@pytest.fixture(scope="module")
+def paper():
+    return load_robot("paper")
+
+
+def test_contract(paper):
+    assert paper.name == "paper" and paper.n_tendons == 4
+    np.testing.assert_array_equal(paper.displacement_limits, [[-0.01, 0.04]] * 4)
+    np.testing.assert_array_equal(paper.tension_limits, [9.73, 9.73, 9.73, 16.81])
+    shape = paper.solve_tensions([0.0, 0.0, 0.0, 0.0])
+    assert isinstance(shape, RodShape)
+    assert shape.s.shape == (41,) and shape.positions.shape == (41, 3) and shape.rotations.shape == (41, 3, 3)
+    np.testing.assert_allclose(shape.tip, [0, 0, 0.2], **TOL["float64_exact"])
+    np.testing.assert_allclose(paper.tendon_rest_lengths[:3], 0.2, **TOL["float64_exact"])
+    # helical tendon: rest length = int sqrt(1 + (r theta')^2) ds
+    assert paper.tendon_rest_lengths[3] == pytest.approx(0.2 * np.hypot(1, 0.008 * 47.124), rel=1e-12)
+
+
+def test_tension_direction_convention(paper):
+    """Tension in the theta = 0 tendon bends the tip towards +x (DESIGN.md)."""
+    tip = paper.solve_tensions([2.0, 0, 0, 0]).tip
+    assert tip[0] > 0.03 and abs(tip[1]) < 1e-12
+
+
+def test_toml_text_rebuilds_the_robot(paper, tmp_path):
+    again = robot_from_toml(paper.toml_text())
+    tau = [1.0, 2.0, 0.0, 3.0]
+    np.testing.assert_array_equal(again.solve_tensions(tau).positions, paper.solve_tensions(tau).positions)
+    f = tmp_path / "mine.toml"
+    f.write_text(paper.toml_text().replace('name = "paper"', 'name = "mine"'))
+    assert load_robot(str(f)).name == "mine"
+
+
+def test_unknown_robot():
+    with pytest.raises(RobotDescriptionError, match="neither a packaged robot"):
+        load_robot("no-such-robot")
+
+
+@pytest.mark.parametrize("method", ["solve_tensions", "solve_displacements"])
+def test_batch_equals_loop(paper, rng, method):
+    if method == "solve_tensions":
+        x = rng.uniform(0, 1, (2, 3, 4)) * paper.tension_limits * 0.6
+    else:
+        x = rng.uniform(-0.01, 0.025, (2, 3, 4))
+    batch = getattr(paper, method)(x)
+    assert batch.positions.shape == (2, 3, 41, 3) and batch.tensions.shape == (2, 3, 4)
+    for i in range(2):
+        for j in range(3):
+            one = getattr(paper, method)(x[i, j])
+            np.testing.assert_allclose(batch.positions[i, j], one.positions, **TOL["float64_exact"])
+            np.testing.assert_allclose(batch.rotations[i, j], one.rotations, **TOL["float64_exact"])
+            np.testing.assert_allclose(batch.tensions[i, j], one.tensions, **TOL["float64_exact"])
+            np.testing.assert_allclose(batch[i, j].tip, one.tip, **TOL["float64_exact"])
+
+
+def test_displacement_tension_round_trip(paper, rng):
+    d = rng.uniform(-0.01, 0.03, (20, 4))
+    shape = paper.solve_displacements(d)
+    tau = shape.tensions
+    assert np.all(tau >= 0)
+    back = paper.displacements_for_tensions(np.minimum(tau, paper.tension_limits), validate=False)
+    taut = tau > 0
+    np.testing.assert_allclose(back[taut], d[taut], rtol=0, atol=1e-11)
+    assert np.all(back[~taut] >= d[~taut] - 1e-11)  # slack: the tendon has length to spare
+    # and from tensions to displacements to tensions
+    tau0 = rng.uniform(0.2, 1.0, (5, 4)) * paper.tension_limits * 0.5
+    d0 = paper.displacements_for_tensions(tau0)
+    np.testing.assert_allclose(paper.tensions_for_displacements(d0), tau0, rtol=1e-8, atol=1e-9)
+    np.testing.assert_allclose(paper.solve_displacements(d0).positions, paper.solve_tensions(tau0).positions, rtol=0, atol=1e-10)
+
+
+def test_slack_tendons_carry_no_tension(paper):
+    s = paper.solve_displacements([-0.01, 0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(s.tensions, 0.0)
+    np.testing.assert_allclose(s.tip, [0, 0, 0.2], **TOL["float64_exact"])
+    s = paper.solve_displacements([0.02, -0.01, -0.01, -0.01])
+    assert s.tensions[0] > 0 and np.all(s.tensions[1:] == 0.0)
+
+
+def test_displacement_with_gravity_round_trip(paper):
+    robot = paper.with_gravity(True, (9.81, 0, 0))
+    d = np.array([0.01, 0.0, 0.003, 0.005])
+    tau = robot.tensions_for_displacements(d)
+    back = robot.displacements_for_tensions(tau)
+    np.testing.assert_allclose(back[tau > 0], d[tau > 0], rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize(
+    "method, value, match",
+    [
+        ("solve_tensions", [1.0, 0.0, np.nan, 0.0], "tensions: contains NaN"),
+        ("solve_tensions", [1.0, 0.0, np.inf, 0.0], "tensions: contains NaN or inf"),
+        ("solve_tensions", [1.0, 0.0, 0.0], "tensions: expected last dimension 4"),
+        ("solve_tensions", [1.0, 0.0, 0.0, 20.0], r"tensions <= 16.81"),
+        ("solve_tensions", [-1.0, 0.0, 0.0, 0.0], r"tensions >= 0"),
+        ("solve_displacements", [0.05, 0.0, 0.0, 0.0], r"displacements <= 0.04"),
+        ("solve_displacements", [0.0, -0.02, 0.0, 0.0], r"displacements >= -0.01"),
+        ("solve_displacements", [[0.0, 0.0, 0.0, 0.0, 0.0]], "displacements: expected last dimension 4"),
+        ("solve_displacements", "abc", "displacements: cannot convert"),
+    ],
+)
+def test_bad_input(paper, method, value, match):
+    with pytest.raises(InvalidInputError, match=match):
+        getattr(paper, method)(value)
+
+
+def test_non_convergence_raises_with_residual(paper, monkeypatch):
+    monkeypatch.setattr(robot_module, "DISP_MAXIT", 1)
+    with pytest.raises(ConvergenceError) as info:
+        paper.solve_displacements([0.03, 0.0, 0.01, 0.02])
+    assert info.value.residual is not None and info.value.residual > 0
+
+
+def test_base_pose_validation(paper):
+    with pytest.raises(InvalidInputError, match="rotation"):
+        paper.with_base_pose((0, 0, 0), rotation=np.diag([1.0, 1.0, -1.0]))
+    with pytest.raises(InvalidInputError, match="position"):
+        paper.with_base_pose((0, 0))

@@ -48,7 +48,8 @@ def test_reference_file_complete_and_consistent(reference, robot):
 
 
 def test_local_backend_matches_serial(reference, robot, tmp_path):
-    p = generate_dataset(robot, "tiny", tmp_path / "local.h5", split="train", seed=3, backend="local", workers=2, chunksize=1)
+    p = generate_dataset(robot, "tiny", tmp_path / "local.h5", split="train", seed=3, backend="local", workers=2, chunksize=1,
+                         min_parallel_clouds=0)
     _assert_same(_arrays(p), _arrays(reference))
 
 
@@ -64,9 +65,9 @@ def test_resume_after_stop_is_bit_identical(reference, robot, tmp_path):
     got = generate_dataset(robot, "tiny", out, split="train", seed=3, backend="serial", max_new=2)
     assert got == partial_path(out) and not out.exists()
     assert load_dataset(got).done.sum() == 2
-    got = generate_dataset(robot, "tiny", out, split="train", seed=3, backend="local", workers=2, max_new=1)
+    got = generate_dataset(robot, "tiny", out, split="train", seed=3, backend="serial", max_new=1)
     assert load_dataset(got).done.sum() == 3
-    got = generate_dataset(robot, "tiny", out, split="train", seed=3, backend="local", workers=2)
+    got = generate_dataset(robot, "tiny", out, split="train", seed=3, backend="local", workers=2, min_parallel_clouds=0)
     assert got == out and not partial_path(out).exists()
     _assert_same(_arrays(out), _arrays(reference))
 

@@ -156,7 +156,8 @@ def _same(f, path, *, robot_toml, protocol_json, split, seed, displacements) -> 
 
 def generate_dataset(robot, preset="small", out="data.h5", *, split: str = "train", seed: int = 0,
                      workers: int | None = None, backend: str = "local", progress: Callable[[int, int], None] | None = None,
-                     overwrite: bool = False, max_new: int | None = None, chunksize: int | None = None) -> Path:
+                     overwrite: bool = False, max_new: int | None = None, chunksize: int | None = None,
+                     min_parallel_clouds: int = 400) -> Path:
     """Generate (or resume) one split of a data set into the HDF5 file ``out``.
 
     Parameters
@@ -172,6 +173,9 @@ def generate_dataset(robot, preset="small", out="data.h5", *, split: str = "trai
     overwrite: replace an existing ``out`` / ``<out>.partial`` made with other settings.
     max_new: compute at most this many configurations in this call and leave the rest for a
         later call (time-boxing; a call without it resumes and finishes).
+    min_parallel_clouds: with ``backend="local"``, less work than this many clouds runs in
+        this process: starting a worker pool (process start, imports, compiled kernels) costs
+        several seconds, more than a few hundred clouds take. The data are the same either way.
 
     Returns
     -------
@@ -191,6 +195,7 @@ def generate_dataset(robot, preset="small", out="data.h5", *, split: str = "trai
     if max_new is not None and max_new < 0:
         raise InvalidInputError(f"max_new: expected >= 0, got {max_new}")
     out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
     part = storage.partial_path(out)
     robot_toml = robot.toml_text()
     protocol_json = protocol.to_json()
@@ -241,6 +246,8 @@ def generate_dataset(robot, preset="small", out="data.h5", *, split: str = "trai
         if progress is not None:
             progress(n_done, C)
         items = [(robot_toml, protocol_json, targets[i], seeds[i]) for i in todo]
+        if backend == "local" and len(items) * protocol.n_starts < min_parallel_clouds:
+            backend = "serial"
         if chunksize is None:
             nw = workers or 2
             chunksize = max(1, min(8, len(items) // (4 * nw) if items else 1))

@@ -5,8 +5,9 @@ Figures (median wall time, paper robot, no gravity, 5 mm step):
 * ``tension_single_ms`` — ``robot.solve_tensions`` for one configuration (validation included).
 * ``tension_batched_us_per_config`` — one ``solve_tensions`` call on 10,000 configurations.
 * ``displacement_single_ms`` — ``robot.solve_displacements`` for one configuration.
-* ``dataset_small_s`` — ``riskplan.datasets.generate_dataset(robot, "small", ...)`` wall time,
-  serial backend (None if the data-set module is not available).
+* ``dataset_small_s`` — wall time of generating the ``small`` preset (train and test splits,
+  ``riskplan.datasets.generate_splits``), serial backend (None if the data-set module is not
+  available).
 
 Anchors: the compiled C++ peer (Kuntz-Lab/interactive-rate-tendons) takes 66-73 us per
 configuration on a 2-core machine; the MDN paper quotes 0.39 ms for its Cosserat model.
@@ -29,7 +30,7 @@ N_BATCH = 10_000
 def _dataset_small_s() -> float | None:
     """Time the small data set (sensing/datasets area); None if that module is missing."""
     try:
-        from riskplan.datasets import generate_dataset
+        from riskplan.datasets import generate_splits
     except ImportError:
         return None
     from riskplan.robots import load_robot
@@ -37,7 +38,7 @@ def _dataset_small_s() -> float | None:
     robot = load_robot("paper")
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        generate_dataset(robot, "small", Path(tmp) / "small.h5", seed=0, workers=1, backend="serial")
+        generate_splits(robot, "small", Path(tmp) / "small", seed=0, workers=1, backend="serial")
         return time.perf_counter() - t0
 
 

@@ -136,6 +136,44 @@ def _gauss_solve(A, b, n, nrhs):
 
 
 @njit(cache=True)
+def _chol_factor6(J):
+    """Cholesky factor (lower, in place) of a symmetric positive definite ``J (6, 6)``.
+
+    The local Jacobian is SPD: ``K + sum_i T_i^T A_i T_i`` with ``T_i = [I, -[r_i]x]`` and
+    ``A_i`` positive semidefinite. Returns False if a pivot is not positive."""
+    for j in range(6):
+        d = J[j, j]
+        for k in range(j):
+            d -= J[j, k] * J[j, k]
+        if not d > 0.0:
+            return False
+        d = math.sqrt(d)
+        J[j, j] = d
+        inv = 1.0 / d
+        for i in range(j + 1, 6):
+            acc = J[i, j]
+            for k in range(j):
+                acc -= J[i, k] * J[j, k]
+            J[i, j] = acc * inv
+    return True
+
+
+@njit(cache=True)
+def _chol_solve6(L, b):
+    """Solve ``L L^T x = b`` in place with the factor from :func:`_chol_factor6`."""
+    for i in range(6):
+        acc = b[i]
+        for k in range(i):
+            acc -= L[i, k] * b[k]
+        b[i] = acc / L[i, i]
+    for i in range(5, -1, -1):
+        acc = b[i]
+        for k in range(i + 1, 6):
+            acc -= L[k, i] * b[k]
+        b[i] = acc / L[i, i]
+
+
+@njit(cache=True)
 def local_residual(x, tau, rt, drt, nb, mb, kse, kbt, F):
     """Residual ``F (6,)`` of eqs. (2)-(3) at strains ``x = (v, u)``; returns ``max |F_a / K_aa|``
     (an estimate of the strain error, since the Jacobian is dominated by ``diag(K_se, K_bt)``)."""
@@ -264,6 +302,8 @@ def local_strains(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, J, rhs):
     """Newton solve of eqs. (2)-(3) for ``x = (v, u)`` in place (``x`` is the warm start).
 
     Stops when ``max |F_a / K_aa| <= tol``. Returns the number of Newton steps, or -1.
+    ``rhs`` is unused (kept for the signature); see :func:`local_strains_chord` for the
+    variant that reuses factorisations.
     """
     for it in range(maxit):
         e = local_residual(x, tau, rt, drt, nb, mb, kse, kbt, F)
@@ -272,12 +312,42 @@ def local_strains(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, J, rhs):
         if not e == e:  # NaN
             return -1
         local_jacobian(x, tau, rt, drt, kse, kbt, J)
-        for a in range(6):
-            rhs[a, 0] = -F[a]
-        if not _gauss_solve(J, rhs, 6, 1):
+        if not _chol_factor6(J):
             return -1
         for a in range(6):
-            x[a] += rhs[a, 0]
+            F[a] = -F[a]
+        _chol_solve6(J, F)
+        for a in range(6):
+            x[a] += F[a]
+    return -1
+
+
+@njit(cache=True)
+def local_strains_chord(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, L, fac):
+    """Like :func:`local_strains`, but reuses the Cholesky factor ``L`` of an earlier Jacobian
+    (``fac[0] = 1`` when ``L`` holds one) while the residual falls by at least 4x per step,
+    and refactors otherwise (a chord/Newton hybrid; the Jacobian changes little between
+    neighbouring stations). Returns the number of steps, or -1.
+    """
+    e_prev = 1e300
+    for it in range(maxit):
+        e = local_residual(x, tau, rt, drt, nb, mb, kse, kbt, F)
+        if e <= tol:
+            return it
+        if not e == e:
+            return -1
+        if fac[0] == 0 or e > 0.25 * e_prev:
+            local_jacobian(x, tau, rt, drt, kse, kbt, L)
+            if not _chol_factor6(L):
+                fac[0] = 0
+                return -1
+            fac[0] = 1
+        e_prev = e
+        for a in range(6):
+            F[a] = -F[a]
+        _chol_solve6(L, F)
+        for a in range(6):
+            x[a] += F[a]
     return -1
 
 
@@ -374,7 +444,7 @@ def shape_free(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, p_ou
     h = length / n_steps
     F = np.empty(6)
     J = np.empty((6, 6))
-    rhs = np.empty((6, 1))
+    fac = np.zeros(1, dtype=np.int64)
     zero = np.zeros(3)
     sp = np.empty(m)
     x0 = np.zeros(6)
@@ -383,7 +453,7 @@ def shape_free(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, p_ou
     x1 = np.empty(6)
     rt = rt_all[0]
     drt = drt_all[0]
-    if local_strains(x0, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, rhs) < 0:
+    if local_strains_chord(x0, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, fac) < 0:
         return LOCAL_FAIL
     for a in range(3):
         p_out[0, a] = 0.0
@@ -404,7 +474,7 @@ def shape_free(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, p_ou
         _predict(x0, xb, xc, nhist, xm)
         rt = rt_all[2 * k + 1]
         drt = drt_all[2 * k + 1]
-        if local_strains(xm, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, rhs) < 0:
+        if local_strains_chord(xm, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, fac) < 0:
             return LOCAL_FAIL
         _tendon_speeds(xm, rt, drt, sp)
         for i in range(m):
@@ -413,7 +483,7 @@ def shape_free(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, p_ou
         _predict(xm, x0, xb, nhist, x1)
         rt = rt_all[2 * k + 2]
         drt = drt_all[2 * k + 2]
-        if local_strains(x1, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, rhs) < 0:
+        if local_strains_chord(x1, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, fac) < 0:
             return LOCAL_FAIL
         _tendon_speeds(x1, rt, drt, sp)
         w = 2.0 if k < n_steps - 1 else 1.0

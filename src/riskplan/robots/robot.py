@@ -119,6 +119,11 @@ class TendonRobot:
         self._G0 = -dl  # d(shortening)/d tau at tau = 0, used for start values
         d = params.disks
         self._lam = bb.density * bb.area + d.count * d.mass / bb.length
+        # cached for the hot path (validation and output)
+        self._tmax = np.array([t.max_tension for t in params.tendons], dtype=float)
+        self._dlim = np.array([t.displacement_limits for t in params.tendons], dtype=float)
+        self._s = np.linspace(0.0, self._L, self._n + 1)
+        self._identity_base = params.base.is_identity
 
     # ------------------------------------------------------------------ description
     @property
@@ -136,17 +141,17 @@ class TendonRobot:
     @property
     def s(self) -> np.ndarray:
         """``(n,)`` arc length of the output stations [m]."""
-        return np.linspace(0.0, self._L, self._n + 1)
+        return self._s.copy()
 
     @property
     def displacement_limits(self) -> np.ndarray:
         """``(m, 2)`` ``[low, high]`` per tendon [m]."""
-        return np.array([t.displacement_limits for t in self.params.tendons], dtype=float)
+        return self._dlim.copy()
 
     @property
     def tension_limits(self) -> np.ndarray:
         """``(m,)`` maximum tension per tendon [N]."""
-        return np.array([t.max_tension for t in self.params.tendons], dtype=float)
+        return self._tmax.copy()
 
     @property
     def tendon_rest_lengths(self) -> np.ndarray:
@@ -192,6 +197,10 @@ class TendonRobot:
 
     # ---------------------------------------------------------------------- checks
     def _check(self, value, name, low, high):
+        # fast path: a well-formed float array passes with a few vectorised checks
+        if isinstance(value, np.ndarray) and value.dtype == np.float64 and value.ndim >= 1 and value.shape[-1] == self.n_tendons:
+            if np.isfinite(value).all() and (value >= low).all() and (value <= high).all():
+                return value
         arr = as_array(value, name, min_ndim=1)
         if arr.shape[-1] != self.n_tendons:
             raise InvalidInputError(f"{name}: expected last dimension {self.n_tendons} (one per tendon), got shape {arr.shape}")
@@ -201,11 +210,11 @@ class TendonRobot:
     def _to_world(self, P, Rs, tau, batch) -> RodShape:
         base = self.params.base
         n = self._n + 1
-        if not base.is_identity:
+        if not self._identity_base:
             Rb = base.matrix
             P = P @ Rb.T + np.asarray(base.position)
             Rs = np.einsum("ij,...jk->...ik", Rb, Rs)
-        return RodShape(self.s, P.reshape(batch + (n, 3)), Rs.reshape(batch + (n, 3, 3)), tau.reshape(batch + (self.n_tendons,)))
+        return RodShape(self._s, P.reshape(batch + (n, 3)), Rs.reshape(batch + (n, 3, 3)), tau.reshape(batch + (self.n_tendons,)))
 
     def _gravity_base(self) -> np.ndarray:
         """Distributed force per unit length in the base frame [N/m]."""
@@ -220,11 +229,11 @@ class TendonRobot:
         (:func:`cosserat.shape_loaded`). Raises :class:`ConvergenceError` if a solve fails.
         """
         if validate:
-            tau = self._check(tensions, "tensions", 0.0, self.tension_limits)
+            tau = self._check(tensions, "tensions", 0.0, self._tmax)
         else:
             tau = np.asarray(tensions, dtype=float)
         batch = tau.shape[:-1]
-        flat = np.ascontiguousarray(tau.reshape(-1, self.n_tendons))
+        flat = np.array(tau.reshape(-1, self.n_tendons), dtype=np.float64, order="C")  # a copy: the shape owns it
         B, n, m = flat.shape[0], self._n + 1, self.n_tendons
         P = np.empty((B, n, 3))
         Rs = np.empty((B, n, 3, 3))
@@ -296,14 +305,14 @@ class TendonRobot:
         tension *input*). Raises :class:`ConvergenceError` with the residual on failure.
         """
         if validate:
-            lim = self.displacement_limits
+            lim = self._dlim
             d = self._check(displacements, "displacements", lim[:, 0], lim[:, 1])
         else:
             d = np.asarray(displacements, dtype=float)
         batch = d.shape[:-1]
         flat = np.ascontiguousarray(d.reshape(-1, self.n_tendons))
         tau = self.tensions_for_displacements(flat, validate=False)
-        over = tau > self.tension_limits * (1 + 1e-9)
+        over = tau > self._tmax * (1 + 1e-9)
         if np.any(over):
             log.warning("displacements need tensions above max_tension in %d configuration(s)", int(np.any(over, -1).sum()))
         shape = self.solve_tensions(tau, validate=False)
@@ -313,7 +322,7 @@ class TendonRobot:
     def tensions_for_displacements(self, displacements, *, validate: bool = True) -> np.ndarray:
         """Tensions ``(..., m)`` [N] that realise tendon displacements ``(..., m)`` (see :meth:`solve_displacements`)."""
         if validate:
-            lim = self.displacement_limits
+            lim = self._dlim
             d = self._check(displacements, "displacements", lim[:, 0], lim[:, 1])
         else:
             d = np.asarray(displacements, dtype=float)
@@ -346,7 +355,7 @@ class TendonRobot:
     def tendon_lengths(self, tensions, *, validate: bool = True) -> np.ndarray:
         """Tendon path lengths ``l_i = int |v + u x r_i + r_i'| ds`` ``(..., m)`` [m] for tensions ``(..., m)``."""
         if validate:
-            tau = self._check(tensions, "tensions", 0.0, self.tension_limits)
+            tau = self._check(tensions, "tensions", 0.0, self._tmax)
         else:
             tau = np.asarray(tensions, dtype=float)
         batch = tau.shape[:-1]
@@ -364,7 +373,7 @@ class TendonRobot:
 
     def displacements_for_tensions(self, tensions, *, validate: bool = True) -> np.ndarray:
         """Actuator displacements ``d = l0 - l(tau) + tau / k`` ``(..., m)`` [m] that hold taut tendons at ``tensions``."""
-        tau = self._check(tensions, "tensions", 0.0, self.tension_limits) if validate else np.asarray(tensions, dtype=float)
+        tau = self._check(tensions, "tensions", 0.0, self._tmax) if validate else np.asarray(tensions, dtype=float)
         return self._l0 - self.tendon_lengths(tau, validate=False) + tau * self._kinv
 
     def _tensions_loaded(self, d) -> np.ndarray:

@@ -143,6 +143,17 @@ def test_clouds_lie_on_the_robot_and_spread_with_the_path(robot):
     assert spread.max() > 1e-4  # path dependence shows (play 0.5 mm per tendon)
 
 
+def test_clouds_in_base_frame_whatever_the_base_pose(robot):
+    """Moving the robot's base in the world does not change its data (cameras ride with the base)."""
+    moved = robot.with_base_pose((0.1, -0.2, 0.3), rpy=(0.3, -0.2, 0.5))
+    target = np.array([0.0, 0.02, 0.0, 0.01])
+    a = simulate_target(robot, TINY, target, seed=5)
+    b = simulate_target(moved, TINY, target, seed=5)
+    np.testing.assert_allclose(b["tips"], a["tips"], rtol=0, atol=1e-12)
+    # float32 clouds: equal up to float64 round-off crossing a float32 rounding boundary
+    np.testing.assert_allclose(b["points"], a["points"], rtol=0, atol=1e-6)
+
+
 def test_bad_input(robot, tmp_path):
     with pytest.raises(InvalidInputError, match="preset"):
         generate_dataset(robot, "enormous", tmp_path / "a.h5")

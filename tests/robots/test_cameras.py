@@ -131,5 +131,7 @@ def test_camera_roundtrip_and_bad_input():
         PinholeCamera((0, 0, 0), ((1, 0, 0), (0, 1, 0), (0, 0, 2)))
     with pytest.raises(InvalidInputError, match="fx"):
         PinholeCamera((0, 0, 0), ((1, 0, 0), (0, 1, 0), (0, 0, 1)), fx=-1.0)
+    with pytest.raises(InvalidInputError, match="camera"):
+        PinholeCamera.from_dict({**cam.to_dict(), "zoom": 2})
     with pytest.raises(InvalidInputError, match="up"):
         PinholeCamera.look_at((0, 0, 0), (0, 0, 1), up=(0, 0, 1))

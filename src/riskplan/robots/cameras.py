@@ -120,8 +120,14 @@ class PinholeCamera:
     @classmethod
     def from_dict(cls, d: dict) -> PinholeCamera:
         d = dict(d)
-        d["position"] = tuple(float(v) for v in d["position"])
-        d["rotation"] = tuple(tuple(float(v) for v in r) for r in d["rotation"])
+        unknown = set(d) - set(cls.__dataclass_fields__)
+        if unknown or "position" not in d or "rotation" not in d:
+            raise InvalidInputError(f"camera: expected keys {sorted(cls.__dataclass_fields__)}, got {sorted(d)}")
+        try:
+            d["position"] = tuple(float(v) for v in d["position"])
+            d["rotation"] = tuple(tuple(float(v) for v in r) for r in d["rotation"])
+        except (TypeError, ValueError) as exc:
+            raise InvalidInputError(f"camera: position/rotation must be numbers ({exc})") from exc
         return cls(**d)
 
     def pixel_footprint(self, depth: float) -> float:

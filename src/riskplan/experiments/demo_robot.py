@@ -64,25 +64,42 @@ def fig_shapes(robot, configs):
 
 
 def fig_clouds(points, tips, title: str):
-    """Fig. 3 analogue: one cloud (left) and all starts' clouds of the same target (right)."""
+    """Fig. 3 analogue: one cloud, all starts' clouds of the same target, and a zoom on the tip.
+
+    ``points (S, P, 3)``, ``tips (S, 3)`` of one target (base frame, m).
+    """
     import matplotlib.pyplot as plt
 
-    fig = plt.figure(figsize=(10, 5))
+    fig = plt.figure(figsize=(14, 4.8))
+    allp = points.reshape(-1, 3)
+    c = 0.5 * (allp.min(0) + allp.max(0))
+    h = 0.5 * (allp.max(0) - allp.min(0)).max()
     for k, (pts, ttl) in enumerate(((points[:1], "one start"), (points, f"all {len(points)} starts"))):
-        ax = fig.add_subplot(1, 2, k + 1, projection="3d")
+        ax = fig.add_subplot(1, 3, k + 1, projection="3d")
         for j, cloud in enumerate(pts):
             ax.scatter(cloud[:, 0], cloud[:, 1], cloud[:, 2], s=1.5, color=f"C{j}", alpha=0.7)
         ax.scatter(tips[: len(pts), 0], tips[: len(pts), 1], tips[: len(pts), 2], color="k", marker="x", s=20)
-        ax.set_title(f"{title}: {ttl}")
+        ax.set_title(f"{ttl}", fontsize=10)
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
         ax.set_zlabel("z [m]")
-        allp = points.reshape(-1, 3)
-        c = 0.5 * (allp.min(0) + allp.max(0))
-        h = 0.5 * (allp.max(0) - allp.min(0)).max()
         ax.set_xlim(c[0] - h, c[0] + h)
         ax.set_ylim(c[1] - h, c[1] + h)
         ax.set_zlim(c[2] - h, c[2] + h)
+    # zoom: points within 15 mm of the mean tip, seen from above (base x-y plane)
+    ax = fig.add_subplot(1, 3, 3)
+    mt = tips.mean(0)
+    for j, cloud in enumerate(points):
+        near = cloud[np.linalg.norm(cloud - mt, axis=1) < 0.015]
+        ax.scatter((near[:, 0] - mt[0]) * 1e3, (near[:, 1] - mt[1]) * 1e3, s=4, color=f"C{j}", alpha=0.7)
+    ax.scatter((tips[:, 0] - mt[0]) * 1e3, (tips[:, 1] - mt[1]) * 1e3, color="k", marker="x", s=30, label="true tips")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x - mean tip x [mm]")
+    ax.set_ylabel("y - mean tip y [mm]")
+    ax.set_title("near the tip (top view), one colour per start", fontsize=10)
+    ax.legend(fontsize=7)
+    fig.suptitle(title)
+    fig.subplots_adjust(wspace=0.35)
     return fig
 
 

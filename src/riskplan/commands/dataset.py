@@ -26,6 +26,7 @@ def summarize(path) -> dict:
     import numpy as np
 
     from riskplan.datasets import load_dataset
+    from riskplan.errors import RiskplanError
 
     ds = load_dataset(path)
     done = ds.done
@@ -55,6 +56,12 @@ def summarize(path) -> dict:
             centroid_spread_mm={"mean": float(cen_rms.mean() * 1e3), "max": float(cen_rms.max() * 1e3)},
             bbox_m={"min": pts.reshape(-1, 3).min(0).tolist(), "max": pts.reshape(-1, 3).max(0).tolist()},
         )
+        try:
+            tmax = np.asarray(ds.robot.tension_limits, dtype=np.float64)
+            over = np.any(ds.tensions[done] > tmax * (1 + 1e-9), axis=-1)
+            summary["arrivals_over_max_tension"] = float(over.mean())
+        except RiskplanError as exc:  # a robot file this version cannot rebuild must not stop the summary
+            summary["arrivals_over_max_tension"] = f"unknown ({exc})"
     return summary
 
 

@@ -23,6 +23,7 @@ def test_generate_both_splits_and_info(tmp_path):
     s = json.loads(r.output)
     assert s["configs_done"] == s["configs_total"] == 6 and s["robot"] == "paper" and s["seed"] == 2
     assert s["tip_spread_mm"]["max"] >= s["tip_spread_mm"]["mean"] > 0
+    assert 0.0 <= s["arrivals_over_max_tension"] <= 1.0
     r = runner.invoke(app, ["dataset", "info", str(te)])
     assert r.exit_code == 0 and "configs_done" in r.output
 

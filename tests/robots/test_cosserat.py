@@ -68,13 +68,51 @@ def test_equilibrium_residuals(paper):
     R = np.empty((n + 1, 3, 3))
     X = np.empty((n + 1, 6))
     L = np.empty(4)
-    assert C.shape_free(tau, paper._rt, paper._drt, paper._kse, paper._kbt, paper._L, n, 1e-12, 50, P, R, X, L) == C.OK
+    assert C.shape_free(tau, paper._rt, paper._drt, paper._ddrt, paper._kse, paper._kbt, paper._L, n, 1e-12, 50, P, R, X, L) == C.OK
     F = np.empty(6)
     z = np.zeros(3)
     for k in range(n + 1):
         e = C.local_residual(X[k], tau, paper._rt[2 * k], paper._drt[2 * k], z, z, paper._kse, paper._kbt, F)
         assert e <= 1e-11
     np.testing.assert_allclose(np.einsum("nji,njk->nik", R, R), np.broadcast_to(np.eye(3), R.shape), rtol=0, atol=1e-6)
+
+
+def test_hermite_midpoints_match_exact_midpoint_solves(paper):
+    """Fast kernel (strains solved at the step nodes, Hermite midpoints) == reference kernel
+    (strains solved at the half steps too): O(h^4) apart, and both converge to the same shape."""
+    tau = np.array([4.0, 0.0, 1.0, 12.0])
+
+    def run(robot, fn, *extra):
+        n = robot._n
+        P, R, X, L = np.empty((n + 1, 3)), np.empty((n + 1, 3, 3)), np.empty((n + 1, 6)), np.empty(4)
+        assert fn(tau, robot._rt, robot._drt, *extra, robot._kse, robot._kbt, robot._L, n, 1e-12, 50, P, R, X, L) == C.OK
+        return P, L
+
+    diffs, ldiffs = [], []
+    for n in (20, 40, 80):
+        r = with_step(paper, 0.2 / n)
+        Pf, Lf = run(r, C.shape_free, r._ddrt)
+        Pr, Lr = run(r, C.shape_free_exact_midpoints)
+        diffs.append(np.abs(Pf - Pr).max())
+        ldiffs.append(np.abs(Lf - Lr).max())
+    assert diffs[1] < 5e-6 and diffs[0] / diffs[1] > 10 and diffs[1] / diffs[2] > 10, diffs
+    assert ldiffs[1] < 1e-6 and ldiffs[0] / ldiffs[1] > 10 and ldiffs[1] / ldiffs[2] > 10, ldiffs
+
+
+def test_strain_slope_matches_finite_differences(paper):
+    """x'(s) from the implicit function theorem (R&W's ODE) == finite differences of local solves."""
+    tau = np.array([2.0, 0.5, 0.0, 9.0])
+    s = np.array([0.1 - 1e-6, 0.1, 0.1 + 1e-6])
+    X = C.strains_along(tau, paper._theta, paper._radius, paper._kse, paper._kbt, s, tol=1e-14)
+    fd = (X[2] - X[0]) / 2e-6
+    th, rc = paper._theta, paper._radius
+    rt, drt, ddrt = C.tendon_offset_table(th, rc, 0.2, 1)  # nodes at 0, 0.1, 0.2
+    Lf = np.empty((6, 6))
+    C.local_jacobian(X[1], tau, rt[1], drt[1], paper._kse, paper._kbt, Lf)
+    assert C._chol_factor6(Lf)
+    d = np.empty(6)
+    C._strain_slope(X[1], tau, rt[1], drt[1], ddrt[1], Lf, d)
+    np.testing.assert_allclose(d, fd, rtol=1e-5, atol=1e-6)
 
 
 def test_jacobian_matches_finite_differences(paper, rng):

@@ -86,15 +86,29 @@ def tendon_offsets(theta_c, radius_c, s, rt, drt):
 
 
 def tendon_offset_table(theta_c, radius_c, length, n_steps):
-    """Offsets ``r_i``, ``r_i'`` at the ``2 n + 1`` RK4 nodes (steps and half steps): two arrays ``(2n+1, m, 3)``."""
+    """Offsets ``r_i``, ``r_i'``, ``r_i''`` at the ``2 n + 1`` RK4 nodes (steps and half steps):
+    three arrays ``(2n+1, m, 3)``."""
     n_nodes = 2 * n_steps + 1
     m = theta_c.shape[0]
     rt_all = np.empty((n_nodes, m, 3))
     drt_all = np.empty((n_nodes, m, 3))
+    ddrt_all = np.zeros((n_nodes, m, 3))
     h = length / n_steps
+    P = np.polynomial.polynomial
     for j in range(n_nodes):
         tendon_offsets(theta_c, radius_c, j * 0.5 * h, rt_all[j], drt_all[j])
-    return rt_all, drt_all
+    s = np.arange(n_nodes) * 0.5 * h
+    for i in range(m):
+        th = P.polyval(s, theta_c[i])
+        d1 = P.polyval(s, P.polyder(theta_c[i])) if theta_c.shape[1] > 1 else 0 * s
+        d2 = P.polyval(s, P.polyder(theta_c[i], 2)) if theta_c.shape[1] > 2 else 0 * s
+        rho = P.polyval(s, radius_c[i])
+        r1 = P.polyval(s, P.polyder(radius_c[i])) if radius_c.shape[1] > 1 else 0 * s
+        r2 = P.polyval(s, P.polyder(radius_c[i], 2)) if radius_c.shape[1] > 2 else 0 * s
+        c, sn = np.cos(th), np.sin(th)
+        ddrt_all[:, i, 0] = r2 * c - 2 * r1 * d1 * sn - rho * d2 * sn - rho * d1 * d1 * c
+        ddrt_all[:, i, 1] = r2 * sn + 2 * r1 * d1 * c + rho * d2 * c - rho * d1 * d1 * sn
+    return rt_all, drt_all, ddrt_all
 
 
 @njit(cache=True)
@@ -434,8 +448,10 @@ def _predict(xa, xb, xc, nhist, out):
 
 
 @njit(cache=True)
-def shape_free(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, x_out, lengths):
-    """Shape under tendon tensions ``tau (m,)`` without external loads (no shooting).
+def shape_free_exact_midpoints(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, x_out, lengths):
+    """Reference variant of :func:`shape_free` that solves (2)-(3) at the half steps too.
+
+    Shape under tendon tensions ``tau (m,)`` without external loads (no shooting).
 
     Outputs: ``p_out (n+1, 3)``, ``R_out (n+1, 3, 3)`` in the base frame, strains
     ``x_out (n+1, 6)`` and tendon path lengths ``lengths (m,)``. Returns a status code.
@@ -502,13 +518,135 @@ def shape_free(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, p_ou
 
 
 @njit(cache=True)
-def shape_free_batch(taus, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, lengths_out, status):
+def _strain_slope(x, tau, rt, drt, ddrt, L, out):
+    """``x'(s) = -J^{-1} dF/ds`` at a solution ``x`` of (2)-(3) (implicit function theorem);
+    ``L`` is the Cholesky factor of the Jacobian at ``x``. This is R&W's ODE for ``v', u'``."""
+    for a in range(6):
+        out[a] = 0.0
+    for i in range(tau.shape[0]):
+        ti = tau[i]
+        if ti == 0.0:
+            continue
+        r0 = rt[i, 0]
+        r1 = rt[i, 1]
+        r2 = rt[i, 2]
+        q0 = drt[i, 0]
+        q1 = drt[i, 1]
+        q2 = drt[i, 2]
+        w0 = x[0] + x[4] * r2 - x[5] * r1 + q0
+        w1 = x[1] + x[5] * r0 - x[3] * r2 + q1
+        w2 = x[2] + x[3] * r1 - x[4] * r0 + q2
+        nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        t0 = w0 / nw
+        t1 = w1 / nw
+        t2 = w2 / nw
+        # dw/ds at fixed strains: u x r' + r''
+        e0 = x[4] * q2 - x[5] * q1 + ddrt[i, 0]
+        e1 = x[5] * q0 - x[3] * q2 + ddrt[i, 1]
+        e2 = x[3] * q1 - x[4] * q0 + ddrt[i, 2]
+        td = t0 * e0 + t1 * e1 + t2 * e2
+        g0 = (e0 - t0 * td) / nw
+        g1 = (e1 - t1 * td) / nw
+        g2 = (e2 - t2 * td) / nw
+        out[0] -= ti * g0
+        out[1] -= ti * g1
+        out[2] -= ti * g2
+        out[3] -= ti * (q1 * t2 - q2 * t1 + r1 * g2 - r2 * g1)
+        out[4] -= ti * (q2 * t0 - q0 * t2 + r2 * g0 - r0 * g2)
+        out[5] -= ti * (q0 * t1 - q1 * t0 + r0 * g1 - r1 * g0)
+    _chol_solve6(L, out)
+
+
+@njit(cache=True)
+def shape_free(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, x_out, lengths):
+    """Shape under tendon tensions ``tau (m,)`` without external loads (no shooting).
+
+    Strains solve (2)-(3) at the step nodes only; their slopes ``x'`` follow from the implicit
+    function theorem (:func:`_strain_slope`), and the half-step strains RK4 needs come from the
+    cubic Hermite interpolant ``x_m = (x_0 + x_1)/2 + h (x_0' - x_1')/8`` (error O(h^4), so the
+    pass stays 4th order). The next node's Newton start is the Hermite extrapolation
+    ``5 x_{k-1} + 2h x'_{k-1} - 4 x_k + 4h x'_k``; Newton reuses the fresh factor of the
+    previous node (chord) and refactors only if it converges slowly.
+
+    Outputs: ``p_out (n+1, 3)``, ``R_out (n+1, 3, 3)`` (base frame), strains ``x_out (n+1, 6)``,
+    tendon path lengths ``lengths (m,)`` (Simpson). Returns a status code.
+    """
+    m = tau.shape[0]
+    h = length / n_steps
+    F = np.empty(6)
+    L = np.empty((6, 6))
+    fac = np.zeros(1, dtype=np.int64)
+    zero = np.zeros(3)
+    sp = np.empty(m)
+    x0 = np.zeros(6)
+    x0[2] = 1.0
+    d0 = np.empty(6)
+    xa = np.empty(6)  # previous node and its slope, for the predictor
+    da = np.empty(6)
+    x1 = np.empty(6)
+    d1 = np.empty(6)
+    xm = np.empty(6)
+    if local_strains_chord(x0, tau, rt_all[0], drt_all[0], zero, zero, kse, kbt, tol, maxit, F, L, fac) < 0:
+        return LOCAL_FAIL
+    local_jacobian(x0, tau, rt_all[0], drt_all[0], kse, kbt, L)
+    if not _chol_factor6(L):
+        return LOCAL_FAIL
+    fac[0] = 1
+    for a in range(6):
+        d0[a] = F[a]
+    _strain_slope(x0, tau, rt_all[0], drt_all[0], ddrt_all[0], L, d0)
+    for a in range(3):
+        p_out[0, a] = 0.0
+        for b in range(3):
+            R_out[0, a, b] = 1.0 if a == b else 0.0
+    for a in range(6):
+        x_out[0, a] = x0[a]
+    _tendon_speeds(x0, rt_all[0], drt_all[0], sp)
+    for i in range(m):
+        lengths[i] = sp[i]
+    for k in range(n_steps):
+        j1 = 2 * k + 2
+        for a in range(6):
+            if k == 0:
+                x1[a] = x0[a] + h * d0[a]
+            else:
+                x1[a] = 5.0 * xa[a] + 2.0 * h * da[a] - 4.0 * x0[a] + 4.0 * h * d0[a]
+        if local_strains_chord(x1, tau, rt_all[j1], drt_all[j1], zero, zero, kse, kbt, tol, maxit, F, L, fac) < 0:
+            return LOCAL_FAIL
+        local_jacobian(x1, tau, rt_all[j1], drt_all[j1], kse, kbt, L)
+        if not _chol_factor6(L):
+            return LOCAL_FAIL
+        fac[0] = 1
+        _strain_slope(x1, tau, rt_all[j1], drt_all[j1], ddrt_all[j1], L, d1)
+        for a in range(6):
+            xm[a] = 0.5 * (x0[a] + x1[a]) + 0.125 * h * (d0[a] - d1[a])
+        _tendon_speeds(xm, rt_all[j1 - 1], drt_all[j1 - 1], sp)
+        for i in range(m):
+            lengths[i] += 4.0 * sp[i]
+        _tendon_speeds(x1, rt_all[j1], drt_all[j1], sp)
+        w = 2.0 if k < n_steps - 1 else 1.0
+        for i in range(m):
+            lengths[i] += w * sp[i]
+        _rk4_pose_step(p_out[k], R_out[k], x0, xm, x1, h, p_out[k + 1], R_out[k + 1])
+        for a in range(6):
+            x_out[k + 1, a] = x1[a]
+            xa[a] = x0[a]
+            da[a] = d0[a]
+            x0[a] = x1[a]
+            d0[a] = d1[a]
+    for i in range(m):
+        lengths[i] *= h / 6.0
+    return OK
+
+
+@njit(cache=True)
+def shape_free_batch(taus, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, lengths_out, status):
     """Batched :func:`shape_free`: ``taus (B, m)`` -> ``p_out (B, n+1, 3)``, ``R_out (B, n+1, 3, 3)``."""
     B = taus.shape[0]
     x_out = np.empty((n_steps + 1, 6))
     for b in range(B):
         status[b] = shape_free(
-            taus[b], rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, p_out[b], R_out[b], x_out, lengths_out[b]
+            taus[b], rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, p_out[b], R_out[b], x_out, lengths_out[b]
         )
 
 

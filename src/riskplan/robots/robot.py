@@ -104,7 +104,7 @@ class TendonRobot:
         self._L = bb.length
         self._theta = _poly_table([t.theta for t in params.tendons])
         self._radius = _poly_table([t.radius for t in params.tendons])
-        self._rt, self._drt = cosserat.tendon_offset_table(self._theta, self._radius, self._L, self._n)
+        self._rt, self._drt, self._ddrt = cosserat.tendon_offset_table(self._theta, self._radius, self._L, self._n)
         self._kse = bb.kse
         self._kbt = bb.kbt
         self._kinv = np.array([0.0 if math.isinf(t.stiffness) else 1.0 / t.stiffness for t in params.tendons])
@@ -241,7 +241,7 @@ class TendonRobot:
             lengths = np.empty((B, m))
             status = np.empty(B, dtype=np.int64)
             cosserat.shape_free_batch(
-                flat, self._rt, self._drt, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, lengths, status
+                flat, self._rt, self._drt, self._ddrt, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, lengths, status
             )
             bad = np.flatnonzero(status != cosserat.OK)
             if bad.size:
@@ -264,7 +264,7 @@ class TendonRobot:
         Rs = np.empty((n + 1, 3, 3))
         X = np.empty((n + 1, 6))
         lengths = np.empty(m)
-        if cosserat.shape_free(tau, self._rt, self._drt, self._kse, self._kbt, L, n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths) != cosserat.OK:
+        if cosserat.shape_free(tau, self._rt, self._drt, self._ddrt, self._kse, self._kbt, L, n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths) != cosserat.OK:
             raise ConvergenceError(f"local strain solve failed for tensions {tau.tolist()}")
         mid = 0.5 * (P[1:] + P[:-1])
         M0 = np.cross(mid - P[0], f).sum(0) * (L / n)

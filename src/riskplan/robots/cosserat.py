@@ -663,7 +663,8 @@ def lengths_and_jacobian(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, m
     n_nodes = 2 * n_steps + 1
     F = np.empty(6)
     J = np.empty((6, 6))
-    rhs = np.empty((6, 1))
+    fac = np.zeros(1, dtype=np.int64)
+    col = np.empty(6)
     S = np.empty((6, m))
     G = np.empty((6, m))
     zero = np.zeros(3)
@@ -685,9 +686,12 @@ def lengths_and_jacobian(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, m
         else:
             for a in range(6):
                 xprev[a] = x[a]
-        if local_strains(x, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, rhs) < 0:
+        if local_strains_chord(x, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, fac) < 0:
             return LOCAL_FAIL
-        local_residual_jacobian(x, tau, rt, drt, zero, zero, kse, kbt, F, J)
+        local_jacobian(x, tau, rt, drt, kse, kbt, J)
+        if not _chol_factor6(J):
+            return LOCAL_FAIL
+        fac[0] = 1
         if node == 0 or node == n_nodes - 1:
             wgt = h / 6.0
         elif node % 2 == 1:
@@ -714,8 +718,12 @@ def lengths_and_jacobian(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, m
             G[5, i] = r0 * t1 - r1 * t0
             for a in range(6):
                 S[a, i] = -G[a, i]
-        if not _gauss_solve(J, S, 6, m):
-            return LOCAL_FAIL
+        for j in range(m):
+            for a in range(6):
+                col[a] = S[a, j]
+            _chol_solve6(J, col)
+            for a in range(6):
+                S[a, j] = col[a]
         for i in range(m):
             for j in range(m):
                 acc = 0.0

@@ -305,13 +305,6 @@ def local_jacobian(x, tau, rt, drt, kse, kbt, J):
 
 
 @njit(cache=True)
-def local_residual_jacobian(x, tau, rt, drt, nb, mb, kse, kbt, F, J):
-    """Residual (eqs. 2-3) and Jacobian at ``x``; see :func:`local_residual`, :func:`local_jacobian`."""
-    local_residual(x, tau, rt, drt, nb, mb, kse, kbt, F)
-    local_jacobian(x, tau, rt, drt, kse, kbt, J)
-
-
-@njit(cache=True)
 def local_strains(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, J, rhs):
     """Newton solve of eqs. (2)-(3) for ``x = (v, u)`` in place (``x`` is the warm start).
 

@@ -251,6 +251,9 @@ class TendonRobot:
                 Y = self._shoot(flat[b])
                 P[b] = Y[:, 0:3]
                 Rs[b] = Y[:, 3:12].reshape(n, 3, 3)
+        if not np.isfinite(P).all():  # never hand out NaN silently
+            b = int(np.flatnonzero(~np.isfinite(P).reshape(B, -1).all(-1))[0])
+            raise ConvergenceError(f"non-finite shape for tensions {flat[b].tolist()}")
         return self._to_world(P, Rs, flat, batch)
 
     def _shoot(self, tau) -> np.ndarray:

@@ -66,7 +66,18 @@ def save_model(model: MDNModel, path) -> Path:
         **{k: v for k, v in model.metadata.items() if k not in _RESERVED},
     }
     write_json_atomic(path / META_NAME, meta)
+    for name in (WEIGHTS_NAME, META_NAME):
+        _usual_permissions(path / name)
     return path
+
+
+def _usual_permissions(path: Path) -> None:
+    """Atomic writes go through ``mkstemp`` (mode 0600); give the file the usual ``0666 & ~umask``."""
+    import os
+
+    mask = os.umask(0)
+    os.umask(mask)
+    os.chmod(path, 0o666 & ~mask)
 
 
 def load_model(path, robot=None) -> MDNModel:

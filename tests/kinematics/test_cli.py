@@ -37,3 +37,21 @@ def test_predict_bad_input_is_clean_error(trained):
     r = runner.invoke(app, ["predict", "--model", str(out), "--displacements", "0.01,0.02,0.03"])
     assert r.exit_code != 0
     assert isinstance(r.exception, InvalidInputError)
+
+
+def test_sweep_cli(synth_small, tmp_path):
+    out = tmp_path / "sw"
+    r = runner.invoke(app, ["sweep", "--data", str(synth_small), "--test", str(synth_small), "--components", "1,2",
+                            "--out", str(out), "--epochs", "2", "--hidden", "8", "--head-hidden", ""])
+    assert r.exit_code == 0, r.output
+    obj = json.loads((out / "sweep.json").read_text())
+    assert obj["components"] == [1, 2] and obj["recommended_components"] in (1, 2)
+    assert (out / "fig4_nll_vs_k.png").is_file()
+
+
+def test_train_on_missing_data_is_clean_error(tmp_path):
+    from riskplan.errors import DataFormatError
+
+    r = runner.invoke(app, ["train", "--data", str(tmp_path / "none.h5"), "--out", str(tmp_path / "m")])
+    assert r.exit_code != 0 and isinstance(r.exception, DataFormatError)
+    assert not (tmp_path / "m").exists()

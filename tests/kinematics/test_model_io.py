@@ -98,3 +98,25 @@ def test_roundtrip_float32_model(synth_small, rng, tmp_path):
     for name in ("weights", "means", "precision_cholesky"):
         assert torch.equal(getattr(res.model.predict(d), name), getattr(loaded.predict(d), name))
         assert torch.equal(getattr(res.model.predict(d, dtype=torch.float32), name), getattr(loaded.predict(d, dtype=torch.float32), name))
+
+
+def test_model_of_the_paper_robot(tmp_path, rng):
+    """Data made with a real robot file: limits and ``model.robot`` come from that robot."""
+    from riskplan.errors import InvalidInputError
+    from riskplan.kinematics.data import read_point_clouds, write_synthetic_dataset
+    from riskplan.kinematics.training import TrainConfig, train
+    from riskplan.robots import load_robot
+
+    robot = load_robot("paper")
+    lim = robot.displacement_limits
+    d = rng.uniform(lim[:, 0], lim[:, 1], size=(8, robot.n_tendons))
+    pts = rng.normal(size=(8, 1, 16, 3)) * 0.01
+    path = write_synthetic_dataset(tmp_path / "p.h5", d, pts, robot_toml=robot.toml_text(), robot_name=robot.name)
+    data = read_point_clouds(path)
+    np.testing.assert_array_equal(data.limits, lim)
+    train(data, TrainConfig(n_components=2, epochs=1, hidden=(8,), head_hidden=()), out=tmp_path / "m")
+    m = load_model(tmp_path / "m", robot=robot)
+    assert m.robot.name == "paper" and m.robot.n_tendons == m.n_tendons
+    m.predict(lim[:, 1])  # the robot's own limits are accepted, slightly beyond them is not
+    with pytest.raises(InvalidInputError, match="limits"):
+        m.predict(lim[:, 1] + 1e-4)

@@ -245,11 +245,19 @@ class MDNModel:
 
     @property
     def robot(self):
-        """The robot rebuilt from the TOML stored with the model (``None`` if it cannot be)."""
+        """The robot rebuilt from the TOML stored with the model (a ``TendonRobot``).
+
+        ``None`` if the model stores no robot description or ``riskplan.robots`` is not
+        installed; :class:`DataFormatError` if the stored description cannot be rebuilt.
+        """
         if self._robot is None and self.robot_toml:
+            from riskplan.errors import DataFormatError, RiskplanError
             from riskplan.kinematics.data import robot_from_toml
 
-            self._robot = robot_from_toml(self.robot_toml)
+            try:
+                self._robot = robot_from_toml(self.robot_toml)
+            except RiskplanError as exc:
+                raise DataFormatError(f"the model's robot {self.robot_name!r} cannot be rebuilt from its stored description: {exc}") from exc
         return self._robot
 
     # ----------------------------------------------------------- validation

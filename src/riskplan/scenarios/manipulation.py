@@ -28,7 +28,6 @@ inside the other).
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -37,6 +36,7 @@ from riskplan._validation import as_array, as_generator
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
 from riskplan.scenarios import _geometry as geo
 from riskplan.scenarios.simulator import (
+    FEMScenario,
     SimParams,
     SimState,
     apply_actuation_noise,
@@ -180,7 +180,7 @@ class _MeshData:
         self.manipulator_slice = slice(1 + nb, 1 + nb + len(cfg.manipulators))
 
 
-class ManipulationScenario:
+class ManipulationScenario(FEMScenario):
     """The internal-point manipulation scenario as a
     :class:`~riskplan.scenarios.simulator.Simulator`.
 
@@ -189,11 +189,11 @@ class ManipulationScenario:
     """
 
     name = "manipulation"
+    state_type = ManipulationState
 
     def __init__(self, config: ManipulationConfig | None = None, distribution=None, cache_size: int = 16):
-        self.config = config or ManipulationConfig()
+        super().__init__(config or ManipulationConfig(), distribution, cache_size)
         cfg = self.config
-        self.distribution = distribution
         m = len(cfg.manipulators)
         self.control_dim = 2 * m
         self.state_dim = 2 + 2 * cfg.n_boundary
@@ -208,17 +208,6 @@ class ManipulationScenario:
         cov = cfg.sensing_std**2 * np.eye(self.obs_dim)
         cov.setflags(write=False)
         self.sensing_cov = cov
-        self._models: OrderedDict = OrderedDict()
-        self._meshes: dict = {}
-        self._cache_size = int(cache_size)
-
-    def __getstate__(self):
-        # caches hold factorisations (not picklable) and are cheap to rebuild: a scenario
-        # sent to a worker process travels as its configuration only
-        state = self.__dict__.copy()
-        state["_models"] = OrderedDict()
-        state["_meshes"] = {}
-        return state
 
     # ---- protocol ------------------------------------------------------------------
     @property
@@ -226,46 +215,21 @@ class ManipulationScenario:
         """``(6, 2)``: ``[−f_max, f_max]`` for every force component."""
         return self._bounds
 
-    @property
-    def nominal_params(self) -> SimParams:
-        if self.distribution is not None:
-            return self.distribution.planning_params
-        return SimParams()
-
     def actuation_cov(self) -> tuple:
         """Default actuation noise for this scenario: ``(0.1 f_max)²`` per component."""
         s2 = (0.1 * self.config.f_max) ** 2
         return tuple(tuple(s2 if i == j else 0.0 for j in range(self.control_dim)) for i in range(self.control_dim))
 
-    def sample_params(self, seed=None) -> SimParams:
-        if self.distribution is None:
-            return self.nominal_params
-        return self.distribution.sample(seed)
+    def _make_mesh_data(self, n_elements: int) -> _MeshData:
+        return _MeshData(self.config, n_elements)
 
-    def mesh_data(self, n_elements: int) -> _MeshData:
-        """Mesh, patch weights and interpolators for an element count (cached)."""
-        d = self._meshes.get(n_elements)
-        if d is None:
-            d = self._meshes[n_elements] = _MeshData(self.config, n_elements)
-        return d
-
-    def model(self, params: SimParams | None = None):
-        """The cached neo-Hookean model for ``params``."""
+    def _make_model(self, params: SimParams):
+        """The neo-Hookean model of the object for ``params``."""
         from riskplan.deformable import Material, NeoHookeanModel
 
-        params = params or self.nominal_params
-        key = params.material_key
-        m = self._models.get(key)
-        if m is None:
-            d = self.mesh_data(params.n_elements)
-            material = Material(params.youngs_modulus, params.poissons_ratio, plane=self.config.plane)
-            m = NeoHookeanModel(d.mesh, material, d.fixed)
-            self._models[key] = m
-            if len(self._models) > self._cache_size:
-                self._models.popitem(last=False)
-        else:
-            self._models.move_to_end(key)
-        return m
+        d = self.mesh_data(params.n_elements)
+        material = Material(params.youngs_modulus, params.poissons_ratio, plane=self.config.plane)
+        return NeoHookeanModel(d.mesh, material, d.fixed)
 
     def initial_state(self, params: SimParams | None = None) -> ManipulationState:
         """Undeformed object, no forces, ``t = 0``."""
@@ -277,14 +241,6 @@ class ManipulationScenario:
             n_elements=params.n_elements,
             forces=np.zeros((len(self.config.manipulators), 2)),
         )
-
-    def _check_state(self, state, params: SimParams) -> None:
-        if not isinstance(state, ManipulationState):
-            raise InvalidInputError(f"state: expected a ManipulationState, got {type(state).__name__}")
-        if state.n_elements != params.n_elements:
-            raise InvalidInputError(
-                f"state: lives on a {state.n_elements}-element mesh but params.n_elements = {params.n_elements}"
-            )
 
     def nodal_forces(self, state: ManipulationState) -> np.ndarray:
         """Consistent nodal forces ``(n_nodes, 2)`` of the forces applied in ``state``
@@ -334,14 +290,6 @@ class ManipulationScenario:
         return self.observation_matrix @ x + gaussian_noise(self.sensing_cov, noise, rng, self.obs_dim)
 
     # ---- geometry of a state ------------------------------------------------------------
-    def _data(self, state) -> _MeshData:
-        if not isinstance(state, ManipulationState):
-            raise InvalidInputError(f"state: expected a ManipulationState, got {type(state).__name__}")
-        return self.mesh_data(state.n_elements)
-
-    def _points(self, state) -> np.ndarray:
-        return self._data(state).interp.positions(state.displacement)
-
     def target(self, state) -> np.ndarray:
         """Current target position ``(2,)``."""
         return self._points(state)[0]
@@ -358,10 +306,6 @@ class ManipulationScenario:
         """The deformed boundary polygon ``(B, 2)`` (all boundary nodes, CCW)."""
         d = self._data(state)
         return d.mesh.nodes[d.loop] + state.displacement[d.loop]
-
-    def deformed_nodes(self, state) -> np.ndarray:
-        """Current node positions ``(n_nodes, 2)``."""
-        return self._data(state).mesh.nodes + state.displacement
 
     def obstacles(self, state=None) -> list[np.ndarray]:
         """The static obstacle (a list with one polygon)."""

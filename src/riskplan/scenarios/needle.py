@@ -35,7 +35,6 @@ Reduced state ``x = (x, y, θ)``; sensing ``z = (x, y) + n``, ``n ~ N(0, σ² I)
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -44,6 +43,7 @@ from riskplan._validation import as_array
 from riskplan.errors import InvalidInputError
 from riskplan.scenarios import _geometry as geo
 from riskplan.scenarios.simulator import (
+    FEMScenario,
     SimParams,
     SimState,
     apply_actuation_noise,
@@ -194,7 +194,7 @@ class _NeedleModel:
         return self.model.solve_flat(f).reshape(-1, 2)
 
 
-class NeedleScenario:
+class NeedleScenario(FEMScenario):
     """The needle / car scenario as a :class:`~riskplan.scenarios.simulator.Simulator`.
 
     Parameters
@@ -212,15 +212,12 @@ class NeedleScenario:
     state_dim = 3
     obs_dim = 2
     name = "needle"
+    state_type = NeedleState
 
     def __init__(self, config: NeedleConfig | None = None, distribution=None, cache_size: int = 32):
-        self.config = config or NeedleConfig()
-        self.distribution = distribution
+        super().__init__(config or NeedleConfig(), distribution, cache_size)
         self._bounds = np.array([[0.0, self.config.v_max], [-self.config.phi_max, self.config.phi_max]])
         self._bounds.setflags(write=False)
-        self._models: OrderedDict = OrderedDict()
-        self._meshes: dict = {}
-        self._cache_size = int(cache_size)
         H = np.zeros((2, 3))
         H[0, 0] = H[1, 1] = 1.0
         H.setflags(write=False)
@@ -229,53 +226,17 @@ class NeedleScenario:
         cov.setflags(write=False)
         self.sensing_cov = cov
 
-    def __getstate__(self):
-        # caches hold factorisations (not picklable) and are cheap to rebuild: a scenario
-        # sent to a worker process travels as its configuration only
-        state = self.__dict__.copy()
-        state["_models"] = OrderedDict()
-        state["_meshes"] = {}
-        return state
-
     # ---- protocol ------------------------------------------------------------------
     @property
     def control_bounds(self) -> np.ndarray:
         """``[[0, v_max], [−φ_max, φ_max]]``."""
         return self._bounds
 
-    @property
-    def nominal_params(self) -> SimParams:
-        """E = 50, ν = 0.4, 175 elements, f_int = 1, no actuation noise."""
-        if self.distribution is not None:
-            return self.distribution.planning_params
-        return SimParams()
+    def _make_mesh_data(self, n_elements: int) -> _MeshData:
+        return _MeshData(self.config, n_elements)
 
-    def sample_params(self, seed=None) -> SimParams:
-        """One draw from ``distribution`` (the nominal parameters if there is none)."""
-        if self.distribution is None:
-            return self.nominal_params
-        return self.distribution.sample(seed)
-
-    def mesh_data(self, n_elements: int) -> _MeshData:
-        """Mesh, locator and interpolators for an element count (cached)."""
-        d = self._meshes.get(n_elements)
-        if d is None:
-            d = self._meshes[n_elements] = _MeshData(self.config, n_elements)
-        return d
-
-    def model(self, params: SimParams | None = None) -> _NeedleModel:
-        """The cached FEM model for ``params`` (built on first use)."""
-        params = params or self.nominal_params
-        key = params.material_key
-        m = self._models.get(key)
-        if m is None:
-            m = _NeedleModel(self.mesh_data(params.n_elements), params, self.config.plane)
-            self._models[key] = m
-            if len(self._models) > self._cache_size:
-                self._models.popitem(last=False)
-        else:
-            self._models.move_to_end(key)
-        return m
+    def _make_model(self, params: SimParams) -> _NeedleModel:
+        return _NeedleModel(self.mesh_data(params.n_elements), params, self.config.plane)
 
     def initial_state(self, params: SimParams | None = None, pose=None) -> NeedleState:
         """Robot at ``config.start`` (or ``pose (3,)``), undeformed tissue, ``t = 0``."""
@@ -284,14 +245,6 @@ class NeedleScenario:
         p = self.config.start if pose is None else pose
         p = as_array(p, "pose", shape=(3,))
         return NeedleState(t=0, displacement=np.zeros((d.mesh.n_nodes, 2)), n_elements=params.n_elements, pose=p)
-
-    def _check_state(self, state, params: SimParams) -> None:
-        if not isinstance(state, NeedleState):
-            raise InvalidInputError(f"state: expected a NeedleState, got {type(state).__name__}")
-        if state.n_elements != params.n_elements:
-            raise InvalidInputError(
-                f"state: lives on a {state.n_elements}-element mesh but params.n_elements = {params.n_elements}"
-            )
 
     def step(self, state: NeedleState, control, params: SimParams | None = None) -> NeedleState:
         """``y_{t+1} = g(y_t, u_t, s)`` (paper eq. 1 with the V-A car and a linear FEM).
@@ -352,14 +305,6 @@ class NeedleScenario:
         return self.observation_matrix @ x + gaussian_noise(self.sensing_cov, noise, rng, 2)
 
     # ---- geometry of a state -----------------------------------------------------------
-    def _data(self, state) -> _MeshData:
-        if not isinstance(state, NeedleState):
-            raise InvalidInputError(f"state: expected a NeedleState, got {type(state).__name__}")
-        return self.mesh_data(state.n_elements)
-
-    def _points(self, state: NeedleState) -> np.ndarray:
-        return self._data(state).interp.positions(state.displacement)
-
     def obstacles(self, state: NeedleState) -> list[np.ndarray]:
         """Deformed obstacle polygons ``[(k_i, 2)]`` in ``state``."""
         pts = self._points(state)
@@ -396,10 +341,6 @@ class NeedleScenario:
     def goal_distance(self, state: NeedleState) -> float:
         """Distance from the robot to the (deformed) goal centre."""
         return float(np.linalg.norm(state.pose[:2] - self.goal_center(state)))
-
-    def deformed_nodes(self, state: NeedleState) -> np.ndarray:
-        """Current node positions ``(n_nodes, 2)``."""
-        return self._data(state).mesh.nodes + state.displacement
 
     def path(self, states) -> np.ndarray:
         """Robot positions ``(T, 2)`` along a list of states."""

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Protocol, runtime_checkable
@@ -43,6 +44,7 @@ __all__ = [
     "SimParams",
     "SimState",
     "Simulator",
+    "FEMScenario",
     "frozen_array",
     "rollout",
     "actuation_noise",
@@ -210,6 +212,93 @@ class SimState:
             elif a != b:
                 return False
         return True
+
+
+
+class FEMScenario:
+    """Machinery shared by the FEM-backed scenarios: the parameter distribution S, per-mesh
+    data (mesh, loads, interpolators) and a small LRU cache of FEM models.
+
+    Subclasses set ``name`` and ``state_type`` and implement ``_make_mesh_data(n_elements)``
+    and ``_make_model(params)``. Caches hold factorisations, which are not picklable and are
+    cheap to rebuild, so a scenario sent to a worker process travels as its configuration only.
+    """
+
+    name: str = ""
+    state_type: type = SimState
+
+    def __init__(self, config, distribution=None, cache_size: int = 16):
+        self.config = config
+        self.distribution = distribution
+        self._models: OrderedDict = OrderedDict()
+        self._meshes: dict = {}
+        self._cache_size = int(cache_size)
+
+    def __getstate__(self):
+        state = self.__dict__.copy()
+        state["_models"] = OrderedDict()
+        state["_meshes"] = {}
+        return state
+
+    @property
+    def nominal_params(self) -> SimParams:
+        """The planning parameters of ``distribution`` (E = 50, nu = 0.4, 175 elements, f_int = 1,
+        no actuation noise when there is none)."""
+        if self.distribution is not None:
+            return self.distribution.planning_params
+        return SimParams()
+
+    def sample_params(self, seed=None) -> SimParams:
+        """One draw from ``distribution`` (the nominal parameters if there is none)."""
+        if self.distribution is None:
+            return self.nominal_params
+        return self.distribution.sample(seed)
+
+    def mesh_data(self, n_elements: int):
+        """Mesh, loads and interpolators for an element count (cached)."""
+        d = self._meshes.get(n_elements)
+        if d is None:
+            d = self._meshes[n_elements] = self._make_mesh_data(n_elements)
+        return d
+
+    def model(self, params: SimParams | None = None):
+        """The cached FEM model for ``params`` (built on first use, least recently used dropped)."""
+        params = params or self.nominal_params
+        key = params.material_key
+        m = self._models.get(key)
+        if m is None:
+            m = self._models[key] = self._make_model(params)
+            if len(self._models) > self._cache_size:
+                self._models.popitem(last=False)
+        else:
+            self._models.move_to_end(key)
+        return m
+
+    def _make_mesh_data(self, n_elements: int):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _make_model(self, params: SimParams):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _check_state(self, state, params: SimParams) -> None:
+        if not isinstance(state, self.state_type):
+            raise InvalidInputError(f"state: expected a {self.state_type.__name__}, got {type(state).__name__}")
+        if state.n_elements != params.n_elements:
+            raise InvalidInputError(
+                f"state: lives on a {state.n_elements}-element mesh but params.n_elements = {params.n_elements}"
+            )
+
+    def _data(self, state):
+        if not isinstance(state, self.state_type):
+            raise InvalidInputError(f"state: expected a {self.state_type.__name__}, got {type(state).__name__}")
+        return self.mesh_data(state.n_elements)
+
+    def _points(self, state) -> np.ndarray:
+        return self._data(state).interp.positions(state.displacement)
+
+    def deformed_nodes(self, state) -> np.ndarray:
+        """Current node positions ``(n_nodes, 2)``."""
+        return self._data(state).mesh.nodes + state.displacement
 
 
 @runtime_checkable

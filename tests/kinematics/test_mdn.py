@@ -82,6 +82,17 @@ def test_predict_batch_equals_loop(rng, tol):
                 np.testing.assert_allclose(getattr(one, name).numpy(), getattr(batched, name).numpy()[i, j], **tol["float64_exact"])
 
 
+def test_large_batch_equals_loop(rng):
+    """From 256 rows on the SiLU uses another (faster) formula; results agree to rounding."""
+    m = _model(rng)
+    d = rng.uniform(-0.01, 0.04, size=(300, 4))
+    big = m.predict(d)
+    for i in (0, 137, 299):
+        one = m.predict(d[i])
+        for name in ("weights", "means", "precision_cholesky"):
+            np.testing.assert_allclose(getattr(big, name).numpy()[i], getattr(one, name).numpy(), rtol=1e-12, atol=1e-15)
+
+
 def test_predict_float32_and_float64(rng, tol):
     m = _model(rng)
     d = rng.uniform(-0.01, 0.04, size=(5, 4))

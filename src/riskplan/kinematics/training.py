@@ -244,7 +244,8 @@ def train(
 
     val = _Evaluator(data, val_idx, norm, config.val_points, config.seed, dtype)
     x_all = ((data.displacements - norm.input_mean) / norm.input_scale)
-    centre, scale = norm.output_centre.astype(np.float32), norm.output_scale.astype(np.float32)
+    np_dtype = np.float64 if dtype == torch.float64 else np.float32
+    centre, scale = norm.output_centre.astype(np_dtype), norm.output_scale.astype(np_dtype)
     n_train, N = train_idx.size, data.n_points
     B = min(config.batch_size, n_train)
     steps = math.ceil(n_train / B)

@@ -78,6 +78,30 @@ def test_one_point_per_pixel():
     assert len(np.unique(lin)) == len(lin)
 
 
+def test_zbuffer_equals_naive_per_pixel_loop(rng):
+    # oracle: for every pixel, the nearest facing in-frustum sample (first one on exact ties);
+    # quantised depths force ties so the tie-break is exercised too
+    cam = cam_at((0, 0, 0), (1, 0, 0), depth_noise_std=0.0)
+    n = 6000
+    pts = np.column_stack([np.round(rng.uniform(0.2, 0.4, n), 2), rng.uniform(-0.15, 0.15, (n, 2))])
+    nrm = np.tile([-1.0, 0.0, 0.0], (n, 1))
+    nrm[rng.random(n) < 0.2] *= -1.0  # some back-facing samples
+    idx, pix = visible_samples(pts, nrm, cam)
+    q, uv = project(pts, cam)
+    best = {}
+    for i in range(n):
+        if nrm[i] @ (cam.c - pts[i]) <= 0:
+            continue
+        r, c = int(np.floor(uv[i, 1] + 0.5)), int(np.floor(uv[i, 0] + 0.5))
+        if not (0 <= r < cam.height and 0 <= c < cam.width):
+            continue
+        if (r, c) not in best or q[i, 2] < q[best[(r, c)], 2]:
+            best[(r, c)] = i
+    keys = sorted(best, key=lambda rc: rc[0] * cam.width + rc[1])
+    np.testing.assert_array_equal(idx, [best[k] for k in keys])
+    np.testing.assert_array_equal(pix, np.array(keys))
+
+
 def test_two_opposite_cameras_see_more_than_one():
     pts, nrm = fib_sphere(np.zeros(3), 0.05, 40000)
     a = cam_at((0.4, 0, 0), (0, 0, 0), depth_noise_std=0.0)

@@ -20,8 +20,6 @@ from riskplan.errors import DataFormatError
 
 log = logging.getLogger(__name__)
 
-FORMAT = "riskplan-dataset"
-SUPPORTED_VERSIONS = (1,)
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,97 +75,50 @@ def content_hash(displacements: np.ndarray, points: np.ndarray) -> str:
     return h.hexdigest()
 
 
-def robot_from_toml(toml_text: str):
-    """Rebuild the robot from its TOML text, or ``None`` if the robot module cannot."""
-    try:
-        from riskplan import robots
-    except ImportError:  # robot area not installed
-        return None
-    for fn_name in ("robot_from_toml", "from_toml", "loads"):
-        fn = getattr(robots, fn_name, None)
-        if fn is not None:
-            return fn(toml_text)
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as tmp:
-        p = Path(tmp) / "robot.toml"
-        p.write_text(toml_text)
-        return robots.load_robot(p)
-
-
 def displacement_limits(toml_text: str, displacements: np.ndarray) -> np.ndarray:
     """``(m, 2)`` limits of the robot in ``toml_text``; the data range if it cannot be rebuilt."""
-    robot = None
+    from riskplan.errors import RobotDescriptionError
+    from riskplan.robots import robot_from_toml
+
     try:
         robot = robot_from_toml(toml_text)
-    except Exception as exc:  # a foreign or synthetic TOML: fall back to the data range
+    except RobotDescriptionError as exc:  # a foreign or synthetic TOML: fall back to the data range
         log.warning("cannot rebuild the robot from the data set's TOML (%s); using the data range as limits", exc)
-    if robot is not None:
-        lim = np.asarray(robot.displacement_limits, dtype=np.float64)
-        if lim.shape == (displacements.shape[1], 2):
-            return lim
+        return np.stack([displacements.min(0), displacements.max(0)], axis=1)
+    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
+    if lim.shape != (displacements.shape[1], 2):
         raise DataFormatError(
             f"robot in the data set has {lim.shape[0]} tendons but displacements have {displacements.shape[1]} columns"
         )
-    return np.stack([displacements.min(0), displacements.max(0)], axis=1)
+    return lim
 
 
 def read_point_clouds(path) -> PointCloudData:
-    """Read and validate a data set file; raises :class:`DataFormatError` naming the problem.
+    """Read a data set (:func:`riskplan.datasets.load_dataset` validates the file) for training.
 
     Only configurations flagged ``done`` are kept. An empty data set (no completed
-    configuration) is an error: nothing can be trained or evaluated on it.
+    configuration) is an error: nothing can be trained or evaluated on it. Raises
+    :class:`DataFormatError` naming the problem.
     """
-    import h5py
+    from riskplan.datasets import load_dataset
 
-    path = Path(path)
-    if not path.is_file():
-        raise DataFormatError(f"data set {str(path)!r}: no such file")
-    try:
-        f = h5py.File(path, "r")
-    except OSError as exc:
-        raise DataFormatError(f"data set {str(path)!r}: not a readable HDF5 file ({exc})") from exc
-    with f:
-        fmt = f.attrs.get("format")
-        if isinstance(fmt, bytes):
-            fmt = fmt.decode()
-        if fmt != FORMAT:
-            raise DataFormatError(f"data set {str(path)!r}: attribute format={fmt!r}, expected {FORMAT!r}")
-        ver = int(f.attrs.get("format_version", -1))
-        if ver not in SUPPORTED_VERSIONS:
-            raise DataFormatError(f"data set {str(path)!r}: format_version={ver} is not supported (expected one of {SUPPORTED_VERSIONS})")
-        for key in ("displacements", "points"):
-            if key not in f:
-                raise DataFormatError(f"data set {str(path)!r}: missing data set {key!r}")
-        disp = np.asarray(f["displacements"][...], dtype=np.float64)
-        if disp.ndim != 2:
-            raise DataFormatError(f"data set {str(path)!r}: displacements has shape {disp.shape}, expected (C, m)")
-        C, m = disp.shape
-        pshape = f["points"].shape
-        if len(pshape) != 4 or pshape[0] != C or pshape[3] != 3:
-            raise DataFormatError(
-                f"data set {str(path)!r}: points has shape {pshape}, expected (C={C}, S, P, 3) matching displacements {disp.shape}"
-            )
-        done = np.asarray(f["done"][...], dtype=bool) if "done" in f else np.ones(C, dtype=bool)
-        if done.shape != (C,):
-            raise DataFormatError(f"data set {str(path)!r}: done has shape {done.shape}, expected ({C},)")
-        idx = np.flatnonzero(done)
-        if idx.size == 0 or pshape[1] * pshape[2] == 0:
-            raise DataFormatError(f"data set {str(path)!r} is empty: {idx.size} completed configurations of {C}, {pshape[1]}x{pshape[2]} points each")
-        points = np.asarray(f["points"][...] if idx.size == C else f["points"][idx], dtype=np.float32)
-        disp = disp[idx]
-        robot_toml = f.attrs.get("robot_toml", "")
-        robot_name = f.attrs.get("robot_name", "")
-    robot_toml = robot_toml.decode() if isinstance(robot_toml, bytes) else str(robot_toml)
-    robot_name = robot_name.decode() if isinstance(robot_name, bytes) else str(robot_name)
-    points = points.reshape(points.shape[0], -1, 3)
+    ds = load_dataset(path)
+    idx = np.flatnonzero(ds.done)
+    if idx.size == 0 or ds.n_starts * ds.n_points == 0:
+        raise DataFormatError(
+            f"data set {str(path)!r} is empty: {idx.size} completed configurations of {ds.n_configs}, "
+            f"{ds.n_starts}x{ds.n_points} points each"
+        )
+    disp = ds.displacements[idx] if idx.size < ds.n_configs else ds.displacements
+    points = ds.points[idx] if idx.size < ds.n_configs else ds.points
+    points = np.asarray(points, dtype=np.float32).reshape(len(idx), -1, 3)
     if not np.isfinite(disp).all():
         raise DataFormatError(f"data set {str(path)!r}: displacements contain NaN or inf")
-    if not np.isfinite(points).all():
-        bad = int((~np.isfinite(points).all(axis=(1, 2))).sum())
-        raise DataFormatError(f"data set {str(path)!r}: points contain NaN or inf in {bad} configurations")
-    limits = displacement_limits(robot_toml, disp)
-    return PointCloudData(disp, points, robot_toml, robot_name, limits, content_hash(disp, points), str(path))
+    toml_text = str(ds.metadata["robot_toml"])
+    limits = displacement_limits(toml_text, disp)
+    return PointCloudData(
+        disp, points, toml_text, str(ds.metadata["robot_name"]), limits, content_hash(disp, points), str(path)
+    )
 
 
 def check_compatible(a: PointCloudData | dict, b: PointCloudData, what: str = "data set") -> None:
@@ -193,39 +144,26 @@ def _normalise_toml(text: str) -> str:
 def write_synthetic_dataset(path, displacements, points, *, robot_toml: str = "", robot_name: str = "synthetic", seed: int = 0) -> Path:
     """Write arrays in the data-set schema (for tests and examples without the simulator).
 
-    ``displacements (C, m)``, ``points (C, S, P, 3)``; all configurations marked done.
+    ``displacements (C, m)``, ``points (C, S, P, 3)``; all configurations marked done. Uses
+    the writer of :mod:`riskplan.datasets.storage`, written atomically.
     """
     import json
 
-    import h5py
-
+    from riskplan.datasets.storage import create_file, mark_complete, write_config
     from riskplan.io import atomic_path
 
     displacements = np.asarray(displacements, dtype=np.float64)
     points = np.asarray(points, dtype=np.float32)
+    C, S, P, _ = points.shape
+    m = displacements.shape[1]
     path = Path(path)
     with atomic_path(path, suffix=".h5") as tmp:
-        with h5py.File(tmp, "w") as f:
-            f.attrs["format"] = FORMAT
-            f.attrs["format_version"] = 1
-            f.attrs["riskplan_version"] = _version()
-            f.attrs["robot_toml"] = robot_toml
-            f.attrs["robot_name"] = robot_name
-            f.attrs["protocol"] = json.dumps({"kind": "synthetic"})
-            f.attrs["seed"] = seed
-            f.attrs["created"] = "synthetic"
-            f["displacements"] = displacements
-            f["points"] = points
-            f["tips"] = np.zeros(points.shape[:2] + (3,))
-            f["starts"] = np.repeat(displacements[:, None, :], points.shape[1], axis=1)
-            f["done"] = np.ones(displacements.shape[0], dtype=bool)
+        f = create_file(
+            tmp, displacements=displacements, n_starts=S, n_points=P, robot_toml=robot_toml, robot_name=robot_name,
+            protocol_json=json.dumps({"kind": "synthetic"}), split="synthetic", seed=seed,
+        )
+        with f:
+            for i in range(C):
+                write_config(f, i, points[i], np.zeros((S, 3)), np.repeat(displacements[i][None], S, 0), np.zeros((S, m)))
+            mark_complete(f)
     return path
-
-
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("riskplan")
-    except PackageNotFoundError:  # pragma: no cover
-        return "0+unknown"

@@ -252,7 +252,7 @@ class MDNModel:
         """
         if self._robot is None and self.robot_toml:
             from riskplan.errors import DataFormatError, RiskplanError
-            from riskplan.kinematics.data import robot_from_toml
+            from riskplan.robots import robot_from_toml
 
             try:
                 self._robot = robot_from_toml(self.robot_toml)

@@ -34,7 +34,7 @@ _RESERVED = frozenset(
 
 
 def _versions() -> dict:
-    from riskplan.kinematics.data import _version
+    from riskplan.datasets.storage import _version
 
     return {"riskplan": _version(), "torch": torch.__version__, "numpy": np.__version__, "python": platform.python_version()}
 

@@ -119,15 +119,24 @@ def test_batch_equals_scalar(request, rng, which, B, parallel):
     robot = request.getfixturevalue(which)
     tau = _tensions(robot, rng, B)
     P, R = batch_kernel.solve_tensions_batch(robot, tau, parallel=parallel)
-    assert P.shape == (B, robot.n_stations, 3) and R.shape == (B, robot.n_stations, 3, 3)
+    assert P.shape == (B, robot.n_stations, 3) and R.shape == (
+        B,
+        robot.n_stations,
+        3,
+        3,
+    )
     _check(robot, tau, P, R)
 
 
 def test_zero_tension_is_straight(paper):
     P, R = batch_kernel.solve_tensions_batch(paper, np.zeros((3, 4)))
-    np.testing.assert_allclose(P[:, :, 2], np.broadcast_to(paper.s, (3, paper.n_stations)), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(
+        P[:, :, 2], np.broadcast_to(paper.s, (3, paper.n_stations)), rtol=0, atol=1e-15
+    )
     np.testing.assert_allclose(P[:, :, :2], 0.0, rtol=0, atol=1e-15)
-    np.testing.assert_allclose(R, np.broadcast_to(np.eye(3), R.shape), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(
+        R, np.broadcast_to(np.eye(3), R.shape), rtol=0, atol=1e-15
+    )
 
 
 def test_kernel_flags_unconverged_configurations(paper, rng):
@@ -136,8 +145,21 @@ def test_kernel_flags_unconverged_configurations(paper, rng):
     tau = _tensions(paper, rng, 40)
     tau[5] = 0.0
     n = paper.n_stations
-    P, R, st = np.empty((40, n, 3)), np.empty((40, n, 3, 3)), np.zeros(40, dtype=np.int64)
-    args = (paper._rt, paper._drt, paper._ddrt, paper._kse, paper._kbt, paper._L, paper._n, LOCAL_TOL)
+    P, R, st = (
+        np.empty((40, n, 3)),
+        np.empty((40, n, 3, 3)),
+        np.zeros(40, dtype=np.int64),
+    )
+    args = (
+        paper._rt,
+        paper._drt,
+        paper._ddrt,
+        paper._kse,
+        paper._kbt,
+        paper._L,
+        paper._n,
+        LOCAL_TOL,
+    )
     batch_kernel._solve_serial(tau, *args, 1, P, R, st)
     loaded = np.any(tau > 0, axis=1)
     assert np.all(st[loaded] == 1) and np.all(st[~loaded] == 0)
@@ -151,7 +173,7 @@ def test_fallback_results_are_merged(paper, rng, monkeypatch):
 
     def flag_some(*args):
         real(*args)
-        P, R, status = args[-3:]
+        P, _, status = args[-3:]
         P[::3] = np.nan  # what the fallback must overwrite
         status[::3] = 1
 
@@ -171,4 +193,9 @@ def test_bad_input(paper):
     with pytest.raises(InvalidInputError, match="gravity"):
         batch_kernel.solve_tensions_batch(paper.with_gravity(True), np.zeros((2, 4)))
     P, R = batch_kernel.solve_tensions_batch(paper, np.zeros((0, 4)))
-    assert P.shape == (0, paper.n_stations, 3) and R.shape == (0, paper.n_stations, 3, 3)
+    assert P.shape == (0, paper.n_stations, 3) and R.shape == (
+        0,
+        paper.n_stations,
+        3,
+        3,
+    )

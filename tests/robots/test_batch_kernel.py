@@ -183,6 +183,15 @@ def test_fallback_results_are_merged(paper, rng, monkeypatch):
     _check(paper, tau, P, R)
 
 
+def test_unvalidated_tensions_above_the_limit(paper, rng):
+    """``validate=False`` (the path ``solve_displacements`` takes) accepts tensions above max_tension."""
+    tau = rng.uniform(1.0, 1.3, (5, 4)) * paper.tension_limits
+    P, R = batch_kernel.solve_tensions_batch(paper, tau, validate=False)
+    ref = paper.solve_tensions(tau, validate=False)
+    np.testing.assert_allclose(P, ref.positions, rtol=RTOL, atol=ATOL)
+    np.testing.assert_allclose(R, ref.rotations, rtol=RTOL, atol=ATOL)
+
+
 def test_bad_input(paper):
     with pytest.raises(InvalidInputError, match="tensions"):
         batch_kernel.solve_tensions_batch(paper, np.full((2, 4), -1.0))

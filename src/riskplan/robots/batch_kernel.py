@@ -955,7 +955,9 @@ def _solve_parallel(
         )
 
 
-def solve_tensions_batch(robot, tensions, *, parallel: bool | None = None):
+def solve_tensions_batch(
+    robot, tensions, *, parallel: bool | None = None, validate: bool = True
+):
     """Shapes of ``robot`` (no gravity) for tensions ``(B, m)`` [N], in the robot's base frame.
 
     Same discretisation and tolerances as :func:`cosserat.shape_free` (what
@@ -965,6 +967,8 @@ def solve_tensions_batch(robot, tensions, *, parallel: bool | None = None):
     finish are re-solved by the scalar kernel.
 
     Returns ``positions (B, n+1, 3)`` and ``rotations (B, n+1, 3, 3)`` (columns = body axes).
+    ``validate=False`` skips the range check (as ``TendonRobot.solve_tensions(validate=False)``,
+    which ``solve_displacements`` uses for solved tensions above ``max_tension``).
     ``parallel``: split the chunks over numba's threads (default: when more than one thread is
     set). Raises :class:`InvalidInputError` for bad tensions or a robot with gravity on and
     :class:`ConvergenceError` if a configuration fails in the scalar kernel too.
@@ -976,8 +980,11 @@ def solve_tensions_batch(robot, tensions, *, parallel: bool | None = None):
             "solve_tensions_batch: the robot has gravity on; use robot.solve_tensions"
         )
     m = robot.n_tendons
-    tau = robot._check(tensions, "tensions", 0.0, robot.tension_limits)
-    if tau.ndim != 2:
+    if validate:
+        tau = robot._check(tensions, "tensions", 0.0, robot.tension_limits)
+    else:
+        tau = np.asarray(tensions, dtype=np.float64)
+    if tau.ndim != 2 or tau.shape[1] != m:
         raise InvalidInputError(f"tensions: expected shape (B, {m}), got {tau.shape}")
     tau = np.ascontiguousarray(tau, dtype=np.float64)
     B, n = tau.shape[0], robot._n + 1

@@ -39,6 +39,8 @@ DISP_TOL = 1e-12  # m, complementarity residual of the displacement -> tension s
 DISP_MAXIT = 60
 SHOOT_TOL = 1e-11  # N m, tip-moment residual of the shooting solve
 SHOOT_MAXIT = 30
+# Batches at least this large use the configuration-vectorised kernel (faster from ~8 on).
+BATCH_KERNEL_MIN = 8
 
 
 @dataclass(frozen=True, eq=False)
@@ -225,7 +227,8 @@ class TendonRobot:
         """Shape for tendon tensions ``(..., m)`` [N], ``0 <= tension <= max_tension``.
 
         Without gravity: local strain solves of eqs. (2)-(3) and one RK4 pass
-        (:func:`cosserat.shape_free`); with gravity: shooting on the base moment
+        (:func:`cosserat.shape_free`; batches of ``BATCH_KERNEL_MIN`` or more go through the
+        SIMD kernel of :mod:`riskplan.robots.batch_kernel`, same results); with gravity: shooting on the base moment
         (:func:`cosserat.shape_loaded`). Raises :class:`ConvergenceError` if a solve fails.
         """
         if validate:
@@ -237,7 +240,12 @@ class TendonRobot:
         B, n, m = flat.shape[0], self._n + 1, self.n_tendons
         P = np.empty((B, n, 3))
         Rs = np.empty((B, n, 3, 3))
-        if not self.loaded:
+        if not self.loaded and B >= BATCH_KERNEL_MIN:
+            # Same algorithm, vectorised across configurations (bit-identical results).
+            from riskplan.robots.batch_kernel import solve_tensions_batch
+
+            P, Rs = solve_tensions_batch(self, flat, parallel=False, validate=False)
+        elif not self.loaded:
             lengths = np.empty((B, m))
             status = np.empty(B, dtype=np.int64)
             cosserat.shape_free_batch(

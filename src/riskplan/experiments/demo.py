@@ -27,13 +27,7 @@ def run_demo(out, *, seed: int = 0, workers: int | None = None, stages=STAGES) -
     ctx: dict = {"out": out}
     timings = []
     for name in stages:
-        try:
-            mod = importlib.import_module(f"riskplan.experiments.demo_{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"riskplan.experiments.demo_{name}":
-                raise
-            log.warning("demo stage %s is not available yet; skipped", name)
-            continue
+        mod = importlib.import_module(f"riskplan.experiments.demo_{name}")
         t0 = time.perf_counter()
         log.info("demo stage %s", name)
         mod.run(report, ctx, seed=seed, workers=workers)

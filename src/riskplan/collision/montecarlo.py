@@ -101,6 +101,20 @@ def _check_n(n_samples) -> int:
     return n
 
 
+
+def _estimate(hits, n: int, shape, confidence: float, interval: str) -> MonteCarloEstimate:
+    """Binomial estimate with its interval from ``hits (B,)`` out of ``n``, reshaped to ``shape``."""
+    low, high = binomial_interval(hits, n, confidence, interval)
+    return MonteCarloEstimate(
+        probability=(hits / n).reshape(shape),
+        low=low.reshape(shape),
+        high=high.reshape(shape),
+        hits=hits.reshape(shape),
+        n=n,
+        confidence=confidence,
+        method=interval,
+    )
+
 def monte_carlo_probability(
     mixture,
     environment: Environment,
@@ -137,16 +151,7 @@ def monte_carlo_probability(
         inside = environment.contains(x).any(-1)  # (B, c)
         hits += inside.sum(-1)
         done += c
-    low, high = binomial_interval(hits, n, confidence, interval)
-    return MonteCarloEstimate(
-        probability=(hits / n).reshape(shape),
-        low=low.reshape(shape),
-        high=high.reshape(shape),
-        hits=hits.reshape(shape),
-        n=n,
-        confidence=confidence,
-        method=interval,
-    )
+    return _estimate(hits, n, shape, confidence, interval)
 
 
 def paths_collide(paths, environment: Environment, *, segments: bool = True) -> np.ndarray:
@@ -205,13 +210,4 @@ def monte_carlo_trajectory(
             hit = hit | seg.any(-1).any(1)
         hits += hit.sum(-1)
         done += c
-    low, high = binomial_interval(hits, n, confidence, interval)
-    return MonteCarloEstimate(
-        probability=(hits / n).reshape(shape),
-        low=low.reshape(shape),
-        high=high.reshape(shape),
-        hits=hits.reshape(shape),
-        n=n,
-        confidence=confidence,
-        method=interval,
-    )
+    return _estimate(hits, n, shape, confidence, interval)

@@ -167,61 +167,71 @@ def _case_table(sim, controls, n_samples: int, seed: int, cap_mesh: int | None =
     return rows
 
 
-def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
-    from riskplan.scenarios.manipulation import ManipulationScenario
-    from riskplan.scenarios.needle import NeedleScenario
+HEADER = ["case", "draws", "mean final dist.", "sd", "in goal", "collided", "success"]
+
+
+def _scenario_section(report: Report, out: Path, sim, title: str, controls, describe, n_samples: int, seed: int,
+                      caption: str, cap_mesh: int | None = None):
+    """Run ``controls`` on the nominal parameters, show the GIF, frames and the per-case table."""
     from riskplan.scenarios.plotting import save_gif
     from riskplan.scenarios.simulator import rollout
 
+    sec = report.section(title)
+    p0 = sim.nominal_params
+    states = rollout(sim, sim.initial_state(p0), controls, p0)
+    gif = save_gif(sim, states, out / f"tissue_{sim.name}.gif")
+    Report.text(sec, describe(p0, states))
+    report.image(sec, gif, f"{sim.name} execution (animated GIF)")
+    report.figure(sec, _frames_figure(sim, states), f"tissue_{sim.name}_frames", f"frames of the {sim.name} execution")
+    rows = _case_table(sim, controls, n_samples, seed, cap_mesh=cap_mesh)
+    Report.table(sec, HEADER, rows, caption=caption)
+
+
+def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
+    from riskplan.scenarios.manipulation import ManipulationScenario
+    from riskplan.scenarios.needle import NeedleScenario
+
     out = Path(ctx["out"])
-    header = ["case", "draws", "mean final dist.", "sd", "in goal", "collided", "success"]
-    sec = report.section("Deformable tissue: needle in a deformable plane (Patil et al. 2011, V-A)")
     t0 = time.perf_counter()
     needle = NeedleScenario()
-    p0 = needle.nominal_params
-    u = greedy_needle_controls(needle, p0, NEEDLE_STEPS)
-    states = rollout(needle, needle.initial_state(p0), u, p0)
-    gif = save_gif(needle, states, out / "tissue_needle.gif")
-    Report.text(
-        sec,
-        f"Car without reverse (v ≤ 0.5, |φ| ≤ π/3, τ = 0.1, r_min = 0.25) pushing a linear-elastic unit square "
-        f"(E = 50, ν = 0.4, {needle.mesh_data(p0.n_elements).mesh.n_elements} triangles, corners fixed) with a unit force "
-        f"along its heading; obstacles (grey) and goal (green) are embedded in the tissue and move with it. Controls: "
-        f"greedy simulator lookahead on the nominal parameters ({len(u)} steps; a demo helper, not the paper's planner). "
-        f"Final distance to the deformed goal centre {needle.goal_distance(states[-1]):.3f}, "
-        f"in goal: {needle.in_goal(states[-1])}, collision: {any(needle.in_collision(s) for s in states)}.",
+    u = greedy_needle_controls(needle, needle.nominal_params, NEEDLE_STEPS)
+
+    def needle_text(p0, states):
+        return (
+            f"Car without reverse (v ≤ 0.5, |φ| ≤ π/3, τ = 0.1, r_min = 0.25) pushing a linear-elastic unit square "
+            f"(E = 50, ν = 0.4, {needle.mesh_data(p0.n_elements).mesh.n_elements} triangles, corners fixed) with a unit force "
+            f"along its heading; obstacles (grey) and goal (green) are embedded in the tissue and move with it. Controls: "
+            f"greedy simulator lookahead on the nominal parameters ({len(u)} steps; a demo helper, not the paper's planner). "
+            f"Final distance to the deformed goal centre {needle.goal_distance(states[-1]):.3f}, "
+            f"in goal: {needle.in_goal(states[-1])}, collision: {any(needle.in_collision(s) for s in states)}."
+        )
+
+    _scenario_section(
+        report, out, needle, "Deformable tissue: needle in a deformable plane (Patil et al. 2011, V-A)", u, needle_text,
+        NEEDLE_SAMPLES, seed, "the same controls executed open loop under each uncertainty case (section V-A)",
     )
-    report.image(sec, gif, "needle execution (animated GIF)")
-    report.figure(sec, _frames_figure(needle, states), "tissue_needle_frames", "frames of the needle execution")
-    rows = _case_table(needle, u, NEEDLE_SAMPLES, seed)
-    Report.table(sec, header, rows, caption="the same controls executed open loop under each uncertainty case (section V-A)")
     t_needle = time.perf_counter() - t0
     ctx["tissue_needle_controls"] = u
 
-    sec = report.section("Deformable tissue: internal point manipulation (Patil et al. 2011, V-B)")
     t0 = time.perf_counter()
     manip = ManipulationScenario()
-    p0 = manip.nominal_params
-    um = greedy_manipulation_controls(manip, p0, MANIP_STEPS)
-    states = rollout(manip, manip.initial_state(p0), um, p0)
-    gif = save_gif(manip, states, out / "tissue_manipulation.gif")
-    Report.text(
-        sec,
-        f"Neo-Hookean object (E = 50, ν = 0.4, {manip.mesh_data(p0.n_elements).mesh.n_elements} triangles), bottom-right "
-        f"edge fixed, three manipulators (red) pushing with forces |F_i| ≤ {manip.config.f_max} per component spread over "
-        f"boundary patches; the target (blue) should reach the goal (green) while the object avoids the obstacle (grey). "
-        f"Only the black boundary points are sensed. Controls: resolved-rate steering with finite-difference Jacobians on the simulator ({len(um)} steps). "
-        f"Final target-goal distance {manip.goal_distance(states[-1]):.3f}, "
-        f"collision: {any(manip.in_collision(s) for s in states)}.",
-    )
-    report.image(sec, gif, "manipulation execution (animated GIF)")
-    report.figure(sec, _frames_figure(manip, states), "tissue_manipulation_frames", "frames of the manipulation execution")
-    rows = _case_table(manip, um, MANIP_SAMPLES, seed, cap_mesh=MANIP_MESH_CAP)
-    Report.table(
-        sec,
-        header,
-        rows,
-        caption=f"open-loop outcomes under each uncertainty case (mesh case capped at {MANIP_MESH_CAP} elements in the demo)",
+    um = greedy_manipulation_controls(manip, manip.nominal_params, MANIP_STEPS)
+
+    def manip_text(p0, states):
+        return (
+            f"Neo-Hookean object (E = 50, ν = 0.4, {manip.mesh_data(p0.n_elements).mesh.n_elements} triangles), bottom-right "
+            f"edge fixed, three manipulators (red) pushing with forces |F_i| ≤ {manip.config.f_max} per component spread over "
+            f"boundary patches; the target (blue) should reach the goal (green) while the object avoids the obstacle (grey). "
+            f"Only the black boundary points are sensed. Controls: resolved-rate steering with finite-difference Jacobians on the simulator ({len(um)} steps). "
+            f"Final target-goal distance {manip.goal_distance(states[-1]):.3f}, "
+            f"collision: {any(manip.in_collision(s) for s in states)}."
+        )
+
+    _scenario_section(
+        report, out, manip, "Deformable tissue: internal point manipulation (Patil et al. 2011, V-B)", um, manip_text,
+        MANIP_SAMPLES, seed,
+        f"open-loop outcomes under each uncertainty case (mesh case capped at {MANIP_MESH_CAP} elements in the demo)",
+        cap_mesh=MANIP_MESH_CAP,
     )
     t_manip = time.perf_counter() - t0
     log.info("tissue demo: needle %.1f s, manipulation %.1f s", t_needle, t_manip)

@@ -117,6 +117,50 @@ def test_bad_input(paper, method, value, match):
         getattr(paper, method)(value)
 
 
+@pytest.mark.parametrize(
+    "row, match",
+    [
+        ([np.nan, 0.0, 0.0, 0.0], "tensions: contains NaN"),
+        ([0.0, 0.0, 0.0, -np.inf], "tensions: contains NaN or inf"),
+        ([15.0, 0.0, 0.0, 0.0], r"tensions <= 9.73"),  # within tendon 3's limit, not tendon 0's
+        ([0.0, 0.0, 0.0, -1e-12], r"tensions >= 0"),
+    ],
+)
+def test_bad_array_input_in_a_batch(paper, row, match):
+    """float64 arrays take the compiled fast check; a bad entry anywhere still gets the named error."""
+    x = np.full((3, 5, 4), 1.0)
+    x[2, 4] = row
+    with pytest.raises(InvalidInputError, match=match):
+        paper.solve_tensions(x)
+    with pytest.raises(InvalidInputError, match=match):
+        paper.solve_tensions(x[2, 4].copy())
+    with pytest.raises(InvalidInputError, match=match):
+        paper.solve_tensions(np.asfortranarray(x))  # not C-contiguous: the numpy path
+
+
+def test_fast_limit_check_matches_numpy(paper, rng):
+    from riskplan.robots.cosserat import in_limits
+
+    low, high = paper._dlo, paper._dhi
+    for _ in range(200):
+        x = rng.uniform(-0.015, 0.045, (int(rng.integers(1, 4)), 4))
+        if rng.random() < 0.2:
+            x.flat[int(rng.integers(x.size))] = rng.choice([np.nan, np.inf, -np.inf])
+        expect = bool(np.all(np.isfinite(x)) and np.all(x >= low) and np.all(x <= high))
+        assert in_limits(x, low, high) is expect
+
+
+def test_single_equals_batch_with_base_pose(paper, rng):
+    robot = paper.with_base_pose((0.1, -0.2, 0.05), rpy=(0.3, -0.2, 1.1))
+    x = rng.uniform(0, 1, (8, 4)) * paper.tension_limits * 0.6
+    batch = robot.solve_tensions(x)
+    for i in range(8):
+        one = robot.solve_tensions(x[i])
+        np.testing.assert_array_equal(one.positions, batch.positions[i])
+        np.testing.assert_array_equal(one.rotations, batch.rotations[i])
+    assert not np.shares_memory(one.tensions, x)  # the shape owns a copy
+
+
 def test_non_convergence_raises_with_residual(paper, monkeypatch):
     monkeypatch.setattr(robot_module, "DISP_MAXIT", 1)
     with pytest.raises(ConvergenceError) as info:

@@ -981,7 +981,7 @@ def solve_tensions_batch(
         )
     m = robot.n_tendons
     if validate:
-        tau = robot._check(tensions, "tensions", 0.0, robot.tension_limits)
+        tau = robot._check_tensions(tensions)
     else:
         tau = np.asarray(tensions, dtype=np.float64)
     if tau.ndim != 2 or tau.shape[1] != m:

@@ -123,7 +123,9 @@ class TendonRobot:
         self._lam = bb.density * bb.area + d.count * d.mass / bb.length
         # cached for the hot path (validation and output)
         self._tmax = np.array([t.max_tension for t in params.tendons], dtype=float)
+        self._tlow = np.zeros(len(params.tendons))
         self._dlim = np.array([t.displacement_limits for t in params.tendons], dtype=float)
+        self._dlo, self._dhi = self._dlim[:, 0].copy(), self._dlim[:, 1].copy()
         self._s = np.linspace(0.0, self._L, self._n + 1)
         self._identity_base = params.base.is_identity
 
@@ -199,15 +201,22 @@ class TendonRobot:
 
     # ---------------------------------------------------------------------- checks
     def _check(self, value, name, low, high):
-        # fast path: a well-formed float array passes with a few vectorised checks
-        if isinstance(value, np.ndarray) and value.dtype == np.float64 and value.ndim >= 1 and value.shape[-1] == self.n_tendons:
-            if np.isfinite(value).all() and (value >= low).all() and (value <= high).all():
+        """``value (..., m)`` as a float array within ``[low, high]`` (per-tendon arrays ``(m,)``)."""
+        # fast path: a well-formed array passes with one compiled loop (no temporaries)
+        if isinstance(value, np.ndarray) and value.dtype == np.float64 and value.ndim >= 1 and value.shape[-1] == self.n_tendons and value.flags.c_contiguous:
+            if cosserat.in_limits(value, low, high):
                 return value
         arr = as_array(value, name, min_ndim=1)
         if arr.shape[-1] != self.n_tendons:
             raise InvalidInputError(f"{name}: expected last dimension {self.n_tendons} (one per tendon), got shape {arr.shape}")
         check_range(arr, name, low=low, high=high)
         return arr
+
+    def _check_tensions(self, tensions) -> np.ndarray:
+        return self._check(tensions, "tensions", self._tlow, self._tmax)
+
+    def _check_displacements(self, displacements) -> np.ndarray:
+        return self._check(displacements, "displacements", self._dlo, self._dhi)
 
     def _to_world(self, P, Rs, tau, batch) -> RodShape:
         base = self.params.base
@@ -232,9 +241,11 @@ class TendonRobot:
         (:func:`cosserat.shape_loaded`). Raises :class:`ConvergenceError` if a solve fails.
         """
         if validate:
-            tau = self._check(tensions, "tensions", 0.0, self._tmax)
+            tau = self._check_tensions(tensions)
         else:
             tau = np.asarray(tensions, dtype=float)
+        if tau.ndim == 1 and not self.loaded:
+            return self._solve_single_free(tau)
         batch = tau.shape[:-1]
         flat = np.array(tau.reshape(-1, self.n_tendons), dtype=np.float64, order="C")  # a copy: the shape owns it
         B, n, m = flat.shape[0], self._n + 1, self.n_tendons
@@ -263,6 +274,20 @@ class TendonRobot:
             b = int(np.flatnonzero(~np.isfinite(P).reshape(B, -1).all(-1))[0])
             raise ConvergenceError(f"non-finite shape for tensions {flat[b].tolist()}")
         return self._to_world(P, Rs, flat, batch)
+
+    def _solve_single_free(self, tau) -> RodShape:
+        """One configuration without external loads: the scalar kernel, no batch bookkeeping."""
+        tau = np.array(tau, dtype=np.float64)  # a copy: the shape owns it
+        n, m = self._n + 1, self.n_tendons
+        P = np.empty((n, 3))
+        Rs = np.empty((n, 3, 3))
+        st = cosserat.shape_free(
+            tau, self._rt, self._drt, self._ddrt, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, np.empty((n, 6)), np.empty(m)
+        )
+        # a non-finite value anywhere propagates along the RK4 pass to the tip position
+        if st != cosserat.OK or not math.isfinite(P[-1, 0] + P[-1, 1] + P[-1, 2]):
+            raise ConvergenceError(f"local strain solve failed for tensions {tau.tolist()}")
+        return self._to_world(P, Rs, tau, ())
 
     def _shoot(self, tau) -> np.ndarray:
         """States ``(n+1, 18+m)`` of the loaded rod: ``N(0) = f L`` exactly, ``M(0)`` by Newton."""
@@ -316,8 +341,7 @@ class TendonRobot:
         tension *input*). Raises :class:`ConvergenceError` with the residual on failure.
         """
         if validate:
-            lim = self._dlim
-            d = self._check(displacements, "displacements", lim[:, 0], lim[:, 1])
+            d = self._check_displacements(displacements)
         else:
             d = np.asarray(displacements, dtype=float)
         batch = d.shape[:-1]
@@ -333,8 +357,7 @@ class TendonRobot:
     def tensions_for_displacements(self, displacements, *, validate: bool = True) -> np.ndarray:
         """Tensions ``(..., m)`` [N] that realise tendon displacements ``(..., m)`` (see :meth:`solve_displacements`)."""
         if validate:
-            lim = self._dlim
-            d = self._check(displacements, "displacements", lim[:, 0], lim[:, 1])
+            d = self._check_displacements(displacements)
         else:
             d = np.asarray(displacements, dtype=float)
         batch = d.shape[:-1]
@@ -366,7 +389,7 @@ class TendonRobot:
     def tendon_lengths(self, tensions, *, validate: bool = True) -> np.ndarray:
         """Tendon path lengths ``l_i = int |v + u x r_i + r_i'| ds`` ``(..., m)`` [m] for tensions ``(..., m)``."""
         if validate:
-            tau = self._check(tensions, "tensions", 0.0, self._tmax)
+            tau = self._check_tensions(tensions)
         else:
             tau = np.asarray(tensions, dtype=float)
         batch = tau.shape[:-1]
@@ -384,7 +407,7 @@ class TendonRobot:
 
     def displacements_for_tensions(self, tensions, *, validate: bool = True) -> np.ndarray:
         """Actuator displacements ``d = l0 - l(tau) + tau / k`` ``(..., m)`` [m] that hold taut tendons at ``tensions``."""
-        tau = self._check(tensions, "tensions", 0.0, self._tmax) if validate else np.asarray(tensions, dtype=float)
+        tau = self._check_tensions(tensions) if validate else np.asarray(tensions, dtype=float)
         return self._l0 - self.tendon_lengths(tau, validate=False) + tau * self._kinv
 
     def _tensions_loaded(self, d) -> np.ndarray:

@@ -168,6 +168,29 @@ def test_non_convergence_raises_with_residual(paper, monkeypatch):
     assert info.value.residual is not None and info.value.residual > 0
 
 
+@pytest.mark.parametrize("call", ["single", "small_batch", "kernel_batch", "lengths"])
+def test_local_solve_failure_names_node_and_residual(paper, monkeypatch, call):
+    monkeypatch.setattr(robot_module, "LOCAL_MAXIT", 1)
+    tau = np.array([6.0, 0.0, 2.0, 9.0])
+    with pytest.raises(ConvergenceError, match=r"failed at s = 0 m .*scaled residual") as info:
+        if call == "single":
+            paper.solve_tensions(tau)
+        elif call == "small_batch":
+            paper.solve_tensions(np.tile(tau, (3, 1)))
+        elif call == "kernel_batch":
+            paper.solve_tensions(np.tile(tau, (robot_module.BATCH_KERNEL_MIN + 2, 1)))
+        else:
+            paper.tendon_lengths(tau)
+    assert info.value.residual > robot_module.LOCAL_TOL and info.value.iterations == 1
+
+
+def test_shapes_cannot_corrupt_the_robot(paper):
+    shape = paper.solve_tensions([1.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError):
+        shape.s[:] = 0.0
+    np.testing.assert_allclose(paper.solve_tensions([1.0, 0.0, 0.0, 0.0]).s[-1], 0.2)
+
+
 def test_base_pose_validation(paper):
     with pytest.raises(InvalidInputError, match="rotation"):
         paper.with_base_pose((0, 0, 0), rotation=np.diag([1.0, 1.0, -1.0]))

@@ -1035,9 +1035,7 @@ def solve_tensions_batch(
             st,
         )
         if np.any(st != cosserat.OK):
-            raise ConvergenceError(
-                f"local strain solve failed for tensions {sub[int(np.flatnonzero(st != cosserat.OK)[0])].tolist()}"
-            )
+            raise robot._local_failure(sub[int(np.flatnonzero(st != cosserat.OK)[0])])
         P[bad] = Pb
         Rs[bad] = Rb
     if not np.isfinite(P).all():

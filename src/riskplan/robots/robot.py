@@ -127,6 +127,7 @@ class TendonRobot:
         self._dlim = np.array([t.displacement_limits for t in params.tendons], dtype=float)
         self._dlo, self._dhi = self._dlim[:, 0].copy(), self._dlim[:, 1].copy()
         self._s = np.linspace(0.0, self._L, self._n + 1)
+        self._s.flags.writeable = False  # shared by every RodShape this robot returns
         self._identity_base = params.base.is_identity
 
     # ------------------------------------------------------------------ description
@@ -264,7 +265,7 @@ class TendonRobot:
             )
             bad = np.flatnonzero(status != cosserat.OK)
             if bad.size:
-                raise ConvergenceError(f"local strain solve failed for tensions {flat[bad[0]].tolist()}")
+                raise self._local_failure(flat[bad[0]])
         else:
             for b in range(B):
                 Y = self._shoot(flat[b])
@@ -284,10 +285,30 @@ class TendonRobot:
         st = cosserat.shape_free(
             tau, self._rt, self._drt, self._ddrt, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, np.empty((n, 6)), np.empty(m)
         )
+        if st != cosserat.OK:
+            raise self._local_failure(tau)
         # a non-finite value anywhere propagates along the RK4 pass to the tip position
-        if st != cosserat.OK or not math.isfinite(P[-1, 0] + P[-1, 1] + P[-1, 2]):
-            raise ConvergenceError(f"local strain solve failed for tensions {tau.tolist()}")
+        if not math.isfinite(P[-1, 0] + P[-1, 1] + P[-1, 2]):
+            raise ConvergenceError(f"non-finite shape for tensions {tau.tolist()}")
         return self._to_world(P, Rs, tau, ())
+
+    def _local_failure(self, tau) -> ConvergenceError:
+        """The error for a failed local strain solve (eqs. 2-3) of the unloaded rod, naming the
+        first node where a plain Newton re-solve stops and its scaled residual ``max |F_a / K_aa|``."""
+        tau = np.ascontiguousarray(tau, dtype=np.float64)
+        F, J, rhs, zero = np.empty(6), np.empty((6, 6)), np.empty((6, 1)), np.zeros(3)
+        x = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+        for k in range(self._n + 1):
+            rt, drt = self._rt[2 * k], self._drt[2 * k]
+            if cosserat.local_strains(x, tau, rt, drt, zero, zero, self._kse, self._kbt, LOCAL_TOL, LOCAL_MAXIT, F, J, rhs) < 0:
+                res = float(cosserat.local_residual(x, tau, rt, drt, zero, zero, self._kse, self._kbt, F))
+                return ConvergenceError(
+                    f"local strain solve failed at s = {self._s[k]:.4g} m for tensions {tau.tolist()} "
+                    f"(scaled residual {res:.3g} after {LOCAL_MAXIT} Newton iterations, tolerance {LOCAL_TOL:g})",
+                    residual=res,
+                    iterations=LOCAL_MAXIT,
+                )
+        return ConvergenceError(f"local strain solve failed for tensions {tau.tolist()} (a plain Newton re-solve converges)")
 
     def _shoot(self, tau) -> np.ndarray:
         """States ``(n+1, 18+m)`` of the loaded rod: ``N(0) = f L`` exactly, ``M(0)`` by Newton."""
@@ -301,7 +322,7 @@ class TendonRobot:
         X = np.empty((n + 1, 6))
         lengths = np.empty(m)
         if cosserat.shape_free(tau, self._rt, self._drt, self._ddrt, self._kse, self._kbt, L, n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths) != cosserat.OK:
-            raise ConvergenceError(f"local strain solve failed for tensions {tau.tolist()}")
+            raise self._local_failure(tau)
         mid = 0.5 * (P[1:] + P[:-1])
         M0 = np.cross(mid - P[0], f).sum(0) * (L / n)
         scale = max(1e-6, float(np.linalg.norm(f)) * L * L)
@@ -402,7 +423,7 @@ class TendonRobot:
             else:
                 dl = np.empty((m, m))
                 if cosserat.lengths_and_jacobian(flat[b], self._rt, self._drt, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, out[b], dl) != cosserat.OK:
-                    raise ConvergenceError(f"local strain solve failed for tensions {flat[b].tolist()}")
+                    raise self._local_failure(flat[b])
         return out.reshape(batch + (m,))
 
     def displacements_for_tensions(self, tensions, *, validate: bool = True) -> np.ndarray:

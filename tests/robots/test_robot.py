@@ -196,3 +196,39 @@ def test_base_pose_validation(paper):
         paper.with_base_pose((0, 0, 0), rotation=np.diag([1.0, 1.0, -1.0]))
     with pytest.raises(InvalidInputError, match="position"):
         paper.with_base_pose((0, 0))
+
+
+FOUR_INEXTENSIBLE = """
+name = "four"
+[backbone]
+length = 0.2
+outer_radius = 0.003
+youngs_modulus = 9.1e7
+""" + "".join(
+    f"""
+[[tendons]]
+theta = [{k * np.pi / 2!r}]
+radius = [0.008]
+displacement_limits = [-0.01, 0.04]
+max_tension = 10
+"""
+    for k in range(4)
+)
+
+
+def test_displacement_solve_with_inextensible_antagonistic_tendons(rng):
+    """Four straight inextensible tendons at 90 deg: the start matrix is singular up to round-off,
+    opposite pairs are statically indeterminate, and d0 + d2 != d1 + d3 forces one tendon slack
+    (the min-function Newton stalls there; the solver continues in Fischer-Burmeister form)."""
+    robot = robot_from_toml(FOUR_INEXTENSIBLE)
+    cases = [[0.005, 0, 0, 0], [0.01, 0, 0, 0.005], [0.03, 0.03, 0, 0], [0.02, 0, 0.01, 0]]
+    cases += rng.uniform(-0.01, 0.03, (20, 4)).tolist()
+    for d in cases:
+        d = np.asarray(d, dtype=float)
+        tau = robot.tensions_for_displacements(d)
+        assert np.all(tau >= 0.0)
+        g = robot.displacements_for_tensions(tau, validate=False) - d  # length to spare, l0 - l(tau) - d
+        taut = tau > 1e-9
+        np.testing.assert_allclose(g[taut], 0.0, atol=1e-10)
+        assert np.all(g >= -1e-10)
+        assert np.all(np.isfinite(robot.solve_displacements(d).positions))

@@ -47,6 +47,9 @@ OK = 0
 LOCAL_FAIL = 1
 OUTER_FAIL = 2
 
+# step halvings of the displacement solve's line search (2**-30 ~ 1e-9 of a Newton step)
+LINE_SEARCH_MAXIT = 30
+
 
 @njit(cache=True)
 def in_limits(values, low, high):
@@ -741,6 +744,73 @@ def lengths_and_jacobian(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, m
     return OK
 
 
+@njit(cache=True, inline="always")
+def _complementarity(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack):
+    """Newton system ``Jm step = phi`` of the complementarity problem at ``tau`` (see
+    :func:`solve_displacement_tensions`) in length units, with ``a_i = tau_i * 1e-3`` (tensions in
+    N compare with lengths in m at 1 mm/N) and ``b_i = g_i``: the min function
+    ``r_i = min(a_i, b_i)`` (``fb = False``) or the Fischer-Burmeister function
+    ``r_i = a_i + b_i - sqrt(a_i^2 + b_i^2)`` (``fb = True``, whose squared norm is smooth);
+    ``phi = -r``, except that slack rows of the min function (``slack[i] = 1``) are written in
+    tension units, ``step_i = -tau_i``. Returns ``(max |min(a_i, b_i)|, sum r_i^2)``."""
+    m = d.shape[0]
+    res = 0.0
+    merit = 0.0
+    for i in range(m):
+        g = l0[i] - lengths[i] + tau[i] * kinv[i] - d[i]
+        a = tau[i] * 1e-3
+        res = max(res, abs(min(a, g)))
+        if fb:
+            nrm = math.sqrt(a * a + g * g)
+            if nrm > 0.0:
+                ca = 1.0 - a / nrm
+                cb = 1.0 - g / nrm
+            else:  # an element of the generalised Jacobian at the kink
+                ca = 1.0 - 1.0 / math.sqrt(2.0)
+                cb = ca
+            r = a + g - nrm
+            for j in range(m):
+                Jm[i, j] = -cb * dl[i, j]
+            Jm[i, i] += cb * kinv[i] + ca * 1e-3
+            phi[i, 0] = -r
+            slack[i] = 0
+        elif tau[i] <= g:  # slack row kept in N (identity) so that a full step gives exactly 0
+            for j in range(m):
+                Jm[i, j] = 0.0
+            Jm[i, i] = 1.0
+            r = a
+            phi[i, 0] = -tau[i]
+            slack[i] = 1
+        else:
+            for j in range(m):
+                Jm[i, j] = -dl[i, j]
+            Jm[i, i] += kinv[i]
+            r = g
+            phi[i, 0] = -r
+            slack[i] = 0
+        merit += r * r
+    return res, merit
+
+
+@njit(cache=True, inline="always")
+def _lm_system(Jm, phi, mu, A, b, m, slack):
+    """``A = J^T J + mu I``, ``b = J^T phi`` (Levenberg-Marquardt normal equations) with the
+    slack rows scaled to length units (1e-3 m/N) like the residual."""
+    for i in range(m):
+        acc = 0.0
+        for k in range(m):
+            w = 1e-6 if slack[k] else 1.0
+            acc += w * Jm[k, i] * phi[k, 0]
+        b[i, 0] = acc
+        for j in range(m):
+            acc = 0.0
+            for k in range(m):
+                w = 1e-6 if slack[k] else 1.0
+                acc += w * Jm[k, i] * Jm[k, j]
+            A[i, j] = acc
+        A[i, i] += mu
+
+
 @njit(cache=True)
 def solve_displacement_tensions(d, kinv, l0, tau0, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, tau, info):
     """Tensions for tendon displacements ``d (m,)`` with compliant tendons and slack (no loads).
@@ -751,7 +821,10 @@ def solve_displacement_tensions(d, kinv, l0, tau0, rt_all, drt_all, kse, kbt, le
 
     (pulling the actuator in by ``d_i`` shortens the tendon's rest length by ``d_i``; a taut
     tendon stretches by ``tau_i / k_i``). Semismooth Newton on ``min(tau, g) = 0`` with the
-    analytic Jacobian of :func:`lengths_and_jacobian`, projected onto ``tau >= 0``.
+    analytic Jacobian of :func:`lengths_and_jacobian`, projected onto ``tau >= 0``, and a
+    backtracking line search on the squared residual (steps are halved until it falls; the
+    full step is taken whenever it does, so the local convergence stays quadratic). Needed for
+    stiff problems such as inextensible antagonistic tendons, where full steps overshoot.
     ``tau0`` is the start. Writes ``tau``; ``info = [iterations, residual]``. Returns status.
     """
     m = d.shape[0]
@@ -759,42 +832,74 @@ def solve_displacement_tensions(d, kinv, l0, tau0, rt_all, drt_all, kse, kbt, le
     dl = np.empty((m, m))
     Jm = np.empty((m, m))
     phi = np.empty((m, 1))
+    trial = np.empty(m)
+    Jt = np.empty((m, m))
+    pt = np.empty((m, 1))
+    Jc = np.empty((m, m))
+    step = np.empty((m, 1))
+    slack = np.zeros(m, dtype=np.int64)
+    slack_t = np.zeros(m, dtype=np.int64)
     for i in range(m):
         tau[i] = tau0[i]
-    res = 1e300
+    info[0] = 0
+    info[1] = 1e300
+    fb = False
+    st = lengths_and_jacobian(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl)
+    if st != OK:
+        return st
+    res, merit = _complementarity(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack)
     for it in range(outer_maxit):
-        st = lengths_and_jacobian(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl)
-        if st != OK:
-            info[0] = it
-            info[1] = res
-            return st
-        res = 0.0
-        for i in range(m):
-            g = l0[i] - lengths[i] + tau[i] * kinv[i] - d[i]
-            if tau[i] <= g:
-                phi[i, 0] = -tau[i]
-                for j in range(m):
-                    Jm[i, j] = 0.0
-                Jm[i, i] = 1.0
-                r = tau[i] * 1e-3  # compare tensions in N with lengths in m at 1 mm/N
-            else:
-                phi[i, 0] = -g
-                for j in range(m):
-                    Jm[i, j] = -dl[i, j]
-                Jm[i, i] += kinv[i]
-                r = g
-            if abs(r) > res:
-                res = abs(r)
+        info[0] = it
+        info[1] = res
         if res <= dtol:
-            info[0] = it
-            info[1] = res
             return OK
-        if not _gauss_solve(Jm, phi, m, 1):
-            info[0] = it
-            info[1] = res
-            return OUTER_FAIL
+        # Newton step; if J is singular or the step finds no decrease, a Levenberg-Marquardt
+        # step with mu = |r|^2 (Yamashita & Fukushima 2001: still quadratic near solutions that
+        # are not isolated, e.g. tendons whose tension split is statically indeterminate)
+        accepted = False
+        for attempt in range(2):
+            if attempt == 0:
+                for i in range(m):
+                    step[i, 0] = phi[i, 0]
+                    for j in range(m):
+                        Jc[i, j] = Jm[i, j]
+                if not _gauss_solve(Jc, step, m, 1):
+                    continue
+            else:
+                _lm_system(Jm, phi, merit, Jc, step, m, slack)
+                if not _gauss_solve(Jc, step, m, 1):
+                    break
+            alpha = 1.0
+            for _ls in range(LINE_SEARCH_MAXIT):
+                for i in range(m):
+                    trial[i] = max(tau[i] + alpha * step[i, 0], 0.0)
+                if lengths_and_jacobian(trial, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl) == OK:
+                    res_t, merit_t = _complementarity(d, kinv, l0, trial, lengths, dl, Jt, pt, fb, slack_t)
+                    if merit_t <= (1.0 - 1e-4 * alpha) * merit or res_t <= dtol:
+                        accepted = True
+                        break
+                alpha *= 0.5
+            if accepted:
+                break
+        if not accepted:
+            if fb:
+                return OUTER_FAIL
+            # stuck at a stationary point of the min-function merit that is not a solution
+            # (it is not smooth): continue with the Fischer-Burmeister form, whose merit has
+            # no such points when dg/dtau is positive semidefinite, as a compliance matrix is
+            fb = True
+            if lengths_and_jacobian(tau, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl) != OK:
+                return LOCAL_FAIL
+            res, merit = _complementarity(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack)
+            continue
         for i in range(m):
-            tau[i] = max(tau[i] + phi[i, 0], 0.0)
+            tau[i] = trial[i]
+            slack[i] = slack_t[i]
+            phi[i, 0] = pt[i, 0]
+            for j in range(m):
+                Jm[i, j] = Jt[i, j]
+        res = res_t
+        merit = merit_t
     info[0] = outer_maxit
     info[1] = res
     return OUTER_FAIL

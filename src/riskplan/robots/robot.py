@@ -119,6 +119,10 @@ class TendonRobot:
         if st != cosserat.OK:  # pragma: no cover - the straight rod always solves
             raise ConvergenceError("rest-length computation failed")
         self._G0 = -dl  # d(shortening)/d tau at tau = 0, used for start values
+        # Start of the displacement solve: the linearisation at tau = 0, (G0 + diag(1/k)) tau = d.
+        # A pseudo-inverse, since with inextensible antagonistic tendons this matrix is singular
+        # up to round-off (the rod's axial stiffness alone separates the tendons).
+        self._A0pinv = np.linalg.pinv(self._G0 + np.diag(self._kinv), rcond=1e-10)
         d = params.disks
         self._lam = bb.density * bb.area + d.count * d.mass / bb.length
         # cached for the hot path (validation and output)
@@ -387,9 +391,8 @@ class TendonRobot:
         if self.loaded:
             tau = np.stack([self._tensions_loaded(flat[b]) for b in range(B)]) if B else np.zeros((0, m))
             return tau.reshape(batch + (m,))
-        # start: the linearisation at tau = 0, (G0 + diag(1/k)) tau = d, clipped to tau >= 0
-        A0 = self._G0 + np.diag(self._kinv)
-        tau0 = np.ascontiguousarray(np.maximum(np.linalg.solve(A0, flat.T).T, 0.0))
+        # start: the linearisation at tau = 0 (see __init__), clipped to tau >= 0
+        tau0 = np.ascontiguousarray(np.maximum(flat @ self._A0pinv.T, 0.0))
         tau = np.empty((B, m))
         infos = np.empty((B, 2))
         status = np.empty(B, dtype=np.int64)
@@ -398,6 +401,16 @@ class TendonRobot:
             LOCAL_TOL, LOCAL_MAXIT, DISP_TOL, DISP_MAXIT, tau, infos, status,
         )  # fmt: skip
         bad = np.flatnonzero(status != cosserat.OK)
+        if bad.size:  # second try from the slack state
+            sub = np.ascontiguousarray(flat[bad])
+            tau_b, infos_b, status_b = np.empty((bad.size, m)), np.empty((bad.size, 2)), np.empty(bad.size, dtype=np.int64)
+            cosserat.solve_displacement_batch(
+                sub, self._kinv, self._l0, np.zeros((bad.size, m)), self._rt, self._drt, self._kse, self._kbt, self._L, self._n,
+                LOCAL_TOL, LOCAL_MAXIT, DISP_TOL, DISP_MAXIT, tau_b, infos_b, status_b,
+            )  # fmt: skip
+            tau[bad], status[bad] = tau_b, status_b
+            infos[bad] = np.where((status_b == cosserat.OK)[:, None], infos_b, np.minimum(infos[bad], infos_b))
+            bad = np.flatnonzero(status != cosserat.OK)
         if bad.size:
             b = int(bad[0])
             raise ConvergenceError(
@@ -434,8 +447,7 @@ class TendonRobot:
     def _tensions_loaded(self, d) -> np.ndarray:
         """Semismooth Newton on ``min(tau, g(tau)) = 0`` with finite differences (gravity on)."""
         m = self.n_tendons
-        A0 = self._G0 + np.diag(self._kinv)
-        tau = np.maximum(np.linalg.solve(A0, d), 0.0)
+        tau = np.maximum(self._A0pinv @ d, 0.0)
 
         def g(t):
             return self._l0 - self._shoot(t)[-1, 18:] + t * self._kinv - d

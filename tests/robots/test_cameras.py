@@ -159,3 +159,96 @@ def test_camera_roundtrip_and_bad_input():
         PinholeCamera.from_dict({**cam.to_dict(), "zoom": 2})
     with pytest.raises(InvalidInputError, match="up"):
         PinholeCamera.look_at((0, 0, 0), (0, 0, 1), up=(0, 0, 1))
+
+
+def _identity_camera(**kw):
+    return PinholeCamera((0.0, 0.0, 0.0), ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), **kw)
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("depth_noise_std", float("nan")),  # used to switch the noise off silently
+        ("depth_noise_quadratic", float("inf")),
+        ("cx", float("nan")),  # used to drop every point ("no camera sees the robot")
+        ("cy", float("inf")),
+        ("fx", float("inf")),
+        ("width", 640.5),  # used to pass int() and fail later with a raw TypeError
+        ("height", 0),
+        ("width", "abc"),  # used to raise a raw ValueError from int()
+        ("width", True),
+        ("fy", "abc"),
+        ("min_depth", float("nan")),
+        ("max_depth", float("nan")),
+    ],
+)
+def test_camera_fields_are_validated(field, value):
+    with pytest.raises(InvalidInputError, match=field):
+        _identity_camera(**{field: value})
+    with pytest.raises(InvalidInputError, match=field):
+        PinholeCamera.from_dict({**default_cameras()[0].to_dict(), field: value})
+
+
+def test_camera_pixel_counts_normalised_to_int_and_far_limit_may_be_infinite():
+    cam = _identity_camera(width=320.0, height=np.int64(240), max_depth=float("inf"))
+    assert cam.width == 320 and type(cam.width) is int and type(cam.height) is int
+    assert cam.max_depth == float("inf")
+
+
+@pytest.mark.parametrize(
+    "kw, field",
+    [
+        ({"hfov_deg": 0}, "hfov_deg"),
+        ({"hfov_deg": 180.0}, "hfov_deg"),
+        ({"hfov_deg": float("nan")}, "hfov_deg"),
+        ({"vfov_deg": -5.0}, "vfov_deg"),
+        ({"width": 640.5}, "width"),
+        ({"height": "abc"}, "height"),
+    ],
+)
+def test_look_at_checks_field_of_view_and_size(kw, field):
+    # hfov_deg=0 used to raise ZeroDivisionError, 180 gave fx ~ 2e-14
+    with pytest.raises(InvalidInputError, match=field):
+        PinholeCamera.look_at((0.4, 0, 0.1), (0, 0, 0.1), **kw)
+
+
+def test_capture_bad_input_is_a_clean_error():
+    pts, nrm = fib_sphere(np.zeros(3), 0.05, 2000)
+    cams = default_cameras(distance=0.3, height=0.0)
+    for n in (-1, 0, 2.5, True):
+        with pytest.raises(InvalidInputError, match="n_points"):
+            capture(pts, nrm, cams, n, seed=0)
+    with pytest.raises(InvalidInputError, match="points"):
+        capture(pts[:, :2], nrm, cams, 16, seed=0)
+    with pytest.raises(InvalidInputError, match="normals"):
+        capture(pts, nrm[:10], cams, 16, seed=0)
+    bad = pts.copy()
+    bad[3] = np.nan  # used to report "no camera sees the robot"
+    with pytest.raises(InvalidInputError, match="points: contains NaN"):
+        capture(bad, nrm, cams, 16, seed=0)
+    with pytest.raises(InvalidInputError, match="points"):
+        render(bad, nrm, cams[0], 0)
+    with pytest.raises(InvalidInputError, match="points"):
+        visible_samples(bad, nrm, cams[0])
+    for cams_bad in ([], 3, [cams[0], "x"]):
+        with pytest.raises(InvalidInputError, match="cameras"):
+            capture(pts, nrm, cams_bad, 16, seed=0)
+    with pytest.raises(InvalidInputError, match="seed"):
+        capture(pts, nrm, cams, 16, seed="abc")
+
+
+def test_capture_accepts_a_generator_and_int_seeds_are_unchanged():
+    pts, nrm = fib_sphere(np.zeros(3), 0.05, 30000)
+    cams = default_cameras(distance=0.3, height=0.0)
+    # int seeds: per-camera children of SeedSequence(seed), the last child picks the points
+    children = np.random.SeedSequence(7).spawn(len(cams) + 1)
+    cloud = np.concatenate([render(pts, nrm, c, np.random.default_rng(ch))[0] for c, ch in zip(cams, children)])
+    ref = cloud[np.random.default_rng(children[-1]).choice(len(cloud), size=64, replace=False)]
+    np.testing.assert_array_equal(capture(pts, nrm, cams, 64, seed=7), ref)
+    # a Generator (used to raise TypeError): deterministic in its state, independent across calls
+    g = np.random.default_rng(3)
+    a, b = capture(pts, nrm, cams, 64, seed=g), capture(pts, nrm, cams, 64, seed=g)
+    assert a.shape == (64, 3) and not np.array_equal(a, b)
+    g2 = np.random.default_rng(3)
+    np.testing.assert_array_equal(capture(pts, nrm, cams, 64, seed=g2), a)
+    np.testing.assert_array_equal(capture(pts, nrm, cams, 64, seed=g2), b)

@@ -7,7 +7,7 @@ import pytest
 
 from riskplan.errors import InvalidInputError
 from riskplan.robots import load_robot
-from riskplan.robots.hysteresis import HysteresisModel, effective_displacements, play_operator, robot_after_path
+from riskplan.robots.hysteresis import HysteresisModel, HysteresisState, effective_displacements, play_operator, robot_after_path
 from tests.conftest import TOL
 
 
@@ -92,3 +92,47 @@ def test_bad_input(paper):
         model.move(model.initial_state(), [0.0, 0, 0, 0])
     with pytest.raises(InvalidInputError, match="path"):
         model.move(model.initial_state(), [[np.nan, 0, 0, 0]])
+
+
+@pytest.mark.parametrize(
+    "engaged, fragment",
+    [
+        (np.full(4, np.nan), "NaN"),  # used to give NaN outputs silently
+        (np.array([0.02]), "last dimension 4"),  # used to broadcast across the tendons
+        (np.zeros(3), "last dimension 4"),  # used to raise a raw numpy ValueError
+        (np.zeros((3, 4)), "broadcast"),  # batch (3,) against a path batch (2,)
+        ("abc", "cannot convert"),
+    ],
+)
+def test_state_engaged_is_validated(paper, engaged, fragment):
+    model = HysteresisModel(paper)
+    path = np.zeros((2, 2, 4))
+    with pytest.raises(InvalidInputError, match=f"state.engaged.*{fragment}"):
+        model.move(HysteresisState(engaged), path)
+    with pytest.raises(InvalidInputError, match="state.engaged"):
+        effective_displacements(paper, path, state=HysteresisState(engaged))
+    with pytest.raises(InvalidInputError, match="state"):
+        model.move(np.zeros(4), path)
+
+
+def test_start_state_of_straight_line_is_validated(paper):
+    model = HysteresisModel(paper)
+    with pytest.raises(InvalidInputError, match="state.engaged"):
+        model.straight_line(np.zeros(4), np.full(4, 0.01), start_state=HysteresisState(np.array([np.inf, 0, 0, 0])))
+
+
+@pytest.mark.parametrize("shape", [(0, 4), (3, 0, 4)])
+def test_empty_path_is_a_clean_error(paper, shape):
+    with pytest.raises(InvalidInputError, match="path: expected at least one configuration"):
+        effective_displacements(paper, np.zeros(shape))
+    with pytest.raises(InvalidInputError, match="path: expected at least one configuration"):
+        robot_after_path(paper, np.zeros(shape))
+
+
+def test_move_along_empty_path_returns_a_new_state(paper):
+    model = HysteresisModel(paper)
+    state = model.initial_state([0.01, 0, 0, 0])
+    new, eff = model.move(state, np.zeros((0, 4)))
+    np.testing.assert_array_equal(new.engaged, state.engaged)
+    np.testing.assert_array_equal(eff, state.engaged)
+    assert not np.shares_memory(new.engaged, state.engaged)

@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 
 from riskplan.errors import RobotDescriptionError
-from riskplan.robots.params import parse_robot_toml, params_to_toml, quaternion_to_matrix, rpy_to_matrix
+from riskplan.robots.params import (
+    load_robot_params,
+    params_to_toml,
+    parse_robot_toml,
+    quaternion_to_matrix,
+    read_robot_text,
+    rpy_to_matrix,
+)
 from tests.conftest import TOL
 
 PAPER = resources.files("riskplan").joinpath("data", "paper_robot.toml").read_text()
@@ -99,3 +106,25 @@ def test_orientations_agree():
     a = parse_robot_toml(MINIMAL + "\n[base]\nrpy = [0.2, -0.4, 1.3]\n")
     b = parse_robot_toml(MINIMAL + f"\n[base]\nquaternion = {[float(v) for v in q]}\n")
     np.testing.assert_allclose(a.base.matrix, b.base.matrix, **TOL["float64_exact"])
+
+
+def test_file_not_utf8_names_the_file(tmp_path):
+    f = tmp_path / "latin1.toml"
+    f.write_bytes('name = "r\xf6bot"\n'.encode("latin-1") + MINIMAL.encode())  # used to raise UnicodeDecodeError
+    for read in (load_robot_params, read_robot_text):
+        with pytest.raises(RobotDescriptionError, match="latin1.toml.*not valid UTF-8"):
+            read(f)
+    with pytest.raises(RobotDescriptionError, match="cannot read"):
+        load_robot_params(tmp_path / "missing.toml")
+
+
+def test_file_read_as_utf8(tmp_path):
+    f = tmp_path / "utf8.toml"
+    f.write_bytes('name = "r\xf6bot"\n'.encode() + MINIMAL.encode())
+    params, text = load_robot_params(f)
+    assert params.name == "r\xf6bot" and text.startswith('name = "r\xf6bot"')
+
+
+def test_bytes_are_not_toml_text():
+    with pytest.raises(RobotDescriptionError, match="str"):
+        parse_robot_toml(MINIMAL.encode())

@@ -3,11 +3,15 @@
 * ``riskplan robot shape --robot paper --displacements 0.01,0,0,0 [--json] [--plot FILE.png]``
 * ``riskplan robot shape --robot FILE.toml --tensions 1,0,0,0``
 * ``riskplan robot info --robot paper``
+
+JSON output (``--json``) is strict JSON: non-finite numbers (an inextensible tendon's
+``stiffness_n_per_m = inf``) are written as ``null``, never as ``Infinity`` / ``NaN``.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import typer
@@ -25,6 +29,22 @@ def _floats(text: str, name: str) -> list[float]:
     return vals
 
 
+def _finite_or_none(value):
+    """``value`` with every non-finite float (``inf``, ``nan``) replaced by ``None``, recursively."""
+    if isinstance(value, dict):
+        return {k: _finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_or_none(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _dumps(value) -> str:
+    """Strict JSON text of ``value``: non-finite numbers become ``null`` (see module docs)."""
+    return json.dumps(_finite_or_none(value), allow_nan=False)
+
+
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
     sub = typer.Typer(help="Tendon-driven continuum robots: shapes and descriptions.", no_args_is_help=True)
@@ -36,7 +56,9 @@ def register(app: typer.Typer) -> None:
         displacements: str = typer.Option(None, "--displacements", "-d", help="Tendon displacements [m], comma-separated."),
         tensions: str = typer.Option(None, "--tensions", "-t", help="Tendon tensions [N], comma-separated."),
         gravity: bool = typer.Option(None, "--gravity/--no-gravity", help="Override the robot file's gravity setting."),
-        as_json: bool = typer.Option(False, "--json", help="Print {tip, backbone, tensions} as JSON."),
+        as_json: bool = typer.Option(
+            False, "--json", help="Print {tip, backbone, tensions} as JSON (non-finite numbers as null)."
+        ),
         plot: Path = typer.Option(None, "--plot", help="Write a PNG of the backbone and disks."),
     ) -> None:
         """Solve the robot's shape for tendon displacements or tensions."""
@@ -53,7 +75,7 @@ def register(app: typer.Typer) -> None:
         else:
             s = r.solve_tensions(_floats(tensions, "tensions"))
         if as_json:
-            typer.echo(json.dumps(s.to_json()))
+            typer.echo(_dumps(s.to_json()))
         else:
             x, y, z = s.tip
             typer.echo(f"robot {r.name}: tip = ({x:.6f}, {y:.6f}, {z:.6f}) m")
@@ -74,9 +96,15 @@ def register(app: typer.Typer) -> None:
     @sub.command("info")
     def info(
         robot: str = typer.Option("paper", "--robot", help="Packaged robot name ('paper') or a robot TOML file."),
-        as_json: bool = typer.Option(False, "--json", help="Print as JSON."),
+        as_json: bool = typer.Option(
+            False, "--json", help="Print as JSON; non-finite numbers (e.g. inf stiffness of an inextensible tendon) as null."
+        ),
     ) -> None:
-        """Describe a robot: backbone, stiffness, tendons, limits, hysteresis."""
+        """Describe a robot: backbone, stiffness, tendons, limits, hysteresis.
+
+        With --json, non-finite numbers are written as null (strict JSON): an inextensible
+        tendon's stiffness_n_per_m is null.
+        """
         from riskplan.robots import load_robot
 
         r = load_robot(robot)
@@ -106,7 +134,7 @@ def register(app: typer.Typer) -> None:
             "hysteresis": {"play_m": p.hysteresis.play, "play_variation": p.hysteresis.play_variation, "offset_std_m": p.hysteresis.offset_std},
         }
         if as_json:
-            typer.echo(json.dumps(d))
+            typer.echo(_dumps(d))
             return
         typer.echo(f"robot {d['name']}: length {b.length} m, {d['disks']} disks, EI = {d['bending_stiffness_nm2']:.4g} N m^2, {b.n_steps} steps")
         for t in d["tendons"]:

@@ -25,12 +25,47 @@ field of view, square pixels (``fx = fy = 337.2``), about 0.5 mm depth noise at 
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from riskplan._validation import as_array, as_generator
 from riskplan.errors import InvalidInputError
+
+
+def _pixel_count(value, name: str) -> int:
+    """``value`` as a positive ``int`` (integral floats such as ``640.0`` are accepted)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise InvalidInputError(f"{name}: expected a positive integer pixel count, got {value!r}")
+    v = float(value)
+    if not math.isfinite(v) or not v.is_integer() or v < 1:
+        raise InvalidInputError(f"{name}: expected a positive integer pixel count, got {value!r}")
+    return int(v)
+
+
+def _real(value, name: str, what: str = "a finite number") -> float:
+    """``value`` as a finite ``float``; raises :class:`InvalidInputError` naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(float(value)):
+        raise InvalidInputError(f"{name}: expected {what}, got {value!r}")
+    return float(value)
+
+
+def _fov(value, name: str) -> float:
+    """A field of view in degrees, ``0 < value < 180``."""
+    v = _real(value, name, "a field of view in degrees, 0 < fov < 180")
+    if not 0.0 < v < 180.0:
+        raise InvalidInputError(f"{name}: expected a field of view in degrees, 0 < fov < 180, got {value!r}")
+    return v
+
+
+def _check_samples(points, normals) -> tuple[np.ndarray, np.ndarray]:
+    """Surface samples ``points (N, 3)`` and ``normals (N, 3)``: finite, same length."""
+    p = as_array(points, "points", shape=(None, 3))
+    n = as_array(normals, "normals", shape=(None, 3))
+    if len(n) != len(p):
+        raise InvalidInputError(f"normals: expected one normal per point ({len(p)}), got shape {n.shape}")
+    return p, n
 
 
 @dataclass(frozen=True)
@@ -40,6 +75,9 @@ class PinholeCamera:
     ``position (3,)`` is the camera centre and ``rotation (3, 3)`` has as columns the camera
     axes (x right, y down, z viewing direction), both in the robot base frame (m).
     Intrinsics in pixels; depth noise std in m (constant part) and 1/m (quadratic part).
+    ``width``/``height`` must be positive integers (integral floats are stored as ``int``);
+    every other number must be finite, except ``max_depth`` which may be ``inf`` (no far limit).
+    Invalid values raise :class:`~riskplan.errors.InvalidInputError` naming the field.
     """
 
     position: tuple[float, float, float]
@@ -56,21 +94,43 @@ class PinholeCamera:
     max_depth: float = 3.0
 
     def __post_init__(self):
-        R = np.asarray(self.rotation, dtype=float)
-        p = np.asarray(self.position, dtype=float)
+        try:
+            R = np.asarray(self.rotation, dtype=float)
+            p = np.asarray(self.position, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise InvalidInputError(f"position/rotation: expected numbers ({exc})") from exc
         if p.shape != (3,) or not np.all(np.isfinite(p)):
             raise InvalidInputError(f"position: expected 3 finite numbers, got {self.position!r}")
-        if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-9) or np.linalg.det(R) <= 0:
+        if (
+            R.shape != (3, 3)
+            or not np.all(np.isfinite(R))
+            or not np.allclose(R.T @ R, np.eye(3), atol=1e-9)
+            or np.linalg.det(R) <= 0
+        ):
             raise InvalidInputError("rotation: expected a proper 3x3 rotation matrix (columns = camera axes)")
-        if int(self.width) < 1 or int(self.height) < 1:
-            raise InvalidInputError(f"width/height: expected positive pixel counts, got {self.width}x{self.height}")
+        # normalise in place (frozen dataclass): pixel counts to int, the rest to float
+        for name in ("width", "height"):
+            object.__setattr__(self, name, _pixel_count(getattr(self, name), name))
         for name in ("fx", "fy"):
-            if not getattr(self, name) > 0:
-                raise InvalidInputError(f"{name}: expected a positive focal length in pixels, got {getattr(self, name)}")
-        if self.depth_noise_std < 0 or self.depth_noise_quadratic < 0:
-            raise InvalidInputError("depth_noise_std/depth_noise_quadratic: expected >= 0")
-        if not 0 < self.min_depth < self.max_depth:
+            v = _real(getattr(self, name), name, "a positive finite focal length in pixels")
+            if not v > 0:
+                raise InvalidInputError(f"{name}: expected a positive finite focal length in pixels, got {v}")
+            object.__setattr__(self, name, v)
+        for name in ("cx", "cy"):
+            object.__setattr__(self, name, _real(getattr(self, name), name, "a finite principal point in pixels"))
+        for name in ("depth_noise_std", "depth_noise_quadratic"):
+            v = _real(getattr(self, name), name, "a finite noise std >= 0")
+            if v < 0:
+                raise InvalidInputError(f"{name}: expected a finite noise std >= 0, got {v}")
+            object.__setattr__(self, name, v)
+        lo = _real(self.min_depth, "min_depth", "a finite depth in m")
+        if isinstance(self.max_depth, bool) or not isinstance(self.max_depth, numbers.Real):
+            raise InvalidInputError(f"max_depth: expected a depth in m, got {self.max_depth!r}")
+        hi = float(self.max_depth)
+        if not 0 < lo < hi:  # also rejects a NaN max_depth; inf means no far limit
             raise InvalidInputError(f"min_depth/max_depth: expected 0 < min < max, got {self.min_depth}, {self.max_depth}")
+        object.__setattr__(self, "min_depth", lo)
+        object.__setattr__(self, "max_depth", hi)
 
     @property
     def R(self) -> np.ndarray:
@@ -91,8 +151,14 @@ class PinholeCamera:
         """Camera at ``position`` looking at ``target`` with image-up close to ``up`` (base frame).
 
         Focal lengths from the field of view: ``fx = (width / 2) / tan(hfov / 2)``, likewise
-        ``fy`` from ``vfov``; without ``vfov_deg`` the pixels are square (``fy = fx``).
+        ``fy`` from ``vfov``; without ``vfov_deg`` the pixels are square (``fy = fx``). Fields of
+        view must satisfy ``0 < fov < 180`` (degrees).
         """
+        width = _pixel_count(width, "width")
+        height = _pixel_count(height, "height")
+        hfov_deg = _fov(hfov_deg, "hfov_deg")
+        if vfov_deg is not None:
+            vfov_deg = _fov(vfov_deg, "vfov_deg")
         c = as_array(position, "position", shape=(3,))
         t = as_array(target, "target", shape=(3,))
         u = as_array(up, "up", shape=(3,))
@@ -108,7 +174,7 @@ class PinholeCamera:
         R = np.stack([x, y, z], axis=1)
         fx = 0.5 * width / math.tan(math.radians(hfov_deg) / 2)
         fy = fx if vfov_deg is None else 0.5 * height / math.tan(math.radians(vfov_deg) / 2)
-        return cls(tuple(float(v) for v in c), tuple(tuple(float(v) for v in row) for row in R), int(width), int(height),
+        return cls(tuple(float(v) for v in c), tuple(tuple(float(v) for v in row) for row in R), width, height,
                    fx, fy, 0.5 * (width - 1), 0.5 * (height - 1), **kwargs)
 
     def to_dict(self) -> dict:
@@ -160,11 +226,15 @@ def project(points, camera: PinholeCamera):
 def visible_samples(points, normals, camera: PinholeCamera):
     """Indices of the samples the camera sees, one per pixel (the nearest), and their pixels.
 
-    ``points``/``normals``: ``(N, 3)``. Returns ``index (k,)`` into the samples and
+    ``points``/``normals``: ``(N, 3)``, finite. Returns ``index (k,)`` into the samples and
     ``pixel (k, 2)`` integer ``(row, col)``. No noise.
     """
-    points = np.asarray(points, dtype=np.float64)
-    normals = np.asarray(normals, dtype=np.float64)
+    points, normals = _check_samples(points, normals)
+    return _visible_samples(points, normals, camera)
+
+
+def _visible_samples(points: np.ndarray, normals: np.ndarray, camera: PinholeCamera):
+    """:func:`visible_samples` on checked float64 arrays."""
     facing = np.einsum("ij,ij->i", normals, camera.c - points) > 0.0
     idx = np.flatnonzero(facing)
     q, uv = project(points[idx], camera)
@@ -193,9 +263,14 @@ def render(points, normals, camera: PinholeCamera, seed=None):
     ``p' = c + (|p - c| + sigma(z) e) (p - c) / |p - c|``, ``e ~ N(0, 1)``,
     ``sigma(z) = depth_noise_std + depth_noise_quadratic z^2``.
     """
-    rng = as_generator(seed)
-    idx, pix = visible_samples(points, normals, camera)
-    p = np.asarray(points, dtype=np.float64)[idx]
+    points, normals = _check_samples(points, normals)
+    return _render(points, normals, camera, as_generator(seed))
+
+
+def _render(points: np.ndarray, normals: np.ndarray, camera: PinholeCamera, rng: np.random.Generator):
+    """:func:`render` on checked float64 arrays."""
+    idx, pix = _visible_samples(points, normals, camera)
+    p = points[idx]
     d = p - camera.c
     r = np.linalg.norm(d, axis=1)
     z = d @ camera.R[:, 2]
@@ -217,14 +292,38 @@ def depth_image(points, normals, camera: PinholeCamera, seed=None) -> np.ndarray
 def capture(points, normals, cameras, n_points: int | None = 512, seed=None) -> np.ndarray:
     """Merged cloud of several cameras, downsampled to ``n_points`` (the paper's 512 per cloud).
 
-    Each camera draws its noise from its own child of ``seed``; the merged cloud is reduced to
-    ``n_points`` by sampling without replacement (with replacement only if fewer points were
-    seen, which the default set-up never produces for the paper robot). ``n_points=None``
-    keeps every point. Returns ``(n_points, 3)`` float64 in the base frame.
+    Each camera draws its noise from its own child of ``seed`` (``None``, an int, a
+    ``SeedSequence`` or a ``Generator``; a Generator's children are spawned from its bit
+    generator's seed sequence, so the same Generator state always gives the same cloud and
+    two calls with one Generator give independent clouds). The merged cloud is reduced to
+    ``n_points`` (a positive int) by sampling without replacement (with replacement only if
+    fewer points were seen, which the default set-up never produces for the paper robot).
+    ``n_points=None`` keeps every point. Returns ``(n_points, 3)`` float64 in the base frame.
     """
-    ss = np.random.SeedSequence(seed) if not isinstance(seed, np.random.SeedSequence) else seed
-    children = ss.spawn(len(cameras) + 1)
-    clouds = [render(points, normals, cam, np.random.default_rng(ch))[0] for cam, ch in zip(cameras, children)]
+    points, normals = _check_samples(points, normals)
+    bad_n = isinstance(n_points, bool) or not isinstance(n_points, numbers.Integral) or n_points < 1
+    if n_points is not None and bad_n:
+        raise InvalidInputError(f"n_points: expected a positive integer or None, got {n_points!r}")
+    cams = (cameras,) if isinstance(cameras, PinholeCamera) else cameras
+    try:
+        cameras = tuple(cams)
+    except TypeError:
+        cameras = ()
+    if not cameras or not all(isinstance(c, PinholeCamera) for c in cameras):
+        raise InvalidInputError(f"cameras: expected a non-empty sequence of PinholeCamera, got {cameras!r}")
+    n_children = len(cameras) + 1
+    if isinstance(seed, np.random.Generator):
+        ss = getattr(seed.bit_generator, "seed_seq", None)
+        if not isinstance(ss, np.random.SeedSequence):  # cannot spawn: seed from the stream itself
+            ss = np.random.SeedSequence(seed.integers(2**63, size=4).tolist())
+        children = ss.spawn(n_children)
+    else:
+        try:
+            ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+        except (TypeError, ValueError) as exc:
+            raise InvalidInputError(f"seed: expected None, a non-negative int, a SeedSequence or a Generator, got {seed!r}") from exc
+        children = ss.spawn(n_children)
+    clouds = [_render(points, normals, cam, np.random.default_rng(ch))[0] for cam, ch in zip(cameras, children)]
     cloud = np.concatenate(clouds, axis=0)
     if n_points is None:
         return cloud

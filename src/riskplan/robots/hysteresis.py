@@ -48,15 +48,31 @@ class HysteresisState:
 def play_operator(engaged, path, play) -> np.ndarray:
     """Play operator over a path: ``engaged (..., m)``, ``path (..., T, m)``, ``play (..., m)`` -> ``(..., m)``.
 
-    ``e_t = min(max(e_{t-1}, c_t - b), c_t + b)`` for t = 1..T; returns ``e_T``.
+    ``e_t = min(max(e_{t-1}, c_t - b), c_t + b)`` for t = 1..T; returns ``e_T`` (a new array,
+    also for an empty path).
     """
-    e = np.asarray(engaged, dtype=np.float64)
+    e = np.array(engaged, dtype=np.float64)
     c = np.asarray(path, dtype=np.float64)
     b = np.asarray(play, dtype=np.float64)
     for t in range(c.shape[-2]):
         ct = c[..., t, :]
         e = np.minimum(np.maximum(e, ct - b), ct + b)
     return e
+
+
+def _check_state(state, m: int) -> np.ndarray:
+    """``state.engaged`` as a finite float64 array ``(..., m)``; raises :class:`InvalidInputError`."""
+    if not isinstance(state, HysteresisState):
+        raise InvalidInputError(f"state: expected a HysteresisState, got {type(state).__name__}")
+    return as_array(state.engaged, "state.engaged", last_dim=m)
+
+
+def _check_path(path) -> np.ndarray:
+    """A commanded path ``(..., T, m)`` with at least one configuration (T >= 1)."""
+    c = as_array(path, "path", min_ndim=2)
+    if c.shape[-2] == 0:
+        raise InvalidInputError(f"path: expected at least one configuration (T >= 1), got shape {c.shape}")
+    return c
 
 
 class HysteresisModel:
@@ -108,20 +124,28 @@ class HysteresisModel:
 
         Returns ``(new_state, effective (..., m))`` where ``effective`` is the displacement the
         robot receives at the end of the path. With ``rng`` (seed or Generator) the run draws its
-        own play and offset (:meth:`sample_run`); without, nominal values.
+        own play and offset (:meth:`sample_run`); without, nominal values. ``state.engaged`` must
+        be finite with last dimension ``m`` and a batch shape broadcasting with the path's; an
+        empty path (T = 0) leaves the state where it is.
         """
         m = self.n_tendons
+        engaged = _check_state(state, m)
         c = as_array(path, "path", min_ndim=2)
         if c.shape[-1] != m:
             raise InvalidInputError(f"path: expected shape (..., T, {m}), got {c.shape}")
         check_range(c, "path", low=self._lim[:, 0], high=self._lim[:, 1])
-        batch = np.broadcast_shapes(c.shape[:-2], np.shape(state.engaged)[:-1])
+        try:
+            batch = np.broadcast_shapes(c.shape[:-2], engaged.shape[:-1])
+        except ValueError as exc:
+            raise InvalidInputError(
+                f"state.engaged: batch shape {engaged.shape[:-1]} does not broadcast with the path's {c.shape[:-2]}"
+            ) from exc
         if rng is None:
             play = np.full(batch + (m,), self.params.play)
             offset = np.zeros(batch + (m,))
         else:
             play, offset = self.sample_run(rng, batch)
-        e = play_operator(state.engaged, c, play)
+        e = play_operator(engaged, c, play)
         eff = np.clip(e + offset, self._lim[:, 0], self._lim[:, 1])
         return HysteresisState(e), eff
 
@@ -153,9 +177,10 @@ def robot_after_path(robot, path, *, state: HysteresisState | None = None, seed=
 
     ``state`` defaults to rest at the path's first point; ``seed`` (int/Generator/None) draws
     the run-to-run variation (None: nominal, deterministic). Returns a :class:`RodShape`.
+    Raises :class:`InvalidInputError` for an empty path (T = 0).
     """
     model = HysteresisModel(robot, params)
-    c = as_array(path, "path", min_ndim=2)
+    c = _check_path(path)
     if state is None:
         state = model.initial_state(c[..., 0, :])
     rng = None if seed is None else as_generator(seed)
@@ -167,10 +192,11 @@ def effective_displacements(robot, path, *, state: HysteresisState | None = None
 
     ``state`` defaults to rest at the path's first point (no lag); ``seed`` (int, SeedSequence,
     Generator or None) draws this run's play widths and zero offsets (None: nominal values).
-    Feed the result to ``robot.solve_displacements``.
+    Feed the result to ``robot.solve_displacements``. Raises :class:`InvalidInputError` for an
+    empty path (T = 0).
     """
     model = HysteresisModel(robot, params)
-    c = as_array(path, "path", min_ndim=2)
+    c = _check_path(path)
     if state is None:
         state = model.initial_state(c[..., 0, :])
     rng = None if seed is None else as_generator(seed)

@@ -27,6 +27,7 @@ __all__ = [
     "RobotParams",
     "parse_robot_toml",
     "load_robot_params",
+    "read_robot_text",
     "rpy_to_matrix",
     "quaternion_to_matrix",
 ]
@@ -229,6 +230,10 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
 
     Raises :class:`RobotDescriptionError` naming the offending key.
     """
+    if not isinstance(text, str):
+        raise RobotDescriptionError(
+            f"robot description: expected TOML text (str), got {type(text).__name__}; decode bytes as UTF-8 first", key=None
+        )
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -362,13 +367,27 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
     return RobotParams(name, backbone, disks, tuple(tendons), gravity, base, hyst)
 
 
-def load_robot_params(path: str | Path) -> tuple[RobotParams, str]:
-    """Read a robot TOML file; returns ``(params, text)``."""
+def read_robot_text(path: str | Path) -> str:
+    """Text of the robot TOML file ``path``, decoded as UTF-8 (TOML files are UTF-8 by spec).
+
+    Raises :class:`RobotDescriptionError` naming the file if it cannot be read or is not
+    valid UTF-8.
+    """
     p = Path(path)
     try:
-        text = p.read_text()
+        return p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise RobotDescriptionError(
+            f"robot description: {str(p)!r} is not valid UTF-8 text (byte {exc.start}: {exc.reason})"
+        ) from exc
     except OSError as exc:
         raise RobotDescriptionError(f"robot description: cannot read {str(p)!r} ({exc})") from exc
+
+
+def load_robot_params(path: str | Path) -> tuple[RobotParams, str]:
+    """Read a robot TOML file (UTF-8); returns ``(params, text)``."""
+    p = Path(path)
+    text = read_robot_text(p)
     return parse_robot_toml(text, default_name=p.stem), text
 
 

@@ -24,6 +24,7 @@ from riskplan.robots.params import (
     params_to_toml,
     parse_robot_toml,
     quaternion_to_matrix,
+    read_robot_text,
     rpy_to_matrix,
 )
 
@@ -474,16 +475,13 @@ class TendonRobot:
 def _robot_text(name_or_path) -> tuple[str, str]:
     key = str(name_or_path)
     if key in PACKAGED_ROBOTS:
-        return resources.files("riskplan").joinpath("data", PACKAGED_ROBOTS[key]).read_text(), key
+        return resources.files("riskplan").joinpath("data", PACKAGED_ROBOTS[key]).read_text(encoding="utf-8"), key
     p = Path(key)
     if not p.is_file():
         raise RobotDescriptionError(
             f"robot: {key!r} is neither a packaged robot ({', '.join(PACKAGED_ROBOTS)}) nor a TOML file", key="robot"
         )
-    try:
-        return p.read_text(), p.stem
-    except OSError as exc:
-        raise RobotDescriptionError(f"robot: cannot read {key!r} ({exc})", key="robot") from exc
+    return read_robot_text(p), p.stem  # RobotDescriptionError naming the file if unreadable or not UTF-8
 
 
 def load_robot(name_or_path="paper") -> TendonRobot:

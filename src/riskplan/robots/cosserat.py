@@ -811,6 +811,37 @@ def _lm_system(Jm, phi, mu, A, b, m, slack):
         A[i, i] += mu
 
 
+@njit(cache=True, inline="always")
+def _search_direction(Jm, phi, merit, slack, lm, A, step, m):
+    """Newton step (``lm`` False) or Levenberg-Marquardt step into ``step``; False if singular."""
+    if lm:
+        _lm_system(Jm, phi, merit, A, step, m, slack)
+    else:
+        for i in range(m):
+            step[i, 0] = phi[i, 0]
+            for j in range(m):
+                A[i, j] = Jm[i, j]
+    return _gauss_solve(A, step, m, 1)
+
+
+@njit(cache=True, inline="always")
+def _line_search(d, kinv, l0, tau, step, merit, fb, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, dtol, trial, lengths, dl, Jt, pt, slack_t):
+    """Backtracking on the squared residual along ``step`` from ``tau`` (projected on tau >= 0):
+    halves the step until it falls by the Armijo factor. Leaves the accepted point in ``trial``
+    with its system in ``Jt, pt, slack_t``; returns ``(accepted, max residual, merit)``."""
+    m = tau.shape[0]
+    alpha = 1.0
+    for _ls in range(LINE_SEARCH_MAXIT):
+        for i in range(m):
+            trial[i] = max(tau[i] + alpha * step[i, 0], 0.0)
+        if lengths_and_jacobian(trial, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl) == OK:
+            res_t, merit_t = _complementarity(d, kinv, l0, trial, lengths, dl, Jt, pt, fb, slack_t)
+            if merit_t <= (1.0 - 1e-4 * alpha) * merit or res_t <= dtol:
+                return True, res_t, merit_t
+        alpha *= 0.5
+    return False, 0.0, 0.0
+
+
 @njit(cache=True)
 def solve_displacement_tensions(d, kinv, l0, tau0, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, tau, info):
     """Tensions for tendon displacements ``d (m,)`` with compliant tendons and slack (no loads).
@@ -858,29 +889,12 @@ def solve_displacement_tensions(d, kinv, l0, tau0, rt_all, drt_all, kse, kbt, le
         # are not isolated, e.g. tendons whose tension split is statically indeterminate)
         accepted = False
         for attempt in range(2):
-            if attempt == 0:
-                for i in range(m):
-                    step[i, 0] = phi[i, 0]
-                    for j in range(m):
-                        Jc[i, j] = Jm[i, j]
-                if not _gauss_solve(Jc, step, m, 1):
-                    continue
-            else:
-                _lm_system(Jm, phi, merit, Jc, step, m, slack)
-                if not _gauss_solve(Jc, step, m, 1):
+            if _search_direction(Jm, phi, merit, slack, attempt == 1, Jc, step, m):
+                accepted, res_t, merit_t = _line_search(
+                    d, kinv, l0, tau, step, merit, fb, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, dtol, trial, lengths, dl, Jt, pt, slack_t
+                )
+                if accepted:
                     break
-            alpha = 1.0
-            for _ls in range(LINE_SEARCH_MAXIT):
-                for i in range(m):
-                    trial[i] = max(tau[i] + alpha * step[i, 0], 0.0)
-                if lengths_and_jacobian(trial, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl) == OK:
-                    res_t, merit_t = _complementarity(d, kinv, l0, trial, lengths, dl, Jt, pt, fb, slack_t)
-                    if merit_t <= (1.0 - 1e-4 * alpha) * merit or res_t <= dtol:
-                        accepted = True
-                        break
-                alpha *= 0.5
-            if accepted:
-                break
         if not accepted:
             if fb:
                 return OUTER_FAIL
@@ -907,11 +921,18 @@ def solve_displacement_tensions(d, kinv, l0, tau0, rt_all, drt_all, kse, kbt, le
 
 @njit(cache=True)
 def solve_displacement_batch(ds, kinv, l0, tau0s, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus, infos, status):
-    """Batched :func:`solve_displacement_tensions` over ``ds (B, m)``."""
+    """Batched :func:`solve_displacement_tensions` over ``ds (B, m)``; a configuration that fails
+    from its start ``tau0s[b]`` is tried once more from the slack state (``infos`` of the last try)."""
+    slack_start = np.zeros(ds.shape[1])
     for b in range(ds.shape[0]):
-        status[b] = solve_displacement_tensions(
+        st = solve_displacement_tensions(
             ds[b], kinv, l0, tau0s[b], rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus[b], infos[b]
         )
+        if st != OK:
+            st = solve_displacement_tensions(
+                ds[b], kinv, l0, slack_start, rt_all, drt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus[b], infos[b]
+            )
+        status[b] = st
 
 
 # ----------------------------------------------------------------------------- loaded case

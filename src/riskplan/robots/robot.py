@@ -129,8 +129,8 @@ class TendonRobot:
         # cached for the hot path (validation and output)
         self._tmax = np.array([t.max_tension for t in params.tendons], dtype=float)
         self._tlow = np.zeros(len(params.tendons))
-        self._dlim = np.array([t.displacement_limits for t in params.tendons], dtype=float)
-        self._dlo, self._dhi = self._dlim[:, 0].copy(), self._dlim[:, 1].copy()
+        dlim = np.array([t.displacement_limits for t in params.tendons], dtype=float)
+        self._dlo, self._dhi = dlim[:, 0].copy(), dlim[:, 1].copy()  # contiguous, for in_limits
         self._s = np.linspace(0.0, self._L, self._n + 1)
         self._s.flags.writeable = False  # shared by every RodShape this robot returns
         self._identity_base = params.base.is_identity
@@ -156,7 +156,7 @@ class TendonRobot:
     @property
     def displacement_limits(self) -> np.ndarray:
         """``(m, 2)`` ``[low, high]`` per tendon [m]."""
-        return self._dlim.copy()
+        return np.stack([self._dlo, self._dhi], axis=1)
 
     @property
     def tension_limits(self) -> np.ndarray:
@@ -402,16 +402,6 @@ class TendonRobot:
             LOCAL_TOL, LOCAL_MAXIT, DISP_TOL, DISP_MAXIT, tau, infos, status,
         )  # fmt: skip
         bad = np.flatnonzero(status != cosserat.OK)
-        if bad.size:  # second try from the slack state
-            sub = np.ascontiguousarray(flat[bad])
-            tau_b, infos_b, status_b = np.empty((bad.size, m)), np.empty((bad.size, 2)), np.empty(bad.size, dtype=np.int64)
-            cosserat.solve_displacement_batch(
-                sub, self._kinv, self._l0, np.zeros((bad.size, m)), self._rt, self._drt, self._kse, self._kbt, self._L, self._n,
-                LOCAL_TOL, LOCAL_MAXIT, DISP_TOL, DISP_MAXIT, tau_b, infos_b, status_b,
-            )  # fmt: skip
-            tau[bad], status[bad] = tau_b, status_b
-            infos[bad] = np.where((status_b == cosserat.OK)[:, None], infos_b, np.minimum(infos[bad], infos_b))
-            bad = np.flatnonzero(status != cosserat.OK)
         if bad.size:
             b = int(bad[0])
             raise ConvergenceError(

@@ -3,6 +3,8 @@
 Figures (median wall time, paper robot, no gravity, 5 mm step):
 
 * ``tension_single_ms`` — ``robot.solve_tensions`` for one configuration (validation included).
+* ``tension_kernel_single_us`` — the compiled kernel behind it (``cosserat.shape_free``, outputs
+  preallocated), so that the difference is the facade's cost (checks, allocation, ``RodShape``).
 * ``tension_batched_us_per_config`` — one ``solve_tensions`` call on 10,000 configurations.
 * ``displacement_single_ms`` — ``robot.solve_displacements`` for one configuration.
 * ``dataset_small_s`` — wall time of generating the ``small`` preset (train and test splits,
@@ -44,7 +46,8 @@ def _dataset_small_s() -> float | None:
 
 def run(quick: bool = False, *, include_dataset: bool = True) -> dict:
     from riskplan.bench._timing import median_time
-    from riskplan.robots import load_robot
+    from riskplan.robots import cosserat, load_robot
+    from riskplan.robots.robot import LOCAL_MAXIT, LOCAL_TOL
 
     robot = load_robot("paper")
     rng = np.random.default_rng(0)
@@ -52,6 +55,10 @@ def run(quick: bool = False, *, include_dataset: bool = True) -> dict:
     singles = rng.uniform(0.0, 1.0, (64, robot.n_tendons)) * lim * 0.5
     it = iter(range(10**9))
     t_single = median_time(lambda: robot.solve_tensions(singles[next(it) % 64]), repeats=50 if quick else 300, warmup=5)
+    n = robot.n_stations
+    P, Rs, X, lengths = np.empty((n, 3)), np.empty((n, 3, 3)), np.empty((n, 6)), np.empty(robot.n_tendons)
+    kernel_args = (robot._rt, robot._drt, robot._ddrt, robot._kse, robot._kbt, robot._L, robot._n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths)
+    t_kernel = median_time(lambda: cosserat.shape_free(singles[next(it) % 64], *kernel_args), repeats=50 if quick else 300, warmup=5)
     n_batch = 1000 if quick else N_BATCH
     batch = rng.uniform(0.0, 1.0, (n_batch, robot.n_tendons)) * lim * 0.5
     t_batch = median_time(lambda: robot.solve_tensions(batch), repeats=3 if quick else 5, warmup=1)
@@ -60,6 +67,7 @@ def run(quick: bool = False, *, include_dataset: bool = True) -> dict:
     t_disp = median_time(lambda: robot.solve_displacements(dsingles[next(it) % 64]), repeats=30 if quick else 200, warmup=3)
     out = {
         "tension_single_ms": t_single * 1e3,
+        "tension_kernel_single_us": t_kernel * 1e6,
         "tension_batched_us_per_config": t_batch / n_batch * 1e6,
         "displacement_single_ms": t_disp * 1e3,
         "dataset_small_s": None,

@@ -32,7 +32,7 @@ state-independent integrand). Reference state: straight, unstretched (``v* = e3`
 
 Everything here is a pure array function (numba, ``cache=True``); ``robot.TendonRobot`` is the
 validating facade. The per-node helpers that take array views are compiled with
-``inline="always"``: passing views to separate functions cost about a quarter of a solve.
+``inline="always"``: passing views to separate functions cost more than their arithmetic.
 """
 
 from __future__ import annotations

@@ -12,6 +12,8 @@ from riskplan import errors
         (errors.ConvergenceError, RuntimeError),
         (errors.ElementInversionError, RuntimeError),
         (errors.MissingDependencyError, ImportError),
+        (errors.PlanningError, RuntimeError),
+        (errors.SimulationError, RuntimeError),
     ],
 )
 def test_hierarchy(cls, builtin):

@@ -19,6 +19,10 @@ class                          builtin base                raised when
                                                            (carries the residual)
 ``ElementInversionError``      ``RuntimeError``            a finite element inverted (det F <= 0)
 ``MissingDependencyError``     ``ImportError``             an optional extra is not installed
+``PlanningError``              ``RuntimeError``            a planner found no plan within its budget
+                                                           (names the budget and how far it got)
+``SimulationError``            ``RuntimeError``            a simulator returned a non-finite state
+                                                           (names the step)
 =============================  ==========================  =====================================
 """
 
@@ -84,6 +88,18 @@ class ElementInversionError(RiskplanError, RuntimeError):
 
 class MissingDependencyError(RiskplanError, ImportError):
     """An optional dependency is needed for this feature but is not installed."""
+
+
+class PlanningError(RiskplanError, RuntimeError):
+    """A planner found no acceptable plan within its budget.
+
+    The message names the budget (time, iterations, roadmap or tree size) and how far the
+    planner got (e.g. the best distance to the goal), so the user knows what to change.
+    """
+
+
+class SimulationError(RiskplanError, RuntimeError):
+    """A simulator produced a non-finite or otherwise unusable state; the message names the step."""
 
 
 def require(module: str, extra: str):

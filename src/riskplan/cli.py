@@ -24,8 +24,10 @@ app = typer.Typer(
 )
 
 # Areas in pipeline order. Each module defines ``register(app: typer.Typer) -> None``.
+# (``plan``, in commands/plan.py, joins this list once a planner registers a command.)
 AREAS = ("robot", "dataset", "kinematics", "collision", "tissue")
-# Benchmarks: ``riskplan.bench.<area>.run(quick: bool) -> dict``.
+# Benchmarks: ``riskplan.bench.<area>.run(quick: bool) -> dict`` (``-`` in an area name is ``_``
+# in the module name: ``planning-tissue`` -> ``riskplan.bench.planning_tissue``).
 BENCH_AREAS = ("robot", "kinematics", "collision", "tissue")
 
 
@@ -66,7 +68,7 @@ def bench(
     if area not in BENCH_AREAS:
         raise typer.BadParameter(f"unknown area {area!r}; expected one of {', '.join(BENCH_AREAS)}", param_hint="AREA")
     _limit_torch_threads()
-    mod = importlib.import_module(f"riskplan.bench.{area}")
+    mod = importlib.import_module(f"riskplan.bench.{area.replace('-', '_')}")
     figures = mod.run(quick=quick)
     if json_out:
         typer.echo(json.dumps(figures))

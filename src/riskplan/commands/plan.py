@@ -1,0 +1,21 @@
+"""``riskplan plan ...``: the planners (chest cavity: PRM + Bayesian optimisation; deformable
+tissue: simulator RRT + LQG-MP selection). Each planner registers its subcommand from its own
+module (``plan_chest``, ``plan_tissue``) so they stay independent."""
+
+from __future__ import annotations
+
+import importlib
+
+import typer
+
+PLANNERS = ("plan_chest", "plan_tissue")
+
+
+def register(app: typer.Typer) -> None:
+    plan_app = typer.Typer(
+        help="Plan motions under uncertainty (chest cavity, deformable tissue).",
+        no_args_is_help=True,
+    )
+    for name in PLANNERS:
+        importlib.import_module(f"riskplan.commands.{name}").register(plan_app)
+    app.add_typer(plan_app, name="plan")

@@ -10,7 +10,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export RAY_AUTH_MODE ?= disabled
 export MPLBACKEND ?= Agg
 
-.PHONY: install demo test bench clean
+.PHONY: install demo test bench clean browser
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || python3 -m venv $(VENV)
@@ -26,8 +26,18 @@ demo: $(STAMP)
 	$(VENV)/bin/riskplan demo --out $(OUT)
 	@echo "open $(OUT)/report.html"
 
-test: $(STAMP)
+test: $(STAMP) browser
 	$(PY) -m pytest -n 2 --dist loadfile -q
+
+# Headless Chromium for the report tests (tests/browser.py). Installed from Debian when missing
+# and this runs as root with apt-get; otherwise those tests skip and say why.
+browser:
+	@if command -v chromium >/dev/null && command -v chromedriver >/dev/null; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+		echo "installing chromium + chromium-driver (Debian) for the report tests"; \
+		(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver) >/dev/null 2>&1 \
+			|| echo "could not install chromium: the browser tests will skip"; \
+	else echo "chromium not installed and not root: the browser tests will skip"; fi
 
 bench: $(STAMP)
 	for a in robot kinematics collision tissue; do $(VENV)/bin/riskplan bench $$a --json; done

@@ -23,6 +23,8 @@ class                          builtin base                raised when
                                                            (names the budget and how far it got)
 ``SimulationError``            ``RuntimeError``            a simulator returned a non-finite state
                                                            (names the step)
+``BackendUnavailableError``    ``ConnectionError``         a parallel backend cannot be reached
+                                                           (e.g. no Ray head at the address)
 =============================  ==========================  =====================================
 """
 
@@ -100,6 +102,10 @@ class PlanningError(RiskplanError, RuntimeError):
 
 class SimulationError(RiskplanError, RuntimeError):
     """A simulator produced a non-finite or otherwise unusable state; the message names the step."""
+
+
+class BackendUnavailableError(RiskplanError, ConnectionError):
+    """A parallel backend cannot be used: e.g. no Ray head answers at the given address."""
 
 
 def require(module: str, extra: str):

@@ -12,16 +12,19 @@ from __future__ import annotations
 
 import logging
 import os
+import socket
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
 
-from riskplan.errors import InvalidInputError, require
+from riskplan.errors import BackendUnavailableError, InvalidInputError, require
 
 log = logging.getLogger(__name__)
 
 BACKENDS = ("serial", "local", "ray")
+#: Seconds to wait for a Ray head to accept a TCP connection before giving up.
+RAY_CONNECT_TIMEOUT_S = 5.0
 
 
 def spawn_seeds(seed: int | None, n: int) -> list[int]:
@@ -105,8 +108,14 @@ def imap_tasks(
     ray = require("ray", "ray")
     started_here = False
     if not ray.is_initialized():
-        kwargs = {"address": ray_address} if ray_address else {"num_cpus": workers}
-        ray.init(ignore_reinit_error=True, log_to_driver=False, include_dashboard=False, **kwargs)
+        if ray_address:
+            check_ray_address(ray_address)
+        # "local": always a fresh local instance, never a cluster some `ray start` left behind.
+        kwargs = {"address": ray_address} if ray_address else {"address": "local", "num_cpus": workers}
+        try:
+            ray.init(ignore_reinit_error=True, log_to_driver=False, include_dashboard=False, **kwargs)
+        except ConnectionError as exc:
+            raise BackendUnavailableError(f"ray_address={ray_address!r}: cannot connect to a Ray cluster ({exc})") from exc
         started_here = True
     try:
         remote = ray.remote(_run_chunk)
@@ -118,6 +127,39 @@ def imap_tasks(
     finally:
         if started_here:
             ray.shutdown()
+
+
+def parse_ray_address(address: str) -> tuple[str, int] | None:
+    """``(host, port)`` of a Ray address ``"host:port"`` or ``"ray://host:port"``; ``None`` for
+    ``"auto"`` / ``"local"`` (Ray finds or starts the cluster itself)."""
+    if not isinstance(address, str) or not address.strip():
+        raise InvalidInputError(f"ray_address: expected 'host:port', 'ray://host:port' or 'auto', got {address!r}")
+    address = address.strip()
+    if address in ("auto", "local"):
+        return None
+    hostport = address.split("://", 1)[1] if "://" in address else address
+    host, sep, port = hostport.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise InvalidInputError(f"ray_address: expected 'host:port', 'ray://host:port' or 'auto', got {address!r}")
+    return host.strip("[]"), int(port)
+
+
+def check_ray_address(address: str, timeout: float = RAY_CONNECT_TIMEOUT_S) -> None:
+    """Fail fast when nothing listens at a Ray address: ``ray.init`` itself retries for minutes.
+
+    Raises :class:`~riskplan.errors.BackendUnavailableError` within ``timeout`` seconds when the
+    head's port does not accept a TCP connection.
+    """
+    hp = parse_ray_address(address)
+    if hp is None:
+        return
+    try:
+        socket.create_connection(hp, timeout=timeout).close()
+    except OSError as exc:
+        raise BackendUnavailableError(
+            f"ray_address={address!r}: no Ray head answers at {hp[0]}:{hp[1]} ({exc.strerror or exc}); "
+            "start one with `ray start --head --port PORT` or check the address"
+        ) from exc
 
 
 def map_tasks(

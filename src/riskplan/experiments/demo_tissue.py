@@ -174,7 +174,7 @@ def _scenario_section(report: Report, out: Path, sim, title: str, controls, desc
                       caption: str, cap_mesh: int | None = None):
     """Run ``controls`` on the nominal parameters, show the GIF, frames and the per-case table."""
     from riskplan.scenarios.plotting import save_gif
-    from riskplan.scenarios.simulator import rollout
+    from riskplan.scenarios.base import rollout
 
     sec = report.section(title)
     p0 = sim.nominal_params

@@ -1,0 +1,11 @@
+"""Control under uncertainty for the deformable-planning method (Patil, van den Berg &
+Alterovitz, RSS 2011, section IV-B..D): the nominal plan, numerical linearisation,
+finite-horizon LQR, Kalman filter, closed-loop LQG execution and LQG-MP.
+
+Depends only on the :class:`~riskplan.scenarios.base.Simulator` protocol, NumPy/SciPy and
+:mod:`riskplan.collision`.
+"""
+
+from riskplan.control.plan import NominalPlan
+
+__all__ = ["NominalPlan"]

@@ -6,6 +6,8 @@ Depends only on the :class:`~riskplan.scenarios.base.Simulator` protocol, NumPy/
 :mod:`riskplan.collision`.
 """
 
+from riskplan.control.kalman import kalman_gains
+from riskplan.control.lqr import lqr_gains
 from riskplan.control.plan import NominalPlan
 
-__all__ = ["NominalPlan"]
+__all__ = ["NominalPlan", "kalman_gains", "lqr_gains"]

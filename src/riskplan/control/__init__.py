@@ -7,7 +7,8 @@ Depends only on the :class:`~riskplan.scenarios.base.Simulator` protocol, NumPy/
 """
 
 from riskplan.control.kalman import kalman_gains
+from riskplan.control.linearize import Linearization, linearize
 from riskplan.control.lqr import lqr_gains
 from riskplan.control.plan import NominalPlan
 
-__all__ = ["NominalPlan", "kalman_gains", "lqr_gains"]
+__all__ = ["Linearization", "NominalPlan", "kalman_gains", "linearize", "lqr_gains"]

@@ -116,3 +116,45 @@ def test_bad_input(rng):
         lqgmp(sim, plan, ctrl, method="exact")
     with pytest.raises(InvalidInputError, match="controller"):
         lqgmp(sim, plan, lqg_controller(_exact(sim, 1)))
+
+
+def test_sigma_distances_batch_equals_free_region(rng, tol):
+    # the vectorised σ-distance is the first half-space of the Patil construction
+    from riskplan.collision import free_region, precision_cholesky_from_covariance
+    from riskplan.control.lqgmp import _edges, polygon_environment, sigma_distances
+    from riskplan.scenarios.needle import NeedleScenario
+
+    sim = NeedleScenario()
+    s = sim.initial_state()
+    polys = sim.obstacles(s)
+    env = polygon_environment(polys)
+    a, b = _edges(polys)
+    pts = rng.uniform(0, 1, (40, 2))
+    L = rng.normal(0, 0.05, (40, 2, 2))
+    covs = L @ np.swapaxes(L, 1, 2) + 1e-4 * np.eye(2)
+    c, inside = sigma_distances(a, b, pts, covs)
+    np.testing.assert_array_equal(inside, env.contains(pts))
+    for k in np.flatnonzero(~inside):
+        fr = free_region(pts[k], precision_cholesky_from_covariance(covs[k]), env, cutoff=np.inf)
+        np.testing.assert_allclose(c[k], fr.distances.min(), **tol["float64_ref"])
+
+
+def test_sigma_vectorised_equals_loop(rng):
+    # obstacle polygons that change size along the plan force the per-step loop
+    sim, plan = _toy(rng, 4)
+    x2 = plan.reduced[2]
+    sim._goal = square(0, 0, 100.0)
+    sim._obstacles = [square(x2[0] + 0.3, x2[1], 0.1)]
+    ctrl = lqg_controller(_exact(sim, 4))
+    fast = lqgmp(sim, plan, ctrl, n_goal_samples=10)
+    calls = {"n": 0}
+    base = sim.obstacles
+
+    def changing(state=None):
+        calls["n"] += 1
+        return base() if calls["n"] % 2 else [np.vstack([o, o[:1] + [0.0, 1e-3]]) for o in base()]
+
+    sim.obstacles = changing
+    loop = lqgmp(sim, plan, ctrl, n_goal_samples=10)
+    assert np.any((fast.p_free_steps > 0) & (fast.p_free_steps < 1))
+    np.testing.assert_allclose(loop.p_free_steps, fast.p_free_steps, rtol=1e-9, atol=1e-12)

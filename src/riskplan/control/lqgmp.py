@@ -153,6 +153,64 @@ def _truncate(mu, S, c, b):
     return mu, 0.5 * (S + S.T)
 
 
+def _edges(polys) -> tuple[np.ndarray, np.ndarray]:
+    """Edge start points ``(E, 2)`` and end points ``(E, 2)`` of polygons."""
+    a = np.concatenate([np.asarray(p, dtype=np.float64) for p in polys])
+    b = np.concatenate([np.roll(np.asarray(p, dtype=np.float64), -1, axis=0) for p in polys])
+    return a, b
+
+
+def sigma_distances(starts, ends, points, covs) -> tuple[np.ndarray, np.ndarray]:
+    """Batched σ-distances: ``(c (...,), inside (...,))`` for points ``(..., 2)`` with
+    covariances ``(..., 2, 2)`` against polygons given by edge ``starts``/``ends`` ``(..., E, 2)``.
+
+    ``c`` is the Mahalanobis distance from the point to the nearest edge (whitening with
+    :func:`riskplan.collision.whiten`, then the Euclidean distance of the origin to each
+    whitened segment); ``inside`` is the crossing-number test of the point against the
+    polygons. Equal to the first half-space distance of :func:`riskplan.collision.free_region`.
+    """
+    from riskplan.collision import whiten
+
+    U = precision_cholesky_from_covariance(covs)
+    wa = whiten(starts, points, U)
+    wb = whiten(ends, points, U)
+    d = wb - wa
+    tt = np.clip(-np.einsum("...i,...i->...", wa, d) / np.maximum(np.einsum("...i,...i->...", d, d), 1e-300), 0.0, 1.0)
+    closest = wa + tt[..., None] * d
+    c = np.sqrt(np.einsum("...i,...i->...", closest, closest).min(axis=-1))
+    # crossing number (edges of all polygons together: polygons do not overlap)
+    P = points[..., None, :]
+    ya, yb = starts[..., 1], ends[..., 1]
+    cond = (ya > P[..., 1]) != (yb > P[..., 1])
+    xint = starts[..., 0] + (P[..., 1] - ya) * (ends[..., 0] - starts[..., 0]) / np.where(yb != ya, yb - ya, 1.0)
+    inside = (np.count_nonzero(cond & (P[..., 0] < xint), axis=-1) % 2) == 1
+    return c, inside
+
+
+def _sigma_free(sim, plan, cov, col, p) -> np.ndarray | None:
+    """Vectorised ``method="sigma"`` over all steps and points; None if the obstacle
+    polygons change size along the plan (then the per-step loop runs)."""
+    T = plan.n_steps
+    polys = [sim.obstacles(plan.states[t + 1]) for t in range(T)]
+    if not len(polys[0]):
+        return np.ones(T)
+    sizes = {tuple(len(q) for q in ps) for ps in polys}
+    if len(sizes) != 1:
+        return None
+    E = [_edges(ps) for ps in polys]
+    starts = np.stack([e[0] for e in E])[:, None]  # (T, 1, E, 2)
+    ends = np.stack([e[1] for e in E])[:, None]
+    pts = plan.reduced[1:][:, col]  # (T, k, 2)
+    covs = cov[1:][:, col[:, :, None], col[:, None, :]]  # (T, k, 2, 2)
+    ok = np.linalg.eigvalsh(covs).min(axis=-1) > 1e-24
+    covs = np.where(ok[..., None, None], covs, np.eye(2))
+    c, inside = sigma_distances(starts, ends, pts, covs)
+    c = np.where(ok, c, np.inf)
+    cmin = c.min(axis=1)
+    free = np.where(np.isinf(cmin), 1.0, -np.expm1(-0.5 * np.minimum(cmin, 1e150) ** 2))
+    return np.where(inside.any(axis=1), 0.0, free)
+
+
 def lqgmp(sim, plan: NominalPlan, controller: LQGController, *, method: str = "sigma",
           n_goal_samples: int = 2000, cutoff: float = DEFAULT_CUTOFF, seed=None) -> LQGMPResult:
     """LQG-MP probability of success of ``plan`` under ``controller`` (module docstring).
@@ -184,9 +242,16 @@ def lqgmp(sim, plan: NominalPlan, controller: LQGController, *, method: str = "s
     cov[0, :p, :p] = controller.P0
     free = np.ones(T)
     truncating = method == "truncation"
+    fast = None
     mu = np.zeros(2 * p)
     S = cov[0].copy()
-    for t in range(T):
+    if not truncating:
+        for t in range(T):
+            S = F[t] @ S @ F[t].T + Qn[t]
+            cov[t + 1] = S = 0.5 * (S + S.T)
+        fast = _sigma_free(sim, plan, cov, col, p)
+        S = cov[0].copy()
+    for t in range(T if truncating or fast is None else 0):
         mu = F[t] @ mu
         S = F[t] @ S @ F[t].T + Qn[t]
         S = 0.5 * (S + S.T)
@@ -228,6 +293,8 @@ def lqgmp(sim, plan: NominalPlan, controller: LQGController, *, method: str = "s
                     c_min = min(c_min, float(d.min()))
             free[t] = 1.0 if math.isinf(c_min) else -math.expm1(-0.5 * c_min * c_min)
         mean[t + 1], cov[t + 1] = mu, S
+    if not truncating and fast is not None:
+        free = fast
     p_free = float(np.prod(free))
     # P(goal): sample the final true state
     gen = np.random.default_rng(seed)

@@ -158,3 +158,37 @@ def test_sigma_vectorised_equals_loop(rng):
     loop = lqgmp(sim, plan, ctrl, n_goal_samples=10)
     assert np.any((fast.p_free_steps > 0) & (fast.p_free_steps < 1))
     np.testing.assert_allclose(loop.p_free_steps, fast.p_free_steps, rtol=1e-9, atol=1e-12)
+
+
+def test_manipulation_points_and_methods():
+    # the manipulation scenario checks its 12 sensed boundary points and its target
+    import warnings
+
+    from riskplan.control import linearize
+    from riskplan.control.lqgmp import point_indices
+    from riskplan.scenarios.manipulation import ManipulationScenario
+
+    sim = ManipulationScenario()
+    col, goal = point_indices(sim)
+    assert col.shape == (12, 2) and tuple(goal) == (0, 1) and col.max() == sim.state_dim - 1
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), np.tile([0.2, 0.0, 0.0, -0.2, 0.1, 0.0], (3, 1)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        lin = linearize(sim, plan, n_a_runs=4, n_samples=0, seed=0)
+    ctrl = lqg_controller(lin)
+    for m in ("sigma", "truncation"):
+        r = lqgmp(sim, plan, ctrl, method=m, n_goal_samples=200, seed=0)
+        assert r.cov.shape == (4, 52, 52) and 0.0 <= r.p_success <= 1.0
+        assert r.p_goal == 0.0  # three small pushes do not bring the target into the goal disk
+
+
+def test_polygon_environment_equals_validated_constructor(rng):
+    from riskplan.collision import Environment
+    from riskplan.control.lqgmp import polygon_environment
+
+    polys = [square(0.2, 0.2, 0.1), square(0.7, 0.5, 0.05)[::-1]]  # one counter-clockwise, one clockwise
+    a, b = polygon_environment(polys), Environment.from_polygons(polys)
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    np.testing.assert_array_equal(a.faces, b.faces)
+    pts = rng.uniform(0, 1, (200, 2))
+    np.testing.assert_array_equal(a.contains(pts), b.contains(pts))

@@ -120,6 +120,11 @@ def _checked(sim, state, t: int, what: str) -> np.ndarray:
     return x
 
 
+def _finite(X: np.ndarray, t: int, what: str) -> None:
+    if not np.isfinite(X).all():
+        raise SimulationError(f"linearize: non-finite reduced state at step {t} ({what})")
+
+
 def _mirror(u: np.ndarray, w: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     v = u + w
     out = (v < bounds[:, 0]) | (v > bounds[:, 1])
@@ -148,12 +153,11 @@ def control_jacobian(sim, state, control, params, epsilon, x_next=None, t: int =
     return B
 
 
-def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, seeds, ts) -> list:
+def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seeds, ts) -> list:
     """(A_t or None, B_t, M_t, rank_t) for each t in ``ts``."""
     bounds = np.asarray(sim.control_bounds, dtype=np.float64)
     params = plan.params
     p = plan.reduced.shape[1]
-    K = 2 * p
     prior = np.eye(p) if a_prior == "identity" else np.zeros((p, p))
     out = []
     for t, seed in zip(ts, seeds):
@@ -170,8 +174,12 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, seeds, 
             X1 = np.empty((p, K))
             for k in range(K):
                 yk = sim.step(y_prev, _mirror(u_prev, Z[k], bounds), params)
-                X0[:, k] = _checked(sim, yk, t, f"A run {k}") - plan.reduced[t]
-                X1[:, k] = _checked(sim, sim.step(yk, u_t, params), t + 1, f"A run {k}") - x_next
+                X0[:, k] = sim.reduced(yk)
+                X1[:, k] = sim.reduced(sim.step(yk, u_t, params))
+            _finite(X0, t, "A runs")
+            _finite(X1, t + 1, "A runs")
+            X0 -= plan.reduced[t][:, None]
+            X1 -= x_next[:, None]
             U, s, Vt = np.linalg.svd(X0, full_matrices=False)
             keep = s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
             rank = int(keep.sum())
@@ -185,7 +193,9 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, seeds, 
         if draws:
             D = np.empty((len(draws), p))
             for i, s_i in enumerate(draws):
-                D[i] = _checked(sim, sim.step(y_t, u_t, s_i), t + 1, f"parameter draw {i}") - x_next
+                D[i] = sim.reduced(sim.step(y_t, u_t, s_i))
+            _finite(D, t + 1, "parameter draws")
+            D -= x_next
             M = D.T @ D / len(draws)
         out.append((A, B, M, rank))
     return out
@@ -220,6 +230,7 @@ def linearize(
     W=None,
     epsilon=None,
     n_samples: int = 16,
+    n_a_runs: int | None = None,
     a_prior: str = "identity",
     rcond: float = 1e-8,
     H=None,
@@ -241,6 +252,10 @@ def linearize(
         ``diag((0.01 (high − low))²)``.
     epsilon : scalar or (q,) perturbation for ``B_t``; default ``10⁻³ (high − low)``.
     n_samples : parameter draws for ``M_t`` (ignored for an explicit list).
+    n_a_runs : K, runs per step for ``A_t`` (default ``2p``, the paper's choice). One control
+        step excites at most ``q`` directions to first order (rank ``X_t <= q``), so for
+        ``p >> q`` (manipulation: p = 26, q = 6) ``K = 2q`` keeps the information at a
+        fraction of the cost.
     a_prior : ``"identity"`` (default) or ``"zero"`` (the paper's plain pseudo-inverse).
     rcond : relative cut-off of the singular values of ``X_t``.
     H, N : observation model override, ``(m, p)`` and ``(m, m)``.
@@ -281,6 +296,10 @@ def linearize(
     eps = 1e-3 * span if epsilon is None else np.broadcast_to(as_array(epsilon, "epsilon"), (q,)).copy()
     if np.any(eps <= 0):
         raise InvalidInputError(f"epsilon: expected > 0, got {eps}")
+    n_a_runs = 2 * p if n_a_runs is None else n_a_runs
+    if int(n_a_runs) != n_a_runs or n_a_runs < 1:
+        raise InvalidInputError(f"n_a_runs: expected a positive integer, got {n_a_runs!r}")
+    n_a_runs = int(n_a_runs)
     if int(n_samples) != n_samples or n_samples < 0:
         raise InvalidInputError(f"n_samples: expected a non-negative integer, got {n_samples!r}")
     H0, N0 = observation_model(sim, H, N)
@@ -292,7 +311,7 @@ def linearize(
     ts = list(range(T))
     n_chunks = 1 if backend == "serial" else max(1, min(T, 4 * (workers or 2)))
     chunks = [ts[k::n_chunks] for k in range(n_chunks)]
-    fn = partial(_run_chunk, sim, plan, draws, W_factor, eps, a_prior, float(rcond), step_seeds)
+    fn = partial(_run_chunk, sim, plan, draws, W_factor, eps, a_prior, float(rcond), n_a_runs, step_seeds)
     results = map_tasks(fn, chunks, backend=backend, workers=workers, chunksize=1)
     per_t = {}
     for chunk, res in zip(chunks, results):
@@ -325,5 +344,5 @@ def linearize(
     )
 
 
-def _run_chunk(sim, plan, draws, W_factor, eps, a_prior, rcond, step_seeds, ts):
-    return _steps(sim, plan, draws, W_factor, eps, a_prior, rcond, [step_seeds[t] for t in ts], ts)
+def _run_chunk(sim, plan, draws, W_factor, eps, a_prior, rcond, K, step_seeds, ts):
+    return _steps(sim, plan, draws, W_factor, eps, a_prior, rcond, K, [step_seeds[t] for t in ts], ts)

@@ -94,23 +94,10 @@ def point_indices(sim) -> tuple[np.ndarray, np.ndarray]:
 
 
 def polygon_environment(polygons) -> Environment:
-    """A 2-D :class:`~riskplan.collision.Environment` from simple polygons ``[(k_i, 2)]``
-    without the self-intersection check of ``Environment.from_polygons`` (the scenarios'
-    deformed polygons stay simple; this runs once per plan step). Oriented counter-clockwise."""
-    Vs, Fs, owners = [], [], []
-    off = 0
-    for i, poly in enumerate(polygons):
-        P = np.asarray(poly, dtype=np.float64)
-        nxt = np.roll(P, -1, axis=0)
-        if np.sum(P[:, 0] * nxt[:, 1] - nxt[:, 0] * P[:, 1]) < 0:
-            P = P[::-1]
-        k = len(P)
-        idx = np.arange(k)
-        Vs.append(P)
-        Fs.append(np.column_stack([idx, (idx + 1) % k]) + off)
-        owners.append(np.full(k, i, dtype=np.int64))
-        off += k
-    return Environment(np.vstack(Vs), np.vstack(Fs), np.concatenate(owners), validate=False)
+    """A 2-D :class:`~riskplan.collision.Environment` from simple polygons ``[(k_i, 2)]``,
+    built without the self-intersection check (``Environment.from_polygons(validate=False)``):
+    the scenarios' deformed polygons stay simple, and this runs once per plan step."""
+    return Environment.from_polygons(polygons, validate=False)
 
 
 def joint_covariances(ctrl: LQGController) -> tuple[np.ndarray, np.ndarray]:

@@ -192,3 +192,30 @@ def test_polygon_environment_equals_validated_constructor(rng):
     np.testing.assert_array_equal(a.faces, b.faces)
     pts = rng.uniform(0, 1, (200, 2))
     np.testing.assert_array_equal(a.contains(pts), b.contains(pts))
+
+
+def test_drift_mean_matches_monte_carlo(rng):
+    # force_scale ~ U[0.5, 2.5]: the toy's parameter term c (f - 1) has mean 0.5 c every step
+    from riskplan.control import linearize
+    from riskplan.scenarios.uncertainty import InteractionForceUncertainty
+
+    A, B, c = toy_system(rng, scale=0.1)
+    dist = InteractionForceUncertainty(low=0.5, high=2.5)
+    sim = LinearToy(A, B, c, distribution=dist)
+    T = 5
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), rng.uniform(-0.5, 0.5, (T, 3)))
+    sim._goal = square(0, 0, 100.0)
+    lin = linearize(sim, plan, dist, n_samples=4000, seed=0)
+    np.testing.assert_allclose(lin.drift, np.broadcast_to(0.5 * c, (T, 3)), rtol=0, atol=0.05 * np.abs(c).max())
+    ctrl = lqg_controller(lin)
+    res = lqgmp(sim, plan, ctrl, drift=True, n_goal_samples=10)
+    assert not np.any(lqgmp(sim, plan, ctrl, n_goal_samples=10).mean)  # the paper's model: zero mean
+    n = 400
+    xi = np.empty((n, 6))
+    for k in range(n):
+        gen = np.random.default_rng(k)
+        ex = execute(sim, plan, ctrl, dist.sample(gen), seed=gen, keep_states=False)
+        xi[k] = np.concatenate([ex.x[-1], ex.estimates[-1]]) - np.tile(plan.reduced[-1], 2)
+    se = xi.std(axis=0) / math.sqrt(n)
+    # the model mean uses the estimated drift (4000 draws): allow its error too
+    assert np.all(np.abs(xi.mean(axis=0) - res.mean[T]) < 4.5 * se + 0.05 * np.abs(res.mean[T])), (xi.mean(0), res.mean[T])

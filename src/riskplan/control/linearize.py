@@ -37,6 +37,7 @@ Estimation, per step ``t`` (each run restarts the simulator from a stored plan s
   zero-mean, so a systematic shift under S counts as spread (conservative). A draw on
   another mesh than the plan's (mesh case) is run on the plan's mesh, since a stored state
   cannot change mesh: mesh uncertainty enters ``M_t`` only through execution, not here.
+  The mean ``d̄_t`` of the ``d_i`` is kept as ``Linearization.drift`` (beyond the paper).
 * ``H_t``, ``N_t``: ``sim.observation_matrix`` and ``sim.sensing_cov`` (constant), or the
   ``H``/``N`` arguments.
 
@@ -78,6 +79,9 @@ class Linearization:
     H : (T, m, p) observation matrices, ``H[t]`` observes ``x̄_{t+1}``.
     N : (T, m, m) measurement noise covariances.
     rank : (T,) int, numerical rank of ``X_t`` (``A_0`` copies step 1, so ``rank[0]`` does too).
+    drift : (T, p) mean ``(1/n) Σ_i d_i`` of the one-step deviations under S (zeros without
+        draws). The paper's model is zero-mean (``M_t`` is the second moment about zero);
+        :func:`~riskplan.control.lqgmp` can carry this mean (``drift=True``).
     """
 
     A: np.ndarray
@@ -86,9 +90,12 @@ class Linearization:
     H: np.ndarray
     N: np.ndarray
     rank: np.ndarray
+    drift: np.ndarray | None = None
 
     def __post_init__(self):
-        for name in ("A", "B", "M", "H", "N", "rank"):
+        if self.drift is None:
+            object.__setattr__(self, "drift", np.zeros(self.A.shape[:2]))
+        for name in ("A", "B", "M", "H", "N", "rank", "drift"):
             arr = np.array(getattr(self, name), copy=True)
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
@@ -190,6 +197,7 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seed
                 A = prior + (X1 - prior @ X0) @ pinv
         B = control_jacobian(sim, y_t, u_t, params, eps, x_next=x_next, t=t)
         M = np.zeros((p, p))
+        drift = np.zeros(p)
         if draws:
             D = np.empty((len(draws), p))
             for i, s_i in enumerate(draws):
@@ -197,7 +205,8 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seed
             _finite(D, t + 1, "parameter draws")
             D -= x_next
             M = D.T @ D / len(draws)
-        out.append((A, B, M, rank))
+            drift = D.mean(axis=0)
+        out.append((A, B, M, drift, rank))
     return out
 
 
@@ -321,11 +330,12 @@ def linearize(
     B = np.empty((T, p, q))
     M = np.empty((T, p, p))
     rank = np.empty(T, dtype=int)
+    drift = np.empty((T, p))
     for t in range(T):
-        a, b, m_, r = per_t[t]
+        a, b, m_, dr, r = per_t[t]
         if a is not None:
             A[t] = a
-        B[t], M[t], rank[t] = b, m_, r
+        B[t], M[t], drift[t], rank[t] = b, m_, dr, r
     if T >= 2:
         A[0], rank[0] = A[1], rank[1]
     else:
@@ -340,7 +350,7 @@ def linearize(
         )
     m = H0.shape[0]
     return Linearization(
-        A=A, B=B, M=M, H=np.broadcast_to(H0, (T, m, p)), N=np.broadcast_to(N0, (T, m, m)), rank=rank
+        A=A, B=B, M=M, H=np.broadcast_to(H0, (T, m, p)), N=np.broadcast_to(N0, (T, m, m)), rank=rank, drift=drift
     )
 
 

@@ -38,7 +38,7 @@ def _toy(rng, T):
 
 
 def test_joint_covariance_matches_monte_carlo(rng):
-    T, n = 6, 1000
+    T, n = 6, 600
     sim, plan = _toy(rng, T)
     xT = plan.reduced[-1]
     sim._goal = square(xT[0], xT[1], 10.0)
@@ -69,7 +69,7 @@ def test_p_goal_matches_monte_carlo_success(rng):
     sim._goal = square(xT[0] + 0.05, xT[1], 0.2)
     ctrl = lqg_controller(_exact(sim, T))
     res = lqgmp(sim, plan, ctrl, n_goal_samples=40_000, seed=0)
-    mc = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=1000, seed=4)
+    mc = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=600, seed=4)
     assert res.p_collision_free == 1.0  # the toy has no obstacles here
     # LQG-MP's own sampling error is ~0.0025: widen the Wilson interval by 3 of it
     assert mc.low - 0.0075 <= res.p_goal <= mc.high + 0.0075, (res.p_goal, mc.low, mc.high)

@@ -42,7 +42,7 @@ import numpy as np
 from riskplan._validation import as_array
 from riskplan.errors import InvalidInputError
 from riskplan.scenarios import _geometry as geo
-from riskplan.scenarios.simulator import (
+from riskplan.scenarios.base import (
     FEMScenario,
     SimParams,
     SimState,
@@ -195,7 +195,7 @@ class _NeedleModel:
 
 
 class NeedleScenario(FEMScenario):
-    """The needle / car scenario as a :class:`~riskplan.scenarios.simulator.Simulator`.
+    """The needle / car scenario as a :class:`~riskplan.scenarios.base.Simulator`.
 
     Parameters
     ----------
@@ -211,6 +211,9 @@ class NeedleScenario(FEMScenario):
     control_dim = 2
     state_dim = 3
     obs_dim = 2
+    #: where the 2-D points of x are (LQG-MP, :mod:`riskplan.control.lqgmp`): the position
+    collision_point_indices = ((0, 1),)
+    goal_point_indices = (0, 1)
     name = "needle"
     state_type = NeedleState
 

@@ -331,7 +331,8 @@ class Environment:
         P, shape = _as_points(points, self.dim)
         if self.dim == 3:
             Vr, origin, cell, shape_g, start, items = self._ray_grid
-            Pr = np.ascontiguousarray(P @ self._rotation.T)
+            with np.errstate(over="ignore", invalid="ignore"):  # points near the float range are outside anyway
+                Pr = np.ascontiguousarray(P @ self._rotation.T)
             w = K.winding_numbers_3d(Vr, self.faces, Pr, origin, cell, shape_g, start, items)
         else:
             w = K.winding_numbers_2d(self.vertices, self.faces, P)
@@ -372,6 +373,13 @@ class Environment:
         else:
             cross = K.segments_hit_2d(self.vertices, self.faces, P0, P1)
         return (inside | cross).reshape(shape)
+
+
+def check_environment(environment, name: str = "environment") -> Environment:
+    """Raise :class:`InvalidInputError` unless ``environment`` is an :class:`Environment`."""
+    if not isinstance(environment, Environment):
+        raise InvalidInputError(f"{name}: expected an Environment, got {type(environment).__name__}")
+    return environment
 
 
 def _as_points(points, d: int, name: str = "points") -> tuple[np.ndarray, tuple]:

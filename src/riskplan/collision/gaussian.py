@@ -20,6 +20,12 @@ bound gains the exact chi-square tail ``P(|y| >= cutoff)`` (2.6e-17 in 3-D for 9
 it a valid upper bound while skipping the far faces. ``cutoff=inf`` runs the method exactly
 as published.
 
+Numerics. Every finite, valid input gives a number in [0, 1]: the kernel whitens in scaled
+coordinates (``U / max|U|``, ``mu / max(1, |mu|)``), so precision factors from 1e-300 to 1e300
+neither overflow nor underflow; a face whose whitened distance overflows contributes
+``1 - Phi(inf) = 0``. Should a non-finite value still appear, :class:`InvalidInputError` is
+raised instead of returning NaN (a NaN compares false against every threshold).
+
 Means inside an obstacle (or on its surface): no convex free region around the mean
 exists; the bound returns 1 for that Gaussian (always valid, and >= 0.5 as the closed form
 for a point inside a half-space requires).
@@ -131,6 +137,9 @@ def gaussian_bound_terms(
     s, ncons, touching, truncated, _, _, _ = K.gaussian_bounds(
         environment.vertices, environment.faces, centers, radii, mus, us, float(cutoff), BEHIND_EPS, False
     )
+    if not np.all(np.isfinite(s)):  # the kernel is built to avoid this; never return NaN as a probability
+        bad = int(np.flatnonzero(~np.isfinite(s))[0])
+        raise InvalidInputError(f"means/precision_cholesky: the bound is not finite for Gaussian {bad} (numerically degenerate input)")
     inside = environment.contains(mus) | touching
     tail = np.where(truncated, chi_tail(cutoff, d), 0.0)
     bound = np.where(inside, 1.0, np.clip(s + tail, 0.0, 1.0))

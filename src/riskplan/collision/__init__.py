@@ -23,6 +23,7 @@ from riskplan.collision.gaussian import (
     gaussian_bound_terms,
     precision_cholesky_from_covariance,
 )
+from riskplan.collision.frames import BasePose, environment_in_base_frame, load_environment, save_environment
 from riskplan.collision.geometry import mahalanobis, unwhiten, whiten
 from riskplan.collision.mixture import COMBINES, component_bounds, mixture_bound
 from riskplan.collision.montecarlo import (
@@ -72,6 +73,10 @@ def probability_of_collision(
 
 
 __all__ = [
+    "BasePose",
+    "environment_in_base_frame",
+    "load_environment",
+    "save_environment",
     "COMBINES",
     "DEFAULT_CUTOFF",
     "METHODS",

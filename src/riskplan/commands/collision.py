@@ -39,15 +39,16 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Build the procedural chest cavity (MDN paper Fig. 6) and write it as one mesh file.
 
-        A JSON sidecar OUT.json records the seed, parameters, insertion point and robot base frame.
+        The mesh is in the world frame; a JSON sidecar OUT.json records the frame, the robot base
+        pose, the seed, the parameters and the insertion point, so `riskplan collision --env OUT`
+        gives the same answer as the built-in chest.
         """
-        from riskplan.io import write_json_atomic
+        from riskplan.collision.frames import sidecar_path
         from riskplan.scenarios.chest import build_chest, chest_figure, chest_plotly
 
         chest = build_chest(seed, subdivisions=subdivisions)
         chest.save(out)
-        meta = out.with_suffix(out.suffix + ".json")
-        write_json_atomic(meta, chest.metadata())
+        meta = sidecar_path(out)
         typer.echo(f"chest: {chest.n_triangles} triangles, {chest.environment.n_obstacles} obstacles -> {out} (+ {meta.name})")
         if view is not None:
             import matplotlib
@@ -62,7 +63,8 @@ def register(app: typer.Typer) -> None:
 
     @app.command("collision")
     def collision(
-        env: str = typer.Option("chest", "--env", help="'chest' (procedural, robot base frame) or a mesh file given in the robot base frame."),
+        env: str = typer.Option("chest", "--env", help="'chest' (procedural) or a mesh file; its frame comes from the sidecar FILE.json that `riskplan env chest` writes, or from --base-pose."),
+        base_pose: str = typer.Option(None, "--base-pose", help="Robot base in the mesh's frame: x,y,z,qw,qx,qy,qz (m, quaternion), a JSON file with base_position/base_rotation, or 'identity' (mesh already in the base frame). Overrides the sidecar."),
         displacements: str = typer.Option(None, "--displacements", "-d", help="Tendon displacements (m), comma-separated; ';' separates configurations."),
         model: Path = typer.Option(None, "--model", help="Trained MDN model (riskplan kinematics train). Default: robot backbone mixture."),
         arc: str = typer.Option(None, "--arc", help="Constant-curvature geometry instead of a robot: 'kappa,phi' (1/m, rad)."),
@@ -75,15 +77,19 @@ def register(app: typer.Typer) -> None:
         """P(collision) of the robot's geometry distribution at given configurations."""
         import numpy as np
 
-        from riskplan.collision import Environment, monte_carlo_probability, probability_of_collision
+        from riskplan.collision import monte_carlo_probability, probability_of_collision
         from riskplan.errors import InvalidInputError
 
         if env == "chest":
+            if base_pose is not None:
+                raise InvalidInputError("--base-pose applies to mesh files; the procedural chest has its own base frame")
             from riskplan.scenarios.chest import build_chest
 
             environment = build_chest(seed).base_environment
         else:
-            environment = Environment.load(env)
+            from riskplan.collision.frames import BasePose, load_environment
+
+            environment = load_environment(env, base_pose=None if base_pose is None else BasePose.parse(base_pose))
         configs = []
         if arc is not None:
             from riskplan.collision.robot_geometry import arc_backbone, backbone_mixture

@@ -101,9 +101,20 @@ class Chest:
         """World points ``(..., 3)`` to the robot base frame: ``R^T (x - p)``."""
         return (np.asarray(points_world, dtype=np.float64) - self.base_position) @ self.base_rotation
 
+    @property
+    def base_pose(self):
+        """The robot base in the world frame (:class:`riskplan.collision.frames.BasePose`)."""
+        from riskplan.collision.frames import BasePose
+
+        return BasePose(self.base_position, self.base_rotation)
+
     def save(self, path):
-        """Write all obstacles to one mesh file (STL/OBJ/PLY by suffix), world frame."""
-        return self.environment.save(path)
+        """Write all obstacles to one mesh file (STL/OBJ/PLY by suffix), world frame, and the sidecar
+        ``<path>.json`` with the frame, the robot base pose and :meth:`metadata`, so that
+        :func:`riskplan.collision.frames.load_environment` gives back :attr:`base_environment`."""
+        from riskplan.collision.frames import save_environment
+
+        return save_environment(self.environment, path, base_pose=self.base_pose, metadata=self.metadata())
 
     def metadata(self) -> dict:
         return {
@@ -168,6 +179,7 @@ def build_chest(seed: int = 0, params: ChestParams | None = None, **overrides) -
     import trimesh
 
     from riskplan.collision import Environment
+    from riskplan.collision.frames import BasePose, environment_in_base_frame
 
     params = replace(params or ChestParams(), **overrides)
     params.validate()
@@ -246,8 +258,7 @@ def build_chest(seed: int = 0, params: ChestParams | None = None, **overrides) -
     x_axis = np.array([0.0, 0.0, 1.0])
     y_axis = np.cross(z_axis, x_axis)
     R = np.column_stack([x_axis, y_axis, z_axis])
-    Vb = (env.vertices - base_position) @ R
-    base_env = Environment(Vb, env.faces, env.face_obstacle, env.names, validate=False)
+    base_env = environment_in_base_frame(env, BasePose(base_position, R))
     return Chest(
         params=params,
         seed=seed,

@@ -75,6 +75,7 @@ def register(app: typer.Typer) -> None:
         seed: int = typer.Option(0, help="Seed (initialisation, split, batches)."),
         dtype: str = typer.Option("float32", help="float32 or float64."),
         resume: bool = typer.Option(False, "--resume", help="Continue from OUT/checkpoint.pt."),
+        overwrite: bool = typer.Option(False, "--overwrite", help="Start afresh even if OUT holds a checkpoint or a model."),
     ) -> None:
         """Train a mixture density network on a point-cloud data set."""
         import torch
@@ -104,7 +105,7 @@ def register(app: typer.Typer) -> None:
                     status=f"train {rec.train_nll:.3f} val {rec.val_nll:.3f} best {state['best']:.3f} lr {rec.lr:.1e}",
                 )
 
-            res = run_train(ds, cfg, out=out, resume=resume, on_epoch=on_epoch, on_step=on_step)
+            res = run_train(ds, cfg, out=out, resume=resume, overwrite=overwrite, on_epoch=on_epoch, on_step=on_step)
         typer.echo(
             f"best validation NLL {res.best_val_nll:.4f} nats/point at epoch {res.best_epoch} "
             f"({len(res.history)} epochs{', stopped early' if res.stopped_early else ''}, {res.skipped_steps} skipped steps); model: {out}"
@@ -120,6 +121,11 @@ def register(app: typer.Typer) -> None:
         from riskplan.kinematics import load_model
 
         m = load_model(model)
+        if m.metadata.get("finished") is False:
+            typer.secho(
+                f"warning: {model} is an unfinished model (its training run has not ended); resume it with riskplan train --resume",
+                fg="yellow", err=True,
+            )
         d = _parse_displacements(displacements)
         gm = m.predict(d)
         obj = {

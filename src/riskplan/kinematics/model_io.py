@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import logging
 import platform
 from pathlib import Path
 
@@ -22,6 +23,8 @@ import torch
 from riskplan.errors import DataFormatError, InvalidInputError
 from riskplan.io import atomic_path, write_json_atomic
 from riskplan.kinematics.mdn import MDN, MDNModel, Normalisation
+
+log = logging.getLogger(__name__)
 
 FORMAT = "riskplan-mdn"
 FORMAT_VERSION = 1
@@ -137,6 +140,11 @@ def load_model(path, robot=None) -> MDNModel:
         )
     _check_numbers(path, net, norm, limits)
     extra = {k: v for k, v in meta.items() if k not in _RESERVED}
+    if extra.get("finished") is False:
+        log.warning(
+            "model %s is unfinished: saved during a training run that has not ended (best epoch %s); "
+            "resume it with `riskplan train --resume`", path, extra.get("best_epoch")
+        )
     model = MDNModel(net, norm, limits, rob.get("toml", ""), rob.get("name", ""), extra)
     if robot is not None:
         check_robot(model, robot)

@@ -130,7 +130,7 @@ def _sweep_one(task: tuple) -> dict:
     train_data = read_point_clouds(train_path)
     test_data = read_point_clouds(test_path)
     try:
-        res = train(train_data, cfg, out=out_dir, max_seconds=max_seconds)
+        res = train(train_data, cfg, out=out_dir, max_seconds=max_seconds, overwrite=True)
     except ConvergenceError as exc:  # one diverging K must not sink the whole sweep; it is reported
         log.warning("K=%d: %s", K, exc)
         return {

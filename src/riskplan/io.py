@@ -36,6 +36,32 @@ def atomic_path(path, suffix: str | None = None):
             tmp.unlink()
 
 
+def check_output_folder(path, name: str = "out") -> Path:
+    """Raise :class:`~riskplan.errors.InvalidInputError` unless ``path`` can be (or is) a folder:
+    it must not be an existing file, nor lie below one. Call before any work is done."""
+    from riskplan.errors import InvalidInputError
+
+    path = Path(path)
+    for p in (path, *path.parents):
+        if p.exists() and not p.is_dir():
+            what = "is an existing file" if p == path else f"lies below {str(p)!r}, an existing file"
+            raise InvalidInputError(f"{name}: {str(path)!r} {what}; expected a folder")
+        if p.exists():
+            break
+    return path
+
+
+def check_output_file(path, name: str = "out") -> Path:
+    """Raise :class:`~riskplan.errors.InvalidInputError` if ``path`` is a folder or lies below a file."""
+    from riskplan.errors import InvalidInputError
+
+    path = Path(path)
+    if path.is_dir():
+        raise InvalidInputError(f"{name}: {str(path)!r} is a folder; expected a file name")
+    check_output_folder(path.parent, name)
+    return path
+
+
 def write_text_atomic(path, text: str) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(text)

@@ -184,6 +184,9 @@ def sweep(
         raise InvalidInputError(f"nll_tolerance: expected >= 0, got {nll_tolerance}")
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise InvalidInputError(f"workers: expected a positive integer, got {workers!r}")
+    from riskplan.io import check_output_folder
+
+    check_output_folder(out, "out")
     config = config or TrainConfig()
     config.validate()
     tr, te = read_point_clouds(train_path), read_point_clouds(test_path)

@@ -73,6 +73,10 @@ class TrainConfig:
         for name in ints:
             if int(getattr(self, name)) < 1:
                 raise InvalidInputError(f"{name}: expected >= 1, got {getattr(self, name)}")
+        for name in ("early_stop_patience", "lr_patience", "seed"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+                raise InvalidInputError(f"{name}: expected a non-negative integer, got {v!r}")
         if not 0.0 <= self.val_fraction < 1.0:
             raise InvalidInputError(f"val_fraction: expected in [0, 1), got {self.val_fraction}")
         if not (self.lr > 0 and math.isfinite(self.lr)):
@@ -221,6 +225,10 @@ def train(
     out = Path(out) if out is not None else None
     if resume and out is None:
         raise InvalidInputError("resume: needs out= (the folder holding checkpoint.pt)")
+    if out is not None:
+        from riskplan.io import check_output_folder
+
+        check_output_folder(out, "out")
     if out is not None and not resume and not overwrite:
         _refuse_existing_run(out, config)
 

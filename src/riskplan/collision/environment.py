@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from riskplan._validation import as_array
 from riskplan.collision import _kernels as K
 from riskplan.collision.geometry import (
     check_closed_mesh,
@@ -383,7 +384,7 @@ def check_environment(environment, name: str = "environment") -> Environment:
 
 
 def _as_points(points, d: int, name: str = "points") -> tuple[np.ndarray, tuple]:
-    arr = np.asarray(points, dtype=np.float64)
+    arr = as_array(points, name, finite=False)
     if arr.ndim == 0 or arr.shape[-1] != d:
         raise InvalidInputError(f"{name}: expected shape (..., {d}) for a {d}-D environment, got {arr.shape}")
     if not np.all(np.isfinite(arr)):
@@ -392,7 +393,7 @@ def _as_points(points, d: int, name: str = "points") -> tuple[np.ndarray, tuple]
 
 
 def _as_point(p, name: str, d: int) -> np.ndarray:
-    arr = np.asarray(p, dtype=np.float64)
+    arr = as_array(p, name, finite=False)
     if arr.shape != (d,):
         raise InvalidInputError(f"{name}: expected shape ({d},), got {arr.shape}")
     if not np.all(np.isfinite(arr)):

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from riskplan._validation import as_array
 from riskplan.collision import _kernels as K
 from riskplan.collision.environment import Environment
 from riskplan.errors import InvalidInputError
@@ -76,7 +77,7 @@ def precision_cholesky_from_covariance(covariance) -> np.ndarray:
 
     Raises :class:`InvalidInputError` for non-finite, non-symmetric or non-positive-definite input.
     """
-    cov = np.asarray(covariance, dtype=np.float64)
+    cov = as_array(covariance, "covariance", finite=False)
     if cov.ndim < 2 or cov.shape[-1] != cov.shape[-2]:
         raise InvalidInputError(f"covariance: expected shape (..., d, d), got {cov.shape}")
     if not np.all(np.isfinite(cov)):
@@ -97,8 +98,8 @@ def precision_cholesky_from_covariance(covariance) -> np.ndarray:
 
 def check_gaussians(means, precision_cholesky, d: int) -> tuple[np.ndarray, np.ndarray]:
     """Validate ``means (..., d)`` and ``precision_cholesky (..., d, d)``; return float64 arrays."""
-    mu = np.asarray(means, dtype=np.float64)
-    u = np.asarray(precision_cholesky, dtype=np.float64)
+    mu = as_array(means, "means", finite=False)
+    u = as_array(precision_cholesky, "precision_cholesky", finite=False)
     if mu.ndim < 1 or mu.shape[-1] != d:
         raise InvalidInputError(f"means: expected shape (..., {d}) to match the {d}-D environment, got {mu.shape}")
     if u.shape != mu.shape + (d,):

@@ -71,8 +71,13 @@ class TrainConfig:
     def validate(self) -> None:
         ints = ("n_components", "epochs", "batch_size", "points_per_config", "val_points", "max_bad_steps")
         for name in ints:
-            if int(getattr(self, name)) < 1:
-                raise InvalidInputError(f"{name}: expected >= 1, got {getattr(self, name)}")
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
+        for name in ("val_fraction", "lr", "lr_factor", "weight_decay", "min_lr"):
+            v = getattr(self, name, 0.0)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
+                raise InvalidInputError(f"{name}: expected a finite number, got {v!r}")
         for name in ("early_stop_patience", "lr_patience", "seed"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:

@@ -60,8 +60,24 @@ class ChestParams:
     rib_sides: int = 6
 
     def validate(self) -> None:
-        a = np.asarray(self.cavity_semi_axes, dtype=float)
-        if a.shape != (3,) or np.any(a <= 0):
+        import math
+        import numbers
+
+        from dataclasses import fields
+
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name == "cavity_semi_axes":
+                continue
+            want_int = f.name in ("n_ribs", "subdivisions", "rib_segments", "rib_sides")
+            ok = isinstance(v, numbers.Integral) if want_int else isinstance(v, numbers.Real)
+            if isinstance(v, bool) or not ok or (not want_int and not math.isfinite(v)):
+                raise InvalidInputError(f"{f.name}: expected a finite {'integer' if want_int else 'number'}, got {v!r}")
+        try:
+            a = np.asarray(self.cavity_semi_axes, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise InvalidInputError(f"cavity_semi_axes: expected three positive lengths, got {self.cavity_semi_axes!r}") from exc
+        if a.shape != (3,) or not np.all(np.isfinite(a)) or np.any(a <= 0):
             raise InvalidInputError(f"cavity_semi_axes: expected three positive lengths, got {self.cavity_semi_axes}")
         for name in ("wall_thickness", "port_depth", "rib_spacing", "rib_radius", "spine_radius", "lung_gap", "heart_gap", "diaphragm_gap"):
             if not getattr(self, name) > 0:

@@ -14,6 +14,12 @@ from __future__ import annotations
 import numpy as np
 
 from riskplan.collision.environment import Environment
+from riskplan.collision.frames import (
+    BasePose,
+    environment_in_base_frame,
+    load_environment,
+    save_environment,
+)
 from riskplan.collision.gaussian import (
     DEFAULT_CUTOFF,
     FreeRegion,
@@ -23,7 +29,6 @@ from riskplan.collision.gaussian import (
     gaussian_bound_terms,
     precision_cholesky_from_covariance,
 )
-from riskplan.collision.frames import BasePose, environment_in_base_frame, load_environment, save_environment
 from riskplan.collision.geometry import mahalanobis, unwhiten, whiten
 from riskplan.collision.mixture import COMBINES, component_bounds, mixture_bound
 from riskplan.collision.montecarlo import (
@@ -73,22 +78,21 @@ def probability_of_collision(
 
 
 __all__ = [
-    "BasePose",
-    "environment_in_base_frame",
-    "load_environment",
-    "save_environment",
     "COMBINES",
     "DEFAULT_CUTOFF",
     "METHODS",
+    "BasePose",
     "Environment",
     "FreeRegion",
     "MonteCarloEstimate",
     "binomial_interval",
     "component_bounds",
+    "environment_in_base_frame",
     "free_region",
     "gaussian_bound",
     "gaussian_bound_covariance",
     "gaussian_bound_terms",
+    "load_environment",
     "mahalanobis",
     "mixture_bound",
     "monte_carlo_probability",
@@ -96,6 +100,7 @@ __all__ = [
     "paths_collide",
     "precision_cholesky_from_covariance",
     "probability_of_collision",
+    "save_environment",
     "trajectory_bound",
     "trajectory_probability",
     "unwhiten",

@@ -49,3 +49,85 @@ def test_bad_backend():
 def test_task_exception_propagates():
     with pytest.raises(ZeroDivisionError):
         map_tasks(functools.partial(divmod, 1), [1, 0], backend="local", workers=2, chunksize=1)
+
+
+_HELPER = '''
+import os, time
+def sleepy(folder):
+    open(os.path.join(folder, f"worker-{os.getpid()}"), "w").close()
+    time.sleep(120)
+    return os.getpid()
+'''
+
+_SCRIPT = '''
+import os, sys
+sys.path.insert(0, sys.argv[1])
+from helper import sleepy
+from riskplan.parallel import map_tasks
+map_tasks(sleepy, [sys.argv[1]] * 4, backend="local", workers=2, chunksize=1)
+'''
+
+
+def _descendants(pid: int) -> set[int]:
+    import os
+
+    children: dict[int, list[int]] = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat", "rb") as fh:
+                    ppid = int(fh.read().rsplit(b")", 1)[1].split()[1])
+            except (OSError, ValueError, IndexError):
+                continue
+            children.setdefault(ppid, []).append(int(entry))
+    out, todo = set(), [pid]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            out.add(c)
+            todo.append(c)
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as fh:
+            return fh.read().rsplit(b")", 1)[1].split()[0] not in (b"Z", b"X")
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not __import__("os").path.isdir("/proc"), reason="needs /proc (Linux)")
+@pytest.mark.parametrize("sig", ["SIGKILL"])  # SIGTERM takes the same path: the parent is gone
+def test_killed_parent_leaves_no_process_behind(tmp_path, sig):
+    # workers, the forkserver and the resource tracker used to outlive a killed parent for minutes
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    (tmp_path / "helper.py").write_text(_HELPER)
+    proc = subprocess.Popen([sys.executable, "-c", _SCRIPT, str(tmp_path)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                            env={**os.environ, "OMP_NUM_THREADS": "1"})
+    family: set[int] = set()
+    try:
+        deadline = time.monotonic() + 120
+        while len(list(tmp_path.glob("worker-*"))) < 2:
+            assert time.monotonic() < deadline and proc.poll() is None, "workers did not start"
+            time.sleep(0.1)
+        family = _descendants(proc.pid)
+        workers = {int(p.name.split("-")[1]) for p in tmp_path.glob("worker-*")}
+        assert workers <= family and len(family) >= 3  # forkserver + 2 workers (+ resource tracker)
+        os.kill(proc.pid, getattr(signal, sig))
+        proc.wait(timeout=30)
+        deadline = time.monotonic() + 15
+        while any(_alive(p) for p in family) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not [p for p in family if _alive(p)]
+        assert proc.stdout.read() == b""  # EOF: no process holds the command's pipe any more
+    finally:  # whatever happened, leave nothing of ours running
+        if proc.poll() is None:
+            proc.kill()
+        for p in family | _descendants(proc.pid):
+            if _alive(p):
+                os.kill(p, signal.SIGKILL)

@@ -25,6 +25,9 @@ def as_array(
     trailing axis (for batched inputs ``(..., d)``). Raises
     :class:`InvalidInputError` naming ``name`` and what was expected.
     """
+    if np.dtype(dtype).kind == "f" and np.iscomplexobj(value):
+        # asarray(..., float) would drop the imaginary part with only a warning
+        raise InvalidInputError(f"{name}: expected real numbers, got complex values")
     try:
         arr = np.asarray(value, dtype=dtype)
     except (TypeError, ValueError) as exc:

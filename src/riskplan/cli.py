@@ -48,13 +48,23 @@ def _main(verbose: bool = typer.Option(False, "--verbose", "-v", help="Log diagn
 @app.command()
 def demo(
     out: Path = typer.Option(Path("demo-out"), "--out", "-o", help="Folder for report.html and figures."),
-    seed: int = typer.Option(0, help="Master seed."),
-    workers: int = typer.Option(0, help="Worker processes (0: one per core)."),
+    seed: int = typer.Option(0, min=0, help="Master seed."),
+    workers: int = typer.Option(0, min=0, help="Worker processes (0: one per core)."),
 ) -> None:
     """Run the main job on embedded defaults and write OUT/report.html."""
+    from riskplan.commands._progress import progress_bar
     from riskplan.experiments.demo import run_demo
 
-    path = run_demo(out, seed=seed, workers=workers or None)
+    with progress_bar() as bar:
+        task = bar.add_task("demo", total=None, status="starting")
+
+        def progress(done, total, stage, seconds):
+            if seconds is None:
+                bar.update(task, completed=done, total=total, description=f"demo: {stage}", status=f"stage {done + 1}/{total}")
+            else:
+                bar.update(task, completed=done, total=total, status=f"{stage} took {seconds:.0f} s")
+
+        path = run_demo(out, seed=seed, workers=workers or None, progress=progress)
     typer.echo(f"report: {path}")
 
 

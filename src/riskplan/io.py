@@ -36,6 +36,32 @@ def atomic_path(path, suffix: str | None = None):
             tmp.unlink()
 
 
+def check_output_folder(path, name: str = "out") -> Path:
+    """Raise :class:`~riskplan.errors.InvalidInputError` unless ``path`` can be (or is) a folder:
+    it must not be an existing file, nor lie below one. Call before any work is done."""
+    from riskplan.errors import InvalidInputError
+
+    path = Path(path)
+    for p in (path, *path.parents):
+        if p.exists() and not p.is_dir():
+            what = "is an existing file" if p == path else f"lies below {str(p)!r}, an existing file"
+            raise InvalidInputError(f"{name}: {str(path)!r} {what}; expected a folder")
+        if p.exists():
+            break
+    return path
+
+
+def check_output_file(path, name: str = "out") -> Path:
+    """Raise :class:`~riskplan.errors.InvalidInputError` if ``path`` is a folder or lies below a file."""
+    from riskplan.errors import InvalidInputError
+
+    path = Path(path)
+    if path.is_dir():
+        raise InvalidInputError(f"{name}: {str(path)!r} is a folder; expected a file name")
+    check_output_folder(path.parent, name)
+    return path
+
+
 def write_text_atomic(path, text: str) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
@@ -44,3 +70,52 @@ def write_text_atomic(path, text: str) -> None:
 def write_json_atomic(path, obj, **kwargs) -> None:
     kwargs.setdefault("indent", 2)
     write_text_atomic(path, json.dumps(obj, **kwargs) + "\n")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, owned by someone else
+        return True
+    return True
+
+
+@contextlib.contextmanager
+def output_lock(path, what: str = "output"):
+    """Hold ``<path>.lock`` while writing ``path``: a second writer gets a clear error.
+
+    The lock file holds the owner's process id; a lock left by a process that no longer
+    exists (killed) is taken over. Raises :class:`~riskplan.errors.InvalidInputError` naming
+    the running process otherwise.
+    """
+    from riskplan.errors import InvalidInputError
+
+    path = Path(path)
+    lock = path.with_name(path.name + ".lock")
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    for _ in range(2):
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            try:
+                pid = int(lock.read_text().strip() or 0)
+            except (OSError, ValueError):
+                pid = 0
+            if pid and pid != os.getpid() and _pid_alive(pid):
+                raise InvalidInputError(
+                    f"{what} {str(path)!r} is being written by another process (pid {pid}, lock {lock.name}); "
+                    "wait for it to finish or choose another output"
+                ) from None
+            lock.unlink(missing_ok=True)  # stale: its owner is gone
+            continue
+        with os.fdopen(fd, "w") as fh:
+            fh.write(f"{os.getpid()}\n")
+        break
+    else:  # pragma: no cover - lost two races in a row
+        raise InvalidInputError(f"{what} {str(path)!r}: could not take the lock {lock.name}")
+    try:
+        yield lock
+    finally:
+        lock.unlink(missing_ok=True)

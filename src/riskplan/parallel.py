@@ -6,6 +6,12 @@ and :func:`map_tasks` returns results in task order whatever order they finish i
 
 On a 2-core machine a process pool with chunked tasks is the fastest; Ray is for
 users who have a cluster (``backend="ray"``, ``ray_address="auto"`` or an address).
+
+Clean ends (``local``): workers ignore Ctrl-C (the parent handles it) and run a watchdog
+thread that ends the worker within :data:`PARENT_POLL_SECONDS` once the parent process is
+gone (SIGKILL, SIGTERM, a crash), so no worker, forkserver or resource tracker is left
+behind. When the consumer stops early (an exception, Ctrl-C, ``close()``), pending tasks
+are cancelled and the workers are terminated instead of finishing their chunks.
 """
 
 from __future__ import annotations
@@ -44,6 +50,59 @@ def _run_chunk(fn: Callable, chunk: Sequence[tuple[int, Any]]) -> list[tuple[int
     return [(i, fn(item)) for i, item in chunk]
 
 
+PARENT_POLL_SECONDS = 0.25
+
+
+def _parent_gone(parent_pid: int, ppid: int) -> bool:
+    """True when the pool's parent has exited (or our own parent, the forkserver, has)."""
+    if os.getppid() != ppid:
+        return True
+    try:
+        os.kill(parent_pid, 0)
+    except ProcessLookupError:
+        return True
+    except PermissionError:  # pragma: no cover - alive, another user
+        return False
+    try:  # a killed parent that its own parent has not reaped yet is a zombie
+        with open(f"/proc/{parent_pid}/stat", "rb") as fh:
+            return fh.read().rsplit(b")", 1)[1].split()[0] in (b"Z", b"X")
+    except OSError:
+        return False
+
+
+def _watch_parent(parent_pid: int, ppid: int) -> None:
+    import time
+
+    while not _parent_gone(parent_pid, ppid):
+        time.sleep(PARENT_POLL_SECONDS)
+    os._exit(1)  # no cleanup to do: results belong to the parent, which is gone
+
+
+def _init_worker(parent_pid: int) -> None:
+    """Worker start: one thread per library, Ctrl-C left to the parent, exit with the parent."""
+    import signal
+    import threading
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_watch_parent, args=(parent_pid, os.getppid()), daemon=True, name="riskplan-parent-watch").start()
+    _limit_threads()
+
+
+def _terminate_pool(pool) -> None:
+    """Cancel what has not started and stop the workers now (their results are not wanted)."""
+    # ProcessPoolExecutor has no public way to stop running tasks; its worker table (taken
+    # before shutdown, which clears it) is stable across CPython 3.9-3.13.
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in procs:
+        try:
+            proc.terminate()
+        except Exception:  # already gone
+            pass
+    for proc in procs:
+        proc.join(timeout=5)
+
+
 def _limit_threads() -> None:
     # Worker processes share few cores: one BLAS/torch thread each avoids oversubscription.
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
@@ -75,9 +134,9 @@ def imap_tasks(
     indexed = list(enumerate(items))
     if not indexed:
         return
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
+        raise InvalidInputError(f"workers: expected a positive integer (or None for all cores), got {workers!r}")
     workers = workers or default_workers()
-    if workers < 1:
-        raise InvalidInputError(f"workers: expected >= 1, got {workers}")
     if chunksize is None:
         chunksize = max(1, len(indexed) // (4 * workers))
     chunks = [indexed[k : k + chunksize] for k in range(0, len(indexed), chunksize)]
@@ -93,16 +152,17 @@ def imap_tasks(
 
         # forkserver: safe with torch / OpenMP state in the parent, unlike fork.
         ctx = mp.get_context("forkserver")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_limit_threads) as pool:
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(os.getpid(),))
+        try:
             pending = {pool.submit(_run_chunk, fn, c) for c in chunks}
-            try:
-                while pending:
-                    done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                    for fut in done:
-                        yield from fut.result()
-            finally:
-                for fut in pending:
-                    fut.cancel()
+            while pending:
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    yield from fut.result()
+        except BaseException:  # a task failed, Ctrl-C, or the consumer closed the generator
+            _terminate_pool(pool)
+            raise
+        pool.shutdown(wait=True)
         return
 
     ray = require("ray", "ray")

@@ -216,3 +216,55 @@ def test_covariance_front_end_2d_lqg_case():
     np.testing.assert_allclose(got, [1 - ndtr(2.0), 1 - ndtr(0.5 / 0.2)], **TOL["float64_ref"])
     with pytest.raises(InvalidInputError, match="positive definite"):
         gaussian_bound_covariance(means, -covs, env)
+
+
+@pytest.mark.parametrize("s", [1e200, 1e150, 1e8, 1.0])
+def test_extreme_precision_scales_keep_the_closed_form(s):
+    # precision U = s I, the face x = 0 of a large box at distance 3 / s from the mean (whitened
+    # distance 3): the bound is 1 - Phi(3) at every scale, although the whitened box is up to
+    # 1e202 wide (no overflow, and the distance is exact relative to itself, not to the face)
+    env = Environment.from_meshes([box_mesh([0.0, -100.0, -100.0], [100.0, 100.0, 100.0])])
+    # (the half-space sum: whether a point 3e-200 from a face is outside is beyond the winding
+    # number's resolution, where the bound is 1 - conservative)
+    got = gaussian_bound_terms(np.array([-3.0 / s, 0.0, 0.0]), s * np.eye(3), env)
+    np.testing.assert_allclose(got.halfspace_sum, 1 - ndtr(3.0), **TOL["float64_ref"])
+    assert got.n_constraints == 1
+
+
+@pytest.mark.parametrize(
+    "U",
+    [
+        6e78 * np.eye(3),  # very thin covariance
+        1e200 * np.eye(3),
+        1e300 * np.eye(3),
+        np.array([[1.0, 1e100, -1e100], [0.0, 1.0, 1e100], [0.0, 0.0, 1.0]]),  # huge off-diagonal
+        np.array([[1e-300, 1e300, 1e300], [0.0, 1e300, -1e300], [0.0, 0.0, 5e-324]]),
+        1e-300 * np.eye(3),  # covariance far wider than the scene
+    ],
+)
+def test_valid_extreme_factors_give_a_probability(boxes_env, U):
+    # these used to give NaN (a planner compares NaN < threshold as False: "safe") or a
+    # ZeroDivisionError inside the compiled kernel
+    for mean in (np.zeros(3), np.array([0.3, -0.7, 0.2]), np.array([1e300, -1e300, 0.0])):
+        p = gaussian_bound(mean, U, boxes_env)
+        assert np.isfinite(p) and 0.0 <= p <= 1.0
+        region = free_region(mean, U, boxes_env)
+        assert np.all(np.isfinite(region.distances)) and np.all(region.distances >= 0)
+
+
+def test_huge_covariance_through_the_covariance_front_end(boxes_env):
+    from riskplan.collision import gaussian_bound_covariance
+
+    p = gaussian_bound_covariance(np.zeros(3), 1e100 * np.eye(3), boxes_env)
+    assert np.isfinite(p) and 0.0 <= p <= 1.0
+
+
+def test_probability_of_collision_rejects_a_missing_environment():
+    from riskplan.collision import monte_carlo_probability, probability_of_collision
+
+    gm = GaussianMixture([1.0], [[0.0, 0.0, 0.0]], np.eye(3)[None])
+    for method in ("bound", "union", "monte_carlo"):
+        with pytest.raises(InvalidInputError, match="environment"):
+            probability_of_collision(gm, None, method)
+    with pytest.raises(InvalidInputError, match="environment"):
+        monte_carlo_probability(gm, "chest.stl", 10)

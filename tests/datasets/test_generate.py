@@ -169,3 +169,39 @@ def test_bad_input(robot, tmp_path):
     bad.write_text("not hdf5")
     with pytest.raises(DataFormatError, match="HDF5"):
         generate_dataset(robot, "tiny", bad, backend="serial")
+
+
+def test_overwrite_keeps_the_finished_file_until_the_new_one_is_complete(reference, robot, tmp_path):
+    out = tmp_path / "o.h5"
+    out.write_bytes(reference.read_bytes())
+    before = out.read_bytes()
+
+    def stop(done, total):
+        if done >= 1:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        generate_dataset(robot, "tiny", out, split="train", seed=5, backend="serial", overwrite=True, progress=stop)
+    assert out.read_bytes() == before  # it used to be deleted before the new run started
+    assert partial_path(out).exists() and not out.with_name("o.h5.lock").exists()
+    generate_dataset(robot, "tiny", out, split="train", seed=5, backend="serial", overwrite=True)
+    assert int(load_dataset(out).metadata["seed"]) == 5
+
+
+def test_bad_workers_leave_no_partial_and_a_second_writer_is_refused(robot, tmp_path):
+    out = tmp_path / "w.h5"
+    for w in (-1, 0, 1.5, True):
+        with pytest.raises(InvalidInputError, match="workers"):
+            generate_dataset(robot, "tiny", out, workers=w)
+    assert not partial_path(out).exists() and not out.exists()
+    # another live process holds the lock: refused, its partial file untouched
+    lock = out.with_name("w.h5.lock")
+    lock.write_text(f"{os.getppid()}\n")
+    with pytest.raises(InvalidInputError, match=rf"another process \(pid {os.getppid()}"):
+        generate_dataset(robot, "tiny", out, backend="serial", max_new=1)
+    assert not partial_path(out).exists()
+    # a lock left by a dead process is taken over
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    lock.write_text(dead.stdout)
+    generate_dataset(robot, "tiny", out, backend="serial", max_new=1)
+    assert partial_path(out).exists() and not lock.exists()

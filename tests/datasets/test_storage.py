@@ -97,3 +97,53 @@ def test_nonfinite_points_rejected(tmp_path, rng):
         f["points"][0, 0, 0, 0] = np.nan
     with pytest.raises(DataFormatError, match="NaN"):
         load_dataset(p)
+
+
+def test_flipped_bytes_in_points_are_detected(tmp_path, rng):
+    # a real on-disk corruption: flip bits in the raw bytes of configuration 1's points
+    p = tmp_path / "d.h5"
+    _write(p, rng)
+    with h5py.File(p, "r") as f:
+        offset = f["points"].id.get_offset()
+        row = f["points"][0].nbytes
+    raw = bytearray(p.read_bytes())
+    raw[offset + row + 3] ^= 0x40  # an exponent bit of a float32 of configuration 1
+    p.write_bytes(bytes(raw))
+    with pytest.raises(DataFormatError, match=r"SHA-256 digest \(first \[1\]\)"):
+        load_dataset(p)
+
+
+def test_points_beyond_the_robots_reach_are_rejected(tmp_path, rng):
+    # digests consistent (written that way), but points kilometres away from a 0.2 m robot
+    from riskplan.robots import load_robot
+
+    toml = load_robot("paper").toml_text()
+    disp = rng.uniform(-0.01, 0.04, (2, 4))
+    p = tmp_path / "d.h5"
+    with storage.create_file(p, displacements=disp, n_starts=1, n_points=4, robot_toml=toml, robot_name="paper",
+                             protocol_json="{}", split="train", seed=0) as f:
+        storage.write_config(f, 0, rng.normal(scale=0.01, size=(1, 4, 3)), np.zeros((1, 3)), np.zeros((1, 4)), np.zeros((1, 4)))
+        far = np.full((1, 4, 3), 0.01)
+        far[0, 2] = [1500.0, 0.0, 0.0]
+        storage.write_config(f, 1, far, np.zeros((1, 3)), np.zeros((1, 4)), np.zeros((1, 4)))
+        storage.mark_complete(f)
+    with pytest.raises(DataFormatError, match=r"configuration 1 lies 1500 m .* reach"):
+        load_dataset(p)
+
+
+def test_string_typed_arrays_and_files_without_digests(tmp_path, rng, caplog):
+    p = tmp_path / "d.h5"
+    _write(p, rng)
+    with h5py.File(p, "r+") as f:
+        del f["displacements"]
+        f.create_dataset("displacements", data=np.full((3, 4), "x", dtype="S1"))
+    with pytest.raises(DataFormatError, match="displacements has dtype"):
+        load_dataset(p)
+    # files written before digests existed still load, with a warning
+    q = tmp_path / "old.h5"
+    _write(q, rng)
+    with h5py.File(q, "r+") as f:
+        del f[storage.HASHES]
+    with caplog.at_level("WARNING"):
+        assert load_dataset(q).complete
+    assert "no row digests" in caplog.text

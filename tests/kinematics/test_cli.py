@@ -55,3 +55,16 @@ def test_train_on_missing_data_is_clean_error(tmp_path):
     r = runner.invoke(app, ["train", "--data", str(tmp_path / "none.h5"), "--out", str(tmp_path / "m")])
     assert r.exit_code != 0 and isinstance(r.exception, DataFormatError)
     assert not (tmp_path / "m").exists()
+
+
+def test_predict_bad_files_are_clean_errors(trained, tmp_path):
+    from riskplan.errors import InvalidInputError
+
+    _, out = trained
+    bad = {"a.npy": b"\x93NUMPY garbage", "b.json": b"{not json", "c.csv": b"0.01,abc\n", "d.json": b'[["x", 1]]',
+           "e.csv": "0.01,0.02\n".encode("utf-16")}
+    for name, content in bad.items():
+        (tmp_path / name).write_bytes(content)
+        r = runner.invoke(app, ["predict", "--model", str(out), "--displacements", str(tmp_path / name)])
+        assert isinstance(r.exception, InvalidInputError), (name, repr(r.exception))
+        assert name in str(r.exception)

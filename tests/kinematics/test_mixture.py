@@ -110,3 +110,32 @@ def test_non_pd_covariance_rejected():
     cov = np.array([[[1.0, 2.0], [2.0, 1.0]]])
     with pytest.raises(InvalidInputError, match="positive definite"):
         GaussianMixture.from_covariances([1.0], [[0.0, 0.0]], cov)
+
+
+@pytest.mark.parametrize(
+    "points, match",
+    [
+        (np.full((2, 3), np.nan), "NaN"),
+        (np.array([[0.0, np.inf, 0.0]]), "NaN or inf"),
+        (np.zeros(3), r"\(\.\.\., N, 3\)"),  # a single point without the N axis
+        (np.zeros((4, 2)), r"\(\.\.\., N, 3\)"),  # wrong dimension
+        (1.0, r"\(\.\.\., N, 3\)"),
+        (None, "numeric"),
+        ("0,0,0", "numeric"),
+        (np.zeros((2, 3), dtype=complex), "numeric"),
+        (np.zeros((5, 4, 3)), "broadcast"),  # leading axis 5 against batch shape (2,)
+    ],
+)
+def test_log_prob_rejects_bad_points(rng, points, match):
+    w, mu, cov = _random_mixture(rng, batch=(2,))
+    gm = GaussianMixture.from_covariances(w, mu, cov)
+    with pytest.raises(InvalidInputError, match=match):
+        gm.log_prob(points)
+
+
+def test_log_prob_overflowing_quadratic_form_is_minus_inf_not_nan():
+    # U (x - mu) overflows with opposite signs (inf - inf): the density is 0, log density -inf
+    u = np.array([[[1e300, 1e300], [0.0, 1.0]]])
+    gm = GaussianMixture([1.0], [[0.0, 0.0]], u)
+    lp = gm.log_prob(np.array([[1e300, -1e300], [0.0, 0.0]]))
+    assert lp[0] == -np.inf and np.isfinite(lp[1])

@@ -120,3 +120,55 @@ def test_model_of_the_paper_robot(tmp_path, rng):
     m.predict(lim[:, 1])  # the robot's own limits are accepted, slightly beyond them is not
     with pytest.raises(InvalidInputError, match="limits"):
         m.predict(lim[:, 1] + 1e-4)
+
+
+def _edited(out, dst, edit):
+    m = _copy(out, dst)
+    meta = json.loads((m / META_NAME).read_text())
+    edit(meta)
+    (m / META_NAME).write_text(json.dumps(meta))
+    return m
+
+
+@pytest.mark.parametrize(
+    "edit, match",
+    [
+        (lambda m: m["normalisation"].update(output_scale=[0.0, 1.0, 1.0]), "output_scale must be > 0"),
+        (lambda m: m["normalisation"].update(output_scale=[float("nan"), 1.0, 1.0]), "output_scale contains NaN"),
+        (lambda m: m["normalisation"].update(input_scale=[-1.0, 1.0]), "input_scale must be > 0"),
+        (lambda m: m["normalisation"].update(output_centre=[float("inf"), 0.0, 0.0]), "output_centre"),
+        (lambda m: m["normalisation"].update(input_mean=[float("nan"), 0.0]), "input_mean"),
+        (lambda m: m["robot"].update(displacement_limits=[[0.04, -0.01], [-0.01, 0.04]]), "displacement_limits"),
+        (lambda m: m["robot"].update(displacement_limits=[[float("nan"), 0.04], [-0.01, 0.04]]), "displacement_limits"),
+        (lambda m: m["architecture"].update(hidden=[2_000_000_000]), "hidden"),
+        (lambda m: m["architecture"].update(hidden=[60000, 60000]), "parameters"),
+        (lambda m: m["architecture"].update(n_components=-1), "n_components"),
+        (lambda m: m["architecture"].update(n_inputs="2"), "n_inputs"),
+        (lambda m: m["architecture"].update(dtype="int8"), "dtype"),
+    ],
+)
+def test_every_number_in_model_json_is_checked(trained, tmp_path, edit, match):
+    # output_scale = 0 or NaN used to make predict return NaN with exit code 0
+    _, out = trained
+    with pytest.raises(DataFormatError, match=match):
+        load_model(_edited(out, tmp_path / "m", edit))
+
+
+def test_non_finite_weights_rejected(trained, tmp_path):
+    import hashlib
+    import io
+
+    _, out = trained
+    m = _copy(out, tmp_path / "w")
+    state = torch.load(m / WEIGHTS_NAME, weights_only=True)
+    key = next(k for k, v in state.items() if v.is_floating_point())
+    state[key] = state[key].clone()
+    state[key].view(-1)[0] = float("nan")
+    buf = io.BytesIO()
+    torch.save(state, buf)
+    (m / WEIGHTS_NAME).write_bytes(buf.getvalue())
+    meta = json.loads((m / META_NAME).read_text())
+    meta["weights_sha256"] = hashlib.sha256(buf.getvalue()).hexdigest()  # a consistent, but broken, model
+    (m / META_NAME).write_text(json.dumps(meta))
+    with pytest.raises(DataFormatError, match="NaN"):
+        load_model(m)

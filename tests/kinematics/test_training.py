@@ -155,3 +155,28 @@ def test_config_validation():
         TrainConfig(lr=-1).validate()
     with pytest.raises(InvalidInputError, match="dtype"):
         TrainConfig(dtype="float16").validate()
+
+
+def test_rerun_without_resume_refused_and_unfinished_models_marked(synth_small, tmp_path, caplog):
+    from riskplan.kinematics import load_model
+
+    data = read_point_clouds(synth_small)
+    cfg = TrainConfig(n_components=2, epochs=3, seed=3, **FAST)
+    out = tmp_path / "m"
+
+    def interrupt(rec):  # Ctrl-C after the first epoch
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train(data, cfg, out=out, on_epoch=interrupt)
+    # the interrupted run used to be discarded silently by a rerun without --resume
+    with pytest.raises(InvalidInputError, match=r"checkpoint at epoch 1 of 3.*--resume"):
+        train(data, cfg, out=out)
+    with caplog.at_level("WARNING"):
+        assert load_model(out).metadata["finished"] is False
+    assert "unfinished" in caplog.text
+    res = train(data, cfg, out=out, resume=True)
+    assert len(res.history) == 3 and load_model(out).metadata["finished"] is True
+    with pytest.raises(InvalidInputError, match="checkpoint at epoch 3 of 3"):
+        train(data, cfg, out=out)
+    assert len(train(data, TrainConfig(n_components=2, epochs=1, seed=3, **FAST), out=out, overwrite=True).history) == 1

@@ -128,3 +128,30 @@ def test_file_read_as_utf8(tmp_path):
 def test_bytes_are_not_toml_text():
     with pytest.raises(RobotDescriptionError, match="str"):
         parse_robot_toml(MINIMAL.encode())
+
+
+@pytest.mark.parametrize(
+    "edit, key, match",
+    [
+        # these took 45 s and 8 GB before a MemoryError: refused at once, saying why
+        (lambda t: t.replace("length = 0.1", "length = 1e5"), "backbone.step", "integration steps"),
+        (lambda t: t.replace("youngs_modulus = 2e8", "youngs_modulus = 2e8\nstep = 1e-9"), "backbone.step", "integration steps"),
+        (lambda t: t + "\n[disks]\ncount = 100000000\n", "disks.count", "10000"),
+        (lambda t: t.replace("theta = [0.0]", "theta = [" + ", ".join(["0.0"] * 100) + "]"), "tendons[0].theta", "coefficients"),
+    ],
+)
+def test_absurd_robot_files_are_bounded(edit, key, match):
+    with pytest.raises(RobotDescriptionError, match=match) as info:
+        parse_robot_toml(edit(MINIMAL))
+    assert info.value.key == key
+
+
+def test_robot_facade_rejects_silently_coerced_input():
+    from riskplan.errors import InvalidInputError
+    from riskplan.robots import robot_from_toml
+
+    r = robot_from_toml(MINIMAL)
+    with pytest.raises(InvalidInputError, match="complex"):
+        r.solve_tensions(np.array([1.0 + 1.0j]))
+    with pytest.raises(InvalidInputError, match="True or False"):
+        r.with_gravity("yes")

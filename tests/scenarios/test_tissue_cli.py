@@ -78,3 +78,27 @@ def test_step_cost_keys():
     for n in (175, 1000):
         for key in (f"needle_step_us_{n}", f"needle_step_and_collision_us_{n}", f"manipulation_step_ms_{n}", f"manipulation_reduced_us_{n}"):
             assert out[key] > 0
+
+
+def test_controls_validated_before_any_simulation(tmp_path):
+    # row 49 of 60 out of bounds: named, and nothing simulated or written (it used to fail at step 49)
+    rows = [[0.5, 0.0]] * 60
+    rows[48] = [0.5, 9.0]
+    ctrl = tmp_path / "u.json"
+    ctrl.write_text(json.dumps(rows))
+    out = tmp_path / "o"
+    r = runner.invoke(app, ["tissue", "simulate", "--controls", str(ctrl), "--out", str(out)])
+    assert r.exit_code != 0 and "row 49 column 2" in str(r.exception) and not out.exists()
+    # --max-frames 0 used to fail after the whole simulation, leaving an empty frames/
+    r = runner.invoke(app, ["tissue", "simulate", "--steps", "2", "--max-frames", "0", "--out", str(out)])
+    assert r.exit_code != 0 and "--max-frames" in str(r.exception) and not out.exists()
+    latin = tmp_path / "latin.csv"
+    latin.write_bytes("# d\xe9placement\n0.5,0.0\n".encode("latin-1"))
+    with pytest.raises(DataFormatError, match="UTF-8"):
+        read_controls(latin, 2)
+    afile = tmp_path / "file"
+    afile.write_text("x")
+    r = runner.invoke(app, ["tissue", "simulate", "--steps", "2", "--out", str(afile)])
+    assert isinstance(r.exception, InvalidInputError) and "existing file" in str(r.exception)
+    r = runner.invoke(app, ["tissue", "simulate", "--steps", "2", "--seed", "-1", "--out", str(out)])
+    assert isinstance(r.exception, InvalidInputError) and "--seed" in str(r.exception)

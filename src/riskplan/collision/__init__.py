@@ -14,6 +14,12 @@ from __future__ import annotations
 import numpy as np
 
 from riskplan.collision.environment import Environment
+from riskplan.collision.frames import (
+    BasePose,
+    environment_in_base_frame,
+    load_environment,
+    save_environment,
+)
 from riskplan.collision.gaussian import (
     DEFAULT_CUTOFF,
     FreeRegion,
@@ -75,15 +81,18 @@ __all__ = [
     "COMBINES",
     "DEFAULT_CUTOFF",
     "METHODS",
+    "BasePose",
     "Environment",
     "FreeRegion",
     "MonteCarloEstimate",
     "binomial_interval",
     "component_bounds",
+    "environment_in_base_frame",
     "free_region",
     "gaussian_bound",
     "gaussian_bound_covariance",
     "gaussian_bound_terms",
+    "load_environment",
     "mahalanobis",
     "mixture_bound",
     "monte_carlo_probability",
@@ -91,6 +100,7 @@ __all__ = [
     "paths_collide",
     "precision_cholesky_from_covariance",
     "probability_of_collision",
+    "save_environment",
     "trajectory_bound",
     "trajectory_probability",
     "unwhiten",

@@ -37,7 +37,9 @@ def _closest_tri(ax, ay, az, bx, by, bz, cx, cy, cz, px, py, pz):
         return bx, by, bz
     vc = d1 * d4 - d3 * d2
     if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        v = d1 / (d1 - d3)
+        # d1 - d3 = |ab|^2 > 0 unless a == b (a degenerate edge: any point of it is closest)
+        den = d1 - d3
+        v = d1 / den if den > 0.0 else 0.0
         return ax + v * abx, ay + v * aby, az + v * abz
     cpx, cpy, cpz = px - cx, py - cy, pz - cz
     d5 = abx * cpx + aby * cpy + abz * cpz
@@ -46,16 +48,73 @@ def _closest_tri(ax, ay, az, bx, by, bz, cx, cy, cz, px, py, pz):
         return cx, cy, cz
     vb = d5 * d2 - d1 * d6
     if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        w = d2 / (d2 - d6)
+        den = d2 - d6
+        w = d2 / den if den > 0.0 else 0.0
         return ax + w * acx, ay + w * acy, az + w * acz
     va = d3 * d6 - d5 * d4
     if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
-        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        den = (d4 - d3) + (d5 - d6)
+        w = (d4 - d3) / den if den > 0.0 else 0.0
         return bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz)
-    denom = 1.0 / (va + vb + vc)
+    tot = va + vb + vc
+    if not tot > 0.0:
+        # numerically degenerate (collinear) triangle: the closest point lies on an edge
+        return _closest_tri_edges(ax, ay, az, bx, by, bz, cx, cy, cz, px, py, pz)
+    # interior: project p onto the plane along the normal n = ab x ac. Unlike the barycentric
+    # form, this keeps the distance accurate relative to itself, not to the triangle's size
+    # (a thin Gaussian next to a large face: whitened distance 3 against a face 1e200 wide)
+    nx = aby * acz - abz * acy
+    ny = abz * acx - abx * acz
+    nz = abx * acy - aby * acx
+    nn = nx * nx + ny * ny + nz * nz
+    if nn > 1e-300:
+        s = ((ax - px) * nx + (ay - py) * ny + (az - pz) * nz) / nn
+        return px + s * nx, py + s * ny, pz + s * nz
+    denom = 1.0 / tot
     v = vb * denom
     w = vc * denom
     return ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
+
+
+@nb.njit(cache=True, inline="always")
+def _closest_seg_3d(ax, ay, az, bx, by, bz, px, py, pz):
+    """Closest point of segment ``ab`` to ``p`` in 3-D; returns (x, y, z)."""
+    ex, ey, ez = bx - ax, by - ay, bz - az
+    ee = ex * ex + ey * ey + ez * ez
+    t = 0.0
+    if ee > 0.0:
+        t = ((px - ax) * ex + (py - ay) * ey + (pz - az) * ez) / ee
+        if t < 0.0:
+            t = 0.0
+        elif t > 1.0:
+            t = 1.0
+    return ax + t * ex, ay + t * ey, az + t * ez
+
+
+@nb.njit(cache=True)
+def _closest_tri_edges(ax, ay, az, bx, by, bz, cx, cy, cz, px, py, pz):
+    """Closest point to ``p`` on the three edges of triangle ``abc`` (for degenerate triangles)."""
+    bestx, besty, bestz = _closest_seg_3d(ax, ay, az, bx, by, bz, px, py, pz)
+    best = (bestx - px) ** 2 + (besty - py) ** 2 + (bestz - pz) ** 2
+    qx, qy, qz = _closest_seg_3d(bx, by, bz, cx, cy, cz, px, py, pz)
+    s = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
+    if s < best:
+        bestx, besty, bestz, best = qx, qy, qz, s
+    qx, qy, qz = _closest_seg_3d(cx, cy, cz, ax, ay, az, px, py, pz)
+    s = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
+    if s < best:
+        bestx, besty, bestz = qx, qy, qz
+    return bestx, besty, bestz
+
+
+@nb.njit(cache=True, inline="always")
+def _norm3(x, y, z):
+    """``sqrt(x^2 + y^2 + z^2)`` without underflow or overflow of the squares."""
+    m = max(abs(x), abs(y), abs(z))
+    if m == 0.0 or not math.isfinite(m):
+        return m
+    x, y, z = x / m, y / m, z / m
+    return m * math.sqrt(x * x + y * y + z * z)
 
 
 @nb.njit(cache=True, inline="always")
@@ -113,40 +172,48 @@ def closest_points_brute(V, F, P):
 
 
 @nb.njit(cache=True)
-def _whitened_closest(V, F, mu, U, centers, radii, cutoff, W, cp, dist, idx):
+def _whitened_closest(V, F, muh, Uh, t, scale, centers, radii, cutoff, W, cp, dhat, dist, idx):
     """Whiten the faces that can come within ``cutoff`` of the origin and find their closest points.
+
+    Works in *scaled* whitened coordinates so that no intermediate overflows or underflows
+    for any finite ``U`` and ``mu``: with ``s = max|U_ij|`` and ``t = max(1, max|mu_j|)``,
+    ``y = U (x - mu) = scale * Uh (x / t - muh)`` where ``Uh = U / s`` (entries in [-1, 1]),
+    ``muh = mu / t`` and ``scale = s t`` (which may be ``inf``; a face at an infinite whitened
+    distance contributes nothing). ``W``, ``cp`` and ``dhat`` hold scaled quantities (``y / scale``);
+    ``dist`` holds true whitened distances ``dhat * scale``.
 
     A face is skipped without exact work when its bounding sphere (centre ``centers[f]``,
     radius ``radii[f]``) maps to a ball that stays beyond ``cutoff``: the whitened centre is
     ``U (c - mu)`` and the whitened radius is at most ``||U||_2 r``. Returns the number of faces
-    kept (those with exact whitened distance < cutoff); their data fill ``W, cp, dist, idx``.
+    kept (those with exact whitened distance < cutoff); their data fill ``W, cp, dhat, dist, idx``.
     """
     d = V.shape[1]
-    # spectral norm of U bounded by its Frobenius norm (cheap and conservative)
+    # spectral norm of Uh bounded by its Frobenius norm (cheap and conservative)
     unorm = 0.0
     for i in range(d):
         for j in range(d):
-            unorm += U[i, j] * U[i, j]
+            unorm += Uh[i, j] * Uh[i, j]
     unorm = math.sqrt(unorm)
     n = 0
     wc = np.empty(d)
     for f in range(F.shape[0]):
-        # whitened centre
-        s = 0.0
+        # whitened centre (scaled)
+        sq = 0.0
         for i in range(d):
             acc = 0.0
             for j in range(i, d):
-                acc += U[i, j] * (centers[f, j] - mu[j])
+                acc += Uh[i, j] * (centers[f, j] / t - muh[j])
             wc[i] = acc
-            s += acc * acc
-        if math.sqrt(s) - unorm * radii[f] >= cutoff:
+            sq += acc * acc
+        lb = math.sqrt(sq) - unorm * (radii[f] / t)
+        if lb > 0.0 and lb * scale >= cutoff:
             continue
         for k in range(d):
             vk = F[f, k]
             for i in range(d):
                 acc = 0.0
                 for j in range(i, d):
-                    acc += U[i, j] * (V[vk, j] - mu[j])
+                    acc += Uh[i, j] * (V[vk, j] / t - muh[j])
                 W[n, k, i] = acc
         if d == 3:
             qx, qy, qz = _closest_tri(
@@ -154,13 +221,16 @@ def _whitened_closest(V, F, mu, U, centers, radii, cutoff, W, cp, dist, idx):
                 W[n, 2, 0], W[n, 2, 1], W[n, 2, 2], 0.0, 0.0, 0.0,
             )
             cp[n, 0], cp[n, 1], cp[n, 2] = qx, qy, qz
-            r = math.sqrt(qx * qx + qy * qy + qz * qz)
+            rh = _norm3(qx, qy, qz)
         else:
             qx, qy = _closest_seg(W[n, 0, 0], W[n, 0, 1], W[n, 1, 0], W[n, 1, 1], 0.0, 0.0)
             cp[n, 0], cp[n, 1] = qx, qy
-            r = math.sqrt(qx * qx + qy * qy)
+            rh = _norm3(qx, qy, 0.0)
+        # rh * scale is inf (face infinitely far) or 0 (touching), never NaN: rh is finite
+        r = rh * scale if rh > 0.0 else 0.0
         if r >= cutoff:
             continue
+        dhat[n] = rh
         dist[n] = r
         idx[n] = f
         n += 1
@@ -168,7 +238,7 @@ def _whitened_closest(V, F, mu, U, centers, radii, cutoff, W, cp, dist, idx):
 
 
 @nb.njit(cache=True)
-def _halfspace_loop(W, cp, dist, n, eps, a_out, b_out):
+def _halfspace_loop(W, cp, dhat, dist, scale, n, eps, a_out, b_out):
     """Patil et al. (ICRA 2012) in whitened space, on the ``n`` faces kept.
 
     Repeatedly take the closest remaining face point ``p`` (distance ``b = |p|``), add the
@@ -176,10 +246,15 @@ def _halfspace_loop(W, cp, dist, n, eps, a_out, b_out):
     discard every face lying entirely in ``a . y >= b`` (behind it). Faces are convex, so the
     face that gave ``p`` is always discarded. Returns ``(n_constraints, touching)``;
     ``touching`` is True when the origin lies on a face (distance ~ 0).
+
+    ``W``, ``cp``, ``dhat`` are scaled by ``1 / scale`` (see :func:`_whitened_closest`); the
+    test "behind" ``a . y >= b - eps (1 + b)`` is done in those units, and ``b_out`` receives
+    true whitened distances.
     """
     d = W.shape[2]
-    order = np.argsort(dist[:n])
+    order = np.argsort(dhat[:n])
     active = np.ones(n, dtype=np.bool_)
+    inv_scale = 1.0 / scale  # 0 for scale = inf, inf for a subnormal scale: both give finite thresholds
     m = 0
     for oi in range(n):
         f = order[oi]
@@ -188,10 +263,11 @@ def _halfspace_loop(W, cp, dist, n, eps, a_out, b_out):
         b = dist[f]
         if b <= 1e-12:
             return m, True
+        bh = dhat[f]
         for i in range(d):
-            a_out[m, i] = cp[f, i] / b
+            a_out[m, i] = cp[f, i] / bh
         b_out[m] = b
-        thr = b - eps * (1.0 + b)
+        thr = bh - eps * (inv_scale + bh)
         active[f] = False
         for oj in range(oi + 1, n):
             g = order[oj]
@@ -220,12 +296,16 @@ def gaussian_bounds(V, F, centers, radii, mus, Us, cutoff, eps, record):
     ``truncated[i]`` is True when faces were left beyond ``cutoff`` (the caller adds the
     chi-square tail ``P(|y| >= cutoff)``). When ``record`` the whitened constraints
     ``A (total, d)``, ``B (total,)`` and their Gaussian index ``owner`` are returned too.
+
+    Every finite input gives finite output: the whitening is done in scaled coordinates (see
+    :func:`_whitened_closest`), distances that overflow are ``inf`` (``1 - Phi(inf) = 0``).
     """
     M = mus.shape[0]
     nf = F.shape[0]
     d = V.shape[1]
     W = np.empty((nf, d, d))
     cp = np.empty((nf, d))
+    dhat = np.empty(nf)
     dist = np.empty(nf)
     idx = np.empty(nf, dtype=np.int64)
     a_buf = np.empty((nf, d))
@@ -240,10 +320,26 @@ def gaussian_bounds(V, F, centers, radii, mus, Us, cutoff, eps, record):
     owner = np.empty(cap, dtype=np.int64)
     total = 0
     inv_sqrt2 = 1.0 / math.sqrt(2.0)
+    Uh = np.empty((d, d))
+    muh = np.empty(d)
     for it in range(M):
-        n = _whitened_closest(V, F, mus[it], Us[it], centers, radii, cutoff, W, cp, dist, idx)
+        smax = 0.0
+        for i in range(d):
+            for j in range(d):
+                smax = max(smax, abs(Us[it, i, j]))
+        t = 1.0
+        for j in range(d):
+            t = max(t, abs(mus[it, j]))
+        if smax == 0.0:  # U = 0 is rejected by the callers; treat as an infinitely wide Gaussian
+            smax = 5e-324
+        for i in range(d):
+            muh[i] = mus[it, i] / t
+            for j in range(d):
+                Uh[i, j] = Us[it, i, j] / smax
+        scale = smax * t
+        n = _whitened_closest(V, F, muh, Uh, t, scale, centers, radii, cutoff, W, cp, dhat, dist, idx)
         truncated[it] = n < nf
-        m, touch = _halfspace_loop(W, cp, dist, n, eps, a_buf, b_buf)
+        m, touch = _halfspace_loop(W, cp, dhat, dist, scale, n, eps, a_buf, b_buf)
         touching[it] = touch
         ncons[it] = m
         s = 0.0
@@ -330,10 +426,12 @@ def winding_numbers_3d(Vr, F, P, origin, cell, shape, start, items):
     out = np.zeros(n, dtype=np.int64)
     for i in range(n):
         py, pz = P[i, 1], P[i, 2]
-        cy = int(math.floor((py - origin[0]) / cell[0]))
-        cz = int(math.floor((pz - origin[1]) / cell[1]))
-        if cy < 0 or cz < 0 or cy >= shape[0] or cz >= shape[1]:
+        fy = math.floor((py - origin[0]) / cell[0])
+        fz = math.floor((pz - origin[1]) / cell[1])
+        # compare as floats: int() of a huge or infinite float is undefined
+        if not (0.0 <= fy < shape[0] and 0.0 <= fz < shape[1]):
             continue
+        cy, cz = int(fy), int(fz)
         c = cy * shape[1] + cz
         w = 0
         for q in range(start[c], start[c + 1]):
@@ -388,8 +486,9 @@ def segments_hit_3d(V, F, P0, P1, origin, cell, shape, start, items):
         for k in range(3):
             a = min(P0[i, k], P1[i, k])
             b = max(P0[i, k], P1[i, k])
-            lo[k] = min(max(int(math.floor((a - origin[k]) / cell[k])), 0), shape[k] - 1)
-            hi[k] = min(max(int(math.floor((b - origin[k]) / cell[k])), 0), shape[k] - 1)
+            # clamp as floats first: int() of a huge or infinite float is undefined
+            lo[k] = int(min(max(math.floor((a - origin[k]) / cell[k]), 0.0), shape[k] - 1.0))
+            hi[k] = int(min(max(math.floor((b - origin[k]) / cell[k]), 0.0), shape[k] - 1.0))
         dx, dy, dz = P1[i, 0] - P0[i, 0], P1[i, 1] - P0[i, 1], P1[i, 2] - P0[i, 2]
         hit = False
         for x in range(lo[0], hi[0] + 1):

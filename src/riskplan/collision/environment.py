@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from riskplan._validation import as_array
 from riskplan.collision import _kernels as K
 from riskplan.collision.geometry import (
     check_closed_mesh,
@@ -336,7 +337,8 @@ class Environment:
         P, shape = _as_points(points, self.dim)
         if self.dim == 3:
             Vr, origin, cell, shape_g, start, items = self._ray_grid
-            Pr = np.ascontiguousarray(P @ self._rotation.T)
+            with np.errstate(over="ignore", invalid="ignore"):  # points near the float range are outside anyway
+                Pr = np.ascontiguousarray(P @ self._rotation.T)
             w = K.winding_numbers_3d(Vr, self.faces, Pr, origin, cell, shape_g, start, items)
         else:
             w = K.winding_numbers_2d(self.vertices, self.faces, P)
@@ -379,8 +381,15 @@ class Environment:
         return (inside | cross).reshape(shape)
 
 
+def check_environment(environment, name: str = "environment") -> Environment:
+    """Raise :class:`InvalidInputError` unless ``environment`` is an :class:`Environment`."""
+    if not isinstance(environment, Environment):
+        raise InvalidInputError(f"{name}: expected an Environment, got {type(environment).__name__}")
+    return environment
+
+
 def _as_points(points, d: int, name: str = "points") -> tuple[np.ndarray, tuple]:
-    arr = np.asarray(points, dtype=np.float64)
+    arr = as_array(points, name, finite=False)
     if arr.ndim == 0 or arr.shape[-1] != d:
         raise InvalidInputError(f"{name}: expected shape (..., {d}) for a {d}-D environment, got {arr.shape}")
     if not np.all(np.isfinite(arr)):
@@ -389,7 +398,7 @@ def _as_points(points, d: int, name: str = "points") -> tuple[np.ndarray, tuple]
 
 
 def _as_point(p, name: str, d: int) -> np.ndarray:
-    arr = np.asarray(p, dtype=np.float64)
+    arr = as_array(p, name, finite=False)
     if arr.shape != (d,):
         raise InvalidInputError(f"{name}: expected shape ({d},), got {arr.shape}")
     if not np.all(np.isfinite(arr)):

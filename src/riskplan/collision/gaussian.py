@@ -20,6 +20,12 @@ bound gains the exact chi-square tail ``P(|y| >= cutoff)`` (2.6e-17 in 3-D for 9
 it a valid upper bound while skipping the far faces. ``cutoff=inf`` runs the method exactly
 as published.
 
+Numerics. Every finite, valid input gives a number in [0, 1]: the kernel whitens in scaled
+coordinates (``U / max|U|``, ``mu / max(1, |mu|)``), so precision factors from 1e-300 to 1e300
+neither overflow nor underflow; a face whose whitened distance overflows contributes
+``1 - Phi(inf) = 0``. Should a non-finite value still appear, :class:`InvalidInputError` is
+raised instead of returning NaN (a NaN compares false against every threshold).
+
 Means inside an obstacle (or on its surface): no convex free region around the mean
 exists; the bound returns 1 for that Gaussian (always valid, and >= 0.5 as the closed form
 for a point inside a half-space requires).
@@ -32,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from riskplan._validation import as_array
 from riskplan.collision import _kernels as K
 from riskplan.collision.environment import Environment
 from riskplan.errors import InvalidInputError
@@ -70,7 +77,7 @@ def precision_cholesky_from_covariance(covariance) -> np.ndarray:
 
     Raises :class:`InvalidInputError` for non-finite, non-symmetric or non-positive-definite input.
     """
-    cov = np.asarray(covariance, dtype=np.float64)
+    cov = as_array(covariance, "covariance", finite=False)
     if cov.ndim < 2 or cov.shape[-1] != cov.shape[-2]:
         raise InvalidInputError(f"covariance: expected shape (..., d, d), got {cov.shape}")
     if not np.all(np.isfinite(cov)):
@@ -91,8 +98,8 @@ def precision_cholesky_from_covariance(covariance) -> np.ndarray:
 
 def check_gaussians(means, precision_cholesky, d: int) -> tuple[np.ndarray, np.ndarray]:
     """Validate ``means (..., d)`` and ``precision_cholesky (..., d, d)``; return float64 arrays."""
-    mu = np.asarray(means, dtype=np.float64)
-    u = np.asarray(precision_cholesky, dtype=np.float64)
+    mu = as_array(means, "means", finite=False)
+    u = as_array(precision_cholesky, "precision_cholesky", finite=False)
     if mu.ndim < 1 or mu.shape[-1] != d:
         raise InvalidInputError(f"means: expected shape (..., {d}) to match the {d}-D environment, got {mu.shape}")
     if u.shape != mu.shape + (d,):
@@ -131,6 +138,9 @@ def gaussian_bound_terms(
     s, ncons, touching, truncated, _, _, _ = K.gaussian_bounds(
         environment.vertices, environment.faces, centers, radii, mus, us, float(cutoff), BEHIND_EPS, False
     )
+    if not np.all(np.isfinite(s)):  # the kernel is built to avoid this; never return NaN as a probability
+        bad = int(np.flatnonzero(~np.isfinite(s))[0])
+        raise InvalidInputError(f"means/precision_cholesky: the bound is not finite for Gaussian {bad} (numerically degenerate input)")
     inside = environment.contains(mus) | touching
     tail = np.where(truncated, chi_tail(cutoff, d), 0.0)
     bound = np.where(inside, 1.0, np.clip(s + tail, 0.0, 1.0))

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from riskplan.collision.environment import Environment
+from riskplan.collision.environment import Environment, check_environment
 from riskplan.collision.gaussian import DEFAULT_CUTOFF, gaussian_bound_terms
 from riskplan.errors import InvalidInputError
 
@@ -54,6 +54,7 @@ def component_bounds(
     mixture, environment: Environment, *, cutoff: float = DEFAULT_CUTOFF, validate: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-component bounds ``p_i = min(1, sum_j (1 - Phi(b_ij)))`` and weights; both ``(..., K)``."""
+    check_environment(environment)
     w, m, u = mixture_arrays(mixture, environment.dim, validate=validate)
     terms = gaussian_bound_terms(m, u, environment, cutoff=cutoff, validate=validate)
     return terms.bound, w
@@ -71,6 +72,7 @@ def mixture_bound(
     """
     if combine not in COMBINES:
         raise InvalidInputError(f"combine: expected one of {COMBINES}, got {combine!r}")
+    check_environment(environment)
     p, w = component_bounds(mixture, environment, cutoff=cutoff, validate=validate)
     out = (w * p).sum(-1) if combine == "weighted" else p.sum(-1)
     return np.clip(out, 0.0, 1.0)

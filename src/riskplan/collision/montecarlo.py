@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from riskplan._validation import as_generator
-from riskplan.collision.environment import Environment
+from riskplan.collision.environment import Environment, check_environment
 from riskplan.collision.mixture import COMBINES, mixture_arrays
 from riskplan.errors import InvalidInputError
 
@@ -136,6 +136,7 @@ def monte_carlo_probability(
     if combine not in COMBINES:
         raise InvalidInputError(f"combine: expected one of {COMBINES}, got {combine!r}")
     n = _check_n(n_samples)
+    check_environment(environment)
     w, m, u = mixture_arrays(mixture, environment.dim, validate=validate)
     shape = w.shape[:-1]
     K, d = m.shape[-2], m.shape[-1]
@@ -158,7 +159,7 @@ def paths_collide(paths, environment: Environment, *, segments: bool = True) -> 
     """``(...,)`` bool: True where a path ``(..., T, d)`` has a point inside an obstacle or
     (``segments``) a segment between consecutive points crossing one."""
     x = np.asarray(paths, dtype=np.float64)
-    d = environment.dim
+    d = check_environment(environment).dim
     if x.ndim < 2 or x.shape[-1] != d:
         raise InvalidInputError(f"paths: expected shape (..., T, {d}), got {x.shape}")
     hit = environment.contains(x).any(-1)
@@ -188,6 +189,7 @@ def monte_carlo_trajectory(
     if combine not in COMBINES:
         raise InvalidInputError(f"combine: expected one of {COMBINES}, got {combine!r}")
     n = _check_n(n_samples)
+    check_environment(environment)
     w, m, u = mixture_arrays(mixtures, environment.dim, validate=validate)
     if w.ndim < 2:
         raise InvalidInputError("mixtures: expected a batch axis of states (batch shape (..., T))")

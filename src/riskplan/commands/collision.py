@@ -32,22 +32,31 @@ def register(app: typer.Typer) -> None:
     @env_app.command("chest")
     def env_chest(
         out: Path = typer.Option(Path("chest.stl"), "--out", "-o", help="Mesh file to write (.stl, .obj, .ply)."),
-        seed: int = typer.Option(0, help="Seed of the organ shape variation."),
+        seed: int = typer.Option(0, min=0, help="Seed of the organ shape variation."),
         subdivisions: int = typer.Option(3, help="Icosphere subdivisions of the organ/wall meshes (3: ~12k triangles)."),
         view: Path = typer.Option(None, "--view", help="Write a PNG view (exterior and interior)."),
         html: Path = typer.Option(None, "--html", help="Write an interactive plotly HTML view."),
     ) -> None:
         """Build the procedural chest cavity (MDN paper Fig. 6) and write it as one mesh file.
 
-        A JSON sidecar OUT.json records the seed, parameters, insertion point and robot base frame.
+        The mesh is in the world frame; a JSON sidecar OUT.json records the frame, the robot base
+        pose, the seed, the parameters and the insertion point, so `riskplan collision --env OUT`
+        gives the same answer as the built-in chest.
         """
-        from riskplan.io import write_json_atomic
+        from riskplan.collision.frames import sidecar_path
+        from riskplan.errors import InvalidInputError
+        from riskplan.io import check_output_file
         from riskplan.scenarios.chest import build_chest, chest_figure, chest_plotly
+
+        if out.suffix.lower() not in (".stl", ".obj", ".ply", ".off"):
+            raise InvalidInputError(f"--out: {out.name}: expected a mesh file ending in .stl, .obj, .ply or .off")
+        for name, p in (("--out", out), ("--view", view), ("--html", html)):
+            if p is not None:
+                check_output_file(p, name)
 
         chest = build_chest(seed, subdivisions=subdivisions)
         chest.save(out)
-        meta = out.with_suffix(out.suffix + ".json")
-        write_json_atomic(meta, chest.metadata())
+        meta = sidecar_path(out)
         typer.echo(f"chest: {chest.n_triangles} triangles, {chest.environment.n_obstacles} obstacles -> {out} (+ {meta.name})")
         if view is not None:
             import matplotlib
@@ -62,29 +71,26 @@ def register(app: typer.Typer) -> None:
 
     @app.command("collision")
     def collision(
-        env: str = typer.Option("chest", "--env", help="'chest' (procedural, robot base frame) or a mesh file given in the robot base frame."),
+        env: str = typer.Option("chest", "--env", help="'chest' (procedural) or a mesh file; its frame comes from the sidecar FILE.json that `riskplan env chest` writes, or from --base-pose."),
+        base_pose: str = typer.Option(None, "--base-pose", help="Robot base in the mesh's frame: x,y,z,qw,qx,qy,qz (m, quaternion), a JSON file with base_position/base_rotation, or 'identity' (mesh already in the base frame). Overrides the sidecar."),
         displacements: str = typer.Option(None, "--displacements", "-d", help="Tendon displacements (m), comma-separated; ';' separates configurations."),
-        model: Path = typer.Option(None, "--model", help="Trained MDN model (riskplan kinematics train). Default: robot backbone mixture."),
+        model: Path = typer.Option(None, "--model", help="Trained MDN model folder (from riskplan train). Default: robot backbone mixture."),
         arc: str = typer.Option(None, "--arc", help="Constant-curvature geometry instead of a robot: 'kappa,phi' (1/m, rad)."),
         robot: str = typer.Option("paper", "--robot", help="Robot name or TOML file for the backbone fallback."),
         method: str = typer.Option("bound", help="bound (eq. 9) | union | monte_carlo | monte_carlo_union."),
-        samples: int = typer.Option(20000, help="Monte Carlo samples (also used for the reference interval)."),
-        seed: int = typer.Option(0, help="Seed (chest shape and Monte Carlo)."),
+        samples: int = typer.Option(20000, min=1, help="Monte Carlo samples (also used for the reference interval)."),
+        seed: int = typer.Option(0, min=0, help="Seed (chest shape and Monte Carlo)."),
         json_out: bool = typer.Option(False, "--json", help="Print JSON."),
     ) -> None:
         """P(collision) of the robot's geometry distribution at given configurations."""
         import numpy as np
 
-        from riskplan.collision import Environment, monte_carlo_probability, probability_of_collision
+        from riskplan.collision import monte_carlo_probability, probability_of_collision
         from riskplan.errors import InvalidInputError
 
-        if env == "chest":
-            from riskplan.scenarios.chest import build_chest
-
-            environment = build_chest(seed).base_environment
-        else:
-            environment = Environment.load(env)
         configs = []
+        if arc is not None and (displacements is not None or model is not None):
+            raise InvalidInputError("--arc describes the geometry itself; give either --arc or --displacements (with --model), not both")
         if arc is not None:
             from riskplan.collision.robot_geometry import arc_backbone, backbone_mixture
 
@@ -96,7 +102,11 @@ def register(app: typer.Typer) -> None:
         else:
             if displacements is None:
                 raise InvalidInputError("--displacements (or --arc) is required")
-            configs = [_floats(c, "--displacements") for c in displacements.split(";")]
+            configs = [_floats(c, "--displacements") for c in displacements.split(";") if c.strip()]
+            if not configs or len({len(c) for c in configs}) != 1 or not configs[0]:
+                raise InvalidInputError(
+                    f"--displacements: expected one or more configurations of equal length ('d1,d2,...;d1,d2,...'), got {displacements!r}"
+                )
             d = np.asarray(configs, dtype=np.float64)
             if model is not None:
                 from riskplan.kinematics import load_model
@@ -111,6 +121,16 @@ def register(app: typer.Typer) -> None:
                     raise InvalidInputError("no robot model is available here; pass --model or --arc") from exc
 
                 gm = robot_mixture(load_robot(robot), d)
+        if env == "chest":
+            if base_pose is not None:
+                raise InvalidInputError("--base-pose applies to mesh files; the procedural chest has its own base frame")
+            from riskplan.scenarios.chest import build_chest
+
+            environment = build_chest(seed).base_environment
+        else:
+            from riskplan.collision.frames import BasePose, load_environment
+
+            environment = load_environment(env, base_pose=None if base_pose is None else BasePose.parse(base_pose))
         p = probability_of_collision(gm, environment, method, n_samples=samples, seed=seed)
         mc = monte_carlo_probability(gm, environment, samples, seed=seed)
         rows = [
@@ -134,8 +154,8 @@ def register(app: typer.Typer) -> None:
     @app.command("collision-table")
     def collision_table(
         out: Path = typer.Option(None, "--out", "-o", help="Write the markdown table here (default: print)."),
-        samples: int = typer.Option(100_000, help="Monte Carlo samples per configuration."),
-        seed: int = typer.Option(0, help="Seed of the chest and of the sampling."),
+        samples: int = typer.Option(100_000, min=1, help="Monte Carlo samples per configuration."),
+        seed: int = typer.Option(0, min=0, help="Seed of the chest and of the sampling."),
         model: Path = typer.Option(None, "--model", help="Trained MDN model; default: robot backbone (or arc) mixtures."),
     ) -> None:
         """Bound vs Monte Carlo (95 % intervals) for a set of robot configurations in the chest."""

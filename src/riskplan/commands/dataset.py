@@ -76,10 +76,10 @@ def register(app: typer.Typer) -> None:
         preset: str = typer.Option("small", help="Protocol preset: paper, small or tiny."),
         out: Path = typer.Option(Path("data.h5"), "--out", "-o", help="Output HDF5 file (a stem for --split both)."),
         split: str = typer.Option("both", help="train, test, or both (writes OUT_train.h5 and OUT_test.h5)."),
-        workers: int = typer.Option(None, help="Worker processes (default: all cores)."),
+        workers: int = typer.Option(None, min=1, help="Worker processes (default: all cores)."),
         backend: str = typer.Option("local", help="local (process pool), serial, or ray."),
-        seed: int = typer.Option(0, help="Master seed of starts, hysteresis variation and camera noise."),
-        overwrite: bool = typer.Option(False, help="Replace existing output made with other settings."),
+        seed: int = typer.Option(0, min=0, help="Master seed of starts, hysteresis variation and camera noise."),
+        overwrite: bool = typer.Option(False, help="Replace existing output (the old file stays until the new one is complete)."),
     ) -> None:
         """Generate a data set (resumable: rerun the same command after an interruption)."""
         import time
@@ -103,8 +103,16 @@ def register(app: typer.Typer) -> None:
                 def progress(done, total, task=task):
                     bar.update(task, completed=done, total=total)
 
-                result = generate_dataset(rob, protocol, path, split=sp, seed=seed, workers=workers, backend=backend,
-                                          progress=progress, overwrite=overwrite)
+                try:
+                    result = generate_dataset(rob, protocol, path, split=sp, seed=seed, workers=workers, backend=backend,
+                                              progress=progress, overwrite=overwrite)
+                except KeyboardInterrupt:
+                    bar.stop()
+                    typer.secho(
+                        f"interrupted: finished configurations are kept in {path}.partial; rerun the same command to resume",
+                        fg="yellow", err=True,
+                    )
+                    raise typer.Exit(130) from None
                 bar.update(task, status=f"-> {result}")
         typer.echo(f"done in {time.perf_counter() - t0:.1f} s: " + ", ".join(str(p) for p in outputs.values()))
 

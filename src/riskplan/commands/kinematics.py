@@ -41,11 +41,19 @@ def _parse_displacements(spec: str):
 
     p = Path(spec)
     if p.suffix in (".npy", ".json", ".csv", ".txt") and p.is_file():
-        if p.suffix == ".npy":
-            return np.load(p)
-        if p.suffix == ".json":
-            return np.asarray(json.loads(p.read_text()), dtype=np.float64)
-        return np.loadtxt(p, delimiter=",", ndmin=2)
+        try:
+            if p.suffix == ".npy":
+                arr = np.load(p, allow_pickle=False)
+            elif p.suffix == ".json":
+                arr = json.loads(p.read_text(encoding="utf-8"))
+            else:
+                arr = np.loadtxt(p, delimiter=",", ndmin=2)
+            arr = np.asarray(arr, dtype=np.float64)
+        except (OSError, ValueError, TypeError, UnicodeDecodeError, EOFError) as exc:
+            raise InvalidInputError(f"--displacements: cannot read {p.name} as a table of numbers ({type(exc).__name__}: {exc})") from exc
+        if arr.ndim not in (1, 2) or arr.size == 0:
+            raise InvalidInputError(f"--displacements: {p.name} must hold one configuration or a (N, m) table, got shape {arr.shape}")
+        return arr
     try:
         rows = [[float(v) for v in r.split(",") if v.strip()] for r in spec.split(";") if r.strip()]
         arr = np.asarray(rows, dtype=np.float64)
@@ -62,7 +70,7 @@ def register(app: typer.Typer) -> None:
         data: Path = typer.Option(..., "--data", help="Training data set (HDF5 from `riskplan dataset`)."),
         out: Path = typer.Option(..., "--out", "-o", help="Model folder (weights.pt, model.json, checkpoint.pt)."),
         components: int = typer.Option(5, "--components", "-k", help="Mixture components K."),
-        epochs: int = typer.Option(100, help="Maximum epochs."),
+        epochs: int = typer.Option(100, min=1, help="Maximum epochs."),
         batch_size: int = typer.Option(32, help="Configurations per step."),
         points_per_config: int = typer.Option(256, help="Points drawn per configuration per step."),
         lr: float = typer.Option(3e-3, help="Adam learning rate."),
@@ -70,11 +78,12 @@ def register(app: typer.Typer) -> None:
         head_hidden: str = typer.Option("32", help="Comma-separated hidden widths of each head ('' for linear heads)."),
         activation: str = typer.Option("silu", help="silu, tanh or relu."),
         val_fraction: float = typer.Option(0.1, help="Fraction of configurations held out for validation."),
-        patience: int = typer.Option(12, help="Early stopping: epochs without validation improvement."),
-        lr_patience: int = typer.Option(4, help="Halve the learning rate after this many epochs without improvement."),
-        seed: int = typer.Option(0, help="Seed (initialisation, split, batches)."),
+        patience: int = typer.Option(12, min=0, help="Early stopping: epochs without validation improvement."),
+        lr_patience: int = typer.Option(4, min=0, help="Halve the learning rate after this many epochs without improvement."),
+        seed: int = typer.Option(0, min=0, help="Seed (initialisation, split, batches)."),
         dtype: str = typer.Option("float32", help="float32 or float64."),
         resume: bool = typer.Option(False, "--resume", help="Continue from OUT/checkpoint.pt."),
+        overwrite: bool = typer.Option(False, "--overwrite", help="Start afresh even if OUT holds a checkpoint or a model."),
     ) -> None:
         """Train a mixture density network on a point-cloud data set."""
         import torch
@@ -95,16 +104,24 @@ def register(app: typer.Typer) -> None:
             state = {"best": float("inf")}
 
             def on_step(step, steps, loss):
-                bar.update(task, status=f"step {step + 1}/{steps} loss {loss:.3f}")
+                bar.update(task, status=f"step {step + 1}/{steps} {loss:.3f}")
 
             def on_epoch(rec):
                 state["best"] = min(state["best"], rec.val_nll)
                 bar.update(
                     task, completed=rec.epoch + 1,
-                    status=f"train {rec.train_nll:.3f} val {rec.val_nll:.3f} best {state['best']:.3f} lr {rec.lr:.1e}",
+                    status=f"val {rec.val_nll:.3f} best {state['best']:.3f}",
                 )
 
-            res = run_train(ds, cfg, out=out, resume=resume, on_epoch=on_epoch, on_step=on_step)
+            try:
+                res = run_train(ds, cfg, out=out, resume=resume, overwrite=overwrite, on_epoch=on_epoch, on_step=on_step)
+            except KeyboardInterrupt:
+                bar.stop()
+                typer.secho(
+                    f"interrupted: the checkpoint in {out} is kept; continue with the same command plus --resume",
+                    fg="yellow", err=True,
+                )
+                raise typer.Exit(130) from None
         typer.echo(
             f"best validation NLL {res.best_val_nll:.4f} nats/point at epoch {res.best_epoch} "
             f"({len(res.history)} epochs{', stopped early' if res.stopped_early else ''}, {res.skipped_steps} skipped steps); model: {out}"
@@ -113,13 +130,18 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def predict(
         model: Path = typer.Option(..., "--model", "-m", help="Model folder."),
-        displacements: str = typer.Option(..., "--displacements", "-d", help="'d1,d2,...' [m]; ';' between configurations; or a .npy/.json/.csv file."),
+        displacements: str = typer.Option(..., "--displacements", "-d", help="'d1,d2,...' (m); ';' between configurations; or a .npy/.json/.csv file."),
         json_out: bool = typer.Option(False, "--json", help="Print the mixture as JSON."),
     ) -> None:
         """Predict the Gaussian mixture of the robot's geometry for tendon displacements."""
         from riskplan.kinematics import load_model
 
         m = load_model(model)
+        if m.metadata.get("finished") is False:
+            typer.secho(
+                f"warning: {model} is an unfinished model (its training run has not ended); resume it with riskplan train --resume",
+                fg="yellow", err=True,
+            )
         d = _parse_displacements(displacements)
         gm = m.predict(d)
         obj = {
@@ -149,16 +171,16 @@ def register(app: typer.Typer) -> None:
         test: Path = typer.Option(..., "--test", help="Test data set."),
         out: Path = typer.Option(..., "--out", "-o", help="Output folder (K*/ models, sweep.json, fig4_nll_vs_k.png)."),
         components: str = typer.Option("1-10", help="K values, e.g. '1-10' or '1,3,5'."),
-        epochs: int = typer.Option(40, help="Maximum epochs per K."),
+        epochs: int = typer.Option(40, min=1, help="Maximum epochs per K."),
         batch_size: int = typer.Option(32),
         points_per_config: int = typer.Option(256),
         lr: float = typer.Option(3e-3),
         hidden: str = typer.Option("64,64", help=_HIDDEN_HELP),
         head_hidden: str = typer.Option("32"),
         activation: str = typer.Option("silu"),
-        patience: int = typer.Option(8, help="Early stopping patience (epochs)."),
-        seed: int = typer.Option(0),
-        workers: int = typer.Option(1, help="Train this many K at once (processes)."),
+        patience: int = typer.Option(8, min=0, help="Early stopping patience (epochs)."),
+        seed: int = typer.Option(0, min=0),
+        workers: int = typer.Option(1, min=1, help="Train this many K at once (processes)."),
         collapse_threshold: float = typer.Option(0.01, help="Mode collapse: weight below this on 99% of test configurations."),
         nll_tolerance: float = typer.Option(0.05, help="Recommended K: smallest K within this many nats/point of the best."),
     ) -> None:
@@ -199,11 +221,11 @@ def register(app: typer.Typer) -> None:
         model: Path = typer.Option(..., "--model", "-m", help="Model folder."),
         data: Path = typer.Option(..., "--data", help="Test data set."),
         out: Path = typer.Option(..., "--out", "-o", help="Output folder (evaluation.json, Fig. 5 PNG + HTML)."),
-        samples: int = typer.Option(4096, help="Mixture samples per configuration for the HDR thresholds."),
+        samples: int = typer.Option(4096, min=1, help="Mixture samples per configuration for the HDR thresholds."),
         chamfer_points: int = typer.Option(2048, help="Points per cloud for the Chamfer distance."),
         max_configs: int = typer.Option(0, help="Evaluate a random subset of this many configurations (0: all)."),
         figure_configs: int = typer.Option(2, help="Random test configurations shown in Fig. 5."),
-        seed: int = typer.Option(0),
+        seed: int = typer.Option(0, min=0),
     ) -> None:
         """Test NLL, Chamfer distance, HDR calibration and the paper's Fig. 5."""
         import torch
@@ -214,6 +236,9 @@ def register(app: typer.Typer) -> None:
         from riskplan.kinematics.evaluation import evaluate as run_eval
         from riskplan.kinematics.plotting import fig_samples_vs_truth, plotly_samples_vs_truth
 
+        from riskplan.io import check_output_folder
+
+        check_output_folder(out, "--out")
         torch.set_num_threads(1)
         m = load_model(model)
         ds = read_point_clouds(data)

@@ -53,7 +53,7 @@ def register(app: typer.Typer) -> None:
     @sub.command("shape")
     def shape(
         robot: str = typer.Option("paper", "--robot", help="Packaged robot name ('paper') or a robot TOML file."),
-        displacements: str = typer.Option(None, "--displacements", "-d", help="Tendon displacements [m], comma-separated."),
+        displacements: str = typer.Option(None, "--displacements", "-d", help="Tendon displacements (m), comma-separated."),
         tensions: str = typer.Option(None, "--tensions", "-t", help="Tendon tensions [N], comma-separated."),
         gravity: bool = typer.Option(None, "--gravity/--no-gravity", help="Override the robot file's gravity setting."),
         as_json: bool = typer.Option(
@@ -67,6 +67,10 @@ def register(app: typer.Typer) -> None:
 
         if (displacements is None) == (tensions is None):
             raise InvalidInputError("give exactly one of --displacements and --tensions")
+        if plot is not None:
+            from riskplan.io import check_output_file
+
+            check_output_file(plot, "--plot")
         r = load_robot(robot)
         if gravity is not None:
             r = r.with_gravity(gravity)

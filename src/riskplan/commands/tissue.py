@@ -19,8 +19,12 @@ import typer
 SCENARIOS = ("needle", "manipulation")
 
 
-def read_controls(path, control_dim: int):
-    """Read a ``(T, control_dim)`` controls table from CSV/TXT or JSON (see module docstring)."""
+def read_controls(path, control_dim: int, bounds=None):
+    """Read a ``(T, control_dim)`` controls table from CSV/TXT or JSON (see module docstring).
+
+    ``bounds (control_dim, 2)``: when given, every row is checked against them here, before any
+    simulation, and the first offending row is named (rows counted from 1).
+    """
     import json
 
     import numpy as np
@@ -31,7 +35,10 @@ def read_controls(path, control_dim: int):
     path = Path(path)
     if not path.is_file():
         raise DataFormatError(f"controls: no such file {str(path)!r}")
-    text = path.read_text()
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise DataFormatError(f"controls: {path.name} is not UTF-8 text ({exc})") from exc
     if path.suffix.lower() == ".json":
         try:
             obj = json.loads(text)
@@ -62,6 +69,20 @@ def read_controls(path, control_dim: int):
         raise DataFormatError(f"controls: {path.name} rows have different lengths or non-numbers") from exc
     if arr.ndim != 2 or arr.shape[0] == 0:
         raise DataFormatError(f"controls: expected a non-empty (T, {control_dim}) table, got shape {arr.shape}")
+    if arr.shape[1] != control_dim:
+        raise DataFormatError(f"controls: {path.name} has {arr.shape[1]} columns per row, expected {control_dim}")
+    bad_rows = np.flatnonzero(~np.isfinite(arr).all(axis=1))
+    if bad_rows.size:
+        raise DataFormatError(f"controls: {path.name} row {int(bad_rows[0]) + 1} contains NaN or inf")
+    if bounds is not None:
+        b = np.asarray(bounds, dtype=np.float64)
+        out = (arr < b[:, 0]) | (arr > b[:, 1])
+        if out.any():
+            r, c = (int(i) for i in np.argwhere(out)[0])
+            raise DataFormatError(
+                f"controls: {path.name} row {r + 1} column {c + 1} is {arr[r, c]:.6g}, outside the bounds "
+                f"[{b[c, 0]:.6g}, {b[c, 1]:.6g}]"
+            )
     return as_array(arr, "controls", shape=(None, control_dim))
 
 
@@ -140,12 +161,18 @@ def register(app: typer.Typer) -> None:
         sim = make_scenario(scenario, case)
         if steps is not None and steps < 1:
             raise InvalidInputError(f"steps: expected >= 1, got {steps}")
+        if max_frames < 1:
+            raise InvalidInputError(f"--max-frames: expected >= 1, got {max_frames}")
+        if seed < 0:
+            raise InvalidInputError(f"--seed: expected a non-negative integer, got {seed}")
+        if out.exists() and not out.is_dir():
+            raise InvalidInputError(f"--out: {out} is an existing file; expected a folder")
         params = sim.sample_params(seed)
         if controls == "random":
             n = steps or (30 if scenario == "needle" else 20)
             u = sim.random_controls(n, seed)
         else:
-            u = read_controls(controls, sim.control_dim)
+            u = read_controls(controls, sim.control_dim, sim.control_bounds)
             if steps is not None:
                 if steps > len(u):
                     raise InvalidInputError(f"steps: {steps} exceeds the {len(u)} rows of {controls}")

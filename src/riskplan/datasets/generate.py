@@ -194,8 +194,21 @@ def generate_dataset(robot, preset="small", out="data.h5", *, split: str = "trai
         raise InvalidInputError(f"seed: expected a non-negative integer, got {seed!r}")
     if max_new is not None and max_new < 0:
         raise InvalidInputError(f"max_new: expected >= 0, got {max_new}")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
+        raise InvalidInputError(f"workers: expected a positive integer (or None for all cores), got {workers!r}")
     out = Path(out)
+    if out.is_dir():
+        raise InvalidInputError(f"out: {str(out)!r} is a folder; expected a data-set file name (.h5)")
     out.parent.mkdir(parents=True, exist_ok=True)
+    from riskplan.io import output_lock
+
+    with output_lock(out, "data set"):
+        return _generate_locked(robot, protocol, out, split, seed, workers, backend, progress, overwrite, max_new,
+                                chunksize, min_parallel_clouds)
+
+
+def _generate_locked(robot, protocol, out, split, seed, workers, backend, progress, overwrite, max_new, chunksize,
+                     min_parallel_clouds) -> Path:
     part = storage.partial_path(out)
     robot_toml = robot.toml_text()
     protocol_json = protocol.to_json()
@@ -208,9 +221,9 @@ def generate_dataset(robot, preset="small", out="data.h5", *, split: str = "trai
     import h5py
 
     if out.exists():
-        if overwrite:
-            out.unlink()
-        else:
+        # with overwrite the finished file stays until the new one is complete (os.replace below):
+        # killing the new run loses nothing
+        if not overwrite:
             try:
                 with h5py.File(out, "r") as f:
                     _same(f, out, **settings)

@@ -12,6 +12,15 @@ HDF5 metadata). Each finished configuration's rows are written and flushed befor
 ``done`` flag is set and flushed, so a killed run leaves at worst rows without their flag,
 which a resumed run recomputes. When every flag is set, ``complete`` is set and the file is
 renamed atomically onto ``<out>``.
+
+Integrity: ``row_sha256 (C, 32) uint8`` holds, per configuration, the SHA-256 of its rows
+(``displacements[i]`` as float64, ``points[i]`` as float32, ``tips[i]``, ``starts[i]``,
+``tensions[i]`` as float64, little-endian), written with the rows before the ``done`` flag.
+:func:`load_dataset` recomputes it for every finished configuration and raises
+:class:`DataFormatError` naming the configurations whose bytes changed. An all-zero digest means
+"not recorded" (rows of a partial file begun by a riskplan without hashes). Points are also
+range-checked against the robot's reach (:func:`reach_bound`): flipped exponent bits turn
+millimetres into kilometres, which no hash-less reader would notice.
 """
 
 from __future__ import annotations
@@ -31,6 +40,35 @@ log = logging.getLogger(__name__)
 FORMAT = "riskplan-dataset"
 FORMAT_VERSION = 1
 DATASETS = ("displacements", "points", "tips", "starts", "tensions", "done")
+HASHES = "row_sha256"
+# points may lie at most this factor times the robot's reach (length + disk radius) from the
+# base origin: generous for camera noise and rod extension, tight enough to catch flipped bits
+REACH_FACTOR = 2.0
+
+
+def row_digest(displacements, points, tips, starts, tensions) -> np.ndarray:
+    """SHA-256 ``(32,) uint8`` of one configuration's rows, in the dtypes they are stored in."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for a, dt in ((displacements, "<f8"), (points, "<f4"), (tips, "<f8"), (starts, "<f8"), (tensions, "<f8")):
+        h.update(np.ascontiguousarray(a, dtype=dt).tobytes())
+    return np.frombuffer(h.digest(), dtype=np.uint8).copy()
+
+
+def reach_bound(robot_toml: str) -> float | None:
+    """Largest distance from the base origin a point of this robot may have (m), or ``None`` when
+    the stored description is not a full robot (e.g. synthetic test data)."""
+    if not robot_toml:
+        return None
+    try:
+        from riskplan.robots.params import parse_robot_toml
+
+        p = parse_robot_toml(robot_toml)
+    except Exception:  # not a robot description: nothing to compare against
+        return None
+    r = max(p.disks.radius, p.backbone.outer_radius, *(max(abs(c) for c in t.radius) for t in p.tendons))
+    return REACH_FACTOR * (p.backbone.length + r)
 
 
 def _version() -> str:
@@ -81,6 +119,7 @@ def create_file(path, *, displacements, n_starts: int, n_points: int, robot_toml
         f.create_dataset("starts", data=np.zeros((C, n_starts, m), dtype=np.float64))
         f.create_dataset("tensions", data=np.zeros((C, n_starts, m), dtype=np.float64))
         f.create_dataset("done", data=np.zeros(C, dtype=bool))
+        f.create_dataset(HASHES, data=np.zeros((C, 32), dtype=np.uint8))
         f["points"].attrs["units"] = "m"
         f["points"].attrs["frame"] = "robot base"
         f["displacements"].attrs["units"] = "m"
@@ -95,11 +134,14 @@ def create_file(path, *, displacements, n_starts: int, n_points: int, robot_toml
 
 
 def write_config(f, i: int, points, tips, starts, tensions) -> None:
-    """Write configuration ``i``'s rows, flush, then set and flush its ``done`` flag."""
-    f["points"][i] = np.asarray(points, dtype=np.float32)
+    """Write configuration ``i``'s rows and their digest, flush, then set and flush its ``done`` flag."""
+    points = np.asarray(points, dtype=np.float32)
+    f["points"][i] = points
     f["tips"][i] = tips
     f["starts"][i] = starts
     f["tensions"][i] = tensions
+    if HASHES in f:
+        f[HASHES][i] = row_digest(f["displacements"][i], points, tips, starts, tensions)
     f.flush()
     f["done"][i] = True
     f.flush()
@@ -132,7 +174,10 @@ def check_header(f, path) -> dict:
     if len(ps) != 4 or ps[0] != C or ps[3] != 3:
         raise DataFormatError(f"data set {str(path)!r}: points has shape {ps}, expected (C={C}, S, P, 3)")
     S = ps[1]
-    for key, want in (("tips", (C, S, 3)), ("starts", (C, S, m)), ("tensions", (C, S, m)), ("done", (C,))):
+    shapes = [("tips", (C, S, 3)), ("starts", (C, S, m)), ("tensions", (C, S, m)), ("done", (C,))]
+    if HASHES in f:
+        shapes.append((HASHES, (C, 32)))
+    for key, want in shapes:
         if f[key].shape != want:
             raise DataFormatError(f"data set {str(path)!r}: {key} has shape {f[key].shape}, expected {want}")
     try:
@@ -233,6 +278,47 @@ class Dataset:
         return np.sqrt((d**2).sum(-1).mean(-1))
 
 
+def verify_rows(arrays: dict, digests, meta: dict, path) -> None:
+    """Check finished rows: finite, recorded digests match, points within the robot's reach.
+
+    Raises :class:`DataFormatError` naming the first configurations that fail.
+    """
+    done = np.flatnonzero(arrays["done"])
+    for key in ("displacements", "points", "tips", "starts", "tensions"):
+        a = arrays[key][done]
+        if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+            raise DataFormatError(f"data set {str(path)!r}: {key} contain NaN or inf")
+    if digests is None:
+        log.warning("data set %s has no row digests (written before they existed): integrity not checked", path)
+    else:
+        recorded = digests[done].any(axis=1)
+        bad = [
+            int(i)
+            for i, rec in zip(done, recorded)
+            if rec
+            and not np.array_equal(
+                digests[i],
+                row_digest(arrays["displacements"][i], arrays["points"][i], arrays["tips"][i], arrays["starts"][i], arrays["tensions"][i]),
+            )
+        ]
+        if bad:
+            raise DataFormatError(
+                f"data set {str(path)!r}: {len(bad)} configuration(s) do not match their SHA-256 digest "
+                f"(first {bad[:5]}); the file is corrupted - regenerate it"
+            )
+        if not recorded.all():
+            log.warning("data set %s: %d configuration(s) carry no digest", path, int((~recorded).sum()))
+    reach = reach_bound(str(meta.get("robot_toml", "")))
+    if reach is not None and done.size:
+        r = np.sqrt((arrays["points"][done].astype(np.float64) ** 2).sum(-1))
+        if r.max() > reach:
+            c = int(done[np.unravel_index(int(np.argmax(r)), r.shape)[0]])
+            raise DataFormatError(
+                f"data set {str(path)!r}: a point of configuration {c} lies {r.max():.4g} m from the robot base, "
+                f"beyond the robot's reach ({reach / REACH_FACTOR:.4g} m, limit {reach:.4g} m); the file is corrupted"
+            )
+
+
 def load_dataset(path) -> Dataset:
     """Read a data-set file; raise :class:`DataFormatError` naming the problem if it is not one.
 
@@ -250,9 +336,17 @@ def load_dataset(path) -> Dataset:
         raise DataFormatError(f"data set {str(path)!r}: not a readable HDF5 file ({exc})") from exc
     with f:
         meta = check_header(f, path)
-        arrays = {k: f[k][...] for k in DATASETS}
-    if not np.all(np.isfinite(arrays["points"][arrays["done"]])):
-        raise DataFormatError(f"data set {str(path)!r}: points contain NaN or inf")
+        try:
+            arrays = {k: f[k][...] for k in DATASETS}
+            digests = f[HASHES][...] if HASHES in f else None
+        except (OSError, TypeError, ValueError) as exc:  # h5py: unreadable chunk, string-typed data
+            raise DataFormatError(f"data set {str(path)!r}: cannot read its arrays ({exc})") from exc
+    for key in DATASETS:
+        kind = arrays[key].dtype.kind
+        if kind not in ("b" if key == "done" else "fiu"):
+            raise DataFormatError(f"data set {str(path)!r}: {key} has dtype {arrays[key].dtype}, expected numbers")
+    arrays["done"] = arrays["done"].astype(bool)
+    verify_rows(arrays, digests, meta, path)
     return Dataset(
         displacements=arrays["displacements"].astype(np.float64),
         points=arrays["points"],

@@ -9,11 +9,19 @@ unit thickness, or force/length² per unit depth for plane strain).
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
+
+import numpy as np
 
 from riskplan.errors import InvalidInputError
 
 PLANES = ("stress", "strain")
+
+
+# Larger than any real material (steel: 2e11 Pa) in any unit system used here, small enough that
+# assembled stiffness entries (E times element factors) cannot overflow float64.
+MAX_MODULUS = 1e30
 
 
 @dataclass(frozen=True)
@@ -35,12 +43,16 @@ class Material:
     plane: str = "stress"
 
     def __post_init__(self):
-        try:
-            E, nu = float(self.E), float(self.nu)
-        except (TypeError, ValueError) as exc:
-            raise InvalidInputError(f"E, nu: expected real numbers ({exc})") from exc
-        if not math.isfinite(E) or E <= 0.0:
-            raise InvalidInputError(f"E: Young's modulus must be finite and > 0, got {self.E!r}")
+        for name in ("E", "nu"):
+            v = getattr(self, name)
+            # strings ("50") and booleans are not numbers here, even if float() accepts them
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (numbers.Real, np.floating, np.integer)):
+                raise InvalidInputError(f"{name}: expected a real number, got {v!r} ({type(v).__name__})")
+        E, nu = float(self.E), float(self.nu)
+        if not math.isfinite(E) or not 0.0 < E <= MAX_MODULUS:
+            raise InvalidInputError(
+                f"E: Young's modulus must be finite, > 0 and <= {MAX_MODULUS:g} (stiffness matrices must stay finite), got {self.E!r}"
+            )
         if not math.isfinite(nu) or not -1.0 < nu < 0.5:
             raise InvalidInputError(f"nu: Poisson's ratio must lie in (-1, 0.5), got {self.nu!r}")
         if self.plane not in PLANES:

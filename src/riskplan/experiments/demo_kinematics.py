@@ -67,7 +67,7 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     cfg = TrainConfig(n_components=DEMO_COMPONENTS, epochs=MAIN_EPOCHS, seed=seed, **TRAIN)
     model_path = out / "model"
     # the time budget keeps the demo short on slow machines: it shortens the run, never lengthens it
-    res = train(train_data, cfg, out=model_path, max_seconds=MAIN_TIME_BUDGET)
+    res = train(train_data, cfg, out=model_path, max_seconds=MAIN_TIME_BUDGET, overwrite=True)
     model, history = res.model, res.history
     t_train = time.perf_counter() - t0
     ctx["model"], ctx["model_path"] = model, model_path

@@ -307,7 +307,14 @@ class MDNModel:
         configuration this avoids torch's per-operation overhead.
         """
         d = self.check_displacements(displacements)
-        w, mu, u = (torch.from_numpy(a) for a in self._forward_numpy(d))
+        arrays = self._forward_numpy(d)
+        if not all(np.isfinite(a).all() for a in arrays):
+            from riskplan.errors import DataFormatError
+
+            raise DataFormatError(
+                f"model of robot {self.robot_name!r} predicts NaN or inf for these displacements (corrupted or unstable weights)"
+            )
+        w, mu, u = (torch.from_numpy(a) for a in arrays)
         if dtype != torch.float64:
             w, mu, u = w.to(dtype), mu.to(dtype), u.to(dtype)
         return GaussianMixture(w, mu, u, validate=False)

@@ -129,13 +129,50 @@ class GaussianMixture:
         return torch.linalg.solve_triangular(u, eye, upper=True)
 
     # ----------------------------------------------------------- densities
+    def _check_points(self, points) -> torch.Tensor:
+        """Validate points ``(..., N, d)`` against this mixture; return them in its dtype.
+
+        The leading axes ``...`` must broadcast against the batch shape; values must be finite.
+        """
+        if points is None or isinstance(points, (str, bytes)):
+            raise InvalidInputError(f"points: expected a numeric array of shape (..., N, {self.dim}), got {type(points).__name__}")
+        try:
+            x = _as_tensor(points)
+        except InvalidInputError as exc:
+            raise InvalidInputError(f"points: {exc}") from exc
+        except (TypeError, ValueError, RuntimeError) as exc:
+            raise InvalidInputError(f"points: cannot convert to a numeric array ({exc})") from exc
+        if x.is_complex() or x.dtype == torch.bool:
+            raise InvalidInputError(f"points: expected real numbers, got dtype {x.dtype}")
+        if x.ndim < 2 or x.shape[-1] != self.dim:
+            raise InvalidInputError(
+                f"points: expected shape (..., N, {self.dim}) for a {self.dim}-D mixture, got {tuple(x.shape)}"
+            )
+        try:
+            torch.broadcast_shapes(x.shape[:-2], self.batch_shape)
+        except RuntimeError as exc:
+            raise InvalidInputError(
+                f"points: leading shape {tuple(x.shape[:-2])} does not broadcast against the batch shape "
+                f"{tuple(self.batch_shape)}"
+            ) from exc
+        if not torch.isfinite(x).all():
+            raise InvalidInputError("points: contain NaN or inf")
+        return x.to(self.dtype)
+
     def component_log_prob(self, points) -> torch.Tensor:
-        """``log N(x_n; mu_k, Sigma_k)`` for points ``(..., N, d)``; returns ``(..., K, N)``."""
-        x = _as_tensor(points).to(self.dtype)
+        """``log N(x_n; mu_k, Sigma_k)`` for points ``(..., N, d)``; returns ``(..., K, N)``.
+
+        Raises :class:`InvalidInputError` for points of the wrong dimension or type, a leading
+        shape that does not broadcast against the batch shape, or NaN/inf values.
+        """
+        x = self._check_points(points)
         diff = x.unsqueeze(-3) - self.means.unsqueeze(-2)  # (..., K, N, d)
         # U (x - mu): row i is sum_j U[i, j] diff[j]
         y = torch.einsum("...kij,...knj->...kni", self.precision_cholesky, diff)
         sq = (y * y).sum(-1)
+        # inputs are finite, so a NaN here means U (x - mu) overflowed (inf - inf): the point is
+        # astronomically far in Mahalanobis distance and its log density is -inf, not NaN
+        sq = torch.nan_to_num(sq, nan=math.inf)
         logdet = torch.log(torch.diagonal(self.precision_cholesky, dim1=-2, dim2=-1)).sum(-1)
         return -0.5 * sq + logdet.unsqueeze(-1) - 0.5 * self.dim * math.log(2.0 * math.pi)
 

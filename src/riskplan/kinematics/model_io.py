@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import logging
 import platform
 from pathlib import Path
 
@@ -22,6 +23,8 @@ import torch
 from riskplan.errors import DataFormatError, InvalidInputError
 from riskplan.io import atomic_path, write_json_atomic
 from riskplan.kinematics.mdn import MDN, MDNModel, Normalisation
+
+log = logging.getLogger(__name__)
 
 FORMAT = "riskplan-mdn"
 FORMAT_VERSION = 1
@@ -119,6 +122,7 @@ def load_model(path, robot=None) -> MDNModel:
             f"model {str(path)!r}: {weights_file.name} does not match {META_NAME} (SHA-256 {got[:12]}... != {expected_hash[:12]}...); "
             "the file is corrupted or from another model"
         )
+    _check_architecture(path, arch)
     try:
         state = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=True)
         net = MDN(
@@ -134,11 +138,83 @@ def load_model(path, robot=None) -> MDNModel:
         raise DataFormatError(
             f"model {str(path)!r}: metadata shapes disagree with {m} tendons (limits {limits.shape}, input_mean {norm.input_mean.shape})"
         )
+    _check_numbers(path, net, norm, limits)
     extra = {k: v for k, v in meta.items() if k not in _RESERVED}
+    if extra.get("finished") is False:
+        log.warning(
+            "model %s is unfinished: saved during a training run that has not ended (best epoch %s); "
+            "resume it with `riskplan train --resume`", path, extra.get("best_epoch")
+        )
     model = MDNModel(net, norm, limits, rob.get("toml", ""), rob.get("name", ""), extra)
     if robot is not None:
         check_robot(model, robot)
     return model
+
+
+# Bounds on what a model file may ask for (a corrupted or hostile model.json must not make the
+# loader allocate gigabytes): far above any MDN of the paper's kind (2 x 64 hidden units, K <= 10).
+MAX_TENDONS = 64
+MAX_COMPONENTS = 1024
+MAX_LAYERS = 32
+MAX_WIDTH = 65536
+MAX_PARAMETERS = 50_000_000
+
+
+def _check_architecture(path: Path, arch) -> None:
+    """Raise :class:`DataFormatError` unless ``arch`` names a network of sensible size."""
+    where = f"model {str(path)!r}: {META_NAME} architecture"
+    if not isinstance(arch, dict):
+        raise DataFormatError(f"{where}: expected an object, got {type(arch).__name__}")
+
+    def count(key, low, high, default=None):
+        v = arch.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= high:
+            raise DataFormatError(f"{where}: {key} must be an integer in [{low}, {high}], got {v!r}")
+        return v
+
+    def widths(key):
+        v = arch.get(key)
+        if not isinstance(v, (list, tuple)) or len(v) > MAX_LAYERS:
+            raise DataFormatError(f"{where}: {key} must be a list of at most {MAX_LAYERS} layer widths, got {v!r}")
+        for h in v:
+            if isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= MAX_WIDTH:
+                raise DataFormatError(f"{where}: {key} widths must be integers in [1, {MAX_WIDTH}], got {h!r}")
+        return list(v)
+
+    m = count("n_inputs", 1, MAX_TENDONS)
+    k = count("n_components", 1, MAX_COMPONENTS)
+    d = count("dim", 3, 3, 3)
+    hidden, heads = widths("hidden"), widths("head_hidden")
+    if not hidden:
+        raise DataFormatError(f"{where}: hidden must name at least one layer")
+    sizes = [m, *hidden]
+    n = sum((a + 1) * b for a, b in zip(sizes[:-1], sizes[1:]))
+    for out in (k, k * d, k * d * (d + 1) // 2):
+        hs = [hidden[-1], *heads, out]
+        n += sum((a + 1) * b for a, b in zip(hs[:-1], hs[1:]))
+    if n > MAX_PARAMETERS:
+        raise DataFormatError(f"{where}: {n} parameters exceed the limit of {MAX_PARAMETERS}")
+    if arch.get("dtype", "float32") not in ("float32", "float64"):
+        raise DataFormatError(f"{where}: dtype must be 'float32' or 'float64', got {arch.get('dtype')!r}")
+
+
+def _check_numbers(path: Path, net, norm, limits: np.ndarray) -> None:
+    """Every number read from a model must be finite, scales positive, limits ordered.
+
+    A zero or NaN ``output_scale`` would otherwise turn every prediction into NaN with no error.
+    """
+    where = f"model {str(path)!r}"
+    for name, t in net.state_dict().items():
+        if t.is_floating_point() and not torch.isfinite(t).all():
+            raise DataFormatError(f"{where}: weights {name!r} contain NaN or inf (corrupted model)")
+    for key in ("input_mean", "input_scale", "output_centre", "output_scale"):
+        v = getattr(norm, key)
+        if not np.all(np.isfinite(v)):
+            raise DataFormatError(f"{where}: {META_NAME} normalisation.{key} contains NaN or inf: {v.tolist()}")
+        if key.endswith("_scale") and not np.all(v > 0):
+            raise DataFormatError(f"{where}: {META_NAME} normalisation.{key} must be > 0, got {v.tolist()}")
+    if not np.all(np.isfinite(limits)) or not np.all(limits[:, 0] < limits[:, 1]):
+        raise DataFormatError(f"{where}: {META_NAME} robot.displacement_limits must be finite with low < high, got {limits.tolist()}")
 
 
 def check_robot(model: MDNModel, robot) -> None:

@@ -130,7 +130,7 @@ def _sweep_one(task: tuple) -> dict:
     train_data = read_point_clouds(train_path)
     test_data = read_point_clouds(test_path)
     try:
-        res = train(train_data, cfg, out=out_dir, max_seconds=max_seconds)
+        res = train(train_data, cfg, out=out_dir, max_seconds=max_seconds, overwrite=True)
     except ConvergenceError as exc:  # one diverging K must not sink the whole sweep; it is reported
         log.warning("K=%d: %s", K, exc)
         return {
@@ -182,6 +182,11 @@ def sweep(
         raise InvalidInputError(f"collapse_threshold: expected in (0, 1), got {collapse_threshold}")
     if not nll_tolerance >= 0.0:
         raise InvalidInputError(f"nll_tolerance: expected >= 0, got {nll_tolerance}")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise InvalidInputError(f"workers: expected a positive integer, got {workers!r}")
+    from riskplan.io import check_output_folder
+
+    check_output_folder(out, "out")
     config = config or TrainConfig()
     config.validate()
     tr, te = read_point_clouds(train_path), read_point_clouds(test_path)
@@ -190,7 +195,7 @@ def sweep(
     out = Path(out)
     tasks = [(str(train_path), str(test_path), K, config.to_json(), str(out / f"K{K}"), collapse_threshold, max_seconds_per_k) for K in components]
     backend = "serial" if workers <= 1 or len(tasks) == 1 else "local"
-    results = map_tasks(_sweep_one, tasks, backend=backend, workers=max(1, workers), chunksize=1, on_result=on_result)
+    results = map_tasks(_sweep_one, tasks, backend=backend, workers=workers, chunksize=1, on_result=on_result)
     entries = [SweepEntry(**r) for r in results]
     rec = recommend(components, [e.test_nll for e in entries], [e.collapsed for e in entries], nll_tolerance)
     rule = (

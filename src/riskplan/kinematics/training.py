@@ -71,8 +71,17 @@ class TrainConfig:
     def validate(self) -> None:
         ints = ("n_components", "epochs", "batch_size", "points_per_config", "val_points", "max_bad_steps")
         for name in ints:
-            if int(getattr(self, name)) < 1:
-                raise InvalidInputError(f"{name}: expected >= 1, got {getattr(self, name)}")
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
+        for name in ("val_fraction", "lr", "lr_factor", "weight_decay", "min_lr"):
+            v = getattr(self, name, 0.0)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
+                raise InvalidInputError(f"{name}: expected a finite number, got {v!r}")
+        for name in ("early_stop_patience", "lr_patience", "seed"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+                raise InvalidInputError(f"{name}: expected a non-negative integer, got {v!r}")
         if not 0.0 <= self.val_fraction < 1.0:
             raise InvalidInputError(f"val_fraction: expected in [0, 1), got {self.val_fraction}")
         if not (self.lr > 0 and math.isfinite(self.lr)):
@@ -189,6 +198,7 @@ def train(
     *,
     out=None,
     resume: bool = False,
+    overwrite: bool = False,
     on_epoch: Callable[[EpochRecord], None] | None = None,
     on_step: Callable[[int, int, float], None] | None = None,
     max_seconds: float | None = None,
@@ -198,7 +208,11 @@ def train(
     ``out``: folder for ``checkpoint.pt`` (written atomically after every epoch) and the
     best model (``weights.pt`` + ``model.json``, see :mod:`riskplan.kinematics.model_io`).
     ``resume``: continue from ``out/checkpoint.pt`` (the data set must be the same, by
-    content hash). ``on_epoch(record)`` and ``on_step(step, steps_per_epoch, loss)``
+    content hash). A folder that already holds a checkpoint or a model is refused unless
+    ``resume`` or ``overwrite`` (a rerun must not silently discard an interrupted run). Models
+    saved during training carry ``"finished": false`` in their metadata, the final one
+    ``"finished": true``; :func:`~riskplan.kinematics.load_model` warns about unfinished ones.
+    ``on_epoch(record)`` and ``on_step(step, steps_per_epoch, loss)``
     report progress. ``max_seconds``: stop after the first epoch that ends past this
     wall-clock budget (the result is still the best model so far). Reported NLLs are
     nats per point with positions in metres.
@@ -216,6 +230,12 @@ def train(
     out = Path(out) if out is not None else None
     if resume and out is None:
         raise InvalidInputError("resume: needs out= (the folder holding checkpoint.pt)")
+    if out is not None:
+        from riskplan.io import check_output_folder
+
+        check_output_folder(out, "out")
+    if out is not None and not resume and not overwrite:
+        _refuse_existing_run(out, config)
 
     train_idx, val_idx = split_indices(data.n_configs, config.val_fraction, config.seed)
     norm = Normalisation.fit(data.displacements[train_idx], data.points[train_idx])
@@ -349,15 +369,41 @@ def train(
         raise ConvergenceError("training produced no finite validation loss", iterations=len(history))
     net.load_state_dict(best_state)
     net.eval()
-    model = build_model(net, norm, data, config, {"history": [dataclasses.asdict(h) for h in history], "best_epoch": best_epoch})
+    model = build_model(
+        net, norm, data, config, {"history": [dataclasses.asdict(h) for h in history], "best_epoch": best_epoch, "finished": True}
+    )
     if out is not None:
         model_io.save_model(model, out)
     return TrainResult(model, history, best_epoch, best_val, stopped_early, total_skipped)
 
 
 def _save_best(net, norm, data, config, history, out, model_io) -> None:
-    model = build_model(net, norm, data, config, {"history": [dataclasses.asdict(h) for h in history], "best_epoch": history[-1].epoch})
+    model = build_model(
+        net, norm, data, config,
+        {"history": [dataclasses.asdict(h) for h in history], "best_epoch": history[-1].epoch, "finished": False},
+    )
     model_io.save_model(model, out)
+
+
+def _refuse_existing_run(out: Path, config: TrainConfig) -> None:
+    """Raise :class:`InvalidInputError` if ``out`` holds a checkpoint or a model (see :func:`train`)."""
+    from riskplan.kinematics.model_io import META_NAME
+
+    ck_path = out / CHECKPOINT_NAME
+    if ck_path.exists():
+        try:
+            ck = load_checkpoint(ck_path)
+            state = f"a checkpoint at epoch {int(ck['epoch']) + 1} of {TrainConfig.from_json(ck['config']).epochs}"
+        except (DataFormatError, KeyError, TypeError, ValueError):
+            state = "an unreadable checkpoint"
+        raise InvalidInputError(
+            f"out: {str(out)!r} holds {state}; pass resume=True (--resume) to continue it or "
+            "overwrite=True (--overwrite) to start afresh"
+        )
+    if (out / META_NAME).exists():
+        raise InvalidInputError(
+            f"out: {str(out)!r} already holds a model; pass overwrite=True (--overwrite) to replace it"
+        )
 
 
 def _check_resume(ck: dict, data: PointCloudData, config: TrainConfig) -> None:

@@ -146,6 +146,16 @@ class RobotParams:
     hysteresis: HysteresisParams = field(default_factory=HysteresisParams)
 
 
+# Bounds on the work a robot file may ask for. Every shape solve integrates n_steps = length / step
+# steps for every configuration, and the batch solvers hold (batch, n_steps, ...) arrays: a file
+# with length = 1e5 m and a 5 mm step (2e7 steps) took 45 s and 8 GB before a MemoryError. The
+# paper robot has 40 steps; 20 000 steps (e.g. a 2 m robot at 0.1 mm) is far beyond any tendon robot.
+MAX_STEPS = 20_000
+MAX_DISKS = 10_000
+MAX_TENDONS = 64
+MAX_POLY_TERMS = 16
+
+
 def rpy_to_matrix(rpy) -> np.ndarray:
     """Roll-pitch-yaw (extrinsic x, then y, then z): ``R = Rz(yaw) Ry(pitch) Rx(roll)``."""
     r, p, y = (float(a) for a in rpy)
@@ -275,17 +285,25 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
     step = _num(b, "step", "backbone", default=0.005, positive=True)
     if step > length:
         raise RobotDescriptionError(f"robot description: 'backbone.step' ({step}) exceeds the length", key="backbone.step")
+    if length / step > MAX_STEPS:
+        raise RobotDescriptionError(
+            f"robot description: length / step = {length:g} / {step:g} = {length / step:.3g} integration steps per shape, more "
+            f"than the limit of {MAX_STEPS} (every solve integrates all of them; use a larger 'backbone.step' or a shorter length)",
+            key="backbone.step",
+        )
     backbone = Backbone(length, ro, ri, E, G, density, step)
 
     d = _table(doc, "disks", required=False)
     _check_unknown(d, {"count", "radius", "thickness", "density", "positions"}, "disks")
     count = d.get("count", 0)
-    if isinstance(count, bool) or not isinstance(count, int) or count < 0:
-        raise RobotDescriptionError(f"robot description: 'disks.count' must be an integer >= 0, got {count!r}", key="disks.count")
+    if isinstance(count, bool) or not isinstance(count, int) or not 0 <= count <= MAX_DISKS:
+        raise RobotDescriptionError(f"robot description: 'disks.count' must be an integer in [0, {MAX_DISKS}], got {count!r}", key="disks.count")
     if "positions" in d:
         pos = _vec(d, "positions", "disks", count if count else None)
         if count == 0:
             count = len(pos)
+        if count > MAX_DISKS:
+            raise RobotDescriptionError(f"robot description: {count} disk positions, more than the limit of {MAX_DISKS}", key="disks.positions")
     else:
         pos = tuple(length * (k + 1) / count for k in range(count))
     if any(not (0.0 <= p <= length) for p in pos):
@@ -301,6 +319,8 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
     tl = doc.get("tendons")
     if not isinstance(tl, list) or len(tl) == 0:
         raise RobotDescriptionError("robot description: at least one '[[tendons]]' entry is required", key="tendons")
+    if len(tl) > MAX_TENDONS:
+        raise RobotDescriptionError(f"robot description: {len(tl)} tendons, more than the limit of {MAX_TENDONS}", key="tendons")
     tendons = []
     for i, t in enumerate(tl):
         path = f"tendons[{i}]"
@@ -312,6 +332,12 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
             raise RobotDescriptionError(f"robot description: '{path}.name' must be a string", key=f"{path}.name")
         theta = _vec(t, "theta", path, None)
         radius = _vec(t, "radius", path, None)
+        for key, poly in (("theta", theta), ("radius", radius)):
+            if not 1 <= len(poly) <= MAX_POLY_TERMS:
+                raise RobotDescriptionError(
+                    f"robot description: '{path}.{key}' must have 1 to {MAX_POLY_TERMS} polynomial coefficients, got {len(poly)}",
+                    key=f"{path}.{key}",
+                )
         # r(s) must stay positive along the backbone (checked on a fine grid)
         ss = np.linspace(0.0, length, 201)
         rs = np.polynomial.polynomial.polyval(ss, radius)

@@ -199,6 +199,8 @@ class TendonRobot:
 
     def with_gravity(self, enabled: bool = True, vector=None) -> TendonRobot:
         """The same robot with gravity switched on/off (``vector`` in the world frame, m/s^2)."""
+        if not isinstance(enabled, (bool, np.bool_)):
+            raise InvalidInputError(f"enabled: expected True or False, got {enabled!r} ({type(enabled).__name__})")
         vec = self.params.gravity.vector if vector is None else tuple(as_array(vector, "vector", shape=(3,)).tolist())
         return TendonRobot(replace(self.params, gravity=Gravity(bool(enabled), vec)))
 

@@ -60,8 +60,24 @@ class ChestParams:
     rib_sides: int = 6
 
     def validate(self) -> None:
-        a = np.asarray(self.cavity_semi_axes, dtype=float)
-        if a.shape != (3,) or np.any(a <= 0):
+        import math
+        import numbers
+
+        from dataclasses import fields
+
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name == "cavity_semi_axes":
+                continue
+            want_int = f.name in ("n_ribs", "subdivisions", "rib_segments", "rib_sides")
+            ok = isinstance(v, numbers.Integral) if want_int else isinstance(v, numbers.Real)
+            if isinstance(v, bool) or not ok or (not want_int and not math.isfinite(v)):
+                raise InvalidInputError(f"{f.name}: expected a finite {'integer' if want_int else 'number'}, got {v!r}")
+        try:
+            a = np.asarray(self.cavity_semi_axes, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise InvalidInputError(f"cavity_semi_axes: expected three positive lengths, got {self.cavity_semi_axes!r}") from exc
+        if a.shape != (3,) or not np.all(np.isfinite(a)) or np.any(a <= 0):
             raise InvalidInputError(f"cavity_semi_axes: expected three positive lengths, got {self.cavity_semi_axes}")
         for name in ("wall_thickness", "port_depth", "rib_spacing", "rib_radius", "spine_radius", "lung_gap", "heart_gap", "diaphragm_gap"):
             if not getattr(self, name) > 0:
@@ -101,9 +117,20 @@ class Chest:
         """World points ``(..., 3)`` to the robot base frame: ``R^T (x - p)``."""
         return (np.asarray(points_world, dtype=np.float64) - self.base_position) @ self.base_rotation
 
+    @property
+    def base_pose(self):
+        """The robot base in the world frame (:class:`riskplan.collision.frames.BasePose`)."""
+        from riskplan.collision.frames import BasePose
+
+        return BasePose(self.base_position, self.base_rotation)
+
     def save(self, path):
-        """Write all obstacles to one mesh file (STL/OBJ/PLY by suffix), world frame."""
-        return self.environment.save(path)
+        """Write all obstacles to one mesh file (STL/OBJ/PLY by suffix), world frame, and the sidecar
+        ``<path>.json`` with the frame, the robot base pose and :meth:`metadata`, so that
+        :func:`riskplan.collision.frames.load_environment` gives back :attr:`base_environment`."""
+        from riskplan.collision.frames import save_environment
+
+        return save_environment(self.environment, path, base_pose=self.base_pose, metadata=self.metadata())
 
     def metadata(self) -> dict:
         return {
@@ -168,6 +195,7 @@ def build_chest(seed: int = 0, params: ChestParams | None = None, **overrides) -
     import trimesh
 
     from riskplan.collision import Environment
+    from riskplan.collision.frames import BasePose, environment_in_base_frame
 
     params = replace(params or ChestParams(), **overrides)
     params.validate()
@@ -246,8 +274,7 @@ def build_chest(seed: int = 0, params: ChestParams | None = None, **overrides) -
     x_axis = np.array([0.0, 0.0, 1.0])
     y_axis = np.cross(z_axis, x_axis)
     R = np.column_stack([x_axis, y_axis, z_axis])
-    Vb = (env.vertices - base_position) @ R
-    base_env = Environment(Vb, env.faces, env.face_obstacle, env.names, validate=False)
+    base_env = environment_in_base_frame(env, BasePose(base_position, R))
     return Chest(
         params=params,
         seed=seed,

@@ -80,3 +80,21 @@ def test_cli_predict_with_shipped_model():
     assert r.exit_code == 0, r.output
     obj = json.loads(r.output)
     assert obj["n_components"] == 10 and len(obj["means"]) == 10
+
+
+def test_cli_collision_with_shipped_model(tmp_path):
+    import trimesh
+
+    from riskplan.cli import app
+
+    box = trimesh.creation.box(extents=[0.5, 1.0, 1.0])
+    box.apply_translation([0.3, 0.0, 0.0])  # slab x >= 0.05 in the robot base frame
+    stl = tmp_path / "slab.stl"
+    box.export(stl)
+    r = CliRunner().invoke(app, ["collision", "--env", str(stl), "--model", "paper", "-d", "0,0,0,0;0.03,0,0,0",
+                                 "--samples", "2000", "--json"])
+    assert r.exit_code == 0, r.output
+    rows = json.loads(r.output)
+    # straight robot: far from the slab; bent towards +x: its distal part crosses it
+    assert rows[0]["probability"] < 0.01 and rows[0]["monte_carlo"] == 0.0
+    assert rows[1]["monte_carlo"] > 0.1 and rows[1]["probability"] >= rows[1]["mc_low"]  # eq. 9 bounds it

@@ -165,5 +165,6 @@ def test_mixture_monte_carlo_below_eq10_bound_and_table(robot):
     rows = validation_table(model, {"a": traj[:2], "b": traj}, env, n_robot=4, n_mixture=2000, backend="serial")
     assert [r["name"] for r in rows] == ["a", "b"]
     assert rows[1]["bound"] == pytest.approx(bound, rel=1e-12)
+    assert all(r["bound_union"] >= r["bound"] for r in rows)  # ignoring the weights can only add
     assert all(0 <= r["robot_low"] <= r["robot_mc"] <= r["robot_high"] <= 1 for r in rows)
     assert "| b |" in validation_markdown(rows)

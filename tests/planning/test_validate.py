@@ -167,4 +167,43 @@ def test_mixture_monte_carlo_below_eq10_bound_and_table(robot):
     assert rows[1]["bound"] == pytest.approx(bound, rel=1e-12)
     assert all(r["bound_union"] >= r["bound"] for r in rows)  # ignoring the weights can only add
     assert all(0 <= r["robot_low"] <= r["robot_mc"] <= r["robot_high"] <= 1 for r in rows)
+    # the tube of the disk radius contains the backbone and the disks: it collides whenever they do
+    assert all(r["robot_disks_hits"] <= r["robot_hits"] for r in rows)
     assert "| b |" in validation_markdown(rows)
+
+
+def test_disks_body_hits_a_slab_at_a_disk_but_not_between_disks(robot):
+    # near home the body is straight along z: the 10 mm disks (at s = k * 0.2 / 9) reach a slab at
+    # x >= 6 mm facing disk 4, the 3 mm backbone does not; a slab in the gap between disks 4 and 5
+    # is touched only by the conservative 10 mm tube
+    from riskplan.robots.geometry import BodyGeometry
+
+    geom = BodyGeometry.from_params(robot.params)
+    z4, z5 = geom.disk_s[3], geom.disk_s[4]
+    at_disk = box_env([0.006, -0.05, z4 - 0.003], [0.1, 0.05, z4 + 0.003])
+    gap = box_env([0.006, -0.05, z4 + 0.004], [0.1, 0.05, z5 - 0.004])
+    traj = np.zeros((1, 4))
+    for env, disks_hit in ((at_disk, 6), (gap, 0)):
+        d = execute_on_robot(robot, traj, env, 6, seed=0, body="disks", backend="serial")
+        t = execute_on_robot(robot, traj, env, 6, seed=0, backend="serial")
+        assert int(d.trajectory.hits) == disks_hit and d.radius == geom.backbone_radius and d.body == "disks"
+        assert int(t.trajectory.hits) == 6
+    with pytest.raises(InvalidInputError, match="body"):
+        execute_on_robot(robot, traj, gap, 2, body="capsule", backend="serial")
+
+
+def test_disk_clearance_closed_form(robot, tol):
+    # straight body along z with identity frames: every disk's rim reaches x = R, so a slab
+    # x >= a gives a clearance a - R (a ring sample lies exactly on the +x rim)
+    from riskplan.planning.validate import disk_clearance
+    from riskplan.robots.geometry import BodyGeometry
+
+    geom = BodyGeometry.from_params(robot.params)
+    s = np.linspace(0.0, 0.2, 41)
+    P = np.stack([np.zeros_like(s), np.zeros_like(s), s], axis=-1)
+    R = np.broadcast_to(np.eye(3), (41, 3, 3))
+    for a in (0.0095, 0.0105):
+        env = box_env([a, -0.5, -0.5], [a + 0.5, 0.5, 0.5])
+        got = disk_clearance(env, s, np.stack([P, P]), np.stack([R, R]), geom)
+        assert got.shape == (2,)
+        np.testing.assert_allclose(got, a - geom.disk_radius, **tol["float64_ref"])

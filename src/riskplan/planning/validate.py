@@ -71,6 +71,7 @@ __all__ = [
     "MixtureMonteCarlo",
     "RobotMonteCarlo",
     "default_radius",
+    "disk_clearance",
     "execute_on_robot",
     "mixture_monte_carlo",
     "simulate_executions",
@@ -83,6 +84,7 @@ __all__ = [
 RESOLUTION = 5e-4
 # executions per parallel task
 CHUNK = 25
+BODIES = ("tube", "disks")
 
 
 @dataclass(frozen=True)
@@ -95,7 +97,8 @@ class RobotMonteCarlo:
     per_configuration: estimates per configuration, shape ``(T,)``.
     clearance: ``(n, T)`` smallest signed distance of the body surface to the obstacles [m]
         per run and configuration (negative: inside; see :func:`tube_clearance`).
-    radius: body radius used [m].
+    radius: tube radius used [m].
+    body: ``"tube"`` or ``"disks"`` (:func:`execute_on_robot`).
     seed, n: the seed and the number of executions.
     """
 
@@ -105,6 +108,7 @@ class RobotMonteCarlo:
     radius: float
     seed: int
     n: int
+    body: str = "tube"
 
 
 @dataclass(frozen=True)
@@ -167,11 +171,12 @@ def default_radius(robot) -> float:
     return float(BodyGeometry.from_params(robot.params).disk_radius)
 
 
-def simulate_executions(robot, trajectory, seeds) -> np.ndarray:
+def simulate_executions(robot, trajectory, seeds, *, return_frames: bool = False):
     """Backbones of the robot along ``trajectory (T, m)`` for runs seeded by ``seeds`` (length ``B``).
 
     Protocol in the module docstring. Returns backbone positions ``(B, T, n, 3)`` in the
-    robot's base frame [m]. Inputs are trusted (validated by :func:`execute_on_robot`).
+    robot's base frame [m], and with ``return_frames`` also the body frames ``(B, T, n, 3, 3)``.
+    Inputs are trusted (validated by :func:`execute_on_robot`).
     """
     from riskplan.datasets.generate import to_base_frame
     from riskplan.datasets.protocol import random_starts
@@ -204,8 +209,11 @@ def simulate_executions(robot, trajectory, seeds) -> np.ndarray:
         shape = robot.solve_displacements(eff.reshape(B * T, m), validate=False)
     finally:
         rlog.setLevel(level)
-    P, _ = to_base_frame(robot, shape.positions, shape.rotations)
-    return P.reshape(B, T, P.shape[-2], 3)
+    P, R = to_base_frame(robot, shape.positions, shape.rotations)
+    P = P.reshape(B, T, P.shape[-2], 3)
+    if return_frames:
+        return P, R.reshape(B, T, P.shape[-2], 3, 3)
+    return P
 
 
 def tube_clearance(environment: Environment, backbones, radius: float, *, resolution: float = RESOLUTION) -> np.ndarray:
@@ -241,15 +249,69 @@ def tube_clearance(environment: Environment, backbones, radius: float, *, resolu
     return (clear - radius).reshape(shape)
 
 
+def disk_clearance(environment: Environment, s, positions, rotations, body, *, resolution: float = 1e-3) -> np.ndarray:
+    """Signed clearance of the separator disks of ``body`` (:class:`~riskplan.robots.geometry.BodyGeometry`)
+    on backbones ``positions (..., n, 3)``, ``rotations (..., n, 3, 3)`` at arc lengths ``s (n,)``; ``(...,)`` [m].
+
+    Each disk (radius ``R``, thickness ``t``, centred on the backbone at its arc length, plane
+    normal to the body ``z`` axis) is taken as a flat disk of radius ``R - t/2`` swept by a ball
+    of radius ``t/2`` (inside the true cylinder; only its rim corners, less than 0.3 t/2 deep, are
+    left out). A disk whose centre is at least ``sqrt(R^2 + t^2/4) + resolution`` from every
+    obstacle is clear (the value returned for it is the positive lower bound
+    ``sd(centre) - sqrt(R^2 + t^2/4)``); otherwise the signed distance is evaluated on
+    rings ``resolution`` apart over the flat disk and the clearance is ``min sd - t/2`` (negative:
+    the disk enters an obstacle; penetrations shallower than about ``resolution / 2`` can be missed).
+    """
+    from riskplan.robots.geometry import interpolate_frames
+
+    P = np.asarray(positions, dtype=np.float64)
+    shape = P.shape[:-2]
+    n = P.shape[-2]
+    P = P.reshape(-1, n, 3)
+    Rm = np.asarray(rotations, dtype=np.float64).reshape(-1, n, 3, 3)
+    ds = np.asarray(body.disk_s, dtype=np.float64)
+    C, F = interpolate_frames(np.asarray(s, dtype=np.float64), P, Rm, ds)  # (N, D, 3), (N, D, 3, 3)
+    half = 0.5 * body.disk_thickness
+    enclosing = math.hypot(body.disk_radius, half)
+    sd_c = environment.signed_distance(C)  # (N, D)
+    clear = sd_c - enclosing
+    near = np.nonzero(sd_c < enclosing + resolution)  # refined: also the values just above 0
+    if near[0].size:
+        rho_max = body.disk_radius - half
+        k = max(1, math.ceil(rho_max / resolution))
+        pts = [np.zeros(2)]
+        for rho in rho_max * np.arange(1, k + 1) / k:
+            m = max(6, math.ceil(2 * math.pi * rho / resolution))
+            a = 2 * math.pi * np.arange(m) / m
+            pts.extend(np.stack([rho * np.cos(a), rho * np.sin(a)], axis=-1))
+        uv = np.asarray(pts)  # (Q, 2) in the disk plane
+        Fn = F[near]  # (A, 3, 3)
+        X = C[near][:, None, :] + uv[None, :, 0, None] * Fn[:, None, :, 0] + uv[None, :, 1, None] * Fn[:, None, :, 1]
+        clear[near] = environment.signed_distance(X).min(axis=1) - half
+    return clear.min(axis=1).reshape(shape)
+
+
 def _task(item):
-    robot_toml, traj, env_key, env, radius, resolution, seeds = item
+    robot_toml, traj, env_key, env, body, radius, resolution, seeds = item
     robot = _robot(robot_toml)
     # one Environment (and its search structures) per worker process, not per task
     env = _ENVIRONMENTS.setdefault(env_key, env)
     if len(_ENVIRONMENTS) > 4:
         _ENVIRONMENTS.pop(next(iter(_ENVIRONMENTS)))
-    P = simulate_executions(robot, traj, seeds)
-    return tube_clearance(env, P, radius, resolution=resolution)  # (B, T)
+    if body == "tube":
+        P = simulate_executions(robot, traj, seeds)
+        return tube_clearance(env, P, radius, resolution=resolution)  # (B, T)
+    P, R = simulate_executions(robot, traj, seeds, return_frames=True)
+    geom = _geometry(robot_toml)
+    tube = tube_clearance(env, P, radius, resolution=resolution)
+    return np.minimum(tube, disk_clearance(env, robot.s, P, R, geom, resolution=2 * resolution))
+
+
+@functools.lru_cache(maxsize=4)
+def _geometry(text: str):
+    from riskplan.robots.geometry import BodyGeometry
+
+    return BodyGeometry.from_params(_robot(text).params)
 
 
 _ENVIRONMENTS: dict = {}
@@ -269,6 +331,7 @@ def execute_on_robot(
     n: int = 1000,
     seed: int = 0,
     *,
+    body: str = "tube",
     radius: float | None = None,
     resolution: float = RESOLUTION,
     confidence: float = 0.95,
@@ -284,7 +347,11 @@ def execute_on_robot(
     trajectory: ``(T, m)`` commanded tendon displacements [m], within the robot's limits.
     environment: 3-D obstacles in the robot's base frame (e.g. ``build_chest(seed).base_environment``).
     n, seed: number of executions and their seed (module docstring: protocol and seeding).
-    radius: body radius [m]; default the disk radius of the point-cloud geometry (10 mm).
+    body: ``"tube"`` (default): the backbone swept by a ball of ``radius`` (module docstring);
+        ``"disks"``: the point-cloud geometry itself, the backbone tube of the backbone radius
+        (3 mm) plus the separator disks (:func:`disk_clearance`).
+    radius: tube radius [m]; default the disk radius of the point-cloud geometry (10 mm) for
+        ``"tube"``, the backbone radius for ``"disks"``.
     resolution: sample spacing on refined backbone chords [m] (:func:`tube_clearance`).
     backend, workers, chunk: :func:`riskplan.parallel.map_tasks` over chunks of ``chunk`` runs;
         the result does not depend on them.
@@ -304,7 +371,12 @@ def execute_on_robot(
         raise InvalidInputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
     if not 0 < confidence < 1:
         raise InvalidInputError(f"confidence: expected in (0, 1), got {confidence!r}")
-    r = default_radius(robot) if radius is None else float(radius)
+    if body not in BODIES:
+        raise InvalidInputError(f"body: expected one of {BODIES}, got {body!r}")
+    if radius is None:
+        r = default_radius(robot) if body == "tube" else _geometry(robot.toml_text()).backbone_radius
+    else:
+        r = float(radius)
     if not (np.isfinite(r) and r >= 0):
         raise InvalidInputError(f"radius: expected a finite length >= 0, got {radius!r}")
     if not (np.isfinite(resolution) and resolution > 0):
@@ -316,7 +388,7 @@ def execute_on_robot(
     for a in (env.vertices, env.faces, env.face_obstacle):
         h.update(np.ascontiguousarray(a).tobytes())
     toml = robot.toml_text()
-    items = [(toml, traj, h.hexdigest(), env_copy, r, resolution, seeds[k : k + chunk]) for k in range(0, n, chunk)]
+    items = [(toml, traj, h.hexdigest(), env_copy, body, r, resolution, seeds[k : k + chunk]) for k in range(0, n, chunk)]
     parts = map_tasks(_task, items, backend=backend, workers=workers, chunksize=1)
     clearance = np.concatenate(parts, axis=0)  # (n, T)
     hit = clearance < 0
@@ -327,6 +399,7 @@ def execute_on_robot(
         radius=r,
         seed=seed,
         n=n,
+        body=body,
     )
 
 
@@ -378,7 +451,8 @@ def validation_table(
     ``max_config_bound`` (largest eq.-9 term), ``mixture_mc`` / ``mixture_low`` / ``mixture_high``
     (:func:`mixture_monte_carlo`, ``n_mixture`` trials), ``robot_mc`` / ``robot_low`` /
     ``robot_high`` / ``robot_hits`` / ``robot_per_config`` (:func:`execute_on_robot`, ``n_robot``
-    executions), ``radius`` and ``n_robot``. Every trajectory uses the same ``seed`` (common
+    executions, the conservative tube of ``radius``), the same with prefix ``robot_disks_`` for
+    the backbone-plus-disks body (``body="disks"``, the same executions), ``radius`` and ``n_robot``. Every trajectory uses the same ``seed`` (common
     random numbers: the same starts and transmission draws), which sharpens the comparison
     between trajectories. ``robot`` defaults to the robot the model was trained for.
     """
@@ -400,6 +474,7 @@ def validation_table(
         per = mixture_bound(gm, environment)
         mix = mixture_monte_carlo(model, traj, environment, n_mixture, seed)
         rob = execute_on_robot(robot, traj, environment, n_robot, seed, radius=radius, backend=backend, workers=workers)
+        dsk = execute_on_robot(robot, traj, environment, n_robot, seed, body="disks", backend=backend, workers=workers)
         rows.append({
             "name": str(name),
             "T": int(traj.shape[0]),
@@ -415,6 +490,11 @@ def validation_table(
             "robot_high": float(rob.trajectory.high),
             "robot_hits": int(rob.trajectory.hits),
             "robot_per_config": rob.per_configuration.probability.tolist(),
+            "robot_disks_mc": float(dsk.trajectory.probability),
+            "robot_disks_low": float(dsk.trajectory.low),
+            "robot_disks_high": float(dsk.trajectory.high),
+            "robot_disks_hits": int(dsk.trajectory.hits),
+            "robot_disks_per_config": dsk.per_configuration.probability.tolist(),
             "n_robot": int(n_robot),
             "radius": rob.radius,
         })
@@ -423,14 +503,16 @@ def validation_table(
 
 def validation_markdown(rows: list[dict]) -> str:
     """Markdown table of :func:`validation_table` rows (probabilities in %)."""
-    head = ("| trajectory | eq.-10 bound | eq. 10, any-component bound | MC of the MDN mixtures (95 % CI) | MC on the robot (95 % CI) |\n"
-            "|---|---|---|---|---|")
+    head = ("| trajectory | eq.-10 bound | eq. 10, any-component bound | MC of the MDN mixtures (95 % CI) "
+            "| MC on the robot, tube (95 % CI) | MC on the robot, backbone + disks (95 % CI) |\n"
+            "|---|---|---|---|---|---|")
     lines = [head]
     for r in rows:
         lines.append(
             f"| {r['name']} | {100 * r['bound']:.1f} % | {100 * r['bound_union']:.1f} % | {100 * r['mixture_mc']:.1f} % "
             f"[{100 * r['mixture_low']:.1f}, {100 * r['mixture_high']:.1f}] (n = {r['n_mixture']}) | "
             f"{100 * r['robot_mc']:.1f} % [{100 * r['robot_low']:.1f}, {100 * r['robot_high']:.1f}] "
-            f"(n = {r['n_robot']}, body radius {1000 * r['radius']:.0f} mm) |"
+            f"(n = {r['n_robot']}, radius {1000 * r['radius']:.0f} mm) | {100 * r['robot_disks_mc']:.1f} % "
+            f"[{100 * r['robot_disks_low']:.1f}, {100 * r['robot_disks_high']:.1f}] |"
         )
     return "\n".join(lines) + "\n"

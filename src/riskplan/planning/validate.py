@@ -32,7 +32,8 @@ Body-in-obstacle test
     :func:`~riskplan.collision.robot_geometry.robot_mixture`. The tube contains the 3 mm
     backbone and every disk whatever its orientation, so the test is conservative: between
     disks the real body is thinner, and contacts that only the envelope makes are counted
-    (pass ``radius=`` the backbone radius for the other extreme). The tube enters an obstacle
+    (pass ``radius=`` the backbone radius for the other extreme, or ``body="disks"`` for the
+    backbone tube plus the disks themselves, :func:`disk_clearance`). The tube enters an obstacle
     iff ``min_s sd(x(s)) < r`` for the environment's signed distance ``sd`` (negative inside).
     ``sd`` is evaluated at the backbone stations; since ``sd`` is 1-Lipschitz, a chord of
     length ``h`` between stations with distances ``a, b`` has ``sd >= (a + b - h) / 2`` and

@@ -74,7 +74,7 @@ def register(app: typer.Typer) -> None:
         env: str = typer.Option("chest", "--env", help="'chest' (procedural) or a mesh file; its frame comes from the sidecar FILE.json that `riskplan env chest` writes, or from --base-pose."),
         base_pose: str = typer.Option(None, "--base-pose", help="Robot base in the mesh's frame: x,y,z,qw,qx,qy,qz (m, quaternion), a JSON file with base_position/base_rotation, or 'identity' (mesh already in the base frame). Overrides the sidecar."),
         displacements: str = typer.Option(None, "--displacements", "-d", help="Tendon displacements (m), comma-separated; ';' separates configurations."),
-        model: Path = typer.Option(None, "--model", help="Trained MDN model folder (from riskplan train). Default: robot backbone mixture."),
+        model: Path = typer.Option(None, "--model", help="Trained MDN model folder (riskplan train) or a shipped name ('paper'). Default: robot backbone mixture."),
         arc: str = typer.Option(None, "--arc", help="Constant-curvature geometry instead of a robot: 'kappa,phi' (1/m, rad)."),
         robot: str = typer.Option("paper", "--robot", help="Robot name or TOML file for the backbone fallback."),
         method: str = typer.Option("bound", help="bound (eq. 9) | union | monte_carlo | monte_carlo_union."),
@@ -156,7 +156,7 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(None, "--out", "-o", help="Write the markdown table here (default: print)."),
         samples: int = typer.Option(100_000, min=1, help="Monte Carlo samples per configuration."),
         seed: int = typer.Option(0, min=0, help="Seed of the chest and of the sampling."),
-        model: Path = typer.Option(None, "--model", help="Trained MDN model; default: robot backbone (or arc) mixtures."),
+        model: Path = typer.Option(None, "--model", help="Trained MDN model folder or shipped name ('paper'); default: robot backbone (or arc) mixtures."),
     ) -> None:
         """Bound vs Monte Carlo (95 % intervals) for a set of robot configurations in the chest."""
         from riskplan.experiments.collision_table import collision_table as make_table, to_markdown

@@ -172,6 +172,7 @@ class Roadmap:
     n_neighbours: int
     build_seconds: float
     ompl_seeded: bool = False
+    n_milestones: int = 0  # OMPL's count; milestones without edges are not in ``vertices``
 
     @property
     def n_vertices(self) -> int:
@@ -187,7 +188,8 @@ class Roadmap:
         return np.linalg.norm(v[self.edges[:, 1]] - v[self.edges[:, 0]], axis=-1)
 
     def describe(self) -> str:
-        return f"{self.n_vertices} milestones, {self.n_edges} edges, built in {self.build_seconds:.1f} s"
+        return (f"{max(self.n_milestones, self.n_vertices)} milestones ({self.n_vertices} connected), "
+                f"{self.n_edges} edges, built in {self.build_seconds:.1f} s")
 
     def connect(self, config) -> tuple[np.ndarray, np.ndarray]:
         """Milestones reachable from ``config (m,)`` by a valid straight motion among its
@@ -357,7 +359,7 @@ def build_roadmap(
             f"{total} milestones ({stats['drawn']} configurations drawn); free space is too small for the model's means"
         )
     pd = ob.PlannerData(si)
-    prm.getPlannerData(pd)
+    prm.getPlannerData(pd)  # holds the milestones that have edges
     nv = pd.numVertices()
     verts = np.empty((nv, m))
     edges = []
@@ -366,8 +368,8 @@ def build_roadmap(
         verts[v] = [s[i] for i in range(m)]
         edges.extend((v, w) for w in pd.getEdges(v) if w > v)
     E = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-    log.info("PRM: %d milestones, %d edges in %.2f s", nv, len(E), elapsed)
-    return Roadmap(verts, E, validity, int(seed), resolution, int(n_neighbours), elapsed, seeded)
+    log.info("PRM: %d milestones (%d in OMPL), %d edges in %.2f s", nv, prm.milestoneCount(), len(E), elapsed)
+    return Roadmap(verts, E, validity, int(seed), resolution, int(n_neighbours), elapsed, seeded, prm.milestoneCount())
 
 
 def tip_positions(model, configs) -> np.ndarray:

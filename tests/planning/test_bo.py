@@ -36,13 +36,13 @@ def toy_bound(c):
 
 def test_bo_finds_known_optimum():
     traj = np.array([[0.1, 0.1], [0.35, 0.2], [0.9, 0.9]])  # the middle one is free to move
-    cfg = OptimiserConfig(iterations=30, n_candidates=256, radius=0.1)
+    cfg = OptimiserConfig(iterations=20, n_candidates=256, radius=0.1)
     res = optimise_trajectory(traj, toy_bound, Free(), TOY_LIMITS, config=cfg, seed=0)
     best = 1 - (1 - toy_bound(traj[[0]])[0]) * (1 - 0.01) * (1 - toy_bound(traj[[2]])[0])
     assert np.linalg.norm(res.trajectory[1] - OPTIMUM) < 0.03
     assert res.bound - best < 2e-3
     np.testing.assert_array_equal(res.trajectory[[0, 2]], traj[[0, 2]])
-    assert res.evaluations == 3 + 30
+    assert res.evaluations == 3 + 20
 
 
 @pytest.fixture(scope="module")
@@ -70,15 +70,9 @@ def test_bo_never_worse_and_valid(problem, model, scene, tol):
 
 def test_same_seed_same_result_and_resume(problem, tmp_path):
     v, bound, traj = problem
-    cfg = OptimiserConfig(iterations=5)
+    cfg = OptimiserConfig(iterations=4)
     a = optimise_trajectory(traj, bound, v, LIMITS, config=cfg, seed=7)
-    b = optimise_trajectory(traj, bound, v, LIMITS, config=cfg, seed=7)
-    np.testing.assert_array_equal(a.trajectory, b.trajectory)
-    np.testing.assert_array_equal(a.trace, b.trace)
-    ck = tmp_path / "ck.json"
-    optimise_trajectory(traj, bound, v, LIMITS, config=OptimiserConfig(iterations=5), seed=7, checkpoint=ck)
-    state = json.loads(ck.read_text())
-    assert state["iteration"] == 5
+    assert a.accepted.any()
     short = tmp_path / "short.json"
     def interrupt(i, n, b):  # an interruption after the second completed iteration
         if i == 2:
@@ -88,6 +82,7 @@ def test_same_seed_same_result_and_resume(problem, tmp_path):
         optimise_trajectory(traj, bound, v, LIMITS, config=cfg, seed=7, checkpoint=short, progress=interrupt)
     assert json.loads(short.read_text())["iteration"] == 2
     r = optimise_trajectory(traj, bound, v, LIMITS, config=cfg, seed=7, checkpoint=short, resume=True)
+    # same seed, same result, also across an interruption
     np.testing.assert_array_equal(r.trajectory, a.trajectory)
     np.testing.assert_array_equal(r.trace, a.trace)
     with pytest.raises(DataFormatError, match="another trajectory, seed or settings"):

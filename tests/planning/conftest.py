@@ -26,9 +26,12 @@ class AnalyticModel:
     limits = LIMITS
     n_tendons = 2
 
+    def __init__(self, gain: float = GAIN):
+        self.gain = gain
+
     def tip(self, d):
         d = np.asarray(d, dtype=np.float64)
-        xy = GAIN * (d - 0.015)
+        xy = self.gain * (d - 0.015)
         return np.concatenate([xy, np.full(d.shape[:-1] + (1,), HEIGHT)], axis=-1)
 
     def predict(self, d):

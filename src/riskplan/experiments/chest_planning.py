@@ -138,3 +138,30 @@ def write_plan(out, plan, *, model, environment_world, to_world, validation: dic
     write_json_atomic(out / "plan.json", json.loads(json.dumps(summary, default=float)))
     files.append("plan.json")
     return files
+
+
+def scan_goal_tips(model, environment, tips, *, n_milestones: int = 300, seed: int = 0, tolerance: float = 0.005) -> list[dict]:
+    """Nominal eq.-10 bound for each candidate goal tip ``(N, 3)`` (base frame) on one roadmap.
+
+    The record behind the default scene (issue part 3): which effusion-pocket targets the
+    model reaches and the bound of the PRM's shortest path to each. Unreachable targets get
+    ``bound = None``.
+    """
+    from riskplan.errors import PlanningError
+    from riskplan.planning.prm import MeanValidity, build_roadmap, goal_from_tip, interpolate_path
+    from riskplan.planning.risk import ConfigurationBound, trajectory_risk
+
+    validity = MeanValidity(model, environment)
+    rm = build_roadmap(validity, n_milestones=n_milestones, seed=seed)
+    bound = ConfigurationBound(model, environment)
+    start = np.clip(np.zeros(model.n_tendons), model.limits[:, 0], model.limits[:, 1])
+    rows = []
+    for tip in np.atleast_2d(np.asarray(tips, dtype=np.float64)):
+        try:
+            goal = goal_from_tip(rm, model, tip, tolerance=tolerance, seed=seed)
+            traj = interpolate_path(rm.shortest_path(start, goal))
+            P, _ = trajectory_risk(bound, traj)
+            rows.append({"tip": tip.tolist(), "goal": goal.tolist(), "T": len(traj), "bound": P})
+        except PlanningError as exc:
+            rows.append({"tip": tip.tolist(), "goal": None, "T": 0, "bound": None, "reason": str(exc)})
+    return rows

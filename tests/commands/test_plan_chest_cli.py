@@ -46,7 +46,7 @@ def test_plan_chest_tiny(tiny, tmp_path):
     out = tmp_path / "out"
     args = ["--model", str(tiny / "model"), "--env", str(tiny / "box.stl"), "--base-pose", "1,2,3,1,0,0,0",
             "--goal", "0.03,0.03", "--milestones", "20", "--iterations", "3", "--candidates", "32", "--least-risk",
-            "--out", str(out)]
+            "--executions", "0", "--out", str(out)]
     res = _run(args)
     assert res.exit_code == 0, res.output
     for f in ("nominal.json", "nominal.csv", "optimised.json", "optimised.csv", "trace.json", "trace.png", "chest.html", "plan.json"):
@@ -80,7 +80,7 @@ def test_plan_chest_tiny(tiny, tmp_path):
 def test_plan_chest_errors(tiny, tmp_path, extra, error, match):
     out = tmp_path / "out"
     args = ["--model", str(tiny / "model"), "--env", str(tiny / "box.stl"), "--base-pose", "1,2,3,1,0,0,0",
-            "--milestones", "10", "--iterations", "1", "--out", str(out), *extra]
+            "--milestones", "10", "--iterations", "1", "--executions", "0", "--out", str(out), *extra]
     res = _run(args)
     assert isinstance(res.exception, error), res.output
     assert match in str(res.exception)

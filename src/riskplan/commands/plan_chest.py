@@ -84,7 +84,10 @@ def register(plan_app: typer.Typer) -> None:
         resolution: float = typer.Option(0.001, "--resolution", help="Motion check resolution (m)."),
         least_risk: bool = typer.Option(False, "--least-risk", help="Also search the roadmap for the least-risk path (prices every edge)."),
         robot: str = typer.Option(None, "--robot", help="Robot (name or TOML) the model must match (default: the model's own)."),
-        seed: int = typer.Option(0, "--seed", help="Seed of the roadmap, goal search and optimiser."),
+        executions: int = typer.Option(1000, "--executions", help="Validation: executions of each trajectory on the simulated robot (0: skip)."),
+        mixture_samples: int = typer.Option(100_000, "--mixture-samples", help="Validation: Monte Carlo trials of the MDN mixtures."),
+        workers: int = typer.Option(None, "--workers", help="Worker processes for the validation (default: all cores)."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the roadmap, goal search, optimiser and validation."),
         resume: bool = typer.Option(False, "--resume", help="Continue an interrupted optimisation from OUT/checkpoint.json."),
     ) -> None:
         """Plan a nominal trajectory with a PRM and lower its P(collision) bound by Bayesian optimisation."""
@@ -100,7 +103,10 @@ def register(plan_app: typer.Typer) -> None:
 
         torch.set_num_threads(1)
         _check_finite(tip_tolerance=tip_tolerance, radius=radius, step=step, resolution=resolution)
+        if executions < 0 or mixture_samples < 1:
+            raise InvalidInputError("--executions must be >= 0 and --mixture-samples >= 1")
         mdl = load_model(model)
+        rob = None
         if robot is not None:
             from riskplan.robots import load_robot
 
@@ -143,9 +149,19 @@ def register(plan_app: typer.Typer) -> None:
                 risk_progress=lambda d, n: bar.update(t_rk, completed=d, total=n, status="edges"),
                 optimise_progress=lambda i, n, b: bar.update(t_bo, completed=i, total=n, status=f"bound {b:.4f}"),
             )
+            validation = None
+            if executions > 0:
+                from riskplan.planning.validate import validation_table
+
+                t_va = bar.add_task("validation on the robot", total=None, status=f"{executions} executions x 2")
+                validation = validation_table(
+                    mdl, {"nominal": plan.nominal, "optimised": plan.optimised.trajectory}, env_base, robot=rob,
+                    n_robot=executions, n_mixture=mixture_samples, seed=seed, workers=workers,
+                )
+                bar.update(t_va, total=1, completed=1)
         from riskplan.experiments.chest_planning import write_plan
 
-        write_plan(out, plan, model=mdl, environment_world=env_world, to_world=to_world,
+        write_plan(out, plan, model=mdl, environment_world=env_world, to_world=to_world, validation=validation,
                    extra={"model": model, **scene})
         res = plan.optimised
         typer.echo(f"roadmap: {plan.roadmap.describe()}; trajectory of {len(plan.nominal)} configurations")
@@ -153,4 +169,8 @@ def register(plan_app: typer.Typer) -> None:
             typer.echo(f"shortest path bound {plan.paths['shortest']['bound']:.4f}, least-risk path bound {plan.paths['least_risk']['bound']:.4f}")
         typer.echo(f"eq. 10 bound: nominal {plan.nominal_bound:.4f} -> optimised {res.bound:.4f} "
                    f"({100 * res.reduction:.1f} % lower, {len(res.trace) - 1} iterations, {res.evaluations} bound evaluations)")
+        if validation is not None:
+            from riskplan.planning.validate import validation_markdown
+
+            typer.echo(validation_markdown(validation))
         typer.echo(f"wrote {out}")

@@ -10,7 +10,10 @@ Fig. 7 trace, and an interactive 3-D view of the mixtures along the trajectories
 * ``chest.html`` — plotly: the obstacles and samples of the predicted mixtures along the
   nominal and optimised trajectories (world frame);
 * ``plan.json`` — settings, timings, the roadmap size and (if computed) the shortest vs
-  least-risk path bounds.
+  least-risk path bounds;
+* ``validation.{json,md}`` (if given) — both trajectories executed on the simulated robot and
+  a Monte Carlo of the mixtures next to the eq.-10 bound
+  (:func:`riskplan.planning.validate.validation_table`).
 """
 
 from __future__ import annotations
@@ -132,7 +135,12 @@ def write_plan(out, plan, *, model, environment_world, to_world, validation: dic
         summary["paths"] = {k: {"bound_eq10": v["bound"], "length_m": v["length"], "configurations": len(v["trajectory"])}
                             for k, v in plan.paths.items()}
     if validation is not None:
-        summary["validation"] = validation
+        from riskplan.planning.validate import validation_markdown
+
+        write_json_atomic(out / "validation.json", {"rows": validation})
+        write_text_atomic(out / "validation.md", validation_markdown(validation))
+        files += ["validation.json", "validation.md"]
+        summary["validation"] = [{k: v for k, v in r.items() if k != "robot_per_config"} for r in validation]
     if extra:
         summary.update(extra)
     write_json_atomic(out / "plan.json", json.loads(json.dumps(summary, default=float)))

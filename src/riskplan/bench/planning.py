@@ -5,8 +5,8 @@ iterations, median over 5 optimiser seeds on the default scene's nominal traject
 ``bo_50_iterations_s`` (median seconds of one 50-iteration run), ``prm_build_s`` (300
 milestones), ``bound_eval_ms_per_trajectory`` (eq. 9 + eq. 10 of the nominal trajectory),
 ``nominal_bound``, ``optimised_bound`` (median), plus the CPU. Model: the shipped ``paper``
-model. ``quick``: 60 milestones, 2 seeds x 3 iterations (a smoke test, not the figures;
-``bo_50_iterations_s`` is then ``None`` and ``bo_run_s`` times the 3-iteration run).
+model. ``quick``: 40 milestones, 2 seeds x 2 iterations (a smoke test, not the figures;
+``bo_50_iterations_s`` is then ``None`` and ``bo_run_s`` times the 2-iteration run).
 """
 
 from __future__ import annotations
@@ -37,9 +37,9 @@ def run(quick: bool = False, model: str = "paper") -> dict:
     from riskplan.planning.risk import trajectory_risk
 
     torch.set_num_threads(1)
-    milestones = 60 if quick else 300
+    milestones = 40 if quick else 300
     seeds = range(2) if quick else range(5)
-    iterations = 3 if quick else 50
+    iterations = 2 if quick else 50
     t0 = time.perf_counter()
     problem = nominal_problem(model, n_milestones=milestones)
     setup_s = time.perf_counter() - t0

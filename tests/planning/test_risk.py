@@ -7,7 +7,14 @@ import pytest
 
 from riskplan.collision import probability_of_collision, trajectory_bound
 from riskplan.planning.prm import MeanValidity, build_roadmap, interpolate_path
-from riskplan.planning.risk import ConfigurationBound, RiskSegmentCost, compare_paths, risk_cost, trajectory_risk
+from riskplan.planning.risk import (
+    ConfigurationBound,
+    RiskSegmentCost,
+    compare_paths,
+    least_risk_path,
+    risk_cost,
+    trajectory_risk,
+)
 from tests.planning.conftest import GOAL, START
 
 
@@ -52,3 +59,16 @@ def test_least_risk_is_optimal_over_paths(roadmap, model, scene):
     path = out["least_risk"]["path"]
     total = cost(path[:-1], path[1:]).sum() + 0.5 * (cost.costs(path[:1])[0] + cost.costs(path[-1:])[0])
     np.testing.assert_allclose(total, -np.log1p(-out["least_risk"]["bound"]), rtol=1e-9, atol=1e-12)
+
+
+def test_lazy_search_equals_full_graph(roadmap, model, scene, tol):
+    # oracle: price every edge up front and run SciPy's Dijkstra on the whole graph
+    bound = ConfigurationBound(model, scene)
+    cost = RiskSegmentCost(bound)
+    full = roadmap.search(roadmap.graph_with(START, GOAL, segment_cost=cost), START, GOAL)
+    lazy_bound = ConfigurationBound(model, scene)
+    lazy = least_risk_path(roadmap, lazy_bound, START, GOAL)
+    P_full = trajectory_bound(model.predict(interpolate_path(full)), scene)
+    P_lazy = trajectory_bound(model.predict(interpolate_path(lazy)), scene)
+    np.testing.assert_allclose(P_lazy, P_full, **tol["float64_ref"])
+    assert lazy_bound.evaluations < bound.evaluations  # it priced fewer configurations

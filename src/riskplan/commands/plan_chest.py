@@ -146,7 +146,7 @@ def register(plan_app: typer.Typer) -> None:
                 step=step, resolution=resolution, optimiser=cfg, seed=seed, least_risk=least_risk,
                 checkpoint=out / "checkpoint.json", resume=resume,
                 roadmap_progress=lambda d, n: bar.update(t_rm, completed=d, total=n),
-                risk_progress=lambda d, n: bar.update(t_rk, completed=d, total=n, status="edges"),
+                risk_progress=lambda d, n: bar.update(t_rk, completed=d, total=n, status="milestones settled"),
                 optimise_progress=lambda i, n, b: bar.update(t_bo, completed=i, total=n, status=f"bound {b:.4f}"),
             )
             validation = None

@@ -95,21 +95,64 @@ def least_risk_path(roadmap: Roadmap, bound, start, goal, *, step: float = DEFAU
                     cost: RiskSegmentCost | None = None, progress=None) -> np.ndarray:
     """Roadmap path ``(P, m)`` whose trajectory (interpolated at ``step``) has the least eq.-10 bound.
 
-    ``progress(done, total)`` reports the edges priced so far.
+    Dijkstra with lazily priced edges: an edge's configurations are evaluated only when the
+    search settles one of its ends, and the search stops when it settles the goal, so
+    milestones riskier than the answer are never priced. ``progress(settled, total)``
+    reports the milestones settled so far.
     """
+    import heapq
+
+    from riskplan.errors import PlanningError
+
     start, goal = roadmap._check_query(start, goal)
     cost = cost or RiskSegmentCost(bound, step)
-    E = roadmap.edges
-    V = roadmap.vertices
-    edge_costs = np.empty(len(E))
-    chunk = 64
-    cost.costs(V)
-    for i in range(0, len(E), chunk):
-        edge_costs[i : i + chunk] = cost(V[E[i : i + chunk, 0]], V[E[i : i + chunk, 1]])
+    V = roadmap.n_vertices
+    conf = np.vstack([roadmap.vertices, start[None], goal[None]])
+    adj: list[list[int]] = [[] for _ in range(V + 2)]
+    for a, b in roadmap.edges:
+        adj[a].append(int(b))
+        adj[b].append(int(a))
+    for node, c in ((V, start), (V + 1, goal)):
+        for i in roadmap.connect(c)[0]:
+            adj[node].append(int(i))
+            adj[int(i)].append(node)
+    if np.linalg.norm(goal - start) > 0 and roadmap.validity.motions(start[None], goal[None], roadmap.resolution)[0]:
+        adj[V].append(V + 1)
+        adj[V + 1].append(V)
+    dist = np.full(V + 2, np.inf)
+    pred = np.full(V + 2, -1)
+    done = np.zeros(V + 2, dtype=bool)
+    dist[V] = 0.0
+    heap = [(0.0, V)]
+    settled = 0
+    while heap:
+        d, u = heapq.heappop(heap)
+        if done[u]:
+            continue
+        done[u] = True
+        settled += 1
         if progress is not None:
-            progress(min(i + chunk, len(E)), len(E))
-    graph = roadmap.graph_with(start, goal, segment_cost=cost, edge_costs=edge_costs)
-    return roadmap.search(graph, start, goal)
+            progress(settled, V + 2)
+        if u == V + 1:
+            break
+        nb = [w for w in adj[u] if not done[w]]
+        if not nb:
+            continue
+        c = cost(np.broadcast_to(conf[u], (len(nb), conf.shape[1])), conf[nb])
+        for w, cw in zip(nb, c):
+            if d + cw < dist[w]:
+                dist[w] = d + cw
+                pred[w] = u
+                heapq.heappush(heap, (dist[w], w))
+    if not done[V + 1] or not np.isfinite(dist[V + 1]):
+        raise PlanningError(
+            f"no path from start to goal in the roadmap ({roadmap.describe()}); grow it with more milestones "
+            "(--milestones) or move the goal"
+        )
+    nodes = [V + 1]
+    while nodes[-1] != V:
+        nodes.append(int(pred[nodes[-1]]))
+    return conf[nodes[::-1]]
 
 
 def compare_paths(roadmap: Roadmap, bound, start, goal, *, step: float = DEFAULT_STEP, progress=None) -> dict:
@@ -119,8 +162,7 @@ def compare_paths(roadmap: Roadmap, bound, start, goal, *, step: float = DEFAULT
     for name, path in (("shortest", roadmap.shortest_path(start, goal)),
                        ("least_risk", least_risk_path(roadmap, bound, start, goal, step=step, cost=cost, progress=progress))):
         traj = interpolate_path(path, step)
-        pc = np.exp(-cost.costs(traj))  # 1 - p, from the cache
-        p = 1.0 - pc
+        p = -np.expm1(-cost.costs(traj))  # from the cache
         out[name] = {"path": path, "trajectory": traj, "bounds": p, "bound": float(trajectory_probability(p)),
                      "length": float(np.linalg.norm(np.diff(path, axis=0), axis=-1).sum())}
     return out

@@ -64,7 +64,7 @@ def register(app: typer.Typer) -> None:
     def collision(
         env: str = typer.Option("chest", "--env", help="'chest' (procedural, robot base frame) or a mesh file given in the robot base frame."),
         displacements: str = typer.Option(None, "--displacements", "-d", help="Tendon displacements (m), comma-separated; ';' separates configurations."),
-        model: Path = typer.Option(None, "--model", help="Trained MDN model (riskplan kinematics train). Default: robot backbone mixture."),
+        model: Path = typer.Option(None, "--model", help="Trained MDN model folder (riskplan train) or a shipped name ('paper'). Default: robot backbone mixture."),
         arc: str = typer.Option(None, "--arc", help="Constant-curvature geometry instead of a robot: 'kappa,phi' (1/m, rad)."),
         robot: str = typer.Option("paper", "--robot", help="Robot name or TOML file for the backbone fallback."),
         method: str = typer.Option("bound", help="bound (eq. 9) | union | monte_carlo | monte_carlo_union."),
@@ -136,7 +136,7 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(None, "--out", "-o", help="Write the markdown table here (default: print)."),
         samples: int = typer.Option(100_000, help="Monte Carlo samples per configuration."),
         seed: int = typer.Option(0, help="Seed of the chest and of the sampling."),
-        model: Path = typer.Option(None, "--model", help="Trained MDN model; default: robot backbone (or arc) mixtures."),
+        model: Path = typer.Option(None, "--model", help="Trained MDN model folder or shipped name ('paper'); default: robot backbone (or arc) mixtures."),
     ) -> None:
         """Bound vs Monte Carlo (95 % intervals) for a set of robot configurations in the chest."""
         from riskplan.experiments.collision_table import collision_table as make_table, to_markdown

@@ -112,7 +112,7 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def predict(
-        model: Path = typer.Option(..., "--model", "-m", help="Model folder."),
+        model: Path = typer.Option(..., "--model", "-m", help="Model folder, or a shipped model name ('paper')."),
         displacements: str = typer.Option(..., "--displacements", "-d", help="'d1,d2,...' [m]; ';' between configurations; or a .npy/.json/.csv file."),
         json_out: bool = typer.Option(False, "--json", help="Print the mixture as JSON."),
     ) -> None:
@@ -196,7 +196,7 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def evaluate(
-        model: Path = typer.Option(..., "--model", "-m", help="Model folder."),
+        model: Path = typer.Option(..., "--model", "-m", help="Model folder, or a shipped model name ('paper')."),
         data: Path = typer.Option(..., "--data", help="Test data set."),
         out: Path = typer.Option(..., "--out", "-o", help="Output folder (evaluation.json, Fig. 5 PNG + HTML)."),
         samples: int = typer.Option(4096, help="Mixture samples per configuration for the HDR thresholds."),

@@ -1,11 +1,11 @@
 """Learned probabilistic kinematics: Gaussian mixtures and the mixture density network
 (MDN paper, sections III-IV).
 
-``load_model(path) -> MDNModel``; ``model.predict(displacements (..., m)) -> GaussianMixture``.
+``load_model(path or shipped name, e.g. "paper") -> MDNModel``; ``model.predict(displacements (..., m)) -> GaussianMixture``.
 """
 
 from riskplan.kinematics.mdn import MDN, MDNModel, Normalisation
 from riskplan.kinematics.mixture import GaussianMixture
-from riskplan.kinematics.model_io import load_model, save_model
+from riskplan.kinematics.model_io import load_model, resolve_model, save_model, shipped_models
 
-__all__ = ["MDN", "GaussianMixture", "MDNModel", "Normalisation", "load_model", "save_model"]
+__all__ = ["MDN", "GaussianMixture", "MDNModel", "Normalisation", "load_model", "resolve_model", "save_model", "shipped_models"]

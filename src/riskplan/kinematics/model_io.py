@@ -6,6 +6,12 @@ input/output normalisation, the robot (TOML text, name, tendon count, displaceme
 limits), the data set's content hash, training options and history, and the SHA-256
 of ``weights.pt``. Both files are written atomically, weights first; the hash in the
 JSON detects a weights file that does not belong to it (torn or corrupted writes).
+
+Shipped models: riskplan carries trained models under ``riskplan/data/models/<name>/`` in
+the same format (``shipped_models()`` lists them). :func:`load_model` takes a folder path or,
+when no folder of that name exists, a shipped name such as ``"paper"`` (the MDN trained on
+the ``paper`` data-set preset; its ``model.json`` ``provenance`` entry names the data set,
+its content hash, the commands and the test NLL). Shipped models are hash-checked like any other.
 """
 
 from __future__ import annotations
@@ -80,16 +86,54 @@ def _usual_permissions(path: Path) -> None:
     os.chmod(path, 0o666 & ~mask)
 
 
-def load_model(path, robot=None) -> MDNModel:
-    """Load a model folder written by :func:`save_model`.
+def _shipped_root() -> Path:
+    from importlib.resources import files
 
-    ``robot``: optional robot (anything with ``toml_text()``) the model must belong to.
-    Raises :class:`DataFormatError` naming the problem: missing files, corrupted JSON or
-    weights, weights that do not match the metadata, or a model of another robot.
+    return Path(str(files("riskplan") / "data" / "models"))
+
+
+def shipped_models() -> tuple[str, ...]:
+    """Names of the models shipped with riskplan (folders under ``riskplan/data/models``), sorted."""
+    root = _shipped_root()
+    if not root.is_dir():
+        return ()
+    return tuple(sorted(p.name for p in root.iterdir() if (p / META_NAME).is_file()))
+
+
+def resolve_model(name_or_path) -> Path:
+    """The model folder for a path or a shipped model name.
+
+    An existing folder (or its ``model.json`` / ``weights.pt``) wins; otherwise a name from
+    :func:`shipped_models` resolves to its packaged folder. Anything else raises
+    :class:`DataFormatError` listing the shipped names.
     """
-    path = Path(path)
+    if not isinstance(name_or_path, (str, Path)):
+        raise InvalidInputError(f"model: expected a folder path or a shipped model name, got {type(name_or_path).__name__}")
+    path = Path(name_or_path)
     if path.is_file() and path.name in (META_NAME, WEIGHTS_NAME):
-        path = path.parent
+        return path.parent
+    if path.is_dir():
+        return path
+    name = str(name_or_path)
+    if name in shipped_models():
+        return _shipped_root() / name
+    raise DataFormatError(
+        f"model {name!r}: not a model folder (no {META_NAME} there) and not a shipped model name "
+        f"(shipped: {', '.join(repr(n) for n in shipped_models()) or 'none'})"
+    )
+
+
+def load_model(path, robot=None) -> MDNModel:
+    """Load a model folder written by :func:`save_model`, or a shipped model by name (``"paper"``).
+
+    ``path``: a model folder, its ``model.json``, or a name from :func:`shipped_models`
+    (used only when no folder of that name exists). ``robot``: optional robot (anything with
+    ``toml_text()``) the model must belong to.
+    Raises :class:`DataFormatError` naming the problem: an unknown name (listing the shipped
+    ones), missing files, corrupted JSON or weights, weights that do not match the metadata
+    (SHA-256 check, shipped models included), or a model of another robot.
+    """
+    path = resolve_model(path)
     meta_path = path / META_NAME
     if not meta_path.is_file():
         raise DataFormatError(f"model {str(path)!r}: no {META_NAME} (not a model folder)")

@@ -1,0 +1,429 @@
+"""Does a planned trajectory hold on the robot? Monte Carlo execution on the simulated robot.
+
+The MDN paper (section V) plans with the eq.-10 bound of the learned mixtures and stops there.
+This module checks a trajectory of tendon displacements ``(T, m)`` against the physics that
+made the training data (:mod:`riskplan.datasets.protocol`, :mod:`riskplan.datasets.generate`):
+
+Execution protocol (one run)
+    * a random start, uniform within the displacement limits
+      (:func:`~riskplan.datasets.protocol.random_starts`), at rest there (no lag);
+    * this run's transmission variation — play widths ``b_i`` and zero offsets ``o_i`` —
+      drawn once (:meth:`~riskplan.robots.hysteresis.HysteresisModel.sample_run`), exactly as
+      one data-collection run draws them;
+    * the actuators move in straight lines start -> ``d_0`` -> ``d_1`` -> ... -> ``d_{T-1}``
+      through the play operator (:func:`~riskplan.robots.hysteresis.play_operator`); the
+      robot receives ``clip(e_t + o, limits)`` at configuration ``t``. Each tendon's command is
+      monotone on a straight segment, so the operator's value at a segment's end depends on
+      its end points only: feeding the configurations themselves is exact;
+    * the Cosserat shape at every configuration (``robot.solve_displacements``), in the
+      robot's base frame (:func:`~riskplan.datasets.generate.to_base_frame`).
+
+Run ``i`` uses ``spawn_seeds(seed, n)[i]`` split into (start draw, transmission variation),
+so a result depends on ``(robot, trajectory, seed, n)`` only, whatever the backend or chunking.
+
+Body-in-obstacle test
+    The body is the backbone swept by a ball of radius ``r`` (a tube closed by hemispheres).
+    Default ``r`` = the separator-disk radius of the point-cloud geometry
+    (:class:`~riskplan.robots.geometry.BodyGeometry`; 10 mm for the ``paper`` robot): the
+    outer radius of the body the cameras see and the MDN learned, and the same 1 cm as
+    :func:`~riskplan.collision.robot_geometry.robot_mixture`. The tube contains the 3 mm
+    backbone and every disk whatever its orientation, so the test is conservative: between
+    disks the real body is thinner, and contacts that only the envelope makes are counted
+    (pass ``radius=`` the backbone radius for the other extreme). The tube enters an obstacle
+    iff ``min_s sd(x(s)) < r`` for the environment's signed distance ``sd`` (negative inside).
+    ``sd`` is evaluated at the backbone stations; since ``sd`` is 1-Lipschitz, a chord of
+    length ``h`` between stations with distances ``a, b`` has ``sd >= (a + b - h) / 2`` and
+    is refined (``sd`` at points ``resolution`` apart) only where that lower bound is below
+    ``r``. Penetrations shallower than ``resolution / 2`` (0.25 mm by default) can be missed;
+    the chord-to-curve distance between 5 mm stations is below 0.01 mm at the curvatures of
+    the robot. A hemisphere of the tube also covers ``r`` behind the base (the mount).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from riskplan._validation import as_array, check_range
+from riskplan.collision import (
+    Environment,
+    MonteCarloEstimate,
+    binomial_interval,
+    mixture_bound,
+    monte_carlo_probability,
+    monte_carlo_trajectory,
+)
+from riskplan.collision.trajectory import trajectory_bound
+from riskplan.errors import InvalidInputError
+from riskplan.parallel import BACKENDS, map_tasks, spawn_seeds
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "MixtureMonteCarlo",
+    "RobotMonteCarlo",
+    "default_radius",
+    "execute_on_robot",
+    "mixture_monte_carlo",
+    "simulate_executions",
+    "tube_clearance",
+    "validation_markdown",
+    "validation_table",
+]
+
+# default spacing of the refinement samples along ambiguous backbone chords (m)
+RESOLUTION = 5e-4
+# executions per parallel task
+CHUNK = 25
+
+
+@dataclass(frozen=True)
+class RobotMonteCarlo:
+    """Executions of one trajectory on the simulated robot.
+
+    Attributes
+    ----------
+    trajectory: estimate of ``P(the body enters an obstacle at some configuration)``, shape ``()``.
+    per_configuration: estimates per configuration, shape ``(T,)``.
+    clearance: ``(n, T)`` smallest signed distance of the body surface to the obstacles [m]
+        per run and configuration (negative: inside; see :func:`tube_clearance`).
+    radius: body radius used [m].
+    seed, n: the seed and the number of executions.
+    """
+
+    trajectory: MonteCarloEstimate
+    per_configuration: MonteCarloEstimate
+    clearance: np.ndarray
+    radius: float
+    seed: int
+    n: int
+
+
+@dataclass(frozen=True)
+class MixtureMonteCarlo:
+    """Monte Carlo of the predicted mixtures of a trajectory: ``trajectory`` (shape ``()``,
+    one independent draw per configuration and trial) and ``per_configuration`` (``(T,)``)."""
+
+    trajectory: MonteCarloEstimate
+    per_configuration: MonteCarloEstimate
+
+
+def _estimate(hits, n: int, confidence: float) -> MonteCarloEstimate:
+    hits = np.asarray(hits, dtype=np.int64)
+    low, high = binomial_interval(hits, n, confidence, "wilson")
+    return MonteCarloEstimate(hits / n, np.asarray(low), np.asarray(high), hits, n, confidence, "wilson")
+
+
+def _check_seed(seed) -> int:
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InvalidInputError(f"seed: expected a non-negative integer, got {seed!r}")
+    return int(seed)
+
+
+def _check_count(n, name: str) -> int:
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise InvalidInputError(f"{name}: expected a positive integer, got {n!r}")
+    return int(n)
+
+
+def _as_robot(robot):
+    if isinstance(robot, str) or hasattr(robot, "__fspath__"):
+        from riskplan.robots import load_robot
+
+        return load_robot(robot)
+    if not hasattr(robot, "solve_displacements") or not hasattr(robot, "toml_text"):
+        raise InvalidInputError(f"robot: expected a TendonRobot or a robot name/path, got {type(robot).__name__}")
+    return robot
+
+
+def _check_trajectory(trajectory, robot) -> np.ndarray:
+    m = robot.n_tendons
+    traj = as_array(trajectory, "trajectory", min_ndim=2)
+    if traj.ndim != 2 or traj.shape[1] != m or traj.shape[0] < 1:
+        raise InvalidInputError(f"trajectory: expected shape (T, {m}) with T >= 1 for robot {robot.name!r} ({m} tendons), got {traj.shape}")
+    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
+    check_range(traj, "trajectory", low=lim[:, 0], high=lim[:, 1])
+    return traj
+
+
+def _check_environment(environment) -> Environment:
+    if not isinstance(environment, Environment) or environment.dim != 3:
+        raise InvalidInputError(f"environment: expected a 3-D Environment (robot base frame), got {environment!r}")
+    return environment
+
+
+def default_radius(robot) -> float:
+    """Outer body radius of ``robot``'s point-cloud geometry: its separator-disk radius [m]."""
+    from riskplan.robots.geometry import BodyGeometry
+
+    return float(BodyGeometry.from_params(robot.params).disk_radius)
+
+
+def simulate_executions(robot, trajectory, seeds) -> np.ndarray:
+    """Backbones of the robot along ``trajectory (T, m)`` for runs seeded by ``seeds`` (length ``B``).
+
+    Protocol in the module docstring. Returns backbone positions ``(B, T, n, 3)`` in the
+    robot's base frame [m]. Inputs are trusted (validated by :func:`execute_on_robot`).
+    """
+    from riskplan.datasets.generate import to_base_frame
+    from riskplan.datasets.protocol import random_starts
+    from riskplan.robots.hysteresis import HysteresisModel, play_operator
+
+    traj = np.asarray(trajectory, dtype=np.float64)
+    T, m = traj.shape
+    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
+    model = HysteresisModel(robot)
+    starts, plays, offsets = [], [], []
+    for sd in seeds:
+        c_start, c_run = np.random.SeedSequence(int(sd)).spawn(2)
+        starts.append(random_starts(lim, 1, np.random.default_rng(c_start))[0])
+        play, offset = model.sample_run(np.random.default_rng(c_run))
+        plays.append(play)
+        offsets.append(offset)
+    e = np.stack(starts)  # at rest at the start: engaged = start
+    play, offset = np.stack(plays), np.stack(offsets)
+    B = len(e)
+    eff = np.empty((B, T, m))
+    for t in range(T):
+        e = play_operator(e, np.broadcast_to(traj[t], (B, 1, m)), play)
+        eff[:, t] = np.clip(e + offset, lim[:, 0], lim[:, 1])
+    # configurations near the corners of the displacement box need more than max_tension; the
+    # solver warns per call, which would flood a long run (the data generator does the same)
+    rlog = logging.getLogger("riskplan.robots.robot")
+    level = rlog.level
+    rlog.setLevel(logging.ERROR)
+    try:
+        shape = robot.solve_displacements(eff.reshape(B * T, m), validate=False)
+    finally:
+        rlog.setLevel(level)
+    P, _ = to_base_frame(robot, shape.positions, shape.rotations)
+    return P.reshape(B, T, P.shape[-2], 3)
+
+
+def tube_clearance(environment: Environment, backbones, radius: float, *, resolution: float = RESOLUTION) -> np.ndarray:
+    """Signed clearance of a tube of ``radius`` around backbones ``(..., n, 3)``; ``(...,)`` [m].
+
+    ``min_s sd(x(s)) - radius`` over the polyline (negative: the tube enters an obstacle),
+    exact where it decides the sign up to ``resolution / 2``: ``sd`` at the ``n`` points, and
+    at points ``resolution`` apart on the chords whose Lipschitz lower bound
+    ``(sd_a + sd_b - h) / 2`` falls below ``radius`` (module docstring). Far from obstacles
+    the value is the minimum over the ``n`` points only (an upper estimate, always positive
+    there).
+    """
+    X = as_array(backbones, "backbones", min_ndim=2, last_dim=3)
+    if not (np.isfinite(radius) and radius >= 0):
+        raise InvalidInputError(f"radius: expected a finite length >= 0, got {radius!r}")
+    if not (np.isfinite(resolution) and resolution > 0):
+        raise InvalidInputError(f"resolution: expected a positive length, got {resolution!r}")
+    shape, n = X.shape[:-2], X.shape[-2]
+    X = X.reshape(-1, n, 3)
+    sd = environment.signed_distance(X)  # (N, n)
+    clear = sd.min(axis=1)
+    if n > 1:
+        h = np.linalg.norm(np.diff(X, axis=1), axis=-1)  # (N, n-1)
+        lower = 0.5 * (sd[:, :-1] + sd[:, 1:] - h)
+        amb = (lower < radius) & (clear[:, None] >= radius)
+        i, j = np.nonzero(amb)
+        if i.size:
+            k = max(2, math.ceil(float(h[i, j].max()) / resolution))
+            t = np.arange(1, k)[:, None] / k  # (k-1, 1)
+            a, b = X[i, j], X[i, j + 1]  # (A, 3)
+            pts = a[:, None, :] + t[None] * (b - a)[:, None, :]  # (A, k-1, 3)
+            np.minimum.at(clear, i, environment.signed_distance(pts).min(axis=1))
+    return (clear - radius).reshape(shape)
+
+
+def _task(item):
+    robot_toml, traj, env_key, env, radius, resolution, seeds = item
+    robot = _robot(robot_toml)
+    # one Environment (and its search structures) per worker process, not per task
+    env = _ENVIRONMENTS.setdefault(env_key, env)
+    if len(_ENVIRONMENTS) > 4:
+        _ENVIRONMENTS.pop(next(iter(_ENVIRONMENTS)))
+    P = simulate_executions(robot, traj, seeds)
+    return tube_clearance(env, P, radius, resolution=resolution)  # (B, T)
+
+
+_ENVIRONMENTS: dict = {}
+
+
+@functools.lru_cache(maxsize=4)
+def _robot(text: str):
+    from riskplan.robots import robot_from_toml
+
+    return robot_from_toml(text)
+
+
+def execute_on_robot(
+    robot,
+    trajectory,
+    environment: Environment,
+    n: int = 1000,
+    seed: int = 0,
+    *,
+    radius: float | None = None,
+    resolution: float = RESOLUTION,
+    confidence: float = 0.95,
+    backend: str = "local",
+    workers: int | None = None,
+    chunk: int = CHUNK,
+) -> RobotMonteCarlo:
+    """Execute ``trajectory (T, m)`` ``n`` times on the simulated robot and count body collisions.
+
+    Parameters
+    ----------
+    robot: :class:`~riskplan.robots.TendonRobot` or a robot name/path (``"paper"``).
+    trajectory: ``(T, m)`` commanded tendon displacements [m], within the robot's limits.
+    environment: 3-D obstacles in the robot's base frame (e.g. ``build_chest(seed).base_environment``).
+    n, seed: number of executions and their seed (module docstring: protocol and seeding).
+    radius: body radius [m]; default the disk radius of the point-cloud geometry (10 mm).
+    resolution: sample spacing on refined backbone chords [m] (:func:`tube_clearance`).
+    backend, workers, chunk: :func:`riskplan.parallel.map_tasks` over chunks of ``chunk`` runs;
+        the result does not depend on them.
+
+    Returns
+    -------
+    :class:`RobotMonteCarlo`: ``P(exists t: body in an obstacle)`` with a Wilson interval
+    at ``confidence``, the per-configuration rates, and the clearances ``(n, T)``.
+    """
+    robot = _as_robot(robot)
+    traj = _check_trajectory(trajectory, robot)
+    env = _check_environment(environment)
+    n = _check_count(n, "n")
+    seed = _check_seed(seed)
+    chunk = _check_count(chunk, "chunk")
+    if backend not in BACKENDS:
+        raise InvalidInputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
+    if not 0 < confidence < 1:
+        raise InvalidInputError(f"confidence: expected in (0, 1), got {confidence!r}")
+    r = default_radius(robot) if radius is None else float(radius)
+    if not (np.isfinite(r) and r >= 0):
+        raise InvalidInputError(f"radius: expected a finite length >= 0, got {radius!r}")
+    if not (np.isfinite(resolution) and resolution > 0):
+        raise InvalidInputError(f"resolution: expected a positive length, got {resolution!r}")
+    seeds = spawn_seeds(seed, n)
+    # a fresh copy without cached search structures travels to the workers (they do not pickle)
+    env_copy = env if backend == "serial" else Environment(env.vertices, env.faces, env.face_obstacle, env.names, validate=False)
+    h = hashlib.sha256()
+    for a in (env.vertices, env.faces, env.face_obstacle):
+        h.update(np.ascontiguousarray(a).tobytes())
+    toml = robot.toml_text()
+    items = [(toml, traj, h.hexdigest(), env_copy, r, resolution, seeds[k : k + chunk]) for k in range(0, n, chunk)]
+    parts = map_tasks(_task, items, backend=backend, workers=workers, chunksize=1)
+    clearance = np.concatenate(parts, axis=0)  # (n, T)
+    hit = clearance < 0
+    return RobotMonteCarlo(
+        trajectory=_estimate(hit.any(axis=1).sum(), n, confidence),
+        per_configuration=_estimate(hit.sum(axis=0), n, confidence),
+        clearance=clearance,
+        radius=r,
+        seed=seed,
+        n=n,
+    )
+
+
+def mixture_monte_carlo(model, trajectory, environment: Environment, n: int = 100_000, seed: int = 0,
+                        *, confidence: float = 0.95) -> MixtureMonteCarlo:
+    """Monte Carlo of the model's mixtures along ``trajectory (T, m)``.
+
+    Each trial draws one point from every configuration's mixture independently
+    (:func:`~riskplan.collision.monte_carlo_trajectory`, ``combine="weighted"``) and counts a
+    collision if any lies inside an obstacle: the quantity eq. 10 bounds under the paper's
+    independence assumption. ``per_configuration``: :func:`~riskplan.collision.monte_carlo_probability`
+    per configuration (what eq. 9 bounds). Wilson intervals at ``confidence``.
+    """
+    env = _check_environment(environment)
+    n = _check_count(n, "n")
+    seed = _check_seed(seed)
+    m = int(getattr(model, "n_tendons", -1))
+    traj = as_array(trajectory, "trajectory", min_ndim=2)
+    if traj.ndim != 2 or traj.shape[1] != m or traj.shape[0] < 1:
+        raise InvalidInputError(f"trajectory: expected shape (T, {m}) with T >= 1 for a model of {m} tendons, got {traj.shape}")
+    gm = model.predict(traj)
+    s1, s2 = spawn_seeds(seed, 2)
+    return MixtureMonteCarlo(
+        trajectory=monte_carlo_trajectory(gm, env, n, seed=s1, confidence=confidence),
+        per_configuration=monte_carlo_probability(gm, env, n, seed=s2, confidence=confidence),
+    )
+
+
+def validation_table(
+    model,
+    trajectories: dict,
+    environment: Environment,
+    *,
+    robot=None,
+    n_robot: int = 1000,
+    n_mixture: int = 100_000,
+    seed: int = 0,
+    radius: float | None = None,
+    backend: str = "local",
+    workers: int | None = None,
+) -> list[dict]:
+    """The "does it hold on the robot?" rows: one per named trajectory (e.g. ``{"nominal": ...,
+    "optimised": ...}``).
+
+    Each row: ``name``, ``T``, ``bound`` (eq. 10 over eq. 9, the planner's objective),
+    ``max_config_bound`` (largest eq.-9 term), ``mixture_mc`` / ``mixture_low`` / ``mixture_high``
+    (:func:`mixture_monte_carlo`, ``n_mixture`` trials), ``robot_mc`` / ``robot_low`` /
+    ``robot_high`` / ``robot_hits`` / ``robot_per_config`` (:func:`execute_on_robot`, ``n_robot``
+    executions), ``radius`` and ``n_robot``. Every trajectory uses the same ``seed`` (common
+    random numbers: the same starts and transmission draws), which sharpens the comparison
+    between trajectories. ``robot`` defaults to the robot the model was trained for.
+    """
+    from riskplan.robots import robot_from_toml
+
+    if not isinstance(trajectories, dict) or not trajectories:
+        raise InvalidInputError("trajectories: expected a non-empty dict {name: (T, m) array}")
+    if robot is None:
+        if not getattr(model, "robot_toml", ""):
+            raise InvalidInputError("robot: the model carries no robot description; pass robot=")
+        robot = robot_from_toml(model.robot_toml)
+    robot = _as_robot(robot)
+    if int(model.n_tendons) != robot.n_tendons:
+        raise InvalidInputError(f"model: has {model.n_tendons} tendons, robot {robot.name!r} has {robot.n_tendons}")
+    rows = []
+    for name, traj in trajectories.items():
+        traj = _check_trajectory(traj, robot)
+        gm = model.predict(traj)
+        per = mixture_bound(gm, environment)
+        mix = mixture_monte_carlo(model, traj, environment, n_mixture, seed)
+        rob = execute_on_robot(robot, traj, environment, n_robot, seed, radius=radius, backend=backend, workers=workers)
+        rows.append({
+            "name": str(name),
+            "T": int(traj.shape[0]),
+            "bound": float(trajectory_bound(gm, environment)),
+            "max_config_bound": float(per.max()),
+            "mixture_mc": float(mix.trajectory.probability),
+            "mixture_low": float(mix.trajectory.low),
+            "mixture_high": float(mix.trajectory.high),
+            "n_mixture": int(n_mixture),
+            "robot_mc": float(rob.trajectory.probability),
+            "robot_low": float(rob.trajectory.low),
+            "robot_high": float(rob.trajectory.high),
+            "robot_hits": int(rob.trajectory.hits),
+            "robot_per_config": rob.per_configuration.probability.tolist(),
+            "n_robot": int(n_robot),
+            "radius": rob.radius,
+        })
+    return rows
+
+
+def validation_markdown(rows: list[dict]) -> str:
+    """Markdown table of :func:`validation_table` rows (probabilities in %)."""
+    head = ("| trajectory | eq.-10 bound | MC of the MDN mixtures (95 % CI) | MC on the robot (95 % CI) |\n"
+            "|---|---|---|---|")
+    lines = [head]
+    for r in rows:
+        lines.append(
+            f"| {r['name']} | {100 * r['bound']:.1f} % | {100 * r['mixture_mc']:.1f} % "
+            f"[{100 * r['mixture_low']:.1f}, {100 * r['mixture_high']:.1f}] (n = {r['n_mixture']}) | "
+            f"{100 * r['robot_mc']:.1f} % [{100 * r['robot_low']:.1f}, {100 * r['robot_high']:.1f}] "
+            f"(n = {r['n_robot']}, body radius {1000 * r['radius']:.0f} mm) |"
+        )
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,169 @@
+"""Monte Carlo execution of trajectories on the simulated robot (riskplan.planning.validate)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from riskplan.collision import Environment, trajectory_bound
+from riskplan.collision.robot_geometry import arc_backbone
+from riskplan.errors import InvalidInputError
+from riskplan.planning.validate import (
+    default_radius,
+    execute_on_robot,
+    mixture_monte_carlo,
+    tube_clearance,
+    validation_markdown,
+    validation_table,
+)
+
+
+def box_env(lo, hi):
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    m = trimesh.creation.box(extents=hi - lo)
+    m.apply_translation((lo + hi) / 2)
+    return Environment.from_meshes([m])
+
+
+@pytest.fixture(scope="module")
+def robot():
+    from riskplan.robots import load_robot
+
+    return load_robot("paper")
+
+
+# --------------------------------------------------------------------------- tube test
+@pytest.mark.parametrize("margin", [-1e-3, -3e-4, 3e-4, 1e-3])
+def test_tube_clearance_between_coarse_samples(margin):
+    # straight backbone along z sampled only at z = 0, 0.1, 0.2; a slab x >= a spans z in
+    # [0.04, 0.06], so the closest approach lies between samples: clearance = a - r exactly
+    r = 0.01
+    a = r + margin
+    env = box_env([a, -0.05, 0.04], [a + 0.05, 0.05, 0.06])
+    bb = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.1], [0.0, 0.0, 0.2]])
+    c = tube_clearance(env, bb, r, resolution=2e-4)
+    assert (c < 0) == (margin < 0)
+    assert abs(c - margin) <= 1e-4 + 1e-12
+
+
+def test_tube_clearance_arc_against_half_space(tol):
+    # constant-curvature arc bending to +x: max x = (1 - cos(kL)) / k at the tip; slab x >= c
+    k, L, r = 4.0, 0.2, 0.01
+    bb = arc_backbone(k, 0.0, L, 81)
+    xmax = (1 - np.cos(k * L)) / k
+    for gap in (-2e-3, 2e-3, 0.03):
+        c = xmax + r + gap
+        env = box_env([c, -0.5, -0.5], [c + 0.5, 0.5, 0.5])
+        got = tube_clearance(env, bb, r)
+        np.testing.assert_allclose(got, gap, **tol["float64_ref"])
+    # batch == loop
+    env = box_env([xmax + r, -0.5, -0.5], [xmax + r + 0.5, 0.5, 0.5])
+    bbs = arc_backbone(np.array([1.0, 4.0, 6.0]), 0.0, L, 81)
+    batch = tube_clearance(env, bbs, r)
+    loop = np.array([tube_clearance(env, b, r) for b in bbs])
+    np.testing.assert_allclose(batch, loop, **tol["float64_exact"])
+    assert batch[0] > 0 and batch[2] < 0
+
+
+# ------------------------------------------------------------- robot Monte Carlo
+def test_single_configuration_matches_training_data_physics(robot):
+    """Oracle: the data generator's own arrival code (random start, straight path through the
+    hysteresis model, per-run variation) gives the distribution of the body's reach; a slab
+    placed at its median must be hit with the same probability by the validation Monte Carlo."""
+    from riskplan.datasets.generate import arrive, to_base_frame
+    from riskplan.datasets.protocol import random_starts, straight_path
+
+    target = np.array([0.02, 0.0, 0.0, 0.0])
+    lim = robot.displacement_limits
+    r = default_radius(robot)
+    N = 160
+    ss = np.random.SeedSequence(987).spawn(N)
+    parts = [c.spawn(2) for c in ss]
+    starts = np.stack([random_starts(lim, 1, np.random.default_rng(p[0]))[0] for p in parts])
+    paths = np.stack([straight_path(s, target, 16) for s in starts])
+    _, shape = arrive(robot, paths, [p[1] for p in parts])
+    P, _ = to_base_frame(robot, shape.positions, shape.rotations)
+    reach = P[..., 0].max(axis=-1) + r  # furthest extent of the body along +x
+    c = float(np.median(reach))
+    assert np.ptp(reach) > 1e-4  # the hysteresis spread is what is being tested
+    p_oracle = float(np.mean(reach > c))
+    env = box_env([c, -0.5, -0.5], [c + 0.5, 0.5, 0.5])
+    n = 160
+    res = execute_on_robot(robot, target[None], env, n, seed=5, backend="serial")
+    p = float(res.trajectory.probability)
+    sigma = np.sqrt(max(p_oracle * (1 - p_oracle), 0.05) * (1 / n + 1 / N))
+    assert abs(p - p_oracle) <= 3.5 * sigma, (p, p_oracle)
+    np.testing.assert_array_equal(res.per_configuration.hits, [res.trajectory.hits])
+    assert res.trajectory.low <= p <= res.trajectory.high
+
+
+def test_any_configuration_counts_and_known_cases(robot):
+    # straight at home: the slab beyond the reach of the robot is never touched, a slab the
+    # bent configuration crosses deeply is always hit; the trajectory counts either
+    env = box_env([0.05, -0.5, -0.5], [0.55, 0.5, 0.5])
+    traj = np.array([[0.0, 0.0, 0.0, 0.0], [0.03, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0]])
+    res = execute_on_robot(robot, traj, env, 12, seed=1, backend="serial", chunk=5)
+    np.testing.assert_array_equal(res.per_configuration.hits, [0, 12, 0])
+    assert int(res.trajectory.hits) == 12 and res.clearance.shape == (12, 3)
+    far = execute_on_robot(robot, traj[[0, 2]], env, 12, seed=1, backend="serial")
+    assert int(far.trajectory.hits) == 0 and np.all(far.clearance > 0.02)
+
+
+def test_same_seed_same_result_across_backends_and_chunks(robot):
+    env = box_env([0.03, -0.5, -0.5], [0.53, 0.5, 0.5])
+    traj = np.array([[0.0, 0.0, 0.0, 0.0], [0.018, 0.004, 0.0, 0.0]])
+    a = execute_on_robot(robot, traj, env, 8, seed=3, backend="serial", chunk=3)
+    b = execute_on_robot(robot, traj, env, 8, seed=3, backend="serial", chunk=8)
+    c = execute_on_robot(robot, traj, env, 8, seed=3, backend="local", workers=2, chunk=4)
+    np.testing.assert_array_equal(a.clearance, b.clearance)
+    np.testing.assert_array_equal(a.clearance, c.clearance)
+    d = execute_on_robot(robot, traj, env, 8, seed=4, backend="serial")
+    assert not np.array_equal(a.clearance, d.clearance)
+
+
+def test_bad_input_names_the_argument(robot):
+    env = box_env([0.05, -0.5, -0.5], [0.55, 0.5, 0.5])
+    ok = np.zeros((2, 4))
+    with pytest.raises(InvalidInputError, match="trajectory"):
+        execute_on_robot(robot, np.zeros((2, 3)), env, 2, backend="serial")
+    with pytest.raises(InvalidInputError, match="trajectory"):
+        execute_on_robot(robot, np.zeros(4), env, 2, backend="serial")
+    with pytest.raises(InvalidInputError, match="trajectory"):
+        execute_on_robot(robot, np.full((2, 4), 0.5), env, 2, backend="serial")
+    with pytest.raises(InvalidInputError, match="trajectory"):
+        execute_on_robot(robot, np.array([[np.nan, 0, 0, 0]]), env, 2, backend="serial")
+    with pytest.raises(InvalidInputError, match="^n"):
+        execute_on_robot(robot, ok, env, 0, backend="serial")
+    with pytest.raises(InvalidInputError, match="seed"):
+        execute_on_robot(robot, ok, env, 2, seed=-1, backend="serial")
+    with pytest.raises(InvalidInputError, match="backend"):
+        execute_on_robot(robot, ok, env, 2, backend="threads")
+    with pytest.raises(InvalidInputError, match="radius"):
+        execute_on_robot(robot, ok, env, 2, radius=-0.01, backend="serial")
+    with pytest.raises(InvalidInputError, match="environment"):
+        execute_on_robot(robot, ok, "chest", 2, backend="serial")
+
+
+# ------------------------------------------------------------ mixtures of the model
+def test_mixture_monte_carlo_below_eq10_bound_and_table(robot):
+    from riskplan.kinematics import load_model
+
+    model = load_model("paper")
+    env = box_env([0.045, -0.5, -0.5], [0.545, 0.5, 0.5])
+    traj = np.linspace([0.0, 0.0, 0.0, 0.0], [0.03, 0.0, 0.0, 0.0], 4)
+    mc = mixture_monte_carlo(model, traj, env, 20_000, seed=2)
+    bound = float(trajectory_bound(model.predict(traj), env))
+    assert 0 < mc.trajectory.probability < 1
+    assert mc.trajectory.low <= bound  # eq. 10 over eq. 9 bounds independent draws
+    assert mc.per_configuration.probability.shape == (4,)
+    assert mc.trajectory.high >= mc.per_configuration.low.max()
+    again = mixture_monte_carlo(model, traj, env, 20_000, seed=2)
+    assert int(again.trajectory.hits) == int(mc.trajectory.hits)
+    with pytest.raises(InvalidInputError, match="trajectory"):
+        mixture_monte_carlo(model, np.zeros((3, 2)), env, 10)
+    rows = validation_table(model, {"a": traj[:2], "b": traj}, env, n_robot=4, n_mixture=2000, backend="serial")
+    assert [r["name"] for r in rows] == ["a", "b"]
+    assert rows[1]["bound"] == pytest.approx(bound, rel=1e-12)
+    assert all(0 <= r["robot_low"] <= r["robot_mc"] <= r["robot_high"] <= 1 for r in rows)
+    assert "| b |" in validation_markdown(rows)

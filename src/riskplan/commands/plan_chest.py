@@ -86,7 +86,7 @@ def register(plan_app: typer.Typer) -> None:
         robot: str = typer.Option(None, "--robot", help="Robot (name or TOML) the model must match (default: the model's own)."),
         executions: int = typer.Option(1000, "--executions", help="Validation: executions of each trajectory on the simulated robot (0: skip)."),
         mixture_samples: int = typer.Option(100_000, "--mixture-samples", help="Validation: Monte Carlo trials of the MDN mixtures."),
-        workers: int = typer.Option(None, "--workers", help="Worker processes for the validation (default: all cores)."),
+        workers: int = typer.Option(1, "--workers", help="Worker processes for the validation (1: in this process, the fastest on 2 shared cores)."),
         seed: int = typer.Option(0, "--seed", help="Seed of the roadmap, goal search, optimiser and validation."),
         resume: bool = typer.Option(False, "--resume", help="Continue an interrupted optimisation from OUT/checkpoint.json."),
     ) -> None:
@@ -156,7 +156,8 @@ def register(plan_app: typer.Typer) -> None:
                 t_va = bar.add_task("validation on the robot", total=None, status=f"{executions} executions x 2")
                 validation = validation_table(
                     mdl, {"nominal": plan.nominal, "optimised": plan.optimised.trajectory}, env_base, robot=rob,
-                    n_robot=executions, n_mixture=mixture_samples, seed=seed, workers=workers,
+                    n_robot=executions, n_mixture=mixture_samples, seed=seed,
+                    backend="serial" if workers <= 1 else "local", workers=workers,
                 )
                 bar.update(t_va, total=1, completed=1)
         from riskplan.experiments.chest_planning import write_plan

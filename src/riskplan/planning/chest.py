@@ -6,10 +6,11 @@ passed here is in the base frame (:attr:`riskplan.scenarios.chest.Chest.base_env
 a user mesh mapped with :func:`environment_in_base_frame`). Goal tips are base-frame points.
 
 Default scene (issue part 3): start at zero displacement (the straight robot, free in the
-procedural chest) and a goal tip in the effusion pocket, :data:`DEFAULT_GOAL_TIP`: the tip
-bent caudally (towards the diaphragm) and anteriorly in the pocket between the diaphragm and
-the heart/lung bases. The target was chosen as a place a clinician would reach (the effusion
-pocket), not to produce a given bound; docs/planning.md gives the resulting bound.
+procedural chest) and a goal tip in the effusion pocket, :data:`DEFAULT_GOAL_TIP`: 5 cm
+caudal, 6 cm posterior and 17 cm medial of the port (base frame), i.e. in the posterior,
+dependent part of the pocket just above the diaphragm dome, where a pleural effusion pools
+(the posterior costophrenic recess). docs/planning.md lists the scan of pocket targets behind
+this choice and the bound it gives; the bound is whatever eq. 10 says.
 """
 
 from __future__ import annotations
@@ -39,8 +40,8 @@ from riskplan.planning.risk import ConfigurationBound, compare_paths, trajectory
 
 log = logging.getLogger(__name__)
 
-# base frame: x cranial, y = z cross x, z medial (insertion direction); metres
-DEFAULT_GOAL_TIP = (-0.03, 0.03, 0.12)
+# base frame: x cranial, y anterior (z cross x), z medial (insertion direction); metres
+DEFAULT_GOAL_TIP = (-0.05, -0.06, 0.17)
 
 
 def environment_in_base_frame(environment, position, rotation):

@@ -18,6 +18,9 @@ Execution protocol (one run)
     * the Cosserat shape at every configuration (``robot.solve_displacements``), in the
       robot's base frame (:func:`~riskplan.datasets.generate.to_base_frame`).
 
+Collisions are counted at the ``T`` configurations of the trajectory (the states eq. 10 runs
+over), not on the way from the random start to ``d_0`` (not part of the plan).
+
 Run ``i`` uses ``spawn_seeds(seed, n)[i]`` split into (start draw, transmission variation),
 so a result depends on ``(robot, trajectory, seed, n)`` only, whatever the backend or chunking.
 

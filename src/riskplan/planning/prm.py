@@ -249,10 +249,12 @@ class Roadmap:
 
     def shortest_path(self, start, goal) -> np.ndarray:
         """Shortest valid path (Euclidean length in displacement space) ``(P, m)``."""
-        start, goal = self._check_query(start, goal)
+        start, goal = self.check_query(start, goal)
         return self.search(self.graph_with(start, goal), start, goal)
 
-    def _check_query(self, start, goal) -> tuple[np.ndarray, np.ndarray]:
+    def check_query(self, start, goal) -> tuple[np.ndarray, np.ndarray]:
+        """``start``, ``goal (m,)`` as float64 arrays; :class:`InvalidInputError` if either is
+        malformed, outside the limits or invalid."""
         m = self.vertices.shape[1]
         out = []
         for name, c in (("start", start), ("goal", goal)):

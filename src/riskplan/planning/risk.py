@@ -104,7 +104,7 @@ def least_risk_path(roadmap: Roadmap, bound, start, goal, *, step: float = DEFAU
 
     from riskplan.errors import PlanningError
 
-    start, goal = roadmap._check_query(start, goal)
+    start, goal = roadmap.check_query(start, goal)
     cost = cost or RiskSegmentCost(bound, step)
     V = roadmap.n_vertices
     conf = np.vstack([roadmap.vertices, start[None], goal[None]])

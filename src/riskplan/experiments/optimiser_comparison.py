@@ -99,6 +99,17 @@ def to_markdown(summary: list[dict], initial_bound: float) -> str:
     return "\n".join(lines) + "\n"
 
 
+def trace_table(rows: list[dict], at=(5, 10, 20, 30, 50)) -> str:
+    """Markdown: median [min-max] of the best eq.-10 bound after the given iterations, per method."""
+    its = [k for k in at if k < len(rows[0]["trace"])]
+    lines = ["| method | " + " | ".join(f"after {k}" for k in its) + " |", "|---|" + "---|" * len(its)]
+    for m in dict.fromkeys(r["method"] for r in rows):
+        tr = np.array([r["trace"] for r in rows if r["method"] == m])
+        cells = [f"{100 * np.median(tr[:, k]):.2f} % [{100 * tr[:, k].min():.2f}-{100 * tr[:, k].max():.2f}]" for k in its]
+        lines.append(f"| {m} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def traces_figure(rows: list[dict]):
     import matplotlib.pyplot as plt
 
@@ -132,7 +143,10 @@ def main(argv=None) -> None:
     summary = summarise(rows)
     a.out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(a.out / "comparison.json", {"rows": rows, "summary": summary, "nominal_bound": rows[0]["initial_bound"]})
-    md = to_markdown(summary, rows[0]["initial_bound"])
+    p = problem["bounds"]
+    floor = float(1 - (1 - p[0]) * (1 - p[-1]))  # start and goal never move
+    md = (to_markdown(summary, rows[0]["initial_bound"]) + f"\nFloor (start and goal fixed): {floor:.4f}\n\n"
+          + trace_table(rows))
     write_text_atomic(a.out / "comparison.md", md)
     import matplotlib
 

@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from riskplan.experiments.optimiser_comparison import compare_optimisers, summarise, to_markdown, trace_table
+from riskplan.experiments.optimiser_comparison import (
+    compare_optimisers,
+    summarise,
+    to_markdown,
+    trace_table,
+)
 from riskplan.planning.prm import MeanValidity, build_roadmap, interpolate_path
 from riskplan.planning.risk import ConfigurationBound, trajectory_risk
 from tests.planning.conftest import GOAL, START, AnalyticModel, box_env

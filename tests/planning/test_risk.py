@@ -28,7 +28,7 @@ def test_bounds_match_collision_module(model, scene, rng, tol):
     b = ConfigurationBound(model, scene, batch=3)
     np.testing.assert_allclose(b(c), probability_of_collision(model.predict(c), scene), **tol["float64_exact"])
     assert b.evaluations == 7
-    P, p = trajectory_risk(b, c)
+    P, _ = trajectory_risk(b, c)
     np.testing.assert_allclose(P, trajectory_bound(model.predict(c), scene), **tol["float64_exact"])
 
 

@@ -22,9 +22,10 @@ from riskplan.bench._timing import median_time
 
 def _cpu_model() -> str:
     try:
-        for line in open("/proc/cpuinfo"):
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
     except OSError:  # pragma: no cover
         pass
     return platform.processor() or "unknown"
@@ -33,7 +34,10 @@ def _cpu_model() -> str:
 def run(quick: bool = False, model: str = "paper") -> dict:
     import torch
 
-    from riskplan.experiments.optimiser_comparison import compare_optimisers, nominal_problem
+    from riskplan.experiments.optimiser_comparison import (
+        compare_optimisers,
+        nominal_problem,
+    )
     from riskplan.planning.risk import trajectory_risk
 
     torch.set_num_threads(1)
@@ -54,7 +58,7 @@ def run(quick: bool = False, model: str = "paper") -> dict:
         "prm_build_s": float(problem["roadmap"].build_seconds),
         "prm_milestones": int(milestones),
         "bound_eval_ms_per_trajectory": float(eval_ms),
-        "trajectory_configurations": int(len(nominal)),
+        "trajectory_configurations": len(nominal),
         "nominal_bound": float(rows[0]["initial_bound"]),
         "optimised_bound": float(np.median([r["bound"] for r in rows])),
         "optimised_bound_range": [float(min(r["bound"] for r in rows)), float(max(r["bound"] for r in rows))],

@@ -156,7 +156,12 @@ def scan_goal_tips(model, environment, tips, *, n_milestones: int = 300, seed: i
     ``bound = None``.
     """
     from riskplan.errors import PlanningError
-    from riskplan.planning.prm import MeanValidity, build_roadmap, goal_from_tip, interpolate_path
+    from riskplan.planning.prm import (
+        MeanValidity,
+        build_roadmap,
+        goal_from_tip,
+        interpolate_path,
+    )
     from riskplan.planning.risk import ConfigurationBound, trajectory_risk
 
     validity = MeanValidity(model, environment)

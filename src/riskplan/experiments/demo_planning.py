@@ -31,7 +31,13 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     from riskplan.experiments.chest_planning import trace_figure, trajectories_plotly
     from riskplan.planning.bo import OptimiserConfig, optimise_trajectory
     from riskplan.planning.chest import DEFAULT_GOAL_TIP
-    from riskplan.planning.prm import MeanValidity, build_roadmap, goal_from_tip, interpolate_path, tip_positions
+    from riskplan.planning.prm import (
+        MeanValidity,
+        build_roadmap,
+        goal_from_tip,
+        interpolate_path,
+        tip_positions,
+    )
     from riskplan.planning.risk import ConfigurationBound, trajectory_risk
 
     torch.set_num_threads(1)

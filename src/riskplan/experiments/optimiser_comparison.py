@@ -17,7 +17,6 @@ and spread (min-max and interquartile range) per method. Run from the command li
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
@@ -30,7 +29,12 @@ def nominal_problem(model="paper", *, chest_seed: int = 0, roadmap_seed: int = 0
     """``(model, environment (base frame), validity, bound, nominal (T, m), bounds (T,))`` of the default scene."""
     from riskplan.kinematics import load_model
     from riskplan.planning.chest import DEFAULT_GOAL_TIP
-    from riskplan.planning.prm import MeanValidity, build_roadmap, goal_from_tip, interpolate_path
+    from riskplan.planning.prm import (
+        MeanValidity,
+        build_roadmap,
+        goal_from_tip,
+        interpolate_path,
+    )
     from riskplan.planning.risk import ConfigurationBound, trajectory_risk
     from riskplan.scenarios.chest import build_chest
 
@@ -156,7 +160,7 @@ def main(argv=None) -> None:
     fig = traces_figure(rows)
     with atomic_path(a.out / "comparison.png", suffix=".png") as tmp:
         fig.savefig(tmp, dpi=120)
-    print(md)  # noqa: T201 - command-line entry point
+    print(md)
 
 
 if __name__ == "__main__":  # pragma: no cover

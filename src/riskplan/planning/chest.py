@@ -24,7 +24,11 @@ import numpy as np
 
 from riskplan._validation import as_array
 from riskplan.errors import InvalidInputError
-from riskplan.planning.bo import OptimisationResult, OptimiserConfig, optimise_trajectory
+from riskplan.planning.bo import (
+    OptimisationResult,
+    OptimiserConfig,
+    optimise_trajectory,
+)
 from riskplan.planning.prm import (
     DEFAULT_MILESTONES,
     DEFAULT_RESOLUTION,

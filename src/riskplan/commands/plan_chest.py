@@ -1,9 +1,177 @@
-"""``riskplan plan chest``."""
+"""``riskplan plan chest``: PRM nominal trajectory + Bayesian optimisation of its collision
+bound in the chest cavity (MDN paper section V, Figs. 6-7)."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import typer
 
 
+def _floats(text, name, n=None):
+    from riskplan.errors import InvalidInputError
+
+    if text is None:
+        return None
+    try:
+        vals = [float(v) for v in text.replace(";", ",").split(",") if v.strip()]
+    except ValueError as exc:
+        raise InvalidInputError(f"{name}: expected comma-separated numbers, got {text!r}") from exc
+    if n is not None and len(vals) != n:
+        raise InvalidInputError(f"{name}: expected {n} comma-separated numbers, got {len(vals)}")
+    return vals
+
+
+def parse_base_pose(text: str):
+    """``--base-pose``: a JSON file with ``base_position`` (3,) and ``base_rotation`` (3, 3) (the
+    sidecar ``riskplan env chest`` writes), or ``x,y,z,qw,qx,qy,qz`` (metres, unit quaternion).
+    Returns ``(position (3,), rotation (3, 3))`` with ``x_world = position + rotation @ x_base``."""
+    import json
+
+    import numpy as np
+
+    from riskplan.errors import InvalidInputError
+
+    p = Path(text)
+    if p.suffix == ".json" or p.is_file():
+        try:
+            meta = json.loads(p.read_text())
+            return np.asarray(meta["base_position"], dtype=float), np.asarray(meta["base_rotation"], dtype=float)
+        except (OSError, KeyError, TypeError, ValueError) as exc:
+            raise InvalidInputError(f"--base-pose {text}: expected a JSON file with base_position and base_rotation ({exc})") from exc
+    v = np.asarray(_floats(text, "--base-pose", 7))
+    q = v[3:]
+    nq = np.linalg.norm(q)
+    if not np.all(np.isfinite(v)) or not nq > 0:
+        raise InvalidInputError("--base-pose: expected finite x,y,z,qw,qx,qy,qz with a non-zero quaternion")
+    w, x, y, z = q / nq
+    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                  [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                  [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    return v[:3], R
+
+
+def _check_finite(**values):
+    import math
+
+    from riskplan.errors import InvalidInputError
+
+    for name, v in values.items():
+        if not math.isfinite(v):
+            raise InvalidInputError(f"--{name.replace('_', '-')}: expected a finite number, got {v}")
+
+
 def register(plan_app: typer.Typer) -> None:
     """Add the ``chest`` command to the ``riskplan plan`` group."""
+
+    @plan_app.command("chest")
+    def chest(
+        out: Path = typer.Option(..., "--out", "-o", help="Output folder (trajectories, trace, chest.html, plan.json)."),
+        model: str = typer.Option("paper", "--model", help="'paper' (shipped model) or a model folder from `riskplan train`."),
+        env: Path = typer.Option(None, "--env", help="Patient mesh (STL/OBJ/PLY), world frame; needs --base-pose. Default: the procedural chest."),
+        base_pose: str = typer.Option(None, "--base-pose", help="Robot base in the mesh's world frame: JSON sidecar of `riskplan env chest` or x,y,z,qw,qx,qy,qz."),
+        chest_seed: int = typer.Option(0, "--chest-seed", help="Seed of the procedural chest's organ shapes."),
+        goal_tip: str = typer.Option(None, "--goal-tip", help="Tip target X,Y,Z in the robot base frame (m). Default: the effusion-pocket target."),
+        goal: str = typer.Option(None, "--goal", help="Goal tendon displacements D1,...,Dm (m)."),
+        start: str = typer.Option(None, "--start", help="Start tendon displacements (default: zeros)."),
+        tip_tolerance: float = typer.Option(0.005, "--tip-tolerance", help="Goal tip tolerance (m)."),
+        iterations: int = typer.Option(50, "--iterations", help="Optimisation iterations (one bound evaluation each)."),
+        candidates: int = typer.Option(256, "--candidates", help="Candidates drawn per iteration."),
+        radius: float = typer.Option(0.1, "--radius", help="Neighbourhood half-width, fraction of each tendon's range."),
+        method: str = typer.Option("bo", "--method", help="bo (the paper's), random (local search), trust_region."),
+        milestones: int = typer.Option(300, "--milestones", help="PRM milestones."),
+        step: float = typer.Option(0.0025, "--step", help="Largest step between trajectory configurations (m)."),
+        resolution: float = typer.Option(0.001, "--resolution", help="Motion check resolution (m)."),
+        least_risk: bool = typer.Option(False, "--least-risk", help="Also search the roadmap for the least-risk path (prices every edge)."),
+        robot: str = typer.Option(None, "--robot", help="Robot (name or TOML) the model must match (default: the model's own)."),
+        executions: int = typer.Option(1000, "--executions", help="Validation: executions of each trajectory on the simulated robot (0: skip)."),
+        mixture_samples: int = typer.Option(100_000, "--mixture-samples", help="Validation: Monte Carlo trials of the MDN mixtures."),
+        workers: int = typer.Option(1, "--workers", help="Worker processes for the validation (1: in this process, the fastest on 2 shared cores)."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the roadmap, goal search, optimiser and validation."),
+        resume: bool = typer.Option(False, "--resume", help="Continue an interrupted optimisation from OUT/checkpoint.json."),
+    ) -> None:
+        """Plan a nominal trajectory with a PRM and lower its P(collision) bound by Bayesian optimisation."""
+        import numpy as np
+        import torch
+
+        from riskplan.collision import Environment
+        from riskplan.commands._progress import progress_bar
+        from riskplan.errors import DataFormatError, InvalidInputError
+        from riskplan.kinematics import load_model
+        from riskplan.planning.bo import OptimiserConfig
+        from riskplan.planning.chest import environment_in_base_frame, plan_chest
+
+        torch.set_num_threads(1)
+        _check_finite(tip_tolerance=tip_tolerance, radius=radius, step=step, resolution=resolution)
+        if executions < 0 or mixture_samples < 1:
+            raise InvalidInputError("--executions must be >= 0 and --mixture-samples >= 1")
+        mdl = load_model(model)
+        rob = None
+        if robot is not None:
+            from riskplan.robots import load_robot
+
+            rob = load_robot(robot)
+            if rob.n_tendons != mdl.n_tendons:
+                raise DataFormatError(f"--robot {robot!r} has {rob.n_tendons} tendons but the model {model!r} has {mdl.n_tendons}")
+        m = mdl.n_tendons
+        if env is None:
+            if base_pose is not None:
+                raise InvalidInputError("--base-pose applies to --env meshes; the procedural chest has its own base frame")
+            from riskplan.scenarios.chest import build_chest
+
+            ch = build_chest(chest_seed)
+            env_world, env_base, to_world = ch.environment, ch.base_environment, ch.to_world
+            scene = {"scene": "procedural chest", "chest_seed": chest_seed}
+        else:
+            if base_pose is None:
+                raise InvalidInputError("--env needs --base-pose (the robot base in the mesh's world frame)")
+            pos, rot = parse_base_pose(base_pose)
+            env_world = Environment.load(env)
+            env_base = environment_in_base_frame(env_world, pos, rot)
+
+            def to_world(x, pos=pos, rot=rot):
+                return pos + np.asarray(x) @ rot.T
+
+            scene = {"scene": str(env), "base_position": pos.tolist(), "base_rotation": rot.tolist()}
+        cfg = OptimiserConfig(iterations=iterations, n_candidates=candidates, radius=radius, method=method, resolution=resolution)
+        cfg.validate()
+        out.mkdir(parents=True, exist_ok=True)
+        with progress_bar() as bar:
+            t_rm = bar.add_task("roadmap", total=milestones, status="")
+            t_rk = bar.add_task("risk roadmap", total=1, status="", visible=least_risk)
+            t_bo = bar.add_task(f"optimisation ({method})", total=iterations, status="")
+            plan = plan_chest(
+                mdl, env_base, start=_floats(start, "--start", m), goal=_floats(goal, "--goal", m),
+                goal_tip=_floats(goal_tip, "--goal-tip", 3), tip_tolerance=tip_tolerance, n_milestones=milestones,
+                step=step, resolution=resolution, optimiser=cfg, seed=seed, least_risk=least_risk,
+                checkpoint=out / "checkpoint.json", resume=resume,
+                roadmap_progress=lambda d, n: bar.update(t_rm, completed=d, total=n),
+                risk_progress=lambda d, n: bar.update(t_rk, completed=d, total=n, status="milestones settled"),
+                optimise_progress=lambda i, n, b: bar.update(t_bo, completed=i, total=n, status=f"bound {b:.4f}"),
+            )
+            validation = None
+            if executions > 0:
+                from riskplan.planning.validate import validation_table
+
+                t_va = bar.add_task("validation on the robot", total=None, status=f"{executions} executions x 2")
+                validation = validation_table(
+                    mdl, {"nominal": plan.nominal, "optimised": plan.optimised.trajectory}, env_base, robot=rob,
+                    n_robot=executions, n_mixture=mixture_samples, seed=seed,
+                    backend="serial" if workers <= 1 else "local", workers=workers,
+                )
+                bar.update(t_va, total=1, completed=1)
+        from riskplan.experiments.chest_planning import write_plan
+
+        write_plan(out, plan, model=mdl, environment_world=env_world, to_world=to_world, validation=validation,
+                   extra={"model": model, **scene})
+        res = plan.optimised
+        typer.echo(f"roadmap: {plan.roadmap.describe()}; trajectory of {len(plan.nominal)} configurations")
+        if plan.paths is not None:
+            typer.echo(f"shortest path bound {plan.paths['shortest']['bound']:.4f}, least-risk path bound {plan.paths['least_risk']['bound']:.4f}")
+        typer.echo(f"eq. 10 bound: nominal {plan.nominal_bound:.4f} -> optimised {res.bound:.4f} "
+                   f"({100 * res.reduction:.1f} % lower, {len(res.trace) - 1} iterations, {res.evaluations} bound evaluations)")
+        if validation is not None:
+            from riskplan.planning.validate import validation_markdown
+
+            typer.echo(validation_markdown(validation))
+        typer.echo(f"wrote {out}")

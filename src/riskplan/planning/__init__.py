@@ -1,5 +1,19 @@
-"""Risk-aware motion planning with learned kinematics (MDN paper, section V)."""
+"""Planning under kinematic uncertainty (MDN paper section V; deformable-planning paper).
 
+Chest cavity (MDN paper section V, Figs. 6-7):
+
+* :mod:`riskplan.planning.prm` — OMPL PRM in tendon-displacement space with the paper's
+  validity condition (component means in free space), nominal trajectories;
+* :mod:`riskplan.planning.risk` — eq. 9/10 along plans, least-risk roadmap search;
+* :mod:`riskplan.planning.bo` — the paper's Bayesian optimisation of the nominal trajectory
+  and the comparison optimisers;
+* :mod:`riskplan.planning.chest` — the whole pipeline on a model and a mesh;
+* :mod:`riskplan.planning.validate` — does a planned trajectory hold on the simulated robot?
+"""
+
+from riskplan.planning.bo import OptimisationResult, OptimiserConfig, optimise_trajectory
+from riskplan.planning.prm import MeanValidity, Roadmap, build_roadmap, goal_from_tip, interpolate_path, tip_positions
+from riskplan.planning.risk import ConfigurationBound, compare_paths, least_risk_path, trajectory_risk
 from riskplan.planning.validate import (
     MixtureMonteCarlo,
     RobotMonteCarlo,
@@ -9,4 +23,24 @@ from riskplan.planning.validate import (
     validation_table,
 )
 
-__all__ = ["MixtureMonteCarlo", "RobotMonteCarlo", "execute_on_robot", "mixture_monte_carlo", "tube_clearance", "validation_table"]
+__all__ = [
+    "ConfigurationBound",
+    "MeanValidity",
+    "MixtureMonteCarlo",
+    "OptimisationResult",
+    "OptimiserConfig",
+    "RobotMonteCarlo",
+    "Roadmap",
+    "build_roadmap",
+    "compare_paths",
+    "execute_on_robot",
+    "goal_from_tip",
+    "interpolate_path",
+    "least_risk_path",
+    "mixture_monte_carlo",
+    "optimise_trajectory",
+    "tip_positions",
+    "trajectory_risk",
+    "tube_clearance",
+    "validation_table",
+]

@@ -1,0 +1,417 @@
+"""Probabilistic roadmap in tendon-displacement space (MDN paper section V; Kavraki et al. 1996).
+
+The configuration space is the box of the robot's tendon displacements (its limits). A
+configuration is *valid* when every component mean of the mixture predicted by the learned
+kinematic model lies in free space (not inside any obstacle of the environment, robot base
+frame) — the paper's condition, which keeps eq. 9 well defined along the plan. A straight
+motion between two configurations is valid when every configuration on it, spaced at most
+``resolution`` (default 1 mm, Euclidean norm of the displacement vector) apart, is valid.
+
+The roadmap is OMPL's ``PRM`` (``ompl.geometric``): milestones from a valid-state sampler,
+each connected to its ``k`` nearest neighbours (OMPL's default ``k = 10``) through our motion
+validator, which checks all states of a motion in one batched model call. Two choices keep
+the roadmap reproducible:
+
+* The roadmap grows until it holds ``n_milestones`` milestones (``growRoadmapPtc`` with a
+  count-based termination condition), not for a wall-clock time: the same seed gives the same
+  roadmap on any machine.
+* Milestones are drawn by our own sampler from a NumPy generator seeded with ``seed``. OMPL's
+  global ``ou.RNG.setSeed`` only takes effect before OMPL draws its first random number in a
+  process, so a second roadmap in the same process would otherwise differ. We still call it
+  (when it is still possible) for OMPL's internal generators, which do not influence the
+  roadmap (nearest-neighbour results are exact whatever the GNAT pivots).
+
+Queries (shortest path, least-risk path in :mod:`riskplan.planning.risk`) run Dijkstra on the
+roadmap graph read back from OMPL (``getPlannerData``): the start and goal are connected to
+their ``k`` nearest valid milestones, and the same roadmap answers any number of queries.
+OMPL's own ``PRM.solve`` grows the roadmap in a second thread under a timed condition while it
+searches, so its answer would depend on timing.
+
+The nominal trajectory is the path with each segment split into ``ceil(length / step)`` equal
+pieces (``step`` default 2.5 mm), so every segment contributes at most ``step`` of motion
+between consecutive configurations and the trajectory's configurations are exactly those
+of its edges (which makes the least-risk search exact, see ``risk.py``).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from riskplan._validation import as_array
+from riskplan.errors import InvalidInputError, PlanningError
+
+log = logging.getLogger(__name__)
+
+DEFAULT_RESOLUTION = 1e-3  # m, motion check spacing (Euclidean, displacement space)
+DEFAULT_STEP = 2.5e-3  # m, largest step between consecutive trajectory configurations
+DEFAULT_MILESTONES = 300
+DEFAULT_NEIGHBOURS = 10  # OMPL's PRM default (magic::DEFAULT_NEAREST_NEIGHBORS)
+DEFAULT_TIP_TOLERANCE = 5e-3  # m
+SAMPLER_ATTEMPTS = 100  # OMPL's UniformValidStateSampler default
+
+
+def _check_positive(value, name: str) -> float:
+    v = float(value)
+    if not math.isfinite(v) or v <= 0:
+        raise InvalidInputError(f"{name}: expected a finite number > 0, got {value!r}")
+    return v
+
+
+class MeanValidity:
+    """Validity of configurations: within limits and every component mean in free space.
+
+    ``model``: anything with ``predict(configs (N, m)) -> GaussianMixture`` and ``limits (m, 2)``
+    (an :class:`~riskplan.kinematics.MDNModel`); ``environment``: an
+    :class:`~riskplan.collision.Environment` in the model's (robot base) frame.
+    """
+
+    def __init__(self, model, environment):
+        self.model = model
+        self.environment = environment
+        self.limits = np.asarray(model.limits, dtype=np.float64)
+        self.n = self.limits.shape[0]
+        self.checks = 0
+
+    def within_limits(self, configs) -> np.ndarray:
+        """``(N, m) -> (N,)`` bool."""
+        c = np.asarray(configs, dtype=np.float64)
+        return np.all((c >= self.limits[:, 0]) & (c <= self.limits[:, 1]), axis=-1) & np.all(np.isfinite(c), axis=-1)
+
+    def means(self, configs) -> np.ndarray:
+        """Component means ``(N, K, 3)`` of the predicted mixtures (configs within limits)."""
+        return self.model.predict(np.asarray(configs, dtype=np.float64)).means.detach().cpu().numpy()
+
+    def __call__(self, configs) -> np.ndarray:
+        """``(N, m) -> (N,)`` bool: within limits and no component mean inside an obstacle."""
+        c = np.atleast_2d(np.asarray(configs, dtype=np.float64))
+        ok = self.within_limits(c)
+        if ok.any():
+            mu = self.means(c[ok])
+            self.checks += len(mu)
+            inside = self.environment.contains(mu.reshape(-1, 3)).reshape(mu.shape[:2])
+            ok[np.flatnonzero(ok)] = ~inside.any(-1)
+        return ok
+
+    def motions(self, starts, ends, resolution: float = DEFAULT_RESOLUTION) -> np.ndarray:
+        """Validity of straight motions ``starts (N, m) -> ends (N, m)``: ``(N,)`` bool.
+
+        Each motion is checked at ``ceil(|b - a| / resolution) + 1`` equally spaced
+        configurations including both ends, all in one batch.
+        """
+        a = np.atleast_2d(np.asarray(starts, dtype=np.float64))
+        b = np.atleast_2d(np.asarray(ends, dtype=np.float64))
+        counts = np.maximum(1, np.ceil(np.linalg.norm(b - a, axis=-1) / resolution).astype(int)) + 1
+        owner = np.repeat(np.arange(len(a)), counts)
+        t = np.concatenate([np.linspace(0.0, 1.0, k) for k in counts])
+        pts = a[owner] + t[:, None] * (b - a)[owner]
+        ok = self(pts)
+        return np.logical_and.reduceat(ok, np.concatenate([[0], np.cumsum(counts)[:-1]]))
+
+
+def interpolate_path(path, step: float = DEFAULT_STEP) -> np.ndarray:
+    """Split each segment of ``path (P, m)`` into ``ceil(length / step)`` equal pieces; ``(T, m)``.
+
+    The path's vertices are kept; consecutive configurations are at most ``step`` apart.
+    """
+    p = np.asarray(path, dtype=np.float64)
+    out = [p[:1]]
+    for a, b in zip(p[:-1], p[1:]):
+        k = max(1, math.ceil(float(np.linalg.norm(b - a)) / step - 1e-12))
+        t = np.arange(1, k + 1) / k
+        out.append(a + t[:, None] * (b - a))
+    return np.concatenate(out)
+
+
+def segment_owners(path, step: float = DEFAULT_STEP) -> np.ndarray:
+    """For :func:`interpolate_path`: the segment index of every trajectory configuration ``(T,)``
+    (``-1`` for the first)."""
+    p = np.asarray(path, dtype=np.float64)
+    own = [np.array([-1])]
+    for i, (a, b) in enumerate(zip(p[:-1], p[1:])):
+        k = max(1, math.ceil(float(np.linalg.norm(b - a)) / step - 1e-12))
+        own.append(np.full(k, i))
+    return np.concatenate(own)
+
+
+_OMPL_SEEDED: list[int] = []  # the seed given to OMPL in this process (at most one)
+
+
+def _seed_ompl(seed: int) -> bool:
+    """``ou.RNG.setSeed`` once per process, before OMPL draws its first random number.
+
+    Returns whether OMPL's generators use ``seed`` (False for a later roadmap with another seed:
+    OMPL ignores a new seed once generation started). The roadmap does not depend on it.
+    """
+    from ompl import util as ou
+
+    ou.setLogLevel(ou.LogLevel.LOG_WARN)
+    if not _OMPL_SEEDED:
+        ou.RNG.setSeed(int(seed) % (2**31 - 2) + 1)  # OMPL rejects seed 0
+        _OMPL_SEEDED.append(int(seed))
+    return _OMPL_SEEDED[0] == int(seed)
+
+
+@dataclass
+class Roadmap:
+    """A PRM roadmap: milestones ``(V, m)``, undirected edges ``(E, 2)`` with lengths ``(E,)``.
+
+    Build with :func:`build_roadmap`; query with :meth:`shortest_path` or
+    :func:`riskplan.planning.risk.least_risk_path`.
+    """
+
+    vertices: np.ndarray
+    edges: np.ndarray
+    validity: MeanValidity = field(repr=False)
+    seed: int
+    resolution: float
+    n_neighbours: int
+    build_seconds: float
+    ompl_seeded: bool = False
+    n_milestones: int = 0  # OMPL's count; milestones without edges are not in ``vertices``
+
+    @property
+    def n_vertices(self) -> int:
+        return len(self.vertices)
+
+    @property
+    def n_edges(self) -> int:
+        return len(self.edges)
+
+    @property
+    def edge_lengths(self) -> np.ndarray:
+        v = self.vertices
+        return np.linalg.norm(v[self.edges[:, 1]] - v[self.edges[:, 0]], axis=-1)
+
+    def describe(self) -> str:
+        return (f"{max(self.n_milestones, self.n_vertices)} milestones ({self.n_vertices} connected), "
+                f"{self.n_edges} edges, built in {self.build_seconds:.1f} s")
+
+    def connect(self, config) -> tuple[np.ndarray, np.ndarray]:
+        """Milestones reachable from ``config (m,)`` by a valid straight motion among its
+        ``n_neighbours`` nearest: ``(indices (k,), lengths (k,))``."""
+        d = np.linalg.norm(self.vertices - config, axis=-1)
+        near = np.argsort(d, kind="stable")[: self.n_neighbours]
+        ok = self.validity.motions(np.broadcast_to(config, (len(near), len(config))), self.vertices[near], self.resolution)
+        return near[ok], d[near[ok]]
+
+    def graph_with(self, start, goal, segment_cost=None, edge_costs=None):
+        """Sparse symmetric cost graph of the roadmap plus the start (node V) and the goal (V + 1).
+
+        ``segment_cost(a (N, m), b (N, m)) -> (N,)`` prices a straight motion (default: its
+        length); ``edge_costs (E,)`` are the roadmap edges' costs if already known. The start
+        and goal connect to their nearest valid milestones (and to each other if that motion
+        is valid).
+        """
+        from scipy.sparse import coo_matrix
+
+        cost = segment_cost or (lambda a, b: np.linalg.norm(b - a, axis=-1))
+        V = self.n_vertices
+        if edge_costs is None:
+            edge_costs = cost(self.vertices[self.edges[:, 0]], self.vertices[self.edges[:, 1]])
+        rows, cols, vals = [self.edges[:, 0]], [self.edges[:, 1]], [np.asarray(edge_costs, dtype=np.float64)]
+        for node, conf in ((V, start), (V + 1, goal)):
+            idx, _ = self.connect(conf)
+            rows.append(np.full(len(idx), node))
+            cols.append(idx)
+            vals.append(cost(np.broadcast_to(conf, (len(idx), len(conf))), self.vertices[idx]))
+        if np.linalg.norm(goal - start) > 0 and self.validity.motions(start[None], goal[None], self.resolution)[0]:
+            rows.append(np.array([V]))
+            cols.append(np.array([V + 1]))
+            vals.append(cost(start[None], goal[None]))
+        r, c, v = (np.concatenate(x) for x in (rows, cols, vals))
+        # a zero cost would read as "no edge" in a sparse graph
+        v = np.maximum(v, 1e-300)
+        g = coo_matrix((np.concatenate([v, v]), (np.concatenate([r, c]), np.concatenate([c, r]))), shape=(V + 2, V + 2))
+        return g.tocsr()
+
+    def search(self, graph, start, goal) -> np.ndarray:
+        """Dijkstra from node V to V + 1 of ``graph``; the path's configurations ``(P, m)``."""
+        from scipy.sparse.csgraph import dijkstra
+
+        V = self.n_vertices
+        dist, pred = dijkstra(graph, directed=False, indices=V, return_predecessors=True)
+        if not np.isfinite(dist[V + 1]):
+            raise PlanningError(
+                f"no path from start to goal in the roadmap ({self.describe()}); grow it with more milestones "
+                "(--milestones) or move the goal"
+            )
+        nodes = [V + 1]
+        while nodes[-1] != V:
+            nodes.append(int(pred[nodes[-1]]))
+        nodes = nodes[::-1]
+        allv = np.vstack([self.vertices, start[None], goal[None]])
+        return allv[nodes]
+
+    def shortest_path(self, start, goal) -> np.ndarray:
+        """Shortest valid path (Euclidean length in displacement space) ``(P, m)``."""
+        start, goal = self.check_query(start, goal)
+        return self.search(self.graph_with(start, goal), start, goal)
+
+    def check_query(self, start, goal) -> tuple[np.ndarray, np.ndarray]:
+        """``start``, ``goal (m,)`` as float64 arrays; :class:`InvalidInputError` if either is
+        malformed, outside the limits or invalid."""
+        m = self.vertices.shape[1]
+        out = []
+        for name, c in (("start", start), ("goal", goal)):
+            c = as_array(c, name, shape=(m,))
+            lim = self.validity.limits
+            if not self.validity.within_limits(c[None])[0]:
+                raise InvalidInputError(f"{name}: {c.tolist()} is outside the displacement limits {lim.tolist()}")
+            if not self.validity(c[None])[0]:
+                raise InvalidInputError(f"{name}: configuration {c.tolist()} is invalid (a component mean of its predicted mixture lies inside an obstacle)")
+            out.append(c)
+        return out[0], out[1]
+
+
+def build_roadmap(
+    validity: MeanValidity,
+    *,
+    n_milestones: int = DEFAULT_MILESTONES,
+    seed: int = 0,
+    n_neighbours: int = DEFAULT_NEIGHBOURS,
+    resolution: float = DEFAULT_RESOLUTION,
+    progress=None,
+    max_seconds: float | None = None,
+) -> Roadmap:
+    """Grow an OMPL PRM to ``n_milestones`` valid milestones in the displacement box.
+
+    ``progress(done, total)`` is called as milestones are added. ``max_seconds`` (optional)
+    raises :class:`PlanningError` if growing takes longer (a scene with almost no free space).
+    """
+    from ompl import base as ob
+    from ompl import geometric as og
+
+    if int(n_milestones) < 2:
+        raise InvalidInputError(f"n_milestones: expected >= 2, got {n_milestones}")
+    if int(n_neighbours) < 1:
+        raise InvalidInputError(f"n_neighbours: expected >= 1, got {n_neighbours}")
+    resolution = _check_positive(resolution, "resolution")
+    seeded = _seed_ompl(seed)
+    lim = validity.limits
+    m = validity.n
+    space = ob.RealVectorStateSpace(m)
+    bounds = ob.RealVectorBounds(m)
+    for i in range(m):
+        bounds.setLow(i, float(lim[i, 0]))
+        bounds.setHigh(i, float(lim[i, 1]))
+    space.setBounds(bounds)
+    si = ob.SpaceInformation(space)
+    si.setStateValidityChecker(lambda s: bool(validity(np.array([s[i] for i in range(m)])[None])[0]))
+    rng = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    pending: list[np.ndarray] = []
+    stats = {"drawn": 0}
+
+    class _Sampler(ob.ValidStateSampler):
+        # draws valid states in batches of 64 (one model call each) from the seeded generator
+        def sample(self, state):
+            for _ in range(SAMPLER_ATTEMPTS):
+                if not pending:
+                    cand = lim[:, 0] + rng.random((64, m)) * (lim[:, 1] - lim[:, 0])
+                    stats["drawn"] += 64
+                    pending.extend(cand[validity(cand)][::-1])
+                    if not pending:
+                        continue
+                x = pending.pop()
+                for i in range(m):
+                    state[i] = float(x[i])
+                return True
+            return False
+
+        def sampleNear(self, state, near, distance):  # pragma: no cover - PRM's growth does not use it
+            return False
+
+    class _Motion(ob.MotionValidator):
+        def checkMotion(self, s1, s2, *last):
+            a = np.array([s1[i] for i in range(m)])
+            b = np.array([s2[i] for i in range(m)])
+            return bool(validity.motions(a[None], b[None], resolution)[0])
+
+    motion = _Motion(si)
+    si.setMotionValidator(motion)
+    si.setValidStateSamplerAllocator(lambda s: _Sampler(s))
+    si.setup()
+    prm = og.PRM(si)
+    prm.setMaxNearestNeighbors(int(n_neighbours))
+    pdef = ob.ProblemDefinition(si)  # PRM's setup (nearest-neighbour structure) needs one
+    prm.setProblemDefinition(pdef)
+    prm.setup()
+    total = int(n_milestones)
+    state = {"timeout": False}
+
+    def stop() -> bool:
+        n = prm.milestoneCount()
+        if progress is not None:
+            progress(min(n, total), total)
+        if max_seconds is not None and time.perf_counter() - t0 > max_seconds:
+            state["timeout"] = True
+            return True
+        return n >= total
+
+    prm.growRoadmapPtc(ob.PlannerTerminationCondition(stop))
+    elapsed = time.perf_counter() - t0
+    if state["timeout"]:
+        raise PlanningError(
+            f"roadmap growth stopped after {elapsed:.1f} s (limit {max_seconds} s) with {prm.milestoneCount()} of "
+            f"{total} milestones ({stats['drawn']} configurations drawn); free space is too small for the model's means"
+        )
+    pd = ob.PlannerData(si)
+    prm.getPlannerData(pd)  # holds the milestones that have edges
+    nv = pd.numVertices()
+    verts = np.empty((nv, m))
+    edges = []
+    for v in range(nv):
+        s = pd.getVertex(v).getState()
+        verts[v] = [s[i] for i in range(m)]
+        edges.extend((v, w) for w in pd.getEdges(v) if w > v)
+    E = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    log.info("PRM: %d milestones (%d in OMPL), %d edges in %.2f s", nv, prm.milestoneCount(), len(E), elapsed)
+    return Roadmap(verts, E, validity, int(seed), resolution, int(n_neighbours), elapsed, seeded, prm.milestoneCount())
+
+
+def tip_positions(model, configs) -> np.ndarray:
+    """Predicted tip ``(N, 3)``: the component mean farthest from the base origin.
+
+    The mixture's components cover the robot's body; the farthest mean is the one that
+    describes its distal end (the tip), in the base frame.
+    """
+    mu = model.predict(np.atleast_2d(np.asarray(configs, dtype=np.float64))).means.detach().cpu().numpy()
+    far = np.argmax(np.linalg.norm(mu, axis=-1), axis=-1)
+    return mu[np.arange(len(mu)), far]
+
+
+def goal_from_tip(roadmap: Roadmap, model, target, *, tolerance: float = DEFAULT_TIP_TOLERANCE,
+                  n_samples: int = 4096, seed: int = 0) -> np.ndarray:
+    """A valid configuration whose predicted tip lies within ``tolerance`` of ``target (3,)`` (base frame).
+
+    Candidates: the roadmap's milestones and ``n_samples`` seeded uniform configurations; the
+    valid candidate with the closest tip wins. :class:`PlanningError` if none is within tolerance.
+    """
+    target = as_array(target, "goal_tip", shape=(3,))
+    tolerance = _check_positive(tolerance, "tolerance")
+    lim = roadmap.validity.limits
+    rng = np.random.default_rng(seed)
+    cand = np.vstack([roadmap.vertices, lim[:, 0] + rng.random((int(n_samples), lim.shape[0])) * (lim[:, 1] - lim[:, 0])])
+    cand = cand[roadmap.validity(cand)]
+    d = np.linalg.norm(tip_positions(model, cand) - target, axis=-1)
+    best = int(np.argmin(d))
+    if d[best] > tolerance:
+        raise PlanningError(
+            f"goal tip {target.tolist()} (base frame) is unreachable: the closest valid predicted tip among "
+            f"{len(cand)} configurations is {d[best] * 1e3:.1f} mm away (tolerance {tolerance * 1e3:.1f} mm)"
+        )
+    # refine locally within the tolerance ball: a few seeded perturbations around the best
+    x = cand[best]
+    for scale in (2e-3, 1e-3, 5e-4):
+        loc = np.clip(x + scale * rng.standard_normal((256, len(x))), lim[:, 0], lim[:, 1])
+        loc = loc[roadmap.validity(loc)]
+        if len(loc):
+            dl = np.linalg.norm(tip_positions(model, loc) - target, axis=-1)
+            if dl.min() < d[best]:
+                x, d[best] = loc[int(np.argmin(dl))], dl.min()
+    return x

@@ -1,0 +1,168 @@
+"""Collision risk along plans (MDN paper section V, eqs. 9-10) and the least-risk roadmap search.
+
+``ConfigurationBound`` evaluates eq. 9 for configurations (the weighted mixture bound of the
+predicted geometry distribution); eq. 10 combines a trajectory's per-configuration bounds,
+``P(tau) <= 1 - prod_t (1 - p_t)``.
+
+Beyond the paper (its stated future work: fold the risk into the planner): the least-risk
+search prices every configuration ``x`` of a plan at ``-log(1 - p(x))``. Summed over a
+trajectory these costs are ``-log prod_t (1 - p_t) = -log(1 - P_eq10)``, so the path of least
+total cost is exactly the roadmap path whose interpolated trajectory has the smallest eq.-10
+bound. A roadmap edge costs its interior configurations (the trajectory step, see
+:func:`~riskplan.planning.prm.interpolate_path`) plus half of each end milestone; the start
+and goal are on every path, so halving the milestones changes no comparison.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from riskplan.collision import mixture_bound, trajectory_probability
+from riskplan.planning.prm import DEFAULT_STEP, Roadmap, interpolate_path
+
+log = logging.getLogger(__name__)
+
+
+class ConfigurationBound:
+    """Eq. 9 at configurations: ``(N, m) -> (N,)`` upper bounds on P(collision) (weighted mixture bound).
+
+    ``model.predict`` gives the mixtures (base frame); ``environment`` is in the same frame.
+    ``evaluations`` counts configurations evaluated (the optimisers' budget unit).
+    """
+
+    def __init__(self, model, environment, *, batch: int = 64):
+        self.model = model
+        self.environment = environment
+        self.batch = int(batch)
+        self.evaluations = 0
+
+    def __call__(self, configs) -> np.ndarray:
+        c = np.atleast_2d(np.asarray(configs, dtype=np.float64))
+        out = np.empty(len(c))
+        for i in range(0, len(c), self.batch):
+            gm = self.model.predict(c[i : i + self.batch])
+            out[i : i + self.batch] = mixture_bound(gm, self.environment, validate=False)
+        self.evaluations += len(c)
+        return out
+
+
+def trajectory_risk(bound, trajectory) -> tuple[float, np.ndarray]:
+    """Eq. 10 of ``trajectory (T, m)`` and its per-configuration eq.-9 bounds ``(T,)``."""
+    p = bound(trajectory)
+    return float(trajectory_probability(p)), p
+
+
+def risk_cost(p) -> np.ndarray:
+    """``-log(1 - p)`` (additive along a trajectory; ``inf`` for p = 1)."""
+    with np.errstate(divide="ignore"):
+        return -np.log1p(-np.clip(np.asarray(p, dtype=np.float64), 0.0, 1.0))
+
+
+class RiskSegmentCost:
+    """Segment cost for :meth:`Roadmap.graph_with`: interior configurations' ``-log(1 - p)`` plus
+    half of each end's. Caches the bounds of roadmap milestones and of configurations seen."""
+
+    def __init__(self, bound, step: float = DEFAULT_STEP):
+        self.bound = bound
+        self.step = float(step)
+        self._cache: dict[bytes, float] = {}
+
+    def costs(self, configs) -> np.ndarray:
+        c = np.atleast_2d(np.asarray(configs, dtype=np.float64))
+        keys = [x.tobytes() for x in c]
+        todo = [i for i, k in enumerate(keys) if k not in self._cache]
+        if todo:
+            todo_unique = list(dict.fromkeys(keys[i] for i in todo))
+            idx = {k: i for i, k in enumerate(keys)}
+            p = self.bound(c[[idx[k] for k in todo_unique]])
+            self._cache.update(zip(todo_unique, risk_cost(p)))
+        return np.array([self._cache[k] for k in keys])
+
+    def __call__(self, a, b) -> np.ndarray:
+        a = np.atleast_2d(a)
+        b = np.atleast_2d(b)
+        interiors = [interpolate_path(np.stack([x, y]), self.step)[1:-1] for x, y in zip(a, b)]
+        counts = np.array([len(x) for x in interiors])
+        flat = np.concatenate(interiors + [np.empty((0, a.shape[1]))])
+        inner = np.add.reduceat(self.costs(flat), np.r_[0, np.cumsum(counts)[:-1]]) if len(flat) else np.zeros(len(a))
+        inner = np.where(counts > 0, inner, 0.0)  # reduceat copies the next value for empty groups
+        return inner + 0.5 * (self.costs(a) + self.costs(b))
+
+
+def least_risk_path(roadmap: Roadmap, bound, start, goal, *, step: float = DEFAULT_STEP,
+                    cost: RiskSegmentCost | None = None, progress=None) -> np.ndarray:
+    """Roadmap path ``(P, m)`` whose trajectory (interpolated at ``step``) has the least eq.-10 bound.
+
+    Dijkstra with lazily priced edges: an edge's configurations are evaluated only when the
+    search settles one of its ends, and the search stops when it settles the goal, so
+    milestones riskier than the answer are never priced. ``progress(settled, total)``
+    reports the milestones settled so far.
+    """
+    import heapq
+
+    from riskplan.errors import PlanningError
+
+    start, goal = roadmap.check_query(start, goal)
+    cost = cost or RiskSegmentCost(bound, step)
+    V = roadmap.n_vertices
+    conf = np.vstack([roadmap.vertices, start[None], goal[None]])
+    adj: list[list[int]] = [[] for _ in range(V + 2)]
+    for a, b in roadmap.edges:
+        adj[a].append(int(b))
+        adj[b].append(int(a))
+    for node, c in ((V, start), (V + 1, goal)):
+        for i in roadmap.connect(c)[0]:
+            adj[node].append(int(i))
+            adj[int(i)].append(node)
+    if np.linalg.norm(goal - start) > 0 and roadmap.validity.motions(start[None], goal[None], roadmap.resolution)[0]:
+        adj[V].append(V + 1)
+        adj[V + 1].append(V)
+    dist = np.full(V + 2, np.inf)
+    pred = np.full(V + 2, -1)
+    done = np.zeros(V + 2, dtype=bool)
+    dist[V] = 0.0
+    heap = [(0.0, V)]
+    settled = 0
+    while heap:
+        d, u = heapq.heappop(heap)
+        if done[u]:
+            continue
+        done[u] = True
+        settled += 1
+        if progress is not None:
+            progress(settled, V + 2)
+        if u == V + 1:
+            break
+        nb = [w for w in adj[u] if not done[w]]
+        if not nb:
+            continue
+        c = cost(np.broadcast_to(conf[u], (len(nb), conf.shape[1])), conf[nb])
+        for w, cw in zip(nb, c):
+            if d + cw < dist[w]:
+                dist[w] = d + cw
+                pred[w] = u
+                heapq.heappush(heap, (dist[w], w))
+    if not done[V + 1] or not np.isfinite(dist[V + 1]):
+        raise PlanningError(
+            f"no path from start to goal in the roadmap ({roadmap.describe()}); grow it with more milestones "
+            "(--milestones) or move the goal"
+        )
+    nodes = [V + 1]
+    while nodes[-1] != V:
+        nodes.append(int(pred[nodes[-1]]))
+    return conf[nodes[::-1]]
+
+
+def compare_paths(roadmap: Roadmap, bound, start, goal, *, step: float = DEFAULT_STEP, progress=None) -> dict:
+    """Shortest vs least-risk roadmap path: trajectories, per-configuration and eq.-10 bounds."""
+    out = {}
+    cost = RiskSegmentCost(bound, step)
+    for name, path in (("shortest", roadmap.shortest_path(start, goal)),
+                       ("least_risk", least_risk_path(roadmap, bound, start, goal, step=step, cost=cost, progress=progress))):
+        traj = interpolate_path(path, step)
+        p = -np.expm1(-cost.costs(traj))  # from the cache
+        out[name] = {"path": path, "trajectory": traj, "bounds": p, "bound": float(trajectory_probability(p)),
+                     "length": float(np.linalg.norm(np.diff(path, axis=0), axis=-1).sum())}
+    return out

@@ -1,0 +1,95 @@
+"""CLI smoke test of `riskplan plan chest` on a tiny problem, and its named errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from riskplan.cli import app
+from riskplan.errors import DataFormatError, InvalidInputError, PlanningError
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """An (untrained, seeded) two-tendon MDN saved as a model folder, and a box mesh in world
+    coordinates with a base pose placing the robot below it."""
+    import trimesh
+
+    from riskplan.kinematics import MDN, MDNModel, Normalisation, save_model
+
+    root = tmp_path_factory.mktemp("tiny")
+    torch.manual_seed(0)
+    net = MDN(2, 2, hidden=(8,), head_hidden=()).double()
+    norm = Normalisation(np.full(2, 0.015), np.full(2, 0.015), np.array([0.0, 0.0, 0.1]), np.array([0.02, 0.02, 0.02]))
+    model = MDNModel(net, norm, np.array([[-0.01, 0.04], [-0.01, 0.04]]), robot_name="tiny")
+    save_model(model, root / "model")
+    # obstacle in the base frame: a box beside the predicted geometry; world = base + (1, 2, 3)
+    box = trimesh.creation.box(extents=[0.04, 0.2, 0.2])
+    box.apply_translation(np.array([0.06, 0.0, 0.1]) + [1.0, 2.0, 3.0])
+    box.export(root / "box.stl")
+    opened = trimesh.Trimesh(box.vertices, box.faces[:-1], process=False)
+    opened.export(root / "open.stl")
+    return root
+
+
+def _run(args):
+    return runner.invoke(app, ["plan", "chest", *args])
+
+
+def test_plan_chest_tiny(tiny, tmp_path):
+    out = tmp_path / "out"
+    args = ["--model", str(tiny / "model"), "--env", str(tiny / "box.stl"), "--base-pose", "1,2,3,1,0,0,0",
+            "--goal", "0.03,0.03", "--milestones", "20", "--iterations", "3", "--candidates", "32", "--least-risk",
+            "--executions", "0", "--out", str(out)]
+    res = _run(args)
+    assert res.exit_code == 0, res.output
+    for f in ("nominal.json", "nominal.csv", "optimised.json", "optimised.csv", "trace.json", "trace.png", "chest.html", "plan.json"):
+        assert (out / f).stat().st_size > 0, f
+    plan = json.loads((out / "plan.json").read_text())
+    nominal = json.loads((out / "nominal.json").read_text())
+    opt = json.loads((out / "optimised.json").read_text())
+    trace = json.loads((out / "trace.json").read_text())["trace"]
+    assert len(trace) == 4 and trace[0] == pytest.approx(nominal["bound_eq10"]) and trace[-1] == pytest.approx(opt["bound_eq10"])
+    assert opt["bound_eq10"] <= nominal["bound_eq10"]
+    assert plan["paths"]["least_risk"]["bound_eq10"] <= plan["paths"]["shortest"]["bound_eq10"] + 1e-12
+    assert nominal["configurations"][0] == [0.0, 0.0] and nominal["configurations"][-1] == [0.03, 0.03]
+    csv = (out / "optimised.csv").read_text().splitlines()
+    assert csv[1].startswith("index,d1_m,d2_m,bound_eq9") and len(csv) == 2 + len(opt["configurations"])
+    # --resume after completion returns the same optimised trajectory
+    res2 = _run(args + ["--resume"])
+    assert res2.exit_code == 0, res2.output
+    assert json.loads((out / "optimised.json").read_text()) == opt
+
+
+@pytest.mark.parametrize(
+    "extra, error, match",
+    [
+        (["--goal", "0.05,0.0"], InvalidInputError, "outside the displacement limits"),
+        (["--goal", "0.01"], InvalidInputError, "expected 2 comma-separated numbers"),
+        (["--radius", "nan"], InvalidInputError, "--radius"),
+        (["--robot", "paper"], DataFormatError, "tendons"),
+        (["--goal-tip", "0,0,0.9"], PlanningError, "unreachable"),
+    ],
+)
+def test_plan_chest_errors(tiny, tmp_path, extra, error, match):
+    out = tmp_path / "out"
+    args = ["--model", str(tiny / "model"), "--env", str(tiny / "box.stl"), "--base-pose", "1,2,3,1,0,0,0",
+            "--milestones", "10", "--iterations", "1", "--executions", "0", "--out", str(out), *extra]
+    res = _run(args)
+    assert isinstance(res.exception, error), res.output
+    assert match in str(res.exception)
+    assert not out.exists() or not any(out.iterdir())  # nothing half-written
+
+
+def test_plan_chest_mesh_and_frame_errors(tiny, tmp_path):
+    base = ["--model", str(tiny / "model"), "--out", str(tmp_path / "o")]
+    res = _run(base + ["--env", str(tiny / "box.stl")])
+    assert isinstance(res.exception, InvalidInputError) and "--base-pose" in str(res.exception)
+    res = _run(base + ["--env", str(tiny / "open.stl"), "--base-pose", "1,2,3,1,0,0,0"])
+    assert isinstance(res.exception, InvalidInputError) and "closed" in str(res.exception)

@@ -1,0 +1,74 @@
+"""Eq. 9/10 along plans and the least-risk roadmap search."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from riskplan.collision import probability_of_collision, trajectory_bound
+from riskplan.planning.prm import MeanValidity, build_roadmap, interpolate_path
+from riskplan.planning.risk import (
+    ConfigurationBound,
+    RiskSegmentCost,
+    compare_paths,
+    least_risk_path,
+    risk_cost,
+    trajectory_risk,
+)
+from tests.planning.conftest import GOAL, START
+
+
+@pytest.fixture(scope="module")
+def roadmap(model, scene):
+    return build_roadmap(MeanValidity(model, scene), n_milestones=60, seed=1)
+
+
+def test_bounds_match_collision_module(model, scene, rng, tol):
+    c = rng.uniform(-0.01, 0.04, size=(7, 2))
+    b = ConfigurationBound(model, scene, batch=3)
+    np.testing.assert_allclose(b(c), probability_of_collision(model.predict(c), scene), **tol["float64_exact"])
+    assert b.evaluations == 7
+    P, _ = trajectory_risk(b, c)
+    np.testing.assert_allclose(P, trajectory_bound(model.predict(c), scene), **tol["float64_exact"])
+
+
+def test_risk_cost_additive(tol):
+    p = np.array([0.1, 0.0, 0.3, 0.05])
+    np.testing.assert_allclose(risk_cost(p).sum(), -np.log(1 - (1 - np.prod(1 - p))), **tol["float64_ref"])
+    assert risk_cost(1.0) == np.inf
+
+
+def test_least_risk_not_worse_than_shortest(roadmap, model, scene, tol):
+    out = compare_paths(roadmap, ConfigurationBound(model, scene), START, GOAL)
+    s, r = out["shortest"], out["least_risk"]
+    assert r["bound"] <= s["bound"] + 1e-12
+    assert r["length"] >= s["length"] - 1e-12
+    # the scene makes the difference real: the shortest path hugs the box
+    assert s["bound"] > 0.01 and r["bound"] < 0.5 * s["bound"]
+    # reported bounds are eq. 10 of the trajectories, recomputed from scratch
+    for v in (s, r):
+        np.testing.assert_allclose(v["bound"], trajectory_bound(model.predict(v["trajectory"]), scene), **tol["float64_ref"])
+        np.testing.assert_array_equal(v["trajectory"], interpolate_path(v["path"]))
+
+
+def test_least_risk_is_optimal_over_paths(roadmap, model, scene):
+    # the edge-cost decomposition is exact: the path's total cost equals -log(1 - eq. 10)
+    bound = ConfigurationBound(model, scene)
+    out = compare_paths(roadmap, bound, START, GOAL)
+    cost = RiskSegmentCost(bound)
+    path = out["least_risk"]["path"]
+    total = cost(path[:-1], path[1:]).sum() + 0.5 * (cost.costs(path[:1])[0] + cost.costs(path[-1:])[0])
+    np.testing.assert_allclose(total, -np.log1p(-out["least_risk"]["bound"]), rtol=1e-9, atol=1e-12)
+
+
+def test_lazy_search_equals_full_graph(roadmap, model, scene, tol):
+    # oracle: price every edge up front and run SciPy's Dijkstra on the whole graph
+    bound = ConfigurationBound(model, scene)
+    cost = RiskSegmentCost(bound)
+    full = roadmap.search(roadmap.graph_with(START, GOAL, segment_cost=cost), START, GOAL)
+    lazy_bound = ConfigurationBound(model, scene)
+    lazy = least_risk_path(roadmap, lazy_bound, START, GOAL)
+    P_full = trajectory_bound(model.predict(interpolate_path(full)), scene)
+    P_lazy = trajectory_bound(model.predict(interpolate_path(lazy)), scene)
+    np.testing.assert_allclose(P_lazy, P_full, **tol["float64_ref"])
+    assert lazy_bound.evaluations < bound.evaluations  # it priced fewer configurations

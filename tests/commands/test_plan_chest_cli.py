@@ -93,3 +93,25 @@ def test_plan_chest_mesh_and_frame_errors(tiny, tmp_path):
     assert isinstance(res.exception, InvalidInputError) and "--base-pose" in str(res.exception)
     res = _run(base + ["--env", str(tiny / "open.stl"), "--base-pose", "1,2,3,1,0,0,0"])
     assert isinstance(res.exception, InvalidInputError) and "closed" in str(res.exception)
+
+
+def test_plan_chest_reads_the_mesh_sidecar(tiny, tmp_path):
+    """A mesh with the sidecar that `riskplan env chest` writes needs no --base-pose, and gives the
+    same plan as the same mesh with the pose given explicitly (one frame convention everywhere)."""
+    import shutil
+
+    from riskplan.collision.frames import BasePose, sidecar_path
+
+    mesh = tmp_path / "box.stl"
+    shutil.copy(tiny / "box.stl", mesh)
+    pose = BasePose.from_quaternion([1.0, 2.0, 3.0], [1.0, 0.0, 0.0, 0.0])
+    sidecar_path(mesh).write_text(json.dumps({"frame": "world", **pose.to_json()}))
+    common = ["--model", str(tiny / "model"), "--goal", "0.03,0.03", "--milestones", "20", "--iterations", "1",
+              "--candidates", "16", "--executions", "0"]
+    a = _run(common + ["--env", str(mesh), "--out", str(tmp_path / "a")])
+    b = _run(common + ["--env", str(tiny / "box.stl"), "--base-pose", "1,2,3,1,0,0,0", "--out", str(tmp_path / "b")])
+    assert a.exit_code == 0 and b.exit_code == 0, a.output + b.output
+    na = json.loads((tmp_path / "a" / "nominal.json").read_text())
+    nb = json.loads((tmp_path / "b" / "nominal.json").read_text())
+    assert na["configurations"] == nb["configurations"]
+    assert na["bound_eq10"] == pytest.approx(nb["bound_eq10"], rel=1e-12, abs=0)

@@ -17,6 +17,7 @@ from riskplan.collision.environment import Environment
 from riskplan.collision.frames import (
     BasePose,
     environment_in_base_frame,
+    mesh_base_pose,
     load_environment,
     save_environment,
 )
@@ -88,6 +89,7 @@ __all__ = [
     "binomial_interval",
     "component_bounds",
     "environment_in_base_frame",
+    "mesh_base_pose",
     "free_region",
     "gaussian_bound",
     "gaussian_bound_covariance",

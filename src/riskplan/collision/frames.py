@@ -163,16 +163,16 @@ def save_environment(environment: Environment, path, *, base_pose: BasePose | No
     return path
 
 
-def load_environment(path, *, base_pose: BasePose | None = None, split: bool = False) -> Environment:
-    """Load a mesh file as a robot-base-frame :class:`Environment`.
+def mesh_base_pose(path, base_pose: BasePose | None = None) -> BasePose:
+    """The robot base pose in the frame of the mesh file ``path``.
 
     The frame comes from, in this order:
 
     1. ``base_pose`` (the mesh is in a world frame; the pose is the robot base in it). If the
        sidecar also stores a pose, the explicit one wins (logged).
-    2. the sidecar ``<path>.json``: ``"frame": "base"`` (used as is) or ``"frame": "world"``
-       with ``base_position`` / ``base_rotation`` (transformed to the base frame). Sidecars
-       written before the ``frame`` key existed but holding a base pose are world frame.
+    2. the sidecar ``<path>.json``: ``"frame": "base"`` (identity pose) or ``"frame": "world"``
+       with ``base_position`` / ``base_rotation``. Sidecars written before the ``frame`` key
+       existed but holding a base pose are world frame.
 
     Without either, :class:`InvalidInputError` says how to name the frame, so a world-frame mesh is
     never silently read as base frame.
@@ -203,8 +203,14 @@ def load_environment(path, *, base_pose: BasePose | None = None, split: bool = F
             "mesh's frame (--base-pose x,y,z,qw,qx,qy,qz or a JSON file), or --base-pose identity if the mesh "
             "is already in the robot base frame"
         )
-    env = Environment.load(path, split=split)
-    return environment_in_base_frame(env, pose)
+    return pose
+
+
+def load_environment(path, *, base_pose: BasePose | None = None, split: bool = False) -> Environment:
+    """Load a mesh file as a robot-base-frame :class:`Environment`; the frame is resolved by
+    :func:`mesh_base_pose` (explicit ``base_pose``, else the sidecar, else a named error)."""
+    pose = mesh_base_pose(path, base_pose)
+    return environment_in_base_frame(Environment.load(path, split=split), pose)
 
 
 def _read_json(path: Path) -> dict:

@@ -22,35 +22,6 @@ def _floats(text, name, n=None):
     return vals
 
 
-def parse_base_pose(text: str):
-    """``--base-pose``: a JSON file with ``base_position`` (3,) and ``base_rotation`` (3, 3) (the
-    sidecar ``riskplan env chest`` writes), or ``x,y,z,qw,qx,qy,qz`` (metres, unit quaternion).
-    Returns ``(position (3,), rotation (3, 3))`` with ``x_world = position + rotation @ x_base``."""
-    import json
-
-    import numpy as np
-
-    from riskplan.errors import InvalidInputError
-
-    p = Path(text)
-    if p.suffix == ".json" or p.is_file():
-        try:
-            meta = json.loads(p.read_text())
-            return np.asarray(meta["base_position"], dtype=float), np.asarray(meta["base_rotation"], dtype=float)
-        except (OSError, KeyError, TypeError, ValueError) as exc:
-            raise InvalidInputError(f"--base-pose {text}: expected a JSON file with base_position and base_rotation ({exc})") from exc
-    v = np.asarray(_floats(text, "--base-pose", 7))
-    q = v[3:]
-    nq = np.linalg.norm(q)
-    if not np.all(np.isfinite(v)) or not nq > 0:
-        raise InvalidInputError("--base-pose: expected finite x,y,z,qw,qx,qy,qz with a non-zero quaternion")
-    w, x, y, z = q / nq
-    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                  [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                  [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-    return v[:3], R
-
-
 def _check_finite(**values):
     import math
 
@@ -68,8 +39,8 @@ def register(plan_app: typer.Typer) -> None:
     def chest(
         out: Path = typer.Option(..., "--out", "-o", help="Output folder (trajectories, trace, chest.html, plan.json)."),
         model: str = typer.Option("paper", "--model", help="'paper' (shipped model) or a model folder from `riskplan train`."),
-        env: Path = typer.Option(None, "--env", help="Patient mesh (STL/OBJ/PLY), world frame; needs --base-pose. Default: the procedural chest."),
-        base_pose: str = typer.Option(None, "--base-pose", help="Robot base in the mesh's world frame: JSON sidecar of `riskplan env chest` or x,y,z,qw,qx,qy,qz."),
+        env: Path = typer.Option(None, "--env", help="Patient mesh (STL/OBJ/PLY); its frame comes from the sidecar FILE.json that `riskplan env chest` writes, or from --base-pose. Default: the procedural chest."),
+        base_pose: str = typer.Option(None, "--base-pose", help="Robot base in the mesh's frame: x,y,z,qw,qx,qy,qz (m, quaternion), a JSON file with base_position/base_rotation, or 'identity' (mesh already in the base frame). Overrides the sidecar."),
         chest_seed: int = typer.Option(0, "--chest-seed", help="Seed of the procedural chest's organ shapes."),
         goal_tip: str = typer.Option(None, "--goal-tip", help="Tip target X,Y,Z in the robot base frame (m). Default: the effusion-pocket target."),
         goal: str = typer.Option(None, "--goal", help="Goal tendon displacements D1,...,Dm (m)."),
@@ -91,7 +62,6 @@ def register(plan_app: typer.Typer) -> None:
         resume: bool = typer.Option(False, "--resume", help="Continue an interrupted optimisation from OUT/checkpoint.json."),
     ) -> None:
         """Plan a nominal trajectory with a PRM and lower its P(collision) bound by Bayesian optimisation."""
-        import numpy as np
         import torch
 
         from riskplan.collision import Environment
@@ -99,7 +69,7 @@ def register(plan_app: typer.Typer) -> None:
         from riskplan.errors import DataFormatError, InvalidInputError
         from riskplan.kinematics import load_model
         from riskplan.planning.bo import OptimiserConfig
-        from riskplan.planning.chest import environment_in_base_frame, plan_chest
+        from riskplan.planning.chest import plan_chest
 
         torch.set_num_threads(1)
         _check_finite(tip_tolerance=tip_tolerance, radius=radius, step=step, resolution=resolution)
@@ -123,16 +93,14 @@ def register(plan_app: typer.Typer) -> None:
             env_world, env_base, to_world = ch.environment, ch.base_environment, ch.to_world
             scene = {"scene": "procedural chest", "chest_seed": chest_seed}
         else:
-            if base_pose is None:
-                raise InvalidInputError("--env needs --base-pose (the robot base in the mesh's world frame)")
-            pos, rot = parse_base_pose(base_pose)
+            from riskplan.collision.frames import BasePose, environment_in_base_frame, mesh_base_pose
+
+            # frame from --base-pose, else the mesh's sidecar (riskplan env chest), else a named error
+            pose = mesh_base_pose(env, BasePose.parse(base_pose) if base_pose is not None else None)
             env_world = Environment.load(env)
-            env_base = environment_in_base_frame(env_world, pos, rot)
-
-            def to_world(x, pos=pos, rot=rot):
-                return pos + np.asarray(x) @ rot.T
-
-            scene = {"scene": str(env), "base_position": pos.tolist(), "base_rotation": rot.tolist()}
+            env_base = environment_in_base_frame(env_world, pose)
+            to_world = pose.to_world
+            scene = {"scene": str(env), **pose.to_json()}
         cfg = OptimiserConfig(iterations=iterations, n_candidates=candidates, radius=radius, method=method, resolution=resolution)
         cfg.validate()
         out.mkdir(parents=True, exist_ok=True)

@@ -3,7 +3,7 @@ trajectory, Bayesian optimisation of its eq.-10 bound, optional least-risk roadm
 
 Frames: the learned model predicts mixtures in the robot *base* frame, so every environment
 passed here is in the base frame (:attr:`riskplan.scenarios.chest.Chest.base_environment`, or
-a user mesh mapped with :func:`environment_in_base_frame`). Goal tips are base-frame points.
+a user mesh mapped with :func:`riskplan.collision.load_environment`). Goal tips are base-frame points.
 
 Default scene (issue part 3): start at zero displacement (the straight robot, free in the
 procedural chest) and a goal tip in the effusion pocket, :data:`DEFAULT_GOAL_TIP`: 5 cm
@@ -46,18 +46,6 @@ log = logging.getLogger(__name__)
 
 # base frame: x cranial, y anterior (z cross x), z medial (insertion direction); metres
 DEFAULT_GOAL_TIP = (-0.05, -0.06, 0.17)
-
-
-def environment_in_base_frame(environment, position, rotation):
-    """World-frame environment -> robot base frame, with ``x_world = position + rotation @ x_base``."""
-    from riskplan.collision import Environment
-
-    p = as_array(position, "base position", shape=(3,))
-    R = as_array(rotation, "base rotation", shape=(3, 3))
-    if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
-        raise InvalidInputError("base rotation: expected a proper rotation matrix (orthonormal, det +1)")
-    V = (environment.vertices - p) @ R
-    return Environment(V, environment.faces, environment.face_obstacle, environment.names, validate=False)
 
 
 @dataclass

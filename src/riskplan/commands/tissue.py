@@ -66,8 +66,8 @@ def read_controls(path, control_dim: int):
 
 
 def make_scenario(name: str, case: str):
-    """See :func:`riskplan.scenarios.simulator.make_scenario`."""
-    from riskplan.scenarios.simulator import make_scenario as _make
+    """See :func:`riskplan.scenarios.registry.make_scenario`."""
+    from riskplan.scenarios.registry import make_scenario as _make
 
     return _make(name, case)
 
@@ -84,7 +84,7 @@ def step_costs(quick: bool = False) -> dict:
     from riskplan.bench._timing import median_time
     from riskplan.scenarios.manipulation import ManipulationScenario
     from riskplan.scenarios.needle import NeedleScenario
-    from riskplan.scenarios.simulator import SimParams
+    from riskplan.scenarios.base import SimParams
 
     reps = 200 if quick else 2000
     out = {}

@@ -68,9 +68,11 @@ def greedy_needle_controls(sim, params, n_steps: int, clearance: float = 0.03, h
 
 def greedy_manipulation_controls(sim, params, n_steps: int, max_move: float = 0.025, eps: float = 0.02) -> np.ndarray:
     """Resolved-rate steering on the simulator: estimate the 2×6 Jacobian of the target
-    position w.r.t. the forces by forward differences, take the minimum-norm force change
+    position w.r.t. the forces by forward differences
+    (:func:`riskplan.control.linearize.control_jacobian`), take the minimum-norm force change
     that moves the target up to ``max_move`` towards the goal, halve it while the object
     would touch the obstacle; stop once the target is in the goal."""
+    from riskplan.control.linearize import control_jacobian
     from riskplan.errors import ConvergenceError, ElementInversionError
 
     f_max = sim.config.f_max
@@ -81,11 +83,8 @@ def greedy_manipulation_controls(sim, params, n_steps: int, max_move: float = 0.
     out = []
     for _ in range(n_steps):
         x0 = sim.target(state)
-        J = np.empty((2, sim.control_dim))
-        for k in range(sim.control_dim):
-            du = np.zeros(sim.control_dim)
-            du[k] = eps * f_max if u[k] + eps * f_max <= bounds[k, 1] else -eps * f_max
-            J[:, k] = (sim.target(sim.step(state, u + du, params)) - x0) / du[k]
+        # the target is x[:2]; the library's B_t machinery (paper IV-B) differentiates the step
+        J = control_jacobian(sim, state, u, params, np.full(sim.control_dim, eps * f_max), x_next=sim.reduced(state))[:2]
         d = goal - x0
         d *= min(1.0, max_move / max(np.linalg.norm(d), 1e-12))
         step = np.linalg.lstsq(J, d, rcond=None)[0]
@@ -174,7 +173,7 @@ def _scenario_section(report: Report, out: Path, sim, title: str, controls, desc
                       caption: str, cap_mesh: int | None = None):
     """Run ``controls`` on the nominal parameters, show the GIF, frames and the per-case table."""
     from riskplan.scenarios.plotting import save_gif
-    from riskplan.scenarios.simulator import rollout
+    from riskplan.scenarios.base import rollout
 
     sec = report.section(title)
     p0 = sim.nominal_params

@@ -35,7 +35,7 @@ import numpy as np
 from riskplan._validation import as_array, as_generator
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
 from riskplan.scenarios import _geometry as geo
-from riskplan.scenarios.simulator import (
+from riskplan.scenarios.base import (
     FEMScenario,
     SimParams,
     SimState,
@@ -182,7 +182,7 @@ class _MeshData:
 
 class ManipulationScenario(FEMScenario):
     """The internal-point manipulation scenario as a
-    :class:`~riskplan.scenarios.simulator.Simulator`.
+    :class:`~riskplan.scenarios.base.Simulator`.
 
     Dimensions: controls q = 2 × (number of manipulators) = 6; reduced state
     p = 2 + 2 n_boundary (26 by default); measurements 2 n_boundary.

@@ -42,7 +42,7 @@ import numpy as np
 from riskplan._validation import as_array
 from riskplan.errors import InvalidInputError
 from riskplan.scenarios import _geometry as geo
-from riskplan.scenarios.simulator import (
+from riskplan.scenarios.base import (
     FEMScenario,
     SimParams,
     SimState,
@@ -195,7 +195,7 @@ class _NeedleModel:
 
 
 class NeedleScenario(FEMScenario):
-    """The needle / car scenario as a :class:`~riskplan.scenarios.simulator.Simulator`.
+    """The needle / car scenario as a :class:`~riskplan.scenarios.base.Simulator`.
 
     Parameters
     ----------

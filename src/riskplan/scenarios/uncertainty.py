@@ -35,7 +35,7 @@ import numpy as np
 
 from riskplan._validation import as_array, as_generator
 from riskplan.errors import InvalidInputError
-from riskplan.scenarios.simulator import SimParams
+from riskplan.scenarios.base import SimParams
 
 __all__ = [
     "ParamDistribution",
@@ -156,7 +156,7 @@ class ActuationNoise(ParamDistribution):
 
     A draw fixes the covariance and a fresh ``actuation_seed``; the noise sequence
     ``w_0, w_1, ...`` of that draw is then a pure function of the step index
-    (:func:`riskplan.scenarios.simulator.actuation_noise`).
+    (:func:`riskplan.scenarios.base.actuation_noise`).
     """
 
     name: str = "actuation"

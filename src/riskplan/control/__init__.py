@@ -1,0 +1,14 @@
+"""Control under uncertainty for the deformable-planning method (Patil, van den Berg &
+Alterovitz, RSS 2011, section IV-B..D): the nominal plan, numerical linearisation,
+finite-horizon LQR, Kalman filter, closed-loop LQG execution and LQG-MP.
+
+Depends only on the :class:`~riskplan.scenarios.base.Simulator` protocol, NumPy/SciPy and
+:mod:`riskplan.collision`.
+"""
+
+from riskplan.control.kalman import kalman_gains
+from riskplan.control.linearize import Linearization, linearize
+from riskplan.control.lqr import lqr_gains
+from riskplan.control.plan import NominalPlan
+
+__all__ = ["Linearization", "NominalPlan", "kalman_gains", "linearize", "lqr_gains"]

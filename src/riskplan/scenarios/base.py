@@ -1,0 +1,395 @@
+"""The simulator seam of the deformable-planning method (Patil, van den Berg & Alterovitz,
+RSS 2011, section III).
+
+A scenario is a deterministic simulator ``g`` (paper eq. 1)
+
+    y_{t+1} = g(y_t, u_t, s)
+
+over full system states ``y`` (robot configuration, FEM displacement, applied loads, step
+index), a map ``reduced(y) -> x`` to the low-dimensional state X the controller works with
+(eq. 2 is ``x_{t+1} = f(x_t, u_t, s)`` built on ``g``), and a linear observation model
+(eq. 3)
+
+    z_t = h(x_t) + n_t = H x_t + n_t,      n_t ~ N(0, N).
+
+Simulation parameters ``s`` (material, mesh, interaction force, actuation noise) are a
+:class:`SimParams` value drawn from a distribution S (:mod:`riskplan.scenarios.uncertainty`).
+
+Design points the planner and the linearisation rely on:
+
+* States are frozen dataclasses whose arrays are read-only, so an RRT node can keep one
+  and restart from it any number of times; ``step`` never mutates its input.
+* ``step`` is a pure function of ``(state, control, params)``: actuation noise, when the
+  parameters carry some, is drawn from a generator seeded by ``(params.actuation_seed,
+  state.t)``, so the same triple always gives the bit-identical next state.
+* FEM models (mesh, factorisation, interpolation weights) are cached per parameter set
+  inside the scenario object, so thousands of steps from many stored states stay cheap.
+
+This module imports no scenario; the scenarios import it. The name → scenario registry lives
+in :mod:`riskplan.scenarios.registry`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import OrderedDict
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from riskplan._validation import as_array, as_generator, check_range
+from riskplan.errors import InvalidInputError
+
+__all__ = [
+    "SimParams",
+    "SimState",
+    "Simulator",
+    "FEMScenario",
+    "frozen_array",
+    "rollout",
+    "actuation_noise",
+    "check_control",
+    "apply_actuation_noise",
+    "gaussian_noise",
+]
+
+
+def frozen_array(value, dtype=np.float64) -> np.ndarray:
+    """A C-contiguous read-only copy of ``value`` (states and parameters hold these)."""
+    arr = np.array(value, dtype=dtype, copy=True, order="C")
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True)
+class SimParams:
+    """Simulation parameters ``s`` of paper section III (one draw from a distribution S).
+
+    Attributes
+    ----------
+    youngs_modulus:
+        Young's modulus E of the tissue (> 0), in the paper's units (nominal 50).
+    poissons_ratio:
+        Poisson's ratio ν in (-1, 0.5) (nominal 0.4).
+    n_elements:
+        Requested number of triangles of the FEM mesh, in [8, 5000] (planning mesh: 175).
+    force_scale:
+        Interaction force scale (>= 0). Needle: the magnitude ``f_int`` of the force the
+        robot exerts in its direction of motion (nominal 1). Manipulation: a gain on the
+        commanded manipulator forces (nominal 1).
+    actuation_cov:
+        ``None`` (no actuation noise) or an ``(m, m)`` covariance, stored as a tuple of
+        tuples so the value stays hashable; the control actually applied at step ``t`` is
+        ``u + w_t``, ``w_t ~ N(0, actuation_cov)``, clipped to the control bounds.
+    actuation_seed:
+        Seed of the actuation noise sequence; ``w_t`` is drawn from
+        ``default_rng([actuation_seed, t])`` so it depends on the step index only.
+    """
+
+    youngs_modulus: float = 50.0
+    poissons_ratio: float = 0.4
+    n_elements: int = 175
+    force_scale: float = 1.0
+    actuation_cov: tuple[tuple[float, ...], ...] | None = None
+    actuation_seed: int = 0
+
+    def __post_init__(self):
+        e = float(self.youngs_modulus)
+        nu = float(self.poissons_ratio)
+        f = float(self.force_scale)
+        for name, v in (("youngs_modulus", e), ("poissons_ratio", nu), ("force_scale", f)):
+            if not math.isfinite(v):
+                raise InvalidInputError(f"{name}: must be finite, got {v!r}")
+        if e <= 0.0:
+            raise InvalidInputError(f"youngs_modulus: must be > 0, got {e:.6g}")
+        if not (-1.0 < nu < 0.5):
+            raise InvalidInputError(f"poissons_ratio: must lie in (-1, 0.5), got {nu:.6g}")
+        if f < 0.0:
+            raise InvalidInputError(f"force_scale: must be >= 0, got {f:.6g}")
+        try:
+            n = int(self.n_elements)
+        except (TypeError, ValueError) as exc:
+            raise InvalidInputError(f"n_elements: expected an integer, got {self.n_elements!r}") from exc
+        if n != self.n_elements or not (8 <= n <= 5000):
+            raise InvalidInputError(f"n_elements: expected an integer in [8, 5000], got {self.n_elements!r}")
+        object.__setattr__(self, "youngs_modulus", e)
+        object.__setattr__(self, "poissons_ratio", nu)
+        object.__setattr__(self, "force_scale", f)
+        object.__setattr__(self, "n_elements", n)
+        object.__setattr__(self, "actuation_seed", int(self.actuation_seed))
+        if self.actuation_cov is not None:
+            cov = as_array(self.actuation_cov, "actuation_cov", min_ndim=2)
+            if cov.ndim != 2 or cov.shape[0] != cov.shape[1]:
+                raise InvalidInputError(f"actuation_cov: expected a square (m, m) matrix, got shape {cov.shape}")
+            if not np.allclose(cov, cov.T, rtol=1e-12, atol=1e-15):
+                raise InvalidInputError("actuation_cov: must be symmetric")
+            if np.linalg.eigvalsh(cov).min() < -1e-14 * max(1.0, float(np.abs(cov).max())):
+                raise InvalidInputError("actuation_cov: must be positive semi-definite")
+            object.__setattr__(self, "actuation_cov", tuple(tuple(float(v) for v in row) for row in cov))
+
+    def replace(self, **changes) -> SimParams:
+        """A copy with some fields changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    @cached_property
+    def actuation_factor(self) -> np.ndarray | None:
+        """``(m, m)`` factor ``L`` with ``L Lᵀ = actuation_cov`` (eigen-based, so PSD is fine)."""
+        if self.actuation_cov is None:
+            return None
+        cov = np.asarray(self.actuation_cov)
+        w, v = np.linalg.eigh(cov)
+        out = v * np.sqrt(np.clip(w, 0.0, None))
+        out.setflags(write=False)
+        return out
+
+    @property
+    def material_key(self) -> tuple[float, float, int]:
+        """What identifies a FEM model: ``(E, ν, n_elements)``."""
+        return (self.youngs_modulus, self.poissons_ratio, self.n_elements)
+
+
+def actuation_noise(params: SimParams, t: int, m: int) -> np.ndarray | None:
+    """The actuation noise ``w_t (m,)`` of step ``t`` under ``params`` (``None`` if none).
+
+    Drawn from ``default_rng([params.actuation_seed, t])``: a pure function of the
+    parameters and the step index, which keeps ``step`` deterministic (paper eq. 1).
+    """
+    factor = params.actuation_factor
+    if factor is None:
+        return None
+    if factor.shape[0] != m:
+        raise InvalidInputError(f"params.actuation_cov: expected a ({m}, {m}) covariance, got {factor.shape}")
+    z = np.random.default_rng([params.actuation_seed, int(t)]).standard_normal(m)
+    return factor @ z
+
+
+@dataclass(frozen=True, eq=False)
+class SimState:
+    """Full system state ``y_t`` (paper section III): everything needed to restart.
+
+    Attributes
+    ----------
+    t:
+        Step index (0 for the initial state).
+    displacement:
+        ``(n_nodes, 2)`` read-only FEM nodal displacement (warm start of the next solve).
+    n_elements:
+        The requested element count of the mesh ``displacement`` lives on; a state can
+        only be continued with parameters whose ``n_elements`` matches.
+    """
+
+    t: int
+    displacement: np.ndarray
+    n_elements: int
+
+    def __post_init__(self):
+        object.__setattr__(self, "t", int(self.t))
+        object.__setattr__(self, "n_elements", int(self.n_elements))
+        object.__setattr__(self, "displacement", frozen_array(self.displacement))
+
+    def __setstate__(self, state: dict) -> None:
+        # unpickled arrays come back writeable: make them read-only again
+        for k, v in state.items():
+            if isinstance(v, np.ndarray):
+                v.setflags(write=False)
+            object.__setattr__(self, k, v)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """All array fields by name (for comparisons and storage)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if isinstance(getattr(self, f.name), np.ndarray)}
+
+    def identical(self, other: SimState) -> bool:
+        """Bit-for-bit equality of every field (the snapshot/restore contract)."""
+        if type(self) is not type(other):
+            return False
+        for f in dataclasses.fields(self):
+            a, b = getattr(self, f.name), getattr(other, f.name)
+            if isinstance(a, np.ndarray):
+                if a.shape != b.shape or a.dtype != b.dtype or a.tobytes() != b.tobytes():
+                    return False
+            elif a != b:
+                return False
+        return True
+
+
+
+class FEMScenario:
+    """Machinery shared by the FEM-backed scenarios: the parameter distribution S, per-mesh
+    data (mesh, loads, interpolators) and a small LRU cache of FEM models.
+
+    Subclasses set ``name`` and ``state_type`` and implement ``_make_mesh_data(n_elements)``
+    and ``_make_model(params)``. Caches hold factorisations, which are not picklable and are
+    cheap to rebuild, so a scenario sent to a worker process travels as its configuration only.
+    """
+
+    name: str = ""
+    state_type: type = SimState
+
+    def __init__(self, config, distribution=None, cache_size: int = 16):
+        self.config = config
+        self.distribution = distribution
+        self._models: OrderedDict = OrderedDict()
+        self._meshes: dict = {}
+        self._cache_size = int(cache_size)
+
+    def __getstate__(self):
+        state = self.__dict__.copy()
+        state["_models"] = OrderedDict()
+        state["_meshes"] = {}
+        return state
+
+    @property
+    def nominal_params(self) -> SimParams:
+        """The planning parameters of ``distribution`` (E = 50, nu = 0.4, 175 elements, f_int = 1,
+        no actuation noise when there is none)."""
+        if self.distribution is not None:
+            return self.distribution.planning_params
+        return SimParams()
+
+    def sample_params(self, seed=None) -> SimParams:
+        """One draw from ``distribution`` (the nominal parameters if there is none)."""
+        if self.distribution is None:
+            return self.nominal_params
+        return self.distribution.sample(seed)
+
+    def mesh_data(self, n_elements: int):
+        """Mesh, loads and interpolators for an element count (cached)."""
+        d = self._meshes.get(n_elements)
+        if d is None:
+            d = self._meshes[n_elements] = self._make_mesh_data(n_elements)
+        return d
+
+    def model(self, params: SimParams | None = None):
+        """The cached FEM model for ``params`` (built on first use, least recently used dropped)."""
+        params = params or self.nominal_params
+        key = params.material_key
+        m = self._models.get(key)
+        if m is None:
+            m = self._models[key] = self._make_model(params)
+            if len(self._models) > self._cache_size:
+                self._models.popitem(last=False)
+        else:
+            self._models.move_to_end(key)
+        return m
+
+    def _make_mesh_data(self, n_elements: int):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _make_model(self, params: SimParams):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _check_state(self, state, params: SimParams) -> None:
+        if not isinstance(state, self.state_type):
+            raise InvalidInputError(f"state: expected a {self.state_type.__name__}, got {type(state).__name__}")
+        if state.n_elements != params.n_elements:
+            raise InvalidInputError(
+                f"state: lives on a {state.n_elements}-element mesh but params.n_elements = {params.n_elements}"
+            )
+
+    def _data(self, state):
+        if not isinstance(state, self.state_type):
+            raise InvalidInputError(f"state: expected a {self.state_type.__name__}, got {type(state).__name__}")
+        return self.mesh_data(state.n_elements)
+
+    def _points(self, state) -> np.ndarray:
+        return self._data(state).interp.positions(state.displacement)
+
+    def deformed_nodes(self, state) -> np.ndarray:
+        """Current node positions ``(n_nodes, 2)``."""
+        return self._data(state).mesh.nodes + state.displacement
+
+
+@runtime_checkable
+class Simulator(Protocol):
+    """What a planner, a linearisation and a Monte Carlo harness need from a scenario.
+
+    Dimensions: ``control_dim`` = q (controls u), ``state_dim`` = p (reduced state x),
+    ``obs_dim`` (measurements z).
+    """
+
+    control_dim: int
+    state_dim: int
+    obs_dim: int
+
+    @property
+    def control_bounds(self) -> np.ndarray:
+        """``(q, 2)`` array of ``[low, high]`` per control component."""
+        ...
+
+    @property
+    def nominal_params(self) -> SimParams:
+        """The parameters plans are made with (expected deformation, no noise)."""
+        ...
+
+    def initial_state(self, params: SimParams | None = None) -> SimState:
+        """The start state ``y_0`` (undeformed tissue, robot at its start)."""
+        ...
+
+    def step(self, state: SimState, control, params: SimParams | None = None) -> SimState:
+        """``y_{t+1} = g(y_t, u_t, s)`` (paper eq. 1); deterministic, never mutates ``state``."""
+        ...
+
+    def reduced(self, state: SimState) -> np.ndarray:
+        """The reduced state ``x (p,)`` of ``state`` (paper section III)."""
+        ...
+
+    def observe(self, x, noise=None, rng=None) -> np.ndarray:
+        """``z = h(x) + n`` (paper eq. 3)."""
+        ...
+
+    def sample_params(self, seed=None) -> SimParams:
+        """One draw ``s ~ S`` from the scenario's parameter distribution."""
+        ...
+
+
+def rollout(sim: Simulator, state: SimState, controls, params: SimParams | None = None) -> list[SimState]:
+    """Apply ``controls (T, q)`` from ``state``; returns the ``T + 1`` states ``[y_0, ..., y_T]``."""
+    u = as_array(controls, "controls", shape=(None, sim.control_dim))
+    states = [state]
+    for k in range(u.shape[0]):
+        states.append(sim.step(states[-1], u[k], params))
+    return states
+
+
+# --- helpers shared by the scenarios -------------------------------------------------------
+
+
+def check_control(control, bounds: np.ndarray, name: str = "control") -> np.ndarray:
+    """Validate a control ``(q,)`` against ``bounds (q, 2)`` (finite, inside the box)."""
+    try:
+        u = np.asarray(control, dtype=np.float64)
+    except (TypeError, ValueError):
+        u = None
+    # fast path (hot loop of planners): one shape test and one vectorised comparison,
+    # which is False for NaN, so every failure takes the slow path with a full message
+    if u is not None and u.shape == (bounds.shape[0],) and ((bounds[:, 0] <= u) & (u <= bounds[:, 1])).all():
+        return u.copy() if u is control else u
+    u = as_array(control, name, shape=(bounds.shape[0],))
+    check_range(u, name, bounds[:, 0], bounds[:, 1])
+    return u  # pragma: no cover - check_range raised
+
+
+def apply_actuation_noise(u: np.ndarray, params: SimParams, t: int, bounds: np.ndarray) -> np.ndarray:
+    """``clip(u + w_t, bounds)``: the control an actuator with noise actually applies.
+
+    Clipping models saturation (e.g. a car without reverse cannot drive at negative
+    speed, however noisy its actuation).
+    """
+    w = actuation_noise(params, t, u.shape[0])
+    if w is None:
+        return u
+    return np.clip(u + w, bounds[:, 0], bounds[:, 1])
+
+
+def gaussian_noise(cov: np.ndarray, noise, rng, dim: int, name: str = "noise") -> np.ndarray:
+    """The measurement noise ``n (dim,)``: given explicitly, drawn with ``rng``, or zero."""
+    if noise is not None:
+        return as_array(noise, name, shape=(dim,))
+    if rng is None:
+        return np.zeros(dim)
+    gen = as_generator(rng)
+    return gen.multivariate_normal(np.zeros(dim), cov, method="cholesky")
+

@@ -14,6 +14,7 @@ import pytest
 from riskplan.errors import BackendUnavailableError, DataFormatError, InvalidInputError
 from riskplan.experiments.fig6 import ScenarioScale, claims, run_scenario
 from riskplan.experiments.store import ResultStore
+from tests.test_parallel_ray_cluster import ray_head  # noqa: F401  (fixture: a Ray head on 127.0.0.1)
 
 #: One candidate per set, two executions per method, one case: every stage runs once.
 TINY = ScenarioScale(n_candidates=1, n_executions=4, batch_size=2, lin_samples=2, goal_samples=50, plans_per_tree=1)
@@ -78,16 +79,16 @@ def test_interrupted_run_resumes_to_identical_results(reference, tmp_path):
 
 
 def test_local_pool_gives_bit_identical_results(reference, tmp_path):
-    """Selection (linearisation, LQG, LQG-MP) and executions on a process pool equal the
-    serial run bit for bit. The RRT plans are reused from the serial store (the RRT's own
-    tests cover its backend independence), which keeps this test to two pool starts."""
+    """Executions (closed loop with the stored controllers, open loop) on a process pool equal the
+    serial run bit for bit. Plans and controllers are reused from the serial store (the RRT and
+    linearisation tests cover their own backend independence): one pool start."""
     import shutil
 
     src, ref = reference
     root = tmp_path / "local"
     shutil.copytree(src, root)
     for rec in (root / "records").glob("*.json"):
-        if ".select." in rec.name or ".exec." in rec.name:
+        if ".exec." in rec.name:
             rec.unlink()
     local = _run(root, backend="local", workers=2)
     assert json.dumps(local, sort_keys=True) == json.dumps(ref, sort_keys=True)
@@ -200,3 +201,25 @@ def test_report_renders_in_browser(reference, tmp_path):
         assert page.ok, page
     assert pages[0].n_images >= 2  # Fig. 6 and the single executions (Fig. 5 for material-high)
     assert len(pages[1].plots_rendered) == 1
+
+
+@pytest.mark.ray
+def test_ray_cluster_gives_bit_identical_results(reference, ray_head, tmp_path):
+    """The execution batches on a Ray head started on the loopback address (the fixture of
+    tests/test_parallel_ray_cluster.py) equal the serial run bit for bit."""
+    import shutil
+
+    import ray
+
+    src, ref = reference
+    root = tmp_path / "ray"
+    shutil.copytree(src, root)
+    for rec in (root / "records").glob("*.json"):
+        if ".exec." in rec.name:
+            rec.unlink()
+    try:
+        got = run_scenario("needle", TINY, ResultStore(root, CONFIG), seed=3, backend="ray", ray_address=ray_head,
+                           cases=CASES)
+    finally:
+        ray.shutdown()
+    assert json.dumps(got, sort_keys=True) == json.dumps(ref, sort_keys=True)

@@ -28,7 +28,7 @@ app = typer.Typer(
 AREAS = ("robot", "dataset", "kinematics", "collision", "tissue", "reproduce")
 # Benchmarks: ``riskplan.bench.<area>.run(quick: bool) -> dict`` (``-`` in an area name is ``_``
 # in the module name: ``planning-tissue`` -> ``riskplan.bench.planning_tissue``).
-BENCH_AREAS = ("robot", "kinematics", "collision", "tissue", "reproduce")
+BENCH_AREAS = ("robot", "kinematics", "collision", "tissue", "control", "reproduce")
 
 
 def _setup_threads() -> None:

@@ -24,11 +24,10 @@ app = typer.Typer(
 )
 
 # Areas in pipeline order. Each module defines ``register(app: typer.Typer) -> None``.
-# (``plan``, in commands/plan.py, joins this list once a planner registers a command.)
-AREAS = ("robot", "dataset", "kinematics", "collision", "tissue")
+AREAS = ("robot", "dataset", "kinematics", "collision", "tissue", "plan")
 # Benchmarks: ``riskplan.bench.<area>.run(quick: bool) -> dict`` (``-`` in an area name is ``_``
 # in the module name: ``planning-tissue`` -> ``riskplan.bench.planning_tissue``).
-BENCH_AREAS = ("robot", "kinematics", "collision", "tissue")
+BENCH_AREAS = ("robot", "kinematics", "collision", "tissue", "planning-tissue")
 
 
 def _setup_threads() -> None:

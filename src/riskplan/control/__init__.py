@@ -8,7 +8,30 @@ Depends only on the :class:`~riskplan.scenarios.base.Simulator` protocol, NumPy/
 
 from riskplan.control.kalman import kalman_gains
 from riskplan.control.linearize import Linearization, linearize
+from riskplan.control.lqg import (
+    Execution,
+    LQGController,
+    SuccessEstimate,
+    execute,
+    lqg_controller,
+    monte_carlo_success,
+)
+from riskplan.control.lqgmp import LQGMPResult, lqgmp
 from riskplan.control.lqr import lqr_gains
 from riskplan.control.plan import NominalPlan
 
-__all__ = ["Linearization", "NominalPlan", "kalman_gains", "linearize", "lqr_gains"]
+__all__ = [
+    "Execution",
+    "LQGController",
+    "LQGMPResult",
+    "Linearization",
+    "NominalPlan",
+    "SuccessEstimate",
+    "execute",
+    "kalman_gains",
+    "linearize",
+    "lqg_controller",
+    "lqgmp",
+    "lqr_gains",
+    "monte_carlo_success",
+]

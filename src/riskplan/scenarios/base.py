@@ -308,6 +308,13 @@ class Simulator(Protocol):
 
     Dimensions: ``control_dim`` = q (controls u), ``state_dim`` = p (reduced state x),
     ``obs_dim`` (measurements z).
+
+    Optional members the control stage uses when present (:mod:`riskplan.control`):
+    ``observation_matrix (m, p)`` and ``sensing_cov (m, m)`` (the linear observation model),
+    ``collision_point_indices`` (``k`` pairs of indices of x that are 2-D points checked
+    against obstacles; default ``((0, 1),)``), ``goal_point_indices`` (the pair checked
+    against the goal; default ``(0, 1)``), ``obstacles(state)`` / ``goal(state)`` (deformed
+    polygons), ``in_collision(state)`` / ``in_goal(state)``.
     """
 
     control_dim: int

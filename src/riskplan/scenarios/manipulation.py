@@ -208,6 +208,10 @@ class ManipulationScenario(FEMScenario):
         cov = cfg.sensing_std**2 * np.eye(self.obs_dim)
         cov.setflags(write=False)
         self.sensing_cov = cov
+        # where the 2-D points of x are (LQG-MP, riskplan.control.lqgmp): collision is
+        # judged on the sensed boundary points, the goal on the target
+        self.collision_point_indices = tuple((2 + 2 * i, 3 + 2 * i) for i in range(cfg.n_boundary))
+        self.goal_point_indices = (0, 1)
 
     # ---- protocol ------------------------------------------------------------------
     @property

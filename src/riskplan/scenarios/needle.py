@@ -211,6 +211,9 @@ class NeedleScenario(FEMScenario):
     control_dim = 2
     state_dim = 3
     obs_dim = 2
+    #: where the 2-D points of x are (LQG-MP, :mod:`riskplan.control.lqgmp`): the position
+    collision_point_indices = ((0, 1),)
+    goal_point_indices = (0, 1)
     name = "needle"
     state_type = NeedleState
 

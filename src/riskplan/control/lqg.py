@@ -1,0 +1,237 @@
+"""LQG execution of a plan on the true simulator (deformable-planning paper, Patil, van den
+Berg & Alterovitz, RSS 2011, section IV-C) and its Monte Carlo success rate (the check the
+paper does not report: how good is LQG-MP's estimate?).
+
+Controller (:func:`lqg_controller`): LQR gains ``L_t`` (:func:`~riskplan.control.lqr_gains`)
+and Kalman gains ``K_t`` (:func:`~riskplan.control.kalman_gains`) of a
+:class:`~riskplan.control.Linearization`. Execution (:func:`execute`), ``t = 0 .. T-1``,
+starting from the simulator's start state under the drawn parameters ``s`` and ``x̂_0 = 0``:
+
+    u_t       = clip(u*_t + L_t x̂_t, bounds)                  (open loop: u_t = u*_t)
+    y_{t+1}   = g(y_t, u_t, s)                                  (actuation noise inside s)
+    z_{t+1}   = h(x_{t+1}) + n_t,   n_t ~ N(0, N)               (sim.observe with a generator)
+    x̂⁻        = A_t x̂_t + B_t (u_t − u*_t)
+    x̂_{t+1}   = x̂⁻ + K_t (z_{t+1} − h(x*_{t+1}) − H_t x̂⁻)
+
+The run fails at the first state in collision (``sim.in_collision``) or when the simulator
+raises (a solve that does not converge counts as a failure, recorded); it succeeds when
+no state ``y_1 .. y_T`` collides and ``y_T`` is in the (deformed) goal (``sim.in_goal``).
+Collisions are checked at the states, as the scenarios define them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+
+from riskplan._validation import as_array
+from riskplan.control.kalman import kalman_gains
+from riskplan.control.linearize import Linearization
+from riskplan.control.lqr import lqr_gains
+from riskplan.control.plan import NominalPlan
+from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError, SimulationError
+
+__all__ = ["LQGController", "Execution", "SuccessEstimate", "lqg_controller", "execute", "monte_carlo_success"]
+
+
+@dataclass(frozen=True, eq=False)
+class LQGController:
+    """Gains of the LQG controller of one plan.
+
+    ``L (T, q, p)`` feedback (``u_t = u*_t + L_t x̂_t``), ``K (T, p, m)`` Kalman gains,
+    ``P (T, p, p)`` posterior estimate covariances (``P[t]`` of ``x̂_{t+1}``), ``P0 (p, p)``,
+    and the :class:`Linearization` they were computed from.
+    """
+
+    L: np.ndarray
+    K: np.ndarray
+    P: np.ndarray
+    P0: np.ndarray
+    lin: Linearization
+
+    @property
+    def n_steps(self) -> int:
+        return int(self.L.shape[0])
+
+
+def lqg_controller(lin: Linearization, Q=None, R=None, Q_final=None, P0=None) -> LQGController:
+    """LQR + Kalman gains for ``lin`` (``A (T, p, p)``, ``B (T, p, q)``, ...).
+
+    Defaults: ``Q = I_p``, ``R = I_q``, ``Q_final = Q`` (the identity costs of van den Berg,
+    Abbeel & Goldberg, IJRR 2011, section VII), ``P0 = 0`` (the start state is known).
+    """
+    if not isinstance(lin, Linearization):
+        raise InvalidInputError(f"lin: expected a Linearization, got {type(lin).__name__}")
+    T, p, q = lin.B.shape
+    Q = np.eye(p) if Q is None else Q
+    R = np.eye(q) if R is None else R
+    Q_final = Q if Q_final is None else Q_final
+    P0 = np.zeros((p, p)) if P0 is None else as_array(P0, "P0", shape=(p, p))
+    L = lqr_gains(lin.A, lin.B, Q, R, Q_final)
+    K, P = kalman_gains(lin.A, lin.H, lin.M, lin.N, P0)
+    return LQGController(L=L, K=K, P=P, P0=P0, lin=lin)
+
+
+@dataclass(frozen=True, eq=False)
+class Execution:
+    """One execution. ``states``: simulator states ``y_0 ..`` up to the last one reached;
+    ``x (k, p)`` their reduced states, ``estimates (k, p)`` the filter's ``x*_t + x̂_t``,
+    ``controls (k − 1, q)`` applied (before actuation noise); ``collided``, ``reached_goal``,
+    ``success``; ``failed_step`` the step that collided or whose solve failed (``None``
+    otherwise) and ``error`` the solver's message if one failed."""
+
+    states: tuple
+    x: np.ndarray
+    estimates: np.ndarray
+    controls: np.ndarray
+    collided: bool
+    reached_goal: bool
+    failed_step: int | None = None
+    error: str | None = None
+
+    @property
+    def success(self) -> bool:
+        return (not self.collided) and self.reached_goal and self.error is None
+
+
+def _observe_nominal(sim, x: np.ndarray) -> np.ndarray:
+    return np.asarray(sim.observe(x, noise=np.zeros(sim.obs_dim)), dtype=np.float64)
+
+
+def execute(sim, plan: NominalPlan, controller: LQGController | None, params, *, seed=None,
+            keep_states: bool = True) -> Execution:
+    """Run ``plan`` on ``sim`` under the true parameters ``params`` (module docstring).
+
+    ``controller=None`` executes open loop (``u_t = u*_t``, no filter). ``seed`` seeds the
+    sensing noise. Raises :class:`~riskplan.errors.SimulationError` naming the step if the
+    simulator returns a non-finite state.
+    """
+    gen = np.random.default_rng(seed)
+    T = plan.n_steps
+    bounds = np.asarray(sim.control_bounds, dtype=np.float64)
+    lo, hi = bounds[:, 0], bounds[:, 1]
+    closed = controller is not None
+    if closed and controller.n_steps != T:
+        raise InvalidInputError(f"controller: has {controller.n_steps} steps, plan has {T}")
+    p = plan.reduced.shape[1]
+    y = sim.initial_state(params)
+    states = [y]
+    xs = [np.asarray(sim.reduced(y), dtype=np.float64)]
+    est = [plan.reduced[0].copy()]
+    us = []
+    xhat = np.zeros(p)
+    if closed:
+        lin = controller.lin
+        L, K, A, B, H = controller.L, controller.K, lin.A, lin.B, lin.H
+        z_nominal = [_observe_nominal(sim, plan.reduced[t + 1]) for t in range(T)]
+    collided = False
+    failed = None
+    error = None
+    for t in range(T):
+        if closed:
+            u = np.minimum(np.maximum(plan.controls[t] + L[t] @ xhat, lo), hi)
+        else:
+            u = plan.controls[t]
+        try:
+            y = sim.step(y, u, params)
+        except (ConvergenceError, ElementInversionError) as exc:
+            failed, error = t, str(exc)
+            break
+        x = np.asarray(sim.reduced(y), dtype=np.float64)
+        if not np.all(np.isfinite(x)):
+            raise SimulationError(f"execute: non-finite reduced state after step {t}")
+        us.append(u)
+        if keep_states:
+            states.append(y)
+        xs.append(x)
+        if closed:
+            z = np.asarray(sim.observe(x, rng=gen), dtype=np.float64)
+            zbar = z - z_nominal[t]
+            xp = A[t] @ xhat + B[t] @ (u - plan.controls[t])
+            xhat = xp + K[t] @ (zbar - H[t] @ xp)
+        est.append(plan.reduced[t + 1] + xhat)
+        if sim.in_collision(y):
+            collided, failed = True, t + 1
+            break
+    reached = (not collided) and error is None and len(xs) == T + 1 and bool(sim.in_goal(y))
+    if not keep_states:
+        states = [states[0], y]
+    return Execution(
+        states=tuple(states),
+        x=np.stack(xs),
+        estimates=np.stack(est),
+        controls=np.array(us).reshape(len(us), sim.control_dim),
+        collided=collided,
+        reached_goal=reached,
+        failed_step=failed,
+        error=error,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class SuccessEstimate:
+    """Monte Carlo success rate: ``successes`` of ``n`` runs, ``probability``, the 95 %
+    Wilson interval ``[low, high]``, and per-run flags ``success``, ``collided``,
+    ``reached_goal``, ``solver_failed`` (``(n,)`` bool)."""
+
+    successes: int
+    n: int
+    probability: float
+    low: float
+    high: float
+    success: np.ndarray
+    collided: np.ndarray
+    reached_goal: np.ndarray
+    solver_failed: np.ndarray
+
+
+def _draw(distribution, sim, gen):
+    if distribution is None:
+        return sim.nominal_params
+    return distribution.sample(gen)
+
+
+def _run_batch(sim, plan, controller, distribution, seeds):
+    out = []
+    for s in seeds:
+        gen = np.random.default_rng(s)
+        params = _draw(distribution, sim, gen)
+        ex = execute(sim, plan, controller, params, seed=gen, keep_states=False)
+        out.append((ex.success, ex.collided, ex.reached_goal, ex.error is not None))
+    return out
+
+
+def monte_carlo_success(sim, plan: NominalPlan, controller: LQGController | None, distribution=None, *,
+                        n: int = 1000, seed=None, confidence: float = 0.95, backend: str = "serial",
+                        workers: int | None = None) -> SuccessEstimate:
+    """Success rate of ``n`` executions of ``plan`` (closed loop with ``controller``, open loop
+    with ``None``), each with its own ``s ~ distribution`` (``sim.nominal_params`` if ``None``)
+    and sensing noise, with a Wilson interval (:func:`riskplan.collision.binomial_interval`).
+
+    Run ``i`` draws its parameters and noise from ``spawn_seeds(seed, n)[i]``, so the result
+    does not depend on ``backend`` (:func:`riskplan.parallel.map_tasks`) or ``workers``.
+    """
+    from riskplan.collision import binomial_interval
+    from riskplan.parallel import map_tasks, spawn_seeds
+
+    if int(n) != n or n < 1:
+        raise InvalidInputError(f"n: expected a positive integer, got {n!r}")
+    n = int(n)
+    if isinstance(seed, np.random.Generator):
+        seed = int(seed.integers(2**63))
+    seeds = spawn_seeds(seed, n)
+    n_chunks = 1 if backend == "serial" else min(n, 4 * (workers or 2))
+    chunks = [seeds[k::n_chunks] for k in range(n_chunks)]
+    results = map_tasks(partial(_run_batch, sim, plan, controller, distribution), chunks, backend=backend,
+                        workers=workers, chunksize=1)
+    flags = np.empty((n, 4), dtype=bool)
+    for k, res in enumerate(results):
+        flags[k::n_chunks] = np.array(res, dtype=bool).reshape(-1, 4)
+    hits = int(flags[:, 0].sum())
+    lo, hi = binomial_interval(hits, n, confidence=confidence)
+    return SuccessEstimate(
+        successes=hits, n=n, probability=hits / n, low=float(lo), high=float(hi),
+        success=flags[:, 0], collided=flags[:, 1], reached_goal=flags[:, 2], solver_failed=flags[:, 3],
+    )

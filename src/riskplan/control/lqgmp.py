@@ -1,0 +1,310 @@
+"""LQG-MP: a-priori distributions of the LQG-controlled plan and its probability of success
+(deformable-planning paper, Patil, van den Berg & Alterovitz, RSS 2011, section IV-D;
+van den Berg, Abbeel & Goldberg, "LQG-MP", IJRR 2011, section V; Patil, van den Berg &
+Alterovitz, ICRA 2012 for the truncation variant).
+
+Joint deviation ``ξ_t = (x̄_t, x̂_t)`` (true and estimated), with the indexing of
+:mod:`riskplan.control.kalman` (``H_t``, ``K_t`` belong to the measurement after step t).
+Substituting ``ū_t = L_t x̂_t`` into the model and the filter:
+
+    x̄_{t+1} = A_t x̄_t + B_t L_t x̂_t + m_t
+    x̂_{t+1} = K_t H_t A_t x̄_t + (A_t + B_t L_t − K_t H_t A_t) x̂_t + K_t H_t m_t + K_t n_t
+
+so ``ξ_{t+1} = F_t ξ_t + G_t (m_t, n_t)`` with
+
+    F_t = [[A_t, B_t L_t], [K_t H_t A_t, A_t + B_t L_t − K_t H_t A_t]],   G_t = [[I, 0], [K_t H_t, K_t]]
+
+and ``Σ_{t+1} = F_t Σ_t F_tᵀ + G_t diag(M_t, N_t) G_tᵀ``, ``Σ_0 = diag(P0, 0)`` (the estimate
+starts at the plan). Control clipping is ignored (a linear model).
+
+The true state at ``t`` is ``x_t ~ N(x*_t + μ_t[:p], Σ_t[:p, :p])``. Collision is checked for
+the 2-D points of ``x`` named by :func:`point_indices` against the *deformed* obstacles of
+the plan's stored state ``y*_t`` (``sim.obstacles(y*_t)``), with the 2-D collision API
+(:func:`riskplan.collision.free_region`, the Patil 2012 construction):
+
+* ``method="sigma"`` (the paper's choice, from LQG-MP and the LQGMPManipulator reference
+  code): ``c_t`` = the number of standard deviations from the mean to the nearest obstacle
+  (Mahalanobis distance, the first half-space of the construction, minimum over the
+  points); ``P(free at t) = F_χ²₂(c_t²) = 1 − exp(−c_t²/2)``; ``P(no collision) = ∏_t``.
+  Zero if a mean is inside an obstacle.
+* ``method="truncation"`` (Patil et al. ICRA 2012): per step and point, the half-spaces
+  ``a_j·x ≤ b_j`` of the free region; ``p_t = Σ_j (1 − Φ(α_j))`` (α_j the whitened
+  distances); the joint Gaussian of ``ξ_t`` is then truncated to each half-space in turn
+  (moments of a truncated normal, conditioned linearly), so later steps see only the
+  trajectories that survived; ``P(no collision) = ∏_t (1 − min(1, p_t))``.
+
+``P(goal)``: ``n_goal_samples`` draws of ``x_T`` (the final, truncated distribution in the
+truncation variant), counting those whose goal point lies in the deformed goal polygon
+``sim.goal(y*_T)``. ``P(success) = P(no collision) · P(goal)`` (paper IV-D).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import ndtr
+
+from riskplan.collision import DEFAULT_CUTOFF, Environment, free_region, precision_cholesky_from_covariance
+from riskplan.control.lqg import LQGController
+from riskplan.control.plan import NominalPlan
+from riskplan.errors import InvalidInputError
+
+__all__ = ["LQGMPResult", "METHODS", "joint_covariances", "lqgmp", "point_indices", "polygon_environment"]
+
+METHODS = ("sigma", "truncation")
+
+# whitened variance below which a direction counts as deterministic (no truncation, no bound)
+_TINY = 1e-300
+
+
+@dataclass(frozen=True, eq=False)
+class LQGMPResult:
+    """LQG-MP estimate of one plan.
+
+    ``p_success``, ``p_collision_free``, ``p_goal`` (floats); ``p_free_steps (T,)`` the
+    per-step factor of ``p_collision_free`` (steps 1..T); ``mean (T + 1, 2p)`` and
+    ``cov (T + 1, 2p, 2p)`` of ``ξ_t = (x̄_t, x̂_t)`` (the mean is zero for ``"sigma"``;
+    after truncation for ``"truncation"``); ``method``.
+    """
+
+    p_success: float
+    p_collision_free: float
+    p_goal: float
+    p_free_steps: np.ndarray
+    mean: np.ndarray
+    cov: np.ndarray
+    method: str
+
+
+def point_indices(sim) -> tuple[np.ndarray, np.ndarray]:
+    """``(collision (k, 2) int, goal (2,) int)``: where the 2-D points of the reduced state are.
+
+    From ``sim.collision_point_indices`` / ``sim.goal_point_indices`` when the scenario
+    defines them (manipulation: the sensed boundary points / the target), else ``x[:2]``
+    for both (the needle's position).
+    """
+    col = np.asarray(getattr(sim, "collision_point_indices", ((0, 1),)), dtype=np.int64).reshape(-1, 2)
+    goal = np.asarray(getattr(sim, "goal_point_indices", (0, 1)), dtype=np.int64).reshape(2)
+    p = sim.state_dim
+    if col.min() < 0 or col.max() >= p or goal.min() < 0 or goal.max() >= p:
+        raise InvalidInputError(f"collision_point_indices/goal_point_indices: expected indices in [0, {p})")
+    return col, goal
+
+
+def polygon_environment(polygons) -> Environment:
+    """A 2-D :class:`~riskplan.collision.Environment` from simple polygons ``[(k_i, 2)]``
+    without the self-intersection check of ``Environment.from_polygons`` (the scenarios'
+    deformed polygons stay simple; this runs once per plan step). Oriented counter-clockwise."""
+    Vs, Fs, owners = [], [], []
+    off = 0
+    for i, poly in enumerate(polygons):
+        P = np.asarray(poly, dtype=np.float64)
+        nxt = np.roll(P, -1, axis=0)
+        if np.sum(P[:, 0] * nxt[:, 1] - nxt[:, 0] * P[:, 1]) < 0:
+            P = P[::-1]
+        k = len(P)
+        idx = np.arange(k)
+        Vs.append(P)
+        Fs.append(np.column_stack([idx, (idx + 1) % k]) + off)
+        owners.append(np.full(k, i, dtype=np.int64))
+        off += k
+    return Environment(np.vstack(Vs), np.vstack(Fs), np.concatenate(owners), validate=False)
+
+
+def joint_covariances(ctrl: LQGController) -> tuple[np.ndarray, np.ndarray]:
+    """``F (T, 2p, 2p)`` and the noise term ``G diag(M, N) Gᵀ (T, 2p, 2p)`` of the recursion."""
+    lin = ctrl.lin
+    A, B, H, M, N, L, K = lin.A, lin.B, lin.H, lin.M, lin.N, ctrl.L, ctrl.K
+    T, p, _ = A.shape
+    m = H.shape[1]
+    BL = B @ L
+    KHA = K @ H @ A
+    F = np.empty((T, 2 * p, 2 * p))
+    F[:, :p, :p] = A
+    F[:, :p, p:] = BL
+    F[:, p:, :p] = KHA
+    F[:, p:, p:] = A + BL - KHA
+    G = np.zeros((T, 2 * p, p + m))
+    G[:, :p, :p] = np.eye(p)
+    G[:, p:, :p] = K @ H
+    G[:, p:, p:] = K
+    Wn = np.zeros((T, p + m, p + m))
+    Wn[:, :p, :p] = M
+    Wn[:, p:, p:] = N
+    return F, G @ Wn @ np.swapaxes(G, 1, 2)
+
+
+def _truncate(mu, S, c, b):
+    """Condition ``N(mu, S)`` on ``cᵀξ <= b`` (moment matching of the truncated normal)."""
+    Sc = S @ c
+    var = float(c @ Sc)
+    if var <= _TINY:
+        return mu, S
+    sd = math.sqrt(var)
+    alpha = (b - float(c @ mu)) / sd
+    Phi = float(ndtr(alpha))
+    if Phi <= 1e-300:
+        return mu, S  # the whole mass is beyond: nothing sensible to keep; the bound says p = 1
+    lam = math.exp(-0.5 * alpha * alpha) / math.sqrt(2 * math.pi) / Phi
+    mu = mu - Sc * (lam / sd)
+    S = S - np.outer(Sc, Sc) * ((alpha * lam + lam * lam) / var)
+    return mu, 0.5 * (S + S.T)
+
+
+def _edges(polys) -> tuple[np.ndarray, np.ndarray]:
+    """Edge start points ``(E, 2)`` and end points ``(E, 2)`` of polygons."""
+    a = np.concatenate([np.asarray(p, dtype=np.float64) for p in polys])
+    b = np.concatenate([np.roll(np.asarray(p, dtype=np.float64), -1, axis=0) for p in polys])
+    return a, b
+
+
+def sigma_distances(starts, ends, points, covs) -> tuple[np.ndarray, np.ndarray]:
+    """Batched σ-distances: ``(c (...,), inside (...,))`` for points ``(..., 2)`` with
+    covariances ``(..., 2, 2)`` against polygons given by edge ``starts``/``ends`` ``(..., E, 2)``.
+
+    ``c`` is the Mahalanobis distance from the point to the nearest edge (whitening with
+    :func:`riskplan.collision.whiten`, then the Euclidean distance of the origin to each
+    whitened segment); ``inside`` is the crossing-number test of the point against the
+    polygons. Equal to the first half-space distance of :func:`riskplan.collision.free_region`.
+    """
+    from riskplan.collision import whiten
+
+    U = precision_cholesky_from_covariance(covs)
+    wa = whiten(starts, points, U)
+    wb = whiten(ends, points, U)
+    d = wb - wa
+    tt = np.clip(-np.einsum("...i,...i->...", wa, d) / np.maximum(np.einsum("...i,...i->...", d, d), 1e-300), 0.0, 1.0)
+    closest = wa + tt[..., None] * d
+    c = np.sqrt(np.einsum("...i,...i->...", closest, closest).min(axis=-1))
+    # crossing number (edges of all polygons together: polygons do not overlap)
+    P = points[..., None, :]
+    ya, yb = starts[..., 1], ends[..., 1]
+    cond = (ya > P[..., 1]) != (yb > P[..., 1])
+    xint = starts[..., 0] + (P[..., 1] - ya) * (ends[..., 0] - starts[..., 0]) / np.where(yb != ya, yb - ya, 1.0)
+    inside = (np.count_nonzero(cond & (P[..., 0] < xint), axis=-1) % 2) == 1
+    return c, inside
+
+
+def _sigma_free(sim, plan, cov, col, p) -> np.ndarray | None:
+    """Vectorised ``method="sigma"`` over all steps and points; None if the obstacle
+    polygons change size along the plan (then the per-step loop runs)."""
+    T = plan.n_steps
+    polys = [sim.obstacles(plan.states[t + 1]) for t in range(T)]
+    if not len(polys[0]):
+        return np.ones(T)
+    sizes = {tuple(len(q) for q in ps) for ps in polys}
+    if len(sizes) != 1:
+        return None
+    E = [_edges(ps) for ps in polys]
+    starts = np.stack([e[0] for e in E])[:, None]  # (T, 1, E, 2)
+    ends = np.stack([e[1] for e in E])[:, None]
+    pts = plan.reduced[1:][:, col]  # (T, k, 2)
+    covs = cov[1:][:, col[:, :, None], col[:, None, :]]  # (T, k, 2, 2)
+    ok = np.linalg.eigvalsh(covs).min(axis=-1) > 1e-24
+    covs = np.where(ok[..., None, None], covs, np.eye(2))
+    c, inside = sigma_distances(starts, ends, pts, covs)
+    c = np.where(ok, c, np.inf)
+    cmin = c.min(axis=1)
+    free = np.where(np.isinf(cmin), 1.0, -np.expm1(-0.5 * np.minimum(cmin, 1e150) ** 2))
+    return np.where(inside.any(axis=1), 0.0, free)
+
+
+def lqgmp(sim, plan: NominalPlan, controller: LQGController, *, method: str = "sigma",
+          n_goal_samples: int = 2000, cutoff: float = DEFAULT_CUTOFF, seed=None) -> LQGMPResult:
+    """LQG-MP probability of success of ``plan`` under ``controller`` (module docstring).
+
+    Parameters
+    ----------
+    sim : the simulator (``obstacles(state)``, ``goal(state)``, optional point indices).
+    plan : :class:`~riskplan.control.NominalPlan` with ``T`` steps.
+    controller : :class:`~riskplan.control.lqg.LQGController` of the plan's linearisation.
+    method : ``"sigma"`` (paper) or ``"truncation"`` (Patil 2012).
+    n_goal_samples : draws of the final state for ``P(goal)``.
+    cutoff : whitened radius of the free-region construction (:mod:`riskplan.collision.gaussian`).
+    seed : seeds the goal samples.
+    """
+    if method not in METHODS:
+        raise InvalidInputError(f"method: expected one of {METHODS}, got {method!r}")
+    if not isinstance(plan, NominalPlan):
+        raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
+    if not isinstance(controller, LQGController) or controller.n_steps != plan.n_steps:
+        raise InvalidInputError("controller: expected the LQGController of this plan (same number of steps)")
+    if int(n_goal_samples) != n_goal_samples or n_goal_samples < 1:
+        raise InvalidInputError(f"n_goal_samples: expected a positive integer, got {n_goal_samples!r}")
+    col, goal_idx = point_indices(sim)
+    T = plan.n_steps
+    p = plan.reduced.shape[1]
+    F, Qn = joint_covariances(controller)
+    mean = np.zeros((T + 1, 2 * p))
+    cov = np.zeros((T + 1, 2 * p, 2 * p))
+    cov[0, :p, :p] = controller.P0
+    free = np.ones(T)
+    truncating = method == "truncation"
+    fast = None
+    mu = np.zeros(2 * p)
+    S = cov[0].copy()
+    if not truncating:
+        for t in range(T):
+            S = F[t] @ S @ F[t].T + Qn[t]
+            cov[t + 1] = S = 0.5 * (S + S.T)
+        fast = _sigma_free(sim, plan, cov, col, p)
+        S = cov[0].copy()
+    for t in range(T if truncating or fast is None else 0):
+        mu = F[t] @ mu
+        S = F[t] @ S @ F[t].T + Qn[t]
+        S = 0.5 * (S + S.T)
+        y = plan.states[t + 1]
+        polys = sim.obstacles(y)
+        if not len(polys):
+            mean[t + 1], cov[t + 1] = mu, S
+            continue
+        env = polygon_environment(polys)
+        xs = plan.reduced[t + 1]
+        pts = xs[col] + mu[col]  # (k, 2)
+        if bool(env.contains(pts).any()):
+            free[t] = 0.0
+            mean[t + 1], cov[t + 1] = mu, S
+            continue
+        if truncating:
+            p_t = 0.0
+            for j, ij in enumerate(col):
+                Sp = S[np.ix_(ij, ij)]
+                if np.linalg.eigvalsh(Sp).min() <= 1e-24:
+                    continue  # a deterministic point outside every obstacle: no risk
+                U = precision_cholesky_from_covariance(Sp)
+                fr = free_region(pts[j], U, env, cutoff=cutoff)
+                p_t += float(fr.bound_terms.sum())
+                for a, off in zip(fr.normals, fr.offsets):
+                    c = np.zeros(2 * p)
+                    c[ij] = a
+                    mu, S = _truncate(mu, S, c, off - float(a @ xs[ij]))
+            free[t] = 1.0 - min(1.0, p_t)
+        else:
+            c_min = math.inf
+            for j, ij in enumerate(col):
+                Sp = S[np.ix_(ij, ij)]
+                if np.linalg.eigvalsh(Sp).min() <= 1e-24:
+                    continue
+                U = precision_cholesky_from_covariance(Sp)
+                d = free_region(pts[j], U, env, cutoff=cutoff).distances
+                if d.size:
+                    c_min = min(c_min, float(d.min()))
+            free[t] = 1.0 if math.isinf(c_min) else -math.expm1(-0.5 * c_min * c_min)
+        mean[t + 1], cov[t + 1] = mu, S
+    if not truncating and fast is not None:
+        free = fast
+    p_free = float(np.prod(free))
+    # P(goal): sample the final true state
+    gen = np.random.default_rng(seed)
+    Sx = cov[T, :p, :p]
+    w, v = np.linalg.eigh(0.5 * (Sx + Sx.T))
+    fac = v * np.sqrt(np.clip(w, 0.0, None))
+    xT = plan.reduced[T] + mean[T, :p] + gen.standard_normal((int(n_goal_samples), p)) @ fac.T
+    goal_env = polygon_environment([sim.goal(plan.states[T])])
+    p_goal = float(goal_env.contains(xT[:, goal_idx]).mean())
+    return LQGMPResult(
+        p_success=p_free * p_goal, p_collision_free=p_free, p_goal=p_goal, p_free_steps=free,
+        mean=mean, cov=cov, method=method,
+    )

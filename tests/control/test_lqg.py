@@ -1,0 +1,75 @@
+"""LQG execution on the true simulator and its Monte Carlo success rate."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from riskplan.control import NominalPlan, execute, linearize, lqg_controller, monte_carlo_success
+from riskplan.errors import InvalidInputError
+from riskplan.scenarios.uncertainty import ActuationNoise
+
+from .toy import LinearToy, square, toy_system
+
+
+def _setup(rng, T=6, goal_half=0.3):
+    A, B, _ = toy_system(rng, scale=0.1)
+    sim = LinearToy(A, B, distribution=ActuationNoise(cov=tuple(map(tuple, 0.01 * np.eye(3)))))
+    u = rng.uniform(-0.5, 0.5, (T, 3))
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), u)
+    xT = plan.reduced[-1]
+    sim._goal = square(xT[0], xT[1], goal_half)
+    return sim, plan
+
+
+def test_open_loop_nominal_reproduces_plan(rng):
+    sim, plan = _setup(rng)
+    ex = execute(sim, plan, None, plan.params, seed=0)
+    np.testing.assert_array_equal(ex.x, plan.reduced)
+    assert ex.success and not ex.collided
+
+
+def test_closed_loop_without_noise_stays_on_plan(rng, tol):
+    # no actuation noise and (almost) no sensing noise: the estimate stays ~0, so does the feedback
+    sim, plan = _setup(rng)
+    sim.sensing_cov = 1e-10 * np.eye(2)
+    lin = linearize(sim, plan, seed=0)
+    ex = execute(sim, plan, lqg_controller(lin), plan.params, seed=0)
+    np.testing.assert_allclose(ex.x, plan.reduced, rtol=0, atol=1e-3)
+    np.testing.assert_allclose(ex.estimates, plan.reduced, rtol=0, atol=1e-3)
+
+
+def test_feedback_shrinks_final_spread(rng):
+    sim, plan = _setup(rng, T=10)
+    lin = linearize(sim, plan, sim.distribution, n_samples=64, seed=1)
+    ctrl = lqg_controller(lin, Q=100 * np.eye(3), R=np.eye(3))
+    finals = {}
+    for name, c in (("open", None), ("closed", ctrl)):
+        xs = []
+        for k in range(150):
+            gen = np.random.default_rng(k)
+            ex = execute(sim, plan, c, sim.distribution.sample(gen), seed=gen, keep_states=False)
+            xs.append(ex.x[-1] - plan.reduced[-1])
+        finals[name] = np.mean(np.sum(np.square(xs), axis=1))
+    assert finals["closed"] < 0.5 * finals["open"]
+
+
+def test_monte_carlo_success_backends_and_interval(rng):
+    sim, plan = _setup(rng, goal_half=0.05)
+    lin = linearize(sim, plan, sim.distribution, n_samples=32, seed=2)
+    ctrl = lqg_controller(lin)
+    a = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=60, seed=3)
+    b = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=60, seed=3, backend="local", workers=2)
+    np.testing.assert_array_equal(a.success, b.success)
+    assert 0 < a.successes < 60  # the goal is tight enough for some runs to miss
+    assert a.low <= a.probability <= a.high and a.success.shape == (60,)
+    with pytest.raises(InvalidInputError, match="n"):
+        monte_carlo_success(sim, plan, ctrl, n=0)
+
+
+def test_collision_stops_the_run(rng):
+    sim, plan = _setup(rng)
+    x3 = plan.reduced[3]
+    sim._obstacles = [square(x3[0], x3[1], 1e-3)]
+    ex = execute(sim, plan, None, plan.params)
+    assert ex.collided and ex.failed_step == 3 and not ex.success and len(ex.x) == 4

@@ -1,0 +1,160 @@
+"""LQG-MP: a-priori covariances against Monte Carlo of closed-loop runs of the linear toy,
+P(goal) against the success rate, the collision factor against a half-plane closed form."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.special import ndtr
+
+from riskplan.control import NominalPlan, execute, lqg_controller, lqgmp, monte_carlo_success
+from riskplan.control.linearize import Linearization
+from riskplan.errors import InvalidInputError
+from riskplan.scenarios.uncertainty import ActuationNoise
+
+from .toy import LinearToy, square, toy_system
+
+SIGMA_W = 0.1
+
+
+def _exact(sim, T):
+    Sw = SIGMA_W**2 * np.eye(sim.control_dim)
+    H = sim.observation_matrix
+    return Linearization(
+        A=np.broadcast_to(sim.A_true, (T, 3, 3)), B=np.broadcast_to(sim.B_true, (T, 3, 3)),
+        M=np.broadcast_to(sim.B_true @ Sw @ sim.B_true.T, (T, 3, 3)), H=np.broadcast_to(H, (T, 2, 3)),
+        N=np.broadcast_to(sim.sensing_cov, (T, 2, 2)), rank=np.full(T, 3),
+    )
+
+
+def _toy(rng, T):
+    A, B, _ = toy_system(rng, scale=0.2)
+    sim = LinearToy(A, B, sensing_std=0.1,
+                    distribution=ActuationNoise(cov=tuple(map(tuple, SIGMA_W**2 * np.eye(3)))))
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), rng.uniform(-0.5, 0.5, (T, 3)))
+    return sim, plan
+
+
+def test_joint_covariance_matches_monte_carlo(rng):
+    T, n = 6, 1000
+    sim, plan = _toy(rng, T)
+    xT = plan.reduced[-1]
+    sim._goal = square(xT[0], xT[1], 10.0)
+    ctrl = lqg_controller(_exact(sim, T), Q=10 * np.eye(3))
+    res = lqgmp(sim, plan, ctrl, n_goal_samples=10)
+    xi = np.empty((n, 6))
+    for k in range(n):
+        gen = np.random.default_rng(1000 + k)
+        ex = execute(sim, plan, ctrl, sim.distribution.sample(gen), seed=gen, keep_states=False)
+        xi[k, :3] = ex.x[-1] - plan.reduced[-1]
+        xi[k, 3:] = ex.estimates[-1] - plan.reduced[-1]
+    S = res.cov[T]
+    w, v = np.linalg.eigh(S)
+    keep = w > 1e-10 * w.max()
+    W = v[:, keep] / np.sqrt(w[keep])  # whitening of the support
+    E = (xi @ W).T @ (xi @ W) / n  # ≈ I, entries with sd sqrt(2/n) (diagonal) and sqrt(1/n)
+    sd = np.where(np.eye(keep.sum(), dtype=bool), math.sqrt(2 / n), math.sqrt(1 / n))
+    assert np.all(np.abs(E - np.eye(keep.sum())) < 4.5 * sd), np.round(E, 3)
+    # and nothing outside the support
+    if (~keep).any():
+        assert np.abs(xi @ v[:, ~keep]).max() < 1e-6
+
+
+def test_p_goal_matches_monte_carlo_success(rng):
+    T = 5
+    sim, plan = _toy(rng, T)
+    xT = plan.reduced[-1]
+    sim._goal = square(xT[0] + 0.05, xT[1], 0.2)
+    ctrl = lqg_controller(_exact(sim, T))
+    res = lqgmp(sim, plan, ctrl, n_goal_samples=40_000, seed=0)
+    mc = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=1000, seed=4)
+    assert res.p_collision_free == 1.0  # the toy has no obstacles here
+    # LQG-MP's own sampling error is ~0.0025: widen the Wilson interval by 3 of it
+    assert mc.low - 0.0075 <= res.p_goal <= mc.high + 0.0075, (res.p_goal, mc.low, mc.high)
+    assert 0.1 < res.p_goal < 0.95
+
+
+def test_half_plane_closed_form(rng):
+    # one step, x_1 ~ N(x*_1, Σ), an obstacle whose near edge is the line x = x*_1 + d
+    T = 1
+    sim, plan = _toy(rng, T)
+    x1 = plan.reduced[1]
+    d = 0.15
+    sim._obstacles = [np.array([[x1[0] + d, x1[1] - 50], [x1[0] + d + 100, x1[1] - 50],
+                                [x1[0] + d + 100, x1[1] + 50], [x1[0] + d, x1[1] + 50]])]
+    sim._goal = square(x1[0], x1[1], 100.0)
+    ctrl = lqg_controller(_exact(sim, T))
+    trunc = lqgmp(sim, plan, ctrl, method="truncation", n_goal_samples=10)
+    sigma = lqgmp(sim, plan, ctrl, method="sigma", n_goal_samples=10)
+    sx = math.sqrt(sigma.cov[1, 0, 0])  # before truncation
+    exact_free = float(ndtr(d / sx))
+    np.testing.assert_allclose(trunc.p_collision_free, exact_free, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(sigma.p_collision_free, -math.expm1(-0.5 * (d / sx) ** 2), rtol=1e-9, atol=0)
+    assert sigma.p_collision_free < exact_free  # the chi-square ball is conservative
+    # truncation removes the mass beyond the line: the mean moves away from it
+    assert trunc.mean[1, 0] < 0 and trunc.cov[1, 0, 0] < sx**2
+
+
+def test_mean_in_obstacle_gives_zero(rng):
+    sim, plan = _toy(rng, 3)
+    x2 = plan.reduced[2]
+    sim._obstacles = [square(x2[0], x2[1], 0.01)]
+    sim._goal = square(0, 0, 100.0)
+    ctrl = lqg_controller(_exact(sim, 3))
+    for m in ("sigma", "truncation"):
+        r = lqgmp(sim, plan, ctrl, method=m, n_goal_samples=10)
+        assert r.p_free_steps[1] == 0.0 and r.p_success == 0.0
+
+
+def test_bad_input(rng):
+    sim, plan = _toy(rng, 2)
+    sim._goal = square(0, 0, 1.0)
+    ctrl = lqg_controller(_exact(sim, 2))
+    with pytest.raises(InvalidInputError, match="method"):
+        lqgmp(sim, plan, ctrl, method="exact")
+    with pytest.raises(InvalidInputError, match="controller"):
+        lqgmp(sim, plan, lqg_controller(_exact(sim, 1)))
+
+
+def test_sigma_distances_batch_equals_free_region(rng, tol):
+    # the vectorised σ-distance is the first half-space of the Patil construction
+    from riskplan.collision import free_region, precision_cholesky_from_covariance
+    from riskplan.control.lqgmp import _edges, polygon_environment, sigma_distances
+    from riskplan.scenarios.needle import NeedleScenario
+
+    sim = NeedleScenario()
+    s = sim.initial_state()
+    polys = sim.obstacles(s)
+    env = polygon_environment(polys)
+    a, b = _edges(polys)
+    pts = rng.uniform(0, 1, (40, 2))
+    L = rng.normal(0, 0.05, (40, 2, 2))
+    covs = L @ np.swapaxes(L, 1, 2) + 1e-4 * np.eye(2)
+    c, inside = sigma_distances(a, b, pts, covs)
+    np.testing.assert_array_equal(inside, env.contains(pts))
+    for k in np.flatnonzero(~inside):
+        fr = free_region(pts[k], precision_cholesky_from_covariance(covs[k]), env, cutoff=np.inf)
+        np.testing.assert_allclose(c[k], fr.distances.min(), **tol["float64_ref"])
+
+
+def test_sigma_vectorised_equals_loop(rng):
+    # obstacle polygons that change size along the plan force the per-step loop
+    sim, plan = _toy(rng, 4)
+    x2 = plan.reduced[2]
+    sim._goal = square(0, 0, 100.0)
+    sim._obstacles = [square(x2[0] + 0.3, x2[1], 0.1)]
+    ctrl = lqg_controller(_exact(sim, 4))
+    fast = lqgmp(sim, plan, ctrl, n_goal_samples=10)
+    calls = {"n": 0}
+    base = sim.obstacles
+
+    def changing(state=None):
+        calls["n"] += 1
+        return base() if calls["n"] % 2 else [np.vstack([o, o[:1] + [0.0, 1e-3]]) for o in base()]
+
+    sim.obstacles = changing
+    loop = lqgmp(sim, plan, ctrl, n_goal_samples=10)
+    assert np.any((fast.p_free_steps > 0) & (fast.p_free_steps < 1))
+    np.testing.assert_allclose(loop.p_free_steps, fast.p_free_steps, rtol=1e-9, atol=1e-12)

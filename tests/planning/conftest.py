@@ -26,6 +26,15 @@ def near_needle():
     return NeedleScenario(cfg)
 
 
+@pytest.fixture(scope="session")
+def needle_result(near_needle):
+    """Four candidate plans (two trees) on the coarse mesh, and the trees."""
+    from riskplan.planning.rrt import RRTOptions, rrt_plans
+
+    options = RRTOptions(plans_per_tree=2, max_iterations=600)
+    return rrt_plans(near_needle, 4, seed=3, params=SMALL_MESH, options=options, backend="serial")
+
+
 class PointState:
     """State of :class:`PointRobot`: step index and position."""
 

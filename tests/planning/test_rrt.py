@@ -14,7 +14,6 @@ from riskplan.planning.rrt import PlanningSpace, RRTOptions, grow_tree, planning
 from riskplan.scenarios.manipulation import ManipulationScenario
 from tests.planning.conftest import SMALL_MESH, PointRobot
 
-FAST = RRTOptions(plans_per_tree=2, max_iterations=600)
 
 
 def _check_plan(sim, plan, params):
@@ -31,12 +30,6 @@ def _check_plan(sim, plan, params):
         assert sim.in_goal(st) == (t == plan.n_steps)
     lo, hi = sim.control_bounds[:, 0], sim.control_bounds[:, 1]
     assert np.all((plan.controls >= lo) & (plan.controls <= hi))
-
-
-@pytest.fixture(scope="module")
-def needle_result(near_needle):
-    plans, trees = rrt_plans(near_needle, 4, seed=3, params=SMALL_MESH, options=FAST, backend="serial")
-    return plans, trees
 
 
 def test_needle_plans_replay_collision_free_in_goal(near_needle, needle_result):

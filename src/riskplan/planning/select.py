@@ -170,7 +170,8 @@ class HonestyRow:
 def honesty_check(sim, plans, selection: Selection, distribution=None, *, others: int = 2, n: int = 1000,
                   seed=0, backend: str = "local", workers: int | None = None, on_row=None) -> list[HonestyRow]:
     """LQG-MP ``P(success)`` against the success rate of ``n`` closed-loop LQG executions
-    for the selected plan and ``others`` more (spread evenly over the rest of the ranking).
+    for the selected plan and ``others`` more (at even quantiles of the ranking, down to the
+    worst usable candidate).
 
     Each execution draws ``s ~ distribution`` (``None``: ``sim.distribution``) and its
     sensing noise (:func:`riskplan.control.lqg.monte_carlo_success`). ``on_row(row)`` is
@@ -185,9 +186,9 @@ def honesty_check(sim, plans, selection: Selection, distribution=None, *, others
         raise InvalidInputError(f"others: expected a non-negative integer, got {others!r}")
     distribution = getattr(sim, "distribution", None) if distribution is None else distribution
     usable = [s for s in selection.ranking if s.error is None]
-    picks = [0]
-    if others and len(usable) > 1:
-        picks += sorted(set(np.linspace(1, len(usable) - 1, min(others, len(usable) - 1)).round().astype(int).tolist()))
+    # the selected plan, then ``others`` ranks at even quantiles of the rest (the last one the worst)
+    k = min(int(others), len(usable) - 1)
+    picks = [0] + sorted(set(np.linspace(0, len(usable) - 1, k + 1)[1:].round().astype(int).tolist()))
     seeds = spawn_seeds(seed, len(picks))
     rows = []
     for rank, s in zip(picks, seeds):

@@ -9,7 +9,7 @@ import pytest
 import riskplan.control
 from riskplan.control.lqgmp import lqgmp
 from riskplan.errors import InvalidInputError, SimulationError
-from riskplan.planning.select import evaluate_plan, honesty_check, select_plan
+from riskplan.planning.select import common_draws, evaluate_plan, honesty_check, select_plan
 from riskplan.scenarios.uncertainty import get_case
 from tests.planning.conftest import SMALL_MESH
 
@@ -47,7 +47,9 @@ def test_evaluate_plan_matches_selection(near_needle, needle_result, selection):
 
     plans, _ = needle_result
     i = selection.ranking[-1].index
-    ctrl, res = evaluate_plan(near_needle, plans[i], CASE, n_samples=4, n_goal_samples=500, seed=spawn_seeds(5, len(plans))[i])
+    draws = common_draws(near_needle, CASE, 4, 5)
+    assert len(draws) == 4 and draws == common_draws(near_needle, CASE, 4, 5)
+    ctrl, res = evaluate_plan(near_needle, plans[i], draws, n_goal_samples=500, seed=spawn_seeds(5, len(plans))[i])
     assert res.p_success == selection.score(i).p_success
     assert np.array_equal(ctrl.L, selection.controllers[i].L)
 

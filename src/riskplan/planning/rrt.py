@@ -55,6 +55,7 @@ attribute. The two paper scenarios have defaults (:func:`planning_space`).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass, field
@@ -495,9 +496,11 @@ def rrt_plans(
         n_trees = -(-missing // per)
         batch = seeds[used : used + n_trees]
         offset = len(trees)
+        # a single tree for fewer plans than a tree collects stops at what is missing
+        opts = options if missing >= per else dataclasses.replace(options, plans_per_tree=missing)
         cb = None if on_tree is None else (lambda i, r, _o=offset: on_tree(_o + i, r))
         results = map_tasks(
-            _tree_task, [(sim, s, params, space, options) for s in batch], backend=backend, workers=workers, on_result=cb
+            _tree_task, [(sim, s, params, space, opts) for s in batch], backend=backend, workers=workers, on_result=cb
         )
         used += n_trees
         trees.extend(results)

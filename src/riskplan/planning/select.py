@@ -12,6 +12,9 @@ For every candidate plan π (from :func:`riskplan.planning.rrt.rrt_plans`):
 and select the plan with the highest ``P(success)``. Plans are independent, so they run in
 parallel through :mod:`riskplan.parallel`; plan ``i`` uses seed ``spawn_seeds(seed, n)[i]``
 for its linearisation and goal samples, so the ranking does not depend on the backend.
+Every plan's ``M_t`` uses the same ``n_samples`` draws ``s_i ~ S`` (common random numbers:
+the plans are compared under the same parameter draws, and the FEM models of those draws
+are built once per worker instead of once per plan).
 A plan whose linearisation fails (a solver that does not converge along it, a non-finite
 state) gets ``P(success) = 0`` and its error message; it is never selected.
 
@@ -32,7 +35,7 @@ from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInpu
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PlanScore", "Selection", "HonestyRow", "evaluate_plan", "select_plan", "honesty_check"]
+__all__ = ["PlanScore", "Selection", "HonestyRow", "common_draws", "evaluate_plan", "select_plan", "honesty_check"]
 
 _FAILURES = (ConvergenceError, ElementInversionError, SimulationError, np.linalg.LinAlgError)
 
@@ -99,20 +102,24 @@ def evaluate_plan(sim, plan, distribution=None, *, method: str = "sigma", n_samp
     return controller, result
 
 
-def _evaluate_task(args):
+def _evaluate_one(index, sim, plan, draws, kwargs, seed):
+    try:
+        controller, result = evaluate_plan(sim, plan, draws, seed=seed, **kwargs)
+    except _FAILURES as exc:
+        return PlanScore(index, 0.0, 0.0, 0.0, plan.n_steps, error=str(exc)), None, None
+    score = PlanScore(index, float(result.p_success), float(result.p_collision_free), float(result.p_goal), plan.n_steps)
+    return score, controller, result
+
+
+def _evaluate_chunk(args):
     import warnings
 
-    index, sim, plan, distribution, kwargs, seed = args
+    sim, items, draws, kwargs = args
     with warnings.catch_warnings():
         # rank-deficient X_t is expected along straight stretches; the linearisation
         # documents its treatment, and a hundred repeated warnings help nobody
         warnings.simplefilter("ignore", RuntimeWarning)
-        try:
-            controller, result = evaluate_plan(sim, plan, distribution, seed=seed, **kwargs)
-        except _FAILURES as exc:
-            return PlanScore(index, 0.0, 0.0, 0.0, plan.n_steps, error=str(exc)), None, None
-    score = PlanScore(index, float(result.p_success), float(result.p_collision_free), float(result.p_goal), plan.n_steps)
-    return score, controller, result
+        return [_evaluate_one(i, sim, plan, draws, kwargs, seed) for i, plan, seed in items]
 
 
 def select_plan(sim, plans, distribution=None, *, method: str = "sigma", n_samples: int = 16,
@@ -126,16 +133,29 @@ def select_plan(sim, plans, distribution=None, *, method: str = "sigma", n_sampl
     Raises :class:`~riskplan.errors.PlanningError` if no candidate could be evaluated.
     """
     from riskplan.errors import PlanningError
-    from riskplan.parallel import map_tasks, spawn_seeds
+    from riskplan.parallel import default_workers, map_tasks, spawn_seeds
 
     plans = list(plans)
     if not plans:
         raise InvalidInputError("plans: expected at least one candidate plan")
+    draws = common_draws(sim, distribution, n_samples, seed)
     kwargs = dict(method=method, n_samples=n_samples, n_goal_samples=n_goal_samples, Q=Q, R=R)
     seeds = spawn_seeds(seed, len(plans))
-    tasks = [(i, sim, p, distribution, kwargs, s) for i, (p, s) in enumerate(zip(plans, seeds))]
-    cb = None if on_result is None else (lambda i, r: on_result(i, r[0]))
-    out = map_tasks(_evaluate_task, tasks, backend=backend, workers=workers, chunksize=1, on_result=cb)
+    items = list(zip(range(len(plans)), plans, seeds))
+    # one simulator per chunk: a scenario travels without its FEM caches, so chunks of plans
+    # (interleaved for balance) share the mesh and the models of the common draws
+    n_chunks = 1 if backend == "serial" else min(len(plans), 4 * (workers or default_workers()))
+    chunks = [items[k::n_chunks] for k in range(n_chunks)]
+    out = [None] * len(plans)
+
+    def collect(k, res):
+        for i, r in zip(range(k, len(plans), n_chunks), res):
+            out[i] = r
+            if on_result is not None:
+                on_result(i, r[0])
+
+    map_tasks(_evaluate_chunk, [(sim, c, draws, kwargs) for c in chunks], backend=backend, workers=workers,
+              chunksize=1, on_result=collect)
     scores = [o[0] for o in out]
     ranking = sorted(scores, key=lambda s: (-s.p_success, s.index))
     ok = [s for s in ranking if s.error is None]
@@ -146,6 +166,21 @@ def select_plan(sim, plans, distribution=None, *, method: str = "sigma", n_sampl
         ranking=ranking, best=best, plan=plans[best], controller=out[best][1], result=out[best][2],
         controllers=[o[1] for o in out], method=method,
     )
+
+
+def common_draws(sim, distribution, n_samples: int, seed) -> list | None:
+    """The ``n_samples`` parameter draws ``s_i ~ S`` every candidate's ``M_t`` uses."""
+    from riskplan.parallel import spawn_seeds
+
+    distribution = getattr(sim, "distribution", None) if distribution is None else distribution
+    if distribution is None:
+        return None
+    if isinstance(distribution, (list, tuple)):
+        return list(distribution)
+    if int(n_samples) != n_samples or n_samples < 0:
+        raise InvalidInputError(f"n_samples: expected a non-negative integer, got {n_samples!r}")
+    s = spawn_seeds(seed, 1)[0] ^ 0x5EED  # apart from the per-plan seeds
+    return list(distribution.sample_many(int(n_samples), s))
 
 
 @dataclass(frozen=True)

@@ -24,11 +24,10 @@ app = typer.Typer(
 )
 
 # Areas in pipeline order. Each module defines ``register(app: typer.Typer) -> None``.
-# (``plan``, in commands/plan.py, joins this list once a planner registers a command.)
-AREAS = ("robot", "dataset", "kinematics", "collision", "tissue", "reproduce")
+AREAS = ("robot", "dataset", "kinematics", "collision", "tissue", "plan", "reproduce")
 # Benchmarks: ``riskplan.bench.<area>.run(quick: bool) -> dict`` (``-`` in an area name is ``_``
 # in the module name: ``planning-tissue`` -> ``riskplan.bench.planning_tissue``).
-BENCH_AREAS = ("robot", "kinematics", "collision", "tissue", "control", "reproduce")
+BENCH_AREAS = ("robot", "kinematics", "collision", "tissue", "control", "planning-tissue", "reproduce")
 
 
 def _setup_threads() -> None:

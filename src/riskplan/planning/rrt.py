@@ -41,8 +41,10 @@ Choices the paper leaves open (documented in docs/planning.md):
   step, with controls within ``0.25 f_max`` of the parent's, because a quasi-static
   step jumps to the equilibrium of the new forces and larger force jumps would skip the
   intermediate configurations that the collision check and the linearisation never see.
-* metric: needle ``(x, y)`` plus ``0.1 · θ`` (a heading error of 1 rad counts like 0.1
-  length units); manipulation: the target position only (the boundary points follow it).
+* metric: needle ``(x, y)`` plus ``r_min · θ`` (a heading error of 1 rad counts like the
+  arc the car needs to turn by it; with 0.1 instead, trees more often crept past the goal
+  with the wrong heading and took 3–10 times as many iterations); manipulation: the target
+  position only (the boundary points follow it).
 * states outside the sampling box are invalid (the needle leaving the tissue).
 
 Any simulator with the :class:`~riskplan.scenarios.simulator.Simulator` protocol plus
@@ -53,6 +55,7 @@ attribute. The two paper scenarios have defaults (:func:`planning_space`).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass, field
@@ -66,8 +69,8 @@ log = logging.getLogger(__name__)
 
 __all__ = ["PlanningSpace", "RRTOptions", "TreeResult", "planning_space", "grow_tree", "rrt_plans"]
 
-#: Failed goal-directed extensions after which a node is no longer picked for the goal (a
-#: car facing away from the goal would otherwise be picked again and again).
+#: Goal-directed extensions of a node's lineage after which it is no longer picked for the
+#: goal (a car facing away from the goal would otherwise be picked again and again).
 _MAX_GOAL_FAILS = 3
 
 #: Errors a simulator may raise for one candidate control; such a candidate is discarded.
@@ -180,7 +183,7 @@ def _needle_space(sim) -> PlanningSpace:
     return PlanningSpace(
         low=[0.0, 0.0, -math.pi],
         high=[cfg.width, cfg.height, math.pi],
-        weights=[1.0, 1.0, 0.1**2],
+        weights=[1.0, 1.0, cfg.r_min**2],
         periodic=[False, False, True],
         goal=[cfg.goal_center[0], cfg.goal_center[1], 0.0],
         steps_per_extension=3,
@@ -395,8 +398,13 @@ def grow_tree(sim, *, seed, params=None, space: PlanningSpace | None = None, opt
             n += 1
             added = True
             break
-        if to_goal and not added:
+        if to_goal:
+            # every goal-directed attempt counts, and a child made by one inherits the count:
+            # a lineage creeping towards the goal with tiny steps (or facing away from it)
+            # stops being picked for the goal after _MAX_GOAL_FAILS attempts
             goal_fails[near] += 1
+            if added:
+                goal_fails[n - 1] = goal_fails[near]
 
     X = X[:n]
     best_node = int(np.argmin(space.distance(X, space.goal, to_goal=True)))
@@ -488,9 +496,11 @@ def rrt_plans(
         n_trees = -(-missing // per)
         batch = seeds[used : used + n_trees]
         offset = len(trees)
+        # a single tree for fewer plans than a tree collects stops at what is missing
+        opts = options if missing >= per else dataclasses.replace(options, plans_per_tree=missing)
         cb = None if on_tree is None else (lambda i, r, _o=offset: on_tree(_o + i, r))
         results = map_tasks(
-            _tree_task, [(sim, s, params, space, options) for s in batch], backend=backend, workers=workers, on_result=cb
+            _tree_task, [(sim, s, params, space, opts) for s in batch], backend=backend, workers=workers, on_result=cb
         )
         used += n_trees
         trees.extend(results)

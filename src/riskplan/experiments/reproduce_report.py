@@ -85,7 +85,7 @@ def _single_runs(report: Report, sec, name: str, store, sc: dict, seed: int) -> 
         if plans is None or sel is None:
             continue
         pc[case] = (plans[ours["candidate"]], sel["controller"])
-    runs = single_executions(name, store, pc, seed=seed)
+    runs = single_executions(name, pc, seed=seed)
     for fig_name, r in runs.items():
         fig, axes = plt.subplots(1, 2, figsize=(8, 4))
         for ax, kind in zip(axes, ("open", "closed")):

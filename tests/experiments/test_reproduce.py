@@ -204,7 +204,7 @@ def test_report_renders_in_browser(reference, tmp_path):
 
 
 @pytest.mark.ray
-def test_ray_cluster_gives_bit_identical_results(reference, ray_head, tmp_path):
+def test_ray_cluster_gives_bit_identical_results(reference, ray_head, tmp_path):  # noqa: F811 (fixture)
     """The execution batches on a Ray head started on the loopback address (the fixture of
     tests/test_parallel_ray_cluster.py) equal the serial run bit for bit."""
     import shutil

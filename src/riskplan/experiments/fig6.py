@@ -48,28 +48,29 @@ from __future__ import annotations
 
 import hashlib
 import logging
-import math
 import pickle
 import warnings
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from functools import partial
 from pathlib import Path
 
 import numpy as np
 
-from riskplan.errors import DataFormatError, InvalidInputError, PlanningError
+from riskplan.errors import DataFormatError, InvalidInputError
 
 log = logging.getLogger(__name__)
 
 __all__ = [
+    "EVAL_CASES",
     "METHODS",
     "METHOD_LABELS",
-    "EVAL_CASES",
-    "ScenarioScale",
     "SCALES",
     "BlobStore",
-    "run_scenario",
+    "ScenarioScale",
     "claims",
+    "evaluate_candidate",
+    "execute_batch",
+    "run_scenario",
     "single_executions",
 ]
 
@@ -188,8 +189,8 @@ class BlobStore:
 # ---- tasks (module level: picklable for process pools and Ray) ---------------------------
 
 
-def _select_task(args):
-    """Linearise one candidate under one case's S, LQG gains, LQG-MP (paper §IV-B..D), with
+def evaluate_candidate(args):
+    """``args = (sim, plan, lin_samples, goal_samples, seed)``: linearise one candidate under one case's S, LQG gains, LQG-MP (paper §IV-B..D), with
     :func:`riskplan.planning.select.evaluate_plan`. A candidate whose linearisation fails
     (the simulator's solve along it) gets ``P(success) = 0``, no controller, and its error."""
     from riskplan.errors import ConvergenceError, ElementInversionError, SimulationError
@@ -215,8 +216,8 @@ def _select_task(args):
     }
 
 
-def _execute_task(args) -> list[list[int]]:
-    """One batch of executions: ``[[success, collided, reached_goal, solver_failed], ...]``."""
+def execute_batch(args) -> list[list[int]]:
+    """``args = (sim, plan, controller or None, seeds)``: one batch of executions: ``[[success, collided, reached_goal, solver_failed], ...]``."""
     from riskplan.control.lqg import execute
 
     sim, plan, controller, seeds = args
@@ -316,7 +317,7 @@ def run_scenario(
     report(f"{name}: linearise + LQG-MP", done, len(sel_items))
     tasks = [(sims[c], plans[s][j], scale.lin_samples, scale.goal_samples, _seed_for(seed, name, "select", c, s, j))
              for (c, s, j) in todo]
-    for i, res in pmap(_select_task, tasks):
+    for i, res in pmap(evaluate_candidate, tasks):
         selection[todo[i]] = res
         blobs.put(sel_key[todo[i]], res)
         done += 1
@@ -355,7 +356,7 @@ def run_scenario(
         ctrl = None if m == "rrt" else sel["controller"]  # None also if its linearisation failed
         return (sims[c], plans[s][j], ctrl, case_seeds[c][b * bs : (b + 1) * bs])
 
-    for i, res in pmap(_execute_task, [task(it) for it in todo]):
+    for i, res in pmap(execute_batch, [task(it) for it in todo]):
         flags[todo[i]] = res
         store.put(bkey[todo[i]], res)
         done += 1
@@ -375,7 +376,7 @@ def run_scenario(
             s, j, sel = chosen[c, m]
             out_cases[c][m] = {
                 "successes": k,
-                "n": int(len(f)),
+                "n": len(f),
                 "rate": k / len(f),
                 "low": lo,
                 "high": hi,

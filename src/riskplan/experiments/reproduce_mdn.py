@@ -24,7 +24,7 @@ from riskplan.errors import InvalidInputError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["MDNScale", "MDN_SCALES", "run_mdn"]
+__all__ = ["MDN_SCALES", "MDNScale", "run_mdn"]
 
 
 @dataclass(frozen=True)
@@ -78,7 +78,7 @@ def _timing(model, robot, n: int, seed: int) -> dict:
     for q in cfgs[:m]:
         robot.solve_displacements(q)
     cos = (time.perf_counter() - t0) / m
-    return {"mdn_ms": mdn * 1e3, "cosserat_ms": cos * 1e3, "configs": int(len(cfgs)), "cosserat_configs": int(m),
+    return {"mdn_ms": mdn * 1e3, "cosserat_ms": cos * 1e3, "configs": len(cfgs), "cosserat_configs": int(m),
             "reduction_percent": 100.0 * (1.0 - mdn / cos)}
 
 
@@ -93,7 +93,11 @@ def run_mdn(out, scale: MDNScale, store, *, seed: int = 0, workers: int | None =
     from riskplan.datasets import generate_splits
     from riskplan.kinematics.data import read_point_clouds
     from riskplan.kinematics.evaluation import evaluate
-    from riskplan.kinematics.plotting import fig_nll_vs_components, fig_samples_vs_truth, plotly_samples_vs_truth
+    from riskplan.kinematics.plotting import (
+        fig_nll_vs_components,
+        fig_samples_vs_truth,
+        plotly_samples_vs_truth,
+    )
     from riskplan.kinematics.sweep import sweep
     from riskplan.kinematics.training import TrainConfig, train
     from riskplan.robots import load_robot

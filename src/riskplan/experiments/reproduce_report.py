@@ -38,7 +38,7 @@ def _fig6_png(sc: dict):
     ax.set_xticks(x, cases)
     ax.set_ylim(0, 105)
     ax.set_ylabel("successful executions [%]")
-    ax.legend(fontsize=7, ncol=2, loc="lower left")
+    ax.legend(fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.1), frameon=False)
     ax.set_title(f"{sc['scenario']}: {sc['cases'][cases[0]]['ours']['n']} executions per bar, 95 % Wilson intervals",
                  fontsize=10)
     return fig
@@ -118,8 +118,10 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
     for name, sc in results.get("deformable", {}).items():
         sec = rep.section(f"Deformable-planning paper, Fig. 6: {name}")
         size = sc["scale"]
-        Report.text(sec, f"{sc['candidates']} RRT candidates per set; {size['n_executions']} executions per method and "
-                    f"case (paper: {DEFORMABLE['executions_per_case']['value']}); plan lengths {sc['plan_steps']}.")
+        sets = "; ".join(f"{s}: {n} (steps {', '.join(map(str, sc['plan_steps'][s]))})" for s, n in sc["candidates"].items())
+        Report.text(sec, f"RRT candidates per set — {sets} (paper: {DEFORMABLE['candidates']['value']}); "
+                    f"{size['n_executions']} executions per method and case (paper: "
+                    f"{DEFORMABLE['executions_per_case']['value']}).")
         for m, why in sc["not_applicable"].items():
             Report.text(sec, f"{METHOD_LABELS[m]}: not applicable — {why}.")
         rep.figure(sec, _fig6_png(sc), f"fig6_{name}", f"Fig. 6 ({name}): percentage of successful executions.")

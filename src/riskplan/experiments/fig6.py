@@ -384,7 +384,7 @@ def run_scenario(
                 "missed_goal": int(((f[:, 1] == 0) & (f[:, 2] == 0) & (f[:, 3] == 0)).sum()),
                 "solver_failed": int(f[:, 3].sum()),
                 "predicted": None if m == "rrt" else sel["p_success"],
-                "controller_error": None if m == "rrt" else sel["error"],
+                "controller_error": None if m == "rrt" else sel.get("error"),
                 "candidate_set": s,
                 "candidate": j,
             }

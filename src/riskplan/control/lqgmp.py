@@ -49,9 +49,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import ndtr
-
-from riskplan.collision import DEFAULT_CUTOFF, Environment, free_region, precision_cholesky_from_covariance
 from riskplan.control.lqg import LQGController
 from riskplan.control.plan import NominalPlan
 from riskplan.errors import InvalidInputError
@@ -98,10 +95,12 @@ def point_indices(sim) -> tuple[np.ndarray, np.ndarray]:
     return col, goal
 
 
-def polygon_environment(polygons) -> Environment:
+def polygon_environment(polygons):
     """A 2-D :class:`~riskplan.collision.Environment` from simple polygons ``[(k_i, 2)]``,
     built without the self-intersection check (``Environment.from_polygons(validate=False)``):
     the scenarios' deformed polygons stay simple, and this runs once per plan step."""
+    from riskplan.collision import Environment
+
     return Environment.from_polygons(polygons, validate=False)
 
 
@@ -135,6 +134,8 @@ def joint_covariances(ctrl: LQGController, drift: bool = False) -> tuple[np.ndar
 
 def _truncate(mu, S, c, b):
     """Condition ``N(mu, S)`` on ``cᵀξ <= b`` (moment matching of the truncated normal)."""
+    from scipy.special import ndtr
+
     Sc = S @ c
     var = float(c @ Sc)
     if var <= _TINY:
@@ -166,7 +167,7 @@ def sigma_distances(starts, ends, points, covs) -> tuple[np.ndarray, np.ndarray]
     whitened segment); ``inside`` is the crossing-number test of the point against the
     polygons. Equal to the first half-space distance of :func:`riskplan.collision.free_region`.
     """
-    from riskplan.collision import whiten
+    from riskplan.collision import precision_cholesky_from_covariance, whiten
 
     U = precision_cholesky_from_covariance(covs)
     wa = whiten(starts, points, U)
@@ -209,7 +210,7 @@ def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
 
 
 def lqgmp(sim, plan: NominalPlan, controller: LQGController, *, method: str = "sigma",
-          n_goal_samples: int = 2000, cutoff: float = DEFAULT_CUTOFF, drift: bool = False,
+          n_goal_samples: int = 2000, cutoff: float | None = None, drift: bool = False,
           seed=None) -> LQGMPResult:
     """LQG-MP probability of success of ``plan`` under ``controller`` (module docstring).
 
@@ -220,12 +221,16 @@ def lqgmp(sim, plan: NominalPlan, controller: LQGController, *, method: str = "s
     controller : :class:`~riskplan.control.lqg.LQGController` of the plan's linearisation.
     method : ``"sigma"`` (paper) or ``"truncation"`` (Patil 2012).
     n_goal_samples : draws of the final state for ``P(goal)``.
-    cutoff : whitened radius of the free-region construction (:mod:`riskplan.collision.gaussian`).
+    cutoff : whitened radius of the free-region construction (default
+        :data:`riskplan.collision.DEFAULT_CUTOFF`, see :mod:`riskplan.collision.gaussian`).
     drift : carry the mean one-step deviation ``lin.drift`` (beyond the paper, whose model is
         zero-mean): ``μ_{t+1} = F_t μ_t + G_t (d̄_t, 0)`` with ``M_t − d̄_t d̄_tᵀ`` as the
         process noise covariance.
     seed : seeds the goal samples.
     """
+    from riskplan.collision import DEFAULT_CUTOFF, free_region, precision_cholesky_from_covariance
+
+    cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
     if method not in METHODS:
         raise InvalidInputError(f"method: expected one of {METHODS}, got {method!r}")
     if not isinstance(plan, NominalPlan):

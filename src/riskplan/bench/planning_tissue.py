@@ -9,7 +9,10 @@ pool with one worker per core):
 * ``<scenario>_selection_s``: :func:`riskplan.planning.select.select_plan` over those plans
   (linearisation, LQG gains and LQG-MP for each; the paper: 57 s and 386 s).
 
-Also the plans actually found, the CPU model and the core count. ``--quick``: 10 needle
+Also ``<scenario>_rrt_cpu_s`` / ``<scenario>_selection_cpu_s``: CPU seconds summed over the
+workers' tasks (on a shared machine the wall clock also counts other users' load; on two
+idle cores the wall time would be about half the CPU sum plus start-up). And the plans
+actually found, the CPU model and the core count. ``--quick``: 10 needle
 and 4 manipulation plans (keys ``..._rrt_10_s`` / ``..._rrt_4_s``), for a smoke test.
 """
 
@@ -51,6 +54,8 @@ def measure(scenario: str, n_plans: int, *, seed: int = 0, workers: int | None =
     return {
         f"{scenario}_rrt_{n_plans}_s": t_rrt,
         f"{scenario}_selection_s": t_sel,
+        f"{scenario}_rrt_cpu_s": sum(t.cpu_s for t in trees),
+        f"{scenario}_selection_cpu_s": sum(s.cpu_s for s in sel.ranking),
         f"{scenario}_plans_found": len(plans),
         f"{scenario}_trees": len(trees),
         f"{scenario}_best_p_success": sel.score(sel.best).p_success,

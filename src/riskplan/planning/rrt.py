@@ -58,7 +58,8 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from dataclasses import dataclass, field
+import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -258,7 +259,8 @@ class TreeResult:
 
     ``nodes (n, p)`` reduced states of the nodes, ``parents (n,)`` (root: −1),
     ``goal_nodes``: node indices of the plans' ends, ``best_goal_distance``: the
-    simulator's goal distance of the node nearest the goal point (by the metric).
+    simulator's goal distance of the node nearest the goal point (by the metric),
+    ``n_sim_steps``: simulator steps taken, ``cpu_s``: CPU seconds of the process growing it.
     """
 
     seed: int
@@ -269,7 +271,7 @@ class TreeResult:
     iterations: int
     best_goal_distance: float
     n_sim_steps: int = 0
-    extra: dict = field(default_factory=dict)
+    cpu_s: float = 0.0
 
     @property
     def size(self) -> int:
@@ -290,6 +292,7 @@ def grow_tree(sim, *, seed, params=None, space: PlanningSpace | None = None, opt
     (possibly none: :func:`rrt_plans` raises :class:`PlanningError` if all trees fail).
     Deterministic in ``seed``.
     """
+    cpu0 = time.process_time()
     _check_sim(sim)
     params = sim.nominal_params if params is None else params
     space = planning_space(sim) if space is None else space
@@ -421,6 +424,7 @@ def grow_tree(sim, *, seed, params=None, space: PlanningSpace | None = None, opt
         iterations=it,
         best_goal_distance=best,
         n_sim_steps=n_steps,
+        cpu_s=time.process_time() - cpu0,
     )
 
 

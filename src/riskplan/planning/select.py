@@ -43,7 +43,8 @@ _FAILURES = (ConvergenceError, ElementInversionError, SimulationError, np.linalg
 @dataclass(frozen=True)
 class PlanScore:
     """LQG-MP estimate of candidate ``index``: ``p_success``, ``p_collision_free``,
-    ``p_goal``, its number of steps, and ``error`` (the message if evaluation failed)."""
+    ``p_goal``, its number of steps, ``error`` (the message if evaluation failed) and the
+    CPU seconds its evaluation took."""
 
     index: int
     p_success: float
@@ -51,6 +52,7 @@ class PlanScore:
     p_goal: float
     n_steps: int
     error: str | None = None
+    cpu_s: float = 0.0
 
 
 @dataclass
@@ -103,11 +105,16 @@ def evaluate_plan(sim, plan, distribution=None, *, method: str = "sigma", n_samp
 
 
 def _evaluate_one(index, sim, plan, draws, kwargs, seed):
+    import time
+
+    cpu0 = time.process_time()
     try:
         controller, result = evaluate_plan(sim, plan, draws, seed=seed, **kwargs)
     except _FAILURES as exc:
-        return PlanScore(index, 0.0, 0.0, 0.0, plan.n_steps, error=str(exc)), None, None
-    score = PlanScore(index, float(result.p_success), float(result.p_collision_free), float(result.p_goal), plan.n_steps)
+        score = PlanScore(index, 0.0, 0.0, 0.0, plan.n_steps, error=str(exc), cpu_s=time.process_time() - cpu0)
+        return score, None, None
+    score = PlanScore(index, float(result.p_success), float(result.p_collision_free), float(result.p_goal),
+                      plan.n_steps, cpu_s=time.process_time() - cpu0)
     return score, controller, result
 
 

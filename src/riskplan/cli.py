@@ -24,10 +24,10 @@ app = typer.Typer(
 )
 
 # Areas in pipeline order. Each module defines ``register(app: typer.Typer) -> None``.
-AREAS = ("robot", "dataset", "kinematics", "collision", "tissue", "plan")
+AREAS = ("robot", "dataset", "kinematics", "collision", "tissue", "plan", "reproduce")
 # Benchmarks: ``riskplan.bench.<area>.run(quick: bool) -> dict`` (``-`` in an area name is ``_``
 # in the module name: ``planning-tissue`` -> ``riskplan.bench.planning_tissue``).
-BENCH_AREAS = ("robot", "kinematics", "collision", "tissue", "control", "planning")
+BENCH_AREAS = ("robot", "kinematics", "collision", "tissue", "control", "planning", "planning-tissue", "reproduce")
 
 
 def _setup_threads() -> None:

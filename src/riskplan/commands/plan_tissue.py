@@ -1,9 +1,93 @@
-"""``riskplan plan tissue``."""
+"""``riskplan plan tissue``: simulator RRT candidates, LQG-MP selection and its check against
+closed-loop executions for the deformable-tissue scenarios (Patil et al., RSS 2011, section IV)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import typer
+
+SCENARIOS = ("needle", "manipulation")
 
 
 def register(plan_app: typer.Typer) -> None:
     """Add the ``tissue`` command to the ``riskplan plan`` group."""
+
+    @plan_app.command("tissue")
+    def tissue(
+        scenario: str = typer.Option("needle", "--scenario", help="needle | manipulation"),
+        plans: int = typer.Option(100, "--plans", help="number of candidate plans (the paper: 100)"),
+        case: str = typer.Option(
+            "material-high", "--case", help="nominal | material-low | material-high | actuation | mesh | force"
+        ),
+        out: Path = typer.Option(..., "--out", help="output folder (npz, JSON, PNG, GIF)"),
+        workers: int = typer.Option(0, "--workers", help="worker processes (0: one per core)"),
+        seed: int = typer.Option(0, "--seed", help="master seed (trees, linearisation, checks)"),
+        method: str = typer.Option("sigma", "--method", help="LQG-MP collision estimate: sigma (paper) | truncation"),
+        check_runs: int = typer.Option(1000, "--check-runs", help="closed-loop executions per checked plan (0: skip)"),
+        check_others: int = typer.Option(2, "--check-others", help="plans checked besides the selected one"),
+        gif: bool = typer.Option(True, "--gif/--no-gif", help="write an animation of one closed-loop execution"),
+    ) -> None:
+        """Plan with the simulator RRT, select with LQG-MP, check the estimate, write OUT/."""
+        from rich.console import Console
+        from rich.table import Table
+
+        from riskplan.commands._progress import progress_bar
+        from riskplan.errors import InvalidInputError
+        from riskplan.experiments.planning_tissue import HONESTY_HEADER, plan_tissue, summary_rows, write_outputs
+        from riskplan.planning.rrt import RRTOptions
+        from riskplan.scenarios.uncertainty import CASE_NAMES
+
+        if scenario not in SCENARIOS:
+            raise InvalidInputError(f"scenario: expected one of {', '.join(SCENARIOS)}, got {scenario!r}")
+        if case not in CASE_NAMES:
+            raise InvalidInputError(f"case: expected one of {', '.join(CASE_NAMES)}, got {case!r}")
+        if plans < 1:
+            raise InvalidInputError(f"plans: expected >= 1, got {plans}")
+        options = RRTOptions()
+        n_trees = -(-plans // options.plans_per_tree)
+        console = Console(stderr=True)
+        with progress_bar() as bar:
+            t_rrt = bar.add_task("RRT trees", total=n_trees, status="")
+            t_sel = bar.add_task("LQG-MP selection", total=plans, status="", start=False)
+            found = [0]
+
+            def on_tree(i, tree):
+                found[0] += len(tree.plans)
+                total = max(n_trees, i + 1)
+                bar.update(t_rrt, total=total, completed=min(total, bar.tasks[t_rrt].completed + 1),
+                           status=f"{found[0]} plans")
+
+            def on_plan(i, score):
+                if not bar.tasks[t_sel].started:
+                    bar.start_task(t_sel)
+                bar.advance(t_sel)
+                bar.update(t_sel, status=f"#{i}: P={score.p_success:.3f}")
+
+            t_chk = bar.add_task("Monte Carlo check", total=1 + check_others if check_runs else 0, status="",
+                                 visible=bool(check_runs))
+
+            def on_check(row):
+                bar.advance(t_chk)
+
+            result = plan_tissue(scenario, n_plans=plans, case=case, seed=seed, workers=workers or None,
+                                 rrt_options=options, method=method, check_runs=check_runs,
+                                 check_others=check_others, on_tree=on_tree, on_plan=on_plan, on_check=on_check)
+            bar.update(t_sel, total=len(result.plans))
+        files = write_outputs(result, out, gif=gif, gif_seed=seed)
+        sel = result.selection
+        best = sel.score(sel.best)
+        console.print(
+            f"{scenario}, case {case}: {len(result.plans)} candidates in {result.timings['rrt']:.1f} s, "
+            f"selection {result.timings['selection']:.1f} s; selected #{sel.best} ({sel.plan.n_steps} steps): "
+            f"LQG-MP P(success) = {best.p_success:.3f} (no collision {best.p_collision_free:.3f}, goal {best.p_goal:.3f})"
+        )
+        if result.honesty:
+            table = Table(title=f"LQG-MP estimate vs {check_runs} closed-loop executions ({case})")
+            for h in HONESTY_HEADER:
+                table.add_column(h, justify="right")
+            for row in summary_rows(result):
+                table.add_row(*[f"{v:.3f}" if isinstance(v, float) else str(v) for v in row])
+            Console().print(table)
+        for name, path in files.items():
+            typer.echo(f"{name}: {path}")

@@ -18,7 +18,7 @@ from riskplan.experiments.report import Report
 
 log = logging.getLogger(__name__)
 
-STAGES = ("robot", "kinematics", "collision", "tissue", "planning")
+STAGES = ("robot", "kinematics", "collision", "tissue", "planning", "planning_tissue")
 
 
 def run_demo(out, *, seed: int = 0, workers: int | None = None, stages=STAGES, progress=None) -> Path:

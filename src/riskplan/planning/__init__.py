@@ -9,6 +9,11 @@ Chest cavity (MDN paper section V, Figs. 6-7):
   and the comparison optimisers;
 * :mod:`riskplan.planning.chest` — the whole pipeline on a model and a mesh;
 * :mod:`riskplan.planning.validate` — does a planned trajectory hold on the simulated robot?
+
+Deformable tissue (deformable-planning paper, section IV):
+
+* :mod:`riskplan.planning.rrt` — the simulator RRT (candidate plans with stored simulator states);
+* :mod:`riskplan.planning.select` — LQG-MP plan selection and its Monte Carlo check.
 """
 
 from riskplan.planning.bo import OptimisationResult, OptimiserConfig, optimise_trajectory

@@ -1,0 +1,73 @@
+"""Speed of planning under uncertainty in deformable tissue (issue 11):
+``riskplan bench planning-tissue --json``.
+
+Per scenario (needle V-A, manipulation V-B; case material-high, seed 0, the local process
+pool with one worker per core):
+
+* ``<scenario>_rrt_100_s``: wall-clock seconds of :func:`riskplan.planning.rrt.rrt_plans`
+  for 100 candidate plans (the paper: needle 81 s, manipulation 438 s, C++ on a 3.33 GHz i7);
+* ``<scenario>_selection_s``: :func:`riskplan.planning.select.select_plan` over those plans
+  (linearisation, LQG gains and LQG-MP for each; the paper: 57 s and 386 s).
+
+Also ``<scenario>_rrt_cpu_s`` / ``<scenario>_selection_cpu_s``: CPU seconds summed over the
+workers' tasks (on a shared machine the wall clock also counts other users' load; on two
+idle cores the wall time would be about half the CPU sum plus start-up). And the plans
+actually found, the CPU model and the core count. ``--quick``: 10 needle
+and 4 manipulation plans (keys ``..._rrt_10_s`` / ``..._rrt_4_s``), for a smoke test.
+"""
+
+from __future__ import annotations
+
+import platform
+import time
+
+
+def cpu_model() -> str:
+    """The CPU's model name (from /proc/cpuinfo where there is one)."""
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.lower().startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:  # pragma: no cover - not Linux
+        pass
+    return platform.processor() or platform.machine()
+
+
+def measure(scenario: str, n_plans: int, *, seed: int = 0, workers: int | None = None) -> dict:
+    """Seconds of the RRT and of the selection for ``n_plans`` candidates of ``scenario``."""
+    import warnings
+
+    from riskplan.planning.rrt import rrt_plans
+    from riskplan.planning.select import select_plan
+    from riskplan.scenarios.registry import make_scenario
+
+    sim = make_scenario(scenario, "material-high")
+    t0 = time.perf_counter()
+    plans, trees = rrt_plans(sim, n_plans, seed=seed, workers=workers)
+    t_rrt = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        sel = select_plan(sim, plans, sim.distribution, seed=seed, workers=workers)
+    t_sel = time.perf_counter() - t0
+    return {
+        f"{scenario}_rrt_{n_plans}_s": t_rrt,
+        f"{scenario}_selection_s": t_sel,
+        f"{scenario}_rrt_cpu_s": sum(t.cpu_s for t in trees),
+        f"{scenario}_selection_cpu_s": sum(s.cpu_s for s in sel.ranking),
+        f"{scenario}_plans_found": len(plans),
+        f"{scenario}_trees": len(trees),
+        f"{scenario}_best_p_success": sel.score(sel.best).p_success,
+    }
+
+
+def run(quick: bool = False) -> dict:
+    from riskplan.parallel import default_workers
+
+    out: dict = {}
+    out.update(measure("needle", 10 if quick else 100))
+    out.update(measure("manipulation", 4 if quick else 100))
+    out["cpu_model"] = cpu_model()
+    out["cores"] = default_workers()
+    return out

@@ -1,0 +1,47 @@
+"""``riskplan reproduce``: both papers' evaluations as one resumable command
+(:mod:`riskplan.experiments.reproduce`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def reproduce(
+        paper: str = typer.Option("all", help="mdn | deformable | all."),
+        scale: str = typer.Option("smoke", help="smoke (minutes) | paper (the papers' sizes; hours)."),
+        backend: str = typer.Option("local", help="serial | local (process pool) | ray."),
+        address: str = typer.Option(None, "--address", help="Ray cluster address (host:port, ray://host:port or auto); with --backend ray."),
+        workers: int = typer.Option(0, help="Worker processes (0: one per core)."),
+        seed: int = typer.Option(0, help="Master seed."),
+        out: Path = typer.Option(Path("reproduce-out"), "--out", "-o", help="Output folder (an existing one is continued)."),
+    ) -> None:
+        """Reproduce the papers' figures and claims; writes OUT/results.json and OUT/report.html.
+
+        Rerunning the same command continues from OUT/store and gives the same results.json.
+        """
+        from riskplan.commands._progress import progress_bar
+        from riskplan.experiments.reproduce import reproduce as run
+
+        with progress_bar() as bar:
+            tasks: dict = {}
+
+            def progress(stage: str, done: int, total: int) -> None:
+                if stage not in tasks:
+                    tasks[stage] = bar.add_task(stage, total=total, status="")
+                bar.update(tasks[stage], completed=done, total=total)
+
+            results = run(out, paper=paper, scale=scale, backend=backend, ray_address=address, workers=workers or None,
+                          seed=seed, progress=progress)
+        for name, sc in results.get("deformable", {}).items():
+            cl = sc["claims"]
+            typer.echo(
+                f"{name}: mean success rrt {100 * cl['mean_rate']['rrt']:.1f} %, without selection "
+                f"{100 * cl['mean_rate']['ours_no_select']:.1f} %, ours {100 * cl['mean_rate']['ours']:.1f} %; "
+                f"ours highest in every case: {'yes' if cl['ours_highest_all'] else 'no'}"
+            )
+        typer.echo(f"results: {Path(out) / 'results.json'}")
+        typer.echo(f"report: {Path(out) / 'report.html'}")

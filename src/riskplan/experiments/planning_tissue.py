@@ -1,0 +1,204 @@
+"""Planning under uncertainty in deformable tissue, end to end (Patil, van den Berg &
+Alterovitz, RSS 2011, Fig. 2): simulator RRT candidates → linearisation, LQG and LQG-MP
+selection → the LQG-MP estimate checked against closed-loop executions; figures of the
+candidates with the chosen plan (paper Figs. 1b/1d, 7b) and an animation of one execution.
+
+Used by ``riskplan plan tissue``, ``riskplan bench planning-tissue`` and the demo stage
+``planning_tissue``. Matplotlib is imported inside the plotting functions only.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "TissuePlanningResult",
+    "plan_tissue",
+    "candidates_figure",
+    "execution_gif",
+    "write_outputs",
+]
+
+
+@dataclass
+class TissuePlanningResult:
+    """Everything one run produces: the scenario (``sim``, with the case's distribution),
+    ``plans``, ``trees``, the :class:`~riskplan.planning.select.Selection`, the honesty rows
+    and wall-clock ``timings`` (seconds: ``rrt``, ``selection``, ``check``)."""
+
+    scenario: str
+    case: str
+    seed: int
+    sim: object
+    plans: list
+    trees: list
+    selection: object
+    honesty: list = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
+
+
+def plan_tissue(scenario: str = "needle", *, n_plans: int = 100, case: str = "material-high", seed: int = 0,
+                workers: int | None = None, backend: str = "local", rrt_options=None, method: str = "sigma",
+                n_samples: int = 16, check_runs: int = 1000, check_others: int = 2,
+                on_tree=None, on_plan=None, on_check=None) -> TissuePlanningResult:
+    """Run the method on one scenario (``"needle"`` or ``"manipulation"``) and uncertainty
+    ``case`` (:data:`riskplan.scenarios.uncertainty.CASE_NAMES`).
+
+    ``n_plans`` candidates from :func:`~riskplan.planning.rrt.rrt_plans`, selection by
+    :func:`~riskplan.planning.select.select_plan` (``method``, ``n_samples`` parameter draws
+    per step for ``M_t``), then ``check_runs`` closed-loop executions for the selected plan
+    and ``check_others`` more (``check_runs = 0`` skips the check). ``on_tree(i, tree)``,
+    ``on_plan(i, score)``, ``on_check(row)`` report progress.
+    """
+    from riskplan.planning.rrt import RRTOptions, rrt_plans
+    from riskplan.planning.select import honesty_check, select_plan
+    from riskplan.scenarios.registry import make_scenario
+
+    sim = make_scenario(scenario, case)
+    options = rrt_options or RRTOptions()
+    timings = {}
+    t0 = time.perf_counter()
+    plans, trees = rrt_plans(sim, n_plans, seed=seed, options=options, backend=backend, workers=workers,
+                             on_tree=on_tree)
+    timings["rrt"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    selection = select_plan(sim, plans, sim.distribution, method=method, n_samples=n_samples, seed=seed + 1,
+                            backend=backend, workers=workers, on_result=on_plan)
+    timings["selection"] = time.perf_counter() - t0
+    rows = []
+    if check_runs:
+        t0 = time.perf_counter()
+        rows = honesty_check(sim, plans, selection, sim.distribution, others=check_others, n=check_runs,
+                             seed=seed + 2, backend=backend, workers=workers, on_row=on_check)
+        timings["check"] = time.perf_counter() - t0
+    return TissuePlanningResult(scenario, case, seed, sim, plans, trees, selection, rows, timings)
+
+
+# ---- figures ----------------------------------------------------------------------------
+
+
+def candidates_figure(sim, plans, best: int, *, title: str | None = None, size: float = 5.2):
+    """The candidates (thin grey: robot path for the needle, target path for the
+    manipulation scenario) over the scene at the end of the chosen plan, the chosen one
+    highlighted (paper Figs. 1b/1d, 7b). Returns the matplotlib figure."""
+    import matplotlib.pyplot as plt
+
+    from riskplan.scenarios.plotting import draw_frame
+
+    fig, ax = plt.subplots(figsize=(size, size))
+    chosen = plans[best]
+    draw_frame(ax, sim, list(chosen.states), title=title or f"{sim.name}: {len(plans)} candidates, chosen #{best}")
+    for i, plan in enumerate(plans):
+        if i == best:
+            continue
+        path = sim.path(plan.states)
+        ax.plot(path[:, 0], path[:, 1], "-", color="0.25", lw=0.6, alpha=0.45, zorder=1)
+    path = sim.path(chosen.states)
+    ax.plot(path[:, 0], path[:, 1], "-", color="tab:orange", lw=2.5, zorder=5, label="selected (LQG-MP)")
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def execution_gif(sim, plan, controller, params, path, *, seed=0, max_frames: int = 40) -> tuple[Path, object]:
+    """Animated GIF of one closed-loop LQG execution of ``plan`` under ``params`` (one draw
+    of the case); returns the path and the :class:`~riskplan.control.lqg.Execution`."""
+    from riskplan.control.lqg import execute
+    from riskplan.scenarios.plotting import save_gif
+
+    ex = execute(sim, plan, controller, params, seed=seed)
+    return save_gif(sim, list(ex.states), path, max_frames=max_frames), ex
+
+
+# ---- files ------------------------------------------------------------------------------
+
+
+def _pack(plans) -> dict:
+    """Variable-length plans as flat arrays plus offsets: plan ``i`` has controls
+    ``controls[c_off[i]:c_off[i+1]]`` and reduced states ``reduced[x_off[i]:x_off[i+1]]``."""
+    c_off = np.cumsum([0] + [p.n_steps for p in plans])
+    x_off = np.cumsum([0] + [p.n_steps + 1 for p in plans])
+    return {
+        "controls": np.concatenate([p.controls for p in plans]),
+        "reduced": np.concatenate([p.reduced for p in plans]),
+        "control_offsets": c_off,
+        "state_offsets": x_off,
+    }
+
+
+def _savez_atomic(path: Path, **arrays) -> None:
+    from riskplan.io import atomic_path
+
+    with atomic_path(path, suffix=".npz") as tmp:
+        np.savez_compressed(tmp, **arrays)
+
+
+def write_outputs(result: TissuePlanningResult, out, *, gif: bool = True, gif_seed: int = 0) -> dict:
+    """Write the run into folder ``out`` (atomic writes) and return ``{name: path}``:
+
+    * ``candidates.npz`` (:func:`_pack` layout) and ``candidates.json`` (LQG-MP scores);
+    * ``selected.npz``: the chosen plan's ``controls (T, q)``, ``reduced (T+1, p)`` and gains
+      ``L (T, q, p)``, ``K (T, p, m)``, ``P (T, p, p)``, ``A``, ``B``, ``M``, ``H``, ``N``;
+    * ``selected.json``: scenario, case, seed, index, probabilities, the honesty check, timings;
+    * ``candidates.png`` and ``execution.gif`` (one closed-loop run under a draw of the case).
+    """
+    from riskplan.io import write_json_atomic
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    sel = result.selection
+    sim = result.sim
+    files = {}
+    files["candidates.npz"] = out / "candidates.npz"
+    _savez_atomic(files["candidates.npz"], **_pack(result.plans))
+    files["candidates.json"] = out / "candidates.json"
+    write_json_atomic(files["candidates.json"], {
+        "scenario": result.scenario, "case": result.case, "seed": result.seed, "method": sel.method,
+        "scores": [asdict(s) for s in sorted(sel.ranking, key=lambda s: s.index)],
+        "trees": [{"seed": t.seed, "nodes": t.size, "iterations": t.iterations, "plans": len(t.plans),
+                   "best_goal_distance": t.best_goal_distance} for t in result.trees],
+    })
+    c = sel.controller
+    files["selected.npz"] = out / "selected.npz"
+    _savez_atomic(files["selected.npz"], controls=sel.plan.controls, reduced=sel.plan.reduced, L=c.L, K=c.K, P=c.P,
+                  A=c.lin.A, B=c.lin.B, M=c.lin.M, H=c.lin.H, N=c.lin.N)
+    best = sel.score(sel.best)
+    files["selected.json"] = out / "selected.json"
+    write_json_atomic(files["selected.json"], {
+        "scenario": result.scenario, "case": result.case, "seed": result.seed, "index": sel.best,
+        "n_steps": sel.plan.n_steps, "p_success": best.p_success, "p_collision_free": best.p_collision_free,
+        "p_goal": best.p_goal, "method": sel.method,
+        "honesty_check": [dict(asdict(r), inside=r.inside) for r in result.honesty],
+        "timings_s": result.timings, "n_candidates": len(result.plans),
+    })
+    import matplotlib.pyplot as plt
+
+    fig = candidates_figure(sim, result.plans, sel.best)
+    files["candidates.png"] = out / "candidates.png"
+    from riskplan.io import atomic_path
+
+    with atomic_path(files["candidates.png"], suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    if gif:
+        params = sim.sample_params(gif_seed)
+        files["execution.gif"], _ = execution_gif(sim, sel.plan, sel.controller, params, out / "execution.gif",
+                                                  seed=gif_seed)
+    return files
+
+
+def summary_rows(result: TissuePlanningResult) -> list[list]:
+    """Table rows for the honesty check: candidate, rank, LQG-MP, Monte Carlo, interval."""
+    return [[r.index, r.rank + 1, r.p_lqgmp, r.p_mc, f"[{r.low:.3f}, {r.high:.3f}]", r.n,
+             "yes" if r.inside else "no"] for r in result.honesty]
+
+
+HONESTY_HEADER = ["candidate", "rank", "P(success) LQG-MP", "success rate (MC)", "95 % interval", "runs", "inside"]
+

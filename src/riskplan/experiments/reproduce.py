@@ -1,0 +1,140 @@
+"""``riskplan reproduce``: both papers' evaluations as one resumable job.
+
+* ``deformable`` — Patil, van den Berg & Alterovitz, RSS 2011, §V: Fig. 6 for the needle
+  and the manipulation scenario (:mod:`riskplan.experiments.fig6`), the paper's claims
+  checked by numbers, LQG-MP's predicted ``P(success)`` beside the measured rate, and the
+  single executions of Figs. 4, 5 and 7(c-f).
+* ``mdn`` — the MDN paper: Fig. 4 (NLL vs K), Fig. 5, MDN vs Cosserat timing
+  (:mod:`riskplan.experiments.reproduce_mdn`).
+
+Outputs in ``out``: ``results.json`` (every number, a pure function of paper, scale and
+seed, so a rerun or a resumed run writes the same file whatever the backend),
+``timings.json`` (wall-clock times, which vary), ``report.html`` with PNG figures and
+interactive plotly pages, and ``store/`` (the finished work units,
+:class:`~riskplan.experiments.store.ResultStore`). Rerunning the same command continues
+from ``store/``; a store of another configuration or a corrupted record raises
+:class:`~riskplan.errors.DataFormatError` naming it.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+from riskplan.errors import InvalidInputError
+
+log = logging.getLogger(__name__)
+
+__all__ = ["PAPERS", "SCALE_NAMES", "reproduce", "resolve_scale"]
+
+PAPERS = ("mdn", "deformable", "all")
+SCALE_NAMES = ("smoke", "paper")
+SCENARIOS = ("needle", "manipulation")
+
+
+def resolve_scale(scale) -> tuple[str, dict]:
+    """``(name, {"needle": ScenarioScale, "manipulation": ScenarioScale, "mdn": MDNScale})``
+    for a scale name (:data:`SCALE_NAMES`) or an explicit dict of those (name ``"custom"``)."""
+    from riskplan.experiments.fig6 import SCALES
+    from riskplan.experiments.reproduce_mdn import MDN_SCALES
+
+    if isinstance(scale, str):
+        if scale not in SCALE_NAMES:
+            raise InvalidInputError(f"scale: expected one of {', '.join(SCALE_NAMES)}, got {scale!r}")
+        return scale, {**SCALES[scale], "mdn": MDN_SCALES[scale]}
+    if isinstance(scale, dict):
+        return "custom", dict(scale)
+    raise InvalidInputError(f"scale: expected one of {', '.join(SCALE_NAMES)} or a dict of scales, got {scale!r}")
+
+
+def _check(paper, backend, workers, ray_address):
+    from riskplan.parallel import BACKENDS, check_ray_address
+
+    if paper not in PAPERS:
+        raise InvalidInputError(f"paper: expected one of {', '.join(PAPERS)}, got {paper!r}")
+    if backend not in BACKENDS:
+        raise InvalidInputError(f"backend: expected one of {', '.join(BACKENDS)}, got {backend!r}")
+    if workers is not None and (int(workers) != workers or workers < 1):
+        raise InvalidInputError(f"workers: expected a positive integer, got {workers!r}")
+    if ray_address is not None:
+        if backend != "ray":
+            raise InvalidInputError(f"address: only used with backend 'ray', got backend {backend!r}")
+        check_ray_address(ray_address)  # BackendUnavailableError within seconds
+
+
+def reproduce(
+    out,
+    *,
+    paper: str = "all",
+    scale="smoke",
+    backend: str = "local",
+    ray_address: str | None = None,
+    workers: int | None = None,
+    seed: int = 0,
+    progress=None,
+) -> dict:
+    """Run (or continue) the reproduction and write ``out/results.json`` and ``out/report.html``.
+
+    Parameters
+    ----------
+    out : output folder (created; an existing one is continued).
+    paper : ``"mdn"``, ``"deformable"`` or ``"all"``.
+    scale : ``"smoke"`` (minutes), ``"paper"`` (the papers' sizes) or a dict of scales.
+    backend, ray_address, workers : :mod:`riskplan.parallel` (results do not depend on them).
+    seed : master seed.
+    progress : optional ``progress(stage, done, total)`` callback.
+
+    Returns the results dict (what ``results.json`` holds). Raises
+    :class:`~riskplan.errors.InvalidInputError` for bad arguments,
+    :class:`~riskplan.errors.BackendUnavailableError` for an unreachable Ray address and
+    :class:`~riskplan.errors.DataFormatError` for a corrupted or foreign results store.
+    """
+    import riskplan
+    from riskplan.experiments.store import ResultStore
+    from riskplan.io import write_json_atomic
+
+    _check(paper, backend, workers, ray_address)
+    scale_name, scales = resolve_scale(scale)
+    seed = int(seed)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    config = {
+        "paper": paper,
+        "scale": scale_name,
+        "sizes": {k: asdict(v) for k, v in scales.items()},
+        "seed": seed,
+        "version": riskplan.__version__,
+    }
+    store = ResultStore(out / "store", config)
+    results: dict = {"config": config}
+    timings: dict = {"backend": backend, "workers": workers}
+    if paper in ("deformable", "all"):
+        from riskplan.experiments.fig6 import run_scenario
+
+        results["deformable"] = {}
+        for name in SCENARIOS:
+            t0 = time.perf_counter()
+            results["deformable"][name] = run_scenario(
+                name, scales[name], store, seed=seed, backend=backend, workers=workers, ray_address=ray_address,
+                progress=progress,
+            )
+            timings[f"deformable_{name}_s"] = time.perf_counter() - t0
+    if paper in ("mdn", "all"):
+        from riskplan.experiments.reproduce_mdn import run_mdn
+
+        t0 = time.perf_counter()
+        results["mdn"] = run_mdn(out / "mdn", scales["mdn"], store, seed=seed, workers=workers, progress=progress)
+        timings["mdn_s"] = time.perf_counter() - t0
+    write_json_atomic(out / "results.json", results, sort_keys=True)
+    write_json_atomic(out / "timings.json", timings, sort_keys=True)
+    from riskplan.experiments.reproduce_report import write_report
+
+    t0 = time.perf_counter()
+    write_report(out, results, store, timings, seed=seed)
+    timings["report_s"] = time.perf_counter() - t0
+    write_json_atomic(out / "timings.json", timings, sort_keys=True)
+    log.info("reproduce: results in %s", out)
+    return json.loads(json.dumps(results))

@@ -20,6 +20,7 @@ from riskplan._validation import as_array
 from riskplan.deformable.material import Material
 from riskplan.deformable.mesh import TissueMesh
 from riskplan.errors import InvalidInputError, require
+from riskplan.threads import one_blas_thread
 
 #: Free-DOF count up to which the reduced stiffness is inverted densely (a dense
 #: mat-vec beats banded triangular solves for small systems); above it an RCM-ordered
@@ -144,6 +145,7 @@ class LinearElasticModel:
     def __setstate__(self, state):
         self.__init__(state["mesh"], state["material"], state["fixed_nodes"], _parts=state["parts"])
 
+    @one_blas_thread
     def _factorise(self) -> None:
         import scipy.linalg
         from scipy.sparse.linalg import splu

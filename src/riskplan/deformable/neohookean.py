@@ -33,6 +33,7 @@ from riskplan._validation import as_array
 from riskplan.deformable.material import Material
 from riskplan.deformable.mesh import TissueMesh
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
+from riskplan.threads import one_blas_thread
 
 logger = logging.getLogger(__name__)
 
@@ -456,6 +457,7 @@ class HyperelasticModel:
         out[self.free_dofs] -= self._factor(st)(rhs)
         return out
 
+    @one_blas_thread
     def solve_with_info(
         self, nodal_forces, u0=None, *, fixed_values=None, load_steps: int = 1, max_halvings: int = 8
     ):

@@ -67,11 +67,11 @@ def test_nonconvex_notch_is_outside(poly200):
 def test_tree_candidates_equal_exhaustive_search(rng, tol):
     """Candidate elements from a k-d tree never change the answer (fallback is exhaustive)."""
     from riskplan.deformable import mesh_polygon, rectangle
-    from riskplan.deformable.locate import _mesh_maps, locate_points
+    from riskplan.deformable.locate import locate_points
 
     mesh = mesh_polygon(rectangle(), 1000)
     pts = np.vstack([rng.uniform(-0.05, 1.05, size=(400, 2)), mesh.nodes[:50]])
-    maps = _mesh_maps(mesh)
+    maps = mesh.barycentric_maps
     e_brute, l_brute = locate_points(maps, pts)
     bad_cand = rng.integers(0, mesh.n_elements, size=(len(pts), 3))  # mostly wrong candidates
     e_c, l_c = locate_points(maps, pts, candidates=bad_cand)

@@ -33,10 +33,10 @@ def _linear_setup(n_elements: int):
 
 
 def linear_step_ms(n_elements: int, repeats: int = 200) -> float:
-    from riskplan.deformable.locate import _mesh_maps, locate_points
+    from riskplan.deformable.locate import locate_points
 
     mesh, model, material_points = _linear_setup(n_elements)
-    maps = _mesh_maps(mesh)
+    maps = mesh.barycentric_maps
     tri = mesh.triangles
     n = 2 * mesh.n_nodes
     state = {"x": np.array([0.1, 0.2]), "k": 0}

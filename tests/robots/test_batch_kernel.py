@@ -150,16 +150,7 @@ def test_kernel_flags_unconverged_configurations(paper, rng):
         np.empty((40, n, 3, 3)),
         np.zeros(40, dtype=np.int64),
     )
-    args = (
-        paper._rt,
-        paper._drt,
-        paper._ddrt,
-        paper._kse,
-        paper._kbt,
-        paper._L,
-        paper._n,
-        LOCAL_TOL,
-    )
+    args = (paper.tables, LOCAL_TOL)
     batch_kernel._solve_serial(tau, *args, 1, P, R, st)
     loaded = np.any(tau > 0, axis=1)
     assert np.all(st[loaded] == 1) and np.all(st[~loaded] == 0)

@@ -139,7 +139,7 @@ def test_bad_array_input_in_a_batch(paper, row, match):
 
 
 def test_fast_limit_check_matches_numpy(paper, rng):
-    from riskplan.robots.cosserat import in_limits
+    from riskplan.robots.robot import in_limits
 
     low, high = paper._dlo, paper._dhi
     for _ in range(200):

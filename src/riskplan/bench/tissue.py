@@ -1,4 +1,4 @@
-"""Speed of one tissue-simulator step (issue 5): ``riskplan bench tissue --json``.
+"""Speed of one tissue-simulator step: ``riskplan bench tissue --json``.
 
 One *step* is what a planner's simulator does per control: a quasi-static solve under a
 small load change, warm-started from the previous state, then the material points read

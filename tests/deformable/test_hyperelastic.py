@@ -15,6 +15,7 @@ from riskplan.deformable import (
 )
 from riskplan.deformable.laws import neohookean_energy_stress
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
+from tests.conftest import TOL
 
 
 @pytest.mark.parametrize("law", ["neohookean", "svk"])
@@ -31,13 +32,13 @@ def test_assembled_tangent_equals_fd_of_residual(poly200, rng, law):
         du[c] = h
         fp = model.internal_forces((u.ravel() + du).reshape(-1, 2)).ravel()
         fm = model.internal_forces((u.ravel() - du).reshape(-1, 2)).ravel()
-        np.testing.assert_allclose(K[:, c], (fp - fm) / (2 * h), rtol=1e-6, atol=1e-6 * np.abs(K).max())
+        np.testing.assert_allclose(K[:, c], (fp - fm) / (2 * h), rtol=TOL["fd_tangent"]["rtol"], atol=TOL["fd_tangent"]["atol"] * np.abs(K).max())
     # internal forces are the gradient of the stored energy
     g = np.array([(model.energy((u.ravel() + h * e).reshape(-1, 2)) - model.energy((u.ravel() - h * e).reshape(-1, 2))) / (2 * h) for e in np.eye(2 * poly200.n_nodes)[cols]])
-    np.testing.assert_allclose(g, model.internal_forces(u).ravel()[cols], rtol=1e-6, atol=1e-8)
+    np.testing.assert_allclose(g, model.internal_forces(u).ravel()[cols], **TOL["fd_jacobian"])
     # reduced tangent is the free-free block of the full one
     Kr = model.tangent(u).toarray()
-    np.testing.assert_allclose(Kr, K[np.ix_(model.free_dofs, model.free_dofs)], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(Kr, K[np.ix_(model.free_dofs, model.free_dofs)], **TOL["float64_exact"])
 
 
 @pytest.mark.parametrize("plane", ["stress", "strain"])
@@ -47,7 +48,7 @@ def test_tangent_at_rest_is_linear_stiffness(square175, plane, tol):
     lin = LinearElasticModel(square175, mat, square175.vertex_nodes)
     nh = NeoHookeanModel(square175, mat, square175.vertex_nodes)
     K0 = nh.tangent(np.zeros((square175.n_nodes, 2)), full=True)
-    np.testing.assert_allclose(K0.toarray(), lin.K.toarray(), rtol=0, atol=1e-12 * abs(lin.K).max())
+    np.testing.assert_allclose(K0.toarray(), lin.K.toarray(), rtol=TOL["float64_abs"]["rtol"], atol=TOL["float64_abs"]["atol"] * abs(lin.K).max())
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +77,7 @@ def test_small_loads_nonlinear_matches_linear(manip):
     diffs = np.array(diffs)
     # the relative difference is O(load): ~10x per decade, and small at small loads
     assert diffs[0] < 1e-3, diffs
-    np.testing.assert_allclose(diffs[1:] / diffs[:-1], 10.0, rtol=0.1)
+    np.testing.assert_allclose(diffs[1:] / diffs[:-1], 10.0, **TOL["convergence_ratio"])
 
 
 @pytest.mark.parametrize("law", ["neohookean", "svk"])
@@ -86,7 +87,7 @@ def test_equilibrium_after_solve_and_warm_start(manip, law):
     u, info = nh.solve_with_info(f)
     r = nh.residual(u, f)
     assert np.linalg.norm(r) <= nh.rtol * np.linalg.norm(f) + nh.atol
-    assert info.residual == pytest.approx(np.linalg.norm(r[~np.isin(np.arange(mesh.n_nodes), fixed)]), rel=1e-6, abs=1e-12)
+    np.testing.assert_allclose(info.residual, np.linalg.norm(r[~np.isin(np.arange(mesh.n_nodes), fixed)]), **TOL["residual_norm"])
     assert info.min_jacobian > 0
     # a slightly different load: warm start needs fewer Newton iterations than a cold one
     f2 = 1.02 * f
@@ -95,7 +96,7 @@ def test_equilibrium_after_solve_and_warm_start(manip, law):
     assert warm.iterations < cold.iterations
     assert np.linalg.norm(nh.residual(u2, f2)) <= nh.rtol * np.linalg.norm(f2) + nh.atol
     # same equilibrium from either start
-    np.testing.assert_allclose(u2, nh.solve(f2), rtol=0, atol=1e-8)
+    np.testing.assert_allclose(u2, nh.solve(f2), **TOL["newton_paths"])
 
 
 def test_large_deformation_and_load_steps(manip):
@@ -104,7 +105,7 @@ def test_large_deformation_and_load_steps(manip):
     u1, i1 = nh.solve_with_info(8 * f)
     u4, i4 = nh.solve_with_info(8 * f, load_steps=4)
     assert i4.load_steps == 4
-    np.testing.assert_allclose(u1, u4, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(u1, u4, **TOL["newton_paths"])
     assert i1.min_jacobian < 0.9  # genuinely nonlinear regime
     lin = LinearElasticModel(mesh, mat, fixed).solve(8 * f)
     assert np.linalg.norm(u1 - lin) / np.linalg.norm(lin) > 0.02
@@ -185,8 +186,8 @@ def test_nonlinear_patch_test_homogeneous_deformation(poly200, rng, law):
     exact = poly200.nodes @ (F - np.eye(2)).T + c
     model = HyperelasticModel(poly200, Material(50.0, 0.4, plane="strain"), poly200.boundary_nodes, law=law)
     u, info = model.solve_with_info(np.zeros((poly200.n_nodes, 2)), fixed_values=exact[model.fixed_nodes], load_steps=2)
-    np.testing.assert_allclose(u, exact, rtol=0, atol=1e-10)
-    np.testing.assert_allclose(model.jacobians(u), np.linalg.det(F), rtol=1e-12, atol=0)
+    np.testing.assert_allclose(u, exact, **TOL["linear_fem"])
+    np.testing.assert_allclose(model.jacobians(u), np.linalg.det(F), **TOL["float64_exact_rel"])
 
 
 def test_traction_patch_test_nonlinear(poly200):
@@ -201,7 +202,7 @@ def test_traction_patch_test_nonlinear(poly200):
     exact = poly200.nodes @ (F - np.eye(2)).T
     model = NeoHookeanModel(poly200, mat, [0, 2])
     u = model.solve(f, fixed_values=exact[model.fixed_nodes], load_steps=2)
-    np.testing.assert_allclose(u, exact, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(u, exact, **TOL["nonlinear_patch"])
 
 
 @pytest.mark.slow

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from riskplan.deformable.laws import LAWS
+from tests.conftest import TOL
 
 
 def _random_F(rng, n=5):
@@ -30,7 +31,7 @@ def test_stress_and_tangent_are_derivatives(law, rng, tol):
             Wm, Pm, _ = LAWS[law](F - dF, lam, mu, False)
             P_fd[:, k, L] = (Wp - Wm) / (2 * h)
             A_fd[:, :, :, k, L] = (Pp - Pm) / (2 * h)
-    np.testing.assert_allclose(P, P_fd, rtol=1e-7, atol=1e-7)
-    np.testing.assert_allclose(A, A_fd, rtol=1e-7, atol=1e-7)
+    np.testing.assert_allclose(P, P_fd, **TOL["fd_law"])
+    np.testing.assert_allclose(A, A_fd, **TOL["fd_law"])
     # major symmetry A_iJkL = A_kLiJ (hyperelastic)
     np.testing.assert_allclose(A, np.einsum("tiJkL->tkLiJ", A), **tol["float64_exact"])

@@ -5,6 +5,7 @@ import pytest
 
 from riskplan.deformable import contains, locate
 from riskplan.errors import InvalidInputError
+from tests.conftest import TOL
 
 
 def _random_inside(mesh, rng, n):
@@ -81,7 +82,7 @@ def test_tree_candidates_equal_exhaustive_search(rng, tol):
     # the same interpolated values (a point on a shared edge may pick either element)
     v_brute = np.einsum("pad,pa->pd", u[mesh.triangles[e_brute[inside]]], l_brute[inside])
     v_c = np.einsum("pad,pa->pd", u[mesh.triangles[e_c[inside]]], l_c[inside])
-    np.testing.assert_allclose(v_c, v_brute, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(v_c, v_brute, **TOL["interpolation"])
     assert np.array_equal(contains(mesh, pts), inside)
     it = locate(mesh, pts[inside])
-    np.testing.assert_allclose(it.interpolate(u), v_brute, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(it.interpolate(u), v_brute, **TOL["interpolation"])

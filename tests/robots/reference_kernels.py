@@ -4,8 +4,6 @@ strain equations at the half steps too (instead of the Hermite midpoints of
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 
@@ -27,7 +25,7 @@ def predict(xa, xb, xc, nhist, out):
 
 
 @njit(cache=False)
-def shape_free_exact_midpoints(tau, rod, tol, maxit, p_out, R_out, x_out, lengths):
+def shape_free_exact_midpoints(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, x_out, lengths):
     """Reference variant of :func:`shape_free` that solves (2)-(3) at the half steps too.
 
     Shape under tendon tensions ``tau (m,)`` without external loads (no shooting).
@@ -35,7 +33,6 @@ def shape_free_exact_midpoints(tau, rod, tol, maxit, p_out, R_out, x_out, length
     Outputs: ``p_out (n+1, 3)``, ``R_out (n+1, 3, 3)`` in the base frame, strains
     ``x_out (n+1, 6)`` and tendon path lengths ``lengths (m,)``. Returns a status code.
     """
-    rt_all, drt_all, _, kse, kbt, length, n_steps = rod
     m = tau.shape[0]
     h = length / n_steps
     F = np.empty(6)
@@ -66,7 +63,6 @@ def shape_free_exact_midpoints(tau, rod, tol, maxit, p_out, R_out, x_out, length
     xc = x0.copy()
     nhist = 1
     for k in range(n_steps):
-        s = k * h
         predict(x0, xb, xc, nhist, xm)
         rt = rt_all[2 * k + 1]
         drt = drt_all[2 * k + 1]

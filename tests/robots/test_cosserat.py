@@ -30,8 +30,8 @@ def with_step(robot, step, **backbone):
 def test_base_curvature_check_value(paper):
     """DESIGN.md check: one straight tendon, tau = 1 N -> base curvature tau r / (E I) = 1.3819 1/m."""
     x = strains_along(np.array([1.0, 0, 0, 0]), paper._theta, paper._radius, paper.tables.kse, paper.tables.kbt, [0.0])
-    assert x[0, 4] == pytest.approx(1.3819, abs=5e-5)
-    assert x[0, 4] == pytest.approx(0.008 / paper.params.backbone.kbt[0], rel=1e-12)
+    np.testing.assert_allclose(x[0, 4], 1.3819, **TOL["quoted_5_digits"])
+    np.testing.assert_allclose(x[0, 4], 0.008 / paper.params.backbone.kbt[0], **TOL["float64_exact_rel"])
 
 
 @pytest.mark.parametrize("tau", [1.0, 7.5])
@@ -48,7 +48,7 @@ def test_single_straight_tendon_is_circular_arc(paper, tau):
     err = np.abs(shape.positions - exact).max() / bb.length
     assert err <= 1e-6
     Ry = np.stack([np.cos(k * s), 0 * s, -np.sin(k * s)], -1)  # first column of Ry(k s)
-    np.testing.assert_allclose(shape.rotations[:, :, 0], Ry, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(shape.rotations[:, :, 0], Ry, **TOL["rk4_closed_form"])
 
 
 def test_rk4_fourth_order_convergence(paper):
@@ -71,13 +71,13 @@ def test_equilibrium_residuals(paper):
     R = np.empty((n + 1, 3, 3))
     X = np.empty((n + 1, 6))
     L = np.empty(4)
-    assert C.shape_free(tau, paper.tables, 1e-12, 50, P, R, X, L) == C.OK
+    assert C.shape_free(tau, *paper.tables, 1e-12, 50, P, R, X, L) == C.OK
     F = np.empty(6)
     z = np.zeros(3)
     for k in range(n + 1):
         e = C.local_residual(X[k], tau, paper.tables.offsets[2 * k], paper.tables.offset_slopes[2 * k], z, z, paper.tables.kse, paper.tables.kbt, F)
         assert e <= 1e-11
-    np.testing.assert_allclose(np.einsum("nji,njk->nik", R, R), np.broadcast_to(np.eye(3), R.shape), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(np.einsum("nji,njk->nik", R, R), np.broadcast_to(np.eye(3), R.shape), **TOL["rk4_closed_form"])
 
 
 def test_hermite_midpoints_match_exact_midpoint_solves(paper):
@@ -88,7 +88,7 @@ def test_hermite_midpoints_match_exact_midpoint_solves(paper):
     def run(robot, fn):
         n = robot.n_stations - 1
         P, R, X, L = np.empty((n + 1, 3)), np.empty((n + 1, 3, 3)), np.empty((n + 1, 6)), np.empty(4)
-        assert fn(tau, robot.tables, 1e-12, 50, P, R, X, L) == C.OK
+        assert fn(tau, *robot.tables, 1e-12, 50, P, R, X, L) == C.OK
         return P, L
 
     diffs, ldiffs = [], []
@@ -115,7 +115,7 @@ def test_strain_slope_matches_finite_differences(paper):
     assert chol_factor6(Lf)
     d = np.empty(6)
     strain_slope(X[1], tau, rt[1], drt[1], ddrt[1], Lf, d)
-    np.testing.assert_allclose(d, fd, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(d, fd, **TOL["fd_strain_slope"])
 
 
 def test_jacobian_matches_finite_differences(paper, rng):
@@ -135,7 +135,7 @@ def test_jacobian_matches_finite_differences(paper, rng):
         C.local_residual(xp, tau, rt, drt, z, z, paper.tables.kse, paper.tables.kbt, F0)
         C.local_residual(xm, tau, rt, drt, z, z, paper.tables.kse, paper.tables.kbt, F1)
         Jfd[:, j] = (F0 - F1) / (2 * h)
-    np.testing.assert_allclose(J, Jfd, rtol=1e-6, atol=1e-8)
+    np.testing.assert_allclose(J, Jfd, **TOL["fd_jacobian"])
 
 
 def _hat(w):
@@ -244,8 +244,8 @@ def test_helical_routing_against_independent_bvp(paper, tau):
     sol = _rw_bvp(paper, np.array(tau))
     shape = with_step(paper, 0.2 / 160).solve_tensions(tau)
     ref = sol.sol(shape.s)
-    np.testing.assert_allclose(shape.positions, ref[0:3].T, rtol=0, atol=2e-6)
-    np.testing.assert_allclose(shape.rotations.reshape(-1, 9), ref[3:12].T, rtol=0, atol=2e-5)
+    np.testing.assert_allclose(shape.positions, ref[0:3].T, **TOL["bvp_positions"])
+    np.testing.assert_allclose(shape.rotations.reshape(-1, 9), ref[3:12].T, **TOL["bvp_rotations"])
 
 
 def _stiff(robot, factor=100.0):
@@ -260,8 +260,8 @@ def test_gravity_small_deflection_cantilever(paper):
     q = robot._lam * 9.81
     bb = robot.params.backbone
     w = q * bb.length**4 / (8 * bb.kbt[0])
-    assert -shape.tip[2] == pytest.approx(w, rel=2e-3)
-    assert shape.tip[0] == pytest.approx(bb.length, rel=1e-3)
+    np.testing.assert_allclose(-shape.tip[2], w, **TOL["small_deflection"])
+    np.testing.assert_allclose(shape.tip[0], bb.length, **TOL["small_deflection_length"])
 
 
 def test_gravity_along_backbone_compresses_linearly(paper):
@@ -270,7 +270,7 @@ def test_gravity_along_backbone_compresses_linearly(paper):
     shape = robot.solve_tensions([0.0, 0.0, 0.0, 0.0])
     q = robot._lam * 9.81
     bb = robot.params.backbone
-    np.testing.assert_allclose(shape.tip, [0, 0, bb.length - q * bb.length**2 / (2 * bb.kse[2])], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(shape.tip, [0, 0, bb.length - q * bb.length**2 / (2 * bb.kse[2])], **TOL["float64_abs"])
 
 
 def test_gravity_tension_shape_is_in_equilibrium(paper):

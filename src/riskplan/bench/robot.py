@@ -50,7 +50,7 @@ def run(quick: bool = False, *, include_dataset: bool = True) -> dict:
     t_single = median_time(lambda: robot.solve_tensions(singles[next(it) % 64]), repeats=50 if quick else 300, warmup=5)
     n = robot.n_stations
     P, Rs, X, lengths = np.empty((n, 3)), np.empty((n, 3, 3)), np.empty((n, 6)), np.empty(robot.n_tendons)
-    kernel_args = (robot.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths)
+    kernel_args = (*robot.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths)
     t_kernel = median_time(lambda: cosserat.shape_free(singles[next(it) % 64], *kernel_args), repeats=50 if quick else 300, warmup=5)
     n_batch = 1000 if quick else N_BATCH
     batch = rng.uniform(0.0, 1.0, (n_batch, robot.n_tendons)) * lim * 0.5

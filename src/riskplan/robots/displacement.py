@@ -10,7 +10,7 @@ import numpy as np
 from numba import njit
 
 from riskplan.robots.linalg6 import gauss_solve
-from riskplan.robots.rod_tables import LOCAL_FAIL, OK, OUTER_FAIL
+from riskplan.robots.rod_tables import LOCAL_FAIL, OK, OUTER_FAIL, RodTables
 from riskplan.robots.tendon_lengths import lengths_and_jacobian
 
 # step halvings of the displacement solve's line search (2**-30 ~ 1e-9 of a Newton step)
@@ -109,7 +109,11 @@ def line_search(d, kinv, l0, tau, step, merit, fb, rod, tols, work):
     for _ls in range(LINE_SEARCH_MAXIT):
         for i in range(m):
             trial[i] = max(tau[i] + alpha * step[i, 0], 0.0)
-        if lengths_and_jacobian(trial, rod, tol, maxit, lengths, dl) == OK:
+        st = lengths_and_jacobian(
+            trial, rod.offsets, rod.offset_slopes, rod.offset_curvatures, rod.kse, rod.kbt, rod.length, rod.n_steps,
+            tol, maxit, lengths, dl,
+        )  # fmt: skip
+        if st == OK:
             res_t, merit_t = complementarity_system(d, kinv, l0, trial, lengths, dl, Jt, pt, fb, slack_t)
             if merit_t <= (1.0 - 1e-4 * alpha) * merit or res_t <= dtol:
                 return True, res_t, merit_t
@@ -118,7 +122,7 @@ def line_search(d, kinv, l0, tau, step, merit, fb, rod, tols, work):
 
 
 @njit(cache=True)
-def solve_displacement_tensions(d, kinv, l0, tau0, rod, tol, maxit, dtol, outer_maxit, tau, info):
+def solve_displacement_tensions(d, kinv, l0, tau0, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, tau, info):
     """Tensions for tendon displacements ``d (m,)`` with compliant tendons and slack (no loads).
 
     Complementarity (per tendon)::
@@ -145,6 +149,7 @@ def solve_displacement_tensions(d, kinv, l0, tau0, rod, tol, maxit, dtol, outer_
     step = np.empty((m, 1))
     slack = np.zeros(m, dtype=np.int64)
     slack_t = np.zeros(m, dtype=np.int64)
+    rod = RodTables(rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps)
     tols = (tol, maxit, dtol)
     work = (trial, lengths, dl, Jt, pt, slack_t)
     for i in range(m):
@@ -152,7 +157,7 @@ def solve_displacement_tensions(d, kinv, l0, tau0, rod, tol, maxit, dtol, outer_
     info[0] = 0
     info[1] = 1e300
     fb = False
-    st = lengths_and_jacobian(tau, rod, tol, maxit, lengths, dl)
+    st = lengths_and_jacobian(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl)
     if st != OK:
         return st
     res, merit = complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack)
@@ -177,7 +182,7 @@ def solve_displacement_tensions(d, kinv, l0, tau0, rod, tol, maxit, dtol, outer_
             # (it is not smooth): continue with the Fischer-Burmeister form, whose merit has
             # no such points when dg/dtau is positive semidefinite, as a compliance matrix is
             fb = True
-            if lengths_and_jacobian(tau, rod, tol, maxit, lengths, dl) != OK:
+            if lengths_and_jacobian(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl) != OK:
                 return LOCAL_FAIL
             res, merit = complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack)
             continue
@@ -195,16 +200,16 @@ def solve_displacement_tensions(d, kinv, l0, tau0, rod, tol, maxit, dtol, outer_
 
 
 @njit(cache=True)
-def solve_displacement_batch(ds, kinv, l0, tau0s, rod, tol, maxit, dtol, outer_maxit, taus, infos, status):
+def solve_displacement_batch(ds, kinv, l0, tau0s, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus, infos, status):
     """Batched :func:`solve_displacement_tensions` over ``ds (B, m)``; a configuration that fails
     from its start ``tau0s[b]`` is tried once more from the slack state (``infos`` of the last try)."""
     slack_start = np.zeros(ds.shape[1])
     for b in range(ds.shape[0]):
         st = solve_displacement_tensions(
-            ds[b], kinv, l0, tau0s[b], rod, tol, maxit, dtol, outer_maxit, taus[b], infos[b]
+            ds[b], kinv, l0, tau0s[b], rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus[b], infos[b]
         )
         if st != OK:
             st = solve_displacement_tensions(
-                ds[b], kinv, l0, slack_start, rod, tol, maxit, dtol, outer_maxit, taus[b], infos[b]
+                ds[b], kinv, l0, slack_start, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus[b], infos[b]
             )
         status[b] = st

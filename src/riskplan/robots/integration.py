@@ -7,14 +7,53 @@ docstring of :mod:`riskplan.robots.cosserat`.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 
 from riskplan.robots.linalg6 import chol_factor6
-from riskplan.robots.rod_tables import LOCAL_FAIL, OK
+from riskplan.robots.rod_tables import LOCAL_FAIL, OK, RodTables
 from riskplan.robots.strains import local_jacobian, local_strains, local_strains_chord, strain_slope, tendon_speeds
+
+
+@njit(cache=True, inline="always")
+def rk4_row(q0, q1, q2, x0, xm, x1, h):
+    """One classical RK4 step of one row ``q`` of ``R`` under ``q' = q [u]x`` and of the matching
+    position component under ``p_a' = q . v``, with strains ``x0, xm, x1`` (indexable, 6) at
+    ``s, s + h/2, s + h``. Returns the new row and the position increment. Shared by
+    :func:`rk4_pose_step` and the lockstep kernel."""
+    # k1 (row of R [u]x and row . v)
+    k10 = q1 * x0[5] - q2 * x0[4]
+    k11 = -q0 * x0[5] + q2 * x0[3]
+    k12 = q0 * x0[4] - q1 * x0[3]
+    kp1 = q0 * x0[0] + q1 * x0[1] + q2 * x0[2]
+    s0 = q0 + 0.5 * h * k10
+    s1 = q1 + 0.5 * h * k11
+    s2 = q2 + 0.5 * h * k12
+    k20 = s1 * xm[5] - s2 * xm[4]
+    k21 = -s0 * xm[5] + s2 * xm[3]
+    k22 = s0 * xm[4] - s1 * xm[3]
+    kp2 = s0 * xm[0] + s1 * xm[1] + s2 * xm[2]
+    s0 = q0 + 0.5 * h * k20
+    s1 = q1 + 0.5 * h * k21
+    s2 = q2 + 0.5 * h * k22
+    k30 = s1 * xm[5] - s2 * xm[4]
+    k31 = -s0 * xm[5] + s2 * xm[3]
+    k32 = s0 * xm[4] - s1 * xm[3]
+    kp3 = s0 * xm[0] + s1 * xm[1] + s2 * xm[2]
+    s0 = q0 + h * k30
+    s1 = q1 + h * k31
+    s2 = q2 + h * k32
+    k40 = s1 * x1[5] - s2 * x1[4]
+    k41 = -s0 * x1[5] + s2 * x1[3]
+    k42 = s0 * x1[4] - s1 * x1[3]
+    kp4 = s0 * x1[0] + s1 * x1[1] + s2 * x1[2]
+    c = h / 6.0
+    return (
+        q0 + c * (k10 + 2.0 * k20 + 2.0 * k30 + k40),
+        q1 + c * (k11 + 2.0 * k21 + 2.0 * k31 + k41),
+        q2 + c * (k12 + 2.0 * k22 + 2.0 * k32 + k42),
+        c * (kp1 + 2.0 * kp2 + 2.0 * kp3 + kp4),
+    )
 
 
 @njit(cache=True, inline="always")
@@ -24,40 +63,11 @@ def rk4_pose_step(p, R, x0, xm, x1, h, pn, Rn):
     The ODE is linear in ``(p, R)`` row by row, so each row of ``R`` is stepped independently.
     """
     for a in range(3):
-        q0 = R[a, 0]
-        q1 = R[a, 1]
-        q2 = R[a, 2]
-        # k1 (row of R [u]x and row . v)
-        k10 = q1 * x0[5] - q2 * x0[4]
-        k11 = -q0 * x0[5] + q2 * x0[3]
-        k12 = q0 * x0[4] - q1 * x0[3]
-        kp1 = q0 * x0[0] + q1 * x0[1] + q2 * x0[2]
-        s0 = q0 + 0.5 * h * k10
-        s1 = q1 + 0.5 * h * k11
-        s2 = q2 + 0.5 * h * k12
-        k20 = s1 * xm[5] - s2 * xm[4]
-        k21 = -s0 * xm[5] + s2 * xm[3]
-        k22 = s0 * xm[4] - s1 * xm[3]
-        kp2 = s0 * xm[0] + s1 * xm[1] + s2 * xm[2]
-        s0 = q0 + 0.5 * h * k20
-        s1 = q1 + 0.5 * h * k21
-        s2 = q2 + 0.5 * h * k22
-        k30 = s1 * xm[5] - s2 * xm[4]
-        k31 = -s0 * xm[5] + s2 * xm[3]
-        k32 = s0 * xm[4] - s1 * xm[3]
-        kp3 = s0 * xm[0] + s1 * xm[1] + s2 * xm[2]
-        s0 = q0 + h * k30
-        s1 = q1 + h * k31
-        s2 = q2 + h * k32
-        k40 = s1 * x1[5] - s2 * x1[4]
-        k41 = -s0 * x1[5] + s2 * x1[3]
-        k42 = s0 * x1[4] - s1 * x1[3]
-        kp4 = s0 * x1[0] + s1 * x1[1] + s2 * x1[2]
-        c = h / 6.0
-        Rn[a, 0] = q0 + c * (k10 + 2.0 * k20 + 2.0 * k30 + k40)
-        Rn[a, 1] = q1 + c * (k11 + 2.0 * k21 + 2.0 * k31 + k41)
-        Rn[a, 2] = q2 + c * (k12 + 2.0 * k22 + 2.0 * k32 + k42)
-        pn[a] = p[a] + c * (kp1 + 2.0 * kp2 + 2.0 * kp3 + kp4)
+        n0, n1, n2, dp = rk4_row(R[a, 0], R[a, 1], R[a, 2], x0, xm, x1, h)
+        Rn[a, 0] = n0
+        Rn[a, 1] = n1
+        Rn[a, 2] = n2
+        pn[a] = p[a] + dp
 
 
 @njit(cache=True)
@@ -74,7 +84,7 @@ def pose_derivative(R, x, dR, dp):
 
 
 @njit(cache=True)
-def shape_free(tau, rod, tol, maxit, p_out, R_out, x_out, lengths):
+def shape_free(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, x_out, lengths):
     """Shape under tendon tensions ``tau (m,)`` without external loads (no shooting).
 
     Strains solve (2)-(3) at the step nodes only; their slopes ``x'`` follow from the implicit
@@ -85,10 +95,11 @@ def shape_free(tau, rod, tol, maxit, p_out, R_out, x_out, lengths):
     previous node (chord) and refactors only if it converges slowly.
 
     Outputs: ``p_out (n+1, 3)``, ``R_out (n+1, 3, 3)`` (base frame), strains ``x_out (n+1, 6)``,
-    tendon path lengths ``lengths (m,)`` (Simpson); ``rod``: :class:`~riskplan.robots.rod_tables.RodTables`.
-    Returns a status code.
+    tendon path lengths ``lengths (m,)`` (Simpson). Returns a status code. The seven arguments after
+    ``tau`` are the fields of :class:`~riskplan.robots.rod_tables.RodTables`: call it as
+    ``shape_free(tau, *robot.tables, tol, maxit, ...)`` (numba types plain arrays much faster
+    than a named tuple at the Python boundary).
     """
-    rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps = rod
     m = tau.shape[0]
     h = length / n_steps
     F = np.empty(6)
@@ -158,12 +169,12 @@ def shape_free(tau, rod, tol, maxit, p_out, R_out, x_out, lengths):
 
 
 @njit(cache=True)
-def shape_free_batch(taus, rod, tol, maxit, p_out, R_out, lengths_out, status):
+def shape_free_batch(taus, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, lengths_out, status):
     """Batched :func:`shape_free`: ``taus (B, m)`` -> ``p_out (B, n+1, 3)``, ``R_out (B, n+1, 3, 3)``."""
     B = taus.shape[0]
-    x_out = np.empty((rod.n_steps + 1, 6))
+    x_out = np.empty((n_steps + 1, 6))
     for b in range(B):
-        status[b] = shape_free(taus[b], rod, tol, maxit, p_out[b], R_out[b], x_out, lengths_out[b])
+        status[b] = shape_free(taus[b], rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, p_out[b], R_out[b], x_out, lengths_out[b])
 
 
 @njit(cache=True)
@@ -211,15 +222,15 @@ def loaded_derivative(y, node, tau, rod, f, x, tol, maxit, work, dy):
 
 
 @njit(cache=True)
-def shape_loaded(tau, rod, f, N0, M0, tol, maxit, Y):
+def shape_loaded(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, f, N0, M0, tol, maxit, Y):
     """Integrate (1)-(3) from base values ``N0, M0`` with distributed force ``f (3,)`` (base frame).
 
     ``Y (n+1, 18+m)`` receives the states ``(p, R row-major, N, M, l)``. Returns a status code.
     """
-    n_steps = rod.n_steps
+    rod = RodTables(rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps)
     m = tau.shape[0]
     ny = 18 + m
-    h = rod.length / n_steps
+    h = length / n_steps
     F = np.empty(6)
     J = np.empty((6, 6))
     rhs = np.empty((6, 1))
@@ -241,7 +252,6 @@ def shape_loaded(tau, rod, f, N0, M0, tol, maxit, Y):
         Y[0, 12 + a] = N0[a]
         Y[0, 15 + a] = M0[a]
     for k in range(n_steps):
-        s = k * h
         y = Y[k]
         if not loaded_derivative(y, 2 * k, tau, rod, f, x, tol, maxit, work, k1):
             return LOCAL_FAIL

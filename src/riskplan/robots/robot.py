@@ -128,7 +128,7 @@ class TendonRobot:
         m = self.n_tendons
         self._l0 = np.empty(m)
         dl = np.empty((m, m))
-        st = cosserat.lengths_and_jacobian(np.zeros(m), self.tables, LOCAL_TOL, LOCAL_MAXIT, self._l0, dl)
+        st = cosserat.lengths_and_jacobian(np.zeros(m), *self.tables, LOCAL_TOL, LOCAL_MAXIT, self._l0, dl)
         if st != cosserat.OK:  # pragma: no cover - the straight rod always solves
             raise ConvergenceError("rest-length computation failed")
         self._G0 = -dl  # d(shortening)/d tau at tau = 0, used for start values
@@ -279,7 +279,7 @@ class TendonRobot:
         elif not self.loaded:
             lengths = np.empty((B, m))
             status = np.empty(B, dtype=np.int64)
-            cosserat.shape_free_batch(flat, self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, lengths, status)
+            cosserat.shape_free_batch(flat, *self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, lengths, status)
             bad = np.flatnonzero(status != cosserat.OK)
             if bad.size:
                 raise self.local_failure_error(flat[bad[0]])
@@ -299,7 +299,7 @@ class TendonRobot:
         n, m = self._n + 1, self.n_tendons
         P = np.empty((n, 3))
         Rs = np.empty((n, 3, 3))
-        st = cosserat.shape_free(tau, self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, np.empty((n, 6)), np.empty(m))
+        st = cosserat.shape_free(tau, *self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, np.empty((n, 6)), np.empty(m))
         if st != cosserat.OK:
             raise self.local_failure_error(tau)
         # a non-finite value anywhere propagates along the RK4 pass to the tip position
@@ -337,14 +337,14 @@ class TendonRobot:
         Rs = np.empty((n + 1, 3, 3))
         X = np.empty((n + 1, 6))
         lengths = np.empty(m)
-        if cosserat.shape_free(tau, self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths) != cosserat.OK:
+        if cosserat.shape_free(tau, *self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths) != cosserat.OK:
             raise self.local_failure_error(tau)
         mid = 0.5 * (P[1:] + P[:-1])
         M0 = np.cross(mid - P[0], f).sum(0) * (L / n)
         scale = max(1e-6, float(np.linalg.norm(f)) * L * L)
 
         def residual(M):
-            st = cosserat.shape_loaded(tau, self.tables, f, N0, M, LOCAL_TOL, LOCAL_MAXIT, Y)
+            st = cosserat.shape_loaded(tau, *self.tables, f, N0, M, LOCAL_TOL, LOCAL_MAXIT, Y)
             if st != cosserat.OK:
                 raise ConvergenceError(f"local strain solve failed while shooting (tensions {tau.tolist()})")
             return Y[-1, 15:18].copy()
@@ -409,7 +409,7 @@ class TendonRobot:
         infos = np.empty((B, 2))
         status = np.empty(B, dtype=np.int64)
         cosserat.solve_displacement_batch(
-            flat, self._kinv, self._l0, tau0, self.tables, LOCAL_TOL, LOCAL_MAXIT, DISP_TOL, DISP_MAXIT, tau, infos, status
+            flat, self._kinv, self._l0, tau0, *self.tables, LOCAL_TOL, LOCAL_MAXIT, DISP_TOL, DISP_MAXIT, tau, infos, status
         )
         bad = np.flatnonzero(status != cosserat.OK)
         if bad.size:
@@ -436,7 +436,7 @@ class TendonRobot:
                 out[b] = self._shoot(flat[b])[-1, 18:]
             else:
                 dl = np.empty((m, m))
-                if cosserat.lengths_and_jacobian(flat[b], self.tables, LOCAL_TOL, LOCAL_MAXIT, out[b], dl) != cosserat.OK:
+                if cosserat.lengths_and_jacobian(flat[b], *self.tables, LOCAL_TOL, LOCAL_MAXIT, out[b], dl) != cosserat.OK:
                     raise self.local_failure_error(flat[b])
         return out.reshape(batch + (m,))
 

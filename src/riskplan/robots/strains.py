@@ -8,10 +8,82 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
 from riskplan.robots.linalg6 import chol_factor6, chol_solve6
+
+
+# ----------------------------------------------------------------------------------------
+# Per-tendon terms, shared by the scalar kernels here and the lockstep kernel
+# (``batch_kernel``); compiled inline, so each caller runs the same operations in the same
+# order (the batch == scalar results are bit-identical). Strains ``x = (v, u)`` and offsets
+# ``r, dr, ddr`` are anything indexable (array rows or tuples).
+
+
+@njit(cache=True, inline="always")
+def row3(a, i):
+    """``(a[i, 0], a[i, 1], a[i, 2])``: a row as a tuple (no array view in the hot loops)."""
+    return (a[i, 0], a[i, 1], a[i, 2])
+
+
+@njit(cache=True, inline="always")
+def tendon_tangent(x, r, dr):
+    """``w = v + u x r + r'`` (R&W eq. 10), the unnormalised tendon tangent, as a 3-tuple."""
+    return (
+        x[0] + x[4] * r[2] - x[5] * r[1] + dr[0],
+        x[1] + x[5] * r[0] - x[3] * r[2] + dr[1],
+        x[2] + x[3] * r[1] - x[4] * r[0] + dr[2],
+    )
+
+
+@njit(cache=True, inline="always")
+def tendon_stiffness(sc, t0, t1, t2, r):
+    """One tendon's Jacobian blocks (R&W eqs. 13-16) from ``sc = tau / |w|`` and the unit
+    tangent ``t``: the symmetric ``A = sc (I - t t^T)`` as ``(a00, a11, a22, a01, a02, a12)``
+    and ``Bm = A [r]x`` row by row (``b00 ... b22``); ``G = -Bm``, ``B = -Bm^T``,
+    ``H = -[r]x Bm``."""
+    r0 = r[0]
+    r1 = r[1]
+    r2 = r[2]
+    a00 = sc * (1.0 - t0 * t0)
+    a11 = sc * (1.0 - t1 * t1)
+    a22 = sc * (1.0 - t2 * t2)
+    a01 = -sc * t0 * t1
+    a02 = -sc * t0 * t2
+    a12 = -sc * t1 * t2
+    # Bm = A [r]x, [r]x = [[0,-r2,r1],[r2,0,-r0],[-r1,r0,0]]
+    b00 = a01 * r2 - a02 * r1
+    b01 = -a00 * r2 + a02 * r0
+    b02 = a00 * r1 - a01 * r0
+    b10 = a11 * r2 - a12 * r1
+    b11 = -a01 * r2 + a12 * r0
+    b12 = a01 * r1 - a11 * r0
+    b20 = a12 * r2 - a22 * r1
+    b21 = -a02 * r2 + a22 * r0
+    b22 = a02 * r1 - a12 * r0
+    return a00, a11, a22, a01, a02, a12, b00, b01, b02, b10, b11, b12, b20, b21, b22
+
+
+@njit(cache=True, inline="always")
+def tendon_slope_source(ti, nw, t0, t1, t2, x, r, dr, ddr):
+    """One tendon's share of ``dF/ds`` at fixed strains (the right-hand side of the strain
+    slope, :func:`strain_slope`): ``w' = u x r' + r''`` projected off the tangent, as the six
+    terms the caller subtracts."""
+    e0 = x[4] * dr[2] - x[5] * dr[1] + ddr[0]
+    e1 = x[5] * dr[0] - x[3] * dr[2] + ddr[1]
+    e2 = x[3] * dr[1] - x[4] * dr[0] + ddr[2]
+    td = t0 * e0 + t1 * e1 + t2 * e2
+    g0 = (e0 - t0 * td) / nw
+    g1 = (e1 - t1 * td) / nw
+    g2 = (e2 - t2 * td) / nw
+    return (
+        ti * g0,
+        ti * g1,
+        ti * g2,
+        ti * (dr[1] * t2 - dr[2] * t1 + r[1] * g2 - r[2] * g1),
+        ti * (dr[2] * t0 - dr[0] * t2 + r[2] * g0 - r[0] * g2),
+        ti * (dr[0] * t1 - dr[1] * t0 + r[0] * g1 - r[1] * g0),
+    )
 
 
 @njit(cache=True)
@@ -31,9 +103,7 @@ def local_residual(x, tau, rt, drt, nb, mb, kse, kbt, F):
         r0 = rt[i, 0]
         r1 = rt[i, 1]
         r2 = rt[i, 2]
-        w0 = x[0] + x[4] * r2 - x[5] * r1 + drt[i, 0]
-        w1 = x[1] + x[5] * r0 - x[3] * r2 + drt[i, 1]
-        w2 = x[2] + x[3] * r1 - x[4] * r0 + drt[i, 2]
+        w0, w1, w2 = tendon_tangent(x, row3(rt, i), row3(drt, i))
         sc = ti / math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
         F[0] += sc * w0
         F[1] += sc * w1
@@ -68,30 +138,13 @@ def local_jacobian(x, tau, rt, drt, kse, kbt, J):
         r0 = rt[i, 0]
         r1 = rt[i, 1]
         r2 = rt[i, 2]
-        w0 = x[0] + x[4] * r2 - x[5] * r1 + drt[i, 0]
-        w1 = x[1] + x[5] * r0 - x[3] * r2 + drt[i, 1]
-        w2 = x[2] + x[3] * r1 - x[4] * r0 + drt[i, 2]
+        w0, w1, w2 = tendon_tangent(x, row3(rt, i), row3(drt, i))
         nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
         t0 = w0 / nw
         t1 = w1 / nw
         t2 = w2 / nw
         sc = ti / nw
-        a00 = sc * (1.0 - t0 * t0)
-        a11 = sc * (1.0 - t1 * t1)
-        a22 = sc * (1.0 - t2 * t2)
-        a01 = -sc * t0 * t1
-        a02 = -sc * t0 * t2
-        a12 = -sc * t1 * t2
-        # Bm = A [r]x, [r]x = [[0,-r2,r1],[r2,0,-r0],[-r1,r0,0]]
-        b00 = a01 * r2 - a02 * r1
-        b01 = -a00 * r2 + a02 * r0
-        b02 = a00 * r1 - a01 * r0
-        b10 = a11 * r2 - a12 * r1
-        b11 = -a01 * r2 + a12 * r0
-        b12 = a01 * r1 - a11 * r0
-        b20 = a12 * r2 - a22 * r1
-        b21 = -a02 * r2 + a22 * r0
-        b22 = a02 * r1 - a12 * r0
+        a00, a11, a22, a01, a02, a12, b00, b01, b02, b10, b11, b12, b20, b21, b22 = tendon_stiffness(sc, t0, t1, t2, row3(rt, i))
         J[0, 0] += a00
         J[0, 1] += a01
         J[0, 2] += a02
@@ -190,12 +243,7 @@ def tendon_speeds(x, rt, drt, out):
     """``|w_i|`` for every tendon (path length per unit s)."""
     m = rt.shape[0]
     for i in range(m):
-        r0 = rt[i, 0]
-        r1 = rt[i, 1]
-        r2 = rt[i, 2]
-        w0 = x[0] + x[4] * r2 - x[5] * r1 + drt[i, 0]
-        w1 = x[1] + x[5] * r0 - x[3] * r2 + drt[i, 1]
-        w2 = x[2] + x[3] * r1 - x[4] * r0 + drt[i, 2]
+        w0, w1, w2 = tendon_tangent(x, row3(rt, i), row3(drt, i))
         out[i] = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
 
 
@@ -209,31 +257,16 @@ def strain_slope(x, tau, rt, drt, ddrt, L, out):
         ti = tau[i]
         if ti == 0.0:
             continue
-        r0 = rt[i, 0]
-        r1 = rt[i, 1]
-        r2 = rt[i, 2]
-        q0 = drt[i, 0]
-        q1 = drt[i, 1]
-        q2 = drt[i, 2]
-        w0 = x[0] + x[4] * r2 - x[5] * r1 + q0
-        w1 = x[1] + x[5] * r0 - x[3] * r2 + q1
-        w2 = x[2] + x[3] * r1 - x[4] * r0 + q2
+        w0, w1, w2 = tendon_tangent(x, row3(rt, i), row3(drt, i))
         nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
         t0 = w0 / nw
         t1 = w1 / nw
         t2 = w2 / nw
-        # dw/ds at fixed strains: u x r' + r''
-        e0 = x[4] * q2 - x[5] * q1 + ddrt[i, 0]
-        e1 = x[5] * q0 - x[3] * q2 + ddrt[i, 1]
-        e2 = x[3] * q1 - x[4] * q0 + ddrt[i, 2]
-        td = t0 * e0 + t1 * e1 + t2 * e2
-        g0 = (e0 - t0 * td) / nw
-        g1 = (e1 - t1 * td) / nw
-        g2 = (e2 - t2 * td) / nw
-        out[0] -= ti * g0
-        out[1] -= ti * g1
-        out[2] -= ti * g2
-        out[3] -= ti * (q1 * t2 - q2 * t1 + r1 * g2 - r2 * g1)
-        out[4] -= ti * (q2 * t0 - q0 * t2 + r2 * g0 - r0 * g2)
-        out[5] -= ti * (q0 * t1 - q1 * t0 + r0 * g1 - r1 * g0)
+        c0, c1, c2, c3, c4, c5 = tendon_slope_source(ti, nw, t0, t1, t2, x, row3(rt, i), row3(drt, i), row3(ddrt, i))
+        out[0] -= c0
+        out[1] -= c1
+        out[2] -= c2
+        out[3] -= c3
+        out[4] -= c4
+        out[5] -= c5
     chol_solve6(L, out)

@@ -10,18 +10,18 @@ from numba import njit
 
 from riskplan.robots.linalg6 import chol_factor6, chol_solve6
 from riskplan.robots.rod_tables import LOCAL_FAIL, OK
-from riskplan.robots.strains import local_jacobian, local_strains_chord
+from riskplan.robots.strains import local_jacobian, local_strains_chord, row3, tendon_tangent
 
 
 @njit(cache=True)
-def lengths_and_jacobian(tau, rod, tol, maxit, lengths, dl):
+def lengths_and_jacobian(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl):
     """Tendon path lengths ``l (m,)`` and ``dl[i, j] = d l_i / d tau_j`` without external loads.
 
     Uses Simpson's rule on the RK4 nodes; the sensitivity of the local strains is
     ``dx/dtau_j = -J^{-1} [t_j; r_j x t_j]`` (implicit function theorem on eqs. (2)-(3)) and
-    ``d|w_i|/dx = [t_i; r_i x t_i]``. Returns a status code.
+    ``d|w_i|/dx = [t_i; r_i x t_i]``. Returns a status code. Arguments 2-8: the fields of
+    :class:`~riskplan.robots.rod_tables.RodTables` (``ddrt_all`` unused).
     """
-    rt_all, drt_all, _, kse, kbt, length, n_steps = rod
     m = tau.shape[0]
     h = length / n_steps
     n_nodes = 2 * n_steps + 1
@@ -66,9 +66,7 @@ def lengths_and_jacobian(tau, rod, tol, maxit, lengths, dl):
             r0 = rt[i, 0]
             r1 = rt[i, 1]
             r2 = rt[i, 2]
-            w0 = x[0] + x[4] * r2 - x[5] * r1 + drt[i, 0]
-            w1 = x[1] + x[5] * r0 - x[3] * r2 + drt[i, 1]
-            w2 = x[2] + x[3] * r1 - x[4] * r0 + drt[i, 2]
+            w0, w1, w2 = tendon_tangent(x, row3(rt, i), row3(drt, i))
             nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
             t0 = w0 / nw
             t1 = w1 / nw

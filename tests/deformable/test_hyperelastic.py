@@ -241,14 +241,14 @@ def test_neohookean_convergence_rate_manufactured():
             div += (P_exact(x + e)[:, :, J] - P_exact(x - e)[:, :, J]) / (2 * h)
         return -div
 
-    from riskplan.deformable.loads import _subdivided_rule
+    from riskplan.deformable.loads import subdivided_triangle_rule
 
     hs, errs = [], []
     for n in (200, 800, 3200):
         mesh = mesh_polygon(rectangle(), n)
         model = NeoHookeanModel(mesh, mat, mesh.boundary_nodes)
         uh = model.solve(body_load(mesh, body), load_steps=2)
-        bary, w = _subdivided_rule(2)
+        bary, w = subdivided_triangle_rule(2)
         x = np.einsum("qa,tad->tqd", bary, mesh.nodes[mesh.triangles])
         uq = np.einsum("qa,tad->tqd", bary, uh[mesh.triangles])
         errs.append(np.sqrt(np.einsum("t,q,tqd->", mesh.areas, w, (uq - u_exact(x)) ** 2)))

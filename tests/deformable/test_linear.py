@@ -12,7 +12,7 @@ from riskplan.deformable import (
     rectangle,
     traction_load,
 )
-from riskplan.deformable.loads import _subdivided_rule
+from riskplan.deformable.loads import subdivided_triangle_rule
 from riskplan.errors import InvalidInputError
 from tests.conftest import TOL
 
@@ -79,7 +79,7 @@ def _manufactured(lam, mu):
 
 
 def _errors(mesh, uh, u, grad):
-    bary, w = _subdivided_rule(2)
+    bary, w = subdivided_triangle_rule(2)
     p = mesh.nodes[mesh.triangles]
     x = np.einsum("qa,tad->tqd", bary, p)
     uq = np.einsum("qa,tad->tqd", bary, uh[mesh.triangles])

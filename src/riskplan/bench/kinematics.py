@@ -38,7 +38,7 @@ def make_bench_model(n_tendons: int, limits: np.ndarray, n_components: int = 5, 
 def run(quick: bool = False) -> dict:
     import torch
 
-    from riskplan.bench._timing import median_time
+    from riskplan.bench import median_time
 
     torch.set_num_threads(1)
     from riskplan.robots import load_robot

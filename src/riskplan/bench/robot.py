@@ -38,7 +38,7 @@ def _dataset_small_s() -> float:
 
 
 def run(quick: bool = False, *, include_dataset: bool = True) -> dict:
-    from riskplan.bench._timing import median_time
+    from riskplan.bench import median_time
     from riskplan.robots import cosserat, load_robot
     from riskplan.robots.robot import LOCAL_MAXIT, LOCAL_TOL
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from riskplan.bench._timing import median_time
+from riskplan.bench import median_time
 
 
 def _linear_setup(n_elements: int):

@@ -77,8 +77,13 @@ def bench(
     if area not in BENCH_AREAS:
         raise typer.BadParameter(f"unknown area {area!r}; expected one of {', '.join(BENCH_AREAS)}", param_hint="AREA")
     _limit_torch_threads()
+    from riskplan.bench import machine_info
+
     mod = importlib.import_module(f"riskplan.bench.{area.replace('-', '_')}")
-    figures = mod.run(quick=quick)
+    figures = dict(mod.run(quick=quick))
+    # every area's figures say where they were measured (read after the run: thread pools
+    # are loaded by then)
+    figures.setdefault("machine", machine_info())
     if json_out:
         typer.echo(json.dumps(figures))
     else:
@@ -88,9 +93,18 @@ def bench(
         table = Table(title=f"riskplan bench {area}")
         table.add_column("figure")
         table.add_column("value", justify="right")
-        for k, v in figures.items():
+        for k, v in _flat_items(figures):
             table.add_row(k, f"{v:.4g}" if isinstance(v, float) else str(v))
         Console().print(table)
+
+
+def _flat_items(d: dict, prefix: str = ""):
+    """``(dotted key, value)`` pairs of a nested dict, for the bench table."""
+    for k, v in d.items():
+        if isinstance(v, dict):
+            yield from _flat_items(v, f"{prefix}{k}.")
+        else:
+            yield f"{prefix}{k}", v
 
 
 def _limit_torch_threads() -> None:

@@ -12,8 +12,9 @@ from riskplan.deformable import (
     rectangle,
     traction_load,
 )
-from riskplan.deformable.loads import _subdivided_rule
+from riskplan.deformable.loads import subdivided_triangle_rule
 from riskplan.errors import InvalidInputError
+from tests.conftest import TOL
 
 
 def _stress(mat, A):
@@ -30,8 +31,8 @@ def test_patch_test_dirichlet(poly200, rng, plane, tol):
     A, c = rng.normal(size=(2, 2)), rng.normal(size=2)
     exact = poly200.nodes @ A.T + c
     u = model.solve(np.zeros((poly200.n_nodes, 2)), fixed_values=exact[model.fixed_nodes])
-    np.testing.assert_allclose(u, exact, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(element_stresses(poly200, mat, u), np.broadcast_to(_stress(mat, A), (poly200.n_elements, 2, 2)), rtol=0, atol=1e-10)
+    np.testing.assert_allclose(u, exact, **TOL["float64_abs"])
+    np.testing.assert_allclose(element_stresses(poly200, mat, u), np.broadcast_to(_stress(mat, A), (poly200.n_elements, 2, 2)), **TOL["linear_fem"])
 
 
 def test_patch_test_traction(poly200, rng, tol):
@@ -44,8 +45,8 @@ def test_patch_test_traction(poly200, rng, tol):
     pins = np.array([0, 2])
     model = LinearElasticModel(poly200, mat, pins)
     u = model.solve(f, fixed_values=exact[model.fixed_nodes])
-    np.testing.assert_allclose(u, exact, rtol=0, atol=1e-10)
-    np.testing.assert_allclose(model.residual(u, f), 0.0, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(u, exact, **TOL["linear_fem"])
+    np.testing.assert_allclose(model.residual(u, f), 0.0, **TOL["linear_fem"])
 
 
 def _manufactured(lam, mu):
@@ -78,13 +79,11 @@ def _manufactured(lam, mu):
 
 
 def _errors(mesh, uh, u, grad):
-    bary, w = _subdivided_rule(2)
+    bary, w = subdivided_triangle_rule(2)
     p = mesh.nodes[mesh.triangles]
     x = np.einsum("qa,tad->tqd", bary, p)
     uq = np.einsum("qa,tad->tqd", bary, uh[mesh.triangles])
-    from riskplan.deformable.neohookean import shape_gradients
-
-    gh = np.einsum("tai,taj->tij", uh[mesh.triangles], shape_gradients(mesh))
+    gh = np.einsum("tai,taj->tij", uh[mesh.triangles], mesh.shape_gradients)
     l2 = np.sqrt(np.einsum("t,q,tqd->", mesh.areas, w, (uq - u(x)) ** 2))
     h1 = np.sqrt(np.einsum("t,q,tqij->", mesh.areas, w, (gh[:, None] - grad(x)) ** 2))
     return l2, h1
@@ -123,7 +122,7 @@ def test_dense_and_sparse_paths_agree(square175, rng, tol, monkeypatch):
     np.testing.assert_allclose(sparse.solve_free(F2), dense.solve_free(F2), **tol["float64_ref"])
     np.testing.assert_allclose(dense.solve(f), sparse.solve(f), **tol["float64_ref"])
     np.testing.assert_allclose(dense.solve_flat(f.ravel()), dense.solve(f).ravel(), **tol["float64_exact"])
-    np.testing.assert_allclose(dense.residual(dense.solve(f), f), 0.0, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(dense.residual(dense.solve(f), f), 0.0, **TOL["linear_fem"])
 
 
 def test_with_material_equals_fresh_assembly(square175, tol, rng):
@@ -144,7 +143,7 @@ def test_energy_and_reactions(square175, rng, tol):
     u = model.solve(f)
     # Clapeyron: strain energy = ½ f·u; reactions balance the applied load
     np.testing.assert_allclose(model.energy(u), 0.5 * np.sum(f * u), **tol["float64_ref"])
-    np.testing.assert_allclose(model.reactions(u).sum(0), -f.sum(0), rtol=0, atol=1e-10)
+    np.testing.assert_allclose(model.reactions(u).sum(0), -f.sum(0), **TOL["linear_fem"])
 
 
 @pytest.mark.parametrize(

@@ -5,6 +5,7 @@ import pytest
 
 from riskplan.deformable import contains, locate
 from riskplan.errors import InvalidInputError
+from tests.conftest import TOL
 
 
 def _random_inside(mesh, rng, n):
@@ -67,11 +68,11 @@ def test_nonconvex_notch_is_outside(poly200):
 def test_tree_candidates_equal_exhaustive_search(rng, tol):
     """Candidate elements from a k-d tree never change the answer (fallback is exhaustive)."""
     from riskplan.deformable import mesh_polygon, rectangle
-    from riskplan.deformable.locate import _mesh_maps, locate_points
+    from riskplan.deformable.locate import locate_points
 
     mesh = mesh_polygon(rectangle(), 1000)
     pts = np.vstack([rng.uniform(-0.05, 1.05, size=(400, 2)), mesh.nodes[:50]])
-    maps = _mesh_maps(mesh)
+    maps = mesh.barycentric_maps
     e_brute, l_brute = locate_points(maps, pts)
     bad_cand = rng.integers(0, mesh.n_elements, size=(len(pts), 3))  # mostly wrong candidates
     e_c, l_c = locate_points(maps, pts, candidates=bad_cand)
@@ -81,7 +82,7 @@ def test_tree_candidates_equal_exhaustive_search(rng, tol):
     # the same interpolated values (a point on a shared edge may pick either element)
     v_brute = np.einsum("pad,pa->pd", u[mesh.triangles[e_brute[inside]]], l_brute[inside])
     v_c = np.einsum("pad,pa->pd", u[mesh.triangles[e_c[inside]]], l_c[inside])
-    np.testing.assert_allclose(v_c, v_brute, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(v_c, v_brute, **TOL["interpolation"])
     assert np.array_equal(contains(mesh, pts), inside)
     it = locate(mesh, pts[inside])
-    np.testing.assert_allclose(it.interpolate(u), v_brute, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(it.interpolate(u), v_brute, **TOL["interpolation"])

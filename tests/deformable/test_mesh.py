@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from riskplan.deformable import TissueMesh, mesh_polygon, rectangle
-from riskplan.deformable.mesh import boundary_edges, signed_areas
+from riskplan.deformable.elements import boundary_edges, signed_areas
 from riskplan.errors import InvalidInputError
 
 
@@ -107,3 +107,42 @@ def test_bad_mesh_arrays(nodes, tris, match):
 def test_bad_polygon_input(verts, n, keep, match):
     with pytest.raises(InvalidInputError, match=match):
         mesh_polygon(np.asarray(verts, dtype=float), n, keep_points=keep)
+
+
+def test_derived_arrays_are_cached_read_only_properties(square175):
+    from riskplan.deformable import elements
+
+    mesh = mesh_polygon(rectangle(), 60)
+    for name, fn in (("shape_gradients", elements.shape_gradients), ("barycentric_maps", elements.barycentric_maps)):
+        first = getattr(mesh, name)
+        assert getattr(mesh, name) is first  # computed once
+        assert not first.flags.writeable
+        np.testing.assert_array_equal(first, fn(mesh.nodes, mesh.triangles))
+    assert mesh.centroid_tree is mesh.centroid_tree
+    assert mesh.boundary_edges is mesh.boundary_edges and not mesh.boundary_edges.flags.writeable
+
+
+def test_deformable_modules_import_without_cycles():
+    """Each module of the package imports only modules listed before it (one direction)."""
+    import ast
+    from pathlib import Path
+
+    import riskplan.deformable as pkg
+
+    order = ["elements", "mesh", "material", "laws", "banded", "assembly", "locate", "loads", "linear", "hyperelastic"]
+    root = Path(pkg.__file__).parent
+    assert sorted(order) == sorted(p.stem for p in root.glob("*.py") if p.stem != "__init__")
+    for k, name in enumerate(order):
+        tree = ast.parse((root / f"{name}.py").read_text())
+        deps = {
+            n.module.split(".")[2]
+            for n in ast.walk(tree)
+            if isinstance(n, ast.ImportFrom) and n.module and n.module.startswith("riskplan.deformable.")
+        }
+        deps |= {
+            a.name
+            for n in ast.walk(tree)
+            if isinstance(n, ast.ImportFrom) and n.module == "riskplan.deformable"
+            for a in n.names
+        } & set(order)
+        assert deps <= set(order[:k]), (name, deps - set(order[:k]))

@@ -8,10 +8,10 @@ import pytest
 from riskplan.errors import InvalidInputError
 from riskplan.robots import batch_kernel, load_robot, robot_from_toml
 from riskplan.robots.robot import LOCAL_MAXIT, LOCAL_TOL
+from tests.conftest import TOL
 
 # the lockstep kernel repeats the scalar kernel's operations in the same order, so the
 # agreement is to rounding (bit for bit in practice); these bounds leave room for that only
-RTOL, ATOL = 1e-10, 1e-12  # ATOL in m (positions) and 1 (rotation entries)
 
 # five tendons, tapered radius, two helices (one with a quadratic twist), 10 mm step
 ODD_TOML = """
@@ -108,8 +108,8 @@ def _tensions(robot, rng, B):
 def _check(robot, tau, P, R):
     ref = robot.solve_tensions(tau)  # scalar kernel, one configuration after another
     assert P.shape == ref.positions.shape and R.shape == ref.rotations.shape
-    np.testing.assert_allclose(P, ref.positions, rtol=RTOL, atol=ATOL)
-    np.testing.assert_allclose(R, ref.rotations, rtol=RTOL, atol=ATOL)
+    np.testing.assert_allclose(P, ref.positions, **TOL["batch_vs_scalar"])
+    np.testing.assert_allclose(R, ref.rotations, **TOL["batch_vs_scalar"])
 
 
 @pytest.mark.parametrize("which", ["paper", "odd"])
@@ -131,11 +131,11 @@ def test_batch_equals_scalar(request, rng, which, B, parallel):
 def test_zero_tension_is_straight(paper):
     P, R = batch_kernel.solve_tensions_batch(paper, np.zeros((3, 4)))
     np.testing.assert_allclose(
-        P[:, :, 2], np.broadcast_to(paper.s, (3, paper.n_stations)), rtol=0, atol=1e-15
+        P[:, :, 2], np.broadcast_to(paper.s, (3, paper.n_stations)), **TOL["round_off"]
     )
-    np.testing.assert_allclose(P[:, :, :2], 0.0, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(P[:, :, :2], 0.0, **TOL["round_off"])
     np.testing.assert_allclose(
-        R, np.broadcast_to(np.eye(3), R.shape), rtol=0, atol=1e-15
+        R, np.broadcast_to(np.eye(3), R.shape), **TOL["round_off"]
     )
 
 
@@ -150,16 +150,7 @@ def test_kernel_flags_unconverged_configurations(paper, rng):
         np.empty((40, n, 3, 3)),
         np.zeros(40, dtype=np.int64),
     )
-    args = (
-        paper._rt,
-        paper._drt,
-        paper._ddrt,
-        paper._kse,
-        paper._kbt,
-        paper._L,
-        paper._n,
-        LOCAL_TOL,
-    )
+    args = (*paper.tables, LOCAL_TOL)
     batch_kernel._solve_serial(tau, *args, 1, P, R, st)
     loaded = np.any(tau > 0, axis=1)
     assert np.all(st[loaded] == 1) and np.all(st[~loaded] == 0)
@@ -188,8 +179,8 @@ def test_unvalidated_tensions_above_the_limit(paper, rng):
     tau = rng.uniform(1.0, 1.3, (5, 4)) * paper.tension_limits
     P, R = batch_kernel.solve_tensions_batch(paper, tau, validate=False)
     ref = paper.solve_tensions(tau, validate=False)
-    np.testing.assert_allclose(P, ref.positions, rtol=RTOL, atol=ATOL)
-    np.testing.assert_allclose(R, ref.rotations, rtol=RTOL, atol=ATOL)
+    np.testing.assert_allclose(P, ref.positions, **TOL["batch_vs_scalar"])
+    np.testing.assert_allclose(R, ref.rotations, **TOL["batch_vs_scalar"])
 
 
 def test_bad_input(paper):

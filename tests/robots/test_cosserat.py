@@ -11,7 +11,10 @@ import pytest
 
 from riskplan.robots import TendonRobot, load_robot
 from riskplan.robots import cosserat as C
+from riskplan.robots.linalg6 import chol_factor6
+from riskplan.robots.strains import strain_slope
 from tests.conftest import TOL
+from tests.robots.reference_kernels import shape_free_exact_midpoints, strains_along
 
 
 @pytest.fixture(scope="module")
@@ -26,9 +29,9 @@ def with_step(robot, step, **backbone):
 
 def test_base_curvature_check_value(paper):
     """DESIGN.md check: one straight tendon, tau = 1 N -> base curvature tau r / (E I) = 1.3819 1/m."""
-    x = C.strains_along(np.array([1.0, 0, 0, 0]), paper._theta, paper._radius, paper._kse, paper._kbt, [0.0])
-    assert x[0, 4] == pytest.approx(1.3819, abs=5e-5)
-    assert x[0, 4] == pytest.approx(0.008 / paper.params.backbone.kbt[0], rel=1e-12)
+    x = strains_along(np.array([1.0, 0, 0, 0]), paper._theta, paper._radius, paper.tables.kse, paper.tables.kbt, [0.0])
+    np.testing.assert_allclose(x[0, 4], 1.3819, **TOL["quoted_5_digits"])
+    np.testing.assert_allclose(x[0, 4], 0.008 / paper.params.backbone.kbt[0], **TOL["float64_exact_rel"])
 
 
 @pytest.mark.parametrize("tau", [1.0, 7.5])
@@ -45,7 +48,7 @@ def test_single_straight_tendon_is_circular_arc(paper, tau):
     err = np.abs(shape.positions - exact).max() / bb.length
     assert err <= 1e-6
     Ry = np.stack([np.cos(k * s), 0 * s, -np.sin(k * s)], -1)  # first column of Ry(k s)
-    np.testing.assert_allclose(shape.rotations[:, :, 0], Ry, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(shape.rotations[:, :, 0], Ry, **TOL["rk4_closed_form"])
 
 
 def test_rk4_fourth_order_convergence(paper):
@@ -63,18 +66,18 @@ def test_rk4_fourth_order_convergence(paper):
 def test_equilibrium_residuals(paper):
     """Eqs. (2)-(3) hold at every station of the solution, and rotations stay orthonormal."""
     tau = np.array([3.0, 0.5, 0.0, 8.0])
-    n = paper._n
+    n = paper.n_stations - 1
     P = np.empty((n + 1, 3))
     R = np.empty((n + 1, 3, 3))
     X = np.empty((n + 1, 6))
     L = np.empty(4)
-    assert C.shape_free(tau, paper._rt, paper._drt, paper._ddrt, paper._kse, paper._kbt, paper._L, n, 1e-12, 50, P, R, X, L) == C.OK
+    assert C.shape_free(tau, *paper.tables, 1e-12, 50, P, R, X, L) == C.OK
     F = np.empty(6)
     z = np.zeros(3)
     for k in range(n + 1):
-        e = C.local_residual(X[k], tau, paper._rt[2 * k], paper._drt[2 * k], z, z, paper._kse, paper._kbt, F)
+        e = C.local_residual(X[k], tau, paper.tables.offsets[2 * k], paper.tables.offset_slopes[2 * k], z, z, paper.tables.kse, paper.tables.kbt, F)
         assert e <= 1e-11
-    np.testing.assert_allclose(np.einsum("nji,njk->nik", R, R), np.broadcast_to(np.eye(3), R.shape), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(np.einsum("nji,njk->nik", R, R), np.broadcast_to(np.eye(3), R.shape), **TOL["rk4_closed_form"])
 
 
 def test_hermite_midpoints_match_exact_midpoint_solves(paper):
@@ -82,17 +85,17 @@ def test_hermite_midpoints_match_exact_midpoint_solves(paper):
     (strains solved at the half steps too): O(h^4) apart, and both converge to the same shape."""
     tau = np.array([4.0, 0.0, 1.0, 12.0])
 
-    def run(robot, fn, *extra):
-        n = robot._n
+    def run(robot, fn):
+        n = robot.n_stations - 1
         P, R, X, L = np.empty((n + 1, 3)), np.empty((n + 1, 3, 3)), np.empty((n + 1, 6)), np.empty(4)
-        assert fn(tau, robot._rt, robot._drt, *extra, robot._kse, robot._kbt, robot._L, n, 1e-12, 50, P, R, X, L) == C.OK
+        assert fn(tau, *robot.tables, 1e-12, 50, P, R, X, L) == C.OK
         return P, L
 
     diffs, ldiffs = [], []
     for n in (20, 40, 80):
         r = with_step(paper, 0.2 / n)
-        Pf, Lf = run(r, C.shape_free, r._ddrt)
-        Pr, Lr = run(r, C.shape_free_exact_midpoints)
+        Pf, Lf = run(r, C.shape_free)
+        Pr, Lr = run(r, shape_free_exact_midpoints)
         diffs.append(np.abs(Pf - Pr).max())
         ldiffs.append(np.abs(Lf - Lr).max())
     assert diffs[1] < 5e-6 and diffs[0] / diffs[1] > 10 and diffs[1] / diffs[2] > 10, diffs
@@ -103,24 +106,24 @@ def test_strain_slope_matches_finite_differences(paper):
     """x'(s) from the implicit function theorem (R&W's ODE) == finite differences of local solves."""
     tau = np.array([2.0, 0.5, 0.0, 9.0])
     s = np.array([0.1 - 1e-6, 0.1, 0.1 + 1e-6])
-    X = C.strains_along(tau, paper._theta, paper._radius, paper._kse, paper._kbt, s, tol=1e-14)
+    X = strains_along(tau, paper._theta, paper._radius, paper.tables.kse, paper.tables.kbt, s, tol=1e-14)
     fd = (X[2] - X[0]) / 2e-6
     th, rc = paper._theta, paper._radius
     rt, drt, ddrt = C.tendon_offset_table(th, rc, 0.2, 1)  # nodes at 0, 0.1, 0.2
     Lf = np.empty((6, 6))
-    C.local_jacobian(X[1], tau, rt[1], drt[1], paper._kse, paper._kbt, Lf)
-    assert C._chol_factor6(Lf)
+    C.local_jacobian(X[1], tau, rt[1], drt[1], paper.tables.kse, paper.tables.kbt, Lf)
+    assert chol_factor6(Lf)
     d = np.empty(6)
-    C._strain_slope(X[1], tau, rt[1], drt[1], ddrt[1], Lf, d)
-    np.testing.assert_allclose(d, fd, rtol=1e-5, atol=1e-6)
+    strain_slope(X[1], tau, rt[1], drt[1], ddrt[1], Lf, d)
+    np.testing.assert_allclose(d, fd, **TOL["fd_strain_slope"])
 
 
 def test_jacobian_matches_finite_differences(paper, rng):
     tau = np.array([3.0, 0.0, 1.0, 8.0])
     x = np.array([0.01, -0.02, 0.99, 3.0, -5.0, 1.0])
-    rt, drt = paper._rt[17], paper._drt[17]
+    rt, drt = paper.tables.offsets[17], paper.tables.offset_slopes[17]
     J = np.empty((6, 6))
-    C.local_jacobian(x, tau, rt, drt, paper._kse, paper._kbt, J)
+    C.local_jacobian(x, tau, rt, drt, paper.tables.kse, paper.tables.kbt, J)
     F0, F1 = np.empty(6), np.empty(6)
     z = np.zeros(3)
     Jfd = np.empty((6, 6))
@@ -129,10 +132,10 @@ def test_jacobian_matches_finite_differences(paper, rng):
         xp, xm = x.copy(), x.copy()
         xp[j] += h
         xm[j] -= h
-        C.local_residual(xp, tau, rt, drt, z, z, paper._kse, paper._kbt, F0)
-        C.local_residual(xm, tau, rt, drt, z, z, paper._kse, paper._kbt, F1)
+        C.local_residual(xp, tau, rt, drt, z, z, paper.tables.kse, paper.tables.kbt, F0)
+        C.local_residual(xm, tau, rt, drt, z, z, paper.tables.kse, paper.tables.kbt, F1)
         Jfd[:, j] = (F0 - F1) / (2 * h)
-    np.testing.assert_allclose(J, Jfd, rtol=1e-6, atol=1e-8)
+    np.testing.assert_allclose(J, Jfd, **TOL["fd_jacobian"])
 
 
 def _hat(w):
@@ -241,8 +244,8 @@ def test_helical_routing_against_independent_bvp(paper, tau):
     sol = _rw_bvp(paper, np.array(tau))
     shape = with_step(paper, 0.2 / 160).solve_tensions(tau)
     ref = sol.sol(shape.s)
-    np.testing.assert_allclose(shape.positions, ref[0:3].T, rtol=0, atol=2e-6)
-    np.testing.assert_allclose(shape.rotations.reshape(-1, 9), ref[3:12].T, rtol=0, atol=2e-5)
+    np.testing.assert_allclose(shape.positions, ref[0:3].T, **TOL["bvp_positions"])
+    np.testing.assert_allclose(shape.rotations.reshape(-1, 9), ref[3:12].T, **TOL["bvp_rotations"])
 
 
 def _stiff(robot, factor=100.0):
@@ -257,8 +260,8 @@ def test_gravity_small_deflection_cantilever(paper):
     q = robot._lam * 9.81
     bb = robot.params.backbone
     w = q * bb.length**4 / (8 * bb.kbt[0])
-    assert -shape.tip[2] == pytest.approx(w, rel=2e-3)
-    assert shape.tip[0] == pytest.approx(bb.length, rel=1e-3)
+    np.testing.assert_allclose(-shape.tip[2], w, **TOL["small_deflection"])
+    np.testing.assert_allclose(shape.tip[0], bb.length, **TOL["small_deflection_length"])
 
 
 def test_gravity_along_backbone_compresses_linearly(paper):
@@ -267,7 +270,7 @@ def test_gravity_along_backbone_compresses_linearly(paper):
     shape = robot.solve_tensions([0.0, 0.0, 0.0, 0.0])
     q = robot._lam * 9.81
     bb = robot.params.backbone
-    np.testing.assert_allclose(shape.tip, [0, 0, bb.length - q * bb.length**2 / (2 * bb.kse[2])], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(shape.tip, [0, 0, bb.length - q * bb.length**2 / (2 * bb.kse[2])], **TOL["float64_abs"])
 
 
 def test_gravity_tension_shape_is_in_equilibrium(paper):

@@ -44,7 +44,7 @@ def test_tube_points_at_radius_from_backbone(kappa):
     d = dist_to_arc(pts, kappa, 0.2)
     # between nodes: Hermite positions (4th order) and projected linear rotations (2nd order,
     # r (kappa h)^2 / 8 = 1.4 um at kappa = 12, h = 5 mm)
-    np.testing.assert_allclose(d, 0.003, rtol=0, atol=2e-6)
+    np.testing.assert_allclose(d, 0.003, **TOL["surface_sampling"])
     np.testing.assert_allclose(np.linalg.norm(nrm, axis=1), 1.0, **TOL["float64_ref"])
     # outward: moving along the normal increases the distance to the backbone
     d_out = dist_to_arc(pts + 1e-4 * nrm, kappa, 0.2)
@@ -74,8 +74,8 @@ def test_disk_points_on_cylinder_with_outward_normals(rng):
     pts, nrm = sample_disk(c, Q, 0.01, 0.002, 0.003, 0.0005)
     local = (pts - c) @ Q  # body coordinates
     rho, h = np.hypot(local[:, 0], local[:, 1]), local[:, 2]
-    side = np.isclose(rho, 0.01, rtol=0, atol=1e-12)
-    face = np.isclose(np.abs(h), 0.001, rtol=0, atol=1e-12)
+    side = np.isclose(rho, 0.01, **TOL["float64_abs"])
+    face = np.isclose(np.abs(h), 0.001, **TOL["float64_abs"])
     assert np.all(side | face)
     assert np.all(np.abs(h) <= 0.001 + 1e-12) and np.all(rho <= 0.01 + 1e-12) and np.all(rho[face] >= 0.003)
     np.testing.assert_allclose(np.linalg.norm(nrm, axis=1), 1.0, **TOL["float64_ref"])

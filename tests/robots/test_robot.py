@@ -26,7 +26,7 @@ def test_contract(paper):
     np.testing.assert_allclose(shape.tip, [0, 0, 0.2], **TOL["float64_exact"])
     np.testing.assert_allclose(paper.tendon_rest_lengths[:3], 0.2, **TOL["float64_exact"])
     # helical tendon: rest length = int sqrt(1 + (r theta')^2) ds
-    assert paper.tendon_rest_lengths[3] == pytest.approx(0.2 * np.hypot(1, 0.008 * 47.124), rel=1e-12)
+    np.testing.assert_allclose(paper.tendon_rest_lengths[3], 0.2 * np.hypot(1, 0.008 * 47.124), **TOL["float64_exact_rel"])
 
 
 def test_tension_direction_convention(paper):
@@ -73,13 +73,13 @@ def test_displacement_tension_round_trip(paper, rng):
     assert np.all(tau >= 0)
     back = paper.displacements_for_tensions(np.minimum(tau, paper.tension_limits), validate=False)
     taut = tau > 0
-    np.testing.assert_allclose(back[taut], d[taut], rtol=0, atol=1e-11)
+    np.testing.assert_allclose(back[taut], d[taut], **TOL["displacement_solve"])
     assert np.all(back[~taut] >= d[~taut] - 1e-11)  # slack: the tendon has length to spare
     # and from tensions to displacements to tensions
     tau0 = rng.uniform(0.2, 1.0, (5, 4)) * paper.tension_limits * 0.5
     d0 = paper.displacements_for_tensions(tau0)
-    np.testing.assert_allclose(paper.tensions_for_displacements(d0), tau0, rtol=1e-8, atol=1e-9)
-    np.testing.assert_allclose(paper.solve_displacements(d0).positions, paper.solve_tensions(tau0).positions, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(paper.tensions_for_displacements(d0), tau0, **TOL["tension_solve"])
+    np.testing.assert_allclose(paper.solve_displacements(d0).positions, paper.solve_tensions(tau0).positions, **TOL["displacement_roundtrip"])
 
 
 def test_slack_tendons_carry_no_tension(paper):
@@ -95,7 +95,7 @@ def test_displacement_with_gravity_round_trip(paper):
     d = np.array([0.01, 0.0, 0.003, 0.005])
     tau = robot.tensions_for_displacements(d)
     back = robot.displacements_for_tensions(tau)
-    np.testing.assert_allclose(back[tau > 0], d[tau > 0], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(back[tau > 0], d[tau > 0], **TOL["displacement_roundtrip"])
 
 
 @pytest.mark.parametrize(
@@ -139,7 +139,7 @@ def test_bad_array_input_in_a_batch(paper, row, match):
 
 
 def test_fast_limit_check_matches_numpy(paper, rng):
-    from riskplan.robots.cosserat import in_limits
+    from riskplan.robots.robot import in_limits
 
     low, high = paper._dlo, paper._dhi
     for _ in range(200):
@@ -229,6 +229,6 @@ def test_displacement_solve_with_inextensible_antagonistic_tendons(rng):
         assert np.all(tau >= 0.0)
         g = robot.displacements_for_tensions(tau, validate=False) - d  # length to spare, l0 - l(tau) - d
         taut = tau > 1e-9
-        np.testing.assert_allclose(g[taut], 0.0, atol=1e-10)
+        np.testing.assert_allclose(g[taut], 0.0, **TOL["displacement_roundtrip"])
         assert np.all(g >= -1e-10)
         assert np.all(np.isfinite(robot.solve_displacements(d).positions))

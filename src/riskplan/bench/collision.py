@@ -1,6 +1,6 @@
 """``riskplan bench collision``: speed of the collision bounds on the procedural chest mesh.
 
-Keys (issue 4): ``gaussian_ms`` (one Gaussian), ``mixture5_ms`` (one 5-component mixture),
+Keys: ``gaussian_ms`` (one Gaussian), ``mixture5_ms`` (one 5-component mixture),
 ``trajectory50_ms`` (50 mixtures + eq. 10), ``mesh_triangles``. Extra keys: scaling with the
 number of triangles and of components, closest-point queries by library (libigl AABB, coal,
 trimesh), Monte Carlo containment throughput. Robot geometry: 5-component mixtures built
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from riskplan.bench._timing import median_time
+from riskplan.bench import median_time
 
 
 def _mixtures(n, K, seed=0):

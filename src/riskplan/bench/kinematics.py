@@ -15,25 +15,9 @@ freshly initialised network is timed (no training needed for the benchmark).
 
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 
-log = logging.getLogger(__name__)
-
 N_BATCH = 10_000
-
-
-def _paper_robot():
-    try:
-        from riskplan.robots import load_robot
-    except ImportError:
-        return None
-    try:
-        return load_robot("paper")
-    except Exception as exc:  # the robot area may be incomplete; report the MDN figures anyway
-        log.warning("cannot load the paper robot (%s); Cosserat timing skipped", exc)
-        return None
 
 
 def make_bench_model(n_tendons: int, limits: np.ndarray, n_components: int = 5, seed: int = 0):
@@ -54,24 +38,22 @@ def make_bench_model(n_tendons: int, limits: np.ndarray, n_components: int = 5, 
 def run(quick: bool = False) -> dict:
     import torch
 
-    from riskplan.bench._timing import median_time
+    from riskplan.bench import median_time
 
     torch.set_num_threads(1)
-    robot = _paper_robot()
-    if robot is not None:
-        limits = np.asarray(robot.displacement_limits, dtype=np.float64)
-    else:
-        limits = np.array([[-0.01, 0.04]] * 4)
+    from riskplan.robots import load_robot
+
+    robot = load_robot("paper")
+    limits = np.asarray(robot.displacement_limits, dtype=np.float64)
     m = limits.shape[0]
     model = make_bench_model(m, limits)
     rng = np.random.default_rng(0)
     singles = rng.uniform(limits[:, 0], limits[:, 1], size=(64, m))
-    if robot is not None:
-        # time configurations the robot can realise (tensions within their limits), as a user would
-        cand = rng.uniform(limits[:, 0], limits[:, 1], size=(512, m))
-        ok = (robot.tensions_for_displacements(cand) <= robot.tension_limits).all(-1)
-        if ok.sum() >= 8:
-            singles = cand[ok][:64]
+    # time configurations the robot can realise (tensions within their limits), as a user would
+    cand = rng.uniform(limits[:, 0], limits[:, 1], size=(512, m))
+    ok = (robot.tensions_for_displacements(cand) <= robot.tension_limits).all(-1)
+    if ok.sum() >= 8:
+        singles = cand[ok][:64]
     batch = rng.uniform(limits[:, 0], limits[:, 1], size=(N_BATCH, m))
     n_single = len(singles)
     it = iter(range(1 << 62))
@@ -85,17 +67,15 @@ def run(quick: bool = False) -> dict:
     out = {
         "mdn_single_ms": single * 1e3,
         "mdn_batched_us_per_config": batched / N_BATCH * 1e6,
-        "cosserat_single_ms": None,
-        "speedup_vs_cosserat": None,
         "n_components": model.n_components,
         "n_tendons": m,
         "batch_size": N_BATCH,
     }
-    if robot is not None:
-        def cosserat():
-            robot.solve_displacements(singles[next(it) % n_single])
 
-        cs = median_time(cosserat, repeats=10 if quick else 100, warmup=3)
-        out["cosserat_single_ms"] = cs * 1e3
-        out["speedup_vs_cosserat"] = cs / single
+    def cosserat():
+        robot.solve_displacements(singles[next(it) % n_single])
+
+    cs = median_time(cosserat, repeats=10 if quick else 100, warmup=3)
+    out["cosserat_single_ms"] = cs * 1e3
+    out["speedup_vs_cosserat"] = cs / single
     return out

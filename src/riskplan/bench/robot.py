@@ -1,4 +1,4 @@
-"""``riskplan bench robot``: Cosserat-model speed (issue #2).
+"""``riskplan bench robot``: Cosserat-model speed.
 
 Figures (median wall time, paper robot, no gravity, 5 mm step):
 
@@ -8,8 +8,7 @@ Figures (median wall time, paper robot, no gravity, 5 mm step):
 * ``tension_batched_us_per_config`` — one ``solve_tensions`` call on 10,000 configurations.
 * ``displacement_single_ms`` — ``robot.solve_displacements`` for one configuration.
 * ``dataset_small_s`` — wall time of generating the ``small`` preset (train and test splits,
-  ``riskplan.datasets.generate_splits``), serial backend (None if the data-set module is not
-  available).
+  ``riskplan.datasets.generate_splits``), serial backend (None with ``include_dataset=False``).
 
 Anchors: the compiled C++ peer (Kuntz-Lab/interactive-rate-tendons) takes 66-73 us per
 configuration on a 2-core machine; the MDN paper quotes 0.39 ms for its Cosserat model.
@@ -17,24 +16,18 @@ configuration on a 2-core machine; the MDN paper quotes 0.39 ms for its Cosserat
 
 from __future__ import annotations
 
-import logging
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-log = logging.getLogger(__name__)
-
 N_BATCH = 10_000
 
 
-def _dataset_small_s() -> float | None:
-    """Time the small data set (sensing/datasets area); None if that module is missing."""
-    try:
-        from riskplan.datasets import generate_splits
-    except ImportError:
-        return None
+def _dataset_small_s() -> float:
+    """Wall time of generating the small data set (train and test splits, serial backend)."""
+    from riskplan.datasets import generate_splits
     from riskplan.robots import load_robot
 
     robot = load_robot("paper")
@@ -45,7 +38,7 @@ def _dataset_small_s() -> float | None:
 
 
 def run(quick: bool = False, *, include_dataset: bool = True) -> dict:
-    from riskplan.bench._timing import median_time
+    from riskplan.bench import median_time
     from riskplan.robots import cosserat, load_robot
     from riskplan.robots.robot import LOCAL_MAXIT, LOCAL_TOL
 
@@ -57,7 +50,7 @@ def run(quick: bool = False, *, include_dataset: bool = True) -> dict:
     t_single = median_time(lambda: robot.solve_tensions(singles[next(it) % 64]), repeats=50 if quick else 300, warmup=5)
     n = robot.n_stations
     P, Rs, X, lengths = np.empty((n, 3)), np.empty((n, 3, 3)), np.empty((n, 6)), np.empty(robot.n_tendons)
-    kernel_args = (robot._rt, robot._drt, robot._ddrt, robot._kse, robot._kbt, robot._L, robot._n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths)
+    kernel_args = (*robot.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths)
     t_kernel = median_time(lambda: cosserat.shape_free(singles[next(it) % 64], *kernel_args), repeats=50 if quick else 300, warmup=5)
     n_batch = 1000 if quick else N_BATCH
     batch = rng.uniform(0.0, 1.0, (n_batch, robot.n_tendons)) * lim * 0.5
@@ -72,9 +65,6 @@ def run(quick: bool = False, *, include_dataset: bool = True) -> dict:
         "displacement_single_ms": t_disp * 1e3,
         "dataset_small_s": None,
     }
-    try:
-        if include_dataset:
-            out["dataset_small_s"] = _dataset_small_s()
-    except Exception as exc:  # the data-set area may still be in progress; report the solver figures anyway
-        log.warning("dataset_small_s not measured: %s", exc)
+    if include_dataset:
+        out["dataset_small_s"] = _dataset_small_s()
     return out

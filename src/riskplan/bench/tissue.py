@@ -1,4 +1,4 @@
-"""Speed of one tissue-simulator step (issue 5): ``riskplan bench tissue --json``.
+"""Speed of one tissue-simulator step: ``riskplan bench tissue --json``.
 
 One *step* is what a planner's simulator does per control: a quasi-static solve under a
 small load change, warm-started from the previous state, then the material points read
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from riskplan.bench._timing import median_time
+from riskplan.bench import median_time
 
 
 def _linear_setup(n_elements: int):
@@ -33,10 +33,10 @@ def _linear_setup(n_elements: int):
 
 
 def linear_step_ms(n_elements: int, repeats: int = 200) -> float:
-    from riskplan.deformable.locate import _mesh_maps, locate_points
+    from riskplan.deformable.locate import locate_points
 
     mesh, model, material_points = _linear_setup(n_elements)
-    maps = _mesh_maps(mesh)
+    maps = mesh.barycentric_maps
     tri = mesh.triangles
     n = 2 * mesh.n_nodes
     state = {"x": np.array([0.1, 0.2]), "k": 0}

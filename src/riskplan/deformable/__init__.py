@@ -5,8 +5,16 @@ with a cached factorisation, compressible neo-Hookean (and St Venant-Kirchhoff)
 hyperelasticity with Newton's method, consistent nodal forces for point / patch /
 body / traction loads, and barycentric interpolation at material points.
 See ``docs/deformable.md`` for equations and the API.
+
+Modules, one job each (imports point down this list, no cycles): ``elements`` (P1
+geometry and kinematics, pure arrays), ``mesh`` (``TissueMesh`` with its cached derived
+arrays, polygon meshing), ``material``, ``laws`` (hyperelastic energies, stresses,
+tangents), ``banded`` (RCM + banded Cholesky), ``assembly`` (element forces/tangents,
+DOF bookkeeping, sparse layouts), ``locate`` (material points), ``loads``, ``linear``
+(linear model), ``hyperelastic`` (hyperelastic model, Newton solver).
 """
 
+from riskplan.deformable.hyperelastic import HyperelasticModel, NeoHookeanModel, SolveInfo
 from riskplan.deformable.linear import LinearElasticModel, element_strains, element_stresses
 from riskplan.deformable.loads import body_load, patch_load, patch_weights, point_load, traction_load
 from riskplan.deformable.locate import Interpolator, contains, locate
@@ -29,8 +37,7 @@ __all__ = [
     "patch_weights",
     "body_load",
     "traction_load",
+    "HyperelasticModel",
+    "NeoHookeanModel",
+    "SolveInfo",
 ]
-
-from riskplan.deformable.neohookean import HyperelasticModel, NeoHookeanModel, SolveInfo  # noqa: E402
-
-__all__ += ["HyperelasticModel", "NeoHookeanModel", "SolveInfo"]

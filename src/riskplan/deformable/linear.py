@@ -17,89 +17,17 @@ from __future__ import annotations
 import numpy as np
 
 from riskplan._validation import as_array
+from riskplan.deformable.assembly import assemble_stiffness_parts, fixed_node_array, split_dofs
+from riskplan.deformable.banded import banded_cholesky
 from riskplan.deformable.material import Material
 from riskplan.deformable.mesh import TissueMesh
-from riskplan.errors import InvalidInputError, require
+from riskplan.errors import InvalidInputError
+from riskplan.threads import one_blas_thread
 
 #: Free-DOF count up to which the reduced stiffness is inverted densely (a dense
 #: mat-vec beats banded triangular solves for small systems); above it an RCM-ordered
 #: banded Cholesky factorisation is used (SuperLU if that fails).
 DENSE_MAX_DOFS = 700
-
-
-class BandedCholeskySolver:
-    """``r -> K⁻¹ r`` from the upper banded Cholesky factor ``cb`` of ``K[perm][:, perm]``
-    (LAPACK ``pbtrs`` called directly: the wrapper's checks cost more than the solve at
-    these sizes). Picklable (the LAPACK handle is looked up again after unpickling)."""
-
-    def __init__(self, cb: np.ndarray, perm: np.ndarray):
-        self.cb = cb
-        self.perm = perm
-        self._pbtrs = None
-
-    def __getstate__(self):
-        return {"cb": self.cb, "perm": self.perm}
-
-    def __setstate__(self, state):
-        self.__init__(state["cb"], state["perm"])
-
-    def __call__(self, r: np.ndarray) -> np.ndarray:
-        if self._pbtrs is None:
-            from scipy.linalg import get_lapack_funcs
-
-            (self._pbtrs,) = get_lapack_funcs(("pbtrs",), (self.cb,))
-        x, info = self._pbtrs(self.cb, r[self.perm], lower=0)
-        if info != 0:  # pragma: no cover - only for malformed arguments
-            raise RuntimeError(f"pbtrs failed with info={info}")
-        out = np.empty_like(x)
-        out[self.perm] = x
-        return out
-
-
-def banded_cholesky(K):
-    """Reverse Cuthill-McKee ordering + banded Cholesky of a sparse SPD matrix ``K``;
-    returns a :class:`BandedCholeskySolver` ``solve(r)``. Raises
-    ``numpy.linalg.LinAlgError`` if ``K`` is not positive definite."""
-    import scipy.linalg
-    from scipy.sparse.csgraph import reverse_cuthill_mckee
-
-    K = K.tocsr()
-    perm = reverse_cuthill_mckee(K, symmetric_mode=True)
-    Kp = K[perm][:, perm].tocoo()
-    upper = Kp.row <= Kp.col
-    bw = int(np.max(Kp.col[upper] - Kp.row[upper]))
-    ab = np.zeros((bw + 1, K.shape[0]))
-    ab[bw + Kp.row[upper] - Kp.col[upper], Kp.col[upper]] = Kp.data[upper]
-    cb = scipy.linalg.cholesky_banded(ab, lower=False)
-    return BandedCholeskySolver(cb, perm)
-
-
-def assemble_stiffness_parts(mesh: TissueMesh):
-    """``(K_λ, K_μ)``: the P1 stiffness matrices ``(2N, 2N)`` (CSR) for ``λ=1, μ=0`` and
-    ``λ=0, μ=1`` (so ``K = λ K_λ + μ K_μ``), assembled with scikit-fem."""
-    skfem = require("skfem", "fem")
-    from skfem.models.elasticity import linear_elasticity
-
-    basis = skfem.Basis(mesh.to_skfem(), skfem.ElementVector(skfem.ElementTriP1()), intorder=1)
-    K_lam = skfem.asm(linear_elasticity(1.0, 0.0), basis).tocsr()
-    K_mu = skfem.asm(linear_elasticity(0.0, 1.0), basis).tocsr()
-    return K_lam, K_mu
-
-
-def _fixed_node_array(fixed_nodes, n_nodes: int) -> np.ndarray:
-    fixed = np.unique(np.asarray(fixed_nodes, dtype=np.int64).reshape(-1)) if fixed_nodes is not None else None
-    if fixed is None or fixed.size == 0:
-        raise InvalidInputError("fixed_nodes: at least one node must be fixed (else rigid motions are free)")
-    if fixed.min() < 0 or fixed.max() >= n_nodes:
-        raise InvalidInputError(f"fixed_nodes: indices must lie in [0, {n_nodes - 1}]")
-    return fixed
-
-
-def _check_rigid(mesh: TissueMesh, fixed: np.ndarray) -> None:
-    if fixed.size == 1:
-        raise InvalidInputError(
-            "fixed_nodes: one fixed node leaves the rotation about it free; fix at least two distinct nodes"
-        )
 
 
 class LinearElasticModel:
@@ -123,16 +51,16 @@ class LinearElasticModel:
             raise InvalidInputError(f"material: expected a Material, got {type(material).__name__}")
         self.mesh = mesh
         self.material = material
-        self.fixed_nodes = _fixed_node_array(fixed_nodes, mesh.n_nodes)
-        _check_rigid(mesh, self.fixed_nodes)
+        self.fixed_nodes = fixed_node_array(fixed_nodes, mesh.n_nodes)
+        if self.fixed_nodes.size == 1:
+            raise InvalidInputError(
+                "fixed_nodes: one fixed node leaves the rotation about it free; fix at least two distinct nodes"
+            )
         self._parts = _parts if _parts is not None else assemble_stiffness_parts(mesh)
         lam, mu = material.lame
         self.K = (lam * self._parts[0] + mu * self._parts[1]).tocsr()
         n = 2 * mesh.n_nodes
-        mask = np.ones(n, dtype=bool)
-        self.fixed_dofs = np.sort(np.concatenate([2 * self.fixed_nodes, 2 * self.fixed_nodes + 1]))
-        mask[self.fixed_dofs] = False
-        self.free_dofs = np.flatnonzero(mask)
+        self.fixed_dofs, self.free_dofs = split_dofs(self.fixed_nodes, n)
         self._K_ff = self.K[self.free_dofs][:, self.free_dofs].tocsc()
         self._K_fc = self.K[self.free_dofs][:, self.fixed_dofs].tocsr()
         self._n = n
@@ -144,6 +72,7 @@ class LinearElasticModel:
     def __setstate__(self, state):
         self.__init__(state["mesh"], state["material"], state["fixed_nodes"], _parts=state["parts"])
 
+    @one_blas_thread
     def _factorise(self) -> None:
         import scipy.linalg
         from scipy.sparse.linalg import splu
@@ -230,9 +159,7 @@ class LinearElasticModel:
 
 def element_strains(mesh: TissueMesh, u) -> np.ndarray:
     """Small strains ``ε = sym ∇u`` ``(T, 2, 2)`` (constant per P1 element) for ``u (N, 2)``."""
-    from riskplan.deformable.neohookean import shape_gradients
-
-    G = shape_gradients(mesh)  # (T, 3, 2)
+    G = mesh.shape_gradients  # (T, 3, 2)
     grad = np.einsum("tai,taj->tij", np.asarray(u, dtype=np.float64)[mesh.triangles], G)
     return 0.5 * (grad + np.swapaxes(grad, 1, 2))
 

@@ -48,7 +48,7 @@ def _check_mesh(mesh) -> None:
         raise InvalidInputError(f"mesh: expected a TissueMesh, got {type(mesh).__name__}")
 
 
-def _subdivided_rule(k: int):
+def subdivided_triangle_rule(k: int):
     """Barycentric points ``(Q, 3)`` and weights ``(Q,)`` (sum 1) of the degree-4 rule
     applied on a uniform ``k × k`` subdivision of the triangle."""
     if k == 1:
@@ -97,7 +97,7 @@ def body_load(mesh: TissueMesh, body_force, *, refine: int = 1) -> np.ndarray:
     each element ``refine × refine`` times for rough integrands).
     """
     _check_mesh(mesh)
-    bary, w = _subdivided_rule(int(refine))
+    bary, w = subdivided_triangle_rule(int(refine))
     p = mesh.nodes[mesh.triangles]  # (T, 3, 2)
     x = np.einsum("qa,tad->tqd", bary, p)  # (T, Q, 2)
     if callable(body_force):
@@ -182,7 +182,7 @@ def patch_weights(mesh: TissueMesh, center, radius: float, *, on: str = "boundar
         if not np.any(near):
             raise InvalidInputError(f"center: the patch of radius {radius:g} at {c.tolist()} misses the body")
         k = max(1, int(np.ceil(4.0 * ext[near].max() / radius)))
-        bary, wq = _subdivided_rule(k)
+        bary, wq = subdivided_triangle_rule(k)
         x = np.einsum("qa,tad->tqd", bary, p[near])
         phi = _bump(((x - c) ** 2).sum(-1), radius) * mesh.areas[near][:, None] * wq[None, :]
         fe = np.einsum("tq,qa->ta", phi, bary)

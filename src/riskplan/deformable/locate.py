@@ -25,27 +25,9 @@ from riskplan.errors import InvalidInputError
 INSIDE_TOL = 1e-10
 
 
-def barycentric_maps(nodes: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """``(T, 3, 3)`` matrices ``M_e`` with ``λ = M_e @ [x, y, 1]`` (inverse of the
-    affine map ``[x; y; 1] = [[x_a], [y_a], [1]] λ``)."""
-    p = nodes[triangles]  # (T, 3, 2)
-    A = np.ones((len(triangles), 3, 3))
-    A[:, 0, :] = p[:, :, 0]
-    A[:, 1, :] = p[:, :, 1]
-    return np.linalg.inv(A)
-
-
-def _mesh_maps(mesh: TissueMesh) -> np.ndarray:
-    maps = mesh.__dict__.get("_bary_maps")
-    if maps is None:
-        maps = barycentric_maps(mesh.nodes, mesh.triangles)
-        maps.setflags(write=False)
-        object.__setattr__(mesh, "_bary_maps", maps)
-    return maps
-
-
 def locate_points(maps: np.ndarray, points: np.ndarray, chunk: int = 256, candidates=None):
-    """Containing element ``(P,)`` and barycentric weights ``(P, 3)`` of ``points (P, 2)``.
+    """Containing element ``(P,)`` and barycentric weights ``(P, 3)`` of ``points (P, 2)``
+    given the elements' ``maps (T, 3, 3)`` (``TissueMesh.barycentric_maps``).
 
     Picks, for each point, the element whose smallest barycentric coordinate is largest;
     element ``-1`` when that value is below ``-INSIDE_TOL`` (outside the mesh).
@@ -85,18 +67,11 @@ _TREE_K = 8
 
 
 def _locate_in_mesh(mesh: TissueMesh, pts: np.ndarray):
-    maps = _mesh_maps(mesh)
     cand = None
     if len(pts) * mesh.n_elements > _TREE_MIN_PAIRS:
-        tree = mesh.__dict__.get("_centroid_tree")
-        if tree is None:
-            from scipy.spatial import cKDTree
-
-            tree = cKDTree(mesh.nodes[mesh.triangles].mean(axis=1))
-            object.__setattr__(mesh, "_centroid_tree", tree)
         k = min(_TREE_K, mesh.n_elements)
-        cand = tree.query(pts, k=k)[1].reshape(len(pts), k)
-    return locate_points(maps, pts, candidates=cand)
+        cand = mesh.centroid_tree.query(pts, k=k)[1].reshape(len(pts), k)
+    return locate_points(mesh.barycentric_maps, pts, candidates=cand)
 
 
 @dataclass(frozen=True, eq=False)

@@ -7,17 +7,21 @@ requested number of triangles. Polygon corners and any ``keep_points`` (fixed po
 load points, embedded obstacles) are mesh nodes.
 
 :class:`TissueMesh` is the frozen value every FEM routine takes; constructing one
-validates it (no inverted or degenerate triangles, no unused nodes).
+validates it (no inverted or degenerate triangles, no unused nodes) and caches what other
+modules derive from the reference mesh as its own read-only cached properties.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from riskplan._validation import as_array
+from riskplan.deformable import elements
+from riskplan.deformable.elements import boundary_edges, signed_areas
 from riskplan.errors import InvalidInputError, require
 
 #: Relative area (w.r.t. the bounding-box area) below which a triangle is degenerate.
@@ -31,24 +35,6 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     a = np.ascontiguousarray(a)
     a.setflags(write=False)
     return a
-
-
-def signed_areas(nodes: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Signed areas ``(T,)`` of triangles ``(T, 3)`` over ``nodes (N, 2)``; > 0 when
-    counter-clockwise: ``A = ½ [(x₁−x₀)(y₂−y₀) − (x₂−x₀)(y₁−y₀)]``."""
-    p = nodes[triangles]
-    d1 = p[:, 1] - p[:, 0]
-    d2 = p[:, 2] - p[:, 0]
-    return 0.5 * (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
-
-
-def boundary_edges(triangles: np.ndarray) -> np.ndarray:
-    """Edges ``(E, 2)`` used by exactly one triangle, oriented as in that triangle
-    (so counter-clockwise around the body when the triangles are)."""
-    e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    key = np.sort(e, axis=1)
-    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    return np.ascontiguousarray(e[counts[inv.ravel()] == 1])
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,6 +55,9 @@ class TissueMesh:
 
     Raises :class:`InvalidInputError` for inverted (clockwise) or degenerate triangles
     (naming them), out-of-range indices, or nodes used by no triangle.
+
+    Derived arrays are computed on first use and kept (read-only): ``areas``,
+    ``boundary_edges``, ``shape_gradients``, ``barycentric_maps``, ``centroid_tree``.
     """
 
     nodes: np.ndarray
@@ -130,12 +119,28 @@ class TissueMesh:
     def area(self) -> float:
         return float(self._areas.sum())
 
-    @property
+    @cached_property
     def boundary_edges(self) -> np.ndarray:
         """``(E, 2)`` boundary edges, counter-clockwise around the body."""
-        if "_bedges" not in self.__dict__:
-            object.__setattr__(self, "_bedges", _readonly(boundary_edges(self.triangles)))
-        return self.__dict__["_bedges"]
+        return _readonly(boundary_edges(self.triangles))
+
+    @cached_property
+    def shape_gradients(self) -> np.ndarray:
+        """``(T, 3, 2)`` reference gradients ``∇_X N_a`` of the P1 shape functions."""
+        return _readonly(elements.shape_gradients(self.nodes, self.triangles))
+
+    @cached_property
+    def barycentric_maps(self) -> np.ndarray:
+        """``(T, 3, 3)`` maps ``λ = M_e @ [x, y, 1]`` from points to barycentric weights."""
+        return _readonly(elements.barycentric_maps(self.nodes, self.triangles))
+
+    @cached_property
+    def centroid_tree(self):
+        """``scipy.spatial.cKDTree`` of the element centroids (candidate elements for
+        point location)."""
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.nodes[self.triangles].mean(axis=1))
 
     @property
     def boundary_nodes(self) -> np.ndarray:

@@ -13,6 +13,7 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from riskplan._validation import as_array, check_range
 from riskplan.errors import ConvergenceError, InvalidInputError, RobotDescriptionError
@@ -83,6 +84,20 @@ class RodShape:
         return {"tip": self.tip.tolist(), "backbone": self.positions.tolist(), "tensions": self.tensions.tolist()}
 
 
+@njit(cache=True)
+def in_limits(values, low, high):
+    """True if every entry of the C-contiguous ``values (..., m)`` is finite and within
+    ``low[j] <= values[..., j] <= high[j]`` (a sub-microsecond check for the facade's fast path;
+    the facade falls back to the numpy checks, which name the offending entry)."""
+    m = low.shape[0]
+    flat = values.reshape(-1)
+    for k in range(flat.shape[0]):
+        x = flat[k]
+        if not (x >= low[k % m] and x <= high[k % m]):  # NaN fails both comparisons
+            return False
+    return True
+
+
 def _poly_table(polys) -> np.ndarray:
     K = max(len(c) for c in polys)
     out = np.zeros((len(polys), K))
@@ -107,16 +122,13 @@ class TendonRobot:
         self._L = bb.length
         self._theta = _poly_table([t.theta for t in params.tendons])
         self._radius = _poly_table([t.radius for t in params.tendons])
-        self._rt, self._drt, self._ddrt = cosserat.tendon_offset_table(self._theta, self._radius, self._L, self._n)
-        self._kse = bb.kse
-        self._kbt = bb.kbt
+        #: the per-robot arrays every Cosserat kernel takes (:class:`cosserat.RodTables`)
+        self.tables = cosserat.rod_tables(self._theta, self._radius, bb.kse, bb.kbt, self._L, self._n)
         self._kinv = np.array([0.0 if math.isinf(t.stiffness) else 1.0 / t.stiffness for t in params.tendons])
         m = self.n_tendons
         self._l0 = np.empty(m)
         dl = np.empty((m, m))
-        st = cosserat.lengths_and_jacobian(
-            np.zeros(m), self._rt, self._drt, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, self._l0, dl
-        )
+        st = cosserat.lengths_and_jacobian(np.zeros(m), *self.tables, LOCAL_TOL, LOCAL_MAXIT, self._l0, dl)
         if st != cosserat.OK:  # pragma: no cover - the straight rod always solves
             raise ConvergenceError("rest-length computation failed")
         self._G0 = -dl  # d(shortening)/d tau at tau = 0, used for start values
@@ -212,7 +224,7 @@ class TendonRobot:
         """``value (..., m)`` as a float array within ``[low, high]`` (per-tendon arrays ``(m,)``)."""
         # fast path: a well-formed array passes with one compiled loop (no temporaries)
         if isinstance(value, np.ndarray) and value.dtype == np.float64 and value.ndim >= 1 and value.shape[-1] == self.n_tendons and value.flags.c_contiguous:
-            if cosserat.in_limits(value, low, high):
+            if in_limits(value, low, high):
                 return value
         arr = as_array(value, name, min_ndim=1)
         if arr.shape[-1] != self.n_tendons:
@@ -220,10 +232,12 @@ class TendonRobot:
         check_range(arr, name, low=low, high=high)
         return arr
 
-    def _check_tensions(self, tensions) -> np.ndarray:
+    def check_tensions(self, tensions) -> np.ndarray:
+        """``tensions (..., m)`` as a float array in ``[0, max_tension]``, else :class:`InvalidInputError`."""
         return self._check(tensions, "tensions", self._tlow, self._tmax)
 
-    def _check_displacements(self, displacements) -> np.ndarray:
+    def check_displacements(self, displacements) -> np.ndarray:
+        """``displacements (..., m)`` as a float array within the limits, else :class:`InvalidInputError`."""
         return self._check(displacements, "displacements", self._dlo, self._dhi)
 
     def _to_world(self, P, Rs, tau, batch) -> RodShape:
@@ -249,7 +263,7 @@ class TendonRobot:
         (:func:`cosserat.shape_loaded`). Raises :class:`ConvergenceError` if a solve fails.
         """
         if validate:
-            tau = self._check_tensions(tensions)
+            tau = self.check_tensions(tensions)
         else:
             tau = np.asarray(tensions, dtype=float)
         if tau.ndim == 1 and not self.loaded:
@@ -267,12 +281,10 @@ class TendonRobot:
         elif not self.loaded:
             lengths = np.empty((B, m))
             status = np.empty(B, dtype=np.int64)
-            cosserat.shape_free_batch(
-                flat, self._rt, self._drt, self._ddrt, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, lengths, status
-            )
+            cosserat.shape_free_batch(flat, *self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, lengths, status)
             bad = np.flatnonzero(status != cosserat.OK)
             if bad.size:
-                raise self._local_failure(flat[bad[0]])
+                raise self.local_failure_error(flat[bad[0]])
         else:
             for b in range(B):
                 Y = self._shoot(flat[b])
@@ -289,26 +301,25 @@ class TendonRobot:
         n, m = self._n + 1, self.n_tendons
         P = np.empty((n, 3))
         Rs = np.empty((n, 3, 3))
-        st = cosserat.shape_free(
-            tau, self._rt, self._drt, self._ddrt, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, np.empty((n, 6)), np.empty(m)
-        )
+        st = cosserat.shape_free(tau, *self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, np.empty((n, 6)), np.empty(m))
         if st != cosserat.OK:
-            raise self._local_failure(tau)
+            raise self.local_failure_error(tau)
         # a non-finite value anywhere propagates along the RK4 pass to the tip position
         if not math.isfinite(P[-1, 0] + P[-1, 1] + P[-1, 2]):
             raise ConvergenceError(f"non-finite shape for tensions {tau.tolist()}")
         return self._to_world(P, Rs, tau, ())
 
-    def _local_failure(self, tau) -> ConvergenceError:
+    def local_failure_error(self, tau) -> ConvergenceError:
         """The error for a failed local strain solve (eqs. 2-3) of the unloaded rod, naming the
         first node where a plain Newton re-solve stops and its scaled residual ``max |F_a / K_aa|``."""
         tau = np.ascontiguousarray(tau, dtype=np.float64)
         F, J, rhs, zero = np.empty(6), np.empty((6, 6)), np.empty((6, 1)), np.zeros(3)
         x = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+        kse, kbt = self.tables.kse, self.tables.kbt
         for k in range(self._n + 1):
-            rt, drt = self._rt[2 * k], self._drt[2 * k]
-            if cosserat.local_strains(x, tau, rt, drt, zero, zero, self._kse, self._kbt, LOCAL_TOL, LOCAL_MAXIT, F, J, rhs) < 0:
-                res = float(cosserat.local_residual(x, tau, rt, drt, zero, zero, self._kse, self._kbt, F))
+            rt, drt = self.tables.offsets[2 * k], self.tables.offset_slopes[2 * k]
+            if cosserat.local_strains(x, tau, rt, drt, zero, zero, kse, kbt, LOCAL_TOL, LOCAL_MAXIT, F, J, rhs) < 0:
+                res = float(cosserat.local_residual(x, tau, rt, drt, zero, zero, kse, kbt, F))
                 return ConvergenceError(
                     f"local strain solve failed at s = {self._s[k]:.4g} m for tensions {tau.tolist()} "
                     f"(scaled residual {res:.3g} after {LOCAL_MAXIT} Newton iterations, tolerance {LOCAL_TOL:g})",
@@ -328,14 +339,14 @@ class TendonRobot:
         Rs = np.empty((n + 1, 3, 3))
         X = np.empty((n + 1, 6))
         lengths = np.empty(m)
-        if cosserat.shape_free(tau, self._rt, self._drt, self._ddrt, self._kse, self._kbt, L, n, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths) != cosserat.OK:
-            raise self._local_failure(tau)
+        if cosserat.shape_free(tau, *self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths) != cosserat.OK:
+            raise self.local_failure_error(tau)
         mid = 0.5 * (P[1:] + P[:-1])
         M0 = np.cross(mid - P[0], f).sum(0) * (L / n)
         scale = max(1e-6, float(np.linalg.norm(f)) * L * L)
 
         def residual(M):
-            st = cosserat.shape_loaded(tau, self._rt, self._drt, self._kse, self._kbt, L, n, f, N0, M, LOCAL_TOL, LOCAL_MAXIT, Y)
+            st = cosserat.shape_loaded(tau, *self.tables, f, N0, M, LOCAL_TOL, LOCAL_MAXIT, Y)
             if st != cosserat.OK:
                 raise ConvergenceError(f"local strain solve failed while shooting (tensions {tau.tolist()})")
             return Y[-1, 15:18].copy()
@@ -369,7 +380,7 @@ class TendonRobot:
         tension *input*). Raises :class:`ConvergenceError` with the residual on failure.
         """
         if validate:
-            d = self._check_displacements(displacements)
+            d = self.check_displacements(displacements)
         else:
             d = np.asarray(displacements, dtype=float)
         batch = d.shape[:-1]
@@ -385,7 +396,7 @@ class TendonRobot:
     def tensions_for_displacements(self, displacements, *, validate: bool = True) -> np.ndarray:
         """Tensions ``(..., m)`` [N] that realise tendon displacements ``(..., m)`` (see :meth:`solve_displacements`)."""
         if validate:
-            d = self._check_displacements(displacements)
+            d = self.check_displacements(displacements)
         else:
             d = np.asarray(displacements, dtype=float)
         batch = d.shape[:-1]
@@ -400,9 +411,8 @@ class TendonRobot:
         infos = np.empty((B, 2))
         status = np.empty(B, dtype=np.int64)
         cosserat.solve_displacement_batch(
-            flat, self._kinv, self._l0, tau0, self._rt, self._drt, self._kse, self._kbt, self._L, self._n,
-            LOCAL_TOL, LOCAL_MAXIT, DISP_TOL, DISP_MAXIT, tau, infos, status,
-        )  # fmt: skip
+            flat, self._kinv, self._l0, tau0, *self.tables, LOCAL_TOL, LOCAL_MAXIT, DISP_TOL, DISP_MAXIT, tau, infos, status
+        )
         bad = np.flatnonzero(status != cosserat.OK)
         if bad.size:
             b = int(bad[0])
@@ -416,7 +426,7 @@ class TendonRobot:
     def tendon_lengths(self, tensions, *, validate: bool = True) -> np.ndarray:
         """Tendon path lengths ``l_i = int |v + u x r_i + r_i'| ds`` ``(..., m)`` [m] for tensions ``(..., m)``."""
         if validate:
-            tau = self._check_tensions(tensions)
+            tau = self.check_tensions(tensions)
         else:
             tau = np.asarray(tensions, dtype=float)
         batch = tau.shape[:-1]
@@ -428,13 +438,13 @@ class TendonRobot:
                 out[b] = self._shoot(flat[b])[-1, 18:]
             else:
                 dl = np.empty((m, m))
-                if cosserat.lengths_and_jacobian(flat[b], self._rt, self._drt, self._kse, self._kbt, self._L, self._n, LOCAL_TOL, LOCAL_MAXIT, out[b], dl) != cosserat.OK:
-                    raise self._local_failure(flat[b])
+                if cosserat.lengths_and_jacobian(flat[b], *self.tables, LOCAL_TOL, LOCAL_MAXIT, out[b], dl) != cosserat.OK:
+                    raise self.local_failure_error(flat[b])
         return out.reshape(batch + (m,))
 
     def displacements_for_tensions(self, tensions, *, validate: bool = True) -> np.ndarray:
         """Actuator displacements ``d = l0 - l(tau) + tau / k`` ``(..., m)`` [m] that hold taut tendons at ``tensions``."""
-        tau = self._check_tensions(tensions) if validate else np.asarray(tensions, dtype=float)
+        tau = self.check_tensions(tensions) if validate else np.asarray(tensions, dtype=float)
         return self._l0 - self.tendon_lengths(tau, validate=False) + tau * self._kinv
 
     def _tensions_loaded(self, d) -> np.ndarray:

@@ -17,7 +17,10 @@ out-of-plane stretch as an extra unknown; we do not model it).
 
 Equilibrium: ``r(u) = f_int(u) − f_ext = 0`` on free DOFs, with
 ``f_int,a = Σ_e A_e P_e ∇N_a`` and tangent ``K_{ai,bk} = Σ_e A_e ∂P_iJ/∂F_kL ∇N_aJ ∇N_bL``.
-Newton's method with a backtracking line search on the total potential energy
+This module is the solver; the pieces are pure functions elsewhere: element kinematics
+(``F``, ``det F``, ``F⁻¹``) in :mod:`.elements`, the laws in :mod:`.laws`, element
+forces/tangents and the sparse layouts in :mod:`.assembly`, banded Cholesky in
+:mod:`.banded`. Newton's method with a backtracking line search on the total potential energy
 ``Π(u) = Σ_e A_e W(F_e) − f_ext·u``, that also rejects steps inverting an element
 (``det F ≤ 0``), load stepping (adaptive halving) and warm starts.
 """
@@ -30,132 +33,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from riskplan._validation import as_array
+from riskplan.deformable.assembly import (
+    TangentPattern,
+    element_forces,
+    element_tangents,
+    fixed_node_array,
+    neohookean_element_tangents,
+    split_dofs,
+)
+from riskplan.deformable.banded import BandedCholeskySolver
+from riskplan.deformable.elements import deformation_gradients, determinants_and_inverses
+from riskplan.deformable.laws import LAWS, neohookean_energy_and_stress
 from riskplan.deformable.material import Material
 from riskplan.deformable.mesh import TissueMesh
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
+from riskplan.threads import one_blas_thread
 
 logger = logging.getLogger(__name__)
-
-LAWS = ("neohookean", "svk")
-
-
-def shape_gradients(mesh: TissueMesh) -> np.ndarray:
-    """``(T, 3, 2)`` reference gradients ``∇_X N_a`` of the P1 shape functions (cached)."""
-    G = mesh.__dict__.get("_shape_grads")
-    if G is None:
-        p = mesh.nodes[mesh.triangles]
-        d1 = p[:, 1] - p[:, 0]
-        d2 = p[:, 2] - p[:, 0]
-        det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]  # 2 A
-        # ∇N1 = (y2 - y0, x0 - x2)/2A, ∇N2 = (y0 - y1, x1 - x0)/2A, ∇N0 = -(∇N1 + ∇N2)
-        g1 = np.stack([d2[:, 1], -d2[:, 0]], axis=1) / det[:, None]
-        g2 = np.stack([-d1[:, 1], d1[:, 0]], axis=1) / det[:, None]
-        G = np.stack([-(g1 + g2), g1, g2], axis=1)
-        G.setflags(write=False)
-        object.__setattr__(mesh, "_shape_grads", G)
-    return G
-
-
-# ---------------------------------------------------------------------------------------
-# pure constitutive and assembly functions
-
-
-def deformation_gradients(u_elem: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """``F = I + Σ_a u_a ⊗ ∇N_a`` ``(T, 2, 2)`` from element displacements ``(T, 3, 2)``."""
-    F = np.einsum("tai,taj->tij", u_elem, G)
-    F[:, 0, 0] += 1.0
-    F[:, 1, 1] += 1.0
-    return F
-
-
-def _det_inv(F: np.ndarray):
-    J = F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
-    Finv = np.empty_like(F)
-    Finv[:, 0, 0] = F[:, 1, 1]
-    Finv[:, 1, 1] = F[:, 0, 0]
-    Finv[:, 0, 1] = -F[:, 0, 1]
-    Finv[:, 1, 0] = -F[:, 1, 0]
-    Finv /= J[:, None, None]
-    return J, Finv
-
-
-def neohookean_energy_stress(F: np.ndarray, lam: float, mu: float, tangent: bool = True):
-    """Energy density ``W (T,)``, stress ``P (T, 2, 2)`` and (optionally) the tangent
-    ``A_iJkL = ∂P_iJ/∂F_kL`` ``(T, 2, 2, 2, 2)`` of the compressible neo-Hookean model.
-
-    ``A = μ δ_ik δ_JL + λ F⁻¹_Ji F⁻¹_Lk + (μ − λ ln J) F⁻¹_Li F⁻¹_Jk``. Requires ``J > 0``.
-    """
-    J, Finv = _det_inv(F)
-    lnJ = np.log(J)
-    FinvT = np.swapaxes(Finv, 1, 2)
-    I1 = np.einsum("tij,tij->t", F, F)
-    W = 0.5 * mu * (I1 - 2.0 - 2.0 * lnJ) + 0.5 * lam * lnJ**2
-    P = mu * (F - FinvT) + (lam * lnJ)[:, None, None] * FinvT
-    if not tangent:
-        return W, P, None
-    eye = np.eye(2)
-    A = mu * np.einsum("ik,JL->iJkL", eye, eye)[None]
-    A = A + lam * np.einsum("tJi,tLk->tiJkL", Finv, Finv)
-    A = A + (mu - lam * lnJ)[:, None, None, None, None] * np.einsum("tLi,tJk->tiJkL", Finv, Finv)
-    return W, P, A
-
-
-def svk_energy_stress(F: np.ndarray, lam: float, mu: float, tangent: bool = True):
-    """St Venant-Kirchhoff ``W``, ``P = F S`` with ``S = 2 μ E + λ tr(E) I`` and tangent
-    ``A_iJkL = δ_ik S_JL + F_iI C_IJKL F_kK`` (``C = λ δ_IJ δ_KL + μ(δ_IK δ_JL + δ_IL δ_JK)``)."""
-    eye = np.eye(2)
-    E = 0.5 * (np.einsum("tki,tkj->tij", F, F) - eye)
-    trE = E[:, 0, 0] + E[:, 1, 1]
-    W = mu * np.einsum("tij,tij->t", E, E) + 0.5 * lam * trE**2
-    S = 2.0 * mu * E + lam * trE[:, None, None] * eye
-    P = F @ S
-    if not tangent:
-        return W, P, None
-    A = np.einsum("ik,tJL->tiJkL", eye, S)
-    A = A + lam * np.einsum("tiJ,tkL->tiJkL", F, F)
-    A = A + mu * (np.einsum("tiL,tkJ->tiJkL", F, F) + np.einsum("tiI,tkI,JL->tiJkL", F, F, eye))
-    return W, P, A
-
-
-_LAW_FUNCS = {"neohookean": neohookean_energy_stress, "svk": svk_energy_stress}
-
-
-def element_forces(P: np.ndarray, G: np.ndarray, areas: np.ndarray) -> np.ndarray:
-    """Internal forces ``(T, 3, 2)``: ``f_{a,i} = A_e Σ_J P_iJ ∇N_aJ``."""
-    return np.matmul(G, np.swapaxes(P, 1, 2)) * areas[:, None, None]
-
-
-def element_tangents(A: np.ndarray, G: np.ndarray, areas: np.ndarray) -> np.ndarray:
-    """Element stiffness ``(T, 6, 6)`` in local DOF order ``(a, i)``:
-    ``K_{ai,bk} = A_e Σ_JL A_iJkL ∇N_aJ ∇N_bL`` (any law, from its 4th-order tangent)."""
-    T = len(areas)
-    X = np.matmul(A.reshape(T, 8, 2), np.swapaxes(G, 1, 2))  # (T, (i,J,k), b)
-    X = X.reshape(T, 2, 2, 2, 3).transpose(0, 2, 1, 3, 4).reshape(T, 2, 12)  # (T, J, (i,k,b))
-    K = np.matmul(G, X) * areas[:, None, None]  # (T, a, (i,k,b))
-    return K.reshape(T, 3, 2, 2, 3).transpose(0, 1, 2, 4, 3).reshape(T, 6, 6)
-
-
-def neohookean_element_tangents(Finv: np.ndarray, lnJ: np.ndarray, G: np.ndarray, areas: np.ndarray,
-                                lam: float, mu: float) -> np.ndarray:
-    """Neo-Hookean element stiffness ``(T, 6, 6)`` without forming the 4th-order tangent.
-
-    With ``h_a = F⁻ᵀ ∇N_a`` the tangent contracts to
-    ``K_{ai,bk} = A_e [μ δ_ik ∇N_a·∇N_b + λ h_ai h_bk + (μ − λ ln J) h_bi h_ak]``
-    (equal to :func:`element_tangents` of :func:`neohookean_energy_stress`'s ``A``).
-    """
-    T = len(areas)
-    h = np.matmul(G, Finv).reshape(T, 6)  # h[t, (a,i)] = Σ_J G_aJ Finv_Ji
-    O = h[:, :, None] * h[:, None, :]  # (T, (a,i), (b,k)): h_ai h_bk
-    swapped = O.reshape(T, 3, 2, 3, 2).transpose(0, 3, 2, 1, 4).reshape(T, 6, 6)  # h_bi h_ak
-    GG = np.matmul(G, np.swapaxes(G, 1, 2))  # (T, a, b)
-    K = lam * O + (mu - lam * lnJ)[:, None, None] * swapped
-    K[:, 0::2, 0::2] += mu * GG
-    K[:, 1::2, 1::2] += mu * GG
-    return K * areas[:, None, None]
-
-
-# ---------------------------------------------------------------------------------------
-# model
 
 
 @dataclass(frozen=True)
@@ -198,75 +92,28 @@ class HyperelasticModel:
         atol: float = 1e-12,
         max_iter: int = 25,
     ):
-        from riskplan.deformable.linear import _fixed_node_array
-
         if not isinstance(mesh, TissueMesh):
             raise InvalidInputError(f"mesh: expected a TissueMesh, got {type(mesh).__name__}")
         if not isinstance(material, Material):
             raise InvalidInputError(f"material: expected a Material, got {type(material).__name__}")
         if law not in LAWS:
-            raise InvalidInputError(f"law: expected one of {LAWS}, got {law!r}")
+            raise InvalidInputError(f"law: expected one of {tuple(LAWS)}, got {law!r}")
         self.mesh = mesh
         self.material = material
         self.law = law
         self.rtol, self.atol, self.max_iter = float(rtol), float(atol), int(max_iter)
-        self.fixed_nodes = _fixed_node_array(fixed_nodes, mesh.n_nodes)
+        self.fixed_nodes = fixed_node_array(fixed_nodes, mesh.n_nodes)
         if self.fixed_nodes.size < 2:
             raise InvalidInputError("fixed_nodes: fix at least two distinct nodes (else a rotation is free)")
-        self._law = _LAW_FUNCS[law]
+        self._law = LAWS[law]
         self._lam, self._mu = material.lame
-        self._G = shape_gradients(mesh)
+        self._G = mesh.shape_gradients
         self._areas = mesh.areas
         self._tri = mesh.triangles
         self._tri_flat = np.ascontiguousarray(mesh.triangles.ravel())
-        n = 2 * mesh.n_nodes
-        self._n = n
-        mask = np.ones(n, dtype=bool)
-        fixed_dofs = np.sort(np.concatenate([2 * self.fixed_nodes, 2 * self.fixed_nodes + 1]))
-        mask[fixed_dofs] = False
-        self.fixed_dofs = fixed_dofs
-        self.free_dofs = np.flatnonzero(mask)
-        self._build_pattern()
-
-    def _build_pattern(self) -> None:
-        """Index maps from the T·36 element-matrix entries to (a) the reduced CSC matrix
-        and (b) the upper band of its RCM-permuted form (entries touching a fixed DOF,
-        and for (b) lower-triangle entries, are dropped)."""
-        from scipy import sparse
-        from scipy.sparse.csgraph import reverse_cuthill_mckee
-
-        dofs = (2 * self._tri[:, :, None] + np.arange(2)[None, None, :]).reshape(-1, 6)  # (T, 6)
-        self._edofs = dofs
-        nf = len(self.free_dofs)
-        red = np.full(self._n, -1, dtype=np.int64)
-        red[self.free_dofs] = np.arange(nf)
-        r = red[np.repeat(dofs, 6, axis=1)].ravel()
-        c = red[np.tile(dofs, (1, 6))].ravel()
-        keep = (r >= 0) & (c >= 0)
-        r, c = r[keep], c[keep]
-        key = c * nf + r  # CSC order: by column, then row
-        uniq, slot = np.unique(key, return_inverse=True)
-        self._keep = np.flatnonzero(keep)
-        self._slot = slot.ravel()
-        self._nnz = len(uniq)
-        self._csc_shape = (nf, nf)
-        self._csc_indices = (uniq % nf).astype(np.int32)
-        self._csc_indptr = np.searchsorted(uniq // nf, np.arange(nf + 1)).astype(np.int32)
-        # banded Cholesky layout (upper form of scipy.linalg.cholesky_banded)
-        pattern = sparse.csc_matrix(
-            (np.ones(self._nnz), self._csc_indices, self._csc_indptr), shape=self._csc_shape
-        )
-        perm = reverse_cuthill_mckee(pattern.tocsr(), symmetric_mode=True)
-        pos = np.empty(nf, dtype=np.int64)
-        pos[perm] = np.arange(nf)
-        pr, pc = pos[r], pos[c]
-        upper = pr <= pc
-        bw = int(np.max(pc[upper] - pr[upper])) if np.any(upper) else 0
-        self._band_perm = perm
-        self._bw = bw
-        self._band_sel = self._keep[upper]
-        self._band_slot = (bw + pr[upper] - pc[upper]) * nf + pc[upper]
-        self._band_size = (bw + 1) * nf
+        self._n = 2 * mesh.n_nodes
+        self.fixed_dofs, self.free_dofs = split_dofs(self.fixed_nodes, self._n)
+        self._pattern = TangentPattern(self._tri, self.free_dofs, self._n)
 
     # ---- pure evaluations -------------------------------------------------------------
     def _F(self, u_flat: np.ndarray) -> np.ndarray:
@@ -282,17 +129,14 @@ class HyperelasticModel:
         st = _State()
         st.u = u_flat
         F = self._F(u_flat)
-        J, Finv = _det_inv(F)
+        J, Finv = determinants_and_inverses(F)
         st.F, st.J, st.Finv = F, J, Finv
         if np.any(J <= 0.0):  # also for SVK, whose energy does not forbid inversion
             st.energy = None
             return st
         if self.law == "neohookean":
             lnJ = np.log(J)
-            FinvT = np.swapaxes(Finv, 1, 2)
-            I1 = np.einsum("tij,tij->t", F, F)
-            W = 0.5 * self._mu * (I1 - 2.0 - 2.0 * lnJ) + 0.5 * self._lam * lnJ**2
-            P = self._mu * (F - FinvT) + (self._lam * lnJ)[:, None, None] * FinvT
+            W, P = neohookean_energy_and_stress(F, Finv, lnJ, self._lam, self._mu)
             st.lnJ = lnJ
         else:
             W, P, _ = self._law(F, self._lam, self._mu, False)
@@ -311,32 +155,23 @@ class HyperelasticModel:
         _, _, A = self._law(st.F, self._lam, self._mu, True)
         return element_tangents(A, self._G, self._areas)
 
-    def _csc(self, Ke_flat: np.ndarray):
-        data = np.bincount(self._slot, Ke_flat[self._keep], minlength=self._nnz)
-        from scipy import sparse
-
-        return sparse.csc_matrix((data, self._csc_indices, self._csc_indptr), shape=self._csc_shape)
-
     def _factor(self, st: _State):
-        """A solver ``r -> K⁻¹ r`` for the reduced tangent at ``st``."""
+        """A solver ``r -> K⁻¹ r`` for the reduced tangent at ``st``: banded Cholesky in
+        the pattern's RCM order, sparse LU when the tangent is not positive definite."""
         import scipy.linalg
 
         Ke = self._element_tangents(st).reshape(-1)
-        ab = np.bincount(self._band_slot, Ke[self._band_sel], minlength=self._band_size)
-        ab = ab.reshape(self._bw + 1, -1)
         try:
-            cb = scipy.linalg.cholesky_banded(ab, lower=False, check_finite=False)
+            cb = scipy.linalg.cholesky_banded(self._pattern.banded(Ke), lower=False, check_finite=False)
         except np.linalg.LinAlgError:
             from scipy.sparse.linalg import splu
 
             try:
-                lu = splu(self._csc(Ke))
+                lu = splu(self._pattern.csc(Ke))
             except RuntimeError as exc:
                 raise ConvergenceError(f"Newton: singular tangent ({exc})") from exc
             return lu.solve
-        from riskplan.deformable.linear import BandedCholeskySolver
-
-        return BandedCholeskySolver(cb, self._band_perm)
+        return BandedCholeskySolver(cb, self._pattern.band_perm)
 
     def _check_u(self, u, name="u") -> np.ndarray:
         return as_array(u, name, shape=(self.mesh.n_nodes, 2)).reshape(-1).copy()
@@ -370,12 +205,8 @@ class HyperelasticModel:
         st = self._evaluate_checked(u)
         Ke = self._element_tangents(st)
         if not full:
-            return self._csc(Ke.reshape(-1))
-        r = np.repeat(self._edofs, 6, axis=1).ravel()
-        c = np.tile(self._edofs, (1, 6)).ravel()
-        from scipy import sparse
-
-        return sparse.csr_matrix((Ke.ravel(), (r, c)), shape=(self._n, self._n))
+            return self._pattern.csc(Ke.reshape(-1))
+        return self._pattern.full_csr(Ke)
 
     def _raise_inverted(self, J: np.ndarray, context: str = ""):
         bad = np.flatnonzero(J <= 0.0)
@@ -456,6 +287,7 @@ class HyperelasticModel:
         out[self.free_dofs] -= self._factor(st)(rhs)
         return out
 
+    @one_blas_thread
     def solve_with_info(
         self, nodal_forces, u0=None, *, fixed_values=None, load_steps: int = 1, max_halvings: int = 8
     ):

@@ -1,0 +1,215 @@
+"""Tensions for tendon displacements: the complementarity problem of compliant tendons that
+may go slack (semismooth Newton with a Levenberg-Marquardt fallback and a line search),
+without external loads."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from riskplan.robots.linalg6 import gauss_solve
+from riskplan.robots.rod_tables import LOCAL_FAIL, OK, OUTER_FAIL, RodTables
+from riskplan.robots.tendon_lengths import lengths_and_jacobian
+
+# step halvings of the displacement solve's line search (2**-30 ~ 1e-9 of a Newton step)
+LINE_SEARCH_MAXIT = 30
+
+@njit(cache=True, inline="always")
+def complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack):
+    """Newton system ``Jm step = phi`` of the complementarity problem at ``tau`` (see
+    :func:`solve_displacement_tensions`) in length units, with ``a_i = tau_i * 1e-3`` (tensions in
+    N compare with lengths in m at 1 mm/N) and ``b_i = g_i``: the min function
+    ``r_i = min(a_i, b_i)`` (``fb = False``) or the Fischer-Burmeister function
+    ``r_i = a_i + b_i - sqrt(a_i^2 + b_i^2)`` (``fb = True``, whose squared norm is smooth);
+    ``phi = -r``, except that slack rows of the min function (``slack[i] = 1``) are written in
+    tension units, ``step_i = -tau_i``. Returns ``(max |min(a_i, b_i)|, sum r_i^2)``."""
+    m = d.shape[0]
+    res = 0.0
+    merit = 0.0
+    for i in range(m):
+        g = l0[i] - lengths[i] + tau[i] * kinv[i] - d[i]
+        a = tau[i] * 1e-3
+        res = max(res, abs(min(a, g)))
+        if fb:
+            nrm = math.sqrt(a * a + g * g)
+            if nrm > 0.0:
+                ca = 1.0 - a / nrm
+                cb = 1.0 - g / nrm
+            else:  # an element of the generalised Jacobian at the kink
+                ca = 1.0 - 1.0 / math.sqrt(2.0)
+                cb = ca
+            r = a + g - nrm
+            for j in range(m):
+                Jm[i, j] = -cb * dl[i, j]
+            Jm[i, i] += cb * kinv[i] + ca * 1e-3
+            phi[i, 0] = -r
+            slack[i] = 0
+        elif tau[i] <= g:  # slack row kept in N (identity) so that a full step gives exactly 0
+            for j in range(m):
+                Jm[i, j] = 0.0
+            Jm[i, i] = 1.0
+            r = a
+            phi[i, 0] = -tau[i]
+            slack[i] = 1
+        else:
+            for j in range(m):
+                Jm[i, j] = -dl[i, j]
+            Jm[i, i] += kinv[i]
+            r = g
+            phi[i, 0] = -r
+            slack[i] = 0
+        merit += r * r
+    return res, merit
+
+
+@njit(cache=True, inline="always")
+def levenberg_marquardt_system(Jm, phi, mu, A, b, m, slack):
+    """``A = J^T J + mu I``, ``b = J^T phi`` (Levenberg-Marquardt normal equations) with the
+    slack rows scaled to length units (1e-3 m/N) like the residual."""
+    for i in range(m):
+        acc = 0.0
+        for k in range(m):
+            w = 1e-6 if slack[k] else 1.0
+            acc += w * Jm[k, i] * phi[k, 0]
+        b[i, 0] = acc
+        for j in range(m):
+            acc = 0.0
+            for k in range(m):
+                w = 1e-6 if slack[k] else 1.0
+                acc += w * Jm[k, i] * Jm[k, j]
+            A[i, j] = acc
+        A[i, i] += mu
+
+
+@njit(cache=True, inline="always")
+def search_direction(Jm, phi, merit, slack, lm, A, step, m):
+    """Newton step (``lm`` False) or Levenberg-Marquardt step into ``step``; False if singular."""
+    if lm:
+        levenberg_marquardt_system(Jm, phi, merit, A, step, m, slack)
+    else:
+        for i in range(m):
+            step[i, 0] = phi[i, 0]
+            for j in range(m):
+                A[i, j] = Jm[i, j]
+    return gauss_solve(A, step, m, 1)
+
+
+@njit(cache=True, inline="always")
+def line_search(d, kinv, l0, tau, step, merit, fb, rod, tols, work):
+    """Backtracking on the squared residual along ``step`` from ``tau`` (projected on tau >= 0):
+    halves the step until it falls by the Armijo factor. Leaves the accepted point in ``trial``
+    with its system in ``Jt, pt, slack_t``; returns ``(accepted, max residual, merit)``.
+    ``tols = (tol, maxit, dtol)``; ``work = (trial, lengths, dl, Jt, pt, slack_t)``."""
+    tol, maxit, dtol = tols
+    trial, lengths, dl, Jt, pt, slack_t = work
+    m = tau.shape[0]
+    alpha = 1.0
+    for _ls in range(LINE_SEARCH_MAXIT):
+        for i in range(m):
+            trial[i] = max(tau[i] + alpha * step[i, 0], 0.0)
+        st = lengths_and_jacobian(
+            trial, rod.offsets, rod.offset_slopes, rod.offset_curvatures, rod.kse, rod.kbt, rod.length, rod.n_steps,
+            tol, maxit, lengths, dl,
+        )  # fmt: skip
+        if st == OK:
+            res_t, merit_t = complementarity_system(d, kinv, l0, trial, lengths, dl, Jt, pt, fb, slack_t)
+            if merit_t <= (1.0 - 1e-4 * alpha) * merit or res_t <= dtol:
+                return True, res_t, merit_t
+        alpha *= 0.5
+    return False, 0.0, 0.0
+
+
+@njit(cache=True)
+def solve_displacement_tensions(d, kinv, l0, tau0, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, tau, info):
+    """Tensions for tendon displacements ``d (m,)`` with compliant tendons and slack (no loads).
+
+    Complementarity (per tendon)::
+
+        g_i(tau) = l0_i - l_i(tau) + tau_i * kinv_i - d_i,   tau_i >= 0, g_i >= 0, tau_i g_i = 0
+
+    (pulling the actuator in by ``d_i`` shortens the tendon's rest length by ``d_i``; a taut
+    tendon stretches by ``tau_i / k_i``). Semismooth Newton on ``min(tau, g) = 0`` with the
+    analytic Jacobian of :func:`lengths_and_jacobian`, projected onto ``tau >= 0``, and a
+    backtracking line search on the squared residual (steps are halved until it falls; the
+    full step is taken whenever it does, so the local convergence stays quadratic). Needed for
+    stiff problems such as inextensible antagonistic tendons, where full steps overshoot.
+    ``tau0`` is the start. Writes ``tau``; ``info = [iterations, residual]``. Returns status.
+    """
+    m = d.shape[0]
+    lengths = np.empty(m)
+    dl = np.empty((m, m))
+    Jm = np.empty((m, m))
+    phi = np.empty((m, 1))
+    trial = np.empty(m)
+    Jt = np.empty((m, m))
+    pt = np.empty((m, 1))
+    Jc = np.empty((m, m))
+    step = np.empty((m, 1))
+    slack = np.zeros(m, dtype=np.int64)
+    slack_t = np.zeros(m, dtype=np.int64)
+    rod = RodTables(rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps)
+    tols = (tol, maxit, dtol)
+    work = (trial, lengths, dl, Jt, pt, slack_t)
+    for i in range(m):
+        tau[i] = tau0[i]
+    info[0] = 0
+    info[1] = 1e300
+    fb = False
+    st = lengths_and_jacobian(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl)
+    if st != OK:
+        return st
+    res, merit = complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack)
+    for it in range(outer_maxit):
+        info[0] = it
+        info[1] = res
+        if res <= dtol:
+            return OK
+        # Newton step; if J is singular or the step finds no decrease, a Levenberg-Marquardt
+        # step with mu = |r|^2 (Yamashita & Fukushima 2001: still quadratic near solutions that
+        # are not isolated, e.g. tendons whose tension split is statically indeterminate)
+        accepted = False
+        for attempt in range(2):
+            if search_direction(Jm, phi, merit, slack, attempt == 1, Jc, step, m):
+                accepted, res_t, merit_t = line_search(d, kinv, l0, tau, step, merit, fb, rod, tols, work)
+                if accepted:
+                    break
+        if not accepted:
+            if fb:
+                return OUTER_FAIL
+            # stuck at a stationary point of the min-function merit that is not a solution
+            # (it is not smooth): continue with the Fischer-Burmeister form, whose merit has
+            # no such points when dg/dtau is positive semidefinite, as a compliance matrix is
+            fb = True
+            if lengths_and_jacobian(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl) != OK:
+                return LOCAL_FAIL
+            res, merit = complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack)
+            continue
+        for i in range(m):
+            tau[i] = trial[i]
+            slack[i] = slack_t[i]
+            phi[i, 0] = pt[i, 0]
+            for j in range(m):
+                Jm[i, j] = Jt[i, j]
+        res = res_t
+        merit = merit_t
+    info[0] = outer_maxit
+    info[1] = res
+    return OUTER_FAIL
+
+
+@njit(cache=True)
+def solve_displacement_batch(ds, kinv, l0, tau0s, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus, infos, status):
+    """Batched :func:`solve_displacement_tensions` over ``ds (B, m)``; a configuration that fails
+    from its start ``tau0s[b]`` is tried once more from the slack state (``infos`` of the last try)."""
+    slack_start = np.zeros(ds.shape[1])
+    for b in range(ds.shape[0]):
+        st = solve_displacement_tensions(
+            ds[b], kinv, l0, tau0s[b], rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus[b], infos[b]
+        )
+        if st != OK:
+            st = solve_displacement_tensions(
+                ds[b], kinv, l0, slack_start, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus[b], infos[b]
+            )
+        status[b] = st

@@ -1,0 +1,95 @@
+"""Tendon path lengths ``l_i = int_0^L |w_i| ds`` and their sensitivity to the tensions
+(the Jacobian the displacement solve needs), without external loads."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from riskplan.robots.linalg6 import chol_factor6, chol_solve6
+from riskplan.robots.rod_tables import LOCAL_FAIL, OK
+from riskplan.robots.strains import local_jacobian, local_strains_chord, row3, tendon_tangent
+
+
+@njit(cache=True)
+def lengths_and_jacobian(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl):
+    """Tendon path lengths ``l (m,)`` and ``dl[i, j] = d l_i / d tau_j`` without external loads.
+
+    Uses Simpson's rule on the RK4 nodes; the sensitivity of the local strains is
+    ``dx/dtau_j = -J^{-1} [t_j; r_j x t_j]`` (implicit function theorem on eqs. (2)-(3)) and
+    ``d|w_i|/dx = [t_i; r_i x t_i]``. Returns a status code. Arguments 2-8: the fields of
+    :class:`~riskplan.robots.rod_tables.RodTables` (``ddrt_all`` unused).
+    """
+    m = tau.shape[0]
+    h = length / n_steps
+    n_nodes = 2 * n_steps + 1
+    F = np.empty(6)
+    J = np.empty((6, 6))
+    fac = np.zeros(1, dtype=np.int64)
+    col = np.empty(6)
+    S = np.empty((6, m))
+    G = np.empty((6, m))
+    zero = np.zeros(3)
+    x = np.zeros(6)
+    x[2] = 1.0
+    xprev = x.copy()
+    for i in range(m):
+        lengths[i] = 0.0
+        for j in range(m):
+            dl[i, j] = 0.0
+    for node in range(n_nodes):
+        rt = rt_all[node]
+        drt = drt_all[node]
+        if node >= 2:
+            for a in range(6):
+                tmp = x[a]
+                x[a] = 2.0 * x[a] - xprev[a]
+                xprev[a] = tmp
+        else:
+            for a in range(6):
+                xprev[a] = x[a]
+        if local_strains_chord(x, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, fac) < 0:
+            return LOCAL_FAIL
+        local_jacobian(x, tau, rt, drt, kse, kbt, J)
+        if not chol_factor6(J):
+            return LOCAL_FAIL
+        fac[0] = 1
+        if node == 0 or node == n_nodes - 1:
+            wgt = h / 6.0
+        elif node % 2 == 1:
+            wgt = 4.0 * h / 6.0
+        else:
+            wgt = 2.0 * h / 6.0
+        for i in range(m):
+            r0 = rt[i, 0]
+            r1 = rt[i, 1]
+            r2 = rt[i, 2]
+            w0, w1, w2 = tendon_tangent(x, row3(rt, i), row3(drt, i))
+            nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+            t0 = w0 / nw
+            t1 = w1 / nw
+            t2 = w2 / nw
+            lengths[i] += wgt * nw
+            G[0, i] = t0
+            G[1, i] = t1
+            G[2, i] = t2
+            G[3, i] = r1 * t2 - r2 * t1
+            G[4, i] = r2 * t0 - r0 * t2
+            G[5, i] = r0 * t1 - r1 * t0
+            for a in range(6):
+                S[a, i] = -G[a, i]
+        for j in range(m):
+            for a in range(6):
+                col[a] = S[a, j]
+            chol_solve6(J, col)
+            for a in range(6):
+                S[a, j] = col[a]
+        for i in range(m):
+            for j in range(m):
+                acc = 0.0
+                for a in range(6):
+                    acc += G[a, i] * S[a, j]
+                dl[i, j] += wgt * acc
+    return OK

@@ -1,0 +1,63 @@
+"""BLAS thread limits for the numeric hot paths.
+
+The FEM factorisations (dense Cholesky inverse, LAPACK banded Cholesky) are small: on a
+few cores, OpenBLAS's worker threads cost more than they save (a 2,000-element
+:class:`~riskplan.deformable.LinearElasticModel` builds 4-10x slower with the default
+threads than with one on 2 busy cores; see docs/architecture.md, "Threads"). The CLI and
+the worker processes already set one thread per process through the environment; this
+module gives library users the same speed from plain Python: the FEM models run their
+factorisations and Newton solves inside :func:`blas_threads`, which lowers the BLAS pools
+to ``limit`` threads for the duration of the call and restores the caller's settings
+afterwards. When the pools already use no more threads, it changes nothing.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import TypeVar
+
+F = TypeVar("F", bound=Callable)
+
+_blas_pools: list | None = None
+
+
+def blas_pools() -> list:
+    """``threadpoolctl`` controllers of the BLAS libraries loaded by NumPy and SciPy
+    (looked up once per process; SciPy is imported first so its own OpenBLAS is seen)."""
+    global _blas_pools
+    if _blas_pools is None:
+        import scipy.linalg  # noqa: F401 - loads SciPy's BLAS before the lookup
+        from threadpoolctl import ThreadpoolController
+
+        _blas_pools = [lc for lc in ThreadpoolController().lib_controllers if lc.user_api == "blas"]
+    return _blas_pools
+
+
+@contextmanager
+def blas_threads(limit: int = 1) -> Iterator[None]:
+    """Run the block with at most ``limit`` BLAS threads per library, then restore the
+    previous counts (only pools above ``limit`` are touched; ~10 us when none is)."""
+    changed = []
+    for pool in blas_pools():
+        n = pool.get_num_threads()
+        if n is not None and n > limit:
+            pool.set_num_threads(limit)
+            changed.append((pool, n))
+    try:
+        yield
+    finally:
+        for pool, n in reversed(changed):
+            pool.set_num_threads(n)
+
+
+def one_blas_thread(fn: F) -> F:
+    """Decorator: run ``fn`` inside ``blas_threads(1)``."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with blas_threads(1):
+            return fn(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]

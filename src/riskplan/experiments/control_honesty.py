@@ -8,8 +8,10 @@ Two plans (docs/control.md, "Honesty check"):
 
 * ``"edge"``: full speed (``v = v_max``), stopped at the first state inside the goal — the
   plan ends on the goal's edge and leaves no speed to feedback;
-* ``"margin"``: ``v = 0.8 v_max`` (a planning margin on the saturating control) and stopped
-  at half the goal radius from the deformed goal centre (``depth = 0.5``).
+* ``"depth"``: full speed, stopped at half the goal radius from the deformed goal centre
+  (``depth = 0.5``);
+* ``"margin"``: ``v = 0.8 v_max`` (a planning margin on the saturating control) and
+  ``depth = 0.5``.
 
 Controllers: the default Bryson weights of :func:`riskplan.control.lqg_controller`
 (``closed``) and the identity weights ``Q = I``, ``R = I`` (``closed_identity``).
@@ -24,7 +26,8 @@ import json
 import sys
 import warnings
 
-PLANS = {"edge": {"speed": 1.0, "depth": 0.0}, "margin": {"speed": 0.8, "depth": 0.5}}
+PLANS = {"edge": {"speed": 1.0, "depth": 0.0}, "depth": {"speed": 1.0, "depth": 0.5},
+         "margin": {"speed": 0.8, "depth": 0.5}}
 
 
 def needle_rows(cases=("nominal", "actuation", "material-high", "force"), n: int = 1000, seed: int = 1,

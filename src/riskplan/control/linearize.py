@@ -102,7 +102,7 @@ class Linearization:
     def __post_init__(self):
         if self.drift is None:
             object.__setattr__(self, "drift", np.zeros(self.A.shape[:2]))
-        T, p, q = np.shape(self.B)
+        _, p, q = np.shape(self.B)
         for name, n in (("state_scale", p), ("control_scale", q)):
             v = getattr(self, name)
             if v is not None:

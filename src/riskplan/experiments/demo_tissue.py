@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from riskplan.experiments.report import Report
 from riskplan.errors import InvalidInputError
+from riskplan.experiments.report import Report
 
 log = logging.getLogger(__name__)
 

@@ -73,3 +73,20 @@ def test_collision_stops_the_run(rng):
     sim._obstacles = [square(x3[0], x3[1], 1e-3)]
     ex = execute(sim, plan, None, plan.params)
     assert ex.collided and ex.failed_step == 3 and not ex.success and len(ex.x) == 4
+
+
+def test_goal_at_any_stops_at_the_first_goal_state(rng):
+    # the goal sits around x*_3: the plan passes through it and leaves
+    sim, plan = _setup(rng)
+    x3 = plan.reduced[3]
+    sim._goal = square(x3[0], x3[1], 1e-3)
+    final = execute(sim, plan, None, plan.params)
+    assert not final.success and len(final.x) == plan.n_steps + 1
+    anyg = execute(sim, plan, None, plan.params, goal_at="any")
+    assert anyg.success and len(anyg.x) == 4
+    mc = monte_carlo_success(sim, plan, None, None, n=3, seed=0, goal_at="any")
+    assert mc.successes == 3
+    with pytest.raises(InvalidInputError, match="goal_at"):
+        execute(sim, plan, None, plan.params, goal_at="first")
+    with pytest.raises(InvalidInputError, match="goal_at"):
+        monte_carlo_success(sim, plan, None, n=3, goal_at="first")

@@ -7,9 +7,18 @@ from riskplan.experiments.control_honesty import needle_rows
 
 def test_nominal_row():
     (row,) = needle_rows(cases=("nominal",), n=20, seed=0)
-    assert row["steps"] > 5
-    for name in ("closed", "open"):
+    assert row["steps"] > 5 and row["plan"] == "margin"
+    for name in ("closed", "closed_identity", "open"):
         p, lo, hi = row[name]
         assert lo <= p <= hi
     # without parameter uncertainty the plan (which reaches the goal) succeeds: sensing noise only
     assert row["lqgmp_sigma"] > 0.9 and row["closed"][0] == 1.0
+
+
+def test_unknown_plan():
+    import pytest
+
+    from riskplan.errors import InvalidInputError
+
+    with pytest.raises(InvalidInputError, match="plan"):
+        needle_rows(cases=("nominal",), n=1, plan="fast")

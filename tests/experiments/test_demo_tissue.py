@@ -35,6 +35,17 @@ def test_needle_steering_reaches_goal_without_collision():
     assert all(sim.inside(s) for s in states)
 
 
+def test_needle_steering_with_speed_margin_ends_inside_the_goal():
+    sim = NeedleScenario()
+    p = sim.nominal_params
+    u = demo_tissue.greedy_needle_controls(sim, p, 40, speed=0.8, depth=0.5)
+    np.testing.assert_array_equal(u[:, 0], 0.8 * sim.config.v_max)
+    states = rollout(sim, sim.initial_state(p), u, p)
+    assert sim.goal_distance(states[-1]) <= 0.5 * sim.config.goal_radius
+    assert not any(sim.in_collision(s) for s in states)
+    assert all(sim.goal_distance(s) > 0.5 * sim.config.goal_radius for s in states[:-1])
+
+
 def test_manipulation_steering_reaches_goal_without_collision():
     sim = ManipulationScenario()
     p = sim.nominal_params

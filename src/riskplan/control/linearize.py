@@ -82,6 +82,11 @@ class Linearization:
     drift : (T, p) mean ``(1/n) Σ_i d_i`` of the one-step deviations under S (zeros without
         draws). The paper's model is zero-mean (``M_t`` is the second moment about zero);
         :func:`~riskplan.control.lqgmp` can carry this mean (``drift=True``).
+    state_scale : (p,) or None, acceptable deviation of each component of x
+        (``sim.state_scale`` where the simulator declares it).
+    control_scale : (q,) or None, acceptable deviation of each control component (the
+        half-range of ``sim.control_bounds``). Both set the default Bryson weights of
+        :func:`~riskplan.control.lqg_controller`.
     """
 
     A: np.ndarray
@@ -91,10 +96,21 @@ class Linearization:
     N: np.ndarray
     rank: np.ndarray
     drift: np.ndarray | None = None
+    state_scale: np.ndarray | None = None
+    control_scale: np.ndarray | None = None
 
     def __post_init__(self):
         if self.drift is None:
             object.__setattr__(self, "drift", np.zeros(self.A.shape[:2]))
+        _, p, q = np.shape(self.B)
+        for name, n in (("state_scale", p), ("control_scale", q)):
+            v = getattr(self, name)
+            if v is not None:
+                v = as_array(v, name, shape=(n,))
+                if not np.all(v > 0):
+                    raise InvalidInputError(f"{name}: expected positive values, got {v}")
+                v.setflags(write=False)
+                object.__setattr__(self, name, v)
         for name in ("A", "B", "M", "H", "N", "rank", "drift"):
             arr = np.array(getattr(self, name), copy=True)
             arr.setflags(write=False)
@@ -349,8 +365,11 @@ def linearize(
             stacklevel=2,
         )
     m = H0.shape[0]
+    scale = getattr(sim, "state_scale", None)
     return Linearization(
-        A=A, B=B, M=M, H=np.broadcast_to(H0, (T, m, p)), N=np.broadcast_to(N0, (T, m, m)), rank=rank, drift=drift
+        A=A, B=B, M=M, H=np.broadcast_to(H0, (T, m, p)), N=np.broadcast_to(N0, (T, m, m)), rank=rank, drift=drift,
+        state_scale=None if scale is None else np.array(scale, dtype=np.float64),
+        control_scale=0.5 * (bounds[:, 1] - bounds[:, 0]),
     )
 
 

@@ -14,8 +14,16 @@ starting from the simulator's start state under the drawn parameters ``s`` and `
     x̂_{t+1}   = x̂⁻ + K_t (z_{t+1} − h(x*_{t+1}) − H_t x̂⁻)
 
 The run fails at the first state in collision (``sim.in_collision``) or when the simulator
-raises (a solve that does not converge counts as a failure, recorded); it succeeds when
-no state ``y_1 .. y_T`` collides and ``y_T`` is in the (deformed) goal (``sim.in_goal``).
+raises (a solve that does not converge counts as a failure, recorded). Success (paper V-A:
+"the goal region is reached and obstacles are avoided"), by ``goal_at``:
+
+* ``"final"`` (default): no state ``y_1 .. y_T`` collides and ``y_T`` is in the (deformed)
+  goal (``sim.in_goal``) — the event whose probability LQG-MP estimates from the final
+  distribution (section IV-D);
+* ``"any"``: the run stops at the first state ``y_t`` (``t ≤ T``) in the deformed goal, as
+  a needle insertion stops at its target and as the RRT ends a plan at its first goal
+  state; it succeeds if no state before collides.
+
 Collisions are checked at the states, as the scenarios define them.
 """
 
@@ -33,7 +41,7 @@ from riskplan.control.lqr import lqr_gains
 from riskplan.control.plan import NominalPlan
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError, SimulationError
 
-__all__ = ["LQGController", "Execution", "SuccessEstimate", "lqg_controller", "execute", "monte_carlo_success"]
+__all__ = ["bryson_weights", "LQGController", "Execution", "SuccessEstimate", "lqg_controller", "execute", "monte_carlo_success"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,17 +64,37 @@ class LQGController:
         return int(self.L.shape[0])
 
 
+def bryson_weights(state_scale, control_scale) -> tuple[np.ndarray, np.ndarray]:
+    """Bryson's rule (Bryson & Ho, *Applied Optimal Control*, 1975, section 5.4):
+    ``Q = diag(1 / x_max²)`` ``(p, p)`` and ``R = diag(1 / u_max²)`` ``(q, q)`` from the
+    acceptable deviation of each state component ``x_max (p,)`` and of each control
+    component ``u_max (q,)``, so every term of the LQR cost is dimensionless and a
+    deviation of one "acceptable" unit costs 1 in any component."""
+    xs = as_array(state_scale, "state_scale", shape=(None,))
+    us = as_array(control_scale, "control_scale", shape=(None,))
+    for name, v in (("state_scale", xs), ("control_scale", us)):
+        if not np.all(v > 0):
+            raise InvalidInputError(f"{name}: expected positive values, got {v}")
+    return np.diag(1.0 / xs**2), np.diag(1.0 / us**2)
+
+
 def lqg_controller(lin: Linearization, Q=None, R=None, Q_final=None, P0=None) -> LQGController:
     """LQR + Kalman gains for ``lin`` (``A (T, p, p)``, ``B (T, p, q)``, ...).
 
-    Defaults: ``Q = I_p``, ``R = I_q``, ``Q_final = Q`` (the identity costs of van den Berg,
-    Abbeel & Goldberg, IJRR 2011, section VII), ``P0 = 0`` (the start state is known).
+    Defaults (explicit ``Q``/``R`` override them): Bryson's rule (:func:`bryson_weights`),
+    ``Q = diag(1 / lin.state_scale²)`` and ``R = diag(1 / lin.control_scale²)``, the
+    scales the simulator declares (:func:`~riskplan.control.linearize` copies
+    ``sim.state_scale`` and the control half-ranges); a component without a declared
+    scale gets weight 1 (``Q = I``/``R = I``, the identity costs of van den Berg, Abbeel &
+    Goldberg, IJRR 2011, section VII). ``Q_final = Q``, ``P0 = 0`` (the start state is known).
     """
     if not isinstance(lin, Linearization):
         raise InvalidInputError(f"lin: expected a Linearization, got {type(lin).__name__}")
     T, p, q = lin.B.shape
-    Q = np.eye(p) if Q is None else Q
-    R = np.eye(q) if R is None else R
+    if Q is None:
+        Q = np.eye(p) if lin.state_scale is None else bryson_weights(lin.state_scale, np.ones(1))[0]
+    if R is None:
+        R = np.eye(q) if lin.control_scale is None else bryson_weights(np.ones(1), lin.control_scale)[1]
     Q_final = Q if Q_final is None else Q_final
     P0 = np.zeros((p, p)) if P0 is None else as_array(P0, "P0", shape=(p, p))
     L = lqr_gains(lin.A, lin.B, Q, R, Q_final)
@@ -100,14 +128,24 @@ def _observe_nominal(sim, x: np.ndarray) -> np.ndarray:
     return np.asarray(sim.observe(x, noise=np.zeros(sim.obs_dim)), dtype=np.float64)
 
 
+GOAL_AT = ("final", "any")
+
+
+def _check_goal_at(goal_at: str) -> None:
+    if goal_at not in GOAL_AT:
+        raise InvalidInputError(f"goal_at: expected one of {GOAL_AT}, got {goal_at!r}")
+
+
 def execute(sim, plan: NominalPlan, controller: LQGController | None, params, *, seed=None,
-            keep_states: bool = True) -> Execution:
-    """Run ``plan`` on ``sim`` under the true parameters ``params`` (module docstring).
+            keep_states: bool = True, goal_at: str = "final") -> Execution:
+    """Run ``plan`` on ``sim`` under the true parameters ``params`` (module docstring;
+    ``goal_at`` ``"final"`` or ``"any"`` is when the goal counts).
 
     ``controller=None`` executes open loop (``u_t = u*_t``, no filter). ``seed`` seeds the
     sensing noise. Raises :class:`~riskplan.errors.SimulationError` naming the step if the
     simulator returns a non-finite state.
     """
+    _check_goal_at(goal_at)
     gen = np.random.default_rng(seed)
     T = plan.n_steps
     bounds = np.asarray(sim.control_bounds, dtype=np.float64)
@@ -155,7 +193,9 @@ def execute(sim, plan: NominalPlan, controller: LQGController | None, params, *,
         if sim.in_collision(y):
             collided, failed = True, t + 1
             break
-    reached = (not collided) and error is None and len(xs) == T + 1 and bool(sim.in_goal(y))
+        if goal_at == "any" and sim.in_goal(y):
+            break
+    reached = (not collided) and error is None and (goal_at == "any" or len(xs) == T + 1) and bool(sim.in_goal(y))
     if not keep_states:
         states = [states[0], y]
     return Execution(
@@ -193,25 +233,26 @@ def _draw(distribution, sim, gen):
     return distribution.sample(gen)
 
 
-def _run_batch(sim, plan, controller, distribution, seeds):
+def _run_batch(sim, plan, controller, distribution, goal_at, seeds):
     out = []
     for s in seeds:
         gen = np.random.default_rng(s)
         params = _draw(distribution, sim, gen)
-        ex = execute(sim, plan, controller, params, seed=gen, keep_states=False)
+        ex = execute(sim, plan, controller, params, seed=gen, keep_states=False, goal_at=goal_at)
         out.append((ex.success, ex.collided, ex.reached_goal, ex.error is not None))
     return out
 
 
 def monte_carlo_success(sim, plan: NominalPlan, controller: LQGController | None, distribution=None, *,
                         n: int = 1000, seed=None, confidence: float = 0.95, backend: str = "serial",
-                        workers: int | None = None) -> SuccessEstimate:
+                        workers: int | None = None, goal_at: str = "final") -> SuccessEstimate:
     """Success rate of ``n`` executions of ``plan`` (closed loop with ``controller``, open loop
     with ``None``), each with its own ``s ~ distribution`` (``sim.nominal_params`` if ``None``)
     and sensing noise, with a Wilson interval (:func:`riskplan.collision.binomial_interval`).
 
     Run ``i`` draws its parameters and noise from ``spawn_seeds(seed, n)[i]``, so the result
     does not depend on ``backend`` (:func:`riskplan.parallel.map_tasks`) or ``workers``.
+    ``goal_at``: when the goal counts (:func:`execute`).
     """
     from riskplan.collision import binomial_interval
     from riskplan.parallel import map_tasks, spawn_seeds
@@ -219,12 +260,13 @@ def monte_carlo_success(sim, plan: NominalPlan, controller: LQGController | None
     if int(n) != n or n < 1:
         raise InvalidInputError(f"n: expected a positive integer, got {n!r}")
     n = int(n)
+    _check_goal_at(goal_at)
     if isinstance(seed, np.random.Generator):
         seed = int(seed.integers(2**63))
     seeds = spawn_seeds(seed, n)
     n_chunks = 1 if backend == "serial" else min(n, 4 * (workers or 2))
     chunks = [seeds[k::n_chunks] for k in range(n_chunks)]
-    results = map_tasks(partial(_run_batch, sim, plan, controller, distribution), chunks, backend=backend,
+    results = map_tasks(partial(_run_batch, sim, plan, controller, distribution, goal_at), chunks, backend=backend,
                         workers=workers, chunksize=1)
     flags = np.empty((n, 4), dtype=bool)
     for k, res in enumerate(results):

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from riskplan.errors import InvalidInputError
 from riskplan.experiments.report import Report
 
 log = logging.getLogger(__name__)
@@ -35,14 +36,27 @@ def _margin(sim, state) -> float:
     return float(min(signed_distance_to_polygon(p, poly)[0] for poly in sim.obstacles(state)))
 
 
-def greedy_needle_controls(sim, params, n_steps: int, clearance: float = 0.03, horizon: int = 8) -> np.ndarray:
-    """Arc lookahead on the simulator: for 9 steering angles at full speed, simulate
+def greedy_needle_controls(sim, params, n_steps: int, clearance: float = 0.03, horizon: int = 8,
+                           speed: float = 1.0, depth: float = 0.0) -> np.ndarray:
+    """Arc lookahead on the simulator: for 9 steering angles at ``speed · v_max`` (full speed by
+    default; ``speed < 1`` leaves the feedback controller room to speed up), simulate
     ``horizon`` steps of that constant control; discard arcs that leave the tissue or come
     within ``clearance`` of a (deformed) obstacle, keep the one ending closest to the
-    (deformed) goal centre, apply its first control, repeat; stop once in the goal."""
+    (deformed) goal centre, apply its first control, repeat; stop once in the goal. With
+    ``depth > 0`` "in the goal" also asks for a distance to the deformed goal centre of at most
+    ``(1 − depth) · goal_radius``, so the plan ends inside the goal instead of on its edge."""
     lo, hi = sim.control_bounds[1]
     phis = np.linspace(lo, hi, 9)
-    v = sim.control_bounds[0, 1]
+    if not 0.0 < speed <= 1.0:
+        raise InvalidInputError(f"speed: expected a fraction of v_max in (0, 1], got {speed!r}")
+    if not 0.0 <= depth < 1.0:
+        raise InvalidInputError(f"depth: expected a fraction of the goal radius in [0, 1), got {depth!r}")
+    v = speed * sim.control_bounds[0, 1]
+    r_in = (1.0 - depth) * sim.config.goal_radius
+
+    def arrived(st) -> bool:
+        return sim.in_goal(st) and (depth == 0.0 or sim.goal_distance(st) <= r_in)
+
     state = sim.initial_state(params)
     out = []
     for _ in range(n_steps):
@@ -52,7 +66,7 @@ def greedy_needle_controls(sim, params, n_steps: int, clearance: float = 0.03, h
             for h in range(horizon):
                 st = sim.step(st, [v, phi], params)
                 margin = min(margin, _margin(sim, st) if sim.inside(st) else -1.0)
-                if reached is None and sim.in_goal(st):
+                if reached is None and arrived(st):
                     reached = h
             cost = (reached - horizon if reached is not None else sim.goal_distance(st)) + (
                 100.0 * (clearance - margin) if margin < clearance else 0.0
@@ -61,7 +75,7 @@ def greedy_needle_controls(sim, params, n_steps: int, clearance: float = 0.03, h
                 best = (cost, phi)
         out.append([v, best[1]])
         state = sim.step(state, out[-1], params)
-        if sim.in_goal(state):
+        if arrived(state):
             break
     return np.array(out)
 

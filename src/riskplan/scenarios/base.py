@@ -314,7 +314,8 @@ class Simulator(Protocol):
     ``collision_point_indices`` (``k`` pairs of indices of x that are 2-D points checked
     against obstacles; default ``((0, 1),)``), ``goal_point_indices`` (the pair checked
     against the goal; default ``(0, 1)``), ``obstacles(state)`` / ``goal(state)`` (deformed
-    polygons), ``in_collision(state)`` / ``in_goal(state)``.
+    polygons), ``in_collision(state)`` / ``in_goal(state)``, ``state_scale (p,)`` (acceptable
+    deviation of each component of x, the scale of the LQR's default Bryson weights).
     """
 
     control_dim: int

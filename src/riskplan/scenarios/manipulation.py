@@ -213,6 +213,16 @@ class ManipulationScenario(FEMScenario):
         self.collision_point_indices = tuple((2 + 2 * i, 3 + 2 * i) for i in range(cfg.n_boundary))
         self.goal_point_indices = (0, 1)
 
+    @property
+    def state_scale(self) -> np.ndarray:
+        """``(p,)`` acceptable deviation of each reduced-state component, the scale of the
+        LQR's default Bryson weights (:func:`riskplan.control.lqg_controller`): the goal
+        radius for the target (placing it is the objective), four goal radii for each
+        boundary point (the outline matters only through obstacle contact, so its twelve
+        points together weigh less than the target)."""
+        r = self.config.goal_radius
+        return np.concatenate([[r, r], np.full(self.state_dim - 2, 4.0 * r)])
+
     # ---- protocol ------------------------------------------------------------------
     @property
     def control_bounds(self) -> np.ndarray:

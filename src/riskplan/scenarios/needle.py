@@ -229,6 +229,16 @@ class NeedleScenario(FEMScenario):
         cov.setflags(write=False)
         self.sensing_cov = cov
 
+    @property
+    def state_scale(self) -> np.ndarray:
+        """``(3,)`` acceptable deviation of each reduced-state component, the scale of the
+        LQR's default Bryson weights (:func:`riskplan.control.lqg_controller`): the goal
+        radius for the position ``(x, y)``, and ``goal_radius / r_min`` for the heading
+        (the heading change that, turned at the minimum radius, moves the tip by one goal
+        radius)."""
+        r = self.config.goal_radius
+        return np.array([r, r, r / self.config.r_min])
+
     # ---- protocol ------------------------------------------------------------------
     @property
     def control_bounds(self) -> np.ndarray:

@@ -27,7 +27,7 @@ app = typer.Typer(
 AREAS = ("robot", "dataset", "kinematics", "collision", "tissue", "plan")
 # Benchmarks: ``riskplan.bench.<area>.run(quick: bool) -> dict`` (``-`` in an area name is ``_``
 # in the module name: ``planning-tissue`` -> ``riskplan.bench.planning_tissue``).
-BENCH_AREAS = ("robot", "kinematics", "collision", "tissue", "planning-tissue")
+BENCH_AREAS = ("robot", "kinematics", "collision", "tissue", "control", "planning-tissue")
 
 
 def _setup_threads() -> None:

@@ -113,6 +113,8 @@ def test_bad_input(rng):
         linearize(sim, plan, W=np.zeros((2, 2)))
     with pytest.raises(InvalidInputError, match="plan"):
         linearize(sim, "plan")
+    with pytest.raises(InvalidInputError, match="n_a_runs"):
+        linearize(sim, plan, n_a_runs=0)
 
 
 def test_needle_matches_car_jacobian():

@@ -58,11 +58,11 @@ def test_monte_carlo_success_backends_and_interval(rng):
     sim, plan = _setup(rng, goal_half=0.05)
     lin = linearize(sim, plan, sim.distribution, n_samples=32, seed=2)
     ctrl = lqg_controller(lin)
-    a = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=60, seed=3)
-    b = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=60, seed=3, backend="local", workers=2)
+    a = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=30, seed=3)
+    b = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=30, seed=3, backend="local", workers=2)
     np.testing.assert_array_equal(a.success, b.success)
-    assert 0 < a.successes < 60  # the goal is tight enough for some runs to miss
-    assert a.low <= a.probability <= a.high and a.success.shape == (60,)
+    assert 0 < a.successes < 30  # the goal is tight enough for some runs to miss
+    assert a.low <= a.probability <= a.high and a.success.shape == (30,)
     with pytest.raises(InvalidInputError, match="n"):
         monte_carlo_success(sim, plan, ctrl, n=0)
 

@@ -38,7 +38,7 @@ def _toy(rng, T):
 
 
 def test_joint_covariance_matches_monte_carlo(rng):
-    T, n = 6, 1000
+    T, n = 6, 600
     sim, plan = _toy(rng, T)
     xT = plan.reduced[-1]
     sim._goal = square(xT[0], xT[1], 10.0)
@@ -69,7 +69,7 @@ def test_p_goal_matches_monte_carlo_success(rng):
     sim._goal = square(xT[0] + 0.05, xT[1], 0.2)
     ctrl = lqg_controller(_exact(sim, T))
     res = lqgmp(sim, plan, ctrl, n_goal_samples=40_000, seed=0)
-    mc = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=1000, seed=4)
+    mc = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=600, seed=4)
     assert res.p_collision_free == 1.0  # the toy has no obstacles here
     # LQG-MP's own sampling error is ~0.0025: widen the Wilson interval by 3 of it
     assert mc.low - 0.0075 <= res.p_goal <= mc.high + 0.0075, (res.p_goal, mc.low, mc.high)
@@ -158,3 +158,64 @@ def test_sigma_vectorised_equals_loop(rng):
     loop = lqgmp(sim, plan, ctrl, n_goal_samples=10)
     assert np.any((fast.p_free_steps > 0) & (fast.p_free_steps < 1))
     np.testing.assert_allclose(loop.p_free_steps, fast.p_free_steps, rtol=1e-9, atol=1e-12)
+
+
+def test_manipulation_points_and_methods():
+    # the manipulation scenario checks its 12 sensed boundary points and its target
+    import warnings
+
+    from riskplan.control import linearize
+    from riskplan.control.lqgmp import point_indices
+    from riskplan.scenarios.manipulation import ManipulationScenario
+
+    sim = ManipulationScenario()
+    col, goal = point_indices(sim)
+    assert col.shape == (12, 2) and tuple(goal) == (0, 1) and col.max() == sim.state_dim - 1
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), np.tile([0.2, 0.0, 0.0, -0.2, 0.1, 0.0], (3, 1)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        lin = linearize(sim, plan, n_a_runs=4, n_samples=0, seed=0)
+    ctrl = lqg_controller(lin)
+    for m in ("sigma", "truncation"):
+        r = lqgmp(sim, plan, ctrl, method=m, n_goal_samples=200, seed=0)
+        assert r.cov.shape == (4, 52, 52) and 0.0 <= r.p_success <= 1.0
+        assert r.p_goal == 0.0  # three small pushes do not bring the target into the goal disk
+
+
+def test_polygon_environment_equals_validated_constructor(rng):
+    from riskplan.collision import Environment
+    from riskplan.control.lqgmp import polygon_environment
+
+    polys = [square(0.2, 0.2, 0.1), square(0.7, 0.5, 0.05)[::-1]]  # one counter-clockwise, one clockwise
+    a, b = polygon_environment(polys), Environment.from_polygons(polys)
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    np.testing.assert_array_equal(a.faces, b.faces)
+    pts = rng.uniform(0, 1, (200, 2))
+    np.testing.assert_array_equal(a.contains(pts), b.contains(pts))
+
+
+def test_drift_mean_matches_monte_carlo(rng):
+    # force_scale ~ U[0.5, 2.5]: the toy's parameter term c (f - 1) has mean 0.5 c every step
+    from riskplan.control import linearize
+    from riskplan.scenarios.uncertainty import InteractionForceUncertainty
+
+    A, B, c = toy_system(rng, scale=0.1)
+    dist = InteractionForceUncertainty(low=0.5, high=2.5)
+    sim = LinearToy(A, B, c, distribution=dist)
+    T = 5
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), rng.uniform(-0.5, 0.5, (T, 3)))
+    sim._goal = square(0, 0, 100.0)
+    lin = linearize(sim, plan, dist, n_samples=4000, seed=0)
+    np.testing.assert_allclose(lin.drift, np.broadcast_to(0.5 * c, (T, 3)), rtol=0, atol=0.05 * np.abs(c).max())
+    ctrl = lqg_controller(lin)
+    res = lqgmp(sim, plan, ctrl, drift=True, n_goal_samples=10)
+    assert not np.any(lqgmp(sim, plan, ctrl, n_goal_samples=10).mean)  # the paper's model: zero mean
+    n = 400
+    xi = np.empty((n, 6))
+    for k in range(n):
+        gen = np.random.default_rng(k)
+        ex = execute(sim, plan, ctrl, dist.sample(gen), seed=gen, keep_states=False)
+        xi[k] = np.concatenate([ex.x[-1], ex.estimates[-1]]) - np.tile(plan.reduced[-1], 2)
+    se = xi.std(axis=0) / math.sqrt(n)
+    # the model mean uses the estimated drift (4000 draws): allow its error too
+    assert np.all(np.abs(xi.mean(axis=0) - res.mean[T]) < 4.5 * se + 0.05 * np.abs(res.mean[T])), (xi.mean(0), res.mean[T])

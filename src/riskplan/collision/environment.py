@@ -131,11 +131,13 @@ class Environment:
         return cls(np.vstack(Vs), np.vstack(Fs), np.concatenate(owners), names, validate=False)
 
     @classmethod
-    def from_polygons(cls, polygons, names=None) -> Environment:
+    def from_polygons(cls, polygons, names=None, *, validate: bool = True) -> Environment:
         """2-D environment: one solid obstacle per simple polygon ``(k, 2)`` (any orientation).
 
         Polygons are re-oriented counter-clockwise. Self-intersecting, degenerate or
-        zero-area polygons raise :class:`InvalidInputError`.
+        zero-area polygons raise :class:`InvalidInputError`. ``validate=False`` skips the
+        (quadratic) self-intersection and finiteness checks for polygons known to be simple,
+        e.g. the deformed obstacles of a tissue state, rebuilt at every plan step.
         """
         polygons = list(polygons)
         if not polygons:
@@ -148,9 +150,12 @@ class Environment:
             arr = np.asarray(p, dtype=np.float64)
             if arr.ndim != 2 or arr.shape[1] != 2:
                 raise InvalidInputError(f"polygons[{i}]: expected shape (k, 2), got {arr.shape}")
-            if not np.all(np.isfinite(arr)):
-                raise InvalidInputError(f"polygons[{i}]: contains NaN or inf")
-            arr = check_simple_polygon(arr, f"polygons[{i}]")
+            if validate:
+                if not np.all(np.isfinite(arr)):
+                    raise InvalidInputError(f"polygons[{i}]: contains NaN or inf")
+                arr = check_simple_polygon(arr, f"polygons[{i}]")
+            elif np.sum(arr[:, 0] * np.roll(arr[:, 1], -1) - np.roll(arr[:, 0], -1) * arr[:, 1]) < 0:
+                arr = arr[::-1]
             k = len(arr)
             idx = np.arange(k)
             Vs.append(arr)

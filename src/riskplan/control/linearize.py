@@ -37,6 +37,7 @@ Estimation, per step ``t`` (each run restarts the simulator from a stored plan s
   zero-mean, so a systematic shift under S counts as spread (conservative). A draw on
   another mesh than the plan's (mesh case) is run on the plan's mesh, since a stored state
   cannot change mesh: mesh uncertainty enters ``M_t`` only through execution, not here.
+  The mean ``d̄_t`` of the ``d_i`` is kept as ``Linearization.drift`` (beyond the paper).
 * ``H_t``, ``N_t``: ``sim.observation_matrix`` and ``sim.sensing_cov`` (constant), or the
   ``H``/``N`` arguments.
 
@@ -78,6 +79,9 @@ class Linearization:
     H : (T, m, p) observation matrices, ``H[t]`` observes ``x̄_{t+1}``.
     N : (T, m, m) measurement noise covariances.
     rank : (T,) int, numerical rank of ``X_t`` (``A_0`` copies step 1, so ``rank[0]`` does too).
+    drift : (T, p) mean ``(1/n) Σ_i d_i`` of the one-step deviations under S (zeros without
+        draws). The paper's model is zero-mean (``M_t`` is the second moment about zero);
+        :func:`~riskplan.control.lqgmp` can carry this mean (``drift=True``).
     """
 
     A: np.ndarray
@@ -86,9 +90,12 @@ class Linearization:
     H: np.ndarray
     N: np.ndarray
     rank: np.ndarray
+    drift: np.ndarray | None = None
 
     def __post_init__(self):
-        for name in ("A", "B", "M", "H", "N", "rank"):
+        if self.drift is None:
+            object.__setattr__(self, "drift", np.zeros(self.A.shape[:2]))
+        for name in ("A", "B", "M", "H", "N", "rank", "drift"):
             arr = np.array(getattr(self, name), copy=True)
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
@@ -120,6 +127,11 @@ def _checked(sim, state, t: int, what: str) -> np.ndarray:
     return x
 
 
+def _finite(X: np.ndarray, t: int, what: str) -> None:
+    if not np.isfinite(X).all():
+        raise SimulationError(f"linearize: non-finite reduced state at step {t} ({what})")
+
+
 def _mirror(u: np.ndarray, w: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     v = u + w
     out = (v < bounds[:, 0]) | (v > bounds[:, 1])
@@ -148,12 +160,11 @@ def control_jacobian(sim, state, control, params, epsilon, x_next=None, t: int =
     return B
 
 
-def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, seeds, ts) -> list:
+def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seeds, ts) -> list:
     """(A_t or None, B_t, M_t, rank_t) for each t in ``ts``."""
     bounds = np.asarray(sim.control_bounds, dtype=np.float64)
     params = plan.params
     p = plan.reduced.shape[1]
-    K = 2 * p
     prior = np.eye(p) if a_prior == "identity" else np.zeros((p, p))
     out = []
     for t, seed in zip(ts, seeds):
@@ -170,8 +181,12 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, seeds, 
             X1 = np.empty((p, K))
             for k in range(K):
                 yk = sim.step(y_prev, _mirror(u_prev, Z[k], bounds), params)
-                X0[:, k] = _checked(sim, yk, t, f"A run {k}") - plan.reduced[t]
-                X1[:, k] = _checked(sim, sim.step(yk, u_t, params), t + 1, f"A run {k}") - x_next
+                X0[:, k] = sim.reduced(yk)
+                X1[:, k] = sim.reduced(sim.step(yk, u_t, params))
+            _finite(X0, t, "A runs")
+            _finite(X1, t + 1, "A runs")
+            X0 -= plan.reduced[t][:, None]
+            X1 -= x_next[:, None]
             U, s, Vt = np.linalg.svd(X0, full_matrices=False)
             keep = s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
             rank = int(keep.sum())
@@ -182,12 +197,16 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, seeds, 
                 A = prior + (X1 - prior @ X0) @ pinv
         B = control_jacobian(sim, y_t, u_t, params, eps, x_next=x_next, t=t)
         M = np.zeros((p, p))
+        drift = np.zeros(p)
         if draws:
             D = np.empty((len(draws), p))
             for i, s_i in enumerate(draws):
-                D[i] = _checked(sim, sim.step(y_t, u_t, s_i), t + 1, f"parameter draw {i}") - x_next
+                D[i] = sim.reduced(sim.step(y_t, u_t, s_i))
+            _finite(D, t + 1, "parameter draws")
+            D -= x_next
             M = D.T @ D / len(draws)
-        out.append((A, B, M, rank))
+            drift = D.mean(axis=0)
+        out.append((A, B, M, drift, rank))
     return out
 
 
@@ -220,6 +239,7 @@ def linearize(
     W=None,
     epsilon=None,
     n_samples: int = 16,
+    n_a_runs: int | None = None,
     a_prior: str = "identity",
     rcond: float = 1e-8,
     H=None,
@@ -241,6 +261,10 @@ def linearize(
         ``diag((0.01 (high − low))²)``.
     epsilon : scalar or (q,) perturbation for ``B_t``; default ``10⁻³ (high − low)``.
     n_samples : parameter draws for ``M_t`` (ignored for an explicit list).
+    n_a_runs : K, runs per step for ``A_t`` (default ``2p``, the paper's choice). One control
+        step excites at most ``q`` directions to first order (rank ``X_t <= q``), so for
+        ``p >> q`` (manipulation: p = 26, q = 6) ``K = 2q`` keeps the information at a
+        fraction of the cost.
     a_prior : ``"identity"`` (default) or ``"zero"`` (the paper's plain pseudo-inverse).
     rcond : relative cut-off of the singular values of ``X_t``.
     H, N : observation model override, ``(m, p)`` and ``(m, m)``.
@@ -281,6 +305,10 @@ def linearize(
     eps = 1e-3 * span if epsilon is None else np.broadcast_to(as_array(epsilon, "epsilon"), (q,)).copy()
     if np.any(eps <= 0):
         raise InvalidInputError(f"epsilon: expected > 0, got {eps}")
+    n_a_runs = 2 * p if n_a_runs is None else n_a_runs
+    if int(n_a_runs) != n_a_runs or n_a_runs < 1:
+        raise InvalidInputError(f"n_a_runs: expected a positive integer, got {n_a_runs!r}")
+    n_a_runs = int(n_a_runs)
     if int(n_samples) != n_samples or n_samples < 0:
         raise InvalidInputError(f"n_samples: expected a non-negative integer, got {n_samples!r}")
     H0, N0 = observation_model(sim, H, N)
@@ -292,7 +320,7 @@ def linearize(
     ts = list(range(T))
     n_chunks = 1 if backend == "serial" else max(1, min(T, 4 * (workers or 2)))
     chunks = [ts[k::n_chunks] for k in range(n_chunks)]
-    fn = partial(_run_chunk, sim, plan, draws, W_factor, eps, a_prior, float(rcond), step_seeds)
+    fn = partial(_run_chunk, sim, plan, draws, W_factor, eps, a_prior, float(rcond), n_a_runs, step_seeds)
     results = map_tasks(fn, chunks, backend=backend, workers=workers, chunksize=1)
     per_t = {}
     for chunk, res in zip(chunks, results):
@@ -302,11 +330,12 @@ def linearize(
     B = np.empty((T, p, q))
     M = np.empty((T, p, p))
     rank = np.empty(T, dtype=int)
+    drift = np.empty((T, p))
     for t in range(T):
-        a, b, m_, r = per_t[t]
+        a, b, m_, dr, r = per_t[t]
         if a is not None:
             A[t] = a
-        B[t], M[t], rank[t] = b, m_, r
+        B[t], M[t], drift[t], rank[t] = b, m_, dr, r
     if T >= 2:
         A[0], rank[0] = A[1], rank[1]
     else:
@@ -321,9 +350,9 @@ def linearize(
         )
     m = H0.shape[0]
     return Linearization(
-        A=A, B=B, M=M, H=np.broadcast_to(H0, (T, m, p)), N=np.broadcast_to(N0, (T, m, m)), rank=rank
+        A=A, B=B, M=M, H=np.broadcast_to(H0, (T, m, p)), N=np.broadcast_to(N0, (T, m, m)), rank=rank, drift=drift
     )
 
 
-def _run_chunk(sim, plan, draws, W_factor, eps, a_prior, rcond, step_seeds, ts):
-    return _steps(sim, plan, draws, W_factor, eps, a_prior, rcond, [step_seeds[t] for t in ts], ts)
+def _run_chunk(sim, plan, draws, W_factor, eps, a_prior, rcond, K, step_seeds, ts):
+    return _steps(sim, plan, draws, W_factor, eps, a_prior, rcond, K, [step_seeds[t] for t in ts], ts)

@@ -33,6 +33,11 @@ the plan's stored state ``y*_t`` (``sim.obstacles(y*_t)``), with the 2-D collisi
   (moments of a truncated normal, conditioned linearly), so later steps see only the
   trajectories that survived; ``P(no collision) = ∏_t (1 − min(1, p_t))``.
 
+Beyond the paper, ``drift=True`` carries the mean ``d̄_t`` of the one-step deviations under S
+(:attr:`Linearization.drift`): ``μ_{t+1} = F_t μ_t + G_t (d̄_t, 0)``, process covariance
+``M_t − d̄_t d̄_tᵀ``. The paper's zero-mean model misses systematic shifts, e.g. actuation
+noise clipped at a control bound (a needle planned at ``v_max`` lags on average).
+
 ``P(goal)``: ``n_goal_samples`` draws of ``x_T`` (the final, truncated distribution in the
 truncation variant), counting those whose goal point lies in the deformed goal polygon
 ``sim.goal(y*_T)``. ``P(success) = P(no collision) · P(goal)`` (paper IV-D).
@@ -44,9 +49,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import ndtr
-
-from riskplan.collision import DEFAULT_CUTOFF, Environment, free_region, precision_cholesky_from_covariance
 from riskplan.control.lqg import LQGController
 from riskplan.control.plan import NominalPlan
 from riskplan.errors import InvalidInputError
@@ -66,7 +68,7 @@ class LQGMPResult:
     ``p_success``, ``p_collision_free``, ``p_goal`` (floats); ``p_free_steps (T,)`` the
     per-step factor of ``p_collision_free`` (steps 1..T); ``mean (T + 1, 2p)`` and
     ``cov (T + 1, 2p, 2p)`` of ``ξ_t = (x̄_t, x̂_t)`` (the mean is zero for ``"sigma"``;
-    after truncation for ``"truncation"``); ``method``.
+    after truncation for ``"truncation"``, and carries the drift with ``drift=True``); ``method``.
     """
 
     p_success: float
@@ -93,30 +95,24 @@ def point_indices(sim) -> tuple[np.ndarray, np.ndarray]:
     return col, goal
 
 
-def polygon_environment(polygons) -> Environment:
-    """A 2-D :class:`~riskplan.collision.Environment` from simple polygons ``[(k_i, 2)]``
-    without the self-intersection check of ``Environment.from_polygons`` (the scenarios'
-    deformed polygons stay simple; this runs once per plan step). Oriented counter-clockwise."""
-    Vs, Fs, owners = [], [], []
-    off = 0
-    for i, poly in enumerate(polygons):
-        P = np.asarray(poly, dtype=np.float64)
-        nxt = np.roll(P, -1, axis=0)
-        if np.sum(P[:, 0] * nxt[:, 1] - nxt[:, 0] * P[:, 1]) < 0:
-            P = P[::-1]
-        k = len(P)
-        idx = np.arange(k)
-        Vs.append(P)
-        Fs.append(np.column_stack([idx, (idx + 1) % k]) + off)
-        owners.append(np.full(k, i, dtype=np.int64))
-        off += k
-    return Environment(np.vstack(Vs), np.vstack(Fs), np.concatenate(owners), validate=False)
+def polygon_environment(polygons):
+    """A 2-D :class:`~riskplan.collision.Environment` from simple polygons ``[(k_i, 2)]``,
+    built without the self-intersection check (``Environment.from_polygons(validate=False)``):
+    the scenarios' deformed polygons stay simple, and this runs once per plan step."""
+    from riskplan.collision import Environment
+
+    return Environment.from_polygons(polygons, validate=False)
 
 
-def joint_covariances(ctrl: LQGController) -> tuple[np.ndarray, np.ndarray]:
-    """``F (T, 2p, 2p)`` and the noise term ``G diag(M, N) Gᵀ (T, 2p, 2p)`` of the recursion."""
+def joint_covariances(ctrl: LQGController, drift: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``F (T, 2p, 2p)``, the noise term ``G diag(M, N) Gᵀ (T, 2p, 2p)`` and the mean input
+    ``G (d̄, 0) (T, 2p)`` of the recursion (zero unless ``drift``; then ``M − d̄ d̄ᵀ``
+    replaces the second moment ``M``)."""
     lin = ctrl.lin
     A, B, H, M, N, L, K = lin.A, lin.B, lin.H, lin.M, lin.N, ctrl.L, ctrl.K
+    d = lin.drift if drift else np.zeros(A.shape[:2])
+    if drift:
+        M = M - d[:, :, None] * d[:, None, :]
     T, p, _ = A.shape
     m = H.shape[1]
     BL = B @ L
@@ -133,11 +129,13 @@ def joint_covariances(ctrl: LQGController) -> tuple[np.ndarray, np.ndarray]:
     Wn = np.zeros((T, p + m, p + m))
     Wn[:, :p, :p] = M
     Wn[:, p:, p:] = N
-    return F, G @ Wn @ np.swapaxes(G, 1, 2)
+    return F, G @ Wn @ np.swapaxes(G, 1, 2), np.einsum("tij,tj->ti", G[:, :, :p], d)
 
 
 def _truncate(mu, S, c, b):
     """Condition ``N(mu, S)`` on ``cᵀξ <= b`` (moment matching of the truncated normal)."""
+    from scipy.special import ndtr
+
     Sc = S @ c
     var = float(c @ Sc)
     if var <= _TINY:
@@ -169,7 +167,7 @@ def sigma_distances(starts, ends, points, covs) -> tuple[np.ndarray, np.ndarray]
     whitened segment); ``inside`` is the crossing-number test of the point against the
     polygons. Equal to the first half-space distance of :func:`riskplan.collision.free_region`.
     """
-    from riskplan.collision import whiten
+    from riskplan.collision import precision_cholesky_from_covariance, whiten
 
     U = precision_cholesky_from_covariance(covs)
     wa = whiten(starts, points, U)
@@ -187,7 +185,7 @@ def sigma_distances(starts, ends, points, covs) -> tuple[np.ndarray, np.ndarray]
     return c, inside
 
 
-def _sigma_free(sim, plan, cov, col, p) -> np.ndarray | None:
+def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
     """Vectorised ``method="sigma"`` over all steps and points; None if the obstacle
     polygons change size along the plan (then the per-step loop runs)."""
     T = plan.n_steps
@@ -200,7 +198,7 @@ def _sigma_free(sim, plan, cov, col, p) -> np.ndarray | None:
     E = [_edges(ps) for ps in polys]
     starts = np.stack([e[0] for e in E])[:, None]  # (T, 1, E, 2)
     ends = np.stack([e[1] for e in E])[:, None]
-    pts = plan.reduced[1:][:, col]  # (T, k, 2)
+    pts = plan.reduced[1:][:, col] + mean[1:][:, col]  # (T, k, 2)
     covs = cov[1:][:, col[:, :, None], col[:, None, :]]  # (T, k, 2, 2)
     ok = np.linalg.eigvalsh(covs).min(axis=-1) > 1e-24
     covs = np.where(ok[..., None, None], covs, np.eye(2))
@@ -212,7 +210,8 @@ def _sigma_free(sim, plan, cov, col, p) -> np.ndarray | None:
 
 
 def lqgmp(sim, plan: NominalPlan, controller: LQGController, *, method: str = "sigma",
-          n_goal_samples: int = 2000, cutoff: float = DEFAULT_CUTOFF, seed=None) -> LQGMPResult:
+          n_goal_samples: int = 2000, cutoff: float | None = None, drift: bool = False,
+          seed=None) -> LQGMPResult:
     """LQG-MP probability of success of ``plan`` under ``controller`` (module docstring).
 
     Parameters
@@ -222,9 +221,16 @@ def lqgmp(sim, plan: NominalPlan, controller: LQGController, *, method: str = "s
     controller : :class:`~riskplan.control.lqg.LQGController` of the plan's linearisation.
     method : ``"sigma"`` (paper) or ``"truncation"`` (Patil 2012).
     n_goal_samples : draws of the final state for ``P(goal)``.
-    cutoff : whitened radius of the free-region construction (:mod:`riskplan.collision.gaussian`).
+    cutoff : whitened radius of the free-region construction (default
+        :data:`riskplan.collision.DEFAULT_CUTOFF`, see :mod:`riskplan.collision.gaussian`).
+    drift : carry the mean one-step deviation ``lin.drift`` (beyond the paper, whose model is
+        zero-mean): ``μ_{t+1} = F_t μ_t + G_t (d̄_t, 0)`` with ``M_t − d̄_t d̄_tᵀ`` as the
+        process noise covariance.
     seed : seeds the goal samples.
     """
+    from riskplan.collision import DEFAULT_CUTOFF, free_region, precision_cholesky_from_covariance
+
+    cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
     if method not in METHODS:
         raise InvalidInputError(f"method: expected one of {METHODS}, got {method!r}")
     if not isinstance(plan, NominalPlan):
@@ -236,7 +242,7 @@ def lqgmp(sim, plan: NominalPlan, controller: LQGController, *, method: str = "s
     col, goal_idx = point_indices(sim)
     T = plan.n_steps
     p = plan.reduced.shape[1]
-    F, Qn = joint_covariances(controller)
+    F, Qn, dm = joint_covariances(controller, drift)
     mean = np.zeros((T + 1, 2 * p))
     cov = np.zeros((T + 1, 2 * p, 2 * p))
     cov[0, :p, :p] = controller.P0
@@ -247,12 +253,14 @@ def lqgmp(sim, plan: NominalPlan, controller: LQGController, *, method: str = "s
     S = cov[0].copy()
     if not truncating:
         for t in range(T):
+            mean[t + 1] = mu = F[t] @ mu + dm[t]
             S = F[t] @ S @ F[t].T + Qn[t]
             cov[t + 1] = S = 0.5 * (S + S.T)
-        fast = _sigma_free(sim, plan, cov, col, p)
+        fast = _sigma_free(sim, plan, mean, cov, col, p)
         S = cov[0].copy()
+        mu = np.zeros(2 * p)
     for t in range(T if truncating or fast is None else 0):
-        mu = F[t] @ mu
+        mu = F[t] @ mu + dm[t]
         S = F[t] @ S @ F[t].T + Qn[t]
         S = 0.5 * (S + S.T)
         y = plan.states[t + 1]

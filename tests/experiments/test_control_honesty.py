@@ -1,0 +1,15 @@
+"""The LQG-MP honesty check runs at small scale and reports rates inside their intervals."""
+
+from __future__ import annotations
+
+from riskplan.experiments.control_honesty import needle_rows
+
+
+def test_nominal_row():
+    (row,) = needle_rows(cases=("nominal",), n=20, seed=0)
+    assert row["steps"] > 5
+    for name in ("closed", "open"):
+        p, lo, hi = row[name]
+        assert lo <= p <= hi
+    # without parameter uncertainty the plan (which reaches the goal) succeeds: sensing noise only
+    assert row["lqgmp_sigma"] > 0.9 and row["closed"][0] == 1.0

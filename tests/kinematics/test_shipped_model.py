@@ -91,7 +91,7 @@ def test_cli_collision_with_shipped_model(tmp_path):
     box.apply_translation([0.3, 0.0, 0.0])  # slab x >= 0.05 in the robot base frame
     stl = tmp_path / "slab.stl"
     box.export(stl)
-    r = CliRunner().invoke(app, ["collision", "--env", str(stl), "--model", "paper", "-d", "0,0,0,0;0.03,0,0,0",
+    r = CliRunner().invoke(app, ["collision", "--env", str(stl), "--base-pose", "identity", "--model", "paper", "-d", "0,0,0,0;0.03,0,0,0",
                                  "--samples", "2000", "--json"])
     assert r.exit_code == 0, r.output
     rows = json.loads(r.output)

@@ -99,7 +99,7 @@ def test_no_plan_raises_planning_error_with_tree_size_and_distance():
 
 def test_fewer_plans_than_asked_returns_what_was_found(point_robot, caplog):
     plans, trees = rrt_plans(
-        point_robot, 6, seed=2, options=RRTOptions(max_iterations=60, plans_per_tree=3), max_rounds=1, backend="serial"
+        point_robot, 6, seed=2, options=RRTOptions(max_iterations=40, plans_per_tree=3), max_rounds=1, backend="serial"
     )
     assert 1 <= len(plans) < 6 and len(trees) == 2
     assert "plans within the budget" in caplog.text

@@ -239,9 +239,9 @@ class RRTOptions:
     before it stops.
     """
 
-    n_controls: int = 6
+    n_controls: int = 4
     goal_bias: float = 0.3
-    max_iterations: int = 4000
+    max_iterations: int = 2000
     plans_per_tree: int = 10
 
     def __post_init__(self):
@@ -416,7 +416,7 @@ def grow_tree(sim, *, seed, params=None, space: PlanningSpace | None = None, opt
         best = min(best, min(float(sim.goal_distance(node_state[g])) for g in goal_nodes))
     plans = [_extract(sim, params, root, x0, parents, edge_states, edge_controls, g) for g in goal_nodes]
     return TreeResult(
-        seed=int(seed) if np.ndim(seed) == 0 else -1,
+        seed=int(seed) if isinstance(seed, (int, np.integer)) else -1,
         plans=plans,
         nodes=X.copy(),
         parents=np.asarray(parents, dtype=np.int64),
@@ -459,7 +459,7 @@ def rrt_plans(
     params=None,
     space: PlanningSpace | None = None,
     options: RRTOptions | None = None,
-    max_rounds: int = 3,
+    max_rounds: int = 4,
     backend: str = "local",
     workers: int | None = None,
     on_tree=None,

@@ -3,6 +3,7 @@ deformed goal, are distinct, do not depend on the backend; the error paths are n
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -26,10 +27,15 @@ def _check_plan(sim, plan, params):
     for t, st in enumerate(plan.states):
         assert not sim.in_collision(st), f"collision at step {t}"
         assert space.contains(plan.reduced[t])
-        # an edge ends at its first state in the goal: only the last state is in it
-        assert sim.in_goal(st) == (t == plan.n_steps)
+        # an edge ends at its first state in the tightened goal: only the last state is in it
+        assert _in_tight_goal(sim, st) == (t == plan.n_steps)
     lo, hi = sim.control_bounds[:, 0], sim.control_bounds[:, 1]
     assert np.all((plan.controls >= lo) & (plan.controls <= hi))
+
+
+def _in_tight_goal(sim, st, depth=RRTOptions().goal_depth):
+    r = getattr(sim, "goal_radius", None) or sim.config.goal_radius
+    return sim.in_goal(st) and sim.goal_distance(st) <= (1.0 - depth) * r
 
 
 def test_needle_plans_replay_collision_free_in_goal(near_needle, needle_result):
@@ -135,3 +141,67 @@ def test_bad_input_is_named(point_robot):
         rrt_plans(NoGoal(), 1)
     with pytest.raises(InvalidInputError, match="planning space"):
         planning_space(object())
+
+
+# ---- planning margins: tightened goal, controls off the bounds ------------------------
+
+
+def test_plans_end_in_tightened_goal_with_margined_controls(near_needle, needle_result):
+    """Default options: every plan ends within (1 − 0.5) r_goal of the deformed goal centre,
+    and every control keeps 2σ of the actuation noise (0.05, 5°) from the needle's bounds
+    (v in [0.1, 0.4], |φ| ≤ φ_max − 10°)."""
+    plans, _ = needle_result
+    r = near_needle.config.goal_radius
+    v_max, phi_max = near_needle.config.v_max, near_needle.config.phi_max
+    for plan in plans:
+        assert near_needle.goal_distance(plan.states[-1]) <= 0.5 * r
+        v, phi = plan.controls[:, 0], plan.controls[:, 1]
+        assert np.all((v >= 0.1) & (v <= v_max - 0.1))
+        assert np.all(np.abs(phi) <= phi_max - math.radians(10.0) + 1e-12)
+
+
+def test_manipulation_sampling_bounds_keep_two_sigma():
+    from riskplan.planning.rrt import sampling_bounds
+
+    sim = ManipulationScenario()
+    f = sim.config.f_max
+    b = sampling_bounds(sim, RRTOptions())
+    # actuation noise 0.1 f_max per component: margin 0.2 f_max
+    np.testing.assert_allclose(b, np.tile([-0.8 * f, 0.8 * f], (sim.control_dim, 1)), rtol=0, atol=1e-15)
+    assert np.array_equal(sampling_bounds(sim, RRTOptions(control_margin=0.0)), sim.control_bounds)
+    with pytest.raises(InvalidInputError, match="control_margin"):
+        sampling_bounds(sim, RRTOptions(control_margin=10.0))
+
+
+def test_point_robot_tight_goal(point_robot):
+    """A simulator with a goal_radius and no noise model: tightened goal, full bounds."""
+    tree = grow_tree(point_robot, seed=11, options=RRTOptions(plans_per_tree=3, goal_depth=0.75))
+    assert tree.plans
+    for plan in tree.plans:
+        assert point_robot.goal_distance(plan.states[-1]) <= 0.25 * point_robot.goal_radius
+
+
+def test_zero_margins_reproduce_previous_plans(near_needle, point_robot):
+    """goal_depth = control_margin = 0 reproduces, bit for bit, plans stored from the tree
+    before the margins existed."""
+    from pathlib import Path
+
+    ref = np.load(Path(__file__).parent / "data" / "rrt_plans_v1.npz")
+    old = RRTOptions(goal_depth=0.0, control_margin=0.0)
+    tree = grow_tree(point_robot, seed=11, options=dataclasses.replace(old, plans_per_tree=3))
+    assert len(tree.plans) == 3
+    for i, p in enumerate(tree.plans):
+        assert p.controls.tobytes() == ref[f"point_{i}_controls"].tobytes()
+        assert p.reduced.tobytes() == ref[f"point_{i}_reduced"].tobytes()
+    opts = dataclasses.replace(old, plans_per_tree=2, max_iterations=600)
+    plans, _ = rrt_plans(near_needle, 2, seed=3, params=SMALL_MESH, options=opts, backend="serial")
+    assert len(plans) == 2
+    for i, p in enumerate(plans):
+        assert p.controls.tobytes() == ref[f"needle_{i}_controls"].tobytes()
+        assert p.reduced.tobytes() == ref[f"needle_{i}_reduced"].tobytes()
+
+
+@pytest.mark.parametrize(("field", "value"), [("goal_depth", 1.0), ("goal_depth", -0.1), ("control_margin", -1.0)])
+def test_margin_options_validated(field, value):
+    with pytest.raises(InvalidInputError, match=field):
+        RRTOptions(**{field: value})

@@ -16,15 +16,18 @@ One iteration (paper IV-A):
 
        d(x, x')² = Σ_i w_i δ_i²,   δ_i = x_i − x'_i  (wrapped to (−π, π] if periodic);
 
-3. draw ``n_controls`` controls (uniform in the control bounds, or within
+3. draw ``n_controls`` controls (uniform in the control bounds narrowed by
+   ``control_margin`` actuation standard deviations, or within
    ``max_control_change`` of the node's own control), simulate each for
    ``steps_per_extension`` steps from the node's stored state and rank them by the
    distance of their end state to ``x_sample``;
 4. take the best candidate whose every intermediate state lies inside the space's box and
    is collision-free against the *deformed* obstacles (``sim.in_collision``); candidates
    are checked lazily in rank order, so collision checks are paid only until one passes;
-5. if an intermediate state lies in the *deformed* goal region (``sim.in_goal``) the edge
-   ends there and the new node is a goal node: a leaf, never expanded. At most one goal
+5. if an intermediate state lies in the *deformed* goal region (``sim.in_goal``), and
+   within ``(1 − goal_depth) · r_goal`` of its centre (``sim.goal_distance``; see
+   :class:`RRTOptions`), the edge ends there and the new node is a goal node: a leaf, never
+   expanded. At most one goal
    child per node, so the plans of one tree differ before their last edge.
 
 A plan is the path from the root to a goal node: the controls of its edges (each held
@@ -68,7 +71,16 @@ from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInpu
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PlanningSpace", "RRTOptions", "TreeResult", "planning_space", "grow_tree", "rrt_plans"]
+__all__ = [
+    "PlanningSpace",
+    "RRTOptions",
+    "TreeResult",
+    "actuation_std",
+    "planning_space",
+    "grow_tree",
+    "rrt_plans",
+    "sampling_bounds",
+]
 
 #: Goal-directed extensions of a node's lineage after which it is no longer picked for the
 #: goal (a car facing away from the goal would otherwise be picked again and again).
@@ -237,12 +249,28 @@ class RRTOptions:
     ``goal_bias``: probability of sampling the goal point; ``max_iterations``: iterations
     per tree (each one extension attempt); ``plans_per_tree``: goal nodes a tree collects
     before it stops.
+
+    ``goal_depth`` (in ``[0, 1)``): a goal node must lie in the goal *and* within
+    ``(1 − goal_depth) · r_goal`` of the (deformed) goal centre, ``sim.goal_distance``
+    (``r_goal``: ``sim.goal_radius`` or ``sim.config.goal_radius``). Planning to a
+    tightened goal leaves the feedback controller room: a plan ending on the goal's edge
+    misses the goal under any execution error. 0: the first state in the goal ends a plan.
+
+    ``control_margin``: controls are sampled in ``[low + m, high − m]`` with
+    ``m = control_margin · σ`` per control, ``σ`` the standard deviation of the scenario's
+    actuation noise (:func:`actuation_std`). A nominal control on a bound has its noise
+    clipped on one side (a biased execution) and leaves the feedback no authority in that
+    direction; 2σ keeps about 98 % of each one-sided noise draw inside the bounds.
+    0: the whole bounds (as are ``goal_depth = control_margin = 0``, the plans of the
+    original tree, bit for bit).
     """
 
     n_controls: int = 4
     goal_bias: float = 0.3
     max_iterations: int = 2000
     plans_per_tree: int = 10
+    goal_depth: float = 0.5
+    control_margin: float = 2.0
 
     def __post_init__(self):
         for name in ("n_controls", "max_iterations", "plans_per_tree"):
@@ -251,6 +279,10 @@ class RRTOptions:
                 raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
         if not 0.0 <= self.goal_bias <= 1.0:
             raise InvalidInputError(f"goal_bias: expected a value in [0, 1], got {self.goal_bias!r}")
+        if not 0.0 <= self.goal_depth < 1.0:
+            raise InvalidInputError(f"goal_depth: expected a value in [0, 1), got {self.goal_depth!r}")
+        if not (math.isfinite(self.control_margin) and self.control_margin >= 0.0):
+            raise InvalidInputError(f"control_margin: expected a finite value >= 0, got {self.control_margin!r}")
 
 
 @dataclass
@@ -278,6 +310,61 @@ class TreeResult:
         return int(self.nodes.shape[0])
 
 
+def actuation_std(sim) -> np.ndarray | None:
+    """``(q,)`` standard deviations of ``sim``'s actuation noise, or ``None`` if unknown.
+
+    ``sim.actuation_cov()`` (the manipulation scenario: ``0.1 f_max``) if it has one, else
+    for the needle :data:`riskplan.scenarios.uncertainty.NEEDLE_ACTUATION_STD`
+    (``0.05``, 5°)."""
+    cov = getattr(sim, "actuation_cov", None)
+    if callable(cov):
+        return np.sqrt(np.diag(np.asarray(cov(), dtype=np.float64)))
+    from riskplan.scenarios.needle import NeedleScenario
+
+    if isinstance(sim, NeedleScenario):
+        from riskplan.scenarios.uncertainty import NEEDLE_ACTUATION_STD
+
+        return np.asarray(NEEDLE_ACTUATION_STD, dtype=np.float64)
+    return None
+
+
+def sampling_bounds(sim, options: RRTOptions) -> np.ndarray:
+    """``(q, 2)`` bounds the RRT samples controls in: ``sim.control_bounds`` narrowed by
+    ``options.control_margin`` actuation standard deviations on each side (see
+    :class:`RRTOptions`); the full bounds when the margin is 0 or the noise unknown."""
+    bounds = np.asarray(sim.control_bounds, dtype=np.float64)
+    if options.control_margin == 0.0:
+        return bounds
+    std = actuation_std(sim)
+    if std is None:
+        log.info("rrt: %s has no actuation noise model; controls use the full bounds", type(sim).__name__)
+        return bounds
+    if std.shape != (bounds.shape[0],):
+        raise InvalidInputError(f"sim: actuation noise has {std.shape[0]} components, but {bounds.shape[0]} controls")
+    m = options.control_margin * std
+    out = np.stack([bounds[:, 0] + m, bounds[:, 1] - m], axis=1)
+    if np.any(out[:, 1] <= out[:, 0]):
+        raise InvalidInputError(
+            f"options.control_margin: {options.control_margin} standard deviations {std.tolist()} leave no controls "
+            f"inside the bounds {bounds.tolist()}"
+        )
+    return out
+
+
+def _goal_radius(sim, options: RRTOptions) -> float:
+    """``(1 − goal_depth) · r_goal``, or ``inf`` when ``goal_depth`` is 0."""
+    if options.goal_depth == 0.0:
+        return math.inf
+    r = getattr(sim, "goal_radius", None)
+    if r is None:
+        r = getattr(getattr(sim, "config", None), "goal_radius", None)
+    if r is None:
+        raise InvalidInputError(
+            f"options.goal_depth: {type(sim).__name__} has no goal_radius (nor config.goal_radius); use goal_depth=0"
+        )
+    return (1.0 - options.goal_depth) * float(r)
+
+
 def _check_sim(sim) -> None:
     for name in ("step", "reduced", "initial_state", "control_bounds", "in_collision", "in_goal", "goal_distance"):
         if not hasattr(sim, name):
@@ -299,7 +386,8 @@ def grow_tree(sim, *, seed, params=None, space: PlanningSpace | None = None, opt
     options = options or RRTOptions()
     if space.dim != sim.state_dim:
         raise InvalidInputError(f"space: has dimension {space.dim}, but sim.state_dim = {sim.state_dim}")
-    bounds = np.asarray(sim.control_bounds, dtype=np.float64)
+    bounds = sampling_bounds(sim, options)
+    r_tight = _goal_radius(sim, options)
     q = bounds.shape[0]
     if space.max_control_change is not None and space.max_control_change.shape != (q,):
         raise InvalidInputError(f"space.max_control_change: expected shape ({q},), got {space.max_control_change.shape}")
@@ -374,7 +462,7 @@ def grow_tree(sim, *, seed, params=None, space: PlanningSpace | None = None, opt
                 if not (np.all(np.isfinite(xj)) and space.contains(xj)) or sim.in_collision(st):
                     accepted = False
                     break
-                if sim.in_goal(st):
+                if sim.in_goal(st) and (r_tight == math.inf or sim.goal_distance(st) <= r_tight):
                     goal_at = j
                     break
             if not accepted:

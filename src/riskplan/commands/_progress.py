@@ -16,3 +16,12 @@ def progress_bar(transient: bool = False) -> Progress:
         TimeRemainingColumn(),
         transient=transient,
     )
+
+
+def stop_interrupted(bar: Progress, how_to_resume: str):
+    """After Ctrl-C: stop ``bar``, say what was kept and how to resume, exit with status 130."""
+    import typer
+
+    bar.stop()
+    typer.secho(f"interrupted: {how_to_resume}", fg="yellow", err=True)
+    return typer.Exit(130)

@@ -84,7 +84,7 @@ def register(app: typer.Typer) -> None:
         """Generate a data set (resumable: rerun the same command after an interruption)."""
         import time
 
-        from riskplan.commands._progress import progress_bar
+        from riskplan.commands._progress import progress_bar, stop_interrupted
         from riskplan.datasets import generate_dataset, get_protocol
         from riskplan.errors import InvalidInputError
         from riskplan.robots import load_robot
@@ -107,12 +107,9 @@ def register(app: typer.Typer) -> None:
                     result = generate_dataset(rob, protocol, path, split=sp, seed=seed, workers=workers, backend=backend,
                                               progress=progress, overwrite=overwrite)
                 except KeyboardInterrupt:
-                    bar.stop()
-                    typer.secho(
-                        f"interrupted: finished configurations are kept in {path}.partial; rerun the same command to resume",
-                        fg="yellow", err=True,
-                    )
-                    raise typer.Exit(130) from None
+                    raise stop_interrupted(
+                        bar, f"finished configurations are kept in {path}.partial; rerun the same command to resume"
+                    ) from None
                 bar.update(task, status=f"-> {result}")
         typer.echo(f"done in {time.perf_counter() - t0:.1f} s: " + ", ".join(str(p) for p in outputs.values()))
 

@@ -88,7 +88,7 @@ def register(app: typer.Typer) -> None:
         """Train a mixture density network on a point-cloud data set."""
         import torch
 
-        from riskplan.commands._progress import progress_bar
+        from riskplan.commands._progress import progress_bar, stop_interrupted
         from riskplan.kinematics.data import read_point_clouds
         from riskplan.kinematics.training import train as run_train
 
@@ -116,12 +116,9 @@ def register(app: typer.Typer) -> None:
             try:
                 res = run_train(ds, cfg, out=out, resume=resume, overwrite=overwrite, on_epoch=on_epoch, on_step=on_step)
             except KeyboardInterrupt:
-                bar.stop()
-                typer.secho(
-                    f"interrupted: the checkpoint in {out} is kept; continue with the same command plus --resume",
-                    fg="yellow", err=True,
-                )
-                raise typer.Exit(130) from None
+                raise stop_interrupted(
+                    bar, f"the checkpoint in {out} is kept; continue with the same command plus --resume"
+                ) from None
         typer.echo(
             f"best validation NLL {res.best_val_nll:.4f} nats/point at epoch {res.best_epoch} "
             f"({len(res.history)} epochs{', stopped early' if res.stopped_early else ''}, {res.skipped_steps} skipped steps); model: {out}"

@@ -10,7 +10,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export RAY_AUTH_MODE ?= disabled
 export MPLBACKEND ?= Agg
 
-.PHONY: install demo test bench clean browser
+.PHONY: install demo test lint bench clean browser
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || python3 -m venv $(VENV)
@@ -26,8 +26,13 @@ demo: $(STAMP)
 	$(VENV)/bin/riskplan demo --out $(OUT)
 	@echo "open $(OUT)/report.html"
 
-test: $(STAMP) browser
+test: $(STAMP) browser lint
 	$(PY) -m pytest -n 2 --dist loadfile -q
+
+# ruff (configured in pyproject.toml): lint rules and the formatter; `ruff format src tests` fixes layout.
+lint: $(STAMP)
+	$(VENV)/bin/ruff check src tests
+	$(VENV)/bin/ruff format --check src tests
 
 # Headless Chromium for the report tests (tests/browser.py). Installed from Debian when missing
 # and this runs as root with apt-get; otherwise those tests skip and say why.

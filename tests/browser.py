@@ -78,7 +78,9 @@ return Array.from(document.querySelectorAll('.js-plotly-plot')).map(
 _IMAGES_JS = """
 return Array.from(document.images).map(i => [i.getAttribute('src'), i.complete && i.naturalWidth > 0]);
 """
-_LINKS_JS = "return Array.from(document.querySelectorAll('a[href]')).map(a => a.getAttribute('href'));"
+_LINKS_JS = (
+    "return Array.from(document.querySelectorAll('a[href]')).map(a => a.getAttribute('href'));"
+)
 
 
 def check_page(driver, path: Path, screenshot: Path | None = None) -> PageCheck:
@@ -98,7 +100,9 @@ def check_page(driver, path: Path, screenshot: Path | None = None) -> PageCheck:
     check.n_images = len(images)
     check.broken_images = [src for src, loaded in images if not loaded]
     check.links = list(driver.execute_script(_LINKS_JS))
-    check.console_errors = [e["message"] for e in driver.get_log("browser") if e.get("level") == "SEVERE"]
+    check.console_errors = [
+        e["message"] for e in driver.get_log("browser") if e.get("level") == "SEVERE"
+    ]
     if screenshot is not None:
         driver.save_screenshot(str(screenshot))
     return check

@@ -19,7 +19,11 @@ PROPERTY = settings(
     max_examples=30,
     deadline=None,
     derandomize=True,
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture, HealthCheck.data_too_large],
+    suppress_health_check=[
+        HealthCheck.too_slow,
+        HealthCheck.function_scoped_fixture,
+        HealthCheck.data_too_large,
+    ],
 )
 
 any_float = st.floats(allow_nan=True, allow_infinity=True, width=64)
@@ -34,8 +38,12 @@ def float_arrays(shape=small_shapes, elements=any_float):
 def junk():
     """Values of the wrong type: None, strings, booleans, complex numbers, nested lists, dicts."""
     return st.one_of(
-        st.none(), st.text(max_size=8), st.booleans(), st.complex_numbers(allow_nan=True, allow_infinity=True),
-        st.lists(st.one_of(st.text(max_size=3), any_float), max_size=4), st.dictionaries(st.text(max_size=3), any_float, max_size=2),
+        st.none(),
+        st.text(max_size=8),
+        st.booleans(),
+        st.complex_numbers(allow_nan=True, allow_infinity=True),
+        st.lists(st.one_of(st.text(max_size=3), any_float), max_size=4),
+        st.dictionaries(st.text(max_size=3), any_float, max_size=2),
     )
 
 

@@ -21,22 +21,30 @@ import riskplan
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
-_BLOCK = re.compile(r"^(?:<!-- not executed: (?P<why>[^>]+?) -->\n)?```python\n(?P<code>.*?)^```", re.S | re.M)
+_BLOCK = re.compile(
+    r"^(?:<!-- not executed: (?P<why>[^>]+?) -->\n)?```python\n(?P<code>.*?)^```", re.S | re.M
+)
 
 
 def python_blocks(path: Path) -> list[tuple[str, str | None, int]]:
     """``(code, reason_not_executed_or_None, line)`` for each ```python block of ``path``."""
     text = path.read_text(encoding="utf-8")
-    return [(m["code"], m["why"], text.count("\n", 0, m.start()) + 1) for m in _BLOCK.finditer(text)]
+    return [
+        (m["code"], m["why"], text.count("\n", 0, m.start()) + 1) for m in _BLOCK.finditer(text)
+    ]
 
 
 def test_block_parser_sees_markers(tmp_path):
     md = tmp_path / "x.md"
-    md.write_text("a\n```python\nx = 1\n```\n<!-- not executed: needs a cluster -->\n```python\ny\n```\n")
+    md.write_text(
+        "a\n```python\nx = 1\n```\n<!-- not executed: needs a cluster -->\n```python\ny\n```\n"
+    )
     assert python_blocks(md) == [("x = 1\n", None, 2), ("y\n", "needs a cluster", 5)]
 
 
-@pytest.mark.parametrize("path", [p for p in DOCS if python_blocks(p)], ids=lambda p: p.relative_to(ROOT).as_posix())
+@pytest.mark.parametrize(
+    "path", [p for p in DOCS if python_blocks(p)], ids=lambda p: p.relative_to(ROOT).as_posix()
+)
 def test_markdown_python_blocks_run(path, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     namespace: dict = {"__name__": f"docs:{path.name}"}
@@ -46,7 +54,9 @@ def test_markdown_python_blocks_run(path, tmp_path, monkeypatch):
         try:
             exec(compile(code, f"{path.relative_to(ROOT)}:{line}", "exec"), namespace)
         except Exception as exc:  # report the block, not this helper
-            pytest.fail(f"{path.relative_to(ROOT)}, block at line {line}: {type(exc).__name__}: {exc}")
+            pytest.fail(
+                f"{path.relative_to(ROOT)}, block at line {line}: {type(exc).__name__}: {exc}"
+            )
 
 
 def _modules_with_examples() -> list[str]:
@@ -64,5 +74,9 @@ def test_docstring_examples_run(module, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     os.environ.setdefault("MPLBACKEND", "Agg")
     mod = importlib.import_module(module)
-    result = doctest.testmod(mod, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE, verbose=False)
-    assert result.failed == 0, f"{module}: {result.failed} of {result.attempted} docstring examples failed"
+    result = doctest.testmod(
+        mod, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE, verbose=False
+    )
+    assert result.failed == 0, (
+        f"{module}: {result.failed} of {result.attempted} docstring examples failed"
+    )

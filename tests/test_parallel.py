@@ -51,21 +51,21 @@ def test_task_exception_propagates():
         map_tasks(functools.partial(divmod, 1), [1, 0], backend="local", workers=2, chunksize=1)
 
 
-_HELPER = '''
+_HELPER = """
 import os, time
 def sleepy(folder):
     open(os.path.join(folder, f"worker-{os.getpid()}"), "w").close()
     time.sleep(120)
     return os.getpid()
-'''
+"""
 
-_SCRIPT = '''
+_SCRIPT = """
 import os, sys
 sys.path.insert(0, sys.argv[1])
 from helper import sleepy
 from riskplan.parallel import map_tasks
 map_tasks(sleepy, [sys.argv[1]] * 4, backend="local", workers=2, chunksize=1)
-'''
+"""
 
 
 def _descendants(pid: int) -> set[int]:
@@ -107,8 +107,12 @@ def test_killed_parent_leaves_no_process_behind(tmp_path, sig):
     import time
 
     (tmp_path / "helper.py").write_text(_HELPER)
-    proc = subprocess.Popen([sys.executable, "-c", _SCRIPT, str(tmp_path)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                            env={**os.environ, "OMP_NUM_THREADS": "1"})
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _SCRIPT, str(tmp_path)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+    )
     family: set[int] = set()
     try:
         deadline = time.monotonic() + 120

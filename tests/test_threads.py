@@ -65,7 +65,13 @@ def _record_counts(monkeypatch, name):
 
 
 def test_fem_factorisations_run_on_one_blas_thread(monkeypatch):
-    from riskplan.deformable import LinearElasticModel, Material, NeoHookeanModel, mesh_polygon, rectangle
+    from riskplan.deformable import (
+        LinearElasticModel,
+        Material,
+        NeoHookeanModel,
+        mesh_polygon,
+        rectangle,
+    )
 
     mesh = mesh_polygon(rectangle(), 60)
     dense = _record_counts(monkeypatch, "cho_factor")

@@ -31,22 +31,34 @@ def as_array(
     try:
         arr = np.asarray(value, dtype=dtype)
     except (TypeError, ValueError) as exc:
-        raise InvalidInputError(f"{name}: cannot convert to a {np.dtype(dtype).name} array ({exc})") from exc
+        raise InvalidInputError(
+            f"{name}: cannot convert to a {np.dtype(dtype).name} array ({exc})"
+        ) from exc
     if shape is not None:
-        if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape)):
+        if arr.ndim != len(shape) or any(
+            s is not None and s != a for s, a in zip(shape, arr.shape)
+        ):
             want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
             raise InvalidInputError(f"{name}: expected shape {want}, got {arr.shape}")
     if min_ndim is not None and arr.ndim < min_ndim:
-        raise InvalidInputError(f"{name}: expected at least {min_ndim} dimensions, got shape {arr.shape}")
+        raise InvalidInputError(
+            f"{name}: expected at least {min_ndim} dimensions, got shape {arr.shape}"
+        )
     if last_dim is not None and (arr.ndim == 0 or arr.shape[-1] != last_dim):
-        raise InvalidInputError(f"{name}: expected last dimension {last_dim}, got shape {arr.shape}")
+        raise InvalidInputError(
+            f"{name}: expected last dimension {last_dim}, got shape {arr.shape}"
+        )
     if finite and np.issubdtype(arr.dtype, np.floating) and not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0]
-        raise InvalidInputError(f"{name}: contains NaN or inf (first at index {tuple(int(i) for i in bad)})")
+        raise InvalidInputError(
+            f"{name}: contains NaN or inf (first at index {tuple(int(i) for i in bad)})"
+        )
     return arr
 
 
-def check_range(arr, name: str, low=None, high=None, *, low_inclusive=True, high_inclusive=True) -> None:
+def check_range(
+    arr, name: str, low=None, high=None, *, low_inclusive=True, high_inclusive=True
+) -> None:
     """Raise :class:`InvalidInputError` if any element of ``arr`` leaves ``[low, high]``.
 
     ``low`` / ``high`` may be arrays broadcasting against ``arr`` (per-element limits).
@@ -58,14 +70,18 @@ def check_range(arr, name: str, low=None, high=None, *, low_inclusive=True, high
             idx = tuple(int(i) for i in np.argwhere(bad)[0])
             lo = np.broadcast_to(low, a.shape)[idx]
             op = ">=" if low_inclusive else ">"
-            raise InvalidInputError(f"{name}: value {a[idx]:.6g} at index {idx} violates {name} {op} {lo:.6g}")
+            raise InvalidInputError(
+                f"{name}: value {a[idx]:.6g} at index {idx} violates {name} {op} {lo:.6g}"
+            )
     if high is not None:
         bad = (a > high) if high_inclusive else (a >= high)
         if np.any(bad):
             idx = tuple(int(i) for i in np.argwhere(bad)[0])
             hi = np.broadcast_to(high, a.shape)[idx]
             op = "<=" if high_inclusive else "<"
-            raise InvalidInputError(f"{name}: value {a[idx]:.6g} at index {idx} violates {name} {op} {hi:.6g}")
+            raise InvalidInputError(
+                f"{name}: value {a[idx]:.6g} at index {idx} violates {name} {op} {hi:.6g}"
+            )
 
 
 def as_generator(seed) -> np.random.Generator:

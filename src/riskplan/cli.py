@@ -27,7 +27,16 @@ app = typer.Typer(
 AREAS = ("robot", "dataset", "kinematics", "collision", "tissue", "plan", "reproduce")
 # Benchmarks: ``riskplan.bench.<area>.run(quick: bool) -> dict`` (``-`` in an area name is ``_``
 # in the module name: ``planning-tissue`` -> ``riskplan.bench.planning_tissue``).
-BENCH_AREAS = ("robot", "kinematics", "collision", "tissue", "control", "planning", "planning-tissue", "reproduce")
+BENCH_AREAS = (
+    "robot",
+    "kinematics",
+    "collision",
+    "tissue",
+    "control",
+    "planning",
+    "planning-tissue",
+    "reproduce",
+)
 
 
 def _setup_threads() -> None:
@@ -39,14 +48,21 @@ def _setup_threads() -> None:
 
 
 @app.callback()
-def _main(verbose: bool = typer.Option(False, "--verbose", "-v", help="Log diagnostics to stderr.")) -> None:
+def _main(
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Log diagnostics to stderr."),
+) -> None:
     _setup_threads()
-    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=logging.INFO if verbose else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
 
 
 @app.command()
 def demo(
-    out: Path = typer.Option(Path("demo-out"), "--out", "-o", help="Folder for report.html and figures."),
+    out: Path = typer.Option(
+        Path("demo-out"), "--out", "-o", help="Folder for report.html and figures."
+    ),
     seed: int = typer.Option(0, min=0, help="Master seed."),
     workers: int = typer.Option(0, min=0, help="Worker processes (0: one per core)."),
 ) -> None:
@@ -59,9 +75,17 @@ def demo(
 
         def progress(done, total, stage, seconds):
             if seconds is None:
-                bar.update(task, completed=done, total=total, description=f"demo: {stage}", status=f"stage {done + 1}/{total}")
+                bar.update(
+                    task,
+                    completed=done,
+                    total=total,
+                    description=f"demo: {stage}",
+                    status=f"stage {done + 1}/{total}",
+                )
             else:
-                bar.update(task, completed=done, total=total, status=f"{stage} took {seconds:.0f} s")
+                bar.update(
+                    task, completed=done, total=total, status=f"{stage} took {seconds:.0f} s"
+                )
 
         path = run_demo(out, seed=seed, workers=workers or None, progress=progress)
     typer.echo(f"report: {path}")
@@ -75,7 +99,9 @@ def bench(
 ) -> None:
     """Measure the speed figures of one area."""
     if area not in BENCH_AREAS:
-        raise typer.BadParameter(f"unknown area {area!r}; expected one of {', '.join(BENCH_AREAS)}", param_hint="AREA")
+        raise typer.BadParameter(
+            f"unknown area {area!r}; expected one of {', '.join(BENCH_AREAS)}", param_hint="AREA"
+        )
     _limit_torch_threads()
     from riskplan.bench import machine_info
 

@@ -44,7 +44,9 @@ def check_output_folder(path, name: str = "out") -> Path:
     path = Path(path)
     for p in (path, *path.parents):
         if p.exists() and not p.is_dir():
-            what = "is an existing file" if p == path else f"lies below {str(p)!r}, an existing file"
+            what = (
+                "is an existing file" if p == path else f"lies below {str(p)!r}, an existing file"
+            )
             raise InvalidInputError(f"{name}: {str(path)!r} {what}; expected a folder")
         if p.exists():
             break

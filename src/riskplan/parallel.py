@@ -84,7 +84,12 @@ def _init_worker(parent_pid: int) -> None:
     import threading
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    threading.Thread(target=_watch_parent, args=(parent_pid, os.getppid()), daemon=True, name="riskplan-parent-watch").start()
+    threading.Thread(
+        target=_watch_parent,
+        args=(parent_pid, os.getppid()),
+        daemon=True,
+        name="riskplan-parent-watch",
+    ).start()
     _limit_threads()
 
 
@@ -134,8 +139,12 @@ def imap_tasks(
     indexed = list(enumerate(items))
     if not indexed:
         return
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
-        raise InvalidInputError(f"workers: expected a positive integer (or None for all cores), got {workers!r}")
+    if workers is not None and (
+        isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1
+    ):
+        raise InvalidInputError(
+            f"workers: expected a positive integer (or None for all cores), got {workers!r}"
+        )
     workers = workers or default_workers()
     if chunksize is None:
         chunksize = max(1, len(indexed) // (4 * workers))
@@ -152,7 +161,9 @@ def imap_tasks(
 
         # forkserver: safe with torch / OpenMP state in the parent, unlike fork.
         ctx = mp.get_context("forkserver")
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(os.getpid(),))
+        pool = ProcessPoolExecutor(
+            max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(os.getpid(),)
+        )
         try:
             pending = {pool.submit(_run_chunk, fn, c) for c in chunks}
             while pending:
@@ -171,11 +182,17 @@ def imap_tasks(
         if ray_address:
             check_ray_address(ray_address)
         # "local": always a fresh local instance, never a cluster some `ray start` left behind.
-        kwargs = {"address": ray_address} if ray_address else {"address": "local", "num_cpus": workers}
+        kwargs = (
+            {"address": ray_address} if ray_address else {"address": "local", "num_cpus": workers}
+        )
         try:
-            ray.init(ignore_reinit_error=True, log_to_driver=False, include_dashboard=False, **kwargs)
+            ray.init(
+                ignore_reinit_error=True, log_to_driver=False, include_dashboard=False, **kwargs
+            )
         except ConnectionError as exc:
-            raise BackendUnavailableError(f"ray_address={ray_address!r}: cannot connect to a Ray cluster ({exc})") from exc
+            raise BackendUnavailableError(
+                f"ray_address={ray_address!r}: cannot connect to a Ray cluster ({exc})"
+            ) from exc
         started_here = True
     try:
         remote = ray.remote(_run_chunk)
@@ -193,14 +210,18 @@ def parse_ray_address(address: str) -> tuple[str, int] | None:
     """``(host, port)`` of a Ray address ``"host:port"`` or ``"ray://host:port"``; ``None`` for
     ``"auto"`` / ``"local"`` (Ray finds or starts the cluster itself)."""
     if not isinstance(address, str) or not address.strip():
-        raise InvalidInputError(f"ray_address: expected 'host:port', 'ray://host:port' or 'auto', got {address!r}")
+        raise InvalidInputError(
+            f"ray_address: expected 'host:port', 'ray://host:port' or 'auto', got {address!r}"
+        )
     address = address.strip()
     if address in ("auto", "local"):
         return None
     hostport = address.split("://", 1)[1] if "://" in address else address
     host, sep, port = hostport.rpartition(":")
     if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise InvalidInputError(f"ray_address: expected 'host:port', 'ray://host:port' or 'auto', got {address!r}")
+        raise InvalidInputError(
+            f"ray_address: expected 'host:port', 'ray://host:port' or 'auto', got {address!r}"
+        )
     return host.strip("[]"), int(port)
 
 
@@ -239,7 +260,9 @@ def map_tasks(
     """
     items = list(items)
     out: list[Any] = [None] * len(items)
-    for i, r in imap_tasks(fn, items, backend=backend, workers=workers, chunksize=chunksize, ray_address=ray_address):
+    for i, r in imap_tasks(
+        fn, items, backend=backend, workers=workers, chunksize=chunksize, ray_address=ray_address
+    ):
         out[i] = r
         if on_result is not None:
             on_result(i, r)

@@ -9,6 +9,13 @@ from riskplan.bench import robot
 
 def test_bench_keys():
     figures = robot.run(quick=True, include_dataset=False)
-    issue_keys = {"tension_single_ms", "tension_batched_us_per_config", "displacement_single_ms", "dataset_small_s"}
+    issue_keys = {
+        "tension_single_ms",
+        "tension_batched_us_per_config",
+        "displacement_single_ms",
+        "dataset_small_s",
+    }
     assert set(figures) == issue_keys | {"tension_kernel_single_us"}
-    assert all(np.isfinite(figures[k]) and figures[k] > 0 for k in figures if k != "dataset_small_s")
+    assert all(
+        np.isfinite(figures[k]) and figures[k] > 0 for k in figures if k != "dataset_small_s"
+    )

@@ -38,7 +38,9 @@ def test_cpu_model_matches_proc_cpuinfo():
         text = open("/proc/cpuinfo", encoding="utf-8").read()
     except OSError:
         pytest.skip("no /proc/cpuinfo: cpu_model falls back to platform")
-    names = {line.split(":", 1)[1].strip() for line in text.splitlines() if line.startswith("model name")}
+    names = {
+        line.split(":", 1)[1].strip() for line in text.splitlines() if line.startswith("model name")
+    }
     if not names:
         pytest.skip("/proc/cpuinfo names no model")
     assert cpu_model() in names

@@ -10,7 +10,12 @@ from riskplan.bench import tissue
 
 def test_bench_keys():
     figures = tissue.run(quick=True)
-    assert set(figures) == {"linear_step_ms_175", "linear_step_ms_1000", "nonlinear_step_ms_175", "nonlinear_step_ms_1000"}
+    assert set(figures) == {
+        "linear_step_ms_175",
+        "linear_step_ms_1000",
+        "nonlinear_step_ms_175",
+        "nonlinear_step_ms_1000",
+    }
     assert all(np.isfinite(v) and v > 0 for v in figures.values())
 
 

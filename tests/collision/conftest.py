@@ -26,6 +26,10 @@ def random_upper(rng, d, scale=1.0):
 @pytest.fixture(scope="module")
 def boxes_env():
     return Environment.from_meshes(
-        [box_mesh([1, -1, -1], [2, 1, 1]), box_mesh([-1.5, 0.5, -0.5], [-0.5, 1.5, 0.5]), box_mesh([-1, -3, -1], [1, -2, 1])],
+        [
+            box_mesh([1, -1, -1], [2, 1, 1]),
+            box_mesh([-1.5, 0.5, -0.5], [-0.5, 1.5, 0.5]),
+            box_mesh([-1, -3, -1], [1, -2, 1]),
+        ],
         names=["a", "b", "c"],
     )

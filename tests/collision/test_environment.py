@@ -10,8 +10,8 @@ from matplotlib.path import Path as MplPath
 import riskplan.collision._kernels as K
 from riskplan.collision import Environment
 from riskplan.errors import InvalidInputError
-from tests.conftest import TOL
 from tests.collision.conftest import box_mesh
+from tests.conftest import TOL
 
 
 def test_contains_matches_analytic_sphere_and_hollow_shell(rng):
@@ -45,7 +45,10 @@ def test_contains_agrees_with_trimesh_on_overlapping_boxes(rng, boxes_env):
 
 
 def test_contains_2d_matches_matplotlib(rng):
-    polys = [np.array([[0.0, 0], [2, 0], [2, 2], [1, 0.5], [0, 2]]), np.array([[3.0, 3], [4, 3], [3.5, 4]])]
+    polys = [
+        np.array([[0.0, 0], [2, 0], [2, 2], [1, 0.5], [0, 2]]),
+        np.array([[3.0, 3], [4, 3], [3.5, 4]]),
+    ]
     env = Environment.from_polygons(polys)
     pts = rng.uniform(-1, 5, size=(5000, 2))
     ref = MplPath(polys[0]).contains_points(pts) | MplPath(polys[1]).contains_points(pts)
@@ -57,7 +60,7 @@ def test_contains_2d_matches_matplotlib(rng):
 
 def test_closest_points_match_brute_force(rng, boxes_env):
     pts = rng.uniform(-3, 3, size=(300, 3))
-    d, c, f = boxes_env.closest_points(pts)
+    d, c, _f = boxes_env.closest_points(pts)
     db, cb, _ = K.closest_points_brute(boxes_env.vertices, boxes_env.faces, pts)
     np.testing.assert_allclose(d, db, **TOL["float64_ref"])
     np.testing.assert_allclose(c, cb, atol=1e-7)
@@ -94,7 +97,9 @@ def test_save_and_load_roundtrip(tmp_path, boxes_env):
 
 
 def test_from_arrays_and_subset(boxes_env):
-    env = Environment.from_arrays(boxes_env.vertices, boxes_env.faces, boxes_env.face_obstacle, boxes_env.names)
+    env = Environment.from_arrays(
+        boxes_env.vertices, boxes_env.faces, boxes_env.face_obstacle, boxes_env.names
+    )
     assert env.n_obstacles == 3 and env.dim == 3
     sub = env.subset(["a"])
     assert sub.n_obstacles == 1 and sub.contains(np.array([1.5, 0, 0]))

@@ -17,7 +17,6 @@ from riskplan.collision import (
 )
 from riskplan.errors import DataFormatError, InvalidInputError
 from tests.collision.conftest import box_mesh
-from tests.conftest import TOL
 
 
 def _rotation(rng):
@@ -27,9 +26,16 @@ def _rotation(rng):
 
 @pytest.fixture
 def world_scene(rng):
-    base_env = Environment.from_meshes([box_mesh([0.05, -0.02, 0.0], [0.08, 0.02, 0.1]), box_mesh([-0.2, -0.2, 0.2], [0.2, 0.2, 0.25])])
+    base_env = Environment.from_meshes(
+        [
+            box_mesh([0.05, -0.02, 0.0], [0.08, 0.02, 0.1]),
+            box_mesh([-0.2, -0.2, 0.2], [0.2, 0.2, 0.25]),
+        ]
+    )
     pose = BasePose(rng.normal(size=3), _rotation(rng))
-    world = Environment(pose.to_world(base_env.vertices), base_env.faces, base_env.face_obstacle, base_env.names)
+    world = Environment(
+        pose.to_world(base_env.vertices), base_env.faces, base_env.face_obstacle, base_env.names
+    )
     return base_env, world, pose
 
 
@@ -40,7 +46,11 @@ def test_pose_round_trip_and_quaternion(rng, tol):
     # 90 degrees about z: base x axis = world y axis
     q = BasePose.from_quaternion([1.0, 2.0, 3.0], [np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)])
     np.testing.assert_allclose(q.rotation[:, 0], [0, 1, 0], **tol["float64_ref"])
-    np.testing.assert_allclose(BasePose.parse("1,2,3,0.7071067811865476,0,0,0.7071067811865476").rotation, q.rotation, **tol["float64_ref"])
+    np.testing.assert_allclose(
+        BasePose.parse("1,2,3,0.7071067811865476,0,0,0.7071067811865476").rotation,
+        q.rotation,
+        **tol["float64_ref"],
+    )
     assert np.array_equal(BasePose.parse("identity").rotation, np.eye(3))
 
 
@@ -66,21 +76,25 @@ def test_bad_poses_are_named_errors(make, match):
 
 def test_saved_world_mesh_loads_in_the_base_frame(tmp_path, world_scene, rng, tol):
     base_env, world, pose = world_scene
-    path = save_environment(world, tmp_path / "scene.ply", base_pose=pose, metadata={"note": "test"})
+    path = save_environment(
+        world, tmp_path / "scene.ply", base_pose=pose, metadata={"note": "test"}
+    )
     meta = json.loads((tmp_path / "scene.ply.json").read_text())
     assert meta["frame"] == "world" and meta["note"] == "test"
     loaded = load_environment(path)
     mu = rng.normal(size=(6, 3)) * 0.05
     U = np.broadcast_to(np.eye(3) / 0.02, (6, 3, 3))
     # (mesh files store float32 vertices)
-    np.testing.assert_allclose(gaussian_bound(mu, U, loaded), gaussian_bound(mu, U, base_env), rtol=1e-4, atol=1e-9)
+    np.testing.assert_allclose(
+        gaussian_bound(mu, U, loaded), gaussian_bound(mu, U, base_env), rtol=1e-4, atol=1e-9
+    )
     # an explicit pose (here the same one, from the sidecar file) gives the same environment
     explicit = load_environment(path, base_pose=BasePose.from_json(tmp_path / "scene.ply.json"))
     np.testing.assert_allclose(explicit.vertices, loaded.vertices, **tol["float64_exact"])
 
 
 def test_base_frame_mesh_and_missing_frame(tmp_path, world_scene):
-    base_env, world, pose = world_scene
+    base_env, world, _pose = world_scene
     path = save_environment(base_env, tmp_path / "base.stl")
     assert json.loads((tmp_path / "base.stl.json").read_text())["frame"] == "base"
     np.testing.assert_allclose(load_environment(path).bounds, base_env.bounds, rtol=1e-6, atol=1e-7)
@@ -108,4 +122,9 @@ def test_chest_file_round_trip(tmp_path):
     loaded = load_environment(path)
     mu = np.array([[0.0, 0.0, 0.05], [0.01, 0.0, 0.12], [0.0, 0.02, 0.18]])
     U = np.broadcast_to(np.eye(3) / 0.01, (3, 3, 3))
-    np.testing.assert_allclose(gaussian_bound(mu, U, loaded), gaussian_bound(mu, U, chest.base_environment), rtol=1e-4, atol=1e-9)
+    np.testing.assert_allclose(
+        gaussian_bound(mu, U, loaded),
+        gaussian_bound(mu, U, chest.base_environment),
+        rtol=1e-4,
+        atol=1e-9,
+    )

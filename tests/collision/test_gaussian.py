@@ -6,7 +6,8 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.special import ndtr
 
 from riskplan.collision import (
@@ -22,8 +23,8 @@ from riskplan.collision import (
 )
 from riskplan.errors import InvalidInputError
 from riskplan.kinematics import GaussianMixture
-from tests.conftest import TOL
 from tests.collision.conftest import box_mesh, random_upper
+from tests.conftest import TOL
 
 
 def naive_patil(V, F, mu, U):
@@ -32,10 +33,20 @@ def naive_patil(V, F, mu, U):
     import riskplan.collision._kernels as K
 
     tri = W[F]
-    dist, cp, _ = K.closest_points_brute(W, F, np.zeros((1, W.shape[1])))
+    _dist, _cp, _ = K.closest_points_brute(W, F, np.zeros((1, W.shape[1])))
     # distances of every face to the origin
-    d_all = np.array([K.closest_points_brute(W, F[i : i + 1], np.zeros((1, W.shape[1])))[0][0] for i in range(len(F))])
-    c_all = np.array([K.closest_points_brute(W, F[i : i + 1], np.zeros((1, W.shape[1])))[1][0] for i in range(len(F))])
+    d_all = np.array(
+        [
+            K.closest_points_brute(W, F[i : i + 1], np.zeros((1, W.shape[1])))[0][0]
+            for i in range(len(F))
+        ]
+    )
+    c_all = np.array(
+        [
+            K.closest_points_brute(W, F[i : i + 1], np.zeros((1, W.shape[1])))[1][0]
+            for i in range(len(F))
+        ]
+    )
     active = list(range(len(F)))
     bs = []
     while active:
@@ -52,7 +63,9 @@ def test_halfspace_closed_form_3d():
     for b, s in ((0.5, 1.0), (2.0, 0.3), (3.7, 2.0)):
         env = Environment.from_meshes([box_mesh([b * s, -50, -50], [b * s + 100, 50, 50])])
         U = np.eye(3) / s
-        np.testing.assert_allclose(gaussian_bound(np.zeros(3), U, env), 1 - ndtr(b), **TOL["float64_ref"])
+        np.testing.assert_allclose(
+            gaussian_bound(np.zeros(3), U, env), 1 - ndtr(b), **TOL["float64_ref"]
+        )
 
 
 def test_halfspace_closed_form_2d_anisotropic():
@@ -60,14 +73,18 @@ def test_halfspace_closed_form_2d_anisotropic():
     env = Environment.from_polygons([[[1, -100], [200, -100], [200, 100], [1, 100]]])
     cov = np.array([[0.16, 0.1], [0.1, 0.5]])
     U = precision_cholesky_from_covariance(cov)
-    np.testing.assert_allclose(gaussian_bound(np.zeros(2), U, env), 1 - ndtr(2.5), **TOL["float64_ref"])
+    np.testing.assert_allclose(
+        gaussian_bound(np.zeros(2), U, env), 1 - ndtr(2.5), **TOL["float64_ref"]
+    )
 
 
 def test_far_obstacle_is_zero_and_inside_is_at_least_half(boxes_env):
     assert gaussian_bound(np.array([50.0, 50, 50]), np.eye(3), boxes_env) < 1e-15
     inside = gaussian_bound(np.array([1.5, 0, 0]), np.eye(3) * 10, boxes_env)
     assert inside >= 0.5
-    terms = gaussian_bound_terms(np.array([[1.5, 0, 0], [0, 0, 0]]), np.stack([np.eye(3)] * 2), boxes_env)
+    terms = gaussian_bound_terms(
+        np.array([[1.5, 0, 0], [0, 0, 0]]), np.stack([np.eye(3)] * 2), boxes_env
+    )
     np.testing.assert_array_equal(terms.mean_in_collision, [True, False])
 
 
@@ -86,7 +103,9 @@ def test_whitening_commutes_with_geometry(rng, boxes_env):
 
         pts, _ = trimesh.sample.sample_surface(boxes_env.to_trimesh(), 20000, seed=1)
         assert mahalanobis(pts, mu, U).min() >= dw - 1e-9
-        np.testing.assert_allclose(whiten(unwhiten(cw[None], mu, U), mu, U)[0], cw, **TOL["float64_ref"])
+        np.testing.assert_allclose(
+            whiten(unwhiten(cw[None], mu, U), mu, U)[0], cw, **TOL["float64_ref"]
+        )
         # the first Patil constraint is that closest point
         fr = free_region(mu, U, boxes_env)
         np.testing.assert_allclose(fr.distances.min(), dw, **TOL["float64_ref"])
@@ -101,7 +120,9 @@ def test_fast_equals_naive(rng, boxes_env):
         np.testing.assert_allclose(terms.halfspace_sum, ref, **TOL["float64_ref"])
         assert terms.n_constraints == ncons
         # the cut-off changes the bound by at most the chi tail
-        np.testing.assert_allclose(gaussian_bound(mu, U, boxes_env), min(1.0, ref), rtol=1e-8, atol=1e-15)
+        np.testing.assert_allclose(
+            gaussian_bound(mu, U, boxes_env), min(1.0, ref), rtol=1e-8, atol=1e-15
+        )
 
 
 def test_free_region_is_free(rng, boxes_env):
@@ -118,7 +139,9 @@ def test_batch_equals_loop(rng, boxes_env):
     Us = np.stack([np.stack([random_upper(rng, 3) for _ in range(3)]) for _ in range(4)])
     batch = gaussian_bound(mus, Us, boxes_env)
     assert batch.shape == (4, 3)
-    loop = np.array([[gaussian_bound(mus[i, j], Us[i, j], boxes_env) for j in range(3)] for i in range(4)])
+    loop = np.array(
+        [[gaussian_bound(mus[i, j], Us[i, j], boxes_env) for j in range(3)] for i in range(4)]
+    )
     np.testing.assert_allclose(batch, loop, **TOL["float64_exact"])
 
 
@@ -152,7 +175,9 @@ def test_bound_never_below_monte_carlo(seed, dim, scale):
     U = random_upper(rng, dim, scale=scale)
     bound = gaussian_bound(mu, U, env)
     gm = GaussianMixture(np.ones(1), mu[None], U[None])
-    mc = monte_carlo_probability(gm, env, 4000, seed=seed, confidence=0.999, interval="clopper-pearson")
+    mc = monte_carlo_probability(
+        gm, env, 4000, seed=seed, confidence=0.999, interval="clopper-pearson"
+    )
     assert 0.0 <= bound <= 1.0
     assert bound >= mc.low - 1e-12
 
@@ -175,7 +200,9 @@ def test_extruded_2d_agrees_with_3d(rng):
         p3 = gaussian_bound(np.r_[mu2, 0.0], U3, env3)
         np.testing.assert_allclose(p3, p2, rtol=1e-9, atol=1e-14)
         pts = rng.normal(size=(200, 2)) * 2
-        np.testing.assert_array_equal(env3.contains(np.column_stack([pts, np.zeros(200)])), env2.contains(pts))
+        np.testing.assert_array_equal(
+            env3.contains(np.column_stack([pts, np.zeros(200)])), env2.contains(pts)
+        )
 
 
 def test_bad_inputs(boxes_env):

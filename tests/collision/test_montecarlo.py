@@ -6,14 +6,20 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest
 
-from riskplan.collision import Environment, binomial_interval, monte_carlo_probability, paths_collide
+from riskplan.collision import (
+    Environment,
+    binomial_interval,
+    monte_carlo_probability,
+    paths_collide,
+)
 from riskplan.errors import InvalidInputError
 from riskplan.kinematics import GaussianMixture
-from tests.conftest import TOL
 from tests.collision.conftest import box_mesh
 
 
-@pytest.mark.parametrize("method, scipy_method", [("wilson", "wilson"), ("clopper-pearson", "exact")])
+@pytest.mark.parametrize(
+    "method, scipy_method", [("wilson", "wilson"), ("clopper-pearson", "exact")]
+)
 def test_intervals_match_scipy(method, scipy_method):
     for k, n in ((0, 50), (3, 50), (25, 50), (50, 50), (137, 10000)):
         lo, hi = binomial_interval(k, n, 0.95, method)
@@ -22,7 +28,11 @@ def test_intervals_match_scipy(method, scipy_method):
 
 
 def test_seeded_and_consistent(boxes_env):
-    gm = GaussianMixture.from_covariances(np.array([0.5, 0.5]), np.array([[0.5, 0, 0], [0.0, 1.0, 0]]), np.stack([np.eye(3) * 0.3] * 2))
+    gm = GaussianMixture.from_covariances(
+        np.array([0.5, 0.5]),
+        np.array([[0.5, 0, 0], [0.0, 1.0, 0]]),
+        np.stack([np.eye(3) * 0.3] * 2),
+    )
     a = monte_carlo_probability(gm, boxes_env, 3000, seed=11)
     b = monte_carlo_probability(gm, boxes_env, 3000, seed=11)
     c = monte_carlo_probability(gm, boxes_env, 3000, seed=12)
@@ -41,7 +51,9 @@ def test_monte_carlo_converges_to_halfspace():
 
 def test_paths_collide():
     env = Environment.from_meshes([box_mesh([-0.01, -1, -1], [0.01, 1, 1])])
-    paths = np.array([[[-1.0, 0, 0], [1.0, 0, 0]], [[-1.0, 0, 0], [-0.5, 0, 0]], [[0.0, 0, 0], [0.0, 5, 0]]])
+    paths = np.array(
+        [[[-1.0, 0, 0], [1.0, 0, 0]], [[-1.0, 0, 0], [-0.5, 0, 0]], [[0.0, 0, 0], [0.0, 5, 0]]]
+    )
     np.testing.assert_array_equal(paths_collide(paths, env), [True, False, True])
     np.testing.assert_array_equal(paths_collide(paths, env, segments=False), [False, False, True])
 

@@ -18,9 +18,23 @@ from riskplan.collision import (
 )
 from riskplan.kinematics import GaussianMixture
 from tests.collision.conftest import box_mesh
-from tests.properties import PROPERTY, any_float, arrays_or_junk, assert_finite, assert_probability, call, finite_float, junk
+from tests.properties import (
+    PROPERTY,
+    any_float,
+    arrays_or_junk,
+    assert_finite,
+    assert_probability,
+    call,
+    finite_float,
+    junk,
+)
 
-ENV = Environment.from_meshes([box_mesh([0.05, -0.05, -0.05], [0.1, 0.05, 0.05]), box_mesh([-0.1, -0.1, 0.2], [0.1, 0.1, 0.25])])
+ENV = Environment.from_meshes(
+    [
+        box_mesh([0.05, -0.05, -0.05], [0.1, 0.05, 0.05]),
+        box_mesh([-0.1, -0.1, 0.2], [0.1, 0.1, 0.25]),
+    ]
+)
 ENV2 = Environment.from_polygons([[[1, -1], [2, -1], [2, 1], [1, 1]]])
 
 # wide range of magnitudes (1e-300 .. 1e300, both signs) for valid-but-extreme factors
@@ -57,7 +71,10 @@ def test_arbitrary_gaussian_input(mean, u):
 
 
 @PROPERTY
-@given(mean=hnp.arrays(np.float64, 3, elements=finite_float), cov=arrays_or_junk(hnp.array_shapes(min_dims=2, max_dims=3, min_side=3, max_side=3)))
+@given(
+    mean=hnp.arrays(np.float64, 3, elements=finite_float),
+    cov=arrays_or_junk(hnp.array_shapes(min_dims=2, max_dims=3, min_side=3, max_side=3)),
+)
 def test_arbitrary_covariances(mean, cov):
     u = call(precision_cholesky_from_covariance, cov)
     if u is not None:
@@ -68,7 +85,12 @@ def test_arbitrary_covariances(mean, cov):
 
 
 @PROPERTY
-@given(w=arrays_or_junk(), m=arrays_or_junk(), u=arrays_or_junk(), method=st.sampled_from(["bound", "union", "monte_carlo", "x"]))
+@given(
+    w=arrays_or_junk(),
+    m=arrays_or_junk(),
+    u=arrays_or_junk(),
+    method=st.sampled_from(["bound", "union", "monte_carlo", "x"]),
+)
 def test_arbitrary_mixtures(w, m, u, method):
     gm = call(GaussianMixture, w, m, u)
     if gm is None:
@@ -79,7 +101,13 @@ def test_arbitrary_mixtures(w, m, u, method):
 
 
 @PROPERTY
-@given(text=st.one_of(st.text(max_size=40), st.lists(any_float, max_size=8).map(lambda v: ",".join(map(str, v))), junk()))
+@given(
+    text=st.one_of(
+        st.text(max_size=40),
+        st.lists(any_float, max_size=8).map(lambda v: ",".join(map(str, v))),
+        junk(),
+    )
+)
 def test_arbitrary_base_poses(text):
     pose = call(BasePose.parse, text)
     if pose is not None:

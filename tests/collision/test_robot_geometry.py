@@ -13,7 +13,9 @@ from tests.conftest import TOL
 def test_arc_closed_form():
     k, L = 5.0, 0.2
     P = arc_backbone(k, np.pi / 2, L)
-    np.testing.assert_allclose(P[-1], [0.0, (1 - np.cos(k * L)) / k, np.sin(k * L) / k], **TOL["float64_ref"])
+    np.testing.assert_allclose(
+        P[-1], [0.0, (1 - np.cos(k * L)) / k, np.sin(k * L) / k], **TOL["float64_ref"]
+    )
     steps = np.linalg.norm(np.diff(P, axis=0), axis=1)
     np.testing.assert_allclose(steps.sum(), L, rtol=1e-3)  # chords of a unit-speed curve
     straight = arc_backbone(0.0, 0.0, L)
@@ -47,7 +49,9 @@ class _ArcRobot:
         d = np.asarray(d, dtype=np.float64)
         ang = 2 * np.pi * np.arange(4) / 4
         v = (d * 200.0) @ np.column_stack([np.cos(ang), np.sin(ang)])
-        return SimpleNamespace(positions=arc_backbone(np.linalg.norm(v, axis=-1), np.arctan2(v[..., 1], v[..., 0])))
+        return SimpleNamespace(
+            positions=arc_backbone(np.linalg.norm(v, axis=-1), np.arctan2(v[..., 1], v[..., 0]))
+        )
 
 
 def test_robot_mixture_uses_robot_backbone():

@@ -19,15 +19,33 @@ def files(tmp_path_factory):
     from riskplan.kinematics.data import write_synthetic_dataset
 
     rng = np.random.default_rng(0)
-    write_synthetic_dataset(d / "data.h5", rng.uniform(0, 0.01, (4, 2)), rng.normal(scale=0.01, size=(4, 1, 8, 3)))
+    write_synthetic_dataset(
+        d / "data.h5", rng.uniform(0, 0.01, (4, 2)), rng.normal(scale=0.01, size=(4, 1, 8, 3))
+    )
     return d
 
 
 CASES = [
     # an output path that is an existing file (or lies below one)
     (["train", "--data", "{d}/data.h5", "--out", "{d}/a_file"], "existing file"),
-    (["sweep", "--data", "{d}/data.h5", "--test", "{d}/data.h5", "--out", "{d}/a_file", "--components", "1"], "existing file"),
-    (["evaluate", "--model", "{d}/nothing", "--data", "{d}/data.h5", "--out", "{d}/a_file"], "existing file"),
+    (
+        [
+            "sweep",
+            "--data",
+            "{d}/data.h5",
+            "--test",
+            "{d}/data.h5",
+            "--out",
+            "{d}/a_file",
+            "--components",
+            "1",
+        ],
+        "existing file",
+    ),
+    (
+        ["evaluate", "--model", "{d}/nothing", "--data", "{d}/data.h5", "--out", "{d}/a_file"],
+        "existing file",
+    ),
     (["demo", "--out", "{d}/a_file"], "existing file"),
     (["env", "chest", "--out", "{d}/a_file/chest.stl"], "existing file"),
     (["env", "chest", "--out", "{d}/c.xyz"], ".stl"),
@@ -42,7 +60,17 @@ CASES = [
 USAGE = [  # rejected by the option parser itself (exit code 2), before anything runs
     ["train", "--data", "{d}/data.h5", "--out", "{d}/m", "--seed", "-1"],
     ["train", "--data", "{d}/data.h5", "--out", "{d}/m", "--patience", "-1"],
-    ["sweep", "--data", "{d}/data.h5", "--test", "{d}/data.h5", "--out", "{d}/s", "--workers", "-1"],
+    [
+        "sweep",
+        "--data",
+        "{d}/data.h5",
+        "--test",
+        "{d}/data.h5",
+        "--out",
+        "{d}/s",
+        "--workers",
+        "-1",
+    ],
     ["dataset", "generate", "--out", "{d}/x.h5", "--workers", "-1"],
     ["demo", "--out", "{d}/demo", "--seed", "-3"],
     ["collision", "--arc", "8,0", "--samples", "0"],

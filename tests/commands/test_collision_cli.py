@@ -14,7 +14,19 @@ runner = CliRunner()
 
 def test_env_chest(tmp_path):
     out = tmp_path / "chest.stl"
-    res = runner.invoke(app, ["env", "chest", "--out", str(out), "--subdivisions", "2", "--view", str(tmp_path / "c.png")])
+    res = runner.invoke(
+        app,
+        [
+            "env",
+            "chest",
+            "--out",
+            str(out),
+            "--subdivisions",
+            "2",
+            "--view",
+            str(tmp_path / "c.png"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     env = Environment.load(out)
     meta = json.loads((tmp_path / "chest.stl.json").read_text())
@@ -35,7 +47,9 @@ def test_collision_requires_configuration():
 
 
 def test_collision_robot_configurations():
-    res = runner.invoke(app, ["collision", "-d", "0,0,0,0;0.02,0,0,0", "--samples", "2000", "--json"])
+    res = runner.invoke(
+        app, ["collision", "-d", "0,0,0,0;0.02,0,0,0", "--samples", "2000", "--json"]
+    )
     assert res.exit_code == 0, res.output
     rows = json.loads(res.output)
     assert len(rows) == 2 and rows[1]["probability"] > rows[0]["probability"]
@@ -62,4 +76,6 @@ def test_env_file_gives_the_built_in_chest_answer(tmp_path):
     pose = tmp_path / "chest.stl.json"
     res = runner.invoke(app, args + ["--env", str(bare), "--base-pose", str(pose)])
     assert res.exit_code == 0, res.output
-    assert abs(json.loads(res.output)[0]["probability"] - built_in[0]["probability"]) <= 1e-5 * max(built_in[0]["probability"], 1e-3)
+    assert abs(json.loads(res.output)[0]["probability"] - built_in[0]["probability"]) <= 1e-5 * max(
+        built_in[0]["probability"], 1e-3
+    )

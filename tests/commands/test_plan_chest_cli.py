@@ -26,7 +26,12 @@ def tiny(tmp_path_factory):
     root = tmp_path_factory.mktemp("tiny")
     torch.manual_seed(0)
     net = MDN(2, 2, hidden=(8,), head_hidden=()).double()
-    norm = Normalisation(np.full(2, 0.015), np.full(2, 0.015), np.array([0.0, 0.0, 0.1]), np.array([0.02, 0.02, 0.02]))
+    norm = Normalisation(
+        np.full(2, 0.015),
+        np.full(2, 0.015),
+        np.array([0.0, 0.0, 0.1]),
+        np.array([0.02, 0.02, 0.02]),
+    )
     model = MDNModel(net, norm, np.array([[-0.01, 0.04], [-0.01, 0.04]]), robot_name="tiny")
     save_model(model, root / "model")
     # obstacle in the base frame: a box beside the predicted geometry; world = base + (1, 2, 3)
@@ -44,23 +49,61 @@ def _run(args):
 
 def test_plan_chest_tiny(tiny, tmp_path):
     out = tmp_path / "out"
-    args = ["--model", str(tiny / "model"), "--env", str(tiny / "box.stl"), "--base-pose", "1,2,3,1,0,0,0",
-            "--goal", "0.03,0.03", "--milestones", "20", "--iterations", "3", "--candidates", "32", "--least-risk",
-            "--executions", "0", "--out", str(out)]
+    args = [
+        "--model",
+        str(tiny / "model"),
+        "--env",
+        str(tiny / "box.stl"),
+        "--base-pose",
+        "1,2,3,1,0,0,0",
+        "--goal",
+        "0.03,0.03",
+        "--milestones",
+        "20",
+        "--iterations",
+        "3",
+        "--candidates",
+        "32",
+        "--least-risk",
+        "--executions",
+        "0",
+        "--out",
+        str(out),
+    ]
     res = _run(args)
     assert res.exit_code == 0, res.output
-    for f in ("nominal.json", "nominal.csv", "optimised.json", "optimised.csv", "trace.json", "trace.png", "chest.html", "plan.json"):
+    for f in (
+        "nominal.json",
+        "nominal.csv",
+        "optimised.json",
+        "optimised.csv",
+        "trace.json",
+        "trace.png",
+        "chest.html",
+        "plan.json",
+    ):
         assert (out / f).stat().st_size > 0, f
     plan = json.loads((out / "plan.json").read_text())
     nominal = json.loads((out / "nominal.json").read_text())
     opt = json.loads((out / "optimised.json").read_text())
     trace = json.loads((out / "trace.json").read_text())["trace"]
-    assert len(trace) == 4 and trace[0] == pytest.approx(nominal["bound_eq10"]) and trace[-1] == pytest.approx(opt["bound_eq10"])
+    assert (
+        len(trace) == 4
+        and trace[0] == pytest.approx(nominal["bound_eq10"])
+        and trace[-1] == pytest.approx(opt["bound_eq10"])
+    )
     assert opt["bound_eq10"] <= nominal["bound_eq10"]
-    assert plan["paths"]["least_risk"]["bound_eq10"] <= plan["paths"]["shortest"]["bound_eq10"] + 1e-12
-    assert nominal["configurations"][0] == [0.0, 0.0] and nominal["configurations"][-1] == [0.03, 0.03]
+    assert (
+        plan["paths"]["least_risk"]["bound_eq10"] <= plan["paths"]["shortest"]["bound_eq10"] + 1e-12
+    )
+    assert nominal["configurations"][0] == [0.0, 0.0] and nominal["configurations"][-1] == [
+        0.03,
+        0.03,
+    ]
     csv = (out / "optimised.csv").read_text().splitlines()
-    assert csv[1].startswith("index,d1_m,d2_m,bound_eq9") and len(csv) == 2 + len(opt["configurations"])
+    assert csv[1].startswith("index,d1_m,d2_m,bound_eq9") and len(csv) == 2 + len(
+        opt["configurations"]
+    )
     # --resume after completion returns the same optimised trajectory
     res2 = _run(args + ["--resume"])
     assert res2.exit_code == 0, res2.output
@@ -79,8 +122,23 @@ def test_plan_chest_tiny(tiny, tmp_path):
 )
 def test_plan_chest_errors(tiny, tmp_path, extra, error, match):
     out = tmp_path / "out"
-    args = ["--model", str(tiny / "model"), "--env", str(tiny / "box.stl"), "--base-pose", "1,2,3,1,0,0,0",
-            "--milestones", "10", "--iterations", "1", "--executions", "0", "--out", str(out), *extra]
+    args = [
+        "--model",
+        str(tiny / "model"),
+        "--env",
+        str(tiny / "box.stl"),
+        "--base-pose",
+        "1,2,3,1,0,0,0",
+        "--milestones",
+        "10",
+        "--iterations",
+        "1",
+        "--executions",
+        "0",
+        "--out",
+        str(out),
+        *extra,
+    ]
     res = _run(args)
     assert isinstance(res.exception, error), res.output
     assert match in str(res.exception)
@@ -106,10 +164,32 @@ def test_plan_chest_reads_the_mesh_sidecar(tiny, tmp_path):
     shutil.copy(tiny / "box.stl", mesh)
     pose = BasePose.from_quaternion([1.0, 2.0, 3.0], [1.0, 0.0, 0.0, 0.0])
     sidecar_path(mesh).write_text(json.dumps({"frame": "world", **pose.to_json()}))
-    common = ["--model", str(tiny / "model"), "--goal", "0.03,0.03", "--milestones", "20", "--iterations", "1",
-              "--candidates", "16", "--executions", "0"]
+    common = [
+        "--model",
+        str(tiny / "model"),
+        "--goal",
+        "0.03,0.03",
+        "--milestones",
+        "20",
+        "--iterations",
+        "1",
+        "--candidates",
+        "16",
+        "--executions",
+        "0",
+    ]
     a = _run(common + ["--env", str(mesh), "--out", str(tmp_path / "a")])
-    b = _run(common + ["--env", str(tiny / "box.stl"), "--base-pose", "1,2,3,1,0,0,0", "--out", str(tmp_path / "b")])
+    b = _run(
+        common
+        + [
+            "--env",
+            str(tiny / "box.stl"),
+            "--base-pose",
+            "1,2,3,1,0,0,0",
+            "--out",
+            str(tmp_path / "b"),
+        ]
+    )
     assert a.exit_code == 0 and b.exit_code == 0, a.output + b.output
     na = json.loads((tmp_path / "a" / "nominal.json").read_text())
     nb = json.loads((tmp_path / "b" / "nominal.json").read_text())

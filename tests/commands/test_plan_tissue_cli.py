@@ -12,9 +12,28 @@ runner = CliRunner()
 
 
 def test_plan_tissue_manipulation_small(tmp_path):
-    res = runner.invoke(app, ["plan", "tissue", "--scenario", "manipulation", "--plans", "2", "--case", "actuation",
-                              "--out", str(tmp_path), "--workers", "1", "--check-runs", "20", "--check-others", "1",
-                              "--no-gif"])
+    res = runner.invoke(
+        app,
+        [
+            "plan",
+            "tissue",
+            "--scenario",
+            "manipulation",
+            "--plans",
+            "2",
+            "--case",
+            "actuation",
+            "--out",
+            str(tmp_path),
+            "--workers",
+            "1",
+            "--check-runs",
+            "20",
+            "--check-others",
+            "1",
+            "--no-gif",
+        ],
+    )
     assert res.exit_code == 0, res.output
     meta = json.loads((tmp_path / "selected.json").read_text())
     assert meta["n_candidates"] == 2 and 0.0 <= meta["p_success"] <= 1.0

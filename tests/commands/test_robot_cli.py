@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 
 import numpy as np
-import pytest
 from typer.testing import CliRunner
 
 from riskplan.cli import app
@@ -16,7 +15,9 @@ runner = CliRunner()
 
 
 def test_shape_json_displacements():
-    res = runner.invoke(app, ["robot", "shape", "--robot", "paper", "--displacements", "0.01,0,0,0", "--json"])
+    res = runner.invoke(
+        app, ["robot", "shape", "--robot", "paper", "--displacements", "0.01,0,0,0", "--json"]
+    )
     assert res.exit_code == 0, res.output
     out = json.loads(res.output)
     assert set(out) == {"tip", "backbone", "tensions"}
@@ -29,7 +30,9 @@ def test_shape_tensions_plot_and_file_robot(tmp_path):
     f = tmp_path / "r.toml"
     f.write_text(load_robot("paper").toml_text())
     png = tmp_path / "s.png"
-    res = runner.invoke(app, ["robot", "shape", "--robot", str(f), "--tensions", "1,0,0,2", "--plot", str(png)])
+    res = runner.invoke(
+        app, ["robot", "shape", "--robot", str(f), "--tensions", "1,0,0,2", "--plot", str(png)]
+    )
     assert res.exit_code == 0, res.output
     assert "tip" in res.output and png.stat().st_size > 1000
 
@@ -46,7 +49,11 @@ def test_info_json():
     res = runner.invoke(app, ["robot", "info", "--json"])
     assert res.exit_code == 0, res.output
     d = json.loads(res.output)
-    assert d["name"] == "paper" and len(d["tendons"]) == 4 and d["tendons"][3]["max_tension_n"] == 16.81
+    assert (
+        d["name"] == "paper"
+        and len(d["tendons"]) == 4
+        and d["tendons"][3]["max_tension_n"] == 16.81
+    )
 
 
 INEXTENSIBLE = """

@@ -79,9 +79,7 @@ def test_linearize_records_the_simulators_scales(rng):
     assert lin.state_scale is None
     np.testing.assert_array_equal(lin.control_scale, [2.0, 2.0, 2.0])
     sim.state_scale = np.array([0.05, 0.05, 0.3])
-    np.testing.assert_array_equal(
-        linearize(sim, plan, seed=0).state_scale, sim.state_scale
-    )
+    np.testing.assert_array_equal(linearize(sim, plan, seed=0).state_scale, sim.state_scale)
 
 
 def _final_sq(sim, plan, ctrl, n, dims=slice(0, 2)):
@@ -90,9 +88,7 @@ def _final_sq(sim, plan, ctrl, n, dims=slice(0, 2)):
     for k in range(n):
         gen = np.random.default_rng(1000 + k)
         params = sim.distribution.sample(gen)
-        ex = execute(
-            sim, plan, ctrl, params, seed=np.random.default_rng(k), keep_states=False
-        )
+        ex = execute(sim, plan, ctrl, params, seed=np.random.default_rng(k), keep_states=False)
         out[k] = np.sum((ex.x[-1] - plan.reduced[-1])[dims] ** 2)
     return out
 
@@ -114,9 +110,7 @@ def test_bryson_feedback_shrinks_toy_spread(rng):
         distribution=ActuationNoise(cov=tuple(map(tuple, 0.01 * np.eye(3)))),
     )
     sim.state_scale = np.full(3, 0.05)
-    plan = NominalPlan.from_rollout(
-        sim, sim.initial_state(), rng.uniform(-0.5, 0.5, (10, 3))
-    )
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), rng.uniform(-0.5, 0.5, (10, 3)))
     sim._goal = square(*plan.reduced[-1, :2], 0.1)
     lin = linearize(sim, plan, sim.distribution, n_samples=32, seed=1)
     open_ = _final_sq(sim, plan, None, 80)

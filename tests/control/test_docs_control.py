@@ -14,7 +14,9 @@ def test_usage_block_runs():
     assert blocks
     ns: dict = {}
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the needle's rank-deficiency warning is expected (see the doc)
+        warnings.simplefilter(
+            "ignore"
+        )  # the needle's rank-deficiency warning is expected (see the doc)
         exec(compile(blocks[0], str(DOC), "exec"), ns)
     assert 0.0 <= ns["est"].p_success <= 1.0
     assert ns["mc"].low <= ns["mc"].probability <= ns["mc"].high

@@ -48,7 +48,13 @@ def test_time_varying_H_broadcast(rng, tol):
     A = rng.standard_normal((T, p, p))
     H = rng.standard_normal((m, p))
     K1, P1 = kalman_gains(A, H, 0.1 * np.eye(p), [[0.2]], np.eye(p))
-    K2, P2 = kalman_gains(A, np.broadcast_to(H, (T, m, p)), np.broadcast_to(0.1 * np.eye(p), (T, p, p)), [[0.2]], np.eye(p))
+    K2, P2 = kalman_gains(
+        A,
+        np.broadcast_to(H, (T, m, p)),
+        np.broadcast_to(0.1 * np.eye(p), (T, p, p)),
+        [[0.2]],
+        np.eye(p),
+    )
     np.testing.assert_allclose(K1, K2, **tol["float64_exact"])
     np.testing.assert_allclose(P1, P2, **tol["float64_exact"])
 

@@ -87,7 +87,9 @@ def test_rank_deficient_warns_and_keeps_prior(tol):
     with pytest.warns(RankDeficiencyWarning, match="rank"):
         lin = linearize(sim, plan, seed=0)
     assert (lin.rank == 2).all()
-    np.testing.assert_allclose(lin.A[:, :2, :2], np.broadcast_to(A[:2, :2], (3, 2, 2)), rtol=1e-8, atol=1e-8)
+    np.testing.assert_allclose(
+        lin.A[:, :2, :2], np.broadcast_to(A[:2, :2], (3, 2, 2)), rtol=1e-8, atol=1e-8
+    )
     np.testing.assert_allclose(lin.A[:, 2, 2], 1.0, **tol["float64_exact"])  # identity prior
     with pytest.warns(RankDeficiencyWarning):
         lin0 = linearize(sim, plan, seed=0, a_prior="zero")
@@ -133,9 +135,15 @@ def test_needle_matches_car_jacobian():
     for t in range(1, 8):
         th = plan.reduced[t, 2]
         v, phi = plan.controls[t]
-        A_true = np.array([[1, 0, -cfg.tau * v * math.sin(th)], [0, 1, cfg.tau * v * math.cos(th)], [0, 0, 1]])
+        A_true = np.array(
+            [[1, 0, -cfg.tau * v * math.sin(th)], [0, 1, cfg.tau * v * math.cos(th)], [0, 0, 1]]
+        )
         B_true = np.array(
-            [[cfg.tau * math.cos(th), 0], [cfg.tau * math.sin(th), 0], [cfg.tau * math.tan(phi) * k, cfg.tau * v * k / math.cos(phi) ** 2]]
+            [
+                [cfg.tau * math.cos(th), 0],
+                [cfg.tau * math.sin(th), 0],
+                [cfg.tau * math.tan(phi) * k, cfg.tau * v * k / math.cos(phi) ** 2],
+            ]
         )
         np.testing.assert_allclose(lin.B[t], B_true, rtol=0, atol=2e-3)
         np.testing.assert_allclose(lin.A[t], A_true, rtol=0, atol=1e-3)

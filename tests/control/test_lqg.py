@@ -59,7 +59,9 @@ def test_monte_carlo_success_backends_and_interval(rng):
     lin = linearize(sim, plan, sim.distribution, n_samples=32, seed=2)
     ctrl = lqg_controller(lin)
     a = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=30, seed=3)
-    b = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=30, seed=3, backend="local", workers=2)
+    b = monte_carlo_success(
+        sim, plan, ctrl, sim.distribution, n=30, seed=3, backend="local", workers=2
+    )
     np.testing.assert_array_equal(a.success, b.success)
     assert 0 < a.successes < 30  # the goal is tight enough for some runs to miss
     assert a.low <= a.probability <= a.high and a.success.shape == (30,)

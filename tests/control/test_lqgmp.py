@@ -23,16 +23,23 @@ def _exact(sim, T):
     Sw = SIGMA_W**2 * np.eye(sim.control_dim)
     H = sim.observation_matrix
     return Linearization(
-        A=np.broadcast_to(sim.A_true, (T, 3, 3)), B=np.broadcast_to(sim.B_true, (T, 3, 3)),
-        M=np.broadcast_to(sim.B_true @ Sw @ sim.B_true.T, (T, 3, 3)), H=np.broadcast_to(H, (T, 2, 3)),
-        N=np.broadcast_to(sim.sensing_cov, (T, 2, 2)), rank=np.full(T, 3),
+        A=np.broadcast_to(sim.A_true, (T, 3, 3)),
+        B=np.broadcast_to(sim.B_true, (T, 3, 3)),
+        M=np.broadcast_to(sim.B_true @ Sw @ sim.B_true.T, (T, 3, 3)),
+        H=np.broadcast_to(H, (T, 2, 3)),
+        N=np.broadcast_to(sim.sensing_cov, (T, 2, 2)),
+        rank=np.full(T, 3),
     )
 
 
 def _toy(rng, T):
     A, B, _ = toy_system(rng, scale=0.2)
-    sim = LinearToy(A, B, sensing_std=0.1,
-                    distribution=ActuationNoise(cov=tuple(map(tuple, SIGMA_W**2 * np.eye(3)))))
+    sim = LinearToy(
+        A,
+        B,
+        sensing_std=0.1,
+        distribution=ActuationNoise(cov=tuple(map(tuple, SIGMA_W**2 * np.eye(3)))),
+    )
     plan = NominalPlan.from_rollout(sim, sim.initial_state(), rng.uniform(-0.5, 0.5, (T, 3)))
     return sim, plan
 
@@ -82,8 +89,16 @@ def test_half_plane_closed_form(rng):
     sim, plan = _toy(rng, T)
     x1 = plan.reduced[1]
     d = 0.15
-    sim._obstacles = [np.array([[x1[0] + d, x1[1] - 50], [x1[0] + d + 100, x1[1] - 50],
-                                [x1[0] + d + 100, x1[1] + 50], [x1[0] + d, x1[1] + 50]])]
+    sim._obstacles = [
+        np.array(
+            [
+                [x1[0] + d, x1[1] - 50],
+                [x1[0] + d + 100, x1[1] - 50],
+                [x1[0] + d + 100, x1[1] + 50],
+                [x1[0] + d, x1[1] + 50],
+            ]
+        )
+    ]
     sim._goal = square(x1[0], x1[1], 100.0)
     ctrl = lqg_controller(_exact(sim, T))
     trunc = lqgmp(sim, plan, ctrl, method="truncation", n_goal_samples=10)
@@ -91,7 +106,9 @@ def test_half_plane_closed_form(rng):
     sx = math.sqrt(sigma.cov[1, 0, 0])  # before truncation
     exact_free = float(ndtr(d / sx))
     np.testing.assert_allclose(trunc.p_collision_free, exact_free, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(sigma.p_collision_free, -math.expm1(-0.5 * (d / sx) ** 2), rtol=1e-9, atol=0)
+    np.testing.assert_allclose(
+        sigma.p_collision_free, -math.expm1(-0.5 * (d / sx) ** 2), rtol=1e-9, atol=0
+    )
     assert sigma.p_collision_free < exact_free  # the chi-square ball is conservative
     # truncation removes the mass beyond the line: the mean moves away from it
     assert trunc.mean[1, 0] < 0 and trunc.cov[1, 0, 0] < sx**2
@@ -171,7 +188,9 @@ def test_manipulation_points_and_methods():
     sim = ManipulationScenario()
     col, goal = point_indices(sim)
     assert col.shape == (12, 2) and tuple(goal) == (0, 1) and col.max() == sim.state_dim - 1
-    plan = NominalPlan.from_rollout(sim, sim.initial_state(), np.tile([0.2, 0.0, 0.0, -0.2, 0.1, 0.0], (3, 1)))
+    plan = NominalPlan.from_rollout(
+        sim, sim.initial_state(), np.tile([0.2, 0.0, 0.0, -0.2, 0.1, 0.0], (3, 1))
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         lin = linearize(sim, plan, n_a_runs=4, n_samples=0, seed=0)
@@ -186,7 +205,10 @@ def test_polygon_environment_equals_validated_constructor(rng):
     from riskplan.collision import Environment
     from riskplan.control.lqgmp import polygon_environment
 
-    polys = [square(0.2, 0.2, 0.1), square(0.7, 0.5, 0.05)[::-1]]  # one counter-clockwise, one clockwise
+    polys = [
+        square(0.2, 0.2, 0.1),
+        square(0.7, 0.5, 0.05)[::-1],
+    ]  # one counter-clockwise, one clockwise
     a, b = polygon_environment(polys), Environment.from_polygons(polys)
     np.testing.assert_array_equal(a.vertices, b.vertices)
     np.testing.assert_array_equal(a.faces, b.faces)
@@ -206,10 +228,14 @@ def test_drift_mean_matches_monte_carlo(rng):
     plan = NominalPlan.from_rollout(sim, sim.initial_state(), rng.uniform(-0.5, 0.5, (T, 3)))
     sim._goal = square(0, 0, 100.0)
     lin = linearize(sim, plan, dist, n_samples=4000, seed=0)
-    np.testing.assert_allclose(lin.drift, np.broadcast_to(0.5 * c, (T, 3)), rtol=0, atol=0.05 * np.abs(c).max())
+    np.testing.assert_allclose(
+        lin.drift, np.broadcast_to(0.5 * c, (T, 3)), rtol=0, atol=0.05 * np.abs(c).max()
+    )
     ctrl = lqg_controller(lin)
     res = lqgmp(sim, plan, ctrl, drift=True, n_goal_samples=10)
-    assert not np.any(lqgmp(sim, plan, ctrl, n_goal_samples=10).mean)  # the paper's model: zero mean
+    assert not np.any(
+        lqgmp(sim, plan, ctrl, n_goal_samples=10).mean
+    )  # the paper's model: zero mean
     n = 400
     xi = np.empty((n, 6))
     for k in range(n):
@@ -218,4 +244,7 @@ def test_drift_mean_matches_monte_carlo(rng):
         xi[k] = np.concatenate([ex.x[-1], ex.estimates[-1]]) - np.tile(plan.reduced[-1], 2)
     se = xi.std(axis=0) / math.sqrt(n)
     # the model mean uses the estimated drift (4000 draws): allow its error too
-    assert np.all(np.abs(xi.mean(axis=0) - res.mean[T]) < 4.5 * se + 0.05 * np.abs(res.mean[T])), (xi.mean(0), res.mean[T])
+    assert np.all(np.abs(xi.mean(axis=0) - res.mean[T]) < 4.5 * se + 0.05 * np.abs(res.mean[T])), (
+        xi.mean(0),
+        res.mean[T],
+    )

@@ -88,4 +88,6 @@ def test_bad_input(kw, match):
 
 def test_nonsymmetric_rejected():
     with pytest.raises(InvalidInputError, match="symmetric"):
-        lqr_gains(np.ones((2, 2, 2)), np.ones((2, 2, 1)), [[1.0, 0.5], [0.0, 1.0]], [[1.0]], np.eye(2))
+        lqr_gains(
+            np.ones((2, 2, 2)), np.ones((2, 2, 1)), [[1.0, 0.5], [0.0, 1.0]], [[1.0]], np.eye(2)
+        )

@@ -17,7 +17,11 @@ def test_from_rollout_reproduces_states():
     u = sim.random_controls(6, seed=3)
     plan = NominalPlan.from_rollout(sim, sim.initial_state(), u)
     assert plan.n_steps == 6 and len(plan.states) == 7
-    assert plan.reduced.shape == (7, 3) and not plan.reduced.flags.writeable and not plan.controls.flags.writeable
+    assert (
+        plan.reduced.shape == (7, 3)
+        and not plan.reduced.flags.writeable
+        and not plan.controls.flags.writeable
+    )
     s = sim.initial_state()
     for t in range(6):
         s = sim.step(s, u[t])
@@ -33,4 +37,6 @@ def test_validation():
         NominalPlan.from_rollout(sim, sim.initial_state(), np.zeros((3, 3)))
     plan = NominalPlan.from_rollout(sim, sim.initial_state(), sim.random_controls(2, seed=1))
     with pytest.raises(InvalidInputError, match="states"):
-        NominalPlan(states=plan.states[:2], controls=plan.controls, reduced=plan.reduced, params=plan.params)
+        NominalPlan(
+            states=plan.states[:2], controls=plan.controls, reduced=plan.reduced, params=plan.params
+        )

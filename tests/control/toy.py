@@ -13,7 +13,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskplan.scenarios.base import SimParams, apply_actuation_noise, check_control, frozen_array, gaussian_noise
+from riskplan.scenarios.base import (
+    SimParams,
+    apply_actuation_noise,
+    check_control,
+    frozen_array,
+    gaussian_noise,
+)
 from riskplan.scenarios.uncertainty import InteractionForceUncertainty
 
 
@@ -35,13 +41,25 @@ def square(cx, cy, h):
 
 
 class LinearToy:
-    def __init__(self, A, B, c=None, H=None, sensing_std=0.05, u_max=10.0, distribution=None, x0=None,
-                 obstacles=(), goal=None, nan_at=None):
+    def __init__(
+        self,
+        A,
+        B,
+        c=None,
+        H=None,
+        sensing_std=0.05,
+        u_max=10.0,
+        distribution=None,
+        x0=None,
+        obstacles=(),
+        goal=None,
+        nan_at=None,
+    ):
         self.A_true = np.asarray(A, float)
         self.B_true = np.asarray(B, float)
         self.state_dim, self.control_dim = self.B_true.shape
         self.c = np.zeros(self.state_dim) if c is None else np.asarray(c, float)
-        self.observation_matrix = np.eye(self.state_dim)[: 2] if H is None else np.asarray(H, float)
+        self.observation_matrix = np.eye(self.state_dim)[:2] if H is None else np.asarray(H, float)
         self.obs_dim = self.observation_matrix.shape[0]
         self.sensing_cov = sensing_std**2 * np.eye(self.obs_dim)
         self._bounds = np.tile([[-u_max, u_max]], (self.control_dim, 1)).astype(float)
@@ -75,7 +93,9 @@ class LinearToy:
         return np.array(state.x)
 
     def observe(self, x, noise=None, rng=None):
-        return self.observation_matrix @ np.asarray(x) + gaussian_noise(self.sensing_cov, noise, rng, self.obs_dim)
+        return self.observation_matrix @ np.asarray(x) + gaussian_noise(
+            self.sensing_cov, noise, rng, self.obs_dim
+        )
 
     def sample_params(self, seed=None):
         return self.distribution.sample(seed) if self.distribution else self.nominal_params

@@ -10,4 +10,3 @@ def robot():
     from riskplan.robots import load_robot
 
     return load_robot("paper")
-

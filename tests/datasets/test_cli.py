@@ -14,7 +14,21 @@ runner = CliRunner()
 
 def test_generate_both_splits_and_info(tmp_path):
     out = tmp_path / "d.h5"
-    r = runner.invoke(app, ["dataset", "generate", "--preset", "tiny", "--out", str(out), "--backend", "serial", "--seed", "2"])
+    r = runner.invoke(
+        app,
+        [
+            "dataset",
+            "generate",
+            "--preset",
+            "tiny",
+            "--out",
+            str(out),
+            "--backend",
+            "serial",
+            "--seed",
+            "2",
+        ],
+    )
     assert r.exit_code == 0, r.output
     tr, te = tmp_path / "d_train.h5", tmp_path / "d_test.h5"
     assert load_dataset(tr).n_configs == 6 and load_dataset(te).n_configs == 2
@@ -30,7 +44,21 @@ def test_generate_both_splits_and_info(tmp_path):
 
 def test_single_split_and_errors(tmp_path):
     out = tmp_path / "only.h5"
-    r = runner.invoke(app, ["dataset", "generate", "--preset", "tiny", "--split", "test", "--out", str(out), "--backend", "serial"])
+    r = runner.invoke(
+        app,
+        [
+            "dataset",
+            "generate",
+            "--preset",
+            "tiny",
+            "--split",
+            "test",
+            "--out",
+            str(out),
+            "--backend",
+            "serial",
+        ],
+    )
     assert r.exit_code == 0, r.output
     assert load_dataset(out).metadata["split"] == "test"
     r = runner.invoke(app, ["dataset", "generate", "--preset", "nope", "--out", str(out)])

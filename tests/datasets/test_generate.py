@@ -11,7 +11,13 @@ import h5py
 import numpy as np
 import pytest
 
-from riskplan.datasets import PRESETS, generate_dataset, load_dataset, simulate_target, target_configurations
+from riskplan.datasets import (
+    PRESETS,
+    generate_dataset,
+    load_dataset,
+    simulate_target,
+    target_configurations,
+)
 from riskplan.datasets.storage import partial_path
 from riskplan.errors import DataFormatError, InvalidInputError
 
@@ -41,22 +47,35 @@ def test_reference_file_complete_and_consistent(reference, robot):
     ds = load_dataset(reference)
     assert ds.complete and ds.n_configs == TINY.n_train
     assert ds.points.shape == (TINY.n_train, TINY.n_starts, TINY.n_points, 3)
-    np.testing.assert_array_equal(ds.displacements, target_configurations(TINY, robot.displacement_limits, "train"))
+    np.testing.assert_array_equal(
+        ds.displacements, target_configurations(TINY, robot.displacement_limits, "train")
+    )
     assert ds.metadata["robot_toml"] == robot.toml_text() and ds.metadata["seed"] == 3
     assert ds.robot.n_tendons == 4
     assert not partial_path(reference).exists()
 
 
 def test_local_backend_matches_serial(reference, robot, tmp_path):
-    p = generate_dataset(robot, "tiny", tmp_path / "local.h5", split="train", seed=3, backend="local", workers=2, chunksize=1,
-                         min_parallel_clouds=0)
+    p = generate_dataset(
+        robot,
+        "tiny",
+        tmp_path / "local.h5",
+        split="train",
+        seed=3,
+        backend="local",
+        workers=2,
+        chunksize=1,
+        min_parallel_clouds=0,
+    )
     _assert_same(_arrays(p), _arrays(reference))
 
 
 def test_ray_backend_matches_serial(robot, tmp_path):
     pytest.importorskip("ray")
     a = generate_dataset(robot, "tiny", tmp_path / "s.h5", split="test", seed=3, backend="serial")
-    b = generate_dataset(robot, "tiny", tmp_path / "r.h5", split="test", seed=3, backend="ray", workers=2)
+    b = generate_dataset(
+        robot, "tiny", tmp_path / "r.h5", split="test", seed=3, backend="ray", workers=2
+    )
     _assert_same(_arrays(a), _arrays(b))
 
 
@@ -67,7 +86,9 @@ def test_resume_after_stop_is_bit_identical(reference, robot, tmp_path):
     assert load_dataset(got).done.sum() == 2
     got = generate_dataset(robot, "tiny", out, split="train", seed=3, backend="serial", max_new=1)
     assert load_dataset(got).done.sum() == 3
-    got = generate_dataset(robot, "tiny", out, split="train", seed=3, backend="local", workers=2, min_parallel_clouds=0)
+    got = generate_dataset(
+        robot, "tiny", out, split="train", seed=3, backend="local", workers=2, min_parallel_clouds=0
+    )
     assert got == out and not partial_path(out).exists()
     _assert_same(_arrays(out), _arrays(reference))
 
@@ -85,7 +106,11 @@ def test_resume_after_kill_is_bit_identical(reference, robot, tmp_path):
         generate_dataset("paper", "tiny", {str(out)!r}, split="train", seed=3, backend="serial", progress=progress)
         """
     )
-    r = subprocess.run([sys.executable, "-c", script], capture_output=True, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    r = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+    )
     assert r.returncode == -9, r.stderr.decode()
     assert partial_path(out).exists() and not out.exists()
     assert load_dataset(partial_path(out)).done.sum() == 3
@@ -99,15 +124,22 @@ def test_resume_with_other_settings_refused(robot, tmp_path):
     with pytest.raises(DataFormatError, match="seed"):
         generate_dataset(robot, "tiny", out, split="train", seed=4, backend="serial")
     with pytest.raises(DataFormatError, match="protocol"):
-        generate_dataset(robot, TINY.replace(n_starts=3), out, split="train", seed=3, backend="serial")
+        generate_dataset(
+            robot, TINY.replace(n_starts=3), out, split="train", seed=3, backend="serial"
+        )
     # overwrite starts afresh
-    p = generate_dataset(robot, "tiny", out, split="train", seed=4, backend="serial", overwrite=True)
+    p = generate_dataset(
+        robot, "tiny", out, split="train", seed=4, backend="serial", overwrite=True
+    )
     assert load_dataset(p).metadata["seed"] == 4
 
 
 def test_complete_file_is_not_regenerated(reference, robot):
     before = os.stat(reference).st_mtime_ns
-    assert generate_dataset(robot, "tiny", reference, split="train", seed=3, backend="serial") == reference
+    assert (
+        generate_dataset(robot, "tiny", reference, split="train", seed=3, backend="serial")
+        == reference
+    )
     assert os.stat(reference).st_mtime_ns == before
 
 
@@ -131,12 +163,18 @@ def test_clouds_lie_on_the_robot_and_spread_with_the_path(robot):
         bb = shape.positions[j]
         a, b = bb[:-1], bb[1:]
         ab = b - a
-        t = np.clip(np.einsum("pki,ki->pk", pts[:, None, :] - a, ab) / np.einsum("ki,ki->k", ab, ab), 0, 1)
+        t = np.clip(
+            np.einsum("pki,ki->pk", pts[:, None, :] - a, ab) / np.einsum("ki,ki->k", ab, ab), 0, 1
+        )
         d = np.linalg.norm(pts[:, None, :] - (a + t[..., None] * ab), axis=-1).min(1)
         assert d.max() < np.hypot(R_disk, robot.params.disks.thickness / 2) + 5 * 0.0005
         assert np.mean(d < r_tube + 3 * 0.0005) > 0.3  # much of the cloud is the backbone tube
         # both cameras contribute: points on both sides (camera axis is y)
-        rel = pts[:, 1] - np.interp(pts[:, 2], bb[:, 2], bb[:, 1]) if np.all(np.diff(bb[:, 2]) > 0) else pts[:, 1] - bb[:, 1].mean()
+        rel = (
+            pts[:, 1] - np.interp(pts[:, 2], bb[:, 2], bb[:, 1])
+            if np.all(np.diff(bb[:, 2]) > 0)
+            else pts[:, 1] - bb[:, 1].mean()
+        )
         assert np.mean(rel > 0) > 0.2 and np.mean(rel < 0) > 0.2
     np.testing.assert_allclose(r["tips"], shape.positions[:, -1], rtol=0, atol=0)
     spread = np.linalg.norm(r["tips"] - r["tips"].mean(0), axis=1)
@@ -171,7 +209,9 @@ def test_bad_input(robot, tmp_path):
         generate_dataset(robot, "tiny", bad, backend="serial")
 
 
-def test_overwrite_keeps_the_finished_file_until_the_new_one_is_complete(reference, robot, tmp_path):
+def test_overwrite_keeps_the_finished_file_until_the_new_one_is_complete(
+    reference, robot, tmp_path
+):
     out = tmp_path / "o.h5"
     out.write_bytes(reference.read_bytes())
     before = out.read_bytes()
@@ -181,7 +221,16 @@ def test_overwrite_keeps_the_finished_file_until_the_new_one_is_complete(referen
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        generate_dataset(robot, "tiny", out, split="train", seed=5, backend="serial", overwrite=True, progress=stop)
+        generate_dataset(
+            robot,
+            "tiny",
+            out,
+            split="train",
+            seed=5,
+            backend="serial",
+            overwrite=True,
+            progress=stop,
+        )
     assert out.read_bytes() == before  # it used to be deleted before the new run started
     assert partial_path(out).exists() and not out.with_name("o.h5.lock").exists()
     generate_dataset(robot, "tiny", out, split="train", seed=5, backend="serial", overwrite=True)
@@ -201,7 +250,9 @@ def test_bad_workers_leave_no_partial_and_a_second_writer_is_refused(robot, tmp_
         generate_dataset(robot, "tiny", out, backend="serial", max_new=1)
     assert not partial_path(out).exists()
     # a lock left by a dead process is taken over
-    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True
+    )
     lock.write_text(dead.stdout)
     generate_dataset(robot, "tiny", out, backend="serial", max_new=1)
     assert partial_path(out).exists() and not lock.exists()

@@ -20,7 +20,11 @@ TOML = load_robot("paper").toml_text()
 @PROPERTY
 @given(
     changes=st.fixed_dictionaries(
-        {}, optional={k: st.one_of(st.integers(-3, 10), any_float, junk()) for k in ("grid_levels", "n_starts", "n_points", "n_train", "surface_spacing")}
+        {},
+        optional={
+            k: st.one_of(st.integers(-3, 10), any_float, junk())
+            for k in ("grid_levels", "n_starts", "n_points", "n_train", "surface_spacing")
+        },
     )
 )
 def test_protocol_arbitrary(changes):
@@ -32,14 +36,29 @@ def test_protocol_arbitrary(changes):
 
 
 @PROPERTY
-@given(points=hnp.arrays(np.float32, (2, 1, 3, 3), elements=st.floats(width=32, allow_nan=True, allow_infinity=True)),
-       disp=hnp.arrays(np.float64, (2, 4), elements=any_float))
+@given(
+    points=hnp.arrays(
+        np.float32, (2, 1, 3, 3), elements=st.floats(width=32, allow_nan=True, allow_infinity=True)
+    ),
+    disp=hnp.arrays(np.float64, (2, 4), elements=any_float),
+)
 def test_load_dataset_arbitrary_arrays(tmp_path_factory, points, disp):
     p = tmp_path_factory.mktemp("h") / "d.h5"
-    with storage.create_file(p, displacements=disp, n_starts=1, n_points=3, robot_toml=TOML, robot_name="paper",
-                             protocol_json=json.dumps({}), split="train", seed=0) as f:
+    with storage.create_file(
+        p,
+        displacements=disp,
+        n_starts=1,
+        n_points=3,
+        robot_toml=TOML,
+        robot_name="paper",
+        protocol_json=json.dumps({}),
+        split="train",
+        seed=0,
+    ) as f:
         for i in range(2):
-            storage.write_config(f, i, points[i], np.zeros((1, 3)), np.zeros((1, 4)), np.zeros((1, 4)))
+            storage.write_config(
+                f, i, points[i], np.zeros((1, 3)), np.zeros((1, 4)), np.zeros((1, 4))
+            )
         storage.mark_complete(f)
     ds = call(load_dataset, p)
     if ds is not None:

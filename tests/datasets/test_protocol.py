@@ -5,7 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from riskplan.datasets.protocol import PRESETS, Protocol, get_protocol, grid, random_starts, straight_path, target_configurations
+from riskplan.datasets.protocol import (
+    PRESETS,
+    Protocol,
+    get_protocol,
+    grid,
+    random_starts,
+    straight_path,
+    target_configurations,
+)
 from riskplan.errors import InvalidInputError
 from tests.conftest import TOL
 
@@ -34,7 +42,9 @@ def test_splits_disjoint_on_grid_within_limits(name):
     assert len({tuple(r) for r in tr}) == len(tr)
     # deterministic: depends on split_seed only
     np.testing.assert_array_equal(tr, target_configurations(p, LIMITS, "train"))
-    assert not np.array_equal(tr, target_configurations(p.replace(split_seed=1), LIMITS, "train")) or len(tr) == len(g)
+    assert not np.array_equal(
+        tr, target_configurations(p.replace(split_seed=1), LIMITS, "train")
+    ) or len(tr) == len(g)
 
 
 def test_grid_levels_and_corners():
@@ -54,7 +64,9 @@ def test_straight_path_and_random_starts(rng):
     np.testing.assert_array_equal(path[0], a)
     np.testing.assert_array_equal(path[-1], b)
     # equally spaced points on the segment
-    np.testing.assert_allclose(np.diff(path, axis=0), np.broadcast_to((b - a) / 6, (6, 4)), **TOL["float64_ref"])
+    np.testing.assert_allclose(
+        np.diff(path, axis=0), np.broadcast_to((b - a) / 6, (6, 4)), **TOL["float64_ref"]
+    )
 
 
 def test_json_round_trip_and_bad_input():

@@ -13,12 +13,26 @@ from tests.conftest import TOL
 
 def _write(path, rng, C=3, S=2, P=5, m=4, complete=True):
     disp = rng.uniform(-0.01, 0.04, (C, m))
-    f = storage.create_file(path, displacements=disp, n_starts=S, n_points=P, robot_toml="name = 'x'\n",
-                            robot_name="x", protocol_json='{"name": "custom"}', split="train", seed=7)
+    f = storage.create_file(
+        path,
+        displacements=disp,
+        n_starts=S,
+        n_points=P,
+        robot_toml="name = 'x'\n",
+        robot_name="x",
+        protocol_json='{"name": "custom"}',
+        split="train",
+        seed=7,
+    )
     rows = []
     with f:
         for i in range(C if complete else C - 1):
-            r = (rng.normal(size=(S, P, 3)).astype(np.float32), rng.normal(size=(S, 3)), rng.normal(size=(S, m)), rng.random((S, m)))
+            r = (
+                rng.normal(size=(S, P, 3)).astype(np.float32),
+                rng.normal(size=(S, 3)),
+                rng.normal(size=(S, m)),
+                rng.random((S, m)),
+            )
             storage.write_config(f, i, *r)
             rows.append(r)
         if complete:
@@ -41,7 +55,11 @@ def test_round_trip(tmp_path, rng):
     assert ds.complete and ds.n_configs == 3 and ds.n_starts == 2 and ds.n_points == 5
     md = ds.metadata
     assert md["format"] == "riskplan-dataset" and md["format_version"] == 1 and md["seed"] == 7
-    assert md["robot_toml"] == "name = 'x'\n" and md["protocol"] == {"name": "custom"} and md["split"] == "train"
+    assert (
+        md["robot_toml"] == "name = 'x'\n"
+        and md["protocol"] == {"name": "custom"}
+        and md["split"] == "train"
+    )
     assert isinstance(md["riskplan_version"], str) and isinstance(md["created"], str)
     spread = ds.tip_spread()
     d = ds.tips - ds.tips.mean(1, keepdims=True)
@@ -64,7 +82,13 @@ def test_incomplete_file_reads_with_done_flags(tmp_path, rng):
         (lambda f: f.__delitem__("tips"), "tips"),
         (lambda f: f.attrs.__delitem__("robot_toml"), "robot_toml"),
         (lambda f: f.attrs.__setitem__("protocol", "{not json"), "protocol"),
-        (lambda f: (f.__delitem__("starts"), f.create_dataset("starts", data=np.zeros((3, 2, 5)))), "starts"),
+        (
+            lambda f: (
+                f.__delitem__("starts"),
+                f.create_dataset("starts", data=np.zeros((3, 2, 5))),
+            ),
+            "starts",
+        ),
     ],
 )
 def test_damaged_files_raise_data_format_error(tmp_path, rng, damage, match):
@@ -120,9 +144,25 @@ def test_points_beyond_the_robots_reach_are_rejected(tmp_path, rng):
     toml = load_robot("paper").toml_text()
     disp = rng.uniform(-0.01, 0.04, (2, 4))
     p = tmp_path / "d.h5"
-    with storage.create_file(p, displacements=disp, n_starts=1, n_points=4, robot_toml=toml, robot_name="paper",
-                             protocol_json="{}", split="train", seed=0) as f:
-        storage.write_config(f, 0, rng.normal(scale=0.01, size=(1, 4, 3)), np.zeros((1, 3)), np.zeros((1, 4)), np.zeros((1, 4)))
+    with storage.create_file(
+        p,
+        displacements=disp,
+        n_starts=1,
+        n_points=4,
+        robot_toml=toml,
+        robot_name="paper",
+        protocol_json="{}",
+        split="train",
+        seed=0,
+    ) as f:
+        storage.write_config(
+            f,
+            0,
+            rng.normal(scale=0.01, size=(1, 4, 3)),
+            np.zeros((1, 3)),
+            np.zeros((1, 4)),
+            np.zeros((1, 4)),
+        )
         far = np.full((1, 4, 3), 0.01)
         far[0, 2] = [1500.0, 0.0, 0.0]
         storage.write_config(f, 1, far, np.zeros((1, 3)), np.zeros((1, 4)), np.zeros((1, 4)))

@@ -8,7 +8,9 @@ import pytest
 from riskplan.deformable import mesh_polygon, rectangle
 
 #: an L-shaped-ish non-convex polygon (exercises boundary handling and meshing)
-POLY = np.array([[0.0, 0.0], [1.2, 0.0], [1.2, 0.3], [1.0, 0.8], [0.5, 1.0], [0.5, 0.5], [0.0, 0.7]])
+POLY = np.array(
+    [[0.0, 0.0], [1.2, 0.0], [1.2, 0.3], [1.0, 0.8], [0.5, 1.0], [0.5, 0.5], [0.0, 0.7]]
+)
 
 
 @pytest.fixture(scope="module")

@@ -19,5 +19,15 @@ def test_fast_neohookean_tangent_equals_generic(poly200, rng, tol):
     J, Finv = determinants_and_inverses(F)
     fast = neohookean_element_tangents(Finv, np.log(J), G, ar, 3.0, 1.7)
     slow = np.einsum("t,tiJkL,taJ,tbL->taibk", ar, A, G, G).reshape(-1, 6, 6)
-    np.testing.assert_allclose(fast, slow, rtol=TOL["float64_exact"]["rtol"], atol=TOL["float64_exact"]["atol"] * np.abs(slow).max())
-    np.testing.assert_allclose(element_tangents(A, G, ar), slow, rtol=TOL["float64_exact"]["rtol"], atol=TOL["float64_exact"]["atol"] * np.abs(slow).max())
+    np.testing.assert_allclose(
+        fast,
+        slow,
+        rtol=TOL["float64_exact"]["rtol"],
+        atol=TOL["float64_exact"]["atol"] * np.abs(slow).max(),
+    )
+    np.testing.assert_allclose(
+        element_tangents(A, G, ar),
+        slow,
+        rtol=TOL["float64_exact"]["rtol"],
+        atol=TOL["float64_exact"]["atol"] * np.abs(slow).max(),
+    )

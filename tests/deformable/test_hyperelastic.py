@@ -32,13 +32,29 @@ def test_assembled_tangent_equals_fd_of_residual(poly200, rng, law):
         du[c] = h
         fp = model.internal_forces((u.ravel() + du).reshape(-1, 2)).ravel()
         fm = model.internal_forces((u.ravel() - du).reshape(-1, 2)).ravel()
-        np.testing.assert_allclose(K[:, c], (fp - fm) / (2 * h), rtol=TOL["fd_tangent"]["rtol"], atol=TOL["fd_tangent"]["atol"] * np.abs(K).max())
+        np.testing.assert_allclose(
+            K[:, c],
+            (fp - fm) / (2 * h),
+            rtol=TOL["fd_tangent"]["rtol"],
+            atol=TOL["fd_tangent"]["atol"] * np.abs(K).max(),
+        )
     # internal forces are the gradient of the stored energy
-    g = np.array([(model.energy((u.ravel() + h * e).reshape(-1, 2)) - model.energy((u.ravel() - h * e).reshape(-1, 2))) / (2 * h) for e in np.eye(2 * poly200.n_nodes)[cols]])
+    g = np.array(
+        [
+            (
+                model.energy((u.ravel() + h * e).reshape(-1, 2))
+                - model.energy((u.ravel() - h * e).reshape(-1, 2))
+            )
+            / (2 * h)
+            for e in np.eye(2 * poly200.n_nodes)[cols]
+        ]
+    )
     np.testing.assert_allclose(g, model.internal_forces(u).ravel()[cols], **TOL["fd_jacobian"])
     # reduced tangent is the free-free block of the full one
     Kr = model.tangent(u).toarray()
-    np.testing.assert_allclose(Kr, K[np.ix_(model.free_dofs, model.free_dofs)], **TOL["float64_exact"])
+    np.testing.assert_allclose(
+        Kr, K[np.ix_(model.free_dofs, model.free_dofs)], **TOL["float64_exact"]
+    )
 
 
 @pytest.mark.parametrize("plane", ["stress", "strain"])
@@ -48,7 +64,12 @@ def test_tangent_at_rest_is_linear_stiffness(square175, plane, tol):
     lin = LinearElasticModel(square175, mat, square175.vertex_nodes)
     nh = NeoHookeanModel(square175, mat, square175.vertex_nodes)
     K0 = nh.tangent(np.zeros((square175.n_nodes, 2)), full=True)
-    np.testing.assert_allclose(K0.toarray(), lin.K.toarray(), rtol=TOL["float64_abs"]["rtol"], atol=TOL["float64_abs"]["atol"] * abs(lin.K).max())
+    np.testing.assert_allclose(
+        K0.toarray(),
+        lin.K.toarray(),
+        rtol=TOL["float64_abs"]["rtol"],
+        atol=TOL["float64_abs"]["atol"] * abs(lin.K).max(),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -58,10 +79,15 @@ def manip():
     be = mesh.boundary_edges
     # fixed: the bottom-right part of the boundary (x >= 0.6 on y = 0, and y <= 0.4 on x = 1)
     nb = mesh.nodes
-    fixed = np.flatnonzero(((nb[:, 1] == 0.0) & (nb[:, 0] >= 0.6)) | ((nb[:, 0] == 1.0) & (nb[:, 1] <= 0.4)))
+    fixed = np.flatnonzero(
+        ((nb[:, 1] == 0.0) & (nb[:, 0] >= 0.6)) | ((nb[:, 0] == 1.0) & (nb[:, 1] <= 0.4))
+    )
     mat = Material(50.0, 0.4)
     # moderate load: min det F ~ 0.95 (ten times it gives min det F ~ 0.2)
-    f = 0.1 * (patch_load(mesh, [0.0, 0.5], 0.15, [4.0, 1.0]) + patch_load(mesh, [0.5, 1.0], 0.15, [0.0, -3.0]))
+    f = 0.1 * (
+        patch_load(mesh, [0.0, 0.5], 0.15, [4.0, 1.0])
+        + patch_load(mesh, [0.5, 1.0], 0.15, [0.0, -3.0])
+    )
     assert len(be) > 0
     return mesh, mat, fixed, f
 
@@ -87,7 +113,11 @@ def test_equilibrium_after_solve_and_warm_start(manip, law):
     u, info = nh.solve_with_info(f)
     r = nh.residual(u, f)
     assert np.linalg.norm(r) <= nh.rtol * np.linalg.norm(f) + nh.atol
-    np.testing.assert_allclose(info.residual, np.linalg.norm(r[~np.isin(np.arange(mesh.n_nodes), fixed)]), **TOL["residual_norm"])
+    np.testing.assert_allclose(
+        info.residual,
+        np.linalg.norm(r[~np.isin(np.arange(mesh.n_nodes), fixed)]),
+        **TOL["residual_norm"],
+    )
     assert info.min_jacobian > 0
     # a slightly different load: warm start needs fewer Newton iterations than a cold one
     f2 = 1.02 * f
@@ -184,8 +214,12 @@ def test_nonlinear_patch_test_homogeneous_deformation(poly200, rng, law):
     F = np.array([[1.3, 0.2], [-0.1, 0.85]])
     c = np.array([0.05, -0.02])
     exact = poly200.nodes @ (F - np.eye(2)).T + c
-    model = HyperelasticModel(poly200, Material(50.0, 0.4, plane="strain"), poly200.boundary_nodes, law=law)
-    u, info = model.solve_with_info(np.zeros((poly200.n_nodes, 2)), fixed_values=exact[model.fixed_nodes], load_steps=2)
+    model = HyperelasticModel(
+        poly200, Material(50.0, 0.4, plane="strain"), poly200.boundary_nodes, law=law
+    )
+    u, _info = model.solve_with_info(
+        np.zeros((poly200.n_nodes, 2)), fixed_values=exact[model.fixed_nodes], load_steps=2
+    )
     np.testing.assert_allclose(u, exact, **TOL["linear_fem"])
     np.testing.assert_allclose(model.jacobians(u), np.linalg.det(F), **TOL["float64_exact_rel"])
 
@@ -218,13 +252,17 @@ def test_neohookean_convergence_rate_manufactured():
 
     def u_exact(x):
         X, Y = x[..., 0], x[..., 1]
-        return amp * np.stack([np.sin(pi * X) * np.sin(pi * Y), 4 * X * (1 - X) * Y * (1 - Y)], axis=-1)
+        return amp * np.stack(
+            [np.sin(pi * X) * np.sin(pi * Y), 4 * X * (1 - X) * Y * (1 - Y)], axis=-1
+        )
 
     def grad_exact(x):
         X, Y = x[..., 0], x[..., 1]
         g = lambda t: t * (1 - t)  # noqa: E731
         gp = lambda t: 1 - 2 * t  # noqa: E731
-        row0 = np.stack([pi * np.cos(pi * X) * np.sin(pi * Y), pi * np.sin(pi * X) * np.cos(pi * Y)], -1)
+        row0 = np.stack(
+            [pi * np.cos(pi * X) * np.sin(pi * Y), pi * np.sin(pi * X) * np.cos(pi * Y)], -1
+        )
         row1 = 4 * np.stack([gp(X) * g(Y), g(X) * gp(Y)], -1)
         return amp * np.stack([row0, row1], -2)
 

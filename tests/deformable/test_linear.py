@@ -32,7 +32,11 @@ def test_patch_test_dirichlet(poly200, rng, plane, tol):
     exact = poly200.nodes @ A.T + c
     u = model.solve(np.zeros((poly200.n_nodes, 2)), fixed_values=exact[model.fixed_nodes])
     np.testing.assert_allclose(u, exact, **TOL["float64_abs"])
-    np.testing.assert_allclose(element_stresses(poly200, mat, u), np.broadcast_to(_stress(mat, A), (poly200.n_elements, 2, 2)), **TOL["linear_fem"])
+    np.testing.assert_allclose(
+        element_stresses(poly200, mat, u),
+        np.broadcast_to(_stress(mat, A), (poly200.n_elements, 2, 2)),
+        **TOL["linear_fem"],
+    )
 
 
 def test_patch_test_traction(poly200, rng, tol):
@@ -62,7 +66,9 @@ def _manufactured(lam, mu):
         X, Y = x[..., 0], x[..., 1]
         return np.stack(
             [
-                np.stack([pi * np.cos(pi * X) * np.sin(pi * Y), pi * np.sin(pi * X) * np.cos(pi * Y)], -1),
+                np.stack(
+                    [pi * np.cos(pi * X) * np.sin(pi * Y), pi * np.sin(pi * X) * np.cos(pi * Y)], -1
+                ),
                 np.stack([gp(X) * g(Y), g(X) * gp(Y)], -1),
             ],
             -2,
@@ -72,7 +78,10 @@ def _manufactured(lam, mu):
         X, Y = x[:, 0], x[:, 1]
         u1 = np.sin(pi * X) * np.sin(pi * Y)
         b1 = -(mu * (-2 * pi**2 * u1) + (lam + mu) * (-(pi**2) * u1 + gp(X) * gp(Y)))
-        b2 = -(mu * (-2 * g(Y) - 2 * g(X)) + (lam + mu) * (pi**2 * np.cos(pi * X) * np.cos(pi * Y) - 2 * g(X)))
+        b2 = -(
+            mu * (-2 * g(Y) - 2 * g(X))
+            + (lam + mu) * (pi**2 * np.cos(pi * X) * np.cos(pi * Y) - 2 * g(X))
+        )
         return np.stack([b1, b2], axis=1)
 
     return u, grad, b
@@ -121,7 +130,9 @@ def test_dense_and_sparse_paths_agree(square175, rng, tol, monkeypatch):
     F2 = rng.normal(size=(len(dense.free_dofs), 3))
     np.testing.assert_allclose(sparse.solve_free(F2), dense.solve_free(F2), **tol["float64_ref"])
     np.testing.assert_allclose(dense.solve(f), sparse.solve(f), **tol["float64_ref"])
-    np.testing.assert_allclose(dense.solve_flat(f.ravel()), dense.solve(f).ravel(), **tol["float64_exact"])
+    np.testing.assert_allclose(
+        dense.solve_flat(f.ravel()), dense.solve(f).ravel(), **tol["float64_exact"]
+    )
     np.testing.assert_allclose(dense.residual(dense.solve(f), f), 0.0, **TOL["linear_fem"])
 
 
@@ -148,8 +159,15 @@ def test_energy_and_reactions(square175, rng, tol):
 
 @pytest.mark.parametrize(
     "E, nu, plane",
-    [(0.0, 0.3, "stress"), (-1.0, 0.3, "stress"), (1.0, 0.5, "stress"), (1.0, -1.0, "stress"),
-     (np.nan, 0.3, "stress"), (1.0, 0.3, "3d"), ("a", 0.3, "stress")],
+    [
+        (0.0, 0.3, "stress"),
+        (-1.0, 0.3, "stress"),
+        (1.0, 0.5, "stress"),
+        (1.0, -1.0, "stress"),
+        (np.nan, 0.3, "stress"),
+        (1.0, 0.3, "3d"),
+        ("a", 0.3, "stress"),
+    ],
 )
 def test_material_validation(E, nu, plane):
     with pytest.raises(InvalidInputError):
@@ -191,7 +209,10 @@ def test_models_pickle_round_trip(n, rng, tol):
     mesh = mesh_polygon(rectangle(), n)
     mat = Material(50.0, 0.4)
     f = locate(mesh, [[0.4, 0.6]]).spread(np.array([[1.0, -0.5]]))
-    for model in (LinearElasticModel(mesh, mat, mesh.vertex_nodes), NeoHookeanModel(mesh, mat, mesh.vertex_nodes)):
+    for model in (
+        LinearElasticModel(mesh, mat, mesh.vertex_nodes),
+        NeoHookeanModel(mesh, mat, mesh.vertex_nodes),
+    ):
         clone = pickle.loads(pickle.dumps(model))
         np.testing.assert_allclose(clone.solve(f), model.solve(f), **tol["float64_exact"])
 

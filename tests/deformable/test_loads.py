@@ -3,7 +3,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from riskplan.deformable import body_load, locate, patch_load, patch_weights, point_load, traction_load
+from riskplan.deformable import (
+    body_load,
+    locate,
+    patch_load,
+    patch_weights,
+    point_load,
+    traction_load,
+)
 from riskplan.errors import InvalidInputError
 from tests.conftest import TOL
 
@@ -15,7 +22,9 @@ def test_point_load_resultant_and_moment(poly200, rng, tol):
     np.testing.assert_allclose(f.sum(0), F.sum(0), **tol["float64_exact"])
     # moment about the origin is preserved (P1 weights reproduce linear functions)
     cross = lambda x, y: x[:, 0] * y[:, 1] - x[:, 1] * y[:, 0]  # noqa: E731
-    np.testing.assert_allclose(cross(poly200.nodes, f).sum(), cross(pts, F).sum(), **tol["float64_exact"])
+    np.testing.assert_allclose(
+        cross(poly200.nodes, f).sum(), cross(pts, F).sum(), **tol["float64_exact"]
+    )
     np.testing.assert_allclose(f, locate(poly200, pts).spread(F), **tol["float64_exact"])
 
 

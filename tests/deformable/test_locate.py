@@ -36,7 +36,9 @@ def test_spread_is_transpose_of_interpolate(poly200, rng, tol):
     F = rng.normal(size=(7, 2))
     u = rng.normal(size=(poly200.n_nodes, 2))
     # virtual work: Σ F·u(X_p) = Σ f_a·u_a
-    np.testing.assert_allclose(np.sum(F * it.interpolate(u)), np.sum(it.spread(F) * u), **tol["float64_exact"])
+    np.testing.assert_allclose(
+        np.sum(F * it.interpolate(u)), np.sum(it.spread(F) * u), **tol["float64_exact"]
+    )
     M = it.matrix().toarray()
     np.testing.assert_allclose(M @ u, it.interpolate(u), **tol["float64_exact"])
     np.testing.assert_allclose(it.spread(F).sum(0), F.sum(0), **tol["float64_exact"])
@@ -56,7 +58,11 @@ def test_outside_points_raise(square175):
         locate(square175, [[np.nan, 0.5]])
     with pytest.raises(InvalidInputError, match="points"):
         locate(square175, np.zeros((2, 3)))
-    assert contains(square175, [[0.5, 0.5], [1.1, 0.5], [-1e-6, 0.5]]).tolist() == [True, False, False]
+    assert contains(square175, [[0.5, 0.5], [1.1, 0.5], [-1e-6, 0.5]]).tolist() == [
+        True,
+        False,
+        False,
+    ]
 
 
 def test_nonconvex_notch_is_outside(poly200):

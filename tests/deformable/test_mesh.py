@@ -8,7 +8,6 @@ from riskplan.deformable.elements import boundary_edges, signed_areas
 from riskplan.errors import InvalidInputError
 
 
-
 @pytest.mark.parametrize("n", [50, 51, 57, 100, 174, 175, 333, 500, 777, 999, 1000])
 @pytest.mark.parametrize("shape", ["square", "poly"])
 def test_element_count_is_hit(n, shape, tol, poly_vertices):
@@ -113,7 +112,10 @@ def test_derived_arrays_are_cached_read_only_properties(square175):
     from riskplan.deformable import elements
 
     mesh = mesh_polygon(rectangle(), 60)
-    for name, fn in (("shape_gradients", elements.shape_gradients), ("barycentric_maps", elements.barycentric_maps)):
+    for name, fn in (
+        ("shape_gradients", elements.shape_gradients),
+        ("barycentric_maps", elements.barycentric_maps),
+    ):
         first = getattr(mesh, name)
         assert getattr(mesh, name) is first  # computed once
         assert not first.flags.writeable
@@ -129,7 +131,18 @@ def test_deformable_modules_import_without_cycles():
 
     import riskplan.deformable as pkg
 
-    order = ["elements", "mesh", "material", "laws", "banded", "assembly", "locate", "loads", "linear", "hyperelastic"]
+    order = [
+        "elements",
+        "mesh",
+        "material",
+        "laws",
+        "banded",
+        "assembly",
+        "locate",
+        "loads",
+        "linear",
+        "hyperelastic",
+    ]
     root = Path(pkg.__file__).parent
     assert sorted(order) == sorted(p.stem for p in root.glob("*.py") if p.stem != "__init__")
     for k, name in enumerate(order):
@@ -137,7 +150,9 @@ def test_deformable_modules_import_without_cycles():
         deps = {
             n.module.split(".")[2]
             for n in ast.walk(tree)
-            if isinstance(n, ast.ImportFrom) and n.module and n.module.startswith("riskplan.deformable.")
+            if isinstance(n, ast.ImportFrom)
+            and n.module
+            and n.module.startswith("riskplan.deformable.")
         }
         deps |= {
             a.name

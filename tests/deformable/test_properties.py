@@ -15,7 +15,11 @@ MODEL = LinearElasticModel(MESH, Material(50.0, 0.4), np.flatnonzero(MESH.nodes[
 
 
 @PROPERTY
-@given(E=st.one_of(any_float, junk(), st.integers()), nu=st.one_of(any_float, junk()), plane=st.one_of(st.sampled_from(["stress", "strain"]), junk()))
+@given(
+    E=st.one_of(any_float, junk(), st.integers()),
+    nu=st.one_of(any_float, junk()),
+    plane=st.one_of(st.sampled_from(["stress", "strain"]), junk()),
+)
 def test_material_arbitrary(E, nu, plane):
     m = call(Material, E, nu, plane)
     if m is not None:
@@ -24,8 +28,14 @@ def test_material_arbitrary(E, nu, plane):
 
 
 @PROPERTY
-@given(points=arrays_or_junk(hnp.array_shapes(min_dims=1, max_dims=2, min_side=1, max_side=3), st.floats(-0.5, 1.5)),
-       forces=arrays_or_junk(hnp.array_shapes(min_dims=1, max_dims=2, min_side=1, max_side=3), st.floats(-1e6, 1e6)))
+@given(
+    points=arrays_or_junk(
+        hnp.array_shapes(min_dims=1, max_dims=2, min_side=1, max_side=3), st.floats(-0.5, 1.5)
+    ),
+    forces=arrays_or_junk(
+        hnp.array_shapes(min_dims=1, max_dims=2, min_side=1, max_side=3), st.floats(-1e6, 1e6)
+    ),
+)
 def test_point_loads_and_solve_arbitrary(points, forces):
     f = call(point_load, MESH, points, forces)
     if f is None:

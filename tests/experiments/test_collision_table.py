@@ -19,7 +19,9 @@ def test_table_bound_covers_monte_carlo():
     assert rows[0]["bound"] < 0.05  # home is nearly free
     assert max(r["bound"] for r in rows) > 0.2  # bent shapes touch organs
     text = to_markdown(rows, meta)
-    assert text.count("\n|") == len(rows) + 2  # header separator + rows (the header starts after a blank line)
+    assert (
+        text.count("\n|") == len(rows) + 2
+    )  # header separator + rows (the header starts after a blank line)
 
 
 def test_demo_stage(tmp_path):
@@ -30,7 +32,9 @@ def test_demo_stage(tmp_path):
     ctx = {"out": tmp_path}
     demo_collision.run(report, ctx, seed=0, workers=1)
     report.write()
-    assert (tmp_path / "collision_chest.png").exists() and (tmp_path / "collision_sweep.png").exists()
+    assert (tmp_path / "collision_chest.png").exists() and (
+        tmp_path / "collision_sweep.png"
+    ).exists()
     assert ctx["environment"].n_faces == ctx["chest"].n_triangles
 
 

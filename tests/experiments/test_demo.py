@@ -31,7 +31,12 @@ def test_every_stage_exists_with_run():
 def demo(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
     seen = []
-    path = run_demo(out, seed=0, workers=1, progress=lambda done, total, stage, seconds: seen.append((stage, seconds)))
+    path = run_demo(
+        out,
+        seed=0,
+        workers=1,
+        progress=lambda done, total, stage, seconds: seen.append((stage, seconds)),
+    )
     return path, seen
 
 

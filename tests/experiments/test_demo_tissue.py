@@ -18,7 +18,12 @@ def test_demo_stage_small(tmp_path, monkeypatch):
     report = Report(tmp_path)
     ctx = {"out": tmp_path}
     demo_tissue.run(report, ctx, seed=0, workers=1)
-    for name in ("tissue_needle.gif", "tissue_manipulation.gif", "tissue_needle_frames.png", "tissue_manipulation_frames.png"):
+    for name in (
+        "tissue_needle.gif",
+        "tissue_manipulation.gif",
+        "tissue_needle_frames.png",
+        "tissue_manipulation_frames.png",
+    ):
         assert (tmp_path / name).is_file(), name
     html = report.write().read_text()
     assert html.count("material-high") == 2 and "tissue_needle.gif" in html
@@ -54,4 +59,6 @@ def test_manipulation_steering_reaches_goal_without_collision():
     assert sim.in_goal(states[-1])
     assert not any(sim.in_collision(s) for s in states)
     dist, reached, collided = demo_tissue.open_loop_outcome(sim, u, p)
-    assert reached and not collided and np.isclose(dist, sim.goal_distance(states[-1]), rtol=0, atol=0)
+    assert (
+        reached and not collided and np.isclose(dist, sim.goal_distance(states[-1]), rtol=0, atol=0)
+    )

@@ -23,10 +23,25 @@ def test_compare_small():
     nominal = interpolate_path(rm.shortest_path(START, GOAL), 0.005)
     bound = ConfigurationBound(model, env)
     _, p = trajectory_risk(bound, nominal)
-    problem = {"model": model, "validity": validity, "bound": bound, "nominal": nominal, "bounds": p}
-    rows = compare_optimisers(problem, methods=("random", "bo"), seeds=(0, 1), iterations=1, backend="serial")
-    assert [(r["method"], r["seed"]) for r in rows] == [("random", 0), ("random", 1), ("bo", 0), ("bo", 1)]
+    problem = {
+        "model": model,
+        "validity": validity,
+        "bound": bound,
+        "nominal": nominal,
+        "bounds": p,
+    }
+    rows = compare_optimisers(
+        problem, methods=("random", "bo"), seeds=(0, 1), iterations=1, backend="serial"
+    )
+    assert [(r["method"], r["seed"]) for r in rows] == [
+        ("random", 0),
+        ("random", 1),
+        ("bo", 0),
+        ("bo", 1),
+    ]
     assert all(r["bound"] <= r["initial_bound"] and r["evaluations"] <= 1 for r in rows)
     s = summarise(rows)
     assert s[0]["median_bound"] == np.median([r["bound"] for r in rows[:2]])
-    assert "| bo |" in to_markdown(s, rows[0]["initial_bound"]) and "after" in trace_table(rows, at=(1,))
+    assert "| bo |" in to_markdown(s, rows[0]["initial_bound"]) and "after" in trace_table(
+        rows, at=(1,)
+    )

@@ -8,7 +8,12 @@ import json
 import numpy as np
 from PIL import Image
 
-from riskplan.experiments.planning_tissue import TissuePlanningResult, _pack, summary_rows, write_outputs
+from riskplan.experiments.planning_tissue import (
+    TissuePlanningResult,
+    _pack,
+    summary_rows,
+    write_outputs,
+)
 from riskplan.planning.select import HonestyRow, select_plan
 from riskplan.scenarios.uncertainty import get_case
 from tests.planning.conftest import SMALL_MESH, near_needle, needle_result  # noqa: F401 (fixtures)
@@ -26,12 +31,22 @@ def test_pack_layout(needle_result):  # noqa: F811
 def test_write_outputs(tmp_path, near_needle, needle_result):  # noqa: F811
     plans, trees = needle_result
     case = get_case("actuation", SMALL_MESH)
-    sel = select_plan(near_needle, plans[:2], case, n_samples=2, n_goal_samples=200, seed=0, backend="serial")
+    sel = select_plan(
+        near_needle, plans[:2], case, n_samples=2, n_goal_samples=200, seed=0, backend="serial"
+    )
     row = HonestyRow(index=sel.best, rank=0, p_lqgmp=0.9, p_mc=0.8, low=0.7, high=0.95, n=100)
-    res = TissuePlanningResult("needle", "actuation", 0, near_needle, plans[:2], trees, sel, [row], {"rrt": 1.0})
+    res = TissuePlanningResult(
+        "needle", "actuation", 0, near_needle, plans[:2], trees, sel, [row], {"rrt": 1.0}
+    )
     files = write_outputs(res, tmp_path, gif=True)
-    assert set(files) == {"candidates.npz", "candidates.json", "selected.npz", "selected.json", "candidates.png",
-                          "execution.gif"}
+    assert set(files) == {
+        "candidates.npz",
+        "candidates.json",
+        "selected.npz",
+        "selected.json",
+        "candidates.png",
+        "execution.gif",
+    }
     with np.load(files["selected.npz"]) as z:
         assert np.array_equal(z["controls"], sel.plan.controls)
         assert np.array_equal(z["L"], sel.controller.L) and z["K"].shape == sel.controller.K.shape

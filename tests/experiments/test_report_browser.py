@@ -31,7 +31,12 @@ def _small_report(out):
     rep.figure(sec, fig, "line", "a line")
     Report.table(sec, ["a", "b"], [[1, 2.5]])
     pts = np.random.default_rng(0).normal(size=(50, 3))
-    rep.plotly(sec, go.Figure(go.Scatter3d(x=pts[:, 0], y=pts[:, 1], z=pts[:, 2], mode="markers")), "cloud", "cloud")
+    rep.plotly(
+        sec,
+        go.Figure(go.Scatter3d(x=pts[:, 0], y=pts[:, 1], z=pts[:, 2], mode="markers")),
+        "cloud",
+        "cloud",
+    )
     rep.plotly(sec, go.Figure(go.Scatter(x=[0, 1], y=[1, 0])), "flat", "flat")
     return rep.write()
 
@@ -51,7 +56,9 @@ def test_report_renders_in_browser(tmp_path, driver):
 def test_broken_image_and_script_error_are_caught(tmp_path, driver):
     """The checker itself can fail: a missing image and a throwing script are reported."""
     page = tmp_path / "bad.html"
-    page.write_text("<html><body><img src='missing.png'><script>undefined_function()</script></body></html>")
+    page.write_text(
+        "<html><body><img src='missing.png'><script>undefined_function()</script></body></html>"
+    )
     (check,) = check_report(driver, page)
     assert check.broken_images == ["missing.png"]
     assert any("undefined_function" in e for e in check.console_errors)

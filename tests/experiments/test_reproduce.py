@@ -17,7 +17,9 @@ from riskplan.experiments.store import ResultStore
 from tests.test_parallel_ray_cluster import ray_head  # noqa: F401  (fixture: a Ray head on 127.0.0.1)
 
 #: One candidate per set, two executions per method, one case: every stage runs once.
-TINY = ScenarioScale(n_candidates=1, n_executions=4, batch_size=2, lin_samples=2, goal_samples=50, plans_per_tree=1)
+TINY = ScenarioScale(
+    n_candidates=1, n_executions=4, batch_size=2, lin_samples=2, goal_samples=50, plans_per_tree=1
+)
 CASES = ("material-high",)
 CONFIG = {"test": "tiny", "seed": 3}
 
@@ -28,7 +30,16 @@ class Interrupt(Exception):
 
 def _run(root, backend="serial", progress=None, workers=None):
     store = ResultStore(root, CONFIG)
-    return run_scenario("needle", TINY, store, seed=3, backend=backend, workers=workers, progress=progress, cases=CASES)
+    return run_scenario(
+        "needle",
+        TINY,
+        store,
+        seed=3,
+        backend=backend,
+        workers=workers,
+        progress=progress,
+        cases=CASES,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -97,7 +108,7 @@ def test_local_pool_gives_bit_identical_results(reference, tmp_path):
 def test_corrupted_record_is_named(reference, tmp_path):
     import shutil
 
-    src, ref = reference
+    src, _ref = reference
     root = tmp_path / "copy"
     shutil.copytree(src, root)
     rec = sorted((root / "records").glob("fig6.needle.exec.*.json"))[0]
@@ -111,7 +122,7 @@ def test_corrupted_record_is_named(reference, tmp_path):
     shutil.copytree(src, root2)
     blob = root2 / "blobs" / "fig6.needle.plans.deforming.pkl"
     blob.write_bytes(blob.read_bytes()[:-10])
-    with pytest.raises(DataFormatError, match="fig6.needle.plans.deforming.pkl"):
+    with pytest.raises(DataFormatError, match=r"fig6.needle.plans.deforming.pkl"):
         _run(root2)
 
 
@@ -187,8 +198,13 @@ def test_report_renders_in_browser(reference, tmp_path):
 
     src, r = reference
     store = ResultStore(src, CONFIG)
-    results = {"config": {"paper": "deformable", "scale": "tiny", "seed": 3}, "deformable": {"needle": r}}
-    path = write_report(tmp_path, results, store, {"backend": "serial", "deformable_needle_s": 1.0}, seed=3)
+    results = {
+        "config": {"paper": "deformable", "scale": "tiny", "seed": 3},
+        "deformable": {"needle": r},
+    }
+    path = write_report(
+        tmp_path, results, store, {"backend": "serial", "deformable_needle_s": 1.0}, seed=3
+    )
     text = path.read_text()
     assert "Fig. 6" in text and "LQG-MP predicted" in text and "+34" in text
     driver = browser_or_skip()
@@ -218,8 +234,15 @@ def test_ray_cluster_gives_bit_identical_results(reference, ray_head, tmp_path):
         if ".exec." in rec.name:
             rec.unlink()
     try:
-        got = run_scenario("needle", TINY, ResultStore(root, CONFIG), seed=3, backend="ray", ray_address=ray_head,
-                           cases=CASES)
+        got = run_scenario(
+            "needle",
+            TINY,
+            ResultStore(root, CONFIG),
+            seed=3,
+            backend="ray",
+            ray_address=ray_head,
+            cases=CASES,
+        )
     finally:
         ray.shutdown()
     assert json.dumps(got, sort_keys=True) == json.dumps(ref, sort_keys=True)

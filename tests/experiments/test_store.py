@@ -31,10 +31,10 @@ def test_corrupted_record_is_named(tmp_path):
     rec = json.loads(path.read_text())
     rec["payload"]["hits"] = 4  # edited behind the store's back
     path.write_text(json.dumps(rec))
-    with pytest.raises(DataFormatError, match="batch_1.json.*hash"):
+    with pytest.raises(DataFormatError, match=r"batch_1.json.*hash"):
         store.get("batch_1")
     path.write_text(path.read_text()[:20])  # truncated
-    with pytest.raises(DataFormatError, match="batch_1.json"):
+    with pytest.raises(DataFormatError, match=r"batch_1.json"):
         store.get("batch_1")
 
 
@@ -45,7 +45,9 @@ def test_other_configuration_is_refused(tmp_path):
     # a record copied in from another run's store is refused too
     other = ResultStore(tmp_path / "other", {**CFG, "seed": 1})
     other.put("b", 2)
-    (tmp_path / "records" / "b.json").write_text((tmp_path / "other" / "records" / "b.json").read_text())
+    (tmp_path / "records" / "b.json").write_text(
+        (tmp_path / "other" / "records" / "b.json").read_text()
+    )
     with pytest.raises(DataFormatError, match="another run configuration"):
         ResultStore(tmp_path, CFG).get("b")
 
@@ -62,4 +64,8 @@ def test_bad_keys_and_payloads(tmp_path):
 
 def test_canonical_json_and_fingerprint_are_order_free():
     assert canonical_json({"b": 1, "a": [1, 2]}) == '{"a":[1,2],"b":1}'
-    assert fingerprint({"a": 1, "b": 2}) == fingerprint({"b": 2, "a": 1}) != fingerprint({"a": 1, "b": 3})
+    assert (
+        fingerprint({"a": 1, "b": 2})
+        == fingerprint({"b": 2, "a": 1})
+        != fingerprint({"a": 1, "b": 3})
+    )

@@ -48,7 +48,9 @@ def sample_true(d: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
     return mu[np.arange(C)[:, None], comp] + np.einsum("cnij,cnj->cni", L[comp], z)
 
 
-def make_synthetic(path, n_configs: int, seed: int, starts: int = 2, points: int = 256, toml: str = SYNTH_TOML):
+def make_synthetic(
+    path, n_configs: int, seed: int, starts: int = 2, points: int = 256, toml: str = SYNTH_TOML
+):
     rng = np.random.default_rng(seed)
     d = rng.uniform(LOW, HIGH, size=(n_configs, N_TENDONS))
     pts = sample_true(d, starts * points, rng).reshape(n_configs, starts, points, 3)
@@ -59,7 +61,9 @@ def make_synthetic(path, n_configs: int, seed: int, starts: int = 2, points: int
 def synth_paths(tmp_path_factory):
     """(train, test) synthetic data sets: 160 and 40 configurations, 512 points each."""
     root = tmp_path_factory.mktemp("synth")
-    return make_synthetic(root / "train.h5", 160, seed=1), make_synthetic(root / "test.h5", 40, seed=2)
+    return make_synthetic(root / "train.h5", 160, seed=1), make_synthetic(
+        root / "test.h5", 40, seed=2
+    )
 
 
 @pytest.fixture(scope="session")

@@ -1,10 +1,10 @@
 import h5py
 import numpy as np
 import pytest
-from tests.kinematics.conftest import make_synthetic
 
 from riskplan.errors import DataFormatError
 from riskplan.kinematics.data import check_compatible, content_hash, read_point_clouds
+from tests.kinematics.conftest import make_synthetic
 
 
 def test_read_roundtrip(tmp_path):
@@ -55,7 +55,9 @@ def test_bad_files(tmp_path):
 
 def test_check_compatible(tmp_path):
     a = read_point_clouds(make_synthetic(tmp_path / "a.h5", 4, seed=0, starts=1, points=4))
-    b = read_point_clouds(make_synthetic(tmp_path / "b.h5", 4, seed=1, starts=1, points=4, toml='name = "x"\n'))
+    b = read_point_clouds(
+        make_synthetic(tmp_path / "b.h5", 4, seed=1, starts=1, points=4, toml='name = "x"\n')
+    )
     check_compatible(a, a)
     with pytest.raises(DataFormatError, match="differs"):
         check_compatible(a, b)

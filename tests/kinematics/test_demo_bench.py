@@ -24,8 +24,17 @@ def test_bench_keys():
     from riskplan.bench.kinematics import run
 
     out = run(quick=True)
-    for key in ("mdn_single_ms", "mdn_batched_us_per_config", "cosserat_single_ms", "speedup_vs_cosserat"):
+    for key in (
+        "mdn_single_ms",
+        "mdn_batched_us_per_config",
+        "cosserat_single_ms",
+        "speedup_vs_cosserat",
+    ):
         assert key in out
     assert out["mdn_single_ms"] > 0 and math.isfinite(out["mdn_batched_us_per_config"])
     if out["cosserat_single_ms"] is not None:
-        assert math.isclose(out["speedup_vs_cosserat"], out["cosserat_single_ms"] / out["mdn_single_ms"], rel_tol=1e-12)
+        assert math.isclose(
+            out["speedup_vs_cosserat"],
+            out["cosserat_single_ms"] / out["mdn_single_ms"],
+            rel_tol=1e-12,
+        )

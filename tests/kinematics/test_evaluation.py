@@ -44,11 +44,15 @@ def test_hdr_coverage_of_own_samples_is_nominal(rng):
     """Points drawn from the mixture itself fall in its level-a HDR with probability a."""
     A = rng.normal(size=(6, 3, 3)) * 0.3
     cov = A @ np.swapaxes(A, -1, -2) + 0.05 * np.eye(3)
-    gm = GaussianMixture.from_covariances(rng.dirichlet(np.ones(3), size=2), rng.normal(size=(2, 3, 3)), cov.reshape(2, 3, 3, 3))
+    gm = GaussianMixture.from_covariances(
+        rng.dirichlet(np.ones(3), size=2), rng.normal(size=(2, 3, 3)), cov.reshape(2, 3, 3, 3)
+    )
     pts = gm.sample(20_000, seed=7)
     cov_hat = hdr_coverage(gm, pts, (0.5, 0.9, 0.95), n_samples=20_000, seed=8).numpy()
     # two independent estimates of the same quantile: sd of the difference ~ sqrt(2 a(1-a)/n) <= 7.1e-3
-    np.testing.assert_allclose(cov_hat, np.broadcast_to([0.5, 0.9, 0.95], (2, 3)), rtol=0, atol=0.025)
+    np.testing.assert_allclose(
+        cov_hat, np.broadcast_to([0.5, 0.9, 0.95], (2, 3)), rtol=0, atol=0.025
+    )
 
 
 def test_evaluate_on_synthetic(trained, synth_paths):
@@ -78,7 +82,9 @@ def test_evaluate_other_robot_rejected(trained, tmp_path):
     from tests.kinematics.conftest import make_synthetic
 
     res, _ = trained
-    other = read_point_clouds(make_synthetic(tmp_path / "o.h5", 4, seed=0, starts=1, points=8, toml='name = "x"\n'))
+    other = read_point_clouds(
+        make_synthetic(tmp_path / "o.h5", 4, seed=0, starts=1, points=8, toml='name = "x"\n')
+    )
     with pytest.raises(DataFormatError, match="differs"):
         evaluate(res.model, other)
 

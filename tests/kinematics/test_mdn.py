@@ -5,7 +5,14 @@ from scipy.stats import multivariate_normal
 
 from riskplan.errors import InvalidInputError
 from riskplan.kinematics import GaussianMixture
-from riskplan.kinematics.mdn import LOG_DIAG_BOUND, MDN, MDNModel, Normalisation, build_precision_cholesky, mixture_log_prob
+from riskplan.kinematics.mdn import (
+    LOG_DIAG_BOUND,
+    MDN,
+    MDNModel,
+    Normalisation,
+    build_precision_cholesky,
+    mixture_log_prob,
+)
 
 LIMITS = np.array([[-0.01, 0.04]] * 4)
 
@@ -16,7 +23,12 @@ def _model(rng, dtype=torch.float64, K=3, activation="silu"):
     with torch.no_grad():
         for p in net.parameters():
             p.normal_(0.0, 0.4)
-    norm = Normalisation(np.full(4, 0.015), np.full(4, 0.014), np.array([0.0, 0.0, 0.1]), np.array([0.01, 0.02, 0.05]))
+    norm = Normalisation(
+        np.full(4, 0.015),
+        np.full(4, 0.014),
+        np.array([0.0, 0.0, 0.1]),
+        np.array([0.01, 0.02, 0.05]),
+    )
     return MDNModel(net, norm, LIMITS, "", "test")
 
 
@@ -39,7 +51,9 @@ def test_mixture_log_prob_matches_scipy(rng, tol):
     mu = rng.normal(size=(K, 3))
     gm = GaussianMixture.from_covariances(w, mu, cov)
     x = rng.normal(size=(9, 3))
-    got = mixture_log_prob(torch.log(gm.weights), gm.means, gm.precision_cholesky, torch.as_tensor(x)).numpy()
+    got = mixture_log_prob(
+        torch.log(gm.weights), gm.means, gm.precision_cholesky, torch.as_tensor(x)
+    ).numpy()
     ref = np.log(sum(w[k] * multivariate_normal(mu[k], cov[k]).pdf(x) for k in range(K)))
     np.testing.assert_allclose(got, ref, **tol["float64_ref"])
 
@@ -63,10 +77,16 @@ def test_numpy_fast_path_float32_network(rng, tol):
     fast = m32.predict(d)
     ref = m32.mixture(torch.as_tensor(d, dtype=torch.float32))
     assert fast.dtype == torch.float64
-    np.testing.assert_allclose(fast.weights.numpy(), ref.weights.detach().numpy(), **tol["float32_ref"])
-    np.testing.assert_allclose(fast.means.numpy(), ref.means.detach().numpy(), rtol=1e-4, atol=1e-6)  # metres
+    np.testing.assert_allclose(
+        fast.weights.numpy(), ref.weights.detach().numpy(), **tol["float32_ref"]
+    )
+    np.testing.assert_allclose(
+        fast.means.numpy(), ref.means.detach().numpy(), rtol=1e-4, atol=1e-6
+    )  # metres
     u_ref = ref.precision_cholesky.detach().numpy()
-    np.testing.assert_allclose(fast.precision_cholesky.numpy(), u_ref, rtol=1e-4, atol=1e-4 * np.abs(u_ref).max())
+    np.testing.assert_allclose(
+        fast.precision_cholesky.numpy(), u_ref, rtol=1e-4, atol=1e-4 * np.abs(u_ref).max()
+    )
 
 
 def test_predict_batch_equals_loop(rng, tol):
@@ -79,7 +99,11 @@ def test_predict_batch_equals_loop(rng, tol):
             one = m.predict(d[i, j])
             assert one.batch_shape == ()
             for name in ("weights", "means", "precision_cholesky"):
-                np.testing.assert_allclose(getattr(one, name).numpy(), getattr(batched, name).numpy()[i, j], **tol["float64_exact"])
+                np.testing.assert_allclose(
+                    getattr(one, name).numpy(),
+                    getattr(batched, name).numpy()[i, j],
+                    **tol["float64_exact"],
+                )
 
 
 def test_large_batch_equals_loop(rng):
@@ -90,7 +114,9 @@ def test_large_batch_equals_loop(rng):
     for i in (0, 137, 299):
         one = m.predict(d[i])
         for name in ("weights", "means", "precision_cholesky"):
-            np.testing.assert_allclose(getattr(big, name).numpy()[i], getattr(one, name).numpy(), rtol=1e-12, atol=1e-15)
+            np.testing.assert_allclose(
+                getattr(big, name).numpy()[i], getattr(one, name).numpy(), rtol=1e-12, atol=1e-15
+            )
 
 
 def test_predict_float32_and_float64(rng, tol):
@@ -100,7 +126,9 @@ def test_predict_float32_and_float64(rng, tol):
     g32 = m.predict(d, dtype=torch.float32)
     assert g64.dtype == torch.float64 and g32.dtype == torch.float32
     x = g64.sample(16, seed=1)
-    np.testing.assert_allclose(g32.log_prob(x.float()).numpy(), g64.log_prob(x).numpy(), rtol=1e-4, atol=1e-3)
+    np.testing.assert_allclose(
+        g32.log_prob(x.float()).numpy(), g64.log_prob(x).numpy(), rtol=1e-4, atol=1e-3
+    )
     # the torch module in float32 agrees with float64
     m32 = MDNModel(m.net.float(), m.normalisation, LIMITS)
     g = m32.mixture(torch.as_tensor(d, dtype=torch.float32))
@@ -111,7 +139,9 @@ def test_predict_float32_and_float64(rng, tol):
 def test_gradients_finite_at_extreme_inputs(rng, dtype):
     m = _model(rng, dtype=dtype)
     corners = np.array(np.meshgrid(*[[-0.01, 0.04]] * 4)).reshape(4, -1).T
-    extreme = np.concatenate([corners, [[1e3, -1e3, 1e3, -1e3], [-1e4] * 4]])  # far outside: network only
+    extreme = np.concatenate(
+        [corners, [[1e3, -1e3, 1e3, -1e3], [-1e4] * 4]]
+    )  # far outside: network only
     d = torch.as_tensor(extreme, dtype=dtype)
     pts = torch.as_tensor(rng.normal(size=(len(extreme), 20, 3)) * 0.1, dtype=dtype)
     pts[0, 0] = torch.tensor([1e3, -1e3, 1e3])  # a far point

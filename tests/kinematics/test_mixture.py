@@ -25,7 +25,9 @@ def test_log_prob_matches_scipy(rng, tol, d):
     w, mu, cov = _random_mixture(rng, K=4, d=d)
     gm = GaussianMixture.from_covariances(w, mu, cov)
     x = rng.normal(size=(11, d)) * 2
-    np.testing.assert_allclose(gm.log_prob(x).numpy(), _scipy_logpdf(w, mu, cov, x), **tol["float64_ref"])
+    np.testing.assert_allclose(
+        gm.log_prob(x).numpy(), _scipy_logpdf(w, mu, cov, x), **tol["float64_ref"]
+    )
     np.testing.assert_allclose(gm.covariances.numpy(), cov, **tol["float64_ref"])
 
 
@@ -36,7 +38,9 @@ def test_batch_equals_loop(rng, tol):
     batched = gm.log_prob(x).numpy()
     for i in range(2):
         for j in range(3):
-            np.testing.assert_allclose(gm[i, j].log_prob(x[i, j]).numpy(), batched[i, j], **tol["float64_exact"])
+            np.testing.assert_allclose(
+                gm[i, j].log_prob(x[i, j]).numpy(), batched[i, j], **tol["float64_exact"]
+            )
 
 
 def test_far_points_are_finite_and_gradients_finite(rng):
@@ -83,7 +87,9 @@ def test_numpy_round_trip(rng, tol):
     gm = GaussianMixture.from_covariances(w, mu, cov)
     back = GaussianMixture.from_numpy(**gm.numpy())
     x = rng.normal(size=(4, 3))
-    np.testing.assert_allclose(back.log_prob(x).numpy(), gm.log_prob(x).numpy(), **tol["float64_exact"])
+    np.testing.assert_allclose(
+        back.log_prob(x).numpy(), gm.log_prob(x).numpy(), **tol["float64_exact"]
+    )
 
 
 @pytest.mark.parametrize(

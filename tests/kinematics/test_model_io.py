@@ -27,7 +27,15 @@ def test_roundtrip_identical_predictions(trained, rng, tmp_path):
     assert loaded.n_components == 2 and loaded.n_tendons == 2
     np.testing.assert_array_equal(loaded.limits, res.model.limits)
     meta = json.loads((out / META_NAME).read_text())
-    for key in ("versions", "architecture", "normalisation", "robot", "data", "training", "weights_sha256"):
+    for key in (
+        "versions",
+        "architecture",
+        "normalisation",
+        "robot",
+        "data",
+        "training",
+        "weights_sha256",
+    ):
         assert key in meta
     assert meta["data"]["content_hash"] == res.model.metadata["data"]["content_hash"]
     # save again from the loaded model: same files
@@ -86,18 +94,24 @@ def test_corrupted_files_rejected(trained, tmp_path):
 
 
 def test_roundtrip_float32_model(synth_small, rng, tmp_path):
-    from tests.kinematics.conftest import FAST
-
     from riskplan.kinematics.data import read_point_clouds
     from riskplan.kinematics.training import TrainConfig, train
+    from tests.kinematics.conftest import FAST
 
-    res = train(read_point_clouds(synth_small), TrainConfig(n_components=3, epochs=2, dtype="float32", **FAST), out=tmp_path / "m")
+    res = train(
+        read_point_clouds(synth_small),
+        TrainConfig(n_components=3, epochs=2, dtype="float32", **FAST),
+        out=tmp_path / "m",
+    )
     loaded = load_model(tmp_path / "m")
     assert next(loaded.net.parameters()).dtype == torch.float32
     d = rng.uniform(0.0, 0.03, size=(5, 2))
     for name in ("weights", "means", "precision_cholesky"):
         assert torch.equal(getattr(res.model.predict(d), name), getattr(loaded.predict(d), name))
-        assert torch.equal(getattr(res.model.predict(d, dtype=torch.float32), name), getattr(loaded.predict(d, dtype=torch.float32), name))
+        assert torch.equal(
+            getattr(res.model.predict(d, dtype=torch.float32), name),
+            getattr(loaded.predict(d, dtype=torch.float32), name),
+        )
 
 
 def test_model_of_the_paper_robot(tmp_path, rng):
@@ -111,10 +125,14 @@ def test_model_of_the_paper_robot(tmp_path, rng):
     lim = robot.displacement_limits
     d = rng.uniform(lim[:, 0], lim[:, 1], size=(8, robot.n_tendons))
     pts = rng.normal(size=(8, 1, 16, 3)) * 0.01
-    path = write_synthetic_dataset(tmp_path / "p.h5", d, pts, robot_toml=robot.toml_text(), robot_name=robot.name)
+    path = write_synthetic_dataset(
+        tmp_path / "p.h5", d, pts, robot_toml=robot.toml_text(), robot_name=robot.name
+    )
     data = read_point_clouds(path)
     np.testing.assert_array_equal(data.limits, lim)
-    train(data, TrainConfig(n_components=2, epochs=1, hidden=(8,), head_hidden=()), out=tmp_path / "m")
+    train(
+        data, TrainConfig(n_components=2, epochs=1, hidden=(8,), head_hidden=()), out=tmp_path / "m"
+    )
     m = load_model(tmp_path / "m", robot=robot)
     assert m.robot.name == "paper" and m.robot.n_tendons == m.n_tendons
     m.predict(lim[:, 1])  # the robot's own limits are accepted, slightly beyond them is not
@@ -133,13 +151,28 @@ def _edited(out, dst, edit):
 @pytest.mark.parametrize(
     "edit, match",
     [
-        (lambda m: m["normalisation"].update(output_scale=[0.0, 1.0, 1.0]), "output_scale must be > 0"),
-        (lambda m: m["normalisation"].update(output_scale=[float("nan"), 1.0, 1.0]), "output_scale contains NaN"),
+        (
+            lambda m: m["normalisation"].update(output_scale=[0.0, 1.0, 1.0]),
+            "output_scale must be > 0",
+        ),
+        (
+            lambda m: m["normalisation"].update(output_scale=[float("nan"), 1.0, 1.0]),
+            "output_scale contains NaN",
+        ),
         (lambda m: m["normalisation"].update(input_scale=[-1.0, 1.0]), "input_scale must be > 0"),
-        (lambda m: m["normalisation"].update(output_centre=[float("inf"), 0.0, 0.0]), "output_centre"),
+        (
+            lambda m: m["normalisation"].update(output_centre=[float("inf"), 0.0, 0.0]),
+            "output_centre",
+        ),
         (lambda m: m["normalisation"].update(input_mean=[float("nan"), 0.0]), "input_mean"),
-        (lambda m: m["robot"].update(displacement_limits=[[0.04, -0.01], [-0.01, 0.04]]), "displacement_limits"),
-        (lambda m: m["robot"].update(displacement_limits=[[float("nan"), 0.04], [-0.01, 0.04]]), "displacement_limits"),
+        (
+            lambda m: m["robot"].update(displacement_limits=[[0.04, -0.01], [-0.01, 0.04]]),
+            "displacement_limits",
+        ),
+        (
+            lambda m: m["robot"].update(displacement_limits=[[float("nan"), 0.04], [-0.01, 0.04]]),
+            "displacement_limits",
+        ),
         (lambda m: m["architecture"].update(hidden=[2_000_000_000]), "hidden"),
         (lambda m: m["architecture"].update(hidden=[60000, 60000]), "parameters"),
         (lambda m: m["architecture"].update(n_components=-1), "n_components"),
@@ -168,7 +201,9 @@ def test_non_finite_weights_rejected(trained, tmp_path):
     torch.save(state, buf)
     (m / WEIGHTS_NAME).write_bytes(buf.getvalue())
     meta = json.loads((m / META_NAME).read_text())
-    meta["weights_sha256"] = hashlib.sha256(buf.getvalue()).hexdigest()  # a consistent, but broken, model
+    meta["weights_sha256"] = hashlib.sha256(
+        buf.getvalue()
+    ).hexdigest()  # a consistent, but broken, model
     (m / META_NAME).write_text(json.dumps(meta))
     with pytest.raises(DataFormatError, match="NaN"):
         load_model(m)

@@ -12,7 +12,11 @@ from riskplan.kinematics import GaussianMixture
 from riskplan.kinematics.training import TrainConfig
 from tests.properties import PROPERTY, any_float, arrays_or_junk, assert_finite, call, junk
 
-GM = GaussianMixture(np.array([[0.3, 0.7]]), np.zeros((1, 2, 3)), np.broadcast_to(np.eye(3) * 50.0, (1, 2, 3, 3)).copy())
+GM = GaussianMixture(
+    np.array([[0.3, 0.7]]),
+    np.zeros((1, 2, 3)),
+    np.broadcast_to(np.eye(3) * 50.0, (1, 2, 3, 3)).copy(),
+)
 
 
 def _no_nan(t) -> None:
@@ -46,7 +50,19 @@ def test_arbitrary_mixtures(w, m, u, x):
 @PROPERTY
 @given(
     values=st.fixed_dictionaries(
-        {}, optional={k: st.one_of(st.integers(-5, 5), any_float, junk()) for k in ("n_components", "epochs", "lr", "seed", "val_fraction", "early_stop_patience", "dtype")}
+        {},
+        optional={
+            k: st.one_of(st.integers(-5, 5), any_float, junk())
+            for k in (
+                "n_components",
+                "epochs",
+                "lr",
+                "seed",
+                "val_fraction",
+                "early_stop_patience",
+                "dtype",
+            )
+        },
     )
 )
 def test_train_config_validation(values):

@@ -69,14 +69,16 @@ def test_unknown_name_lists_the_shipped_models(tmp_path, monkeypatch):
         load_model("no-such-model")
     # an existing folder wins over a shipped name
     (tmp_path / "paper").mkdir()
-    with pytest.raises(DataFormatError, match="no model.json"):
+    with pytest.raises(DataFormatError, match=r"no model.json"):
         load_model("paper")
 
 
 def test_cli_predict_with_shipped_model():
     from riskplan.cli import app
 
-    r = CliRunner().invoke(app, ["predict", "--model", "paper", "--displacements", "0.01,0,0,0", "--json"])
+    r = CliRunner().invoke(
+        app, ["predict", "--model", "paper", "--displacements", "0.01,0,0,0", "--json"]
+    )
     assert r.exit_code == 0, r.output
     obj = json.loads(r.output)
     assert obj["n_components"] == 10 and len(obj["means"]) == 10
@@ -91,10 +93,27 @@ def test_cli_collision_with_shipped_model(tmp_path):
     box.apply_translation([0.3, 0.0, 0.0])  # slab x >= 0.05 in the robot base frame
     stl = tmp_path / "slab.stl"
     box.export(stl)
-    r = CliRunner().invoke(app, ["collision", "--env", str(stl), "--base-pose", "identity", "--model", "paper", "-d", "0,0,0,0;0.03,0,0,0",
-                                 "--samples", "2000", "--json"])
+    r = CliRunner().invoke(
+        app,
+        [
+            "collision",
+            "--env",
+            str(stl),
+            "--base-pose",
+            "identity",
+            "--model",
+            "paper",
+            "-d",
+            "0,0,0,0;0.03,0,0,0",
+            "--samples",
+            "2000",
+            "--json",
+        ],
+    )
     assert r.exit_code == 0, r.output
     rows = json.loads(r.output)
     # straight robot: far from the slab; bent towards +x: its distal part crosses it
     assert rows[0]["probability"] < 0.01 and rows[0]["monte_carlo"] == 0.0
-    assert rows[1]["monte_carlo"] > 0.1 and rows[1]["probability"] >= rows[1]["mc_low"]  # eq. 9 bounds it
+    assert (
+        rows[1]["monte_carlo"] > 0.1 and rows[1]["probability"] >= rows[1]["mc_low"]
+    )  # eq. 9 bounds it

@@ -1,12 +1,12 @@
 import json
 
 import pytest
-from tests.kinematics.conftest import FAST, make_synthetic
 
 from riskplan.errors import DataFormatError, InvalidInputError
 from riskplan.kinematics import load_model
 from riskplan.kinematics.sweep import parse_components, recommend, sweep
 from riskplan.kinematics.training import TrainConfig
+from tests.kinematics.conftest import FAST, make_synthetic
 
 
 def test_parse_components():
@@ -51,7 +51,9 @@ def test_sweep_small(synth_paths, tmp_path):
 
 
 def test_sweep_checks_data_before_training(synth_paths, tmp_path):
-    foreign = make_synthetic(tmp_path / "foreign.h5", 8, seed=0, starts=1, points=8, toml='name = "x"\n')
+    foreign = make_synthetic(
+        tmp_path / "foreign.h5", 8, seed=0, starts=1, points=8, toml='name = "x"\n'
+    )
     with pytest.raises(DataFormatError, match="differs"):
         sweep(synth_paths[0], foreign, [1], TrainConfig(epochs=1), out=tmp_path / "sw")
     assert not (tmp_path / "sw").exists()

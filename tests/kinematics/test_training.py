@@ -3,13 +3,13 @@ import math
 import numpy as np
 import pytest
 import torch
-from tests.kinematics.conftest import COV, FAST, make_synthetic, sample_true, true_mixture
 
 from riskplan.errors import ConvergenceError, DataFormatError, InvalidInputError
 from riskplan.kinematics import GaussianMixture
 from riskplan.kinematics import training as training_mod
 from riskplan.kinematics.data import read_point_clouds, write_synthetic_dataset
 from riskplan.kinematics.training import CHECKPOINT_NAME, TrainConfig, train
+from tests.kinematics.conftest import COV, FAST, make_synthetic, sample_true, true_mixture
 
 
 def test_training_recovers_known_mixture(trained, rng):
@@ -21,9 +21,15 @@ def test_training_recovers_known_mixture(trained, rng):
     # components identified by height (true means at z = 0.05 and z ~ 0.14)
     order = np.argsort(gm.means.numpy()[..., 2], axis=-1)
     take = lambda a: np.take_along_axis(a, order.reshape(order.shape + (1,) * (a.ndim - 2)), axis=1)  # noqa: E731
-    w_hat, mu_hat, cov_hat = take(gm.weights.numpy()), take(gm.means.numpy()), take(gm.covariances.numpy())
+    w_hat, mu_hat, cov_hat = (
+        take(gm.weights.numpy()),
+        take(gm.means.numpy()),
+        take(gm.covariances.numpy()),
+    )
     np.testing.assert_allclose(w_hat, w, rtol=0, atol=0.03)
-    np.testing.assert_allclose(mu_hat, mu, rtol=0, atol=1.0e-3)  # metres; component stds are 1.5-12 mm
+    np.testing.assert_allclose(
+        mu_hat, mu, rtol=0, atol=1.0e-3
+    )  # metres; component stds are 1.5-12 mm
     sd_hat = np.sqrt(np.diagonal(cov_hat, axis1=-2, axis2=-1))
     sd = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
     np.testing.assert_allclose(sd_hat, np.broadcast_to(sd, sd_hat.shape), rtol=0.08, atol=0)
@@ -38,7 +44,11 @@ def test_training_recovers_known_mixture(trained, rng):
 
 def test_training_history_and_outputs(trained):
     res, out = trained
-    assert (out / "weights.pt").is_file() and (out / "model.json").is_file() and (out / CHECKPOINT_NAME).is_file()
+    assert (
+        (out / "weights.pt").is_file()
+        and (out / "model.json").is_file()
+        and (out / CHECKPOINT_NAME).is_file()
+    )
     nll = [h.val_nll for h in res.history]
     assert all(math.isfinite(v) for v in nll)
     assert res.best_val_nll == min(nll)
@@ -80,8 +90,12 @@ def test_nan_loss_skips_step_and_keeps_parameters(synth_small, monkeypatch):
         return real(net, x, p)
 
     monkeypatch.setattr(training_mod, "_batch_loss", faulty)
-    res = train(data, TrainConfig(n_components=2, epochs=2, batch_size=4, hidden=(16,), head_hidden=()))
-    assert state["unchanged"] is True  # the NaN step did not touch the parameters (nor Adam's state)
+    res = train(
+        data, TrainConfig(n_components=2, epochs=2, batch_size=4, hidden=(16,), head_hidden=())
+    )
+    assert (
+        state["unchanged"] is True
+    )  # the NaN step did not touch the parameters (nor Adam's state)
     assert res.skipped_steps == 1 and res.history[0].skipped_steps == 1
     assert all(bool(torch.isfinite(q).all()) for q in res.model.net.parameters())
     assert all(math.isfinite(h.val_nll) for h in res.history)
@@ -89,7 +103,9 @@ def test_nan_loss_skips_step_and_keeps_parameters(synth_small, monkeypatch):
 
 def test_persistent_nan_raises(synth_small, monkeypatch):
     data = read_point_clouds(synth_small)
-    monkeypatch.setattr(training_mod, "_batch_loss", lambda net, x, p: net(x)[0].sum() * float("inf") * 0.0)
+    monkeypatch.setattr(
+        training_mod, "_batch_loss", lambda net, x, p: net(x)[0].sum() * float("inf") * 0.0
+    )
     with pytest.raises(ConvergenceError, match="non-finite"):
         train(data, TrainConfig(n_components=2, epochs=3, batch_size=2, max_bad_steps=5))
 
@@ -127,16 +143,26 @@ def test_single_config_rejected_before_training(tmp_path):
 def test_resume_with_other_data_rejected(synth_small, tmp_path):
     data = read_point_clouds(synth_small)
     train(data, TrainConfig(n_components=2, epochs=1, **FAST), out=tmp_path / "m")
-    other = read_point_clouds(make_synthetic(tmp_path / "other.h5", 24, seed=99, starts=1, points=128))
+    other = read_point_clouds(
+        make_synthetic(tmp_path / "other.h5", 24, seed=99, starts=1, points=128)
+    )
     with pytest.raises(DataFormatError, match="content hash"):
         train(other, TrainConfig(n_components=2, epochs=2, **FAST), out=tmp_path / "m", resume=True)
-    foreign = read_point_clouds(make_synthetic(tmp_path / "foreign.h5", 24, seed=3, starts=1, points=128, toml='name = "other"\n'))
+    foreign = read_point_clouds(
+        make_synthetic(
+            tmp_path / "foreign.h5", 24, seed=3, starts=1, points=128, toml='name = "other"\n'
+        )
+    )
     with pytest.raises(DataFormatError, match="differs"):
-        train(foreign, TrainConfig(n_components=2, epochs=2, **FAST), out=tmp_path / "m", resume=True)
+        train(
+            foreign, TrainConfig(n_components=2, epochs=2, **FAST), out=tmp_path / "m", resume=True
+        )
     with pytest.raises(DataFormatError, match="n_components"):
         train(data, TrainConfig(n_components=3, epochs=2, **FAST), out=tmp_path / "m", resume=True)
     with pytest.raises(DataFormatError, match="no such file"):
-        train(data, TrainConfig(n_components=2, epochs=2, **FAST), out=tmp_path / "none", resume=True)
+        train(
+            data, TrainConfig(n_components=2, epochs=2, **FAST), out=tmp_path / "none", resume=True
+        )
 
 
 def test_corrupted_checkpoint_rejected(synth_small, tmp_path):
@@ -179,4 +205,11 @@ def test_rerun_without_resume_refused_and_unfinished_models_marked(synth_small, 
     assert len(res.history) == 3 and load_model(out).metadata["finished"] is True
     with pytest.raises(InvalidInputError, match="checkpoint at epoch 3 of 3"):
         train(data, cfg, out=out)
-    assert len(train(data, TrainConfig(n_components=2, epochs=1, seed=3, **FAST), out=out, overwrite=True).history) == 1
+    assert (
+        len(
+            train(
+                data, TrainConfig(n_components=2, epochs=1, seed=3, **FAST), out=out, overwrite=True
+            ).history
+        )
+        == 1
+    )

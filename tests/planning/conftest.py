@@ -8,11 +8,16 @@ and a tip component), isotropic standard deviation ``SIGMA``. The tip sweeps the
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
 
 from riskplan.kinematics import GaussianMixture
+from riskplan.scenarios import _geometry as geo
+from riskplan.scenarios.base import SimParams, check_control, frozen_array
+from riskplan.scenarios.needle import NeedleConfig, NeedleScenario
 
 LIMITS = np.array([[-0.01, 0.04], [-0.01, 0.04]])
 SIGMA = 0.004
@@ -41,7 +46,9 @@ class AnalyticModel:
         shape = d.shape[:-1]
         w = np.broadcast_to([0.4, 0.6], shape + (2,)).copy()
         u = np.broadcast_to(np.eye(3) / SIGMA, shape + (2, 3, 3)).copy()
-        return GaussianMixture(torch.from_numpy(w), torch.from_numpy(means), torch.from_numpy(u), validate=False)
+        return GaussianMixture(
+            torch.from_numpy(w), torch.from_numpy(means), torch.from_numpy(u), validate=False
+        )
 
 
 def box_env(center, half):
@@ -76,16 +83,7 @@ START = np.array([0.0, 0.0])
 GOAL = np.array([0.03, 0.03])
 
 
-# ---- tissue planner fixtures ----
-"""Fixtures of the tissue-planner tests: small, fast problems (a nearby goal, a coarse mesh)."""
-
-
-import math
-
-
-from riskplan.scenarios import _geometry as geo
-from riskplan.scenarios.base import SimParams, check_control, frozen_array
-from riskplan.scenarios.needle import NeedleConfig, NeedleScenario
+# ---- tissue planner fixtures: small, fast problems (a nearby goal, a coarse mesh) ----
 
 #: Coarse planning mesh of the tests (the scenarios plan on 175 elements).
 SMALL_MESH = SimParams(n_elements=60)

@@ -56,7 +56,9 @@ def problem(model, scene):
 def test_bo_never_worse_and_valid(problem, model, scene, tol):
     v, bound, traj = problem
     for method in ("bo", "random", "trust_region"):
-        res = optimise_trajectory(traj, bound, v, LIMITS, config=OptimiserConfig(iterations=6, method=method), seed=1)
+        res = optimise_trajectory(
+            traj, bound, v, LIMITS, config=OptimiserConfig(iterations=6, method=method), seed=1
+        )
         assert res.bound <= res.initial_bound
         assert np.all(np.diff(res.trace) <= 0)
         np.testing.assert_array_equal(res.trajectory[[0, -1]], traj[[0, -1]])
@@ -64,7 +66,9 @@ def test_bo_never_worse_and_valid(problem, model, scene, tol):
         assert np.all((out >= LIMITS[:, 0]) & (out <= LIMITS[:, 1]))
         assert v(out).all() and v.motions(out[:-1], out[1:], 0.001).all()
         # the reported bound is eq. 10 of the returned trajectory, recomputed from scratch
-        np.testing.assert_allclose(res.bound, trajectory_bound(model.predict(out), scene), **tol["float64_ref"])
+        np.testing.assert_allclose(
+            res.bound, trajectory_bound(model.predict(out), scene), **tol["float64_ref"]
+        )
         assert res.evaluations == len(traj) + 6 - sum(c < 0 for c in res.chosen)
 
 
@@ -74,19 +78,26 @@ def test_same_seed_same_result_and_resume(problem, tmp_path):
     a = optimise_trajectory(traj, bound, v, LIMITS, config=cfg, seed=7)
     assert a.accepted.any()
     short = tmp_path / "short.json"
+
     def interrupt(i, n, b):  # an interruption after the second completed iteration
         if i == 2:
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        optimise_trajectory(traj, bound, v, LIMITS, config=cfg, seed=7, checkpoint=short, progress=interrupt)
+        optimise_trajectory(
+            traj, bound, v, LIMITS, config=cfg, seed=7, checkpoint=short, progress=interrupt
+        )
     assert json.loads(short.read_text())["iteration"] == 2
-    r = optimise_trajectory(traj, bound, v, LIMITS, config=cfg, seed=7, checkpoint=short, resume=True)
+    r = optimise_trajectory(
+        traj, bound, v, LIMITS, config=cfg, seed=7, checkpoint=short, resume=True
+    )
     # same seed, same result, also across an interruption
     np.testing.assert_array_equal(r.trajectory, a.trajectory)
     np.testing.assert_array_equal(r.trace, a.trace)
     with pytest.raises(DataFormatError, match="another trajectory, seed or settings"):
-        optimise_trajectory(traj, bound, v, LIMITS, config=cfg, seed=8, checkpoint=short, resume=True)
+        optimise_trajectory(
+            traj, bound, v, LIMITS, config=cfg, seed=8, checkpoint=short, resume=True
+        )
 
 
 def test_options_checked(problem):

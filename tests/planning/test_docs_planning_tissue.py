@@ -11,7 +11,9 @@ DOC = Path(__file__).resolve().parents[2] / "docs" / "planning.md"
 
 def _blocks() -> list[str]:
     text = DOC.read_text()
-    block = text[text.index("<!-- BEGIN planning-tissue -->") : text.index("<!-- END planning-tissue -->")]
+    block = text[
+        text.index("<!-- BEGIN planning-tissue -->") : text.index("<!-- END planning-tissue -->")
+    ]
     return re.findall(r"```python\n(.*?)```", block, flags=re.S)
 
 

@@ -34,10 +34,19 @@ def test_roadmap_vertices_and_edges_valid(roadmap, model, scene):
     # every edge is a valid motion at the stated resolution (independent re-check, one motion at a time)
     v = roadmap.validity
     for a, b in roadmap.edges[:40]:
-        n = int(np.ceil(np.linalg.norm(roadmap.vertices[b] - roadmap.vertices[a]) / roadmap.resolution)) + 1
+        n = (
+            int(
+                np.ceil(
+                    np.linalg.norm(roadmap.vertices[b] - roadmap.vertices[a]) / roadmap.resolution
+                )
+            )
+            + 1
+        )
         pts = np.linspace(roadmap.vertices[a], roadmap.vertices[b], n)
         assert _means_free(model, scene, pts).all()
-    assert v.motions(roadmap.vertices[roadmap.edges[:, 0]], roadmap.vertices[roadmap.edges[:, 1]]).all()
+    assert v.motions(
+        roadmap.vertices[roadmap.edges[:, 0]], roadmap.vertices[roadmap.edges[:, 1]]
+    ).all()
 
 
 def test_motions_batch_equals_loop(model, scene, rng):
@@ -76,7 +85,9 @@ def test_same_seed_same_roadmap_and_trajectory(model, scene, roadmap):
     again = build_roadmap(MeanValidity(model, scene), n_milestones=60, seed=3)
     np.testing.assert_array_equal(again.vertices, roadmap.vertices)
     np.testing.assert_array_equal(again.edges, roadmap.edges)
-    np.testing.assert_array_equal(again.shortest_path(START, GOAL), roadmap.shortest_path(START, GOAL))
+    np.testing.assert_array_equal(
+        again.shortest_path(START, GOAL), roadmap.shortest_path(START, GOAL)
+    )
     other = build_roadmap(MeanValidity(model, scene), n_milestones=60, seed=4)
     assert not np.array_equal(other.vertices, roadmap.vertices)
 
@@ -92,14 +103,16 @@ def test_roadmap_reused_across_queries(roadmap):
 
 def test_no_path_names_roadmap_size(model, wall):
     rm = build_roadmap(MeanValidity(model, wall), n_milestones=30, seed=0)
-    with pytest.raises(PlanningError, match=r"30 milestones \(\d+ connected\), \d+ edges, built in"):
+    with pytest.raises(
+        PlanningError, match=r"30 milestones \(\d+ connected\), \d+ edges, built in"
+    ):
         rm.shortest_path(np.array([0.0, 0.0]), np.array([0.035, 0.0]))
 
 
 def test_invalid_start_and_goal_outside_limits(roadmap):
-    with pytest.raises(InvalidInputError, match="start: .*invalid"):
+    with pytest.raises(InvalidInputError, match=r"start: .*invalid"):
         roadmap.shortest_path(np.array([0.015, 0.015]), GOAL)
-    with pytest.raises(InvalidInputError, match="goal: .*outside the displacement limits"):
+    with pytest.raises(InvalidInputError, match=r"goal: .*outside the displacement limits"):
         roadmap.shortest_path(START, np.array([0.05, 0.0]))
     with pytest.raises(InvalidInputError, match="goal"):
         roadmap.shortest_path(START, np.array([np.nan, 0.0]))
@@ -112,7 +125,9 @@ def test_goal_from_tip(roadmap, model):
     assert roadmap.validity(g[None])[0]
     with pytest.raises(PlanningError, match="unreachable"):
         goal_from_tip(roadmap, model, [0.0, 0.0, 0.5], tolerance=0.002)
-    with pytest.raises(PlanningError, match="unreachable"):  # inside the box: no valid configuration there
+    with pytest.raises(
+        PlanningError, match="unreachable"
+    ):  # inside the box: no valid configuration there
         goal_from_tip(roadmap, model, [0.0, 0.0, 0.1], tolerance=0.002)
 
 

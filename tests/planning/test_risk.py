@@ -26,7 +26,9 @@ def roadmap(model, scene):
 def test_bounds_match_collision_module(model, scene, rng, tol):
     c = rng.uniform(-0.01, 0.04, size=(7, 2))
     b = ConfigurationBound(model, scene, batch=3)
-    np.testing.assert_allclose(b(c), probability_of_collision(model.predict(c), scene), **tol["float64_exact"])
+    np.testing.assert_allclose(
+        b(c), probability_of_collision(model.predict(c), scene), **tol["float64_exact"]
+    )
     assert b.evaluations == 7
     P, _ = trajectory_risk(b, c)
     np.testing.assert_allclose(P, trajectory_bound(model.predict(c), scene), **tol["float64_exact"])
@@ -34,7 +36,9 @@ def test_bounds_match_collision_module(model, scene, rng, tol):
 
 def test_risk_cost_additive(tol):
     p = np.array([0.1, 0.0, 0.3, 0.05])
-    np.testing.assert_allclose(risk_cost(p).sum(), -np.log(1 - (1 - np.prod(1 - p))), **tol["float64_ref"])
+    np.testing.assert_allclose(
+        risk_cost(p).sum(), -np.log(1 - (1 - np.prod(1 - p))), **tol["float64_ref"]
+    )
     assert risk_cost(1.0) == np.inf
 
 
@@ -47,7 +51,11 @@ def test_least_risk_not_worse_than_shortest(roadmap, model, scene, tol):
     assert s["bound"] > 0.01 and r["bound"] < 0.5 * s["bound"]
     # reported bounds are eq. 10 of the trajectories, recomputed from scratch
     for v in (s, r):
-        np.testing.assert_allclose(v["bound"], trajectory_bound(model.predict(v["trajectory"]), scene), **tol["float64_ref"])
+        np.testing.assert_allclose(
+            v["bound"],
+            trajectory_bound(model.predict(v["trajectory"]), scene),
+            **tol["float64_ref"],
+        )
         np.testing.assert_array_equal(v["trajectory"], interpolate_path(v["path"]))
 
 
@@ -57,7 +65,9 @@ def test_least_risk_is_optimal_over_paths(roadmap, model, scene):
     out = compare_paths(roadmap, bound, START, GOAL)
     cost = RiskSegmentCost(bound)
     path = out["least_risk"]["path"]
-    total = cost(path[:-1], path[1:]).sum() + 0.5 * (cost.costs(path[:1])[0] + cost.costs(path[-1:])[0])
+    total = cost(path[:-1], path[1:]).sum() + 0.5 * (
+        cost.costs(path[:1])[0] + cost.costs(path[-1:])[0]
+    )
     np.testing.assert_allclose(total, -np.log1p(-out["least_risk"]["bound"]), rtol=1e-9, atol=1e-12)
 
 

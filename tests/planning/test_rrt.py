@@ -16,7 +16,6 @@ from riskplan.scenarios.manipulation import ManipulationScenario
 from tests.planning.conftest import SMALL_MESH, PointRobot
 
 
-
 def _check_plan(sim, plan, params):
     assert isinstance(plan, NominalPlan)
     # re-simulated from the root with its controls: the stored states, bit for bit
@@ -57,7 +56,10 @@ def test_needle_plans_replay_collision_free_in_goal(near_needle, needle_result):
 def test_obstacle_deformed_check_is_used(near_needle, needle_result):
     # the plans pass the obstacle, whose deformed polygon differs from the reference one
     plans, _ = needle_result
-    moved = [np.abs(near_needle.obstacles(s)[0] - near_needle.config.obstacles[0]).max() for s in plans[0].states[1:]]
+    moved = [
+        np.abs(near_needle.obstacles(s)[0] - near_needle.config.obstacles[0]).max()
+        for s in plans[0].states[1:]
+    ]
     assert max(moved) > 1e-3
 
 
@@ -77,7 +79,9 @@ def test_grow_tree_deterministic(point_robot):
 
 
 def test_user_simulator_with_its_own_space(point_robot):
-    plans, trees = rrt_plans(point_robot, 5, seed=0, options=RRTOptions(plans_per_tree=5), backend="serial")
+    plans, trees = rrt_plans(
+        point_robot, 5, seed=0, options=RRTOptions(plans_per_tree=5), backend="serial"
+    )
     assert len(plans) == 5 and len(trees) == 1
     for plan in plans:
         _check_plan(point_robot, plan, point_robot.nominal_params)
@@ -86,7 +90,9 @@ def test_user_simulator_with_its_own_space(point_robot):
 def test_manipulation_plan(tmp_path):
     sim = ManipulationScenario()
     params = sim.nominal_params.replace(n_elements=60)
-    tree = grow_tree(sim, seed=1, params=params, options=RRTOptions(plans_per_tree=1, max_iterations=300))
+    tree = grow_tree(
+        sim, seed=1, params=params, options=RRTOptions(plans_per_tree=1, max_iterations=300)
+    )
     assert len(tree.plans) == 1
     plan = tree.plans[0]
     _check_plan(sim, plan, params)
@@ -99,36 +105,65 @@ def test_manipulation_plan(tmp_path):
 def test_no_plan_raises_planning_error_with_tree_size_and_distance():
     # the goal is walled in by the obstacle: unreachable
     sim = PointRobot(goal=(0.5, 0.5), goal_radius=0.05, obstacle=((0.3, 0.3), (0.7, 0.7)))
-    with pytest.raises(PlanningError, match=r"tree sizes \d+\.\.\d+ nodes, best goal distance 0\.\d+"):
-        rrt_plans(sim, 3, seed=0, options=RRTOptions(max_iterations=40, plans_per_tree=3), max_rounds=1, backend="serial")
+    with pytest.raises(
+        PlanningError, match=r"tree sizes \d+\.\.\d+ nodes, best goal distance 0\.\d+"
+    ):
+        rrt_plans(
+            sim,
+            3,
+            seed=0,
+            options=RRTOptions(max_iterations=40, plans_per_tree=3),
+            max_rounds=1,
+            backend="serial",
+        )
 
 
 def test_fewer_plans_than_asked_returns_what_was_found(point_robot, caplog):
     plans, trees = rrt_plans(
-        point_robot, 6, seed=2, options=RRTOptions(max_iterations=40, plans_per_tree=3), max_rounds=1, backend="serial"
+        point_robot,
+        6,
+        seed=2,
+        options=RRTOptions(max_iterations=40, plans_per_tree=3),
+        max_rounds=1,
+        backend="serial",
     )
     assert 1 <= len(plans) < 6 and len(trees) == 2
     assert "plans within the budget" in caplog.text
 
 
 def test_distance_metric_against_a_loop(rng, tol):
-    space = PlanningSpace(low=[0, 0, -math.pi], high=[1, 1, math.pi], weights=[1, 4, 0.01],
-                          periodic=[False, False, True], goal=[0.5, 0.5, 0])
+    space = PlanningSpace(
+        low=[0, 0, -math.pi],
+        high=[1, 1, math.pi],
+        weights=[1, 4, 0.01],
+        periodic=[False, False, True],
+        goal=[0.5, 0.5, 0],
+    )
     xs = rng.uniform(-4, 4, (20, 3))
     x = rng.uniform(-4, 4, 3)
-    want = [math.sqrt((a[0] - x[0]) ** 2 + 4 * (a[1] - x[1]) ** 2
-                      + 0.01 * math.remainder(a[2] - x[2], 2 * math.pi) ** 2) for a in xs]
+    want = [
+        math.sqrt(
+            (a[0] - x[0]) ** 2
+            + 4 * (a[1] - x[1]) ** 2
+            + 0.01 * math.remainder(a[2] - x[2], 2 * math.pi) ** 2
+        )
+        for a in xs
+    ]
     np.testing.assert_allclose(space.distance(xs, x), want, **tol["float64_ref"])
     # towards the goal the heading is ignored
     want_goal = [math.sqrt((a[0] - 0.5) ** 2 + 4 * (a[1] - 0.5) ** 2) for a in xs]
-    np.testing.assert_allclose(space.distance(xs, space.goal, to_goal=True), want_goal, **tol["float64_ref"])
+    np.testing.assert_allclose(
+        space.distance(xs, space.goal, to_goal=True), want_goal, **tol["float64_ref"]
+    )
 
 
 def test_bad_input_is_named(point_robot):
     with pytest.raises(InvalidInputError, match="weights"):
         PlanningSpace(low=[0, 0], high=[1, 1], weights=[0, 0], periodic=[False, False], goal=[0, 0])
     with pytest.raises(InvalidInputError, match="steps_per_extension"):
-        PlanningSpace(low=[0], high=[1], weights=[1], periodic=[False], goal=[0], steps_per_extension=0)
+        PlanningSpace(
+            low=[0], high=[1], weights=[1], periodic=[False], goal=[0], steps_per_extension=0
+        )
     with pytest.raises(InvalidInputError, match="n_plans"):
         rrt_plans(point_robot, 0)
     with pytest.raises(InvalidInputError, match="goal_bias"):
@@ -137,7 +172,7 @@ def test_bad_input_is_named(point_robot):
     class NoGoal:
         pass
 
-    with pytest.raises(InvalidInputError, match="in_goal|lacks"):
+    with pytest.raises(InvalidInputError, match=r"in_goal|lacks"):
         rrt_plans(NoGoal(), 1)
     with pytest.raises(InvalidInputError, match="planning space"):
         planning_space(object())
@@ -167,7 +202,9 @@ def test_manipulation_sampling_bounds_keep_two_sigma():
     f = sim.config.f_max
     b = sampling_bounds(sim, RRTOptions())
     # actuation noise 0.1 f_max per component: margin 0.2 f_max
-    np.testing.assert_allclose(b, np.tile([-0.8 * f, 0.8 * f], (sim.control_dim, 1)), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(
+        b, np.tile([-0.8 * f, 0.8 * f], (sim.control_dim, 1)), rtol=0, atol=1e-15
+    )
     assert np.array_equal(sampling_bounds(sim, RRTOptions(control_margin=0.0)), sim.control_bounds)
     with pytest.raises(InvalidInputError, match="control_margin"):
         sampling_bounds(sim, RRTOptions(control_margin=10.0))
@@ -201,7 +238,9 @@ def test_zero_margins_reproduce_previous_plans(near_needle, point_robot):
         assert p.reduced.tobytes() == ref[f"needle_{i}_reduced"].tobytes()
 
 
-@pytest.mark.parametrize(("field", "value"), [("goal_depth", 1.0), ("goal_depth", -0.1), ("control_margin", -1.0)])
+@pytest.mark.parametrize(
+    ("field", "value"), [("goal_depth", 1.0), ("goal_depth", -0.1), ("control_margin", -1.0)]
+)
 def test_margin_options_validated(field, value):
     with pytest.raises(InvalidInputError, match=field):
         RRTOptions(**{field: value})

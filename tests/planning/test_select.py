@@ -19,7 +19,9 @@ CASE = get_case("actuation", SMALL_MESH)
 @pytest.fixture(scope="module")
 def selection(near_needle, needle_result):
     plans, _ = needle_result
-    return select_plan(near_needle, plans, CASE, n_samples=4, n_goal_samples=500, seed=5, backend="serial")
+    return select_plan(
+        near_needle, plans, CASE, n_samples=4, n_goal_samples=500, seed=5, backend="serial"
+    )
 
 
 def test_ranking_and_chosen_plan(near_needle, needle_result, selection):
@@ -38,7 +40,9 @@ def test_ranking_and_chosen_plan(near_needle, needle_result, selection):
     # the stored result is LQG-MP of that plan and controller (P(no collision) does not
     # depend on the goal samples' seed)
     again = lqgmp(near_needle, selection.plan, selection.controller, n_goal_samples=500, seed=0)
-    assert again.p_collision_free == pytest.approx(selection.result.p_collision_free, rel=1e-12, abs=1e-15)
+    assert again.p_collision_free == pytest.approx(
+        selection.result.p_collision_free, rel=1e-12, abs=1e-15
+    )
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
@@ -49,7 +53,9 @@ def test_evaluate_plan_matches_selection(near_needle, needle_result, selection):
     i = selection.ranking[-1].index
     draws = common_draws(near_needle, CASE, 4, 5)
     assert len(draws) == 4 and draws == common_draws(near_needle, CASE, 4, 5)
-    ctrl, res = evaluate_plan(near_needle, plans[i], draws, n_goal_samples=500, seed=spawn_seeds(5, len(plans))[i])
+    ctrl, res = evaluate_plan(
+        near_needle, plans[i], draws, n_goal_samples=500, seed=spawn_seeds(5, len(plans))[i]
+    )
     assert res.p_success == selection.score(i).p_success
     assert np.array_equal(ctrl.L, selection.controllers[i].L)
 
@@ -64,7 +70,9 @@ def test_failed_candidate_scores_zero(near_needle, needle_result, monkeypatch):
         return real(sim, plan, *args, **kwargs)
 
     monkeypatch.setattr(riskplan.control, "linearize", flaky)
-    sel = select_plan(near_needle, plans[:2], CASE, n_samples=2, n_goal_samples=200, seed=1, backend="serial")
+    sel = select_plan(
+        near_needle, plans[:2], CASE, n_samples=2, n_goal_samples=200, seed=1, backend="serial"
+    )
     bad = sel.score(0)
     assert bad.p_success == 0.0 and "step 3" in bad.error
     assert sel.best == 1 and sel.controllers[0] is None
@@ -72,7 +80,9 @@ def test_failed_candidate_scores_zero(near_needle, needle_result, monkeypatch):
 
 def test_honesty_check_rows(near_needle, needle_result, selection):
     plans, _ = needle_result
-    rows = honesty_check(near_needle, plans, selection, CASE, others=1, n=60, seed=0, backend="serial")
+    rows = honesty_check(
+        near_needle, plans, selection, CASE, others=1, n=60, seed=0, backend="serial"
+    )
     assert [r.rank for r in rows] == [0, len(plans) - 1]
     assert rows[0].index == selection.best
     for r in rows:

@@ -133,7 +133,7 @@ def test_bad_input_names_the_argument(robot):
         execute_on_robot(robot, np.full((2, 4), 0.5), env, 2, backend="serial")
     with pytest.raises(InvalidInputError, match="trajectory"):
         execute_on_robot(robot, np.array([[np.nan, 0, 0, 0]]), env, 2, backend="serial")
-    with pytest.raises(InvalidInputError, match="^n"):
+    with pytest.raises(InvalidInputError, match=r"^n"):
         execute_on_robot(robot, ok, env, 0, backend="serial")
     with pytest.raises(InvalidInputError, match="seed"):
         execute_on_robot(robot, ok, env, 2, seed=-1, backend="serial")
@@ -162,7 +162,9 @@ def test_mixture_monte_carlo_below_eq10_bound_and_table(robot):
     assert int(again.trajectory.hits) == int(mc.trajectory.hits)
     with pytest.raises(InvalidInputError, match="trajectory"):
         mixture_monte_carlo(model, np.zeros((3, 2)), env, 10)
-    rows = validation_table(model, {"a": traj[:2], "b": traj}, env, n_robot=4, n_mixture=2000, backend="serial")
+    rows = validation_table(
+        model, {"a": traj[:2], "b": traj}, env, n_robot=4, n_mixture=2000, backend="serial"
+    )
     assert [r["name"] for r in rows] == ["a", "b"]
     assert rows[1]["bound"] == pytest.approx(bound, rel=1e-12)
     assert all(r["bound_union"] >= r["bound"] for r in rows)  # ignoring the weights can only add
@@ -186,7 +188,11 @@ def test_disks_body_hits_a_slab_at_a_disk_but_not_between_disks(robot):
     for env, disks_hit in ((at_disk, 6), (gap, 0)):
         d = execute_on_robot(robot, traj, env, 6, seed=0, body="disks", backend="serial")
         t = execute_on_robot(robot, traj, env, 6, seed=0, backend="serial")
-        assert int(d.trajectory.hits) == disks_hit and d.radius == geom.backbone_radius and d.body == "disks"
+        assert (
+            int(d.trajectory.hits) == disks_hit
+            and d.radius == geom.backbone_radius
+            and d.body == "disks"
+        )
         assert int(t.trajectory.hits) == 6
     with pytest.raises(InvalidInputError, match="body"):
         execute_on_robot(robot, traj, gap, 2, body="capsule", backend="serial")

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from riskplan.robots.rod_tables import LOCAL_FAIL, OK, tendon_offsets
 from riskplan.robots.integration import rk4_pose_step
+from riskplan.robots.rod_tables import LOCAL_FAIL, OK, tendon_offsets
 from riskplan.robots.strains import local_strains, local_strains_chord, tendon_speeds
 
 
@@ -25,7 +25,22 @@ def predict(xa, xb, xc, nhist, out):
 
 
 @njit(cache=False)
-def shape_free_exact_midpoints(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, x_out, lengths):
+def shape_free_exact_midpoints(
+    tau,
+    rt_all,
+    drt_all,
+    ddrt_all,
+    kse,
+    kbt,
+    length,
+    n_steps,
+    tol,
+    maxit,
+    p_out,
+    R_out,
+    x_out,
+    lengths,
+):
     """Reference variant of :func:`shape_free` that solves (2)-(3) at the half steps too.
 
     Shape under tendon tensions ``tau (m,)`` without external loads (no shooting).

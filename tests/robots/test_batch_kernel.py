@@ -134,9 +134,7 @@ def test_zero_tension_is_straight(paper):
         P[:, :, 2], np.broadcast_to(paper.s, (3, paper.n_stations)), **TOL["round_off"]
     )
     np.testing.assert_allclose(P[:, :, :2], 0.0, **TOL["round_off"])
-    np.testing.assert_allclose(
-        R, np.broadcast_to(np.eye(3), R.shape), **TOL["round_off"]
-    )
+    np.testing.assert_allclose(R, np.broadcast_to(np.eye(3), R.shape), **TOL["round_off"])
 
 
 def test_kernel_flags_unconverged_configurations(paper, rng):

@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 
 from riskplan.errors import InvalidInputError
-from riskplan.robots.cameras import PinholeCamera, capture, default_cameras, depth_image, project, render, visible_samples
+from riskplan.robots.cameras import (
+    PinholeCamera,
+    capture,
+    default_cameras,
+    depth_image,
+    project,
+    render,
+    visible_samples,
+)
 from tests.conftest import TOL
 
 
@@ -21,7 +29,9 @@ def fib_sphere(center, radius, n):
 
 
 def cam_at(pos, target, **kw):
-    return PinholeCamera.look_at(pos, target, (0.0, 0.0, 1.0), width=160, height=120, hfov_deg=60.0, **kw)
+    return PinholeCamera.look_at(
+        pos, target, (0.0, 0.0, 1.0), width=160, height=120, hfov_deg=60.0, **kw
+    )
 
 
 def test_plane_depths_exact_without_noise(rng):
@@ -58,7 +68,10 @@ def test_sphere_front_side_only_with_exact_depths():
 
 def test_occluded_points_not_returned():
     # a small sphere hidden behind a large one along the optical axis
-    big, small = fib_sphere(np.array([0.4, 0, 0]), 0.05, 40000), fib_sphere(np.array([0.7, 0, 0]), 0.02, 20000)
+    big, small = (
+        fib_sphere(np.array([0.4, 0, 0]), 0.05, 40000),
+        fib_sphere(np.array([0.7, 0, 0]), 0.02, 20000),
+    )
     pts = np.concatenate([big[0], small[0]])
     nrm = np.concatenate([big[1], small[1]])
     cam = cam_at((0, 0, 0), (1, 0, 0), depth_noise_std=0.0)
@@ -127,7 +140,9 @@ def test_noise_along_ray_has_configured_std(sigma0, quad):
     clean = pts[idx]
     r_clean, r_noisy = np.linalg.norm(clean, axis=1), np.linalg.norm(cloud, axis=1)
     # direction unchanged
-    np.testing.assert_allclose(cloud / r_noisy[:, None], clean / r_clean[:, None], **TOL["float64_ref"])
+    np.testing.assert_allclose(
+        cloud / r_noisy[:, None], clean / r_clean[:, None], **TOL["float64_ref"]
+    )
     err = r_noisy - r_clean
     sigma = sigma0 + quad * 0.4**2
     n = len(err)
@@ -242,7 +257,9 @@ def test_capture_accepts_a_generator_and_int_seeds_are_unchanged():
     cams = default_cameras(distance=0.3, height=0.0)
     # int seeds: per-camera children of SeedSequence(seed), the last child picks the points
     children = np.random.SeedSequence(7).spawn(len(cams) + 1)
-    cloud = np.concatenate([render(pts, nrm, c, np.random.default_rng(ch))[0] for c, ch in zip(cams, children)])
+    cloud = np.concatenate(
+        [render(pts, nrm, c, np.random.default_rng(ch))[0] for c, ch in zip(cams, children)]
+    )
     ref = cloud[np.random.default_rng(children[-1]).choice(len(cloud), size=64, replace=False)]
     np.testing.assert_array_equal(capture(pts, nrm, cams, 64, seed=7), ref)
     # a Generator (used to raise TypeError): deterministic in its state, independent across calls

@@ -29,9 +29,18 @@ def with_step(robot, step, **backbone):
 
 def test_base_curvature_check_value(paper):
     """DESIGN.md check: one straight tendon, tau = 1 N -> base curvature tau r / (E I) = 1.3819 1/m."""
-    x = strains_along(np.array([1.0, 0, 0, 0]), paper._theta, paper._radius, paper.tables.kse, paper.tables.kbt, [0.0])
+    x = strains_along(
+        np.array([1.0, 0, 0, 0]),
+        paper._theta,
+        paper._radius,
+        paper.tables.kse,
+        paper.tables.kbt,
+        [0.0],
+    )
     np.testing.assert_allclose(x[0, 4], 1.3819, **TOL["quoted_5_digits"])
-    np.testing.assert_allclose(x[0, 4], 0.008 / paper.params.backbone.kbt[0], **TOL["float64_exact_rel"])
+    np.testing.assert_allclose(
+        x[0, 4], 0.008 / paper.params.backbone.kbt[0], **TOL["float64_exact_rel"]
+    )
 
 
 @pytest.mark.parametrize("tau", [1.0, 7.5])
@@ -75,9 +84,23 @@ def test_equilibrium_residuals(paper):
     F = np.empty(6)
     z = np.zeros(3)
     for k in range(n + 1):
-        e = C.local_residual(X[k], tau, paper.tables.offsets[2 * k], paper.tables.offset_slopes[2 * k], z, z, paper.tables.kse, paper.tables.kbt, F)
+        e = C.local_residual(
+            X[k],
+            tau,
+            paper.tables.offsets[2 * k],
+            paper.tables.offset_slopes[2 * k],
+            z,
+            z,
+            paper.tables.kse,
+            paper.tables.kbt,
+            F,
+        )
         assert e <= 1e-11
-    np.testing.assert_allclose(np.einsum("nji,njk->nik", R, R), np.broadcast_to(np.eye(3), R.shape), **TOL["rk4_closed_form"])
+    np.testing.assert_allclose(
+        np.einsum("nji,njk->nik", R, R),
+        np.broadcast_to(np.eye(3), R.shape),
+        **TOL["rk4_closed_form"],
+    )
 
 
 def test_hermite_midpoints_match_exact_midpoint_solves(paper):
@@ -87,7 +110,12 @@ def test_hermite_midpoints_match_exact_midpoint_solves(paper):
 
     def run(robot, fn):
         n = robot.n_stations - 1
-        P, R, X, L = np.empty((n + 1, 3)), np.empty((n + 1, 3, 3)), np.empty((n + 1, 6)), np.empty(4)
+        P, R, X, L = (
+            np.empty((n + 1, 3)),
+            np.empty((n + 1, 3, 3)),
+            np.empty((n + 1, 6)),
+            np.empty(4),
+        )
         assert fn(tau, *robot.tables, 1e-12, 50, P, R, X, L) == C.OK
         return P, L
 
@@ -106,7 +134,9 @@ def test_strain_slope_matches_finite_differences(paper):
     """x'(s) from the implicit function theorem (R&W's ODE) == finite differences of local solves."""
     tau = np.array([2.0, 0.5, 0.0, 9.0])
     s = np.array([0.1 - 1e-6, 0.1, 0.1 + 1e-6])
-    X = strains_along(tau, paper._theta, paper._radius, paper.tables.kse, paper.tables.kbt, s, tol=1e-14)
+    X = strains_along(
+        tau, paper._theta, paper._radius, paper.tables.kse, paper.tables.kbt, s, tol=1e-14
+    )
     fd = (X[2] - X[0]) / 2e-6
     th, rc = paper._theta, paper._radius
     rt, drt, ddrt = C.tendon_offset_table(th, rc, 0.2, 1)  # nodes at 0, 0.1, 0.2
@@ -203,14 +233,22 @@ def _rw_bvp(robot, tau, guess_n=41):
             npd = np.linalg.norm(pd, axis=-1)[:, None, None]
             Ai = -ti * _hat(pd) @ _hat(pd) / npd**3
             Gi = -Ai @ _hat(r)
-            ai = np.einsum("kij,kj->ki", Ai, np.einsum("kij,kj->ki", uh, pd) + np.einsum("kij,kj->ki", uh, dr) + ddr)
+            ai = np.einsum(
+                "kij,kj->ki",
+                Ai,
+                np.einsum("kij,kj->ki", uh, pd) + np.einsum("kij,kj->ki", uh, dr) + ddr,
+            )
             A += Ai
             G += Gi
             B += _hat(r) @ Ai
             H += _hat(r) @ Gi
             a += ai
             b += np.einsum("kij,kj->ki", _hat(r), ai)
-        c = -np.einsum("kij,kj->ki", uh, u @ Kbt) - np.einsum("kij,kj->ki", _hat(v), (v - e3) @ Kse) - b
+        c = (
+            -np.einsum("kij,kj->ki", uh, u @ Kbt)
+            - np.einsum("kij,kj->ki", _hat(v), (v - e3) @ Kse)
+            - b
+        )
         d = -np.einsum("kij,kj->ki", uh, (v - e3) @ Kse) - a
         M = np.concatenate([np.concatenate([Kse + A, G], -1), np.concatenate([B, Kbt + H], -1)], -2)
         vu = np.linalg.solve(M, np.concatenate([d, c], -1)[..., None])[..., 0]
@@ -227,7 +265,9 @@ def _rw_bvp(robot, tau, guess_n=41):
             t = pd / np.linalg.norm(pd)
             nsum += ti * t
             msum += ti * np.cross(r[0], t)
-        return np.concatenate([ya[0:3], ya[3:12] - np.eye(3).ravel(), Kse @ (v - e3) + nsum, Kbt @ u + msum])
+        return np.concatenate(
+            [ya[0:3], ya[3:12] - np.eye(3).ravel(), Kse @ (v - e3) + nsum, Kbt @ u + msum]
+        )
 
     s = np.linspace(0, bb.length, guess_n)
     Y = np.zeros((18, guess_n))
@@ -250,12 +290,21 @@ def test_helical_routing_against_independent_bvp(paper, tau):
 
 def _stiff(robot, factor=100.0):
     bb = robot.params.backbone
-    return with_step(robot, bb.step, youngs_modulus=bb.youngs_modulus * factor, shear_modulus=bb.shear_modulus * factor)
+    return with_step(
+        robot,
+        bb.step,
+        youngs_modulus=bb.youngs_modulus * factor,
+        shear_modulus=bb.shear_modulus * factor,
+    )
 
 
 def test_gravity_small_deflection_cantilever(paper):
     """Horizontal cantilever under its own weight: tip deflection q L^4 / (8 E I)."""
-    robot = _stiff(paper).with_base_pose(rpy=(0.0, np.pi / 2, 0.0)).with_gravity(True, (0.0, 0.0, -9.81))
+    robot = (
+        _stiff(paper)
+        .with_base_pose(rpy=(0.0, np.pi / 2, 0.0))
+        .with_gravity(True, (0.0, 0.0, -9.81))
+    )
     shape = robot.solve_tensions([0.0, 0.0, 0.0, 0.0])
     q = robot._lam * 9.81
     bb = robot.params.backbone
@@ -270,7 +319,9 @@ def test_gravity_along_backbone_compresses_linearly(paper):
     shape = robot.solve_tensions([0.0, 0.0, 0.0, 0.0])
     q = robot._lam * 9.81
     bb = robot.params.backbone
-    np.testing.assert_allclose(shape.tip, [0, 0, bb.length - q * bb.length**2 / (2 * bb.kse[2])], **TOL["float64_abs"])
+    np.testing.assert_allclose(
+        shape.tip, [0, 0, bb.length - q * bb.length**2 / (2 * bb.kse[2])], **TOL["float64_abs"]
+    )
 
 
 def test_gravity_tension_shape_is_in_equilibrium(paper):

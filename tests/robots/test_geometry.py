@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from riskplan.errors import InvalidInputError
-from riskplan.robots.geometry import BodyGeometry, interpolate_frames, sample_disk, sample_surface, sample_tube
+from riskplan.robots.geometry import (
+    BodyGeometry,
+    interpolate_frames,
+    sample_disk,
+    sample_surface,
+    sample_tube,
+)
 from tests.conftest import TOL
 
 
@@ -64,7 +70,11 @@ def test_interpolated_frames_orthonormal_and_exact_at_nodes():
     np.testing.assert_allclose(Pi, P, **TOL["float64_exact"])
     np.testing.assert_allclose(Ri, R, **TOL["float64_ref"])
     _, Rm = interpolate_frames(s, P, R, 0.5 * (s[1:] + s[:-1]))
-    np.testing.assert_allclose(np.einsum("kji,kjl->kil", Rm, Rm), np.broadcast_to(np.eye(3), Rm.shape), **TOL["float64_ref"])
+    np.testing.assert_allclose(
+        np.einsum("kji,kjl->kil", Rm, Rm),
+        np.broadcast_to(np.eye(3), Rm.shape),
+        **TOL["float64_ref"],
+    )
 
 
 def test_disk_points_on_cylinder_with_outward_normals(rng):
@@ -77,12 +87,20 @@ def test_disk_points_on_cylinder_with_outward_normals(rng):
     side = np.isclose(rho, 0.01, **TOL["float64_abs"])
     face = np.isclose(np.abs(h), 0.001, **TOL["float64_abs"])
     assert np.all(side | face)
-    assert np.all(np.abs(h) <= 0.001 + 1e-12) and np.all(rho <= 0.01 + 1e-12) and np.all(rho[face] >= 0.003)
+    assert (
+        np.all(np.abs(h) <= 0.001 + 1e-12)
+        and np.all(rho <= 0.01 + 1e-12)
+        and np.all(rho[face] >= 0.003)
+    )
     np.testing.assert_allclose(np.linalg.norm(nrm, axis=1), 1.0, **TOL["float64_ref"])
     nl = nrm @ Q
     # outward: radial on the side, +-axis on the faces
-    np.testing.assert_allclose(nl[side & ~face][:, :2], local[side & ~face][:, :2] / 0.01, **TOL["float64_ref"])
-    np.testing.assert_allclose(nl[face & ~side][:, 2], np.sign(h[face & ~side]), **TOL["float64_ref"])
+    np.testing.assert_allclose(
+        nl[side & ~face][:, :2], local[side & ~face][:, :2] / 0.01, **TOL["float64_ref"]
+    )
+    np.testing.assert_allclose(
+        nl[face & ~side][:, 2], np.sign(h[face & ~side]), **TOL["float64_ref"]
+    )
 
 
 def test_whole_surface_is_on_the_union_boundary():
@@ -99,7 +117,9 @@ def test_whole_surface_is_on_the_union_boundary():
         depth = np.minimum(0.01 - np.hypot(loc[:, 0], loc[:, 1]), 0.001 - np.abs(loc[:, 2]))
         # tube stations are cut at |s - s_k| = t/2: on the inside of the bend the tube surface
         # reaches into the disk by at most kappa r t / 2 = 18 um (hidden behind the disk faces)
-        assert depth.max() <= 1.05 * 6.0 * 0.003 * 0.002 / 2  # first-order bound, 5 % for higher orders
+        assert (
+            depth.max() <= 1.05 * 6.0 * 0.003 * 0.002 / 2
+        )  # first-order bound, 5 % for higher orders
 
 
 def test_batch_equals_loop():

@@ -7,7 +7,13 @@ import pytest
 
 from riskplan.errors import InvalidInputError
 from riskplan.robots import load_robot
-from riskplan.robots.hysteresis import HysteresisModel, HysteresisState, effective_displacements, play_operator, robot_after_path
+from riskplan.robots.hysteresis import (
+    HysteresisModel,
+    HysteresisState,
+    effective_displacements,
+    play_operator,
+    robot_after_path,
+)
 from tests.conftest import TOL
 
 
@@ -40,12 +46,12 @@ def test_retracing_the_same_path_gives_the_same_shape(paper):
     model = HysteresisModel(paper)
     path = np.array([[0.0, 0, 0, 0], [0.02, 0.0, 0.01, 0.0], [0.01, 0.005, 0.0, 0.002]])
     state0 = model.initial_state()
-    s1, shape1 = model.shape_after(state0, path)
-    s2, shape2 = model.shape_after(state0, path)
+    _s1, shape1 = model.shape_after(state0, path)
+    _s2, shape2 = model.shape_after(state0, path)
     np.testing.assert_array_equal(shape1.positions, shape2.positions)
     # a closed loop back to the loop's start from the end state lands on the same state as the first visit
     loop = np.concatenate([path, path[::-1][1:], path[1:]])
-    s3, shape3 = model.shape_after(state0, loop)
+    _s3, shape3 = model.shape_after(state0, loop)
     np.testing.assert_allclose(shape3.positions, shape1.positions, **TOL["float64_exact"])
 
 
@@ -69,7 +75,9 @@ def test_run_to_run_variation_is_seeded(paper):
     np.testing.assert_array_equal(a, b)
     assert np.abs(a - c).max() > 0
     nominal = effective_displacements(paper, path)
-    np.testing.assert_allclose(nominal, [0.01 + paper.params.hysteresis.play, 0, 0, 0], **TOL["float64_exact"])
+    np.testing.assert_allclose(
+        nominal, [0.01 + paper.params.hysteresis.play, 0, 0, 0], **TOL["float64_exact"]
+    )
 
 
 def test_tip_spread_is_millimetres(paper):
@@ -109,7 +117,7 @@ def test_state_engaged_is_validated(paper, engaged, fragment):
     path = np.zeros((2, 2, 4))
     with pytest.raises(InvalidInputError, match=f"state.engaged.*{fragment}"):
         model.move(HysteresisState(engaged), path)
-    with pytest.raises(InvalidInputError, match="state.engaged"):
+    with pytest.raises(InvalidInputError, match=r"state.engaged"):
         effective_displacements(paper, path, state=HysteresisState(engaged))
     with pytest.raises(InvalidInputError, match="state"):
         model.move(np.zeros(4), path)
@@ -117,8 +125,10 @@ def test_state_engaged_is_validated(paper, engaged, fragment):
 
 def test_start_state_of_straight_line_is_validated(paper):
     model = HysteresisModel(paper)
-    with pytest.raises(InvalidInputError, match="state.engaged"):
-        model.straight_line(np.zeros(4), np.full(4, 0.01), start_state=HysteresisState(np.array([np.inf, 0, 0, 0])))
+    with pytest.raises(InvalidInputError, match=r"state.engaged"):
+        model.straight_line(
+            np.zeros(4), np.full(4, 0.01), start_state=HysteresisState(np.array([np.inf, 0, 0, 0]))
+        )
 
 
 @pytest.mark.parametrize("shape", [(0, 4), (3, 0, 4)])

@@ -21,11 +21,17 @@ def test_solve_displacements_arbitrary(d):
     s = call(ROBOT.solve_displacements, d)
     if s is not None:
         assert_finite(s.positions, s.tensions)
-        assert np.all(np.linalg.norm(s.positions, axis=-1) <= 0.2 * 1.01 + 1e-9)  # never beyond the 0.2 m rod
+        assert np.all(
+            np.linalg.norm(s.positions, axis=-1) <= 0.2 * 1.01 + 1e-9
+        )  # never beyond the 0.2 m rod
 
 
 @PROPERTY
-@given(t=arrays_or_junk(hnp.array_shapes(min_dims=1, max_dims=2, min_side=4, max_side=4), st.floats(-1, 20)))
+@given(
+    t=arrays_or_junk(
+        hnp.array_shapes(min_dims=1, max_dims=2, min_side=4, max_side=4), st.floats(-1, 20)
+    )
+)
 def test_solve_tensions_arbitrary(t):
     s = call(ROBOT.solve_tensions, t)
     if s is not None:
@@ -34,12 +40,19 @@ def test_solve_tensions_arbitrary(t):
 
 @PROPERTY
 @given(
-    length=st.one_of(any_float, junk()), step=st.one_of(any_float, junk()), radius=st.one_of(any_float, junk()),
-    limits=st.lists(any_float, min_size=0, max_size=3), count=st.one_of(st.integers(-3, 10**9), junk()),
+    length=st.one_of(any_float, junk()),
+    step=st.one_of(any_float, junk()),
+    radius=st.one_of(any_float, junk()),
+    limits=st.lists(any_float, min_size=0, max_size=3),
+    count=st.one_of(st.integers(-3, 10**9), junk()),
 )
 def test_robot_descriptions_arbitrary(length, step, radius, limits, count):
     def fmt(v):
-        return repr(v).replace("inf", "inf").replace("None", '"none"') if not isinstance(v, str) else f'"{v!r}"'
+        return (
+            repr(v).replace("inf", "inf").replace("None", '"none"')
+            if not isinstance(v, str)
+            else f'"{v!r}"'
+        )
 
     text = (
         f"[backbone]\nlength = {fmt(length)}\nouter_radius = 0.002\nyoungs_modulus = 2e8\nstep = {fmt(step)}\n"

@@ -22,11 +22,17 @@ def test_contract(paper):
     np.testing.assert_array_equal(paper.tension_limits, [9.73, 9.73, 9.73, 16.81])
     shape = paper.solve_tensions([0.0, 0.0, 0.0, 0.0])
     assert isinstance(shape, RodShape)
-    assert shape.s.shape == (41,) and shape.positions.shape == (41, 3) and shape.rotations.shape == (41, 3, 3)
+    assert (
+        shape.s.shape == (41,)
+        and shape.positions.shape == (41, 3)
+        and shape.rotations.shape == (41, 3, 3)
+    )
     np.testing.assert_allclose(shape.tip, [0, 0, 0.2], **TOL["float64_exact"])
     np.testing.assert_allclose(paper.tendon_rest_lengths[:3], 0.2, **TOL["float64_exact"])
     # helical tendon: rest length = int sqrt(1 + (r theta')^2) ds
-    np.testing.assert_allclose(paper.tendon_rest_lengths[3], 0.2 * np.hypot(1, 0.008 * 47.124), **TOL["float64_exact_rel"])
+    np.testing.assert_allclose(
+        paper.tendon_rest_lengths[3], 0.2 * np.hypot(1, 0.008 * 47.124), **TOL["float64_exact_rel"]
+    )
 
 
 def test_tension_direction_convention(paper):
@@ -38,7 +44,9 @@ def test_tension_direction_convention(paper):
 def test_toml_text_rebuilds_the_robot(paper, tmp_path):
     again = robot_from_toml(paper.toml_text())
     tau = [1.0, 2.0, 0.0, 3.0]
-    np.testing.assert_array_equal(again.solve_tensions(tau).positions, paper.solve_tensions(tau).positions)
+    np.testing.assert_array_equal(
+        again.solve_tensions(tau).positions, paper.solve_tensions(tau).positions
+    )
     f = tmp_path / "mine.toml"
     f.write_text(paper.toml_text().replace('name = "paper"', 'name = "mine"'))
     assert load_robot(str(f)).name == "mine"
@@ -79,7 +87,11 @@ def test_displacement_tension_round_trip(paper, rng):
     tau0 = rng.uniform(0.2, 1.0, (5, 4)) * paper.tension_limits * 0.5
     d0 = paper.displacements_for_tensions(tau0)
     np.testing.assert_allclose(paper.tensions_for_displacements(d0), tau0, **TOL["tension_solve"])
-    np.testing.assert_allclose(paper.solve_displacements(d0).positions, paper.solve_tensions(tau0).positions, **TOL["displacement_roundtrip"])
+    np.testing.assert_allclose(
+        paper.solve_displacements(d0).positions,
+        paper.solve_tensions(tau0).positions,
+        **TOL["displacement_roundtrip"],
+    )
 
 
 def test_slack_tendons_carry_no_tension(paper):
@@ -108,7 +120,11 @@ def test_displacement_with_gravity_round_trip(paper):
         ("solve_tensions", [-1.0, 0.0, 0.0, 0.0], r"tensions >= 0"),
         ("solve_displacements", [0.05, 0.0, 0.0, 0.0], r"displacements <= 0.04"),
         ("solve_displacements", [0.0, -0.02, 0.0, 0.0], r"displacements >= -0.01"),
-        ("solve_displacements", [[0.0, 0.0, 0.0, 0.0, 0.0]], "displacements: expected last dimension 4"),
+        (
+            "solve_displacements",
+            [[0.0, 0.0, 0.0, 0.0, 0.0]],
+            "displacements: expected last dimension 4",
+        ),
         ("solve_displacements", "abc", "displacements: cannot convert"),
     ],
 )
@@ -227,7 +243,9 @@ def test_displacement_solve_with_inextensible_antagonistic_tendons(rng):
         d = np.asarray(d, dtype=float)
         tau = robot.tensions_for_displacements(d)
         assert np.all(tau >= 0.0)
-        g = robot.displacements_for_tensions(tau, validate=False) - d  # length to spare, l0 - l(tau) - d
+        g = (
+            robot.displacements_for_tensions(tau, validate=False) - d
+        )  # length to spare, l0 - l(tau) - d
         taut = tau > 1e-9
         np.testing.assert_allclose(g[taut], 0.0, **TOL["displacement_roundtrip"])
         assert np.all(g >= -1e-10)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import trimesh
 
 from riskplan.collision import Environment, probability_of_collision
 from riskplan.collision.robot_geometry import arc_backbone, backbone_mixture
@@ -23,7 +22,15 @@ def test_meshes_closed_and_sized(chest):
     for name, m in chest.meshes.items():
         assert m.is_watertight and m.is_winding_consistent, name
         assert m.volume > 0, name
-    assert set(chest.environment.names) >= {"body_wall", "lung_left", "lung_right", "heart", "diaphragm", "spine", "rib0"}
+    assert set(chest.environment.names) >= {
+        "body_wall",
+        "lung_left",
+        "lung_right",
+        "heart",
+        "diaphragm",
+        "spine",
+        "rib0",
+    }
 
 
 def test_seeded(chest):
@@ -39,13 +46,19 @@ def test_base_frame(chest):
     np.testing.assert_allclose(np.linalg.det(R), 1.0, **TOL["float64_ref"])
     p = np.array([0.01, -0.02, 0.05])
     np.testing.assert_allclose(chest.to_base(chest.to_world(p)), p, **TOL["float64_ref"])
-    np.testing.assert_allclose(chest.base_environment.vertices, chest.to_base(chest.environment.vertices), **TOL["float64_ref"])
+    np.testing.assert_allclose(
+        chest.base_environment.vertices,
+        chest.to_base(chest.environment.vertices),
+        **TOL["float64_ref"],
+    )
     # insertion point lies on the outer body wall; the base is inside the cavity, free
     wall = chest.environment.subset(["body_wall"])
     assert wall.closest_points(chest.insertion_point)[0] < 2e-3
     assert not chest.environment.contains(chest.base_position)
     # cavity interior is free, the wall and organs are not
-    assert chest.environment.contains(np.array([0.0, 0.0, 0.0]) + [0, 0, -0.19 - 0.01])  # inside the wall shell
+    assert chest.environment.contains(
+        np.array([0.0, 0.0, 0.0]) + [0, 0, -0.19 - 0.01]
+    )  # inside the wall shell
 
 
 def test_home_shape_free_and_bent_shapes_touch(chest):
@@ -54,8 +67,13 @@ def test_home_shape_free_and_bent_shapes_touch(chest):
     home = np.column_stack([0 * s, 0 * s, s])
     assert not env.contains(home).any()
     # a 1 cm-radius body around the straight backbone stays clear too
-    ring = np.stack([np.cos(np.linspace(0, 2 * np.pi, 16)), np.sin(np.linspace(0, 2 * np.pi, 16))], 1) * 0.01
-    body = (home[None, :, :] + np.concatenate([ring, np.zeros((16, 1))], 1)[:, None, :]).reshape(-1, 3)
+    ring = (
+        np.stack([np.cos(np.linspace(0, 2 * np.pi, 16)), np.sin(np.linspace(0, 2 * np.pi, 16))], 1)
+        * 0.01
+    )
+    body = (home[None, :, :] + np.concatenate([ring, np.zeros((16, 1))], 1)[:, None, :]).reshape(
+        -1, 3
+    )
     assert not env.contains(body).any()
     bent = arc_backbone(np.array([8.0, 8.0]), np.array([0.0, np.pi]))
     assert env.contains(bent).any(axis=-1).all()

@@ -24,14 +24,20 @@ def test_polygons_intersect_cases():
     assert geo.polygons_intersect(sq, geo.rectangle_polygon((0.9, 0.9), (2, 2)))  # overlap
     assert geo.polygons_intersect(sq, geo.rectangle_polygon((0.2, 0.2), (0.3, 0.3)))  # contained
     assert geo.polygons_intersect(geo.rectangle_polygon((0.2, 0.2), (0.3, 0.3)), sq)  # contains
-    assert geo.polygons_intersect(sq, geo.rectangle_polygon((1.0, 0.2), (2.0, 0.3)))  # touching edge
+    assert geo.polygons_intersect(
+        sq, geo.rectangle_polygon((1.0, 0.2), (2.0, 0.3))
+    )  # touching edge
     assert not geo.polygons_intersect(sq, geo.rectangle_polygon((1.01, 0.2), (2.0, 0.3)))
-    assert not geo.polygons_intersect(sq, geo.rectangle_polygon((1.5, 0.0), (2.0, 1.0)))  # collinear, disjoint
+    assert not geo.polygons_intersect(
+        sq, geo.rectangle_polygon((1.5, 0.0), (2.0, 1.0))
+    )  # collinear, disjoint
 
 
 def test_signed_distance(tol):
     sq = geo.rectangle_polygon((0, 0), (1, 1))
-    d = geo.signed_distance_to_polygon(np.array([[0.5, 0.5], [1.5, 0.5], [2.0, 2.0], [1.0, 0.3]]), sq)
+    d = geo.signed_distance_to_polygon(
+        np.array([[0.5, 0.5], [1.5, 0.5], [2.0, 2.0], [1.0, 0.3]]), sq
+    )
     np.testing.assert_allclose(d, [-0.5, 0.5, np.sqrt(2), 0.0], **tol["float64_ref"])
 
 
@@ -54,7 +60,9 @@ def test_point_locator_matches_fem_locate(n_elements, rng, tol):
         # same point: equal barycentric interpolation of the node coordinates
         np.testing.assert_allclose(lam @ mesh.nodes[mesh.triangles[e]], p, **tol["float64_ref"])
         assert lam.min() >= -1e-10
-        np.testing.assert_allclose(ref.positions(np.zeros((mesh.n_nodes, 2)))[k], p, **tol["float64_ref"])
+        np.testing.assert_allclose(
+            ref.positions(np.zeros((mesh.n_nodes, 2)))[k], p, **tol["float64_ref"]
+        )
         k += 1
     assert loc.locate(np.array([5.0, 5.0]))[0] == -1
     assert loc.locate(np.array([-1e-3, 0.5]))[0] == -1
@@ -69,7 +77,7 @@ def test_numba_and_numpy_kernels_agree(rng, tol):
     loc = geo.PointLocator(mesh.nodes, mesh.triangles)
     for p in rng.uniform(0, 1, (50, 2)):
         cand = np.arange(mesh.n_elements)
-        e1, w1, l1 = geo._locate_numba(loc.maps, cand, p[0], p[1])
-        e2, w2, l2 = geo._locate_numpy(loc.maps, cand, p[0], p[1])
+        e1, _w1, l1 = geo._locate_numba(loc.maps, cand, p[0], p[1])
+        e2, _w2, l2 = geo._locate_numpy(loc.maps, cand, p[0], p[1])
         assert e1 == e2
         np.testing.assert_allclose(l1, l2, **tol["float64_exact"])

@@ -50,7 +50,9 @@ def test_patch_loads_carry_the_commanded_force(manip, tol):
     u = np.array([0.5, -0.2, 0.1, 0.3, -0.4, 1.0])
     s = manip.step(manip.initial_state(p), u, p)
     np.testing.assert_allclose(s.forces, 0.7 * u.reshape(3, 2), **tol["float64_exact"])
-    np.testing.assert_allclose(manip.nodal_forces(s).sum(0), 0.7 * u.reshape(3, 2).sum(0), **tol["float64_ref"])
+    np.testing.assert_allclose(
+        manip.nodal_forces(s).sum(0), 0.7 * u.reshape(3, 2).sum(0), **tol["float64_ref"]
+    )
 
 
 def test_small_forces_match_linear_elasticity(manip):
@@ -59,7 +61,9 @@ def test_small_forces_match_linear_elasticity(manip):
 
     p = SimParams()
     d = manip.mesh_data(p.n_elements)
-    lin = LinearElasticModel(d.mesh, Material(p.youngs_modulus, p.poissons_ratio, plane=manip.config.plane), d.fixed)
+    lin = LinearElasticModel(
+        d.mesh, Material(p.youngs_modulus, p.poissons_ratio, plane=manip.config.plane), d.fixed
+    )
     u = np.array([0.3, -0.2, 0.1, 0.4, -0.3, 0.2]) * 1e-3
     s = manip.step(manip.initial_state(p), u, p)
     ref = lin.solve(manip.nodal_forces(s))
@@ -73,7 +77,9 @@ def test_reduced_state_and_sensing_layout(manip, rng, tol):
     x = manip.reduced(s)
     assert x.shape == (manip.state_dim,) == (2 + 2 * manip.config.n_boundary,)
     np.testing.assert_allclose(x[:2], manip.target(s), **tol["float64_exact"])
-    np.testing.assert_allclose(x[2:].reshape(-1, 2), manip.boundary_points(s), **tol["float64_exact"])
+    np.testing.assert_allclose(
+        x[2:].reshape(-1, 2), manip.boundary_points(s), **tol["float64_exact"]
+    )
     z = manip.observe(x)
     np.testing.assert_allclose(z, x[2:], **tol["float64_exact"])  # the target is not sensed
     zs = np.array([manip.observe(x, rng=rng) for _ in range(2000)]) - x[2:]
@@ -126,7 +132,9 @@ def test_bad_config():
         ManipulationConfig(obstacle=geo.circle_polygon((0.5, 0.5), 0.1))
     with pytest.raises(InvalidInputError, match="f_max"):
         ManipulationConfig(f_max=0.0)
-    sim = ManipulationScenario(ManipulationConfig(manipulators=np.array([[0.0, 0.3], [-0.5, 0.8], [0.5, 1.0]])))
+    sim = ManipulationScenario(
+        ManipulationConfig(manipulators=np.array([[0.0, 0.3], [-0.5, 0.8], [0.5, 1.0]]))
+    )
     with pytest.raises(InvalidInputError):
         sim.initial_state()
 
@@ -136,7 +144,9 @@ def test_solver_failure_is_reported_with_context():
     the error names the step and the forces, and keeps the solver's details."""
     sim = ManipulationScenario(ManipulationConfig(f_max=1e4, patch_radius=0.03))
     p = SimParams(n_elements=60)
-    with pytest.raises((ElementInversionError, ConvergenceError), match="manipulation step t=0") as info:
+    with pytest.raises(
+        (ElementInversionError, ConvergenceError), match="manipulation step t=0"
+    ) as info:
         sim.step(sim.initial_state(p), np.array([-1e4, 0.0, 0.0, 0.0, 0.0, -1e4]), p)
     exc = info.value
     if isinstance(exc, ElementInversionError):

@@ -11,7 +11,7 @@ import pytest
 
 from riskplan.errors import InvalidInputError
 from riskplan.scenarios import _geometry as geo
-from riskplan.scenarios.needle import NeedleConfig, NeedleScenario, NeedleState, car_step
+from riskplan.scenarios.needle import NeedleConfig, NeedleScenario, car_step
 from riskplan.scenarios.simulator import SimParams, rollout
 
 TAU, RMIN, PHIMAX = 0.1, 0.25, math.pi / 3
@@ -131,7 +131,9 @@ def test_force_direction_and_support_reactions(needle, tol):
     s = needle.step(needle.initial_state(p, pose=(0.5, 0.5, 0.0)), [0.5, 0.9], p)
     reactions = needle.model(p).model.reactions(s.displacement)
     th = s.pose[2]
-    np.testing.assert_allclose(reactions.sum(0), -1.5 * np.array([math.cos(th), math.sin(th)]), rtol=1e-9, atol=1e-10)
+    np.testing.assert_allclose(
+        reactions.sum(0), -1.5 * np.array([math.cos(th), math.sin(th)]), rtol=1e-9, atol=1e-10
+    )
     # the tissue near the robot moves along the push
     d = needle.mesh_data(175)
     elem, lam = d.locator.locate(s.pose[:2])
@@ -176,7 +178,9 @@ def test_embedded_mesh_nodes_move_exactly_with_nodes(tol):
     tri = mesh.nodes[interior]
     sim = NeedleScenario(NeedleConfig(obstacles=(tri,)))
     s = sim.step(sim.initial_state(pose=(0.1, 0.5, 0.0)), [0.5, 0.3])
-    np.testing.assert_allclose(sim.obstacles(s)[0], tri + s.displacement[interior], **tol["float64_ref"])
+    np.testing.assert_allclose(
+        sim.obstacles(s)[0], tri + s.displacement[interior], **tol["float64_ref"]
+    )
 
 
 def test_robot_outside_tissue_pushes_nothing(needle):
@@ -200,7 +204,9 @@ def test_collision_and_goal_predicates(needle):
 def test_observe_noise(needle, rng, tol):
     x = np.array([0.2, 0.3, 1.0])
     np.testing.assert_array_equal(needle.observe(x), [0.2, 0.3])
-    np.testing.assert_allclose(needle.observe(x, noise=[0.01, -0.01]), [0.21, 0.29], **tol["float64_exact"])
+    np.testing.assert_allclose(
+        needle.observe(x, noise=[0.01, -0.01]), [0.21, 0.29], **tol["float64_exact"]
+    )
     z = np.array([needle.observe(x, rng=rng) for _ in range(3000)]) - x[:2]
     sd = needle.config.sensing_std
     assert np.all(np.abs(z.mean(0)) < 4 * sd / np.sqrt(3000))
@@ -210,7 +216,16 @@ def test_observe_noise(needle, rng, tol):
 
 
 @pytest.mark.parametrize(
-    "control", [[0.51, 0.0], [-1e-9, 0.0], [0.2, PHIMAX + 1e-9], [0.2, -PHIMAX - 0.1], [np.nan, 0.0], [0.2, np.inf], [0.2]]
+    "control",
+    [
+        [0.51, 0.0],
+        [-1e-9, 0.0],
+        [0.2, PHIMAX + 1e-9],
+        [0.2, -PHIMAX - 0.1],
+        [np.nan, 0.0],
+        [0.2, np.inf],
+        [0.2],
+    ],
 )
 def test_bad_controls(needle, control):
     with pytest.raises(InvalidInputError, match="control"):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -31,7 +30,21 @@ def test_needle_initial_pose_arbitrary(pose):
 
 
 @PROPERTY
-@given(changes=st.fixed_dictionaries({}, optional={k: st.one_of(any_float, junk(), st.integers(-2, 8)) for k in ("wall_thickness", "port_depth", "subdivisions", "shape_noise", "insertion_height")}))
+@given(
+    changes=st.fixed_dictionaries(
+        {},
+        optional={
+            k: st.one_of(any_float, junk(), st.integers(-2, 8))
+            for k in (
+                "wall_thickness",
+                "port_depth",
+                "subdivisions",
+                "shape_noise",
+                "insertion_height",
+            )
+        },
+    )
+)
 def test_chest_parameters_arbitrary(changes):
     p = call(ChestParams, **changes)
     if p is not None:

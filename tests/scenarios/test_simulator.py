@@ -94,10 +94,14 @@ def test_noisy_control_is_clipped_to_bounds():
     for t in range(20):
         u = apply_actuation_noise(np.array([0.0, 0.0]), p, t, bounds)
         assert np.all(u >= bounds[:, 0]) and np.all(u <= bounds[:, 1])
-    assert np.array_equal(apply_actuation_noise(np.array([0.1, 0.2]), SimParams(), 0, bounds), [0.1, 0.2])
+    assert np.array_equal(
+        apply_actuation_noise(np.array([0.1, 0.2]), SimParams(), 0, bounds), [0.1, 0.2]
+    )
 
 
-@pytest.mark.parametrize("u", [[0.6, 0.0], [-0.01, 0.0], [0.1, 1.5], [np.nan, 0.0], [0.1], [[0.1, 0.1]], "x"])
+@pytest.mark.parametrize(
+    "u", [[0.6, 0.0], [-0.01, 0.0], [0.1, 1.5], [np.nan, 0.0], [0.1], [[0.1, 0.1]], "x"]
+)
 def test_check_control_rejects(u):
     bounds = np.array([[0.0, 0.5], [-1.0, 1.0]])
     with pytest.raises(InvalidInputError, match="control"):

@@ -19,7 +19,23 @@ def test_simulate_needle_from_csv(tmp_path):
     ctrl = tmp_path / "u.csv"
     ctrl.write_text("# speed, steering\nv,phi\n0.5,0.0\n0.5,0.3\n0.4,-0.2\n")
     out = tmp_path / "out"
-    r = runner.invoke(app, ["tissue", "simulate", "--scenario", "needle", "--controls", str(ctrl), "--out", str(out), "--case", "material-high", "--seed", "2"])
+    r = runner.invoke(
+        app,
+        [
+            "tissue",
+            "simulate",
+            "--scenario",
+            "needle",
+            "--controls",
+            str(ctrl),
+            "--out",
+            str(out),
+            "--case",
+            "material-high",
+            "--seed",
+            "2",
+        ],
+    )
     assert r.exit_code == 0, r.output
     summary = json.loads((out / "summary.json").read_text())
     assert summary["steps"] == 3 and summary["case"] == "material-high"
@@ -29,7 +45,23 @@ def test_simulate_needle_from_csv(tmp_path):
 
 def test_simulate_manipulation_random_json(tmp_path):
     out = tmp_path / "m"
-    r = runner.invoke(app, ["tissue", "simulate", "--scenario", "manipulation", "--controls", "random", "--out", str(out), "--steps", "3", "--max-frames", "2"])
+    r = runner.invoke(
+        app,
+        [
+            "tissue",
+            "simulate",
+            "--scenario",
+            "manipulation",
+            "--controls",
+            "random",
+            "--out",
+            str(out),
+            "--steps",
+            "3",
+            "--max-frames",
+            "2",
+        ],
+    )
     assert r.exit_code == 0, r.output
     summary = json.loads((out / "summary.json").read_text())
     assert len(summary["final_reduced_state"]) == 26 and summary["steps"] == 3
@@ -38,9 +70,13 @@ def test_simulate_manipulation_random_json(tmp_path):
 def test_simulate_rejects_bad_input(tmp_path):
     ctrl = tmp_path / "u.json"
     ctrl.write_text(json.dumps({"controls": [[0.9, 0.0]]}))  # speed above v_max
-    r = runner.invoke(app, ["tissue", "simulate", "--controls", str(ctrl), "--out", str(tmp_path / "o")])
+    r = runner.invoke(
+        app, ["tissue", "simulate", "--controls", str(ctrl), "--out", str(tmp_path / "o")]
+    )
     assert r.exit_code != 0
-    r = runner.invoke(app, ["tissue", "simulate", "--scenario", "liver", "--out", str(tmp_path / "o")])
+    r = runner.invoke(
+        app, ["tissue", "simulate", "--scenario", "liver", "--out", str(tmp_path / "o")]
+    )
     assert r.exit_code != 0
     r = runner.invoke(app, ["tissue", "simulate", "--case", "bogus", "--out", str(tmp_path / "o")])
     assert r.exit_code != 0
@@ -49,10 +85,14 @@ def test_simulate_rejects_bad_input(tmp_path):
 def test_read_controls_formats(tmp_path, tol):
     a = tmp_path / "a.json"
     a.write_text("[[0.1, 0.2], [0.3, 0.4]]")
-    np.testing.assert_allclose(read_controls(a, 2), [[0.1, 0.2], [0.3, 0.4]], **tol["float64_exact"])
+    np.testing.assert_allclose(
+        read_controls(a, 2), [[0.1, 0.2], [0.3, 0.4]], **tol["float64_exact"]
+    )
     b = tmp_path / "b.txt"
     b.write_text("0.1,0.2\n\n0.3,0.4\n")
-    np.testing.assert_allclose(read_controls(b, 2), [[0.1, 0.2], [0.3, 0.4]], **tol["float64_exact"])
+    np.testing.assert_allclose(
+        read_controls(b, 2), [[0.1, 0.2], [0.3, 0.4]], **tol["float64_exact"]
+    )
     bad = tmp_path / "c.csv"
     bad.write_text("0.1,0.2\n0.3\n")
     with pytest.raises(DataFormatError):
@@ -76,7 +116,12 @@ def test_step_cost_keys():
 
     out = step_costs(quick=True)
     for n in (175, 1000):
-        for key in (f"needle_step_us_{n}", f"needle_step_and_collision_us_{n}", f"manipulation_step_ms_{n}", f"manipulation_reduced_us_{n}"):
+        for key in (
+            f"needle_step_us_{n}",
+            f"needle_step_and_collision_us_{n}",
+            f"manipulation_step_ms_{n}",
+            f"manipulation_reduced_us_{n}",
+        ):
             assert out[key] > 0
 
 
@@ -90,7 +135,9 @@ def test_controls_validated_before_any_simulation(tmp_path):
     r = runner.invoke(app, ["tissue", "simulate", "--controls", str(ctrl), "--out", str(out)])
     assert r.exit_code != 0 and "row 49 column 2" in str(r.exception) and not out.exists()
     # --max-frames 0 used to fail after the whole simulation, leaving an empty frames/
-    r = runner.invoke(app, ["tissue", "simulate", "--steps", "2", "--max-frames", "0", "--out", str(out)])
+    r = runner.invoke(
+        app, ["tissue", "simulate", "--steps", "2", "--max-frames", "0", "--out", str(out)]
+    )
     assert r.exit_code != 0 and "--max-frames" in str(r.exception) and not out.exists()
     latin = tmp_path / "latin.csv"
     latin.write_bytes("# d\xe9placement\n0.5,0.0\n".encode("latin-1"))
@@ -100,5 +147,7 @@ def test_controls_validated_before_any_simulation(tmp_path):
     afile.write_text("x")
     r = runner.invoke(app, ["tissue", "simulate", "--steps", "2", "--out", str(afile)])
     assert isinstance(r.exception, InvalidInputError) and "existing file" in str(r.exception)
-    r = runner.invoke(app, ["tissue", "simulate", "--steps", "2", "--seed", "-1", "--out", str(out)])
+    r = runner.invoke(
+        app, ["tissue", "simulate", "--steps", "2", "--seed", "-1", "--out", str(out)]
+    )
     assert isinstance(r.exception, InvalidInputError) and "--seed" in str(r.exception)

@@ -33,14 +33,18 @@ def _check_moments(samples, mean, var):
     assert abs(x.var(ddof=1) - var) < 4 * math.sqrt(max(m4 - var**2, 1e-300) / n)
 
 
-@pytest.mark.parametrize("case,e_var,nu_var", [("material-low", 5.0, 1e-4), ("material-high", 75.0, 4e-4)])
+@pytest.mark.parametrize(
+    "case,e_var,nu_var", [("material-low", 5.0, 1e-4), ("material-high", 75.0, 4e-4)]
+)
 def test_material_moments_read_as_variances(case, e_var, nu_var):
     dist = get_case(case)
     draws = dist.sample_many(N, seed=1)
     _check_moments([d.youngs_modulus for d in draws], 50.0, e_var)
     _check_moments([d.poissons_ratio for d in draws], 0.4, nu_var)
     assert dist.variance == (e_var, nu_var) and dist.mean == (50.0, 0.4)
-    assert all(d.n_elements == 175 and d.force_scale == 1.0 and d.actuation_cov is None for d in draws)
+    assert all(
+        d.n_elements == 175 and d.force_scale == 1.0 and d.actuation_cov is None for d in draws
+    )
 
 
 def test_mesh_case_uniform_integers():
@@ -109,5 +113,7 @@ def test_every_case_drives_both_scenarios(name, needle, manip):
     dm = get_case(name, actuation_cov=manip.actuation_cov()).sample(11)
     if name == "mesh":
         dm = dm.replace(n_elements=min(dm.n_elements, 200))  # keep the nonlinear solve cheap
-    s = rollout(manip, manip.initial_state(dm), np.tile([0.2, 0.2, 0.0, 0.3, -0.2, 0.1], (2, 1)), dm)[-1]
+    s = rollout(
+        manip, manip.initial_state(dm), np.tile([0.2, 0.2, 0.0, 0.3, -0.2, 0.1], (2, 1)), dm
+    )[-1]
     assert np.all(np.isfinite(s.displacement))

@@ -11,10 +11,17 @@ import time
 from collections.abc import Callable
 
 #: Environment variables that set thread counts of the numeric libraries.
-THREAD_ENV_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")
+THREAD_ENV_VARS = (
+    "OMP_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "NUMBA_NUM_THREADS",
+)
 
 
-def median_time(fn: Callable[[], object], repeats: int = 50, warmup: int = 3, inner: int = 1) -> float:
+def median_time(
+    fn: Callable[[], object], repeats: int = 50, warmup: int = 3, inner: int = 1
+) -> float:
     """Median wall-clock seconds of one call to ``fn`` (``inner`` calls per sample)."""
     for _ in range(warmup):
         fn()
@@ -50,7 +57,11 @@ def thread_settings() -> dict:
     from threadpoolctl import threadpool_info
 
     out["pools"] = [
-        {"library": p.get("internal_api", p.get("prefix")), "api": p.get("user_api"), "num_threads": p.get("num_threads")}
+        {
+            "library": p.get("internal_api", p.get("prefix")),
+            "api": p.get("user_api"),
+            "num_threads": p.get("num_threads"),
+        }
         for p in threadpool_info()
     ]
     torch = sys.modules.get("torch")

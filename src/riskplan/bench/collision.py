@@ -37,7 +37,9 @@ def _closest_point_libraries(env, n, quick):
     P = rng.uniform(lo, hi, size=(n, 3))
     out = {}
     env.closest_points(P[:2])
-    out["libigl_aabb"] = median_time(lambda: env.closest_points(P), repeats=3 if quick else 10) * 1e3
+    out["libigl_aabb"] = (
+        median_time(lambda: env.closest_points(P), repeats=3 if quick else 10) * 1e3
+    )
     try:
         import coal
     except ImportError:
@@ -62,7 +64,16 @@ def _closest_point_libraries(env, n, quick):
         out["coal"] = median_time(coal_query, repeats=3 if quick else 5, warmup=1) * 1e3
     mesh = trimesh.Trimesh(env.vertices, env.faces, process=False)
     m = max(10, n // 20)
-    out["trimesh"] = median_time(lambda: trimesh.proximity.closest_point(mesh, P[:m]), repeats=1 if quick else 3, warmup=1) * 1e3 * n / m
+    out["trimesh"] = (
+        median_time(
+            lambda: trimesh.proximity.closest_point(mesh, P[:m]),
+            repeats=1 if quick else 3,
+            warmup=1,
+        )
+        * 1e3
+        * n
+        / m
+    )
     return out
 
 
@@ -81,7 +92,10 @@ def run(quick: bool = False) -> dict:
     figures = {
         "gaussian_ms": median_time(lambda: gaussian_bound(mu, U, env), repeats=reps) * 1e3,
         "mixture5_ms": median_time(lambda: probability_of_collision(gm1, env), repeats=reps) * 1e3,
-        "trajectory50_ms": median_time(lambda: trajectory_bound(gm50, env), repeats=max(3, reps // 6)) * 1e3,
+        "trajectory50_ms": median_time(
+            lambda: trajectory_bound(gm50, env), repeats=max(3, reps // 6)
+        )
+        * 1e3,
         "mesh_triangles": int(env.n_faces),
     }
     # per-configuration cost when many configurations go in one batched call
@@ -92,16 +106,33 @@ def run(quick: bool = False) -> dict:
         ch = build_chest(0, subdivisions=sub, rib_segments=seg, rib_sides=8 if sub >= 4 else 6)
         e = ch.base_environment
         probability_of_collision(gm1, e)
-        by_tri[str(e.n_faces)] = median_time(lambda e=e: probability_of_collision(gm50, e), repeats=3) * 1e3 / 50
+        by_tri[str(e.n_faces)] = (
+            median_time(lambda e=e: probability_of_collision(gm50, e), repeats=3) * 1e3 / 50
+        )
     figures["mixture5_ms_per_config_by_triangles"] = by_tri
     by_k = {}
     for K in (1, 2, 5, 10, 20) if not quick else (1, 5):
         g = _mixtures(50, K)
         probability_of_collision(g[:2], env)
-        by_k[str(K)] = median_time(lambda g=g: probability_of_collision(g, env), repeats=3) * 1e3 / 50
+        by_k[str(K)] = (
+            median_time(lambda g=g: probability_of_collision(g, env), repeats=3) * 1e3 / 50
+        )
     figures["mixture_ms_per_config_by_components"] = by_k
-    figures["closest_points_1000_ms"] = _closest_point_libraries(chest.environment, 200 if quick else 1000, quick)
+    figures["closest_points_1000_ms"] = _closest_point_libraries(
+        chest.environment, 200 if quick else 1000, quick
+    )
     rng = np.random.default_rng(2)
-    pts = chest.base_environment.bounds[0] + rng.random((100_000, 3)) * np.ptp(chest.base_environment.bounds, axis=0)
-    figures["contains_100k_points_ms"] = median_time(lambda: env.contains(pts), repeats=3 if quick else 10) * 1e3
-    return {k: (round(v, 4) if isinstance(v, float) else ({kk: round(vv, 4) for kk, vv in v.items()} if isinstance(v, dict) else v)) for k, v in figures.items()}
+    pts = chest.base_environment.bounds[0] + rng.random((100_000, 3)) * np.ptp(
+        chest.base_environment.bounds, axis=0
+    )
+    figures["contains_100k_points_ms"] = (
+        median_time(lambda: env.contains(pts), repeats=3 if quick else 10) * 1e3
+    )
+    return {
+        k: (
+            round(v, 4)
+            if isinstance(v, float)
+            else ({kk: round(vv, 4) for kk, vv in v.items()} if isinstance(v, dict) else v)
+        )
+        for k, v in figures.items()
+    }

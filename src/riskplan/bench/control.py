@@ -20,8 +20,6 @@ from __future__ import annotations
 import time
 import warnings
 
-import numpy as np
-
 
 def _timed(fn, repeats: int) -> tuple[float, object]:
     out = fn()  # warm-up (numba kernels, FEM caches)
@@ -34,7 +32,9 @@ def _timed(fn, repeats: int) -> tuple[float, object]:
     return samples[len(samples) // 2], out
 
 
-def _scenario_figures(name: str, plan_controls, repeats: int, mc_runs: int, k_2q: bool = False) -> dict:
+def _scenario_figures(
+    name: str, plan_controls, repeats: int, mc_runs: int, k_2q: bool = False
+) -> dict:
     from riskplan.control import NominalPlan, linearize, lqg_controller, lqgmp, monte_carlo_success
     from riskplan.control.linearize import RankDeficiencyWarning
     from riskplan.scenarios.registry import make_scenario
@@ -61,7 +61,9 @@ def _scenario_figures(name: str, plan_controls, repeats: int, mc_runs: int, k_2q
     if k_2q:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RankDeficiencyWarning)
-            t_k, _ = _timed(lambda: linearize(sim, plan, n_a_runs=2 * sim.control_dim, seed=0), repeats)
+            t_k, _ = _timed(
+                lambda: linearize(sim, plan, n_a_runs=2 * sim.control_dim, seed=0), repeats
+            )
         out[f"{name}_linearize_k2q_ms"] = 1e3 * t_k
     if mc_runs:
         t0 = time.perf_counter()
@@ -71,15 +73,25 @@ def _scenario_figures(name: str, plan_controls, repeats: int, mc_runs: int, k_2q
 
 
 def run(quick: bool = False) -> dict:
-    from riskplan.experiments.demo_tissue import greedy_manipulation_controls, greedy_needle_controls
+    from riskplan.experiments.demo_tissue import (
+        greedy_manipulation_controls,
+        greedy_needle_controls,
+    )
 
     figures = _scenario_figures(
-        "needle", lambda sim, p: greedy_needle_controls(sim, p, 40), repeats=1 if quick else 5, mc_runs=50 if quick else 1000
+        "needle",
+        lambda sim, p: greedy_needle_controls(sim, p, 40),
+        repeats=1 if quick else 5,
+        mc_runs=50 if quick else 1000,
     )
     if not quick:
         figures.update(
             _scenario_figures(
-                "manipulation", lambda sim, p: greedy_manipulation_controls(sim, p, 14), repeats=1, mc_runs=0, k_2q=True
+                "manipulation",
+                lambda sim, p: greedy_manipulation_controls(sim, p, 14),
+                repeats=1,
+                mc_runs=0,
+                k_2q=True,
             )
         )
     return {k: (float(v) if not isinstance(v, int) else v) for k, v in figures.items()}

@@ -48,9 +48,16 @@ def run(quick: bool = False, model: str = "paper") -> dict:
     problem = nominal_problem(model, n_milestones=milestones)
     setup_s = time.perf_counter() - t0
     nominal = problem["nominal"]
-    eval_ms = median_time(lambda: trajectory_risk(problem["bound"], nominal), repeats=3 if quick else 10, warmup=1) * 1e3
+    eval_ms = (
+        median_time(
+            lambda: trajectory_risk(problem["bound"], nominal), repeats=3 if quick else 10, warmup=1
+        )
+        * 1e3
+    )
     # serial: the per-run time is what a user waits for one optimisation
-    rows = compare_optimisers(problem, methods=("bo",), seeds=seeds, iterations=iterations, backend="serial")
+    rows = compare_optimisers(
+        problem, methods=("bo",), seeds=seeds, iterations=iterations, backend="serial"
+    )
     return {
         "bound_reduction": float(np.median([r["reduction"] for r in rows])),
         "bo_50_iterations_s": None if quick else float(np.median([r["seconds"] for r in rows])),
@@ -61,7 +68,10 @@ def run(quick: bool = False, model: str = "paper") -> dict:
         "trajectory_configurations": len(nominal),
         "nominal_bound": float(rows[0]["initial_bound"]),
         "optimised_bound": float(np.median([r["bound"] for r in rows])),
-        "optimised_bound_range": [float(min(r["bound"] for r in rows)), float(max(r["bound"] for r in rows))],
+        "optimised_bound_range": [
+            float(min(r["bound"] for r in rows)),
+            float(max(r["bound"] for r in rows)),
+        ],
         "seeds": len(rows),
         "iterations": iterations,
         "setup_s": float(setup_s),

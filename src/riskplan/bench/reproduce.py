@@ -62,7 +62,9 @@ def executions_per_s(name: str, n_per_case: int, seed: int = 0, costs: dict | No
         ctrl = evaluate_candidate((sim, plan, 16, 2000, seed))["controller"]
         t_select.append(time.process_time() - t0)
         seeds = spawn_seeds(seed, n_per_case + 1)
-        execute_batch((sim, plan, ctrl, seeds[:1]))  # warm-up: FEM model of the planning mesh, imports
+        execute_batch(
+            (sim, plan, ctrl, seeds[:1])
+        )  # warm-up: FEM model of the planning mesh, imports
         t0 = time.process_time()
         execute_batch((sim, plan, None, seeds[1:]))
         execute_batch((sim, plan, ctrl, seeds[1:]))
@@ -70,7 +72,9 @@ def executions_per_s(name: str, n_per_case: int, seed: int = 0, costs: dict | No
         count += 2 * n_per_case
     if costs is not None:
         costs["rrt_s"] = t_rrt
-        costs["select_s"] = sum(t_select[1:]) / max(1, len(t_select) - 1)  # the first one pays imports and JIT
+        costs["select_s"] = sum(t_select[1:]) / max(
+            1, len(t_select) - 1
+        )  # the first one pays imports and JIT
     return count / elapsed
 
 
@@ -78,14 +82,18 @@ def run(quick: bool = False) -> dict:
     needle, manipulation = {}, {}
     out = {
         "needle_executions_per_s": executions_per_s("needle", 5 if quick else 40, costs=needle),
-        "manipulation_executions_per_s": executions_per_s("manipulation", 2 if quick else 10, costs=manipulation),
+        "manipulation_executions_per_s": executions_per_s(
+            "manipulation", 2 if quick else 10, costs=manipulation
+        ),
         "needle_rrt_s_per_candidate": needle["rrt_s"],
         "needle_select_s_per_candidate_case": needle["select_s"],
         "manipulation_rrt_s_per_candidate": manipulation["rrt_s"],
         "manipulation_select_s_per_candidate_case": manipulation["select_s"],
         "smoke_all_s": None,
         "cpu": _cpu(),
-        "cores": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+        "cores": len(os.sched_getaffinity(0))
+        if hasattr(os, "sched_getaffinity")
+        else os.cpu_count(),
     }
     if not quick:
         from riskplan.experiments.reproduce import reproduce

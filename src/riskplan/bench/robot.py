@@ -47,17 +47,32 @@ def run(quick: bool = False, *, include_dataset: bool = True) -> dict:
     lim = robot.tension_limits
     singles = rng.uniform(0.0, 1.0, (64, robot.n_tendons)) * lim * 0.5
     it = iter(range(10**9))
-    t_single = median_time(lambda: robot.solve_tensions(singles[next(it) % 64]), repeats=50 if quick else 300, warmup=5)
+    t_single = median_time(
+        lambda: robot.solve_tensions(singles[next(it) % 64]), repeats=50 if quick else 300, warmup=5
+    )
     n = robot.n_stations
-    P, Rs, X, lengths = np.empty((n, 3)), np.empty((n, 3, 3)), np.empty((n, 6)), np.empty(robot.n_tendons)
+    P, Rs, X, lengths = (
+        np.empty((n, 3)),
+        np.empty((n, 3, 3)),
+        np.empty((n, 6)),
+        np.empty(robot.n_tendons),
+    )
     kernel_args = (*robot.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths)
-    t_kernel = median_time(lambda: cosserat.shape_free(singles[next(it) % 64], *kernel_args), repeats=50 if quick else 300, warmup=5)
+    t_kernel = median_time(
+        lambda: cosserat.shape_free(singles[next(it) % 64], *kernel_args),
+        repeats=50 if quick else 300,
+        warmup=5,
+    )
     n_batch = 1000 if quick else N_BATCH
     batch = rng.uniform(0.0, 1.0, (n_batch, robot.n_tendons)) * lim * 0.5
     t_batch = median_time(lambda: robot.solve_tensions(batch), repeats=3 if quick else 5, warmup=1)
     dl = robot.displacement_limits
     dsingles = rng.uniform(dl[:, 0], 0.5 * dl[:, 1], (64, robot.n_tendons))
-    t_disp = median_time(lambda: robot.solve_displacements(dsingles[next(it) % 64]), repeats=30 if quick else 200, warmup=3)
+    t_disp = median_time(
+        lambda: robot.solve_displacements(dsingles[next(it) % 64]),
+        repeats=30 if quick else 200,
+        warmup=3,
+    )
     out = {
         "tension_single_ms": t_single * 1e3,
         "tension_kernel_single_us": t_kernel * 1e6,

@@ -27,8 +27,22 @@ def _linear_setup(n_elements: int):
 
     mesh = mesh_polygon(rectangle(), n_elements)
     model = LinearElasticModel(mesh, Material(50.0, 0.4), mesh.vertex_nodes)
-    pts = np.array([[0.3, 0.3], [0.4, 0.3], [0.4, 0.45], [0.3, 0.45], [0.6, 0.6], [0.7, 0.6],
-                    [0.7, 0.7], [0.6, 0.7], [0.8, 0.85], [0.85, 0.85], [0.85, 0.9], [0.8, 0.9]])
+    pts = np.array(
+        [
+            [0.3, 0.3],
+            [0.4, 0.3],
+            [0.4, 0.45],
+            [0.3, 0.45],
+            [0.6, 0.6],
+            [0.7, 0.6],
+            [0.7, 0.7],
+            [0.6, 0.7],
+            [0.8, 0.85],
+            [0.85, 0.85],
+            [0.85, 0.9],
+            [0.8, 0.9],
+        ]
+    )
     return mesh, model, locate(mesh, pts)
 
 
@@ -57,20 +71,29 @@ def linear_step_ms(n_elements: int, repeats: int = 200) -> float:
 
 
 def _nonlinear_setup(n_elements: int):
-    from riskplan.deformable import Material, NeoHookeanModel, locate, mesh_polygon, patch_weights, rectangle
+    from riskplan.deformable import (
+        Material,
+        NeoHookeanModel,
+        locate,
+        mesh_polygon,
+        patch_weights,
+        rectangle,
+    )
 
     mesh = mesh_polygon(rectangle(), n_elements)
     x, y = mesh.nodes[:, 0], mesh.nodes[:, 1]
     fixed = np.flatnonzero(((y == 0.0) & (x >= 0.6)) | ((x == 1.0) & (y <= 0.4)))
     model = NeoHookeanModel(mesh, Material(50.0, 0.4), fixed)
-    W = np.stack([patch_weights(mesh, c, 0.1) for c in ([0.0, 0.5], [0.5, 1.0], [1.0, 0.8])], axis=1)  # (N, 3)
+    W = np.stack(
+        [patch_weights(mesh, c, 0.1) for c in ([0.0, 0.5], [0.5, 1.0], [1.0, 0.8])], axis=1
+    )  # (N, 3)
     b = mesh.boundary_nodes
     pts = np.vstack([[0.45, 0.55], mesh.nodes[b[:: max(1, len(b) // 8)][:8]]])
     return mesh, model, W, locate(mesh, pts)
 
 
 def nonlinear_step_ms(n_elements: int, repeats: int = 30) -> float:
-    mesh, model, W, material_points = _nonlinear_setup(n_elements)
+    _mesh, model, W, material_points = _nonlinear_setup(n_elements)
     base = np.array([[1.0, 0.2], [0.1, -1.0], [-0.8, -0.3]])  # manipulator forces (3, 2)
     state = {"u": model.solve(W @ base), "k": 0}
 

@@ -17,8 +17,8 @@ from riskplan.collision.environment import Environment
 from riskplan.collision.frames import (
     BasePose,
     environment_in_base_frame,
-    mesh_base_pose,
     load_environment,
+    mesh_base_pose,
     save_environment,
 )
 from riskplan.collision.gaussian import (
@@ -67,9 +67,13 @@ def probability_of_collision(
       (``n_samples``, ``seed``); use :func:`monte_carlo_probability` for intervals.
     """
     if method == "bound":
-        return mixture_bound(mixture, environment, combine="weighted", cutoff=cutoff, validate=validate)
+        return mixture_bound(
+            mixture, environment, combine="weighted", cutoff=cutoff, validate=validate
+        )
     if method == "union":
-        return mixture_bound(mixture, environment, combine="union", cutoff=cutoff, validate=validate)
+        return mixture_bound(
+            mixture, environment, combine="union", cutoff=cutoff, validate=validate
+        )
     if method in ("monte_carlo", "monte_carlo_union"):
         combine = "weighted" if method == "monte_carlo" else "union"
         return monte_carlo_probability(
@@ -89,13 +93,13 @@ __all__ = [
     "binomial_interval",
     "component_bounds",
     "environment_in_base_frame",
-    "mesh_base_pose",
     "free_region",
     "gaussian_bound",
     "gaussian_bound_covariance",
     "gaussian_bound_terms",
     "load_environment",
     "mahalanobis",
+    "mesh_base_pose",
     "mixture_bound",
     "monte_carlo_probability",
     "monte_carlo_trajectory",

@@ -149,7 +149,18 @@ def closest_points_brute(V, F, P):
             if d == 3:
                 a, b, c = F[f, 0], F[f, 1], F[f, 2]
                 qx, qy, qz = _closest_tri(
-                    V[a, 0], V[a, 1], V[a, 2], V[b, 0], V[b, 1], V[b, 2], V[c, 0], V[c, 1], V[c, 2], P[i, 0], P[i, 1], P[i, 2]
+                    V[a, 0],
+                    V[a, 1],
+                    V[a, 2],
+                    V[b, 0],
+                    V[b, 1],
+                    V[b, 2],
+                    V[c, 0],
+                    V[c, 1],
+                    V[c, 2],
+                    P[i, 0],
+                    P[i, 1],
+                    P[i, 2],
                 )
                 s = (qx - P[i, 0]) ** 2 + (qy - P[i, 1]) ** 2 + (qz - P[i, 2]) ** 2
                 if s < best:
@@ -217,8 +228,18 @@ def _whitened_closest(V, F, muh, Uh, t, scale, centers, radii, cutoff, W, cp, dh
                 W[n, k, i] = acc
         if d == 3:
             qx, qy, qz = _closest_tri(
-                W[n, 0, 0], W[n, 0, 1], W[n, 0, 2], W[n, 1, 0], W[n, 1, 1], W[n, 1, 2],
-                W[n, 2, 0], W[n, 2, 1], W[n, 2, 2], 0.0, 0.0, 0.0,
+                W[n, 0, 0],
+                W[n, 0, 1],
+                W[n, 0, 2],
+                W[n, 1, 0],
+                W[n, 1, 1],
+                W[n, 1, 2],
+                W[n, 2, 0],
+                W[n, 2, 1],
+                W[n, 2, 2],
+                0.0,
+                0.0,
+                0.0,
             )
             cp[n, 0], cp[n, 1], cp[n, 2] = qx, qy, qz
             rh = _norm3(qx, qy, qz)
@@ -254,7 +275,9 @@ def _halfspace_loop(W, cp, dhat, dist, scale, n, eps, a_out, b_out):
     d = W.shape[2]
     order = np.argsort(dhat[:n])
     active = np.ones(n, dtype=np.bool_)
-    inv_scale = 1.0 / scale  # 0 for scale = inf, inf for a subnormal scale: both give finite thresholds
+    inv_scale = (
+        1.0 / scale
+    )  # 0 for scale = inf, inf for a subnormal scale: both give finite thresholds
     m = 0
     for oi in range(n):
         f = order[oi]
@@ -337,7 +360,9 @@ def gaussian_bounds(V, F, centers, radii, mus, Us, cutoff, eps, record):
             for j in range(d):
                 Uh[i, j] = Us[it, i, j] / smax
         scale = smax * t
-        n = _whitened_closest(V, F, muh, Uh, t, scale, centers, radii, cutoff, W, cp, dhat, dist, idx)
+        n = _whitened_closest(
+            V, F, muh, Uh, t, scale, centers, radii, cutoff, W, cp, dhat, dist, idx
+        )
         truncated[it] = n < nf
         m, touch = _halfspace_loop(W, cp, dhat, dist, scale, n, eps, a_buf, b_buf)
         touching[it] = touch
@@ -387,8 +412,8 @@ def build_grid(lo, hi, origin, cell, shape):
             fill = np.empty(0, dtype=np.int64)
         for f in range(n):
             for i in range(k):
-                a = int(math.floor((lo[f, i] - origin[i]) / cell[i]))
-                b = int(math.floor((hi[f, i] - origin[i]) / cell[i]))
+                a = math.floor((lo[f, i] - origin[i]) / cell[i])
+                b = math.floor((hi[f, i] - origin[i]) / cell[i])
                 i0[i] = min(max(a, 0), shape[i] - 1)
                 i1[i] = min(max(b, 0), shape[i] - 1)
             if k == 2:
@@ -544,10 +569,17 @@ def segments_hit_2d(V, F, P0, P1):
             d2 = (dx - cx) * (by - cy) - (dy - cy) * (bx - cx)
             d3 = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
             d4 = (bx - ax) * (dy - ay) - (by - ay) * (dx - ax)
-            if ((d1 > 0.0) != (d2 > 0.0) or d1 == 0.0 or d2 == 0.0) and ((d3 > 0.0) != (d4 > 0.0) or d3 == 0.0 or d4 == 0.0):
+            if ((d1 > 0.0) != (d2 > 0.0) or d1 == 0.0 or d2 == 0.0) and (
+                (d3 > 0.0) != (d4 > 0.0) or d3 == 0.0 or d4 == 0.0
+            ):
                 if d1 == 0.0 and d2 == 0.0:
                     # collinear: overlap of projections
-                    if max(ax, bx) < min(cx, dx) or max(cx, dx) < min(ax, bx) or max(ay, by) < min(cy, dy) or max(cy, dy) < min(ay, by):
+                    if (
+                        max(ax, bx) < min(cx, dx)
+                        or max(cx, dx) < min(ax, bx)
+                        or max(ay, by) < min(cy, dy)
+                        or max(cy, dy) < min(ay, by)
+                    ):
                         continue
                 out[i] = True
                 break

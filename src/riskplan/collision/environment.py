@@ -62,7 +62,11 @@ class Environment:
             )
         if F.shape[0] == 0:
             raise InvalidInputError("environment is empty: no obstacle faces")
-        fo = np.zeros(len(F), dtype=np.int64) if face_obstacle is None else np.ascontiguousarray(face_obstacle, dtype=np.int64)
+        fo = (
+            np.zeros(len(F), dtype=np.int64)
+            if face_obstacle is None
+            else np.ascontiguousarray(face_obstacle, dtype=np.int64)
+        )
         if fo.shape != (len(F),):
             raise InvalidInputError(f"face_obstacle: expected shape ({len(F)},), got {fo.shape}")
         n_obs = int(fo.max()) + 1
@@ -70,7 +74,9 @@ class Environment:
             names = tuple(f"obstacle{i}" for i in range(n_obs))
         names = tuple(str(n) for n in names)
         if len(names) != n_obs:
-            raise InvalidInputError(f"names: expected {n_obs} names (one per obstacle), got {len(names)}")
+            raise InvalidInputError(
+                f"names: expected {n_obs} names (one per obstacle), got {len(names)}"
+            )
         if validate:
             if not np.all(np.isfinite(V)):
                 raise InvalidInputError("vertices: contain NaN or inf")
@@ -111,18 +117,26 @@ class Environment:
                 try:
                     V, F = m
                 except (TypeError, ValueError) as exc:
-                    raise InvalidInputError(f"meshes[{i}]: expected a Trimesh or a (vertices, faces) pair") from exc
+                    raise InvalidInputError(
+                        f"meshes[{i}]: expected a Trimesh or a (vertices, faces) pair"
+                    ) from exc
                 V, F = np.asarray(V, dtype=np.float64), np.asarray(F, dtype=np.int64)
             if V.ndim != 2 or V.shape[1] != 3:
-                raise InvalidInputError(f"meshes[{i}] ({names[i]!r}): vertices must have shape (V, 3), got {V.shape}")
+                raise InvalidInputError(
+                    f"meshes[{i}] ({names[i]!r}): vertices must have shape (V, 3), got {V.shape}"
+                )
             if F.ndim != 2 or F.shape[1] != 3:
-                raise InvalidInputError(f"meshes[{i}] ({names[i]!r}): faces must have shape (F, 3) triangles, got {F.shape}")
+                raise InvalidInputError(
+                    f"meshes[{i}] ({names[i]!r}): faces must have shape (F, 3) triangles, got {F.shape}"
+                )
             if not np.all(np.isfinite(V)):
                 raise InvalidInputError(f"meshes[{i}] ({names[i]!r}): vertices contain NaN or inf")
             check_closed_mesh(V, F, f"mesh {names[i]!r}")
             if signed_volume(V, F) < 0:
                 if not fix_orientation:
-                    raise InvalidInputError(f"mesh {names[i]!r}: faces point inwards (negative enclosed volume)")
+                    raise InvalidInputError(
+                        f"mesh {names[i]!r}: faces point inwards (negative enclosed volume)"
+                    )
                 log.info("mesh %r had inward normals; flipped", names[i])
                 F = F[:, ::-1]
             Vs.append(V)
@@ -155,7 +169,9 @@ class Environment:
                 if not np.all(np.isfinite(arr)):
                     raise InvalidInputError(f"polygons[{i}]: contains NaN or inf")
                 arr = check_simple_polygon(arr, f"polygons[{i}]")
-            elif np.sum(arr[:, 0] * np.roll(arr[:, 1], -1) - np.roll(arr[:, 0], -1) * arr[:, 1]) < 0:
+            elif (
+                np.sum(arr[:, 0] * np.roll(arr[:, 1], -1) - np.roll(arr[:, 0], -1) * arr[:, 1]) < 0
+            ):
                 arr = arr[::-1]
             k = len(arr)
             idx = np.arange(k)
@@ -234,21 +250,31 @@ class Environment:
         idx = [self.names.index(o) if isinstance(o, str) else int(o) for o in obstacles]
         parts = [self.obstacle(i) for i in idx]
         if self.dim == 3:
-            return Environment.from_meshes(parts, names=[self.names[i] for i in idx], fix_orientation=False)
+            return Environment.from_meshes(
+                parts, names=[self.names[i] for i in idx], fix_orientation=False
+            )
         Vs, Fs, owners, off = [], [], [], 0
         for j, (V, F) in enumerate(parts):
             Vs.append(V)
             Fs.append(F + off)
             owners.append(np.full(len(F), j))
             off += len(V)
-        return Environment(np.vstack(Vs), np.vstack(Fs), np.concatenate(owners), [self.names[i] for i in idx], validate=False)
+        return Environment(
+            np.vstack(Vs),
+            np.vstack(Fs),
+            np.concatenate(owners),
+            [self.names[i] for i in idx],
+            validate=False,
+        )
 
     def to_trimesh(self):
         """All obstacles as one ``trimesh.Trimesh`` (3-D only)."""
         import trimesh
 
         if self.dim != 3:
-            raise InvalidInputError("to_trimesh: only 3-D environments are meshes; use extrude() first")
+            raise InvalidInputError(
+                "to_trimesh: only 3-D environments are meshes; use extrude() first"
+            )
         return trimesh.Trimesh(self.vertices, self.faces, process=False)
 
     def save(self, path) -> Path:
@@ -279,7 +305,9 @@ class Environment:
         mu = _as_point(mean, "mean", self.dim)
         u = np.asarray(precision_cholesky, dtype=np.float64)
         if u.shape != (self.dim, self.dim):
-            raise InvalidInputError(f"precision_cholesky: expected shape ({self.dim}, {self.dim}), got {u.shape}")
+            raise InvalidInputError(
+                f"precision_cholesky: expected shape ({self.dim}, {self.dim}), got {u.shape}"
+            )
         Vw = whiten(self.vertices, mu, u)
         return Environment(Vw, self.faces, self.face_obstacle, self.names, validate=False)
 
@@ -308,7 +336,9 @@ class Environment:
         side = int(min(512, max(1, math.ceil(math.sqrt(self.n_faces / 2)))))
         shape = np.array([side, side], dtype=np.int64)
         cell = ext / side * (1 + 1e-9)
-        start, items = K.build_grid(np.ascontiguousarray(lo), np.ascontiguousarray(hi), origin, cell, shape)
+        start, items = K.build_grid(
+            np.ascontiguousarray(lo), np.ascontiguousarray(hi), origin, cell, shape
+        )
         return Vr, origin, cell, shape, start, items
 
     @cached_property
@@ -320,7 +350,9 @@ class Environment:
         side = int(min(128, max(1, math.ceil((self.n_faces / 2) ** (1 / 3)))))
         shape = np.full(3, side, dtype=np.int64)
         cell = ext / side * (1 + 1e-9)
-        start, items = K.build_grid(np.ascontiguousarray(lo), np.ascontiguousarray(hi), origin, cell, shape)
+        start, items = K.build_grid(
+            np.ascontiguousarray(lo), np.ascontiguousarray(hi), origin, cell, shape
+        )
         return origin, cell, shape, start, items
 
     @cached_property
@@ -337,7 +369,9 @@ class Environment:
         P, shape = _as_points(points, self.dim)
         if self.dim == 3:
             Vr, origin, cell, shape_g, start, items = self._ray_grid
-            with np.errstate(over="ignore", invalid="ignore"):  # points near the float range are outside anyway
+            with np.errstate(
+                over="ignore", invalid="ignore"
+            ):  # points near the float range are outside anyway
                 Pr = np.ascontiguousarray(P @ self._rotation.T)
             w = K.winding_numbers_3d(Vr, self.faces, Pr, origin, cell, shape_g, start, items)
         else:
@@ -375,7 +409,9 @@ class Environment:
         inside = self.contains(P0) | self.contains(P1)
         if self.dim == 3:
             origin, cell, shape_g, start_g, items = self._box_grid
-            cross = K.segments_hit_3d(self.vertices, self.faces, P0, P1, origin, cell, shape_g, start_g, items)
+            cross = K.segments_hit_3d(
+                self.vertices, self.faces, P0, P1, origin, cell, shape_g, start_g, items
+            )
         else:
             cross = K.segments_hit_2d(self.vertices, self.faces, P0, P1)
         return (inside | cross).reshape(shape)
@@ -384,14 +420,18 @@ class Environment:
 def check_environment(environment, name: str = "environment") -> Environment:
     """Raise :class:`InvalidInputError` unless ``environment`` is an :class:`Environment`."""
     if not isinstance(environment, Environment):
-        raise InvalidInputError(f"{name}: expected an Environment, got {type(environment).__name__}")
+        raise InvalidInputError(
+            f"{name}: expected an Environment, got {type(environment).__name__}"
+        )
     return environment
 
 
 def _as_points(points, d: int, name: str = "points") -> tuple[np.ndarray, tuple]:
     arr = as_array(points, name, finite=False)
     if arr.ndim == 0 or arr.shape[-1] != d:
-        raise InvalidInputError(f"{name}: expected shape (..., {d}) for a {d}-D environment, got {arr.shape}")
+        raise InvalidInputError(
+            f"{name}: expected shape (..., {d}) for a {d}-D environment, got {arr.shape}"
+        )
     if not np.all(np.isfinite(arr)):
         raise InvalidInputError(f"{name}: contains NaN or inf")
     return np.ascontiguousarray(arr.reshape(-1, d)), arr.shape[:-1]
@@ -417,7 +457,9 @@ def _check_closed_polyline(V: np.ndarray, F: np.ndarray, name: str) -> None:
     inn = np.bincount(F[:, 1], minlength=len(V))
     used = (out + inn) > 0
     if np.any(out[used] != 1) or np.any(inn[used] != 1):
-        raise InvalidInputError(f"{name}: edges do not form closed, simple, consistently oriented loops")
+        raise InvalidInputError(
+            f"{name}: edges do not form closed, simple, consistently oriented loops"
+        )
     lengths = np.linalg.norm(V[F[:, 1]] - V[F[:, 0]], axis=1)
     if np.any(lengths <= 1e-12 * (float(np.ptp(V[used], axis=0).max()) or 1.0)):
         raise InvalidInputError(f"{name}: zero-length edge")

@@ -46,11 +46,17 @@ class BasePose:
         p = np.asarray(self.position, dtype=np.float64) if _numeric(self.position) else None
         R = np.asarray(self.rotation, dtype=np.float64) if _numeric(self.rotation) else None
         if p is None or p.shape != (3,) or not np.all(np.isfinite(p)):
-            raise InvalidInputError(f"base position: expected 3 finite numbers (metres), got {self.position!r}")
+            raise InvalidInputError(
+                f"base position: expected 3 finite numbers (metres), got {self.position!r}"
+            )
         if R is None or R.shape != (3, 3) or not np.all(np.isfinite(R)):
-            raise InvalidInputError(f"base rotation: expected a finite 3 x 3 matrix, got {self.rotation!r}")
+            raise InvalidInputError(
+                f"base rotation: expected a finite 3 x 3 matrix, got {self.rotation!r}"
+            )
         if not np.allclose(R.T @ R, np.eye(3), atol=ROTATION_ATOL) or np.linalg.det(R) <= 0:
-            raise InvalidInputError("base rotation: expected a proper rotation matrix (orthonormal, det +1)")
+            raise InvalidInputError(
+                "base rotation: expected a proper rotation matrix (orthonormal, det +1)"
+            )
         p.setflags(write=False)
         R.setflags(write=False)
         object.__setattr__(self, "position", p)
@@ -65,16 +71,20 @@ class BasePose:
         """From ``position (3,)`` and a quaternion ``(w, x, y, z)`` (normalised here; must be non-zero)."""
         q = np.asarray(quaternion, dtype=np.float64) if _numeric(quaternion) else None
         if q is None or q.shape != (4,) or not np.all(np.isfinite(q)):
-            raise InvalidInputError(f"base quaternion: expected 4 finite numbers (w, x, y, z), got {quaternion!r}")
+            raise InvalidInputError(
+                f"base quaternion: expected 4 finite numbers (w, x, y, z), got {quaternion!r}"
+            )
         n = np.linalg.norm(q)
         if not n > 0:
             raise InvalidInputError("base quaternion: must be non-zero")
         w, x, y, z = q / n
-        R = np.array([
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ])
+        R = np.array(
+            [
+                [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+            ]
+        )
         return cls(position, R)
 
     @classmethod
@@ -94,7 +104,9 @@ class BasePose:
         """Command-line form: ``identity`` (the mesh is already in the base frame), a JSON file
         (see :meth:`from_json`), or ``x,y,z,qw,qx,qy,qz`` (metres, quaternion)."""
         if not isinstance(text, str) or not text.strip():
-            raise InvalidInputError(f"base pose: expected 'identity', a JSON file or x,y,z,qw,qx,qy,qz, got {text!r}")
+            raise InvalidInputError(
+                f"base pose: expected 'identity', a JSON file or x,y,z,qw,qx,qy,qz, got {text!r}"
+            )
         text = text.strip()
         if text.lower() == "identity":
             return cls.identity()
@@ -104,9 +116,13 @@ class BasePose:
         try:
             v = [float(s) for s in text.split(",")]
         except ValueError as exc:
-            raise InvalidInputError(f"base pose: expected 'identity', a JSON file or x,y,z,qw,qx,qy,qz, got {text!r}") from exc
+            raise InvalidInputError(
+                f"base pose: expected 'identity', a JSON file or x,y,z,qw,qx,qy,qz, got {text!r}"
+            ) from exc
         if len(v) != 7:
-            raise InvalidInputError(f"base pose: expected 7 comma-separated numbers x,y,z,qw,qx,qy,qz, got {len(v)}")
+            raise InvalidInputError(
+                f"base pose: expected 7 comma-separated numbers x,y,z,qw,qx,qy,qz, got {len(v)}"
+            )
         return cls.from_quaternion(v[:3], v[3:])
 
     def to_world(self, points_base) -> np.ndarray:
@@ -128,9 +144,13 @@ def environment_in_base_frame(environment: Environment, pose: BasePose) -> Envir
     if not isinstance(pose, BasePose):
         raise InvalidInputError(f"pose: expected a BasePose, got {type(pose).__name__}")
     if environment.dim != 3:
-        raise InvalidInputError("environment_in_base_frame: only 3-D environments have a robot base pose")
+        raise InvalidInputError(
+            "environment_in_base_frame: only 3-D environments have a robot base pose"
+        )
     V = pose.to_base(environment.vertices)
-    return Environment(V, environment.faces, environment.face_obstacle, environment.names, validate=False)
+    return Environment(
+        V, environment.faces, environment.face_obstacle, environment.names, validate=False
+    )
 
 
 def sidecar_path(path) -> Path:
@@ -139,7 +159,13 @@ def sidecar_path(path) -> Path:
     return path.with_name(path.name + SIDECAR_SUFFIX)
 
 
-def save_environment(environment: Environment, path, *, base_pose: BasePose | None = None, metadata: dict | None = None) -> Path:
+def save_environment(
+    environment: Environment,
+    path,
+    *,
+    base_pose: BasePose | None = None,
+    metadata: dict | None = None,
+) -> Path:
     """Write a mesh file (world frame) and its sidecar ``<path>.json`` naming the frame, atomically.
 
     With ``base_pose`` the sidecar says ``"frame": "world"`` and stores the pose; without it the
@@ -151,7 +177,9 @@ def save_environment(environment: Environment, path, *, base_pose: BasePose | No
     check_environment(environment)
     path = Path(path)
     if path.suffix.lower() not in (".stl", ".obj", ".ply", ".off"):
-        raise InvalidInputError(f"out: {path.name}: expected a mesh file ending in .stl, .obj, .ply or .off")
+        raise InvalidInputError(
+            f"out: {path.name}: expected a mesh file ending in .stl, .obj, .ply or .off"
+        )
     if path.is_dir():
         raise InvalidInputError(f"out: {path} is a folder; expected a mesh file name")
     meta = dict(metadata or {})
@@ -181,7 +209,9 @@ def mesh_base_pose(path, base_pose: BasePose | None = None) -> BasePose:
     if not path.exists():
         raise InvalidInputError(f"mesh file not found: {path}")
     if path.is_dir():
-        raise InvalidInputError(f"{path}: is a folder; expected a mesh file (.stl, .obj, .ply, .off)")
+        raise InvalidInputError(
+            f"{path}: is a folder; expected a mesh file (.stl, .obj, .ply, .off)"
+        )
     side = sidecar_path(path)
     meta = _read_json(side) if side.exists() else None
     if base_pose is not None and not isinstance(base_pose, BasePose):
@@ -190,7 +220,9 @@ def mesh_base_pose(path, base_pose: BasePose | None = None) -> BasePose:
     if pose is None and meta is not None:
         frame = meta.get("frame", "world" if "base_position" in meta else None)
         if frame not in FRAMES:
-            raise DataFormatError(f"{side}: 'frame' must be one of {FRAMES}, got {meta.get('frame')!r}")
+            raise DataFormatError(
+                f"{side}: 'frame' must be one of {FRAMES}, got {meta.get('frame')!r}"
+            )
         if frame == "world":
             pose = BasePose.from_json(side)
         else:
@@ -206,7 +238,9 @@ def mesh_base_pose(path, base_pose: BasePose | None = None) -> BasePose:
     return pose
 
 
-def load_environment(path, *, base_pose: BasePose | None = None, split: bool = False) -> Environment:
+def load_environment(
+    path, *, base_pose: BasePose | None = None, split: bool = False
+) -> Environment:
     """Load a mesh file as a robot-base-frame :class:`Environment`; the frame is resolved by
     :func:`mesh_base_pose` (explicit ``base_pose``, else the sidecar, else a named error)."""
     pose = mesh_base_pose(path, base_pose)

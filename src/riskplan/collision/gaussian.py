@@ -101,13 +101,19 @@ def check_gaussians(means, precision_cholesky, d: int) -> tuple[np.ndarray, np.n
     mu = as_array(means, "means", finite=False)
     u = as_array(precision_cholesky, "precision_cholesky", finite=False)
     if mu.ndim < 1 or mu.shape[-1] != d:
-        raise InvalidInputError(f"means: expected shape (..., {d}) to match the {d}-D environment, got {mu.shape}")
+        raise InvalidInputError(
+            f"means: expected shape (..., {d}) to match the {d}-D environment, got {mu.shape}"
+        )
     if u.shape != mu.shape + (d,):
-        raise InvalidInputError(f"precision_cholesky: expected shape {mu.shape + (d,)}, got {u.shape}")
+        raise InvalidInputError(
+            f"precision_cholesky: expected shape {mu.shape + (d,)}, got {u.shape}"
+        )
     if not np.all(np.isfinite(mu)):
         raise InvalidInputError("means: contain NaN or inf")
     if not np.all(np.isfinite(u)):
-        raise InvalidInputError("precision_cholesky: contains NaN or inf (covariance not finite or singular)")
+        raise InvalidInputError(
+            "precision_cholesky: contains NaN or inf (covariance not finite or singular)"
+        )
     if np.any(np.tril(u, -1) != 0):
         raise InvalidInputError("precision_cholesky: must be upper triangular")
     diag = np.diagonal(u, axis1=-2, axis2=-1)
@@ -119,16 +125,26 @@ def check_gaussians(means, precision_cholesky, d: int) -> tuple[np.ndarray, np.n
 
 
 def gaussian_bound_terms(
-    means, precision_cholesky, environment: Environment, *, cutoff: float = DEFAULT_CUTOFF, validate: bool = True
+    means,
+    precision_cholesky,
+    environment: Environment,
+    *,
+    cutoff: float = DEFAULT_CUTOFF,
+    validate: bool = True,
 ) -> GaussianBoundTerms:
     """The Patil-2012 bound for a batch of Gaussians, with its pieces. See :func:`gaussian_bound`."""
     if not isinstance(environment, Environment):
-        raise InvalidInputError(f"environment: expected an Environment, got {type(environment).__name__}")
+        raise InvalidInputError(
+            f"environment: expected an Environment, got {type(environment).__name__}"
+        )
     d = environment.dim
     if validate:
         mu, u = check_gaussians(means, precision_cholesky, d)
     else:
-        mu, u = np.asarray(means, dtype=np.float64), np.asarray(precision_cholesky, dtype=np.float64)
+        mu, u = (
+            np.asarray(means, dtype=np.float64),
+            np.asarray(precision_cholesky, dtype=np.float64),
+        )
     if not (cutoff > 0):
         raise InvalidInputError(f"cutoff: expected > 0, got {cutoff}")
     shape = mu.shape[:-1]
@@ -136,11 +152,23 @@ def gaussian_bound_terms(
     us = np.ascontiguousarray(u.reshape(-1, d, d))
     centers, radii = environment._spheres
     s, ncons, touching, truncated, _, _, _ = K.gaussian_bounds(
-        environment.vertices, environment.faces, centers, radii, mus, us, float(cutoff), BEHIND_EPS, False
+        environment.vertices,
+        environment.faces,
+        centers,
+        radii,
+        mus,
+        us,
+        float(cutoff),
+        BEHIND_EPS,
+        False,
     )
-    if not np.all(np.isfinite(s)):  # the kernel is built to avoid this; never return NaN as a probability
+    if not np.all(
+        np.isfinite(s)
+    ):  # the kernel is built to avoid this; never return NaN as a probability
         bad = int(np.flatnonzero(~np.isfinite(s))[0])
-        raise InvalidInputError(f"means/precision_cholesky: the bound is not finite for Gaussian {bad} (numerically degenerate input)")
+        raise InvalidInputError(
+            f"means/precision_cholesky: the bound is not finite for Gaussian {bad} (numerically degenerate input)"
+        )
     inside = environment.contains(mus) | touching
     tail = np.where(truncated, chi_tail(cutoff, d), 0.0)
     bound = np.where(inside, 1.0, np.clip(s + tail, 0.0, 1.0))
@@ -154,7 +182,12 @@ def gaussian_bound_terms(
 
 
 def gaussian_bound(
-    means, precision_cholesky, environment: Environment, *, cutoff: float = DEFAULT_CUTOFF, validate: bool = True
+    means,
+    precision_cholesky,
+    environment: Environment,
+    *,
+    cutoff: float = DEFAULT_CUTOFF,
+    validate: bool = True,
 ) -> np.ndarray:
     """Upper bound on ``P(x in obstacles)`` for ``x ~ N(mu, (U^T U)^{-1})`` (Patil et al. 2012).
 
@@ -171,7 +204,9 @@ def gaussian_bound(
     (...,) float64 in [0, 1]: ``min(1, sum_j (1 - Phi(b_j)) + P(|y| >= cutoff))``, or 1 where
     the mean is in collision.
     """
-    return gaussian_bound_terms(means, precision_cholesky, environment, cutoff=cutoff, validate=validate).bound
+    return gaussian_bound_terms(
+        means, precision_cholesky, environment, cutoff=cutoff, validate=validate
+    ).bound
 
 
 @dataclass(frozen=True)
@@ -192,24 +227,40 @@ class FreeRegion:
         return ndtr(-self.distances)
 
 
-def free_region(mean, precision_cholesky, environment: Environment, *, cutoff: float = DEFAULT_CUTOFF) -> FreeRegion:
+def free_region(
+    mean, precision_cholesky, environment: Environment, *, cutoff: float = DEFAULT_CUTOFF
+) -> FreeRegion:
     """Half-spaces of the Patil construction for one Gaussian (``mean (d,)``, ``U (d, d)``).
 
     World form: ``a . U (x - mu) <= b``  <=>  ``(U^T a) . x <= b + (U^T a) . mu``.
     """
-    mu, u = check_gaussians(np.asarray(mean)[None], np.asarray(precision_cholesky)[None], environment.dim)
+    mu, u = check_gaussians(
+        np.asarray(mean)[None], np.asarray(precision_cholesky)[None], environment.dim
+    )
     centers, radii = environment._spheres
     _, _, _, _, A, B, _ = K.gaussian_bounds(
-        environment.vertices, environment.faces, centers, radii, mu, u, float(cutoff), BEHIND_EPS, True
+        environment.vertices,
+        environment.faces,
+        centers,
+        radii,
+        mu,
+        u,
+        float(cutoff),
+        BEHIND_EPS,
+        True,
     )
     normals = A @ u[0]
     return FreeRegion(normals=normals, offsets=B + normals @ mu[0], whitened_normals=A, distances=B)
 
 
-def gaussian_bound_covariance(means, covariances, environment: Environment, *, cutoff: float = DEFAULT_CUTOFF) -> np.ndarray:
+def gaussian_bound_covariance(
+    means, covariances, environment: Environment, *, cutoff: float = DEFAULT_CUTOFF
+) -> np.ndarray:
     """:func:`gaussian_bound` for Gaussians given by covariances ``(..., d, d)`` (e.g. LQG-MP state
     distributions, deformable-planning paper section IV-D); returns ``(...,)``.
 
     Raises :class:`InvalidInputError` for non-finite, non-symmetric or non-positive-definite covariances.
     """
-    return gaussian_bound(means, precision_cholesky_from_covariance(covariances), environment, cutoff=cutoff)
+    return gaussian_bound(
+        means, precision_cholesky_from_covariance(covariances), environment, cutoff=cutoff
+    )

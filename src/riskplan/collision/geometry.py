@@ -61,13 +61,17 @@ def check_closed_mesh(vertices: np.ndarray, faces: np.ndarray, name: str) -> Non
         raise InvalidInputError(f"{name}: mesh has no faces")
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise InvalidInputError(f"{name}: face indices out of range [0, {len(vertices)})")
-    if np.any((faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])):
+    if np.any(
+        (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
+    ):
         raise InvalidInputError(f"{name}: degenerate face (repeated vertex index)")
     scale = float(np.ptp(vertices, axis=0).max()) or 1.0
     area = triangle_areas(vertices, faces)
     bad = np.flatnonzero(area <= 1e-12 * scale * scale)
     if bad.size:
-        raise InvalidInputError(f"{name}: {bad.size} degenerate (zero-area) triangles, first is face {int(bad[0])}")
+        raise InvalidInputError(
+            f"{name}: {bad.size} degenerate (zero-area) triangles, first is face {int(bad[0])}"
+        )
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     nv = len(vertices)
     key = e[:, 0].astype(np.int64) * nv + e[:, 1]
@@ -95,7 +99,9 @@ def check_simple_polygon(poly: np.ndarray, name: str) -> np.ndarray:
     self-intersections (non-adjacent edges that touch or cross).
     """
     if poly.ndim != 2 or poly.shape[1] != 2 or poly.shape[0] < 3:
-        raise InvalidInputError(f"{name}: expected a (k >= 3, 2) vertex array, got shape {poly.shape}")
+        raise InvalidInputError(
+            f"{name}: expected a (k >= 3, 2) vertex array, got shape {poly.shape}"
+        )
     nxt = np.roll(poly, -1, axis=0)
     seg = nxt - poly
     scale = float(np.ptp(poly, axis=0).max()) or 1.0
@@ -107,9 +113,12 @@ def check_simple_polygon(poly: np.ndarray, name: str) -> np.ndarray:
     k = len(poly)
     if k > 3:
         a, b = poly, nxt
+
         # orientation tests for every pair of edges (k is small for tissue polygons)
         def orient(p, q, r):
-            return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
+            return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (
+                r[..., 0] - p[..., 0]
+            )
 
         A, B = a[:, None], b[:, None]
         C, D = a[None, :], b[None, :]
@@ -121,7 +130,9 @@ def check_simple_polygon(poly: np.ndarray, name: str) -> np.ndarray:
         hit = cross[i, j] & ~adjacent
         if np.any(hit):
             h = int(np.flatnonzero(hit)[0])
-            raise InvalidInputError(f"{name}: polygon self-intersects (edges {int(i[h])} and {int(j[h])})")
+            raise InvalidInputError(
+                f"{name}: polygon self-intersects (edges {int(i[h])} and {int(j[h])})"
+            )
     return poly if area > 0 else poly[::-1].copy()
 
 

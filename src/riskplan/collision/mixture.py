@@ -30,23 +30,33 @@ from riskplan.errors import InvalidInputError
 COMBINES = ("weighted", "union")
 
 
-def mixture_arrays(mixture, d: int, *, validate: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def mixture_arrays(
+    mixture, d: int, *, validate: bool = True
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(weights (..., K), means (..., K, d), U (..., K, d, d))`` as float64 NumPy arrays.
 
     ``mixture`` is a :class:`riskplan.kinematics.GaussianMixture` (re-validated when ``validate``).
     """
     if not all(hasattr(mixture, a) for a in ("weights", "means", "precision_cholesky")):
-        raise InvalidInputError(f"mixture: expected a GaussianMixture, got {type(mixture).__name__}")
+        raise InvalidInputError(
+            f"mixture: expected a GaussianMixture, got {type(mixture).__name__}"
+        )
     if validate and hasattr(mixture, "validate"):
         mixture.validate()
-    arrs = mixture.numpy() if hasattr(mixture, "numpy") else {
-        k: np.asarray(getattr(mixture, k)) for k in ("weights", "means", "precision_cholesky")
-    }
+    arrs = (
+        mixture.numpy()
+        if hasattr(mixture, "numpy")
+        else {
+            k: np.asarray(getattr(mixture, k)) for k in ("weights", "means", "precision_cholesky")
+        }
+    )
     w = np.asarray(arrs["weights"], dtype=np.float64)
     m = np.asarray(arrs["means"], dtype=np.float64)
     u = np.asarray(arrs["precision_cholesky"], dtype=np.float64)
     if m.shape[-1] != d:
-        raise InvalidInputError(f"mixture: dimension {m.shape[-1]} does not match the {d}-D environment")
+        raise InvalidInputError(
+            f"mixture: dimension {m.shape[-1]} does not match the {d}-D environment"
+        )
     return w, m, u
 
 
@@ -61,7 +71,12 @@ def component_bounds(
 
 
 def mixture_bound(
-    mixture, environment: Environment, *, combine: str = "weighted", cutoff: float = DEFAULT_CUTOFF, validate: bool = True
+    mixture,
+    environment: Environment,
+    *,
+    combine: str = "weighted",
+    cutoff: float = DEFAULT_CUTOFF,
+    validate: bool = True,
 ) -> np.ndarray:
     """Upper bound on the collision probability of a mixture batch; returns ``(...,)`` in [0, 1].
 

@@ -42,7 +42,9 @@ class MonteCarloEstimate:
     method: str
 
 
-def binomial_interval(hits, n: int, confidence: float = 0.95, method: str = "wilson") -> tuple[np.ndarray, np.ndarray]:
+def binomial_interval(
+    hits, n: int, confidence: float = 0.95, method: str = "wilson"
+) -> tuple[np.ndarray, np.ndarray]:
     """Two-sided ``confidence`` interval for a binomial proportion ``hits / n``.
 
     ``wilson``: Wilson score interval. ``clopper-pearson``: exact interval from Beta quantiles
@@ -101,7 +103,6 @@ def _check_n(n_samples) -> int:
     return n
 
 
-
 def _estimate(hits, n: int, shape, confidence: float, interval: str) -> MonteCarloEstimate:
     """Binomial estimate with its interval from ``hits (B,)`` out of ``n``, reshaped to ``shape``."""
     low, high = binomial_interval(hits, n, confidence, interval)
@@ -114,6 +115,7 @@ def _estimate(hits, n: int, shape, confidence: float, interval: str) -> MonteCar
         confidence=confidence,
         method=interval,
     )
+
 
 def monte_carlo_probability(
     mixture,

@@ -36,7 +36,9 @@ def arc_backbone(curvature, bend_angle, length: float = 0.2, n: int = 41) -> np.
     return np.stack([r * np.cos(phi), r * np.sin(phi), z + 0 * r], axis=-1)
 
 
-def backbone_mixture(positions, n_components: int = 5, *, radius: float = 0.01, sigma: float = 0.003):
+def backbone_mixture(
+    positions, n_components: int = 5, *, radius: float = 0.01, sigma: float = 0.003
+):
     """Gaussian mixture ``(..., K)`` over the body around backbone points ``positions (..., n, 3)``.
 
     Returns a :class:`riskplan.kinematics.GaussianMixture` (float64, d = 3).
@@ -45,7 +47,9 @@ def backbone_mixture(positions, n_components: int = 5, *, radius: float = 0.01, 
 
     P = np.asarray(positions, dtype=np.float64)
     if P.ndim < 2 or P.shape[-1] != 3 or P.shape[-2] < 2 * n_components:
-        raise InvalidInputError(f"positions: expected shape (..., n >= {2 * n_components}, 3), got {P.shape}")
+        raise InvalidInputError(
+            f"positions: expected shape (..., n >= {2 * n_components}, 3), got {P.shape}"
+        )
     if not np.all(np.isfinite(P)):
         raise InvalidInputError("positions: contain NaN or inf")
     if radius < 0 or sigma <= 0:
@@ -72,7 +76,9 @@ def backbone_mixture(positions, n_components: int = 5, *, radius: float = 0.01, 
     return GaussianMixture.from_covariances(w, means, covs)
 
 
-def robot_mixture(robot, displacements, n_components: int = 5, *, radius: float = 0.01, sigma: float = 0.003):
+def robot_mixture(
+    robot, displacements, n_components: int = 5, *, radius: float = 0.01, sigma: float = 0.003
+):
     """Mixture over the body of ``robot`` at tendon ``displacements (..., m)``.
 
     Uses the robot's deterministic model (``robot.solve_displacements(d).positions``, base frame)
@@ -80,4 +86,6 @@ def robot_mixture(robot, displacements, n_components: int = 5, *, radius: float 
     """
     d = np.asarray(displacements, dtype=np.float64)
     shape = robot.solve_displacements(d)
-    return backbone_mixture(np.asarray(shape.positions, dtype=np.float64), n_components, radius=radius, sigma=sigma)
+    return backbone_mixture(
+        np.asarray(shape.positions, dtype=np.float64), n_components, radius=radius, sigma=sigma
+    )

@@ -18,7 +18,9 @@ from riskplan.errors import InvalidInputError
 TRAJECTORY_COMBINES = ("independent", "union")
 
 
-def trajectory_probability(probabilities, *, combine: str = "independent", axis: int = -1) -> np.ndarray:
+def trajectory_probability(
+    probabilities, *, combine: str = "independent", axis: int = -1
+) -> np.ndarray:
     """Combine per-state probabilities ``(..., T)`` (along ``axis``) into ``(...,)``.
 
     ``independent``: ``1 - prod_t (1 - p_t)`` (eq. 10), computed as ``-expm1(sum log1p(-p_t))``
@@ -50,7 +52,9 @@ def trajectory_bound(
 ) -> np.ndarray:
     """Eq. 10 over eq. 9: ``mixtures`` with batch shape ``(..., T)`` (T states along the last
     batch axis); returns ``(...,)``."""
-    p = mixture_bound(mixtures, environment, combine=mixture_combine, cutoff=cutoff, validate=validate)
+    p = mixture_bound(
+        mixtures, environment, combine=mixture_combine, cutoff=cutoff, validate=validate
+    )
     if p.ndim == 0:
         raise InvalidInputError("mixtures: expected a batch axis of states (batch shape (..., T))")
     return trajectory_probability(p, combine=combine)

@@ -26,14 +26,20 @@ def _floats(text: str | None, name: str) -> list[float] | None:
 
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
-    env_app = typer.Typer(help="Build obstacle environments (meshes) for planning.", no_args_is_help=True)
+    env_app = typer.Typer(
+        help="Build obstacle environments (meshes) for planning.", no_args_is_help=True
+    )
     app.add_typer(env_app, name="env")
 
     @env_app.command("chest")
     def env_chest(
-        out: Path = typer.Option(Path("chest.stl"), "--out", "-o", help="Mesh file to write (.stl, .obj, .ply)."),
+        out: Path = typer.Option(
+            Path("chest.stl"), "--out", "-o", help="Mesh file to write (.stl, .obj, .ply)."
+        ),
         seed: int = typer.Option(0, min=0, help="Seed of the organ shape variation."),
-        subdivisions: int = typer.Option(3, help="Icosphere subdivisions of the organ/wall meshes (3: ~12k triangles)."),
+        subdivisions: int = typer.Option(
+            3, help="Icosphere subdivisions of the organ/wall meshes (3: ~12k triangles)."
+        ),
         view: Path = typer.Option(None, "--view", help="Write a PNG view (exterior and interior)."),
         html: Path = typer.Option(None, "--html", help="Write an interactive plotly HTML view."),
     ) -> None:
@@ -49,7 +55,9 @@ def register(app: typer.Typer) -> None:
         from riskplan.scenarios.chest import build_chest, chest_figure, chest_plotly
 
         if out.suffix.lower() not in (".stl", ".obj", ".ply", ".off"):
-            raise InvalidInputError(f"--out: {out.name}: expected a mesh file ending in .stl, .obj, .ply or .off")
+            raise InvalidInputError(
+                f"--out: {out.name}: expected a mesh file ending in .stl, .obj, .ply or .off"
+            )
         for name, p in (("--out", out), ("--view", view), ("--html", html)):
             if p is not None:
                 check_output_file(p, name)
@@ -57,7 +65,9 @@ def register(app: typer.Typer) -> None:
         chest = build_chest(seed, subdivisions=subdivisions)
         chest.save(out)
         meta = sidecar_path(out)
-        typer.echo(f"chest: {chest.n_triangles} triangles, {chest.environment.n_obstacles} obstacles -> {out} (+ {meta.name})")
+        typer.echo(
+            f"chest: {chest.n_triangles} triangles, {chest.environment.n_obstacles} obstacles -> {out} (+ {meta.name})"
+        )
         if view is not None:
             import matplotlib
 
@@ -71,14 +81,41 @@ def register(app: typer.Typer) -> None:
 
     @app.command("collision")
     def collision(
-        env: str = typer.Option("chest", "--env", help="'chest' (procedural) or a mesh file; its frame comes from the sidecar FILE.json that `riskplan env chest` writes, or from --base-pose."),
-        base_pose: str = typer.Option(None, "--base-pose", help="Robot base in the mesh's frame: x,y,z,qw,qx,qy,qz (m, quaternion), a JSON file with base_position/base_rotation, or 'identity' (mesh already in the base frame). Overrides the sidecar."),
-        displacements: str = typer.Option(None, "--displacements", "-d", help="Tendon displacements (m), comma-separated; ';' separates configurations."),
-        model: Path = typer.Option(None, "--model", help="Trained MDN model folder (riskplan train) or a shipped name ('paper'). Default: robot backbone mixture."),
-        arc: str = typer.Option(None, "--arc", help="Constant-curvature geometry instead of a robot: 'kappa,phi' (1/m, rad)."),
-        robot: str = typer.Option("paper", "--robot", help="Robot name or TOML file for the backbone fallback."),
-        method: str = typer.Option("bound", help="bound (eq. 9) | union | monte_carlo | monte_carlo_union."),
-        samples: int = typer.Option(20000, min=1, help="Monte Carlo samples (also used for the reference interval)."),
+        env: str = typer.Option(
+            "chest",
+            "--env",
+            help="'chest' (procedural) or a mesh file; its frame comes from the sidecar FILE.json that `riskplan env chest` writes, or from --base-pose.",
+        ),
+        base_pose: str = typer.Option(
+            None,
+            "--base-pose",
+            help="Robot base in the mesh's frame: x,y,z,qw,qx,qy,qz (m, quaternion), a JSON file with base_position/base_rotation, or 'identity' (mesh already in the base frame). Overrides the sidecar.",
+        ),
+        displacements: str = typer.Option(
+            None,
+            "--displacements",
+            "-d",
+            help="Tendon displacements (m), comma-separated; ';' separates configurations.",
+        ),
+        model: Path = typer.Option(
+            None,
+            "--model",
+            help="Trained MDN model folder (riskplan train) or a shipped name ('paper'). Default: robot backbone mixture.",
+        ),
+        arc: str = typer.Option(
+            None,
+            "--arc",
+            help="Constant-curvature geometry instead of a robot: 'kappa,phi' (1/m, rad).",
+        ),
+        robot: str = typer.Option(
+            "paper", "--robot", help="Robot name or TOML file for the backbone fallback."
+        ),
+        method: str = typer.Option(
+            "bound", help="bound (eq. 9) | union | monte_carlo | monte_carlo_union."
+        ),
+        samples: int = typer.Option(
+            20000, min=1, help="Monte Carlo samples (also used for the reference interval)."
+        ),
         seed: int = typer.Option(0, min=0, help="Seed (chest shape and Monte Carlo)."),
         json_out: bool = typer.Option(False, "--json", help="Print JSON."),
     ) -> None:
@@ -90,7 +127,9 @@ def register(app: typer.Typer) -> None:
 
         configs = []
         if arc is not None and (displacements is not None or model is not None):
-            raise InvalidInputError("--arc describes the geometry itself; give either --arc or --displacements (with --model), not both")
+            raise InvalidInputError(
+                "--arc describes the geometry itself; give either --arc or --displacements (with --model), not both"
+            )
         if arc is not None:
             from riskplan.collision.robot_geometry import arc_backbone, backbone_mixture
 
@@ -118,24 +157,36 @@ def register(app: typer.Typer) -> None:
                 try:
                     from riskplan.robots import load_robot
                 except ImportError as exc:
-                    raise InvalidInputError("no robot model is available here; pass --model or --arc") from exc
+                    raise InvalidInputError(
+                        "no robot model is available here; pass --model or --arc"
+                    ) from exc
 
                 gm = robot_mixture(load_robot(robot), d)
         if env == "chest":
             if base_pose is not None:
-                raise InvalidInputError("--base-pose applies to mesh files; the procedural chest has its own base frame")
+                raise InvalidInputError(
+                    "--base-pose applies to mesh files; the procedural chest has its own base frame"
+                )
             from riskplan.scenarios.chest import build_chest
 
             environment = build_chest(seed).base_environment
         else:
             from riskplan.collision.frames import BasePose, load_environment
 
-            environment = load_environment(env, base_pose=None if base_pose is None else BasePose.parse(base_pose))
+            environment = load_environment(
+                env, base_pose=None if base_pose is None else BasePose.parse(base_pose)
+            )
         p = probability_of_collision(gm, environment, method, n_samples=samples, seed=seed)
         mc = monte_carlo_probability(gm, environment, samples, seed=seed)
         rows = [
-            {"config": c, "probability": float(p[i]), "method": method, "monte_carlo": float(mc.probability[i]),
-             "mc_low": float(mc.low[i]), "mc_high": float(mc.high[i])}
+            {
+                "config": c,
+                "probability": float(p[i]),
+                "method": method,
+                "monte_carlo": float(mc.probability[i]),
+                "mc_low": float(mc.low[i]),
+                "mc_high": float(mc.high[i]),
+            }
             for i, c in enumerate(configs)
         ]
         if json_out:
@@ -148,18 +199,30 @@ def register(app: typer.Typer) -> None:
         for col in ("config", method, "Monte Carlo", "95% interval"):
             table.add_column(col)
         for r in rows:
-            table.add_row(str(r["config"]), f"{r['probability']:.4g}", f"{r['monte_carlo']:.4g}", f"[{r['mc_low']:.4g}, {r['mc_high']:.4g}]")
+            table.add_row(
+                str(r["config"]),
+                f"{r['probability']:.4g}",
+                f"{r['monte_carlo']:.4g}",
+                f"[{r['mc_low']:.4g}, {r['mc_high']:.4g}]",
+            )
         Console().print(table)
 
     @app.command("collision-table")
     def collision_table(
-        out: Path = typer.Option(None, "--out", "-o", help="Write the markdown table here (default: print)."),
+        out: Path = typer.Option(
+            None, "--out", "-o", help="Write the markdown table here (default: print)."
+        ),
         samples: int = typer.Option(100_000, min=1, help="Monte Carlo samples per configuration."),
         seed: int = typer.Option(0, min=0, help="Seed of the chest and of the sampling."),
-        model: Path = typer.Option(None, "--model", help="Trained MDN model folder or shipped name ('paper'); default: robot backbone (or arc) mixtures."),
+        model: Path = typer.Option(
+            None,
+            "--model",
+            help="Trained MDN model folder or shipped name ('paper'); default: robot backbone (or arc) mixtures.",
+        ),
     ) -> None:
         """Bound vs Monte Carlo (95 % intervals) for a set of robot configurations in the chest."""
-        from riskplan.experiments.collision_table import collision_table as make_table, to_markdown
+        from riskplan.experiments.collision_table import collision_table as make_table
+        from riskplan.experiments.collision_table import to_markdown
 
         rows, meta = make_table(seed=seed, n_samples=samples, model_path=model)
         text = to_markdown(rows, meta)

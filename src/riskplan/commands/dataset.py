@@ -51,35 +51,62 @@ def summarize(path) -> dict:
         cen = pts.mean(axis=2)  # (C, S, 3) cloud centroids: their spread over the starts
         cen_rms = np.sqrt(((cen - cen.mean(axis=1, keepdims=True)) ** 2).sum(-1).mean(-1))
         summary.update(
-            tip_spread_mm={"mean": float(spread.mean() * 1e3), "median": float(np.median(spread) * 1e3), "max": float(spread.max() * 1e3)},
-            tip_range_m={"min": tips.reshape(-1, 3).min(0).tolist(), "max": tips.reshape(-1, 3).max(0).tolist()},
-            centroid_spread_mm={"mean": float(cen_rms.mean() * 1e3), "max": float(cen_rms.max() * 1e3)},
-            bbox_m={"min": pts.reshape(-1, 3).min(0).tolist(), "max": pts.reshape(-1, 3).max(0).tolist()},
+            tip_spread_mm={
+                "mean": float(spread.mean() * 1e3),
+                "median": float(np.median(spread) * 1e3),
+                "max": float(spread.max() * 1e3),
+            },
+            tip_range_m={
+                "min": tips.reshape(-1, 3).min(0).tolist(),
+                "max": tips.reshape(-1, 3).max(0).tolist(),
+            },
+            centroid_spread_mm={
+                "mean": float(cen_rms.mean() * 1e3),
+                "max": float(cen_rms.max() * 1e3),
+            },
+            bbox_m={
+                "min": pts.reshape(-1, 3).min(0).tolist(),
+                "max": pts.reshape(-1, 3).max(0).tolist(),
+            },
         )
         try:
             tmax = np.asarray(ds.robot.tension_limits, dtype=np.float64)
             over = np.any(ds.tensions[done] > tmax * (1 + 1e-9), axis=-1)
             summary["arrivals_over_max_tension"] = float(over.mean())
-        except RiskplanError as exc:  # a robot file this version cannot rebuild must not stop the summary
+        except (
+            RiskplanError
+        ) as exc:  # a robot file this version cannot rebuild must not stop the summary
             summary["arrivals_over_max_tension"] = f"unknown ({exc})"
     return summary
 
 
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
-    sub = typer.Typer(help="Point-cloud data sets by the MDN paper's protocol (generate, inspect).", no_args_is_help=True)
+    sub = typer.Typer(
+        help="Point-cloud data sets by the MDN paper's protocol (generate, inspect).",
+        no_args_is_help=True,
+    )
     app.add_typer(sub, name="dataset")
 
     @sub.command("generate")
     def generate(
         robot: str = typer.Option("paper", help="Robot name (paper) or TOML file."),
         preset: str = typer.Option("small", help="Protocol preset: paper, small or tiny."),
-        out: Path = typer.Option(Path("data.h5"), "--out", "-o", help="Output HDF5 file (a stem for --split both)."),
-        split: str = typer.Option("both", help="train, test, or both (writes OUT_train.h5 and OUT_test.h5)."),
+        out: Path = typer.Option(
+            Path("data.h5"), "--out", "-o", help="Output HDF5 file (a stem for --split both)."
+        ),
+        split: str = typer.Option(
+            "both", help="train, test, or both (writes OUT_train.h5 and OUT_test.h5)."
+        ),
         workers: int = typer.Option(None, min=1, help="Worker processes (default: all cores)."),
         backend: str = typer.Option("local", help="local (process pool), serial, or ray."),
-        seed: int = typer.Option(0, min=0, help="Master seed of starts, hysteresis variation and camera noise."),
-        overwrite: bool = typer.Option(False, help="Replace existing output (the old file stays until the new one is complete)."),
+        seed: int = typer.Option(
+            0, min=0, help="Master seed of starts, hysteresis variation and camera noise."
+        ),
+        overwrite: bool = typer.Option(
+            False,
+            help="Replace existing output (the old file stays until the new one is complete).",
+        ),
     ) -> None:
         """Generate a data set (resumable: rerun the same command after an interruption)."""
         import time
@@ -98,20 +125,37 @@ def register(app: typer.Typer) -> None:
         with progress_bar() as bar:
             for sp, path in outputs.items():
                 n = protocol.n_configs(sp)
-                task = bar.add_task(f"{sp} ({protocol.name})", total=n, status=f"{protocol.n_starts} starts x {protocol.n_points} pts")
+                task = bar.add_task(
+                    f"{sp} ({protocol.name})",
+                    total=n,
+                    status=f"{protocol.n_starts} starts x {protocol.n_points} pts",
+                )
 
                 def progress(done, total, task=task):
                     bar.update(task, completed=done, total=total)
 
                 try:
-                    result = generate_dataset(rob, protocol, path, split=sp, seed=seed, workers=workers, backend=backend,
-                                              progress=progress, overwrite=overwrite)
+                    result = generate_dataset(
+                        rob,
+                        protocol,
+                        path,
+                        split=sp,
+                        seed=seed,
+                        workers=workers,
+                        backend=backend,
+                        progress=progress,
+                        overwrite=overwrite,
+                    )
                 except KeyboardInterrupt:
                     raise stop_interrupted(
-                        bar, f"finished configurations are kept in {path}.partial; rerun the same command to resume"
+                        bar,
+                        f"finished configurations are kept in {path}.partial; rerun the same command to resume",
                     ) from None
                 bar.update(task, status=f"-> {result}")
-        typer.echo(f"done in {time.perf_counter() - t0:.1f} s: " + ", ".join(str(p) for p in outputs.values()))
+        typer.echo(
+            f"done in {time.perf_counter() - t0:.1f} s: "
+            + ", ".join(str(p) for p in outputs.values())
+        )
 
     @sub.command("info")
     def info(
@@ -129,6 +173,8 @@ def register(app: typer.Typer) -> None:
         t = Table(title=str(file), show_header=False)
         for k, v in s.items():
             if isinstance(v, dict):
-                v = ", ".join(f"{a}={b:.4g}" if isinstance(b, float) else f"{a}={b}" for a, b in v.items())
+                v = ", ".join(
+                    f"{a}={b:.4g}" if isinstance(b, float) else f"{a}={b}" for a, b in v.items()
+                )
             t.add_row(k, str(v))
         Console().print(t)

@@ -50,15 +50,21 @@ def _parse_displacements(spec: str):
                 arr = np.loadtxt(p, delimiter=",", ndmin=2)
             arr = np.asarray(arr, dtype=np.float64)
         except (OSError, ValueError, TypeError, UnicodeDecodeError, EOFError) as exc:
-            raise InvalidInputError(f"--displacements: cannot read {p.name} as a table of numbers ({type(exc).__name__}: {exc})") from exc
+            raise InvalidInputError(
+                f"--displacements: cannot read {p.name} as a table of numbers ({type(exc).__name__}: {exc})"
+            ) from exc
         if arr.ndim not in (1, 2) or arr.size == 0:
-            raise InvalidInputError(f"--displacements: {p.name} must hold one configuration or a (N, m) table, got shape {arr.shape}")
+            raise InvalidInputError(
+                f"--displacements: {p.name} must hold one configuration or a (N, m) table, got shape {arr.shape}"
+            )
         return arr
     try:
         rows = [[float(v) for v in r.split(",") if v.strip()] for r in spec.split(";") if r.strip()]
         arr = np.asarray(rows, dtype=np.float64)
     except ValueError as exc:
-        raise InvalidInputError(f"--displacements: expected numbers like '0.01,0,0,0' (';' between configurations) or a file, got {spec!r}") from exc
+        raise InvalidInputError(
+            f"--displacements: expected numbers like '0.01,0,0,0' (';' between configurations) or a file, got {spec!r}"
+        ) from exc
     return arr[0] if arr.shape[0] == 1 else arr
 
 
@@ -67,23 +73,37 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def train(
-        data: Path = typer.Option(..., "--data", help="Training data set (HDF5 from `riskplan dataset`)."),
-        out: Path = typer.Option(..., "--out", "-o", help="Model folder (weights.pt, model.json, checkpoint.pt)."),
+        data: Path = typer.Option(
+            ..., "--data", help="Training data set (HDF5 from `riskplan dataset`)."
+        ),
+        out: Path = typer.Option(
+            ..., "--out", "-o", help="Model folder (weights.pt, model.json, checkpoint.pt)."
+        ),
         components: int = typer.Option(5, "--components", "-k", help="Mixture components K."),
         epochs: int = typer.Option(100, min=1, help="Maximum epochs."),
         batch_size: int = typer.Option(32, help="Configurations per step."),
         points_per_config: int = typer.Option(256, help="Points drawn per configuration per step."),
         lr: float = typer.Option(3e-3, help="Adam learning rate."),
         hidden: str = typer.Option("64,64", help=_HIDDEN_HELP),
-        head_hidden: str = typer.Option("32", help="Comma-separated hidden widths of each head ('' for linear heads)."),
+        head_hidden: str = typer.Option(
+            "32", help="Comma-separated hidden widths of each head ('' for linear heads)."
+        ),
         activation: str = typer.Option("silu", help="silu, tanh or relu."),
-        val_fraction: float = typer.Option(0.1, help="Fraction of configurations held out for validation."),
-        patience: int = typer.Option(12, min=0, help="Early stopping: epochs without validation improvement."),
-        lr_patience: int = typer.Option(4, min=0, help="Halve the learning rate after this many epochs without improvement."),
+        val_fraction: float = typer.Option(
+            0.1, help="Fraction of configurations held out for validation."
+        ),
+        patience: int = typer.Option(
+            12, min=0, help="Early stopping: epochs without validation improvement."
+        ),
+        lr_patience: int = typer.Option(
+            4, min=0, help="Halve the learning rate after this many epochs without improvement."
+        ),
         seed: int = typer.Option(0, min=0, help="Seed (initialisation, split, batches)."),
         dtype: str = typer.Option("float32", help="float32 or float64."),
         resume: bool = typer.Option(False, "--resume", help="Continue from OUT/checkpoint.pt."),
-        overwrite: bool = typer.Option(False, "--overwrite", help="Start afresh even if OUT holds a checkpoint or a model."),
+        overwrite: bool = typer.Option(
+            False, "--overwrite", help="Start afresh even if OUT holds a checkpoint or a model."
+        ),
     ) -> None:
         """Train a mixture density network on a point-cloud data set."""
         import torch
@@ -94,9 +114,19 @@ def register(app: typer.Typer) -> None:
 
         torch.set_num_threads(1)
         cfg = _config(
-            n_components=components, epochs=epochs, batch_size=batch_size, points_per_config=points_per_config, lr=lr,
-            hidden=hidden, head_hidden=head_hidden, activation=activation, val_fraction=val_fraction,
-            early_stop_patience=patience, lr_patience=lr_patience, seed=seed, dtype=dtype,
+            n_components=components,
+            epochs=epochs,
+            batch_size=batch_size,
+            points_per_config=points_per_config,
+            lr=lr,
+            hidden=hidden,
+            head_hidden=head_hidden,
+            activation=activation,
+            val_fraction=val_fraction,
+            early_stop_patience=patience,
+            lr_patience=lr_patience,
+            seed=seed,
+            dtype=dtype,
         )
         ds = read_point_clouds(data)
         with progress_bar() as bar:
@@ -109,15 +139,25 @@ def register(app: typer.Typer) -> None:
             def on_epoch(rec):
                 state["best"] = min(state["best"], rec.val_nll)
                 bar.update(
-                    task, completed=rec.epoch + 1,
+                    task,
+                    completed=rec.epoch + 1,
                     status=f"val {rec.val_nll:.3f} best {state['best']:.3f}",
                 )
 
             try:
-                res = run_train(ds, cfg, out=out, resume=resume, overwrite=overwrite, on_epoch=on_epoch, on_step=on_step)
+                res = run_train(
+                    ds,
+                    cfg,
+                    out=out,
+                    resume=resume,
+                    overwrite=overwrite,
+                    on_epoch=on_epoch,
+                    on_step=on_step,
+                )
             except KeyboardInterrupt:
                 raise stop_interrupted(
-                    bar, f"the checkpoint in {out} is kept; continue with the same command plus --resume"
+                    bar,
+                    f"the checkpoint in {out} is kept; continue with the same command plus --resume",
                 ) from None
         typer.echo(
             f"best validation NLL {res.best_val_nll:.4f} nats/point at epoch {res.best_epoch} "
@@ -126,8 +166,15 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def predict(
-        model: Path = typer.Option(..., "--model", "-m", help="Model folder, or a shipped model name ('paper')."),
-        displacements: str = typer.Option(..., "--displacements", "-d", help="'d1,d2,...' (m); ';' between configurations; or a .npy/.json/.csv file."),
+        model: Path = typer.Option(
+            ..., "--model", "-m", help="Model folder, or a shipped model name ('paper')."
+        ),
+        displacements: str = typer.Option(
+            ...,
+            "--displacements",
+            "-d",
+            help="'d1,d2,...' (m); ';' between configurations; or a .npy/.json/.csv file.",
+        ),
         json_out: bool = typer.Option(False, "--json", help="Print the mixture as JSON."),
     ) -> None:
         """Predict the Gaussian mixture of the robot's geometry for tendon displacements."""
@@ -137,7 +184,8 @@ def register(app: typer.Typer) -> None:
         if m.metadata.get("finished") is False:
             typer.secho(
                 f"warning: {model} is an unfinished model (its training run has not ended); resume it with riskplan train --resume",
-                fg="yellow", err=True,
+                fg="yellow",
+                err=True,
             )
         d = _parse_displacements(displacements)
         gm = m.predict(d)
@@ -160,13 +208,17 @@ def register(app: typer.Typer) -> None:
         for c in range(w.shape[0]):
             typer.echo(f"configuration {c}:")
             for k in range(m.n_components):
-                typer.echo(f"  w={w[c, k]:.3f}  mean=({', '.join(f'{v * 1e3:8.2f}' for v in mu[c, k])}) mm")
+                typer.echo(
+                    f"  w={w[c, k]:.3f}  mean=({', '.join(f'{v * 1e3:8.2f}' for v in mu[c, k])}) mm"
+                )
 
     @app.command()
     def sweep(
         data: Path = typer.Option(..., "--data", help="Training data set."),
         test: Path = typer.Option(..., "--test", help="Test data set."),
-        out: Path = typer.Option(..., "--out", "-o", help="Output folder (K*/ models, sweep.json, fig4_nll_vs_k.png)."),
+        out: Path = typer.Option(
+            ..., "--out", "-o", help="Output folder (K*/ models, sweep.json, fig4_nll_vs_k.png)."
+        ),
         components: str = typer.Option("1-10", help="K values, e.g. '1-10' or '1,3,5'."),
         epochs: int = typer.Option(40, min=1, help="Maximum epochs per K."),
         batch_size: int = typer.Option(32),
@@ -178,8 +230,12 @@ def register(app: typer.Typer) -> None:
         patience: int = typer.Option(8, min=0, help="Early stopping patience (epochs)."),
         seed: int = typer.Option(0, min=0),
         workers: int = typer.Option(1, min=1, help="Train this many K at once (processes)."),
-        collapse_threshold: float = typer.Option(0.01, help="Mode collapse: weight below this on 99% of test configurations."),
-        nll_tolerance: float = typer.Option(0.05, help="Recommended K: smallest K within this many nats/point of the best."),
+        collapse_threshold: float = typer.Option(
+            0.01, help="Mode collapse: weight below this on 99% of test configurations."
+        ),
+        nll_tolerance: float = typer.Option(
+            0.05, help="Recommended K: smallest K within this many nats/point of the best."
+        ),
     ) -> None:
         """Train one model per K and plot test NLL vs K (the paper's Fig. 4)."""
         from riskplan.commands._progress import progress_bar
@@ -189,18 +245,36 @@ def register(app: typer.Typer) -> None:
         from riskplan.kinematics.sweep import sweep as run_sweep
 
         cfg = _config(
-            epochs=epochs, batch_size=batch_size, points_per_config=points_per_config, lr=lr, hidden=hidden,
-            head_hidden=head_hidden, activation=activation, early_stop_patience=patience, seed=seed,
+            epochs=epochs,
+            batch_size=batch_size,
+            points_per_config=points_per_config,
+            lr=lr,
+            hidden=hidden,
+            head_hidden=head_hidden,
+            activation=activation,
+            early_stop_patience=patience,
+            seed=seed,
         )
         ks = parse_components(components)
         with progress_bar() as bar:
             task = bar.add_task("K sweep", total=len(ks), status="")
 
             def on_result(i, r):
-                bar.update(task, advance=1, status=f"K={r['n_components']} test NLL {r['test_nll']:.3f}")
+                bar.update(
+                    task, advance=1, status=f"K={r['n_components']} test NLL {r['test_nll']:.3f}"
+                )
 
-            res = run_sweep(data, test, ks, cfg, out=out, workers=workers, collapse_threshold=collapse_threshold,
-                            nll_tolerance=nll_tolerance, on_result=on_result)
+            res = run_sweep(
+                data,
+                test,
+                ks,
+                cfg,
+                out=out,
+                workers=workers,
+                collapse_threshold=collapse_threshold,
+                nll_tolerance=nll_tolerance,
+                on_result=on_result,
+            )
         write_json_atomic(out / "sweep.json", res.to_json())
         import matplotlib.pyplot as plt
 
@@ -215,40 +289,62 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def evaluate(
-        model: Path = typer.Option(..., "--model", "-m", help="Model folder, or a shipped model name ('paper')."),
+        model: Path = typer.Option(
+            ..., "--model", "-m", help="Model folder, or a shipped model name ('paper')."
+        ),
         data: Path = typer.Option(..., "--data", help="Test data set."),
-        out: Path = typer.Option(..., "--out", "-o", help="Output folder (evaluation.json, Fig. 5 PNG + HTML)."),
-        samples: int = typer.Option(4096, min=1, help="Mixture samples per configuration for the HDR thresholds."),
+        out: Path = typer.Option(
+            ..., "--out", "-o", help="Output folder (evaluation.json, Fig. 5 PNG + HTML)."
+        ),
+        samples: int = typer.Option(
+            4096, min=1, help="Mixture samples per configuration for the HDR thresholds."
+        ),
         chamfer_points: int = typer.Option(2048, help="Points per cloud for the Chamfer distance."),
-        max_configs: int = typer.Option(0, help="Evaluate a random subset of this many configurations (0: all)."),
+        max_configs: int = typer.Option(
+            0, help="Evaluate a random subset of this many configurations (0: all)."
+        ),
         figure_configs: int = typer.Option(2, help="Random test configurations shown in Fig. 5."),
         seed: int = typer.Option(0, min=0),
     ) -> None:
         """Test NLL, Chamfer distance, HDR calibration and the paper's Fig. 5."""
         import torch
 
-        from riskplan.io import write_json_atomic
+        from riskplan.io import check_output_folder, write_json_atomic
         from riskplan.kinematics import load_model
         from riskplan.kinematics.data import read_point_clouds
         from riskplan.kinematics.evaluation import evaluate as run_eval
         from riskplan.kinematics.plotting import fig_samples_vs_truth, plotly_samples_vs_truth
 
-        from riskplan.io import check_output_folder
-
         check_output_folder(out, "--out")
         torch.set_num_threads(1)
         m = load_model(model)
         ds = read_point_clouds(data)
-        ev = run_eval(m, ds, n_samples=samples, chamfer_points=chamfer_points, seed=seed, max_configs=max_configs or None)
+        ev = run_eval(
+            m,
+            ds,
+            n_samples=samples,
+            chamfer_points=chamfer_points,
+            seed=seed,
+            max_configs=max_configs or None,
+        )
         out.mkdir(parents=True, exist_ok=True)
-        obj = {**ev.to_json(), "model": str(model), "data": str(data), "n_components": m.n_components}
+        obj = {
+            **ev.to_json(),
+            "model": str(model),
+            "data": str(data),
+            "n_components": m.n_components,
+        }
         write_json_atomic(out / "evaluation.json", obj)
         import matplotlib.pyplot as plt
 
         fig = fig_samples_vs_truth(m, ds, n_configs=figure_configs, seed=seed)
         fig.savefig(out / "fig5_samples_vs_truth.png", dpi=110, bbox_inches="tight")
         plt.close(fig)
-        plotly_samples_vs_truth(m, ds, n_configs=figure_configs, seed=seed).write_html(out / "fig5_samples_vs_truth.html", include_plotlyjs=True)
+        plotly_samples_vs_truth(m, ds, n_configs=figure_configs, seed=seed).write_html(
+            out / "fig5_samples_vs_truth.html", include_plotlyjs=True
+        )
         typer.echo(f"test NLL {ev.nll:.4f} nats/point; Chamfer {ev.chamfer * 1e3:.3f} mm")
-        typer.echo("HDR calibration: " + ", ".join(f"{a:g} -> {c:.3f}" for a, c in ev.calibration.items()))
+        typer.echo(
+            "HDR calibration: " + ", ".join(f"{a:g} -> {c:.3f}" for a, c in ev.calibration.items())
+        )
         typer.echo(f"results in {out}")

@@ -29,7 +29,9 @@ def _check_finite(**values):
 
     for name, v in values.items():
         if not math.isfinite(v):
-            raise InvalidInputError(f"--{name.replace('_', '-')}: expected a finite number, got {v}")
+            raise InvalidInputError(
+                f"--{name.replace('_', '-')}: expected a finite number, got {v}"
+            )
 
 
 def register(plan_app: typer.Typer) -> None:
@@ -37,29 +39,85 @@ def register(plan_app: typer.Typer) -> None:
 
     @plan_app.command("chest")
     def chest(
-        out: Path = typer.Option(..., "--out", "-o", help="Output folder (trajectories, trace, chest.html, plan.json)."),
-        model: str = typer.Option("paper", "--model", help="'paper' (shipped model) or a model folder from `riskplan train`."),
-        env: Path = typer.Option(None, "--env", help="Patient mesh (STL/OBJ/PLY); its frame comes from the sidecar FILE.json that `riskplan env chest` writes, or from --base-pose. Default: the procedural chest."),
-        base_pose: str = typer.Option(None, "--base-pose", help="Robot base in the mesh's frame: x,y,z,qw,qx,qy,qz (m, quaternion), a JSON file with base_position/base_rotation, or 'identity' (mesh already in the base frame). Overrides the sidecar."),
-        chest_seed: int = typer.Option(0, "--chest-seed", help="Seed of the procedural chest's organ shapes."),
-        goal_tip: str = typer.Option(None, "--goal-tip", help="Tip target X,Y,Z in the robot base frame (m). Default: the effusion-pocket target."),
+        out: Path = typer.Option(
+            ..., "--out", "-o", help="Output folder (trajectories, trace, chest.html, plan.json)."
+        ),
+        model: str = typer.Option(
+            "paper",
+            "--model",
+            help="'paper' (shipped model) or a model folder from `riskplan train`.",
+        ),
+        env: Path = typer.Option(
+            None,
+            "--env",
+            help="Patient mesh (STL/OBJ/PLY); its frame comes from the sidecar FILE.json that `riskplan env chest` writes, or from --base-pose. Default: the procedural chest.",
+        ),
+        base_pose: str = typer.Option(
+            None,
+            "--base-pose",
+            help="Robot base in the mesh's frame: x,y,z,qw,qx,qy,qz (m, quaternion), a JSON file with base_position/base_rotation, or 'identity' (mesh already in the base frame). Overrides the sidecar.",
+        ),
+        chest_seed: int = typer.Option(
+            0, "--chest-seed", help="Seed of the procedural chest's organ shapes."
+        ),
+        goal_tip: str = typer.Option(
+            None,
+            "--goal-tip",
+            help="Tip target X,Y,Z in the robot base frame (m). Default: the effusion-pocket target.",
+        ),
         goal: str = typer.Option(None, "--goal", help="Goal tendon displacements D1,...,Dm (m)."),
-        start: str = typer.Option(None, "--start", help="Start tendon displacements (default: zeros)."),
-        tip_tolerance: float = typer.Option(0.005, "--tip-tolerance", help="Goal tip tolerance (m)."),
-        iterations: int = typer.Option(50, "--iterations", help="Optimisation iterations (one bound evaluation each)."),
+        start: str = typer.Option(
+            None, "--start", help="Start tendon displacements (default: zeros)."
+        ),
+        tip_tolerance: float = typer.Option(
+            0.005, "--tip-tolerance", help="Goal tip tolerance (m)."
+        ),
+        iterations: int = typer.Option(
+            50, "--iterations", help="Optimisation iterations (one bound evaluation each)."
+        ),
         candidates: int = typer.Option(256, "--candidates", help="Candidates drawn per iteration."),
-        radius: float = typer.Option(0.1, "--radius", help="Neighbourhood half-width, fraction of each tendon's range."),
-        method: str = typer.Option("bo", "--method", help="bo (the paper's), random (local search), trust_region."),
+        radius: float = typer.Option(
+            0.1, "--radius", help="Neighbourhood half-width, fraction of each tendon's range."
+        ),
+        method: str = typer.Option(
+            "bo", "--method", help="bo (the paper's), random (local search), trust_region."
+        ),
         milestones: int = typer.Option(300, "--milestones", help="PRM milestones."),
-        step: float = typer.Option(0.0025, "--step", help="Largest step between trajectory configurations (m)."),
-        resolution: float = typer.Option(0.001, "--resolution", help="Motion check resolution (m)."),
-        least_risk: bool = typer.Option(False, "--least-risk", help="Also search the roadmap for the least-risk path (prices every edge)."),
-        robot: str = typer.Option(None, "--robot", help="Robot (name or TOML) the model must match (default: the model's own)."),
-        executions: int = typer.Option(1000, "--executions", help="Validation: executions of each trajectory on the simulated robot (0: skip)."),
-        mixture_samples: int = typer.Option(100_000, "--mixture-samples", help="Validation: Monte Carlo trials of the MDN mixtures."),
-        workers: int = typer.Option(1, "--workers", help="Worker processes for the validation (1: in this process, the fastest on 2 shared cores)."),
-        seed: int = typer.Option(0, "--seed", help="Seed of the roadmap, goal search, optimiser and validation."),
-        resume: bool = typer.Option(False, "--resume", help="Continue an interrupted optimisation from OUT/checkpoint.json."),
+        step: float = typer.Option(
+            0.0025, "--step", help="Largest step between trajectory configurations (m)."
+        ),
+        resolution: float = typer.Option(
+            0.001, "--resolution", help="Motion check resolution (m)."
+        ),
+        least_risk: bool = typer.Option(
+            False,
+            "--least-risk",
+            help="Also search the roadmap for the least-risk path (prices every edge).",
+        ),
+        robot: str = typer.Option(
+            None,
+            "--robot",
+            help="Robot (name or TOML) the model must match (default: the model's own).",
+        ),
+        executions: int = typer.Option(
+            1000,
+            "--executions",
+            help="Validation: executions of each trajectory on the simulated robot (0: skip).",
+        ),
+        mixture_samples: int = typer.Option(
+            100_000, "--mixture-samples", help="Validation: Monte Carlo trials of the MDN mixtures."
+        ),
+        workers: int = typer.Option(
+            1,
+            "--workers",
+            help="Worker processes for the validation (1: in this process, the fastest on 2 shared cores).",
+        ),
+        seed: int = typer.Option(
+            0, "--seed", help="Seed of the roadmap, goal search, optimiser and validation."
+        ),
+        resume: bool = typer.Option(
+            False, "--resume", help="Continue an interrupted optimisation from OUT/checkpoint.json."
+        ),
     ) -> None:
         """Plan a nominal trajectory with a PRM and lower its P(collision) bound by Bayesian optimisation."""
         import torch
@@ -82,18 +140,26 @@ def register(plan_app: typer.Typer) -> None:
 
             rob = load_robot(robot)
             if rob.n_tendons != mdl.n_tendons:
-                raise DataFormatError(f"--robot {robot!r} has {rob.n_tendons} tendons but the model {model!r} has {mdl.n_tendons}")
+                raise DataFormatError(
+                    f"--robot {robot!r} has {rob.n_tendons} tendons but the model {model!r} has {mdl.n_tendons}"
+                )
         m = mdl.n_tendons
         if env is None:
             if base_pose is not None:
-                raise InvalidInputError("--base-pose applies to --env meshes; the procedural chest has its own base frame")
+                raise InvalidInputError(
+                    "--base-pose applies to --env meshes; the procedural chest has its own base frame"
+                )
             from riskplan.scenarios.chest import build_chest
 
             ch = build_chest(chest_seed)
             env_world, env_base, to_world = ch.environment, ch.base_environment, ch.to_world
             scene = {"scene": "procedural chest", "chest_seed": chest_seed}
         else:
-            from riskplan.collision.frames import BasePose, environment_in_base_frame, mesh_base_pose
+            from riskplan.collision.frames import (
+                BasePose,
+                environment_in_base_frame,
+                mesh_base_pose,
+            )
 
             # frame from --base-pose, else the mesh's sidecar (riskplan env chest), else a named error
             pose = mesh_base_pose(env, BasePose.parse(base_pose) if base_pose is not None else None)
@@ -101,7 +167,13 @@ def register(plan_app: typer.Typer) -> None:
             env_base = environment_in_base_frame(env_world, pose)
             to_world = pose.to_world
             scene = {"scene": str(env), **pose.to_json()}
-        cfg = OptimiserConfig(iterations=iterations, n_candidates=candidates, radius=radius, method=method, resolution=resolution)
+        cfg = OptimiserConfig(
+            iterations=iterations,
+            n_candidates=candidates,
+            radius=radius,
+            method=method,
+            resolution=resolution,
+        )
         cfg.validate()
         out.mkdir(parents=True, exist_ok=True)
         with progress_bar() as bar:
@@ -109,35 +181,70 @@ def register(plan_app: typer.Typer) -> None:
             t_rk = bar.add_task("risk roadmap", total=1, status="", visible=least_risk)
             t_bo = bar.add_task(f"optimisation ({method})", total=iterations, status="")
             plan = plan_chest(
-                mdl, env_base, start=_floats(start, "--start", m), goal=_floats(goal, "--goal", m),
-                goal_tip=_floats(goal_tip, "--goal-tip", 3), tip_tolerance=tip_tolerance, n_milestones=milestones,
-                step=step, resolution=resolution, optimiser=cfg, seed=seed, least_risk=least_risk,
-                checkpoint=out / "checkpoint.json", resume=resume,
+                mdl,
+                env_base,
+                start=_floats(start, "--start", m),
+                goal=_floats(goal, "--goal", m),
+                goal_tip=_floats(goal_tip, "--goal-tip", 3),
+                tip_tolerance=tip_tolerance,
+                n_milestones=milestones,
+                step=step,
+                resolution=resolution,
+                optimiser=cfg,
+                seed=seed,
+                least_risk=least_risk,
+                checkpoint=out / "checkpoint.json",
+                resume=resume,
                 roadmap_progress=lambda d, n: bar.update(t_rm, completed=d, total=n),
-                risk_progress=lambda d, n: bar.update(t_rk, completed=d, total=n, status="milestones settled"),
-                optimise_progress=lambda i, n, b: bar.update(t_bo, completed=i, total=n, status=f"bound {b:.4f}"),
+                risk_progress=lambda d, n: bar.update(
+                    t_rk, completed=d, total=n, status="milestones settled"
+                ),
+                optimise_progress=lambda i, n, b: bar.update(
+                    t_bo, completed=i, total=n, status=f"bound {b:.4f}"
+                ),
             )
             validation = None
             if executions > 0:
                 from riskplan.planning.validate import validation_table
 
-                t_va = bar.add_task("validation on the robot", total=None, status=f"{executions} executions x 2")
+                t_va = bar.add_task(
+                    "validation on the robot", total=None, status=f"{executions} executions x 2"
+                )
                 validation = validation_table(
-                    mdl, {"nominal": plan.nominal, "optimised": plan.optimised.trajectory}, env_base, robot=rob,
-                    n_robot=executions, n_mixture=mixture_samples, seed=seed,
-                    backend="serial" if workers <= 1 else "local", workers=workers,
+                    mdl,
+                    {"nominal": plan.nominal, "optimised": plan.optimised.trajectory},
+                    env_base,
+                    robot=rob,
+                    n_robot=executions,
+                    n_mixture=mixture_samples,
+                    seed=seed,
+                    backend="serial" if workers <= 1 else "local",
+                    workers=workers,
                 )
                 bar.update(t_va, total=1, completed=1)
         from riskplan.experiments.chest_planning import write_plan
 
-        write_plan(out, plan, model=mdl, environment_world=env_world, to_world=to_world, validation=validation,
-                   extra={"model": model, **scene})
+        write_plan(
+            out,
+            plan,
+            model=mdl,
+            environment_world=env_world,
+            to_world=to_world,
+            validation=validation,
+            extra={"model": model, **scene},
+        )
         res = plan.optimised
-        typer.echo(f"roadmap: {plan.roadmap.describe()}; trajectory of {len(plan.nominal)} configurations")
+        typer.echo(
+            f"roadmap: {plan.roadmap.describe()}; trajectory of {len(plan.nominal)} configurations"
+        )
         if plan.paths is not None:
-            typer.echo(f"shortest path bound {plan.paths['shortest']['bound']:.4f}, least-risk path bound {plan.paths['least_risk']['bound']:.4f}")
-        typer.echo(f"eq. 10 bound: nominal {plan.nominal_bound:.4f} -> optimised {res.bound:.4f} "
-                   f"({100 * res.reduction:.1f} % lower, {len(res.trace) - 1} iterations, {res.evaluations} bound evaluations)")
+            typer.echo(
+                f"shortest path bound {plan.paths['shortest']['bound']:.4f}, least-risk path bound {plan.paths['least_risk']['bound']:.4f}"
+            )
+        typer.echo(
+            f"eq. 10 bound: nominal {plan.nominal_bound:.4f} -> optimised {res.bound:.4f} "
+            f"({100 * res.reduction:.1f} % lower, {len(res.trace) - 1} iterations, {res.evaluations} bound evaluations)"
+        )
         if validation is not None:
             from riskplan.planning.validate import validation_markdown
 

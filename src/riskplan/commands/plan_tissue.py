@@ -16,17 +16,29 @@ def register(plan_app: typer.Typer) -> None:
     @plan_app.command("tissue")
     def tissue(
         scenario: str = typer.Option("needle", "--scenario", help="needle | manipulation"),
-        plans: int = typer.Option(100, "--plans", help="number of candidate plans (the paper: 100)"),
+        plans: int = typer.Option(
+            100, "--plans", help="number of candidate plans (the paper: 100)"
+        ),
         case: str = typer.Option(
-            "material-high", "--case", help="nominal | material-low | material-high | actuation | mesh | force"
+            "material-high",
+            "--case",
+            help="nominal | material-low | material-high | actuation | mesh | force",
         ),
         out: Path = typer.Option(..., "--out", help="output folder (npz, JSON, PNG, GIF)"),
         workers: int = typer.Option(0, "--workers", help="worker processes (0: one per core)"),
         seed: int = typer.Option(0, "--seed", help="master seed (trees, linearisation, checks)"),
-        method: str = typer.Option("sigma", "--method", help="LQG-MP collision estimate: sigma (paper) | truncation"),
-        check_runs: int = typer.Option(1000, "--check-runs", help="closed-loop executions per checked plan (0: skip)"),
-        check_others: int = typer.Option(2, "--check-others", help="plans checked besides the selected one"),
-        gif: bool = typer.Option(True, "--gif/--no-gif", help="write an animation of one closed-loop execution"),
+        method: str = typer.Option(
+            "sigma", "--method", help="LQG-MP collision estimate: sigma (paper) | truncation"
+        ),
+        check_runs: int = typer.Option(
+            1000, "--check-runs", help="closed-loop executions per checked plan (0: skip)"
+        ),
+        check_others: int = typer.Option(
+            2, "--check-others", help="plans checked besides the selected one"
+        ),
+        gif: bool = typer.Option(
+            True, "--gif/--no-gif", help="write an animation of one closed-loop execution"
+        ),
     ) -> None:
         """Plan with the simulator RRT, select with LQG-MP, check the estimate, write OUT/."""
         from rich.console import Console
@@ -34,12 +46,19 @@ def register(plan_app: typer.Typer) -> None:
 
         from riskplan.commands._progress import progress_bar
         from riskplan.errors import InvalidInputError
-        from riskplan.experiments.planning_tissue import HONESTY_HEADER, plan_tissue, summary_rows, write_outputs
+        from riskplan.experiments.planning_tissue import (
+            HONESTY_HEADER,
+            plan_tissue,
+            summary_rows,
+            write_outputs,
+        )
         from riskplan.planning.rrt import RRTOptions
         from riskplan.scenarios.uncertainty import CASE_NAMES
 
         if scenario not in SCENARIOS:
-            raise InvalidInputError(f"scenario: expected one of {', '.join(SCENARIOS)}, got {scenario!r}")
+            raise InvalidInputError(
+                f"scenario: expected one of {', '.join(SCENARIOS)}, got {scenario!r}"
+            )
         if case not in CASE_NAMES:
             raise InvalidInputError(f"case: expected one of {', '.join(CASE_NAMES)}, got {case!r}")
         if plans < 1:
@@ -55,8 +74,12 @@ def register(plan_app: typer.Typer) -> None:
             def on_tree(i, tree):
                 found[0] += len(tree.plans)
                 total = max(n_trees, i + 1)
-                bar.update(t_rrt, total=total, completed=min(total, bar.tasks[t_rrt].completed + 1),
-                           status=f"{found[0]} plans")
+                bar.update(
+                    t_rrt,
+                    total=total,
+                    completed=min(total, bar.tasks[t_rrt].completed + 1),
+                    status=f"{found[0]} plans",
+                )
 
             def on_plan(i, score):
                 if not bar.tasks[t_sel].started:
@@ -64,15 +87,30 @@ def register(plan_app: typer.Typer) -> None:
                 bar.advance(t_sel)
                 bar.update(t_sel, status=f"#{i}: P={score.p_success:.3f}")
 
-            t_chk = bar.add_task("Monte Carlo check", total=1 + check_others if check_runs else 0, status="",
-                                 visible=bool(check_runs))
+            t_chk = bar.add_task(
+                "Monte Carlo check",
+                total=1 + check_others if check_runs else 0,
+                status="",
+                visible=bool(check_runs),
+            )
 
             def on_check(row):
                 bar.advance(t_chk)
 
-            result = plan_tissue(scenario, n_plans=plans, case=case, seed=seed, workers=workers or None,
-                                 rrt_options=options, method=method, check_runs=check_runs,
-                                 check_others=check_others, on_tree=on_tree, on_plan=on_plan, on_check=on_check)
+            result = plan_tissue(
+                scenario,
+                n_plans=plans,
+                case=case,
+                seed=seed,
+                workers=workers or None,
+                rrt_options=options,
+                method=method,
+                check_runs=check_runs,
+                check_others=check_others,
+                on_tree=on_tree,
+                on_plan=on_plan,
+                on_check=on_check,
+            )
             bar.update(t_sel, total=len(result.plans))
         files = write_outputs(result, out, gif=gif, gif_seed=seed)
         sel = result.selection

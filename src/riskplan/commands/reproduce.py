@@ -12,12 +12,23 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def reproduce(
         paper: str = typer.Option("all", help="mdn | deformable | all."),
-        scale: str = typer.Option("smoke", help="smoke (minutes) | paper (the papers' sizes; hours)."),
+        scale: str = typer.Option(
+            "smoke", help="smoke (minutes) | paper (the papers' sizes; hours)."
+        ),
         backend: str = typer.Option("local", help="serial | local (process pool) | ray."),
-        address: str = typer.Option(None, "--address", help="Ray cluster address (host:port, ray://host:port or auto); with --backend ray."),
+        address: str = typer.Option(
+            None,
+            "--address",
+            help="Ray cluster address (host:port, ray://host:port or auto); with --backend ray.",
+        ),
         workers: int = typer.Option(0, help="Worker processes (0: one per core)."),
         seed: int = typer.Option(0, help="Master seed."),
-        out: Path = typer.Option(Path("reproduce-out"), "--out", "-o", help="Output folder (an existing one is continued)."),
+        out: Path = typer.Option(
+            Path("reproduce-out"),
+            "--out",
+            "-o",
+            help="Output folder (an existing one is continued).",
+        ),
     ) -> None:
         """Reproduce the papers' figures and claims; writes OUT/results.json and OUT/report.html.
 
@@ -34,8 +45,16 @@ def register(app: typer.Typer) -> None:
                     tasks[stage] = bar.add_task(stage, total=total, status="")
                 bar.update(tasks[stage], completed=done, total=total)
 
-            results = run(out, paper=paper, scale=scale, backend=backend, ray_address=address, workers=workers or None,
-                          seed=seed, progress=progress)
+            results = run(
+                out,
+                paper=paper,
+                scale=scale,
+                backend=backend,
+                ray_address=address,
+                workers=workers or None,
+                seed=seed,
+                progress=progress,
+            )
         for name, sc in results.get("deformable", {}).items():
             cl = sc["claims"]
             typer.echo(

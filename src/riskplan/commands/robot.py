@@ -47,17 +47,29 @@ def _dumps(value) -> str:
 
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
-    sub = typer.Typer(help="Tendon-driven continuum robots: shapes and descriptions.", no_args_is_help=True)
+    sub = typer.Typer(
+        help="Tendon-driven continuum robots: shapes and descriptions.", no_args_is_help=True
+    )
     app.add_typer(sub, name="robot")
 
     @sub.command("shape")
     def shape(
-        robot: str = typer.Option("paper", "--robot", help="Packaged robot name ('paper') or a robot TOML file."),
-        displacements: str = typer.Option(None, "--displacements", "-d", help="Tendon displacements (m), comma-separated."),
-        tensions: str = typer.Option(None, "--tensions", "-t", help="Tendon tensions [N], comma-separated."),
-        gravity: bool = typer.Option(None, "--gravity/--no-gravity", help="Override the robot file's gravity setting."),
+        robot: str = typer.Option(
+            "paper", "--robot", help="Packaged robot name ('paper') or a robot TOML file."
+        ),
+        displacements: str = typer.Option(
+            None, "--displacements", "-d", help="Tendon displacements (m), comma-separated."
+        ),
+        tensions: str = typer.Option(
+            None, "--tensions", "-t", help="Tendon tensions [N], comma-separated."
+        ),
+        gravity: bool = typer.Option(
+            None, "--gravity/--no-gravity", help="Override the robot file's gravity setting."
+        ),
         as_json: bool = typer.Option(
-            False, "--json", help="Print {tip, backbone, tensions} as JSON (non-finite numbers as null)."
+            False,
+            "--json",
+            help="Print {tip, backbone, tensions} as JSON (non-finite numbers as null).",
         ),
         plot: Path = typer.Option(None, "--plot", help="Write a PNG of the backbone and disks."),
     ) -> None:
@@ -99,9 +111,13 @@ def register(app: typer.Typer) -> None:
 
     @sub.command("info")
     def info(
-        robot: str = typer.Option("paper", "--robot", help="Packaged robot name ('paper') or a robot TOML file."),
+        robot: str = typer.Option(
+            "paper", "--robot", help="Packaged robot name ('paper') or a robot TOML file."
+        ),
         as_json: bool = typer.Option(
-            False, "--json", help="Print as JSON; non-finite numbers (e.g. inf stiffness of an inextensible tendon) as null."
+            False,
+            "--json",
+            help="Print as JSON; non-finite numbers (e.g. inf stiffness of an inextensible tendon) as null.",
         ),
     ) -> None:
         """Describe a robot: backbone, stiffness, tendons, limits, hysteresis.
@@ -135,15 +151,23 @@ def register(app: typer.Typer) -> None:
                 }
                 for t in p.tendons
             ],
-            "hysteresis": {"play_m": p.hysteresis.play, "play_variation": p.hysteresis.play_variation, "offset_std_m": p.hysteresis.offset_std},
+            "hysteresis": {
+                "play_m": p.hysteresis.play,
+                "play_variation": p.hysteresis.play_variation,
+                "offset_std_m": p.hysteresis.offset_std,
+            },
         }
         if as_json:
             typer.echo(_dumps(d))
             return
-        typer.echo(f"robot {d['name']}: length {b.length} m, {d['disks']} disks, EI = {d['bending_stiffness_nm2']:.4g} N m^2, {b.n_steps} steps")
+        typer.echo(
+            f"robot {d['name']}: length {b.length} m, {d['disks']} disks, EI = {d['bending_stiffness_nm2']:.4g} N m^2, {b.n_steps} steps"
+        )
         for t in d["tendons"]:
             typer.echo(
                 f"  {t['name']}: theta {t['theta']}, r {t['radius']}, k {t['stiffness_n_per_m']} N/m, "
                 f"d in {t['displacement_limits_m']} m, tension <= {t['max_tension_n']} N"
             )
-        typer.echo(f"  hysteresis: {d['hysteresis']}; gravity {'on' if p.gravity.enabled else 'off'}")
+        typer.echo(
+            f"  hysteresis: {d['hysteresis']}; gravity {'on' if p.gravity.enabled else 'off'}"
+        )

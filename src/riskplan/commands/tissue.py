@@ -57,23 +57,35 @@ def read_controls(path, control_dim: int, bounds=None):
             if not line or line.startswith("#"):
                 continue
             try:
-                rows.append([float(v) for v in line.replace(";", ",").split(",") if v.strip() != ""])
+                rows.append(
+                    [float(v) for v in line.replace(";", ",").split(",") if v.strip() != ""]
+                )
             except ValueError as exc:
                 if not rows and not header_seen:
                     header_seen = True
                     continue  # one header line before the data
-                raise DataFormatError(f"controls: {path.name} line {i + 1} is not a row of numbers ({exc})") from exc
+                raise DataFormatError(
+                    f"controls: {path.name} line {i + 1} is not a row of numbers ({exc})"
+                ) from exc
     try:
         arr = np.asarray(rows, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise DataFormatError(f"controls: {path.name} rows have different lengths or non-numbers") from exc
+        raise DataFormatError(
+            f"controls: {path.name} rows have different lengths or non-numbers"
+        ) from exc
     if arr.ndim != 2 or arr.shape[0] == 0:
-        raise DataFormatError(f"controls: expected a non-empty (T, {control_dim}) table, got shape {arr.shape}")
+        raise DataFormatError(
+            f"controls: expected a non-empty (T, {control_dim}) table, got shape {arr.shape}"
+        )
     if arr.shape[1] != control_dim:
-        raise DataFormatError(f"controls: {path.name} has {arr.shape[1]} columns per row, expected {control_dim}")
+        raise DataFormatError(
+            f"controls: {path.name} has {arr.shape[1]} columns per row, expected {control_dim}"
+        )
     bad_rows = np.flatnonzero(~np.isfinite(arr).all(axis=1))
     if bad_rows.size:
-        raise DataFormatError(f"controls: {path.name} row {int(bad_rows[0]) + 1} contains NaN or inf")
+        raise DataFormatError(
+            f"controls: {path.name} row {int(bad_rows[0]) + 1} contains NaN or inf"
+        )
     if bounds is not None:
         b = np.asarray(bounds, dtype=np.float64)
         out = (arr < b[:, 0]) | (arr > b[:, 1])
@@ -103,9 +115,9 @@ def step_costs(quick: bool = False) -> dict:
     import numpy as np
 
     from riskplan.bench._timing import median_time
+    from riskplan.scenarios.base import SimParams
     from riskplan.scenarios.manipulation import ManipulationScenario
     from riskplan.scenarios.needle import NeedleScenario
-    from riskplan.scenarios.base import SimParams
 
     reps = 200 if quick else 2000
     out = {}
@@ -114,23 +126,40 @@ def step_costs(quick: bool = False) -> dict:
         p = SimParams(n_elements=n)
         s = nd.initial_state(p, pose=(0.3, 0.45, 0.2))
         u = np.array([0.5, 0.3])
-        out[f"needle_step_us_{n}"] = round(1e6 * median_time(lambda: nd.step(s, u, p), repeats=reps, warmup=20), 1)
+        out[f"needle_step_us_{n}"] = round(
+            1e6 * median_time(lambda s=s, u=u, p=p: nd.step(s, u, p), repeats=reps, warmup=20), 1
+        )
         out[f"needle_step_and_collision_us_{n}"] = round(
-            1e6 * median_time(lambda: nd.in_collision(nd.step(s, u, p)), repeats=reps, warmup=20), 1
+            1e6
+            * median_time(
+                lambda s=s, u=u, p=p: nd.in_collision(nd.step(s, u, p)), repeats=reps, warmup=20
+            ),
+            1,
         )
     ms = ManipulationScenario()
     for n in (175, 1000):
         p = SimParams(n_elements=n)
         s = ms.step(ms.initial_state(p), np.full(6, 0.5), p)
         u = np.full(6, 0.5) + 0.05 * np.array([1.0, -1.0, 0.5, 0.2, -0.3, 0.1])
-        out[f"manipulation_step_ms_{n}"] = round(1e3 * median_time(lambda: ms.step(s, u, p), repeats=10 if quick else 40, warmup=2), 2)
-        out[f"manipulation_reduced_us_{n}"] = round(1e6 * median_time(lambda: ms.reduced(s), repeats=reps, warmup=10), 1)
+        out[f"manipulation_step_ms_{n}"] = round(
+            1e3
+            * median_time(
+                lambda s=s, u=u, p=p: ms.step(s, u, p), repeats=10 if quick else 40, warmup=2
+            ),
+            2,
+        )
+        out[f"manipulation_reduced_us_{n}"] = round(
+            1e6 * median_time(lambda s=s: ms.reduced(s), repeats=reps, warmup=10), 1
+        )
     return out
 
 
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
-    sub = typer.Typer(help="Deformable-tissue scenarios (FEM): simulate, render frames and GIFs.", no_args_is_help=True)
+    sub = typer.Typer(
+        help="Deformable-tissue scenarios (FEM): simulate, render frames and GIFs.",
+        no_args_is_help=True,
+    )
     app.add_typer(sub, name="tissue")
 
     @sub.command("step-cost")
@@ -143,12 +172,28 @@ def register(app: typer.Typer) -> None:
     @sub.command("simulate")
     def simulate(
         scenario: str = typer.Option("needle", "--scenario", help="needle | manipulation"),
-        controls: str = typer.Option("random", "--controls", help="FILE (CSV or JSON, one (T, q) row per step) or 'random'"),
-        out: Path = typer.Option(..., "--out", help="output folder for frames, GIF and summary.json"),
-        case: str = typer.Option("nominal", "--case", help="nominal | material-low | material-high | actuation | mesh | force"),
-        steps: int = typer.Option(None, "--steps", help="steps to run (default: all rows of FILE, or 30 needle / 20 manipulation)"),
-        seed: int = typer.Option(0, "--seed", help="seed of the parameter draw and of random controls"),
-        max_frames: int = typer.Option(40, "--max-frames", help="at most this many PNG frames / GIF frames"),
+        controls: str = typer.Option(
+            "random", "--controls", help="FILE (CSV or JSON, one (T, q) row per step) or 'random'"
+        ),
+        out: Path = typer.Option(
+            ..., "--out", help="output folder for frames, GIF and summary.json"
+        ),
+        case: str = typer.Option(
+            "nominal",
+            "--case",
+            help="nominal | material-low | material-high | actuation | mesh | force",
+        ),
+        steps: int = typer.Option(
+            None,
+            "--steps",
+            help="steps to run (default: all rows of FILE, or 30 needle / 20 manipulation)",
+        ),
+        seed: int = typer.Option(
+            0, "--seed", help="seed of the parameter draw and of random controls"
+        ),
+        max_frames: int = typer.Option(
+            40, "--max-frames", help="at most this many PNG frames / GIF frames"
+        ),
     ) -> None:
         """Run one simulation and write PNG frames, an animated GIF and summary.json."""
         import numpy as np
@@ -175,7 +220,9 @@ def register(app: typer.Typer) -> None:
             u = read_controls(controls, sim.control_dim, sim.control_bounds)
             if steps is not None:
                 if steps > len(u):
-                    raise InvalidInputError(f"steps: {steps} exceeds the {len(u)} rows of {controls}")
+                    raise InvalidInputError(
+                        f"steps: {steps} exceeds the {len(u)} rows of {controls}"
+                    )
                 u = u[:steps]
         out.mkdir(parents=True, exist_ok=True)
         states = [sim.initial_state(params)]

@@ -26,9 +26,13 @@ def check_psd(mats: np.ndarray, name: str, *, definite: bool) -> None:
     w = np.linalg.eigvalsh(0.5 * (mats + np.swapaxes(mats, -1, -2)))
     lo = float(w.min()) if w.size else 0.0
     if definite and lo <= 1e-12 * scale:
-        raise InvalidInputError(f"{name}: expected positive definite matrices (smallest eigenvalue {lo:.3g})")
+        raise InvalidInputError(
+            f"{name}: expected positive definite matrices (smallest eigenvalue {lo:.3g})"
+        )
     if not definite and lo < -1e-12 * scale:
-        raise InvalidInputError(f"{name}: expected positive semi-definite matrices (smallest eigenvalue {lo:.3g})")
+        raise InvalidInputError(
+            f"{name}: expected positive semi-definite matrices (smallest eigenvalue {lo:.3g})"
+        )
 
 
 def dynamics(A, B=None) -> tuple[np.ndarray, np.ndarray | None]:

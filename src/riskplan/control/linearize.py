@@ -58,7 +58,13 @@ from riskplan._validation import as_array, as_generator
 from riskplan.control.plan import NominalPlan
 from riskplan.errors import InvalidInputError, SimulationError
 
-__all__ = ["Linearization", "RankDeficiencyWarning", "linearize", "control_jacobian", "observation_model"]
+__all__ = [
+    "Linearization",
+    "RankDeficiencyWarning",
+    "control_jacobian",
+    "linearize",
+    "observation_model",
+]
 
 A_PRIORS = ("identity", "zero")
 
@@ -172,7 +178,10 @@ def control_jacobian(sim, state, control, params, epsilon, x_next=None, t: int =
         e = eps[j] if u[j] + eps[j] <= bounds[j, 1] else -eps[j]
         du = u.copy()
         du[j] += e
-        B[:, j] = (_checked(sim, sim.step(state, du, params), t + 1, f"control component {j} perturbed") - x_next) / e
+        B[:, j] = (
+            _checked(sim, sim.step(state, du, params), t + 1, f"control component {j} perturbed")
+            - x_next
+        ) / e
     return B
 
 
@@ -315,10 +324,16 @@ def linearize(
         W = np.diag((0.01 * span) ** 2)
     W = as_array(W, "W", shape=(q, q))
     if not np.allclose(W, W.T) or np.linalg.eigvalsh(W).min() < 0 or not np.any(W):
-        raise InvalidInputError("W: expected a non-zero symmetric positive semi-definite (q, q) matrix")
+        raise InvalidInputError(
+            "W: expected a non-zero symmetric positive semi-definite (q, q) matrix"
+        )
     w, v = np.linalg.eigh(W)
     W_factor = v * np.sqrt(np.clip(w, 0.0, None))
-    eps = 1e-3 * span if epsilon is None else np.broadcast_to(as_array(epsilon, "epsilon"), (q,)).copy()
+    eps = (
+        1e-3 * span
+        if epsilon is None
+        else np.broadcast_to(as_array(epsilon, "epsilon"), (q,)).copy()
+    )
     if np.any(eps <= 0):
         raise InvalidInputError(f"epsilon: expected > 0, got {eps}")
     n_a_runs = 2 * p if n_a_runs is None else n_a_runs
@@ -336,7 +351,9 @@ def linearize(
     ts = list(range(T))
     n_chunks = 1 if backend == "serial" else max(1, min(T, 4 * (workers or 2)))
     chunks = [ts[k::n_chunks] for k in range(n_chunks)]
-    fn = partial(_run_chunk, sim, plan, draws, W_factor, eps, a_prior, float(rcond), n_a_runs, step_seeds)
+    fn = partial(
+        _run_chunk, sim, plan, draws, W_factor, eps, a_prior, float(rcond), n_a_runs, step_seeds
+    )
     results = map_tasks(fn, chunks, backend=backend, workers=workers, chunksize=1)
     per_t = {}
     for chunk, res in zip(chunks, results):
@@ -367,11 +384,19 @@ def linearize(
     m = H0.shape[0]
     scale = getattr(sim, "state_scale", None)
     return Linearization(
-        A=A, B=B, M=M, H=np.broadcast_to(H0, (T, m, p)), N=np.broadcast_to(N0, (T, m, m)), rank=rank, drift=drift,
+        A=A,
+        B=B,
+        M=M,
+        H=np.broadcast_to(H0, (T, m, p)),
+        N=np.broadcast_to(N0, (T, m, m)),
+        rank=rank,
+        drift=drift,
         state_scale=None if scale is None else np.array(scale, dtype=np.float64),
         control_scale=0.5 * (bounds[:, 1] - bounds[:, 0]),
     )
 
 
 def _run_chunk(sim, plan, draws, W_factor, eps, a_prior, rcond, K, step_seeds, ts):
-    return _steps(sim, plan, draws, W_factor, eps, a_prior, rcond, K, [step_seeds[t] for t in ts], ts)
+    return _steps(
+        sim, plan, draws, W_factor, eps, a_prior, rcond, K, [step_seeds[t] for t in ts], ts
+    )

@@ -39,9 +39,22 @@ from riskplan.control.kalman import kalman_gains
 from riskplan.control.linearize import Linearization
 from riskplan.control.lqr import lqr_gains
 from riskplan.control.plan import NominalPlan
-from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError, SimulationError
+from riskplan.errors import (
+    ConvergenceError,
+    ElementInversionError,
+    InvalidInputError,
+    SimulationError,
+)
 
-__all__ = ["bryson_weights", "LQGController", "Execution", "SuccessEstimate", "lqg_controller", "execute", "monte_carlo_success"]
+__all__ = [
+    "Execution",
+    "LQGController",
+    "SuccessEstimate",
+    "bryson_weights",
+    "execute",
+    "lqg_controller",
+    "monte_carlo_success",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,11 +103,15 @@ def lqg_controller(lin: Linearization, Q=None, R=None, Q_final=None, P0=None) ->
     """
     if not isinstance(lin, Linearization):
         raise InvalidInputError(f"lin: expected a Linearization, got {type(lin).__name__}")
-    T, p, q = lin.B.shape
+    _T, p, q = lin.B.shape
     if Q is None:
         Q = np.eye(p) if lin.state_scale is None else bryson_weights(lin.state_scale, np.ones(1))[0]
     if R is None:
-        R = np.eye(q) if lin.control_scale is None else bryson_weights(np.ones(1), lin.control_scale)[1]
+        R = (
+            np.eye(q)
+            if lin.control_scale is None
+            else bryson_weights(np.ones(1), lin.control_scale)[1]
+        )
     Q_final = Q if Q_final is None else Q_final
     P0 = np.zeros((p, p)) if P0 is None else as_array(P0, "P0", shape=(p, p))
     L = lqr_gains(lin.A, lin.B, Q, R, Q_final)
@@ -136,8 +153,16 @@ def _check_goal_at(goal_at: str) -> None:
         raise InvalidInputError(f"goal_at: expected one of {GOAL_AT}, got {goal_at!r}")
 
 
-def execute(sim, plan: NominalPlan, controller: LQGController | None, params, *, seed=None,
-            keep_states: bool = True, goal_at: str = "final") -> Execution:
+def execute(
+    sim,
+    plan: NominalPlan,
+    controller: LQGController | None,
+    params,
+    *,
+    seed=None,
+    keep_states: bool = True,
+    goal_at: str = "final",
+) -> Execution:
     """Run ``plan`` on ``sim`` under the true parameters ``params`` (module docstring;
     ``goal_at`` ``"final"`` or ``"any"`` is when the goal counts).
 
@@ -195,7 +220,12 @@ def execute(sim, plan: NominalPlan, controller: LQGController | None, params, *,
             break
         if goal_at == "any" and sim.in_goal(y):
             break
-    reached = (not collided) and error is None and (goal_at == "any" or len(xs) == T + 1) and bool(sim.in_goal(y))
+    reached = (
+        (not collided)
+        and error is None
+        and (goal_at == "any" or len(xs) == T + 1)
+        and bool(sim.in_goal(y))
+    )
     if not keep_states:
         states = [states[0], y]
     return Execution(
@@ -243,9 +273,19 @@ def _run_batch(sim, plan, controller, distribution, goal_at, seeds):
     return out
 
 
-def monte_carlo_success(sim, plan: NominalPlan, controller: LQGController | None, distribution=None, *,
-                        n: int = 1000, seed=None, confidence: float = 0.95, backend: str = "serial",
-                        workers: int | None = None, goal_at: str = "final") -> SuccessEstimate:
+def monte_carlo_success(
+    sim,
+    plan: NominalPlan,
+    controller: LQGController | None,
+    distribution=None,
+    *,
+    n: int = 1000,
+    seed=None,
+    confidence: float = 0.95,
+    backend: str = "serial",
+    workers: int | None = None,
+    goal_at: str = "final",
+) -> SuccessEstimate:
     """Success rate of ``n`` executions of ``plan`` (closed loop with ``controller``, open loop
     with ``None``), each with its own ``s ~ distribution`` (``sim.nominal_params`` if ``None``)
     and sensing noise, with a Wilson interval (:func:`riskplan.collision.binomial_interval`).
@@ -266,14 +306,26 @@ def monte_carlo_success(sim, plan: NominalPlan, controller: LQGController | None
     seeds = spawn_seeds(seed, n)
     n_chunks = 1 if backend == "serial" else min(n, 4 * (workers or 2))
     chunks = [seeds[k::n_chunks] for k in range(n_chunks)]
-    results = map_tasks(partial(_run_batch, sim, plan, controller, distribution, goal_at), chunks, backend=backend,
-                        workers=workers, chunksize=1)
+    results = map_tasks(
+        partial(_run_batch, sim, plan, controller, distribution, goal_at),
+        chunks,
+        backend=backend,
+        workers=workers,
+        chunksize=1,
+    )
     flags = np.empty((n, 4), dtype=bool)
     for k, res in enumerate(results):
         flags[k::n_chunks] = np.array(res, dtype=bool).reshape(-1, 4)
     hits = int(flags[:, 0].sum())
     lo, hi = binomial_interval(hits, n, confidence=confidence)
     return SuccessEstimate(
-        successes=hits, n=n, probability=hits / n, low=float(lo), high=float(hi),
-        success=flags[:, 0], collided=flags[:, 1], reached_goal=flags[:, 2], solver_failed=flags[:, 3],
+        successes=hits,
+        n=n,
+        probability=hits / n,
+        low=float(lo),
+        high=float(hi),
+        success=flags[:, 0],
+        collided=flags[:, 1],
+        reached_goal=flags[:, 2],
+        solver_failed=flags[:, 3],
     )

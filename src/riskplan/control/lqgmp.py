@@ -49,11 +49,19 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
 from riskplan.control.lqg import LQGController
 from riskplan.control.plan import NominalPlan
 from riskplan.errors import InvalidInputError
 
-__all__ = ["LQGMPResult", "METHODS", "joint_covariances", "lqgmp", "point_indices", "polygon_environment"]
+__all__ = [
+    "METHODS",
+    "LQGMPResult",
+    "joint_covariances",
+    "lqgmp",
+    "point_indices",
+    "polygon_environment",
+]
 
 METHODS = ("sigma", "truncation")
 
@@ -87,11 +95,15 @@ def point_indices(sim) -> tuple[np.ndarray, np.ndarray]:
     defines them (manipulation: the sensed boundary points / the target), else ``x[:2]``
     for both (the needle's position).
     """
-    col = np.asarray(getattr(sim, "collision_point_indices", ((0, 1),)), dtype=np.int64).reshape(-1, 2)
+    col = np.asarray(getattr(sim, "collision_point_indices", ((0, 1),)), dtype=np.int64).reshape(
+        -1, 2
+    )
     goal = np.asarray(getattr(sim, "goal_point_indices", (0, 1)), dtype=np.int64).reshape(2)
     p = sim.state_dim
     if col.min() < 0 or col.max() >= p or goal.min() < 0 or goal.max() >= p:
-        raise InvalidInputError(f"collision_point_indices/goal_point_indices: expected indices in [0, {p})")
+        raise InvalidInputError(
+            f"collision_point_indices/goal_point_indices: expected indices in [0, {p})"
+        )
     return col, goal
 
 
@@ -104,7 +116,9 @@ def polygon_environment(polygons):
     return Environment.from_polygons(polygons, validate=False)
 
 
-def joint_covariances(ctrl: LQGController, drift: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def joint_covariances(
+    ctrl: LQGController, drift: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``F (T, 2p, 2p)``, the noise term ``G diag(M, N) Gᵀ (T, 2p, 2p)`` and the mean input
     ``G (d̄, 0) (T, 2p)`` of the recursion (zero unless ``drift``; then ``M − d̄ d̄ᵀ``
     replaces the second moment ``M``)."""
@@ -173,14 +187,20 @@ def sigma_distances(starts, ends, points, covs) -> tuple[np.ndarray, np.ndarray]
     wa = whiten(starts, points, U)
     wb = whiten(ends, points, U)
     d = wb - wa
-    tt = np.clip(-np.einsum("...i,...i->...", wa, d) / np.maximum(np.einsum("...i,...i->...", d, d), 1e-300), 0.0, 1.0)
+    tt = np.clip(
+        -np.einsum("...i,...i->...", wa, d) / np.maximum(np.einsum("...i,...i->...", d, d), 1e-300),
+        0.0,
+        1.0,
+    )
     closest = wa + tt[..., None] * d
     c = np.sqrt(np.einsum("...i,...i->...", closest, closest).min(axis=-1))
     # crossing number (edges of all polygons together: polygons do not overlap)
     P = points[..., None, :]
     ya, yb = starts[..., 1], ends[..., 1]
     cond = (ya > P[..., 1]) != (yb > P[..., 1])
-    xint = starts[..., 0] + (P[..., 1] - ya) * (ends[..., 0] - starts[..., 0]) / np.where(yb != ya, yb - ya, 1.0)
+    xint = starts[..., 0] + (P[..., 1] - ya) * (ends[..., 0] - starts[..., 0]) / np.where(
+        yb != ya, yb - ya, 1.0
+    )
     inside = (np.count_nonzero(cond & (P[..., 0] < xint), axis=-1) % 2) == 1
     return c, inside
 
@@ -209,9 +229,17 @@ def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
     return np.where(inside.any(axis=1), 0.0, free)
 
 
-def lqgmp(sim, plan: NominalPlan, controller: LQGController, *, method: str = "sigma",
-          n_goal_samples: int = 2000, cutoff: float | None = None, drift: bool = False,
-          seed=None) -> LQGMPResult:
+def lqgmp(
+    sim,
+    plan: NominalPlan,
+    controller: LQGController,
+    *,
+    method: str = "sigma",
+    n_goal_samples: int = 2000,
+    cutoff: float | None = None,
+    drift: bool = False,
+    seed=None,
+) -> LQGMPResult:
     """LQG-MP probability of success of ``plan`` under ``controller`` (module docstring).
 
     Parameters
@@ -236,9 +264,13 @@ def lqgmp(sim, plan: NominalPlan, controller: LQGController, *, method: str = "s
     if not isinstance(plan, NominalPlan):
         raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
     if not isinstance(controller, LQGController) or controller.n_steps != plan.n_steps:
-        raise InvalidInputError("controller: expected the LQGController of this plan (same number of steps)")
+        raise InvalidInputError(
+            "controller: expected the LQGController of this plan (same number of steps)"
+        )
     if int(n_goal_samples) != n_goal_samples or n_goal_samples < 1:
-        raise InvalidInputError(f"n_goal_samples: expected a positive integer, got {n_goal_samples!r}")
+        raise InvalidInputError(
+            f"n_goal_samples: expected a positive integer, got {n_goal_samples!r}"
+        )
     col, goal_idx = point_indices(sim)
     T = plan.n_steps
     p = plan.reduced.shape[1]
@@ -313,6 +345,11 @@ def lqgmp(sim, plan: NominalPlan, controller: LQGController, *, method: str = "s
     goal_env = polygon_environment([sim.goal(plan.states[T])])
     p_goal = float(goal_env.contains(xT[:, goal_idx]).mean())
     return LQGMPResult(
-        p_success=p_free * p_goal, p_collision_free=p_free, p_goal=p_goal, p_free_steps=free,
-        mean=mean, cov=cov, method=method,
+        p_success=p_free * p_goal,
+        p_collision_free=p_free,
+        p_goal=p_goal,
+        p_free_steps=free,
+        mean=mean,
+        cov=cov,
+        method=method,
     )

@@ -46,10 +46,14 @@ class NominalPlan:
         controls = frozen_array(self.controls)
         reduced = frozen_array(self.reduced)
         if controls.ndim != 2:
-            raise InvalidInputError(f"controls: expected a (ℓ, q) array, got shape {controls.shape}")
+            raise InvalidInputError(
+                f"controls: expected a (ℓ, q) array, got shape {controls.shape}"
+            )
         n = controls.shape[0]
         if len(states) != n + 1:
-            raise InvalidInputError(f"states: expected ℓ + 1 = {n + 1} states for {n} controls, got {len(states)}")
+            raise InvalidInputError(
+                f"states: expected ℓ + 1 = {n + 1} states for {n} controls, got {len(states)}"
+            )
         if reduced.ndim != 2 or reduced.shape[0] != n + 1:
             raise InvalidInputError(f"reduced: expected shape ({n + 1}, p), got {reduced.shape}")
         if not isinstance(self.params, SimParams):
@@ -70,7 +74,9 @@ class NominalPlan:
         return int(self.controls.shape[0])
 
     @classmethod
-    def from_rollout(cls, sim, initial_state, controls, params: SimParams | None = None) -> NominalPlan:
+    def from_rollout(
+        cls, sim, initial_state, controls, params: SimParams | None = None
+    ) -> NominalPlan:
         """Simulate ``controls (ℓ, q)`` from ``initial_state`` with ``params`` (default
         ``sim.nominal_params``) and store every state; raises
         :class:`~riskplan.errors.SimulationError` naming the step at a non-finite reduced state."""
@@ -82,6 +88,8 @@ class NominalPlan:
             states.append(sim.step(states[-1], u[t], params))
             x = np.asarray(sim.reduced(states[-1]), dtype=np.float64)
             if not np.all(np.isfinite(x)):
-                raise SimulationError(f"from_rollout: non-finite reduced state after step {t} (control {t})")
+                raise SimulationError(
+                    f"from_rollout: non-finite reduced state after step {t} (control {t})"
+                )
             xs.append(x)
         return cls(states=tuple(states), controls=u, reduced=np.stack(xs), params=params)

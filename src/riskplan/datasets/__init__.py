@@ -7,7 +7,15 @@
 """
 
 from riskplan.datasets.generate import generate_dataset, generate_splits, simulate_target
-from riskplan.datasets.protocol import PRESETS, Protocol, get_protocol, grid, random_starts, straight_path, target_configurations
+from riskplan.datasets.protocol import (
+    PRESETS,
+    Protocol,
+    get_protocol,
+    grid,
+    random_starts,
+    straight_path,
+    target_configurations,
+)
 from riskplan.datasets.storage import FORMAT, FORMAT_VERSION, Dataset, load_dataset
 
 __all__ = [

@@ -22,9 +22,17 @@ from pathlib import Path
 
 import numpy as np
 
-from riskplan.datasets import storage
-from riskplan.datasets.protocol import SPLITS, Protocol, _check_split, get_protocol, random_starts, straight_path, target_configurations
 from riskplan._validation import as_array, check_range
+from riskplan.datasets import storage
+from riskplan.datasets.protocol import (
+    SPLITS,
+    Protocol,
+    _check_split,
+    get_protocol,
+    random_starts,
+    straight_path,
+    target_configurations,
+)
 from riskplan.errors import DataFormatError, InvalidInputError
 from riskplan.parallel import BACKENDS, imap_tasks, spawn_seeds
 
@@ -69,11 +77,24 @@ def arrive(robot, paths, seeds):
     from riskplan.robots.hysteresis import HysteresisModel
 
     model = HysteresisModel(robot)
-    eff = np.stack([model.move(model.initial_state(p[0]), p, np.random.default_rng(sd))[1] for p, sd in zip(paths, seeds)])
+    eff = np.stack(
+        [
+            model.move(model.initial_state(p[0]), p, np.random.default_rng(sd))[1]
+            for p, sd in zip(paths, seeds)
+        ]
+    )
     return eff, robot.solve_displacements(eff)
 
 
-def simulate_target(robot, protocol: Protocol, target, seed, *, robot_toml: str | None = None, return_shapes: bool = False):
+def simulate_target(
+    robot,
+    protocol: Protocol,
+    target,
+    seed,
+    *,
+    robot_toml: str | None = None,
+    return_shapes: bool = False,
+):
     """The ``S`` clouds of one target configuration.
 
     Parameters
@@ -108,9 +129,18 @@ def simulate_target(robot, protocol: Protocol, target, seed, *, robot_toml: str 
         body = BodyGeometry.from_params(robot.params, spacing=protocol.surface_spacing)
     surf_p, surf_n = sample_surface(shape.s, P, R, body)
     cams = protocol.camera_objects()
-    clouds = np.stack([capture(surf_p[j], surf_n[j], cams, protocol.n_points, seed=per_start[j][2]) for j in range(S)])
-    out = {"points": clouds.astype(np.float32), "tips": P[:, -1, :].copy(), "starts": starts,
-           "tensions": np.asarray(shape.tensions, dtype=np.float64)}
+    clouds = np.stack(
+        [
+            capture(surf_p[j], surf_n[j], cams, protocol.n_points, seed=per_start[j][2])
+            for j in range(S)
+        ]
+    )
+    out = {
+        "points": clouds.astype(np.float32),
+        "tips": P[:, -1, :].copy(),
+        "starts": starts,
+        "tensions": np.asarray(shape.tensions, dtype=np.float64),
+    }
     if return_shapes:
         from riskplan.robots import RodShape
 
@@ -145,7 +175,9 @@ def _same(f, path, *, robot_toml, protocol_json, split, seed, displacements) -> 
         problems.append(f"split ({meta.get('split')!r} vs {split!r})")
     if int(meta["seed"]) != int(seed):
         problems.append(f"seed ({meta['seed']} vs {seed})")
-    if f["displacements"].shape != displacements.shape or not np.array_equal(f["displacements"][...], displacements):
+    if f["displacements"].shape != displacements.shape or not np.array_equal(
+        f["displacements"][...], displacements
+    ):
         problems.append("target configurations")
     if problems:
         raise DataFormatError(
@@ -154,10 +186,21 @@ def _same(f, path, *, robot_toml, protocol_json, split, seed, displacements) -> 
         )
 
 
-def generate_dataset(robot, preset="small", out="data.h5", *, split: str = "train", seed: int = 0,
-                     workers: int | None = None, backend: str = "local", progress: Callable[[int, int], None] | None = None,
-                     overwrite: bool = False, max_new: int | None = None, chunksize: int | None = None,
-                     min_parallel_clouds: int = 400) -> Path:
+def generate_dataset(
+    robot,
+    preset="small",
+    out="data.h5",
+    *,
+    split: str = "train",
+    seed: int = 0,
+    workers: int | None = None,
+    backend: str = "local",
+    progress: Callable[[int, int], None] | None = None,
+    overwrite: bool = False,
+    max_new: int | None = None,
+    chunksize: int | None = None,
+    min_parallel_clouds: int = 400,
+) -> Path:
     """Generate (or resume) one split of a data set into the HDF5 file ``out``.
 
     Parameters
@@ -194,21 +237,51 @@ def generate_dataset(robot, preset="small", out="data.h5", *, split: str = "trai
         raise InvalidInputError(f"seed: expected a non-negative integer, got {seed!r}")
     if max_new is not None and max_new < 0:
         raise InvalidInputError(f"max_new: expected >= 0, got {max_new}")
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
-        raise InvalidInputError(f"workers: expected a positive integer (or None for all cores), got {workers!r}")
+    if workers is not None and (
+        isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1
+    ):
+        raise InvalidInputError(
+            f"workers: expected a positive integer (or None for all cores), got {workers!r}"
+        )
     out = Path(out)
     if out.is_dir():
-        raise InvalidInputError(f"out: {str(out)!r} is a folder; expected a data-set file name (.h5)")
+        raise InvalidInputError(
+            f"out: {str(out)!r} is a folder; expected a data-set file name (.h5)"
+        )
     out.parent.mkdir(parents=True, exist_ok=True)
     from riskplan.io import output_lock
 
     with output_lock(out, "data set"):
-        return _generate_locked(robot, protocol, out, split, seed, workers, backend, progress, overwrite, max_new,
-                                chunksize, min_parallel_clouds)
+        return _generate_locked(
+            robot,
+            protocol,
+            out,
+            split,
+            seed,
+            workers,
+            backend,
+            progress,
+            overwrite,
+            max_new,
+            chunksize,
+            min_parallel_clouds,
+        )
 
 
-def _generate_locked(robot, protocol, out, split, seed, workers, backend, progress, overwrite, max_new, chunksize,
-                     min_parallel_clouds) -> Path:
+def _generate_locked(
+    robot,
+    protocol,
+    out,
+    split,
+    seed,
+    workers,
+    backend,
+    progress,
+    overwrite,
+    max_new,
+    chunksize,
+    min_parallel_clouds,
+) -> Path:
     part = storage.partial_path(out)
     robot_toml = robot.toml_text()
     protocol_json = protocol.to_json()
@@ -216,7 +289,13 @@ def _generate_locked(robot, protocol, out, split, seed, workers, backend, progre
     C = len(targets)
     if C == 0:
         raise InvalidInputError(f"protocol: split {split!r} has no configurations")
-    settings = dict(robot_toml=robot_toml, protocol_json=protocol_json, split=split, seed=seed, displacements=targets)
+    settings = dict(
+        robot_toml=robot_toml,
+        protocol_json=protocol_json,
+        split=split,
+        seed=seed,
+        displacements=targets,
+    )
 
     import h5py
 
@@ -229,13 +308,17 @@ def _generate_locked(robot, protocol, out, split, seed, workers, backend, progre
                     _same(f, out, **settings)
                     complete = bool(storage._attr(f, "complete")) and bool(np.all(f["done"][...]))
             except OSError as exc:
-                raise DataFormatError(f"{str(out)!r} exists and is not a readable HDF5 file ({exc})") from exc
+                raise DataFormatError(
+                    f"{str(out)!r} exists and is not a readable HDF5 file ({exc})"
+                ) from exc
             if complete:
                 log.info("%s is already complete", out)
                 if progress is not None:
                     progress(C, C)
                 return out
-            raise DataFormatError(f"{str(out)!r} exists but is incomplete; pass overwrite=True (--overwrite)")
+            raise DataFormatError(
+                f"{str(out)!r} exists but is incomplete; pass overwrite=True (--overwrite)"
+            )
     if part.exists() and overwrite:
         part.unlink()
     if part.exists():
@@ -247,8 +330,17 @@ def _generate_locked(robot, protocol, out, split, seed, workers, backend, progre
             raise
         log.info("resuming %s: %d of %d configurations done", part, int(f["done"][...].sum()), C)
     else:
-        f = storage.create_file(part, displacements=targets, n_starts=protocol.n_starts, n_points=protocol.n_points,
-                                robot_toml=robot_toml, robot_name=robot.name, protocol_json=protocol_json, split=split, seed=seed)
+        f = storage.create_file(
+            part,
+            displacements=targets,
+            n_starts=protocol.n_starts,
+            n_points=protocol.n_points,
+            robot_toml=robot_toml,
+            robot_name=robot.name,
+            protocol_json=protocol_json,
+            split=split,
+            seed=seed,
+        )
     try:
         done = f["done"][...].astype(bool)
         todo = np.flatnonzero(~done)
@@ -264,7 +356,9 @@ def _generate_locked(robot, protocol, out, split, seed, workers, backend, progre
         if chunksize is None:
             nw = workers or 2
             chunksize = max(1, min(8, len(items) // (4 * nw) if items else 1))
-        for k, (pts, tips, starts, tens) in imap_tasks(_task, items, backend=backend, workers=workers, chunksize=chunksize):
+        for k, (pts, tips, starts, tens) in imap_tasks(
+            _task, items, backend=backend, workers=workers, chunksize=chunksize
+        ):
             storage.write_config(f, int(todo[k]), pts, tips, starts, tens)
             n_done += 1
             if progress is not None:
@@ -280,7 +374,9 @@ def _generate_locked(robot, protocol, out, split, seed, workers, backend, progre
     return part
 
 
-def generate_splits(robot, preset, stem, *, seed: int = 0, splits=("train", "test"), **kwargs) -> dict[str, Path]:
+def generate_splits(
+    robot, preset, stem, *, seed: int = 0, splits=("train", "test"), **kwargs
+) -> dict[str, Path]:
     """Generate several splits: ``<stem>_train.h5`` and ``<stem>_test.h5`` (``stem`` without ``.h5``).
 
     Each split uses the same ``seed``; the per-target seeds also depend on the split.
@@ -289,4 +385,9 @@ def generate_splits(robot, preset, stem, *, seed: int = 0, splits=("train", "tes
     stem = Path(stem)
     if stem.suffix == ".h5":
         stem = stem.with_suffix("")
-    return {sp: generate_dataset(robot, preset, stem.with_name(f"{stem.name}_{sp}.h5"), split=sp, seed=seed, **kwargs) for sp in splits}
+    return {
+        sp: generate_dataset(
+            robot, preset, stem.with_name(f"{stem.name}_{sp}.h5"), split=sp, seed=seed, **kwargs
+        )
+        for sp in splits
+    }

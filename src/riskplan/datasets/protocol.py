@@ -73,14 +73,20 @@ class Protocol:
     def __post_init__(self):
         for name in ("grid_levels", "n_starts", "n_points", "path_steps"):
             v = getattr(self, name)
-            if not isinstance(v, (int, np.integer)) or v < (2 if name in ("grid_levels", "path_steps") else 1):
-                raise InvalidInputError(f"protocol.{name}: expected an integer >= {2 if name in ('grid_levels', 'path_steps') else 1}, got {v!r}")
+            if not isinstance(v, (int, np.integer)) or v < (
+                2 if name in ("grid_levels", "path_steps") else 1
+            ):
+                raise InvalidInputError(
+                    f"protocol.{name}: expected an integer >= {2 if name in ('grid_levels', 'path_steps') else 1}, got {v!r}"
+                )
         for name in ("n_train", "n_test"):
             v = getattr(self, name)
             if not isinstance(v, (int, np.integer)) or v < 0:
                 raise InvalidInputError(f"protocol.{name}: expected an integer >= 0, got {v!r}")
         if not (np.isfinite(self.surface_spacing) and self.surface_spacing > 0):
-            raise InvalidInputError(f"protocol.surface_spacing: expected a positive length, got {self.surface_spacing!r}")
+            raise InvalidInputError(
+                f"protocol.surface_spacing: expected a positive length, got {self.surface_spacing!r}"
+            )
         if len(self.cameras) < 1:
             raise InvalidInputError("protocol.cameras: expected at least one camera")
 
@@ -125,7 +131,9 @@ def _register_presets() -> None:
     # 'small': seconds of work, for tests and the demo: 3^4 = 81 grid points, 60 / 15 used.
     PRESETS["small"] = Protocol(name="small", grid_levels=3, n_train=60, n_test=15, n_starts=4)
     # 'tiny': a handful of clouds, for unit tests of storage and resumption.
-    PRESETS["tiny"] = Protocol(name="tiny", grid_levels=2, n_train=6, n_test=2, n_starts=2, path_steps=4)
+    PRESETS["tiny"] = Protocol(
+        name="tiny", grid_levels=2, n_train=6, n_test=2, n_starts=2, path_steps=4
+    )
 
 
 _register_presets()
@@ -140,7 +148,9 @@ def get_protocol(preset_or_protocol) -> Protocol:
             return PRESETS[preset_or_protocol]
         if preset_or_protocol.lstrip().startswith("{"):
             return Protocol.from_json(preset_or_protocol)
-    raise InvalidInputError(f"preset: expected one of {sorted(PRESETS)} or a Protocol, got {preset_or_protocol!r}")
+    raise InvalidInputError(
+        f"preset: expected one of {sorted(PRESETS)} or a Protocol, got {preset_or_protocol!r}"
+    )
 
 
 def _check_split(split: str) -> str:
@@ -154,7 +164,9 @@ def grid(limits, levels: int) -> np.ndarray:
     lexicographic order (last tendon fastest). ``limits``: ``(m, 2)`` [low, high] (m)."""
     lim = np.asarray(limits, dtype=np.float64)
     if lim.ndim != 2 or lim.shape[1] != 2 or np.any(lim[:, 1] < lim[:, 0]):
-        raise InvalidInputError(f"limits: expected (m, 2) [low, high] with low <= high, got {lim.tolist()}")
+        raise InvalidInputError(
+            f"limits: expected (m, 2) [low, high] with low <= high, got {lim.tolist()}"
+        )
     axes = [np.linspace(lo, hi, levels) for lo, hi in lim]
     mesh = np.meshgrid(*axes, indexing="ij")
     return np.stack([g.ravel() for g in mesh], axis=-1)

@@ -51,7 +51,13 @@ def row_digest(displacements, points, tips, starts, tensions) -> np.ndarray:
     import hashlib
 
     h = hashlib.sha256()
-    for a, dt in ((displacements, "<f8"), (points, "<f4"), (tips, "<f8"), (starts, "<f8"), (tensions, "<f8")):
+    for a, dt in (
+        (displacements, "<f8"),
+        (points, "<f4"),
+        (tips, "<f8"),
+        (starts, "<f8"),
+        (tensions, "<f8"),
+    ):
         h.update(np.ascontiguousarray(a, dtype=dt).tobytes())
     return np.frombuffer(h.digest(), dtype=np.uint8).copy()
 
@@ -67,7 +73,9 @@ def reach_bound(robot_toml: str) -> float | None:
         p = parse_robot_toml(robot_toml)
     except Exception:  # not a robot description: nothing to compare against
         return None
-    r = max(p.disks.radius, p.backbone.outer_radius, *(max(abs(c) for c in t.radius) for t in p.tendons))
+    r = max(
+        p.disks.radius, p.backbone.outer_radius, *(max(abs(c) for c in t.radius) for t in p.tendons)
+    )
     return REACH_FACTOR * (p.backbone.length + r)
 
 
@@ -94,8 +102,18 @@ def partial_path(out) -> Path:
     return out.with_name(out.name + ".partial")
 
 
-def create_file(path, *, displacements, n_starts: int, n_points: int, robot_toml: str, robot_name: str,
-                protocol_json: str, split: str, seed: int):
+def create_file(
+    path,
+    *,
+    displacements,
+    n_starts: int,
+    n_points: int,
+    robot_toml: str,
+    robot_name: str,
+    protocol_json: str,
+    split: str,
+    seed: int,
+):
     """Create a data-set file with every data set allocated (``done`` all False); returns the open h5py File."""
     import h5py
 
@@ -110,7 +128,7 @@ def create_file(path, *, displacements, n_starts: int, n_points: int, robot_toml
         f.attrs["protocol"] = protocol_json
         f.attrs["split"] = split
         f.attrs["seed"] = int(seed)
-        f.attrs["created"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+        f.attrs["created"] = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
         f.attrs["complete"] = False
         f.create_dataset("displacements", data=np.asarray(displacements, dtype=np.float64))
         # Writing zeros allocates the contiguous storage now: later row writes never change metadata.
@@ -149,7 +167,7 @@ def write_config(f, i: int, points, tips, starts, tensions) -> None:
 
 def mark_complete(f) -> None:
     f.attrs["complete"] = True
-    f.attrs["completed"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    f.attrs["completed"] = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     f.flush()
 
 
@@ -157,10 +175,14 @@ def check_header(f, path) -> dict:
     """Validate the format attributes and data-set shapes; return the attributes as a dict."""
     fmt = _attr(f, "format")
     if fmt != FORMAT:
-        raise DataFormatError(f"data set {str(path)!r}: attribute format={fmt!r}, expected {FORMAT!r}")
+        raise DataFormatError(
+            f"data set {str(path)!r}: attribute format={fmt!r}, expected {FORMAT!r}"
+        )
     ver = _attr(f, "format_version")
     if ver != FORMAT_VERSION:
-        raise DataFormatError(f"data set {str(path)!r}: format_version={ver!r}, this riskplan reads version {FORMAT_VERSION}")
+        raise DataFormatError(
+            f"data set {str(path)!r}: format_version={ver!r}, this riskplan reads version {FORMAT_VERSION}"
+        )
     for key in ("robot_toml", "robot_name", "protocol", "seed"):
         if key not in f.attrs:
             raise DataFormatError(f"data set {str(path)!r}: missing attribute {key!r}")
@@ -169,21 +191,29 @@ def check_header(f, path) -> dict:
             raise DataFormatError(f"data set {str(path)!r}: missing data set {key!r}")
     C, m = f["displacements"].shape if f["displacements"].ndim == 2 else (None, None)
     if C is None:
-        raise DataFormatError(f"data set {str(path)!r}: displacements has shape {f['displacements'].shape}, expected (C, m)")
+        raise DataFormatError(
+            f"data set {str(path)!r}: displacements has shape {f['displacements'].shape}, expected (C, m)"
+        )
     ps = f["points"].shape
     if len(ps) != 4 or ps[0] != C or ps[3] != 3:
-        raise DataFormatError(f"data set {str(path)!r}: points has shape {ps}, expected (C={C}, S, P, 3)")
+        raise DataFormatError(
+            f"data set {str(path)!r}: points has shape {ps}, expected (C={C}, S, P, 3)"
+        )
     S = ps[1]
     shapes = [("tips", (C, S, 3)), ("starts", (C, S, m)), ("tensions", (C, S, m)), ("done", (C,))]
     if HASHES in f:
         shapes.append((HASHES, (C, 32)))
     for key, want in shapes:
         if f[key].shape != want:
-            raise DataFormatError(f"data set {str(path)!r}: {key} has shape {f[key].shape}, expected {want}")
+            raise DataFormatError(
+                f"data set {str(path)!r}: {key} has shape {f[key].shape}, expected {want}"
+            )
     try:
         protocol = json.loads(_attr(f, "protocol"))
     except (TypeError, json.JSONDecodeError) as exc:
-        raise DataFormatError(f"data set {str(path)!r}: attribute protocol is not valid JSON ({exc})") from exc
+        raise DataFormatError(
+            f"data set {str(path)!r}: attribute protocol is not valid JSON ({exc})"
+        ) from exc
     meta = {k: _attr(f, k) for k in f.attrs}
     meta["protocol"] = protocol
     return meta
@@ -289,7 +319,10 @@ def verify_rows(arrays: dict, digests, meta: dict, path) -> None:
         if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
             raise DataFormatError(f"data set {str(path)!r}: {key} contain NaN or inf")
     if digests is None:
-        log.warning("data set %s has no row digests (written before they existed): integrity not checked", path)
+        log.warning(
+            "data set %s has no row digests (written before they existed): integrity not checked",
+            path,
+        )
     else:
         recorded = digests[done].any(axis=1)
         bad = [
@@ -298,7 +331,13 @@ def verify_rows(arrays: dict, digests, meta: dict, path) -> None:
             if rec
             and not np.array_equal(
                 digests[i],
-                row_digest(arrays["displacements"][i], arrays["points"][i], arrays["tips"][i], arrays["starts"][i], arrays["tensions"][i]),
+                row_digest(
+                    arrays["displacements"][i],
+                    arrays["points"][i],
+                    arrays["tips"][i],
+                    arrays["starts"][i],
+                    arrays["tensions"][i],
+                ),
             )
         ]
         if bad:
@@ -307,7 +346,9 @@ def verify_rows(arrays: dict, digests, meta: dict, path) -> None:
                 f"(first {bad[:5]}); the file is corrupted - regenerate it"
             )
         if not recorded.all():
-            log.warning("data set %s: %d configuration(s) carry no digest", path, int((~recorded).sum()))
+            log.warning(
+                "data set %s: %d configuration(s) carry no digest", path, int((~recorded).sum())
+            )
     reach = reach_bound(str(meta.get("robot_toml", "")))
     if reach is not None and done.size:
         r = np.sqrt((arrays["points"][done].astype(np.float64) ** 2).sum(-1))
@@ -340,11 +381,15 @@ def load_dataset(path) -> Dataset:
             arrays = {k: f[k][...] for k in DATASETS}
             digests = f[HASHES][...] if HASHES in f else None
         except (OSError, TypeError, ValueError) as exc:  # h5py: unreadable chunk, string-typed data
-            raise DataFormatError(f"data set {str(path)!r}: cannot read its arrays ({exc})") from exc
+            raise DataFormatError(
+                f"data set {str(path)!r}: cannot read its arrays ({exc})"
+            ) from exc
     for key in DATASETS:
         kind = arrays[key].dtype.kind
         if kind not in ("b" if key == "done" else "fiu"):
-            raise DataFormatError(f"data set {str(path)!r}: {key} has dtype {arrays[key].dtype}, expected numbers")
+            raise DataFormatError(
+                f"data set {str(path)!r}: {key} has dtype {arrays[key].dtype}, expected numbers"
+            )
     arrays["done"] = arrays["done"].astype(bool)
     verify_rows(arrays, digests, meta, path)
     return Dataset(

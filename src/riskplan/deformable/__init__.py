@@ -16,28 +16,34 @@ DOF bookkeeping, sparse layouts), ``locate`` (material points), ``loads``, ``lin
 
 from riskplan.deformable.hyperelastic import HyperelasticModel, NeoHookeanModel, SolveInfo
 from riskplan.deformable.linear import LinearElasticModel, element_strains, element_stresses
-from riskplan.deformable.loads import body_load, patch_load, patch_weights, point_load, traction_load
+from riskplan.deformable.loads import (
+    body_load,
+    patch_load,
+    patch_weights,
+    point_load,
+    traction_load,
+)
 from riskplan.deformable.locate import Interpolator, contains, locate
 from riskplan.deformable.material import Material
 from riskplan.deformable.mesh import TissueMesh, mesh_polygon, rectangle
 
 __all__ = [
-    "TissueMesh",
-    "mesh_polygon",
-    "rectangle",
-    "Material",
-    "LinearElasticModel",
-    "element_strains",
-    "element_stresses",
-    "Interpolator",
-    "locate",
-    "contains",
-    "point_load",
-    "patch_load",
-    "patch_weights",
-    "body_load",
-    "traction_load",
     "HyperelasticModel",
+    "Interpolator",
+    "LinearElasticModel",
+    "Material",
     "NeoHookeanModel",
     "SolveInfo",
+    "TissueMesh",
+    "body_load",
+    "contains",
+    "element_strains",
+    "element_stresses",
+    "locate",
+    "mesh_polygon",
+    "patch_load",
+    "patch_weights",
+    "point_load",
+    "rectangle",
+    "traction_load",
 ]

@@ -30,8 +30,9 @@ def element_tangents(A: np.ndarray, G: np.ndarray, areas: np.ndarray) -> np.ndar
     return K.reshape(T, 3, 2, 2, 3).transpose(0, 1, 2, 4, 3).reshape(T, 6, 6)
 
 
-def neohookean_element_tangents(Finv: np.ndarray, lnJ: np.ndarray, G: np.ndarray, areas: np.ndarray,
-                                lam: float, mu: float) -> np.ndarray:
+def neohookean_element_tangents(
+    Finv: np.ndarray, lnJ: np.ndarray, G: np.ndarray, areas: np.ndarray, lam: float, mu: float
+) -> np.ndarray:
     """Neo-Hookean element stiffness ``(T, 6, 6)`` without forming the 4th-order tangent.
 
     With ``h_a = F⁻ᵀ ∇N_a`` the tangent contracts to
@@ -64,9 +65,15 @@ def assemble_stiffness_parts(mesh: TissueMesh):
 def fixed_node_array(fixed_nodes, n_nodes: int) -> np.ndarray:
     """Sorted unique fixed node indices ``(F,)``; raises :class:`InvalidInputError` when
     none is given or one is out of range."""
-    fixed = np.unique(np.asarray(fixed_nodes, dtype=np.int64).reshape(-1)) if fixed_nodes is not None else None
+    fixed = (
+        np.unique(np.asarray(fixed_nodes, dtype=np.int64).reshape(-1))
+        if fixed_nodes is not None
+        else None
+    )
     if fixed is None or fixed.size == 0:
-        raise InvalidInputError("fixed_nodes: at least one node must be fixed (else rigid motions are free)")
+        raise InvalidInputError(
+            "fixed_nodes: at least one node must be fixed (else rigid motions are free)"
+        )
     if fixed.min() < 0 or fixed.max() >= n_nodes:
         raise InvalidInputError(f"fixed_nodes: indices must lie in [0, {n_nodes - 1}]")
     return fixed
@@ -114,7 +121,9 @@ class TangentPattern:
         self._csc_shape = (nf, nf)
         self._csc_indices = (uniq % nf).astype(np.int32)
         self._csc_indptr = np.searchsorted(uniq // nf, np.arange(nf + 1)).astype(np.int32)
-        pattern = sparse.csc_matrix((np.ones(self._nnz), self._csc_indices, self._csc_indptr), shape=self._csc_shape)
+        pattern = sparse.csc_matrix(
+            (np.ones(self._nnz), self._csc_indices, self._csc_indptr), shape=self._csc_shape
+        )
         perm = reverse_cuthill_mckee(pattern.tocsr(), symmetric_mode=True)
         pos = np.empty(nf, dtype=np.int64)
         pos[perm] = np.arange(nf)

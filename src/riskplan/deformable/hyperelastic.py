@@ -66,7 +66,7 @@ class SolveInfo:
 class _State:
     """Everything evaluated at one displacement (internal, per Newton iterate)."""
 
-    __slots__ = ("u", "energy", "fint", "J", "F", "Finv", "lnJ")
+    __slots__ = ("F", "Finv", "J", "energy", "fint", "lnJ", "u")
 
 
 class HyperelasticModel:
@@ -104,7 +104,9 @@ class HyperelasticModel:
         self.rtol, self.atol, self.max_iter = float(rtol), float(atol), int(max_iter)
         self.fixed_nodes = fixed_node_array(fixed_nodes, mesh.n_nodes)
         if self.fixed_nodes.size < 2:
-            raise InvalidInputError("fixed_nodes: fix at least two distinct nodes (else a rotation is free)")
+            raise InvalidInputError(
+                "fixed_nodes: fix at least two distinct nodes (else a rotation is free)"
+            )
         self._law = LAWS[law]
         self._lam, self._mu = material.lame
         self._G = mesh.shape_gradients
@@ -151,7 +153,9 @@ class HyperelasticModel:
 
     def _element_tangents(self, st: _State) -> np.ndarray:
         if self.law == "neohookean":
-            return neohookean_element_tangents(st.Finv, st.lnJ, self._G, self._areas, self._lam, self._mu)
+            return neohookean_element_tangents(
+                st.Finv, st.lnJ, self._G, self._areas, self._lam, self._mu
+            )
         _, _, A = self._law(st.F, self._lam, self._mu, True)
         return element_tangents(A, self._G, self._areas)
 
@@ -162,7 +166,9 @@ class HyperelasticModel:
 
         Ke = self._element_tangents(st).reshape(-1)
         try:
-            cb = scipy.linalg.cholesky_banded(self._pattern.banded(Ke), lower=False, check_finite=False)
+            cb = scipy.linalg.cholesky_banded(
+                self._pattern.banded(Ke), lower=False, check_finite=False
+            )
         except np.linalg.LinAlgError:
             from scipy.sparse.linalg import splu
 
@@ -265,7 +271,9 @@ class HyperelasticModel:
             else:
                 if J_bad is not None:
                     self._raise_inverted(J_bad, " in every line-search trial")
-                raise ConvergenceError(f"Newton line search failed (residual {rn:.3g})", residual=rn, iterations=it)
+                raise ConvergenceError(
+                    f"Newton line search failed (residual {rn:.3g})", residual=rn, iterations=it
+                )
             st, r, rn = st1, r1, rn1
         raise ConvergenceError(
             f"Newton did not converge in {self.max_iter} iterations (residual {rn:.3g}, tolerance {tol:.3g})",
@@ -289,7 +297,13 @@ class HyperelasticModel:
 
     @one_blas_thread
     def solve_with_info(
-        self, nodal_forces, u0=None, *, fixed_values=None, load_steps: int = 1, max_halvings: int = 8
+        self,
+        nodal_forces,
+        u0=None,
+        *,
+        fixed_values=None,
+        load_steps: int = 1,
+        max_halvings: int = 8,
     ):
         """Equilibrium displacement ``(N, 2)`` under dead nodal loads, plus :class:`SolveInfo`.
 
@@ -306,12 +320,18 @@ class HyperelasticModel:
         """
         f = as_array(nodal_forces, "nodal_forces", shape=(self.mesh.n_nodes, 2)).reshape(-1).copy()
         f[self.fixed_dofs] = 0.0
-        if isinstance(load_steps, bool) or not isinstance(load_steps, (int, np.integer)) or load_steps < 1:
+        if (
+            isinstance(load_steps, bool)
+            or not isinstance(load_steps, (int, np.integer))
+            or load_steps < 1
+        ):
             raise InvalidInputError(f"load_steps: expected an int >= 1, got {load_steps!r}")
         if fixed_values is None:
             ub = np.zeros(len(self.fixed_dofs))
         else:
-            ub = as_array(fixed_values, "fixed_values", shape=(len(self.fixed_nodes), 2)).reshape(-1)
+            ub = as_array(fixed_values, "fixed_values", shape=(len(self.fixed_nodes), 2)).reshape(
+                -1
+            )
         if u0 is None:
             u = np.zeros(self._n)
             f0 = np.zeros(self._n)
@@ -324,7 +344,9 @@ class HyperelasticModel:
             f0[self.fixed_dofs] = 0.0
         ub0 = u[self.fixed_dofs].copy()
         moving = bool(np.any(ub != ub0))
-        fscale = max(float(np.linalg.norm(f[self.free_dofs])), float(np.linalg.norm(f0[self.free_dofs])))
+        fscale = max(
+            float(np.linalg.norm(f[self.free_dofs])), float(np.linalg.norm(f0[self.free_dofs]))
+        )
         if moving:
             # forces of the order the prescribed motion produces: linear response to it
             probe = np.zeros(self._n)
@@ -359,11 +381,15 @@ class HyperelasticModel:
             if it <= 4:  # an easy increment: let the next one grow back towards 1/load_steps
                 ds = min(2.0 * ds, 1.0 / int(load_steps))
         J = self.jacobians(u.reshape(-1, 2))
-        return u.reshape(-1, 2), SolveInfo(iterations=iters, load_steps=steps, residual=rn, min_jacobian=float(J.min()))
+        return u.reshape(-1, 2), SolveInfo(
+            iterations=iters, load_steps=steps, residual=rn, min_jacobian=float(J.min())
+        )
 
     def solve(self, nodal_forces, u0=None, *, fixed_values=None, load_steps: int = 1) -> np.ndarray:
         """Equilibrium displacement ``(N, 2)``; see :meth:`solve_with_info`."""
-        return self.solve_with_info(nodal_forces, u0, fixed_values=fixed_values, load_steps=load_steps)[0]
+        return self.solve_with_info(
+            nodal_forces, u0, fixed_values=fixed_values, load_steps=load_steps
+        )[0]
 
 
 class NeoHookeanModel(HyperelasticModel):

@@ -18,7 +18,9 @@ import numpy as np
 from riskplan.deformable.elements import determinants_and_inverses
 
 
-def neohookean_energy_and_stress(F: np.ndarray, Finv: np.ndarray, lnJ: np.ndarray, lam: float, mu: float):
+def neohookean_energy_and_stress(
+    F: np.ndarray, Finv: np.ndarray, lnJ: np.ndarray, lam: float, mu: float
+):
     """Neo-Hookean ``W (T,)`` and ``P (T, 2, 2)`` given ``F``, ``F⁻¹`` and ``ln J`` (the
     Newton solver has them already)."""
     FinvT = np.swapaxes(Finv, 1, 2)

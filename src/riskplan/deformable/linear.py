@@ -67,7 +67,12 @@ class LinearElasticModel:
         self._factorise()
 
     def __getstate__(self):
-        return {"mesh": self.mesh, "material": self.material, "fixed_nodes": self.fixed_nodes, "parts": self._parts}
+        return {
+            "mesh": self.mesh,
+            "material": self.material,
+            "fixed_nodes": self.fixed_nodes,
+            "parts": self._parts,
+        }
 
     def __setstate__(self, state):
         self.__init__(state["mesh"], state["material"], state["fixed_nodes"], _parts=state["parts"])
@@ -100,7 +105,7 @@ class LinearElasticModel:
                     raise singular from exc
 
     # ---- construction helpers -------------------------------------------------------
-    def with_material(self, material: Material) -> "LinearElasticModel":
+    def with_material(self, material: Material) -> LinearElasticModel:
         """The same mesh and supports with another material (re-uses the assembly)."""
         return LinearElasticModel(self.mesh, material, self.fixed_nodes, _parts=self._parts)
 
@@ -134,7 +139,9 @@ class LinearElasticModel:
         u = np.zeros(self._n)
         rhs = f[self.free_dofs]
         if fixed_values is not None:
-            ub = as_array(fixed_values, "fixed_values", shape=(len(self.fixed_nodes), 2)).reshape(-1)
+            ub = as_array(fixed_values, "fixed_values", shape=(len(self.fixed_nodes), 2)).reshape(
+                -1
+            )
             u[self.fixed_dofs] = ub
             rhs = rhs - self._K_fc @ ub
         u[self.free_dofs] = self.solve_free(rhs)
@@ -143,13 +150,17 @@ class LinearElasticModel:
     def residual(self, u, nodal_forces) -> np.ndarray:
         """Out-of-balance forces ``(K u − f)`` at the free DOFs, as ``(N, 2)`` with zeros
         at the fixed nodes."""
-        r = self.K @ np.asarray(u, dtype=np.float64).reshape(-1) - np.asarray(nodal_forces, dtype=np.float64).reshape(-1)
+        r = self.K @ np.asarray(u, dtype=np.float64).reshape(-1) - np.asarray(
+            nodal_forces, dtype=np.float64
+        ).reshape(-1)
         r[self.fixed_dofs] = 0.0
         return r.reshape(-1, 2)
 
     def reactions(self, u) -> np.ndarray:
         """Support reactions ``(F, 2)`` at the fixed nodes: ``(K u)`` there."""
-        return (self.K @ np.asarray(u, dtype=np.float64).reshape(-1))[self.fixed_dofs].reshape(-1, 2)
+        return (self.K @ np.asarray(u, dtype=np.float64).reshape(-1))[self.fixed_dofs].reshape(
+            -1, 2
+        )
 
     def energy(self, u) -> float:
         """Strain energy ``½ uᵀ K u``."""

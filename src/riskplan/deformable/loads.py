@@ -101,7 +101,9 @@ def body_load(mesh: TissueMesh, body_force, *, refine: int = 1) -> np.ndarray:
     p = mesh.nodes[mesh.triangles]  # (T, 3, 2)
     x = np.einsum("qa,tad->tqd", bary, p)  # (T, Q, 2)
     if callable(body_force):
-        b = as_array(body_force(x.reshape(-1, 2)), "body_force(x)", shape=(x.shape[0] * x.shape[1], 2))
+        b = as_array(
+            body_force(x.reshape(-1, 2)), "body_force(x)", shape=(x.shape[0] * x.shape[1], 2)
+        )
         b = b.reshape(x.shape)
     else:
         b = np.broadcast_to(as_array(body_force, "body_force", shape=(2,)), x.shape)
@@ -180,7 +182,9 @@ def patch_weights(mesh: TissueMesh, center, radius: float, *, on: str = "boundar
         ext = np.sqrt(((p - cen[:, None]) ** 2).sum(-1)).max(1)
         near = np.sqrt(((cen - c) ** 2).sum(1)) < radius + ext
         if not np.any(near):
-            raise InvalidInputError(f"center: the patch of radius {radius:g} at {c.tolist()} misses the body")
+            raise InvalidInputError(
+                f"center: the patch of radius {radius:g} at {c.tolist()} misses the body"
+            )
         k = max(1, int(np.ceil(4.0 * ext[near].max() / radius)))
         bary, wq = subdivided_triangle_rule(k)
         x = np.einsum("qa,tad->tqd", bary, p[near])
@@ -191,11 +195,15 @@ def patch_weights(mesh: TissueMesh, center, radius: float, *, on: str = "boundar
         raise InvalidInputError(f"on: expected 'boundary' or 'area', got {on!r}")
     total = fe.sum()
     if not total > 0.0:
-        raise InvalidInputError(f"center: the patch of radius {radius:g} at {c.tolist()} has no {on}")
+        raise InvalidInputError(
+            f"center: the patch of radius {radius:g} at {c.tolist()} has no {on}"
+        )
     return np.bincount(idx.ravel(), fe.ravel() / total, minlength=mesh.n_nodes)
 
 
-def patch_load(mesh: TissueMesh, center, radius: float, force, *, on: str = "boundary") -> np.ndarray:
+def patch_load(
+    mesh: TissueMesh, center, radius: float, force, *, on: str = "boundary"
+) -> np.ndarray:
     """Nodal forces ``(N, 2)`` of a total force ``force (2,)`` spread over a patch
     (see :func:`patch_weights`); they sum to ``force``."""
     f = as_array(force, "force", shape=(2,))

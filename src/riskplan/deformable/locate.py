@@ -40,7 +40,10 @@ def locate_points(maps: np.ndarray, points: np.ndarray, chunk: int = 256, candid
     lam = np.empty((P, 3))
     todo = np.arange(P)
     if candidates is not None and P:
-        b = np.einsum("pkij,pj->pki", maps[candidates][:, :, :, :2], points) + maps[candidates][:, :, :, 2]
+        b = (
+            np.einsum("pkij,pj->pki", maps[candidates][:, :, :, :2], points)
+            + maps[candidates][:, :, :, 2]
+        )
         worst = b.min(axis=2)  # (P, k)
         j = worst.argmax(axis=1)
         rows = np.arange(P)
@@ -110,7 +113,9 @@ class Interpolator:
         out = np.zeros((self.n_nodes, d))
         contrib = self.weights[:, :, None] * forces[:, None, :]  # (P, 3, d)
         for k in range(d):
-            out[:, k] = np.bincount(self.node_index.ravel(), contrib[:, :, k].ravel(), minlength=self.n_nodes)
+            out[:, k] = np.bincount(
+                self.node_index.ravel(), contrib[:, :, k].ravel(), minlength=self.n_nodes
+            )
         return out
 
     def matrix(self):
@@ -119,7 +124,8 @@ class Interpolator:
 
         rows = np.repeat(np.arange(self.n_points), 3)
         return sparse.csr_matrix(
-            (self.weights.ravel(), (rows, self.node_index.ravel())), shape=(self.n_points, self.n_nodes)
+            (self.weights.ravel(), (rows, self.node_index.ravel())),
+            shape=(self.n_points, self.n_nodes),
         )
 
 
@@ -147,7 +153,9 @@ def locate(mesh: TissueMesh, points) -> Interpolator:
         a.setflags(write=False)
     idx = mesh.triangles[elem]
     idx.setflags(write=False)
-    return Interpolator(points=pts, elements=elem, node_index=idx, weights=lam, n_nodes=mesh.n_nodes)
+    return Interpolator(
+        points=pts, elements=elem, node_index=idx, weights=lam, n_nodes=mesh.n_nodes
+    )
 
 
 def contains(mesh: TissueMesh, points) -> np.ndarray:

@@ -46,8 +46,12 @@ class Material:
         for name in ("E", "nu"):
             v = getattr(self, name)
             # strings ("50") and booleans are not numbers here, even if float() accepts them
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (numbers.Real, np.floating, np.integer)):
-                raise InvalidInputError(f"{name}: expected a real number, got {v!r} ({type(v).__name__})")
+            if isinstance(v, (bool, np.bool_)) or not isinstance(
+                v, (numbers.Real, np.floating, np.integer)
+            ):
+                raise InvalidInputError(
+                    f"{name}: expected a real number, got {v!r} ({type(v).__name__})"
+                )
         E, nu = float(self.E), float(self.nu)
         if not math.isfinite(E) or not 0.0 < E <= MAX_MODULUS:
             raise InvalidInputError(

@@ -79,7 +79,9 @@ class TissueMesh:
         used = np.zeros(len(nodes), dtype=bool)
         used[tri.ravel()] = True
         if not used.all():
-            raise InvalidInputError(f"nodes: nodes {np.flatnonzero(~used)[:10].tolist()} belong to no triangle")
+            raise InvalidInputError(
+                f"nodes: nodes {np.flatnonzero(~used)[:10].tolist()} belong to no triangle"
+            )
         area = signed_areas(nodes, tri)
         span = np.ptp(nodes, axis=0)
         tol = DEGENERATE_RTOL * float(span[0] * span[1] + np.finfo(float).tiny)
@@ -162,13 +164,17 @@ class TissueMesh:
         idx = d2.argmin(1)
         far = np.sqrt(d2[np.arange(len(pts)), idx]) > tol
         if np.any(far):
-            raise InvalidInputError(f"points: {pts[far][:3].tolist()} are not mesh nodes (tol {tol:g})")
+            raise InvalidInputError(
+                f"points: {pts[far][:3].tolist()} are not mesh nodes (tol {tol:g})"
+            )
         return idx
 
     def to_skfem(self):
         """The same mesh as a ``skfem.MeshTri``."""
         skfem = require("skfem", "fem")
-        return skfem.MeshTri(np.ascontiguousarray(self.nodes.T), np.ascontiguousarray(self.triangles.T))
+        return skfem.MeshTri(
+            np.ascontiguousarray(self.nodes.T), np.ascontiguousarray(self.triangles.T)
+        )
 
     def __repr__(self) -> str:
         return f"TissueMesh(n_nodes={self.n_nodes}, n_elements={self.n_elements}, area={self.area:.6g})"
@@ -204,8 +210,12 @@ def _check_polygon(vertices: np.ndarray) -> tuple[np.ndarray, bool]:
         for j in range(i + 2, n):
             if i == 0 and j == n - 1:
                 continue
-            if _segments_intersect(vertices[i], vertices[(i + 1) % n], vertices[j], vertices[(j + 1) % n]):
-                raise InvalidInputError(f"vertices: polygon edges {i} and {j} intersect (not a simple polygon)")
+            if _segments_intersect(
+                vertices[i], vertices[(i + 1) % n], vertices[j], vertices[(j + 1) % n]
+            ):
+                raise InvalidInputError(
+                    f"vertices: polygon edges {i} and {j} intersect (not a simple polygon)"
+                )
     return (vertices, False) if area > 0 else (vertices[::-1].copy(), True)
 
 
@@ -254,11 +264,13 @@ def _build_pslg(poly: np.ndarray, keep: np.ndarray):
     chain = []
     for i in range(n):
         chain.append(i)
-        for t, k in sorted(on_edge.get(i, [])):
+        for _t, k in sorted(on_edge.get(i, [])):
             keep_index[k] = len(verts)
             verts.append(keep[k])
             chain.append(keep_index[k])
-    segs = np.array([[chain[j], chain[(j + 1) % len(chain)]] for j in range(len(chain))], dtype=np.int32)
+    segs = np.array(
+        [[chain[j], chain[(j + 1) % len(chain)]] for j in range(len(chain))], dtype=np.int32
+    )
     for k in interior:
         keep_index[k] = len(verts)
         verts.append(keep[k])
@@ -267,7 +279,7 @@ def _build_pslg(poly: np.ndarray, keep: np.ndarray):
 
 def _triangulate(tri_mod, pslg: dict, max_area: float, min_angle: float):
     # Triangle does not parse exponents: write the area in fixed notation, ~15 digits
-    digits = max(1, 15 - int(math.floor(math.log10(max_area))))
+    digits = max(1, 15 - math.floor(math.log10(max_area)))
     return tri_mod.triangulate(pslg, f"pq{min_angle:.4f}Qa{max_area:.{digits}f}")
 
 
@@ -330,7 +342,9 @@ def mesh_polygon(
     if not 1 <= n_elements <= 200_000:
         raise InvalidInputError(f"n_elements: expected 1 <= n_elements <= 200000, got {n_elements}")
     if not 0.0 <= min_angle <= 33.0:
-        raise InvalidInputError(f"min_angle: expected 0 <= min_angle <= 33 degrees, got {min_angle}")
+        raise InvalidInputError(
+            f"min_angle: expected 0 <= min_angle <= 33 degrees, got {min_angle}"
+        )
     keep = (
         np.zeros((0, 2))
         if keep_points is None
@@ -385,7 +399,9 @@ def mesh_polygon(
     return TissueMesh(
         nodes=nodes,
         triangles=tris,
-        vertex_nodes=np.arange(len(poly), dtype=np.int64)[::-1] if flipped else np.arange(len(poly), dtype=np.int64),
+        vertex_nodes=np.arange(len(poly), dtype=np.int64)[::-1]
+        if flipped
+        else np.arange(len(poly), dtype=np.int64),
         kept_nodes=keep_index,
     )
 

@@ -28,15 +28,22 @@ PAPER_FIG7 = {"nominal": 0.15, "optimised": 0.07, "iterations": 50}
 
 
 def trajectory_record(name: str, trajectory, bounds, bound: float) -> dict:
-    return {"name": name, "bound_eq10": float(bound), "configurations": np.asarray(trajectory).tolist(),
-            "bounds_eq9": np.asarray(bounds).tolist(), "units": "m (tendon displacements)"}
+    return {
+        "name": name,
+        "bound_eq10": float(bound),
+        "configurations": np.asarray(trajectory).tolist(),
+        "bounds_eq9": np.asarray(bounds).tolist(),
+        "units": "m (tendon displacements)",
+    }
 
 
 def trajectory_csv(trajectory, bounds, bound: float) -> str:
     traj = np.asarray(trajectory)
     buf = io.StringIO()
     buf.write(f"# eq. 10 trajectory bound: {bound:.8g}\n")
-    buf.write(",".join(["index"] + [f"d{j + 1}_m" for j in range(traj.shape[1])] + ["bound_eq9"]) + "\n")
+    buf.write(
+        ",".join(["index"] + [f"d{j + 1}_m" for j in range(traj.shape[1])] + ["bound_eq9"]) + "\n"
+    )
     for i, (row, p) in enumerate(zip(traj, bounds)):
         buf.write(",".join([str(i)] + [f"{v:.9g}" for v in row] + [f"{p:.8g}"]) + "\n")
     return buf.getvalue()
@@ -50,8 +57,13 @@ def trace_figure(trace, *, label: str = "riskplan (this run)", paper: dict | Non
     fig, ax = plt.subplots(figsize=(6, 3.6))
     ax.plot(np.arange(len(tr)), 100 * tr, "o-", ms=3, label=label)
     if paper:
-        ax.plot([0, paper["iterations"]], [100 * paper["nominal"], 100 * paper["optimised"]], "s--", color="gray",
-                label="paper Fig. 7 (start 15 %, < 7 % after 50)")
+        ax.plot(
+            [0, paper["iterations"]],
+            [100 * paper["nominal"], 100 * paper["optimised"]],
+            "s--",
+            color="gray",
+            label="paper Fig. 7 (start 15 %, < 7 % after 50)",
+        )
     ax.set_xlabel("iteration")
     ax.set_ylabel("P(collision) bound, eq. 10 [%]")
     ax.set_ylim(bottom=0)
@@ -61,8 +73,16 @@ def trace_figure(trace, *, label: str = "riskplan (this run)", paper: dict | Non
     return fig
 
 
-def trajectories_plotly(environment_world, model, trajectories: dict, to_world, *, samples: int = 60, seed: int = 0,
-                        title: str = "chest cavity: mixtures along the trajectories"):
+def trajectories_plotly(
+    environment_world,
+    model,
+    trajectories: dict,
+    to_world,
+    *,
+    samples: int = 60,
+    seed: int = 0,
+    title: str = "chest cavity: mixtures along the trajectories",
+):
     """Plotly figure: obstacles of ``environment_world`` and ``samples`` points of each predicted
     mixture along each trajectory (``{name: (T, m)}``), mapped by ``to_world (N, 3) -> (N, 3)``."""
     import plotly.graph_objects as go
@@ -71,24 +91,60 @@ def trajectories_plotly(environment_world, model, trajectories: dict, to_world, 
     data = []
     for k, name in enumerate(env.names):
         V, F = env.obstacle(k)
-        data.append(go.Mesh3d(x=V[:, 0], y=V[:, 1], z=V[:, 2], i=F[:, 0], j=F[:, 1], k=F[:, 2], name=name,
-                              opacity=0.12 if name == "body_wall" else 0.5, showlegend=True))
+        data.append(
+            go.Mesh3d(
+                x=V[:, 0],
+                y=V[:, 1],
+                z=V[:, 2],
+                i=F[:, 0],
+                j=F[:, 1],
+                k=F[:, 2],
+                name=name,
+                opacity=0.12 if name == "body_wall" else 0.5,
+                showlegend=True,
+            )
+        )
     colours = {"nominal": "royalblue", "optimised": "darkorange", "least_risk": "seagreen"}
     for name, traj in trajectories.items():
         gm = model.predict(np.asarray(traj))
         pts = gm.sample(samples, seed=seed).detach().cpu().numpy().reshape(-1, 3)
         w = to_world(pts)
-        data.append(go.Scatter3d(x=w[:, 0], y=w[:, 1], z=w[:, 2], mode="markers", name=f"{name} (mixture samples)",
-                                 marker=dict(size=1.5, color=colours.get(name, "black"), opacity=0.5)))
+        data.append(
+            go.Scatter3d(
+                x=w[:, 0],
+                y=w[:, 1],
+                z=w[:, 2],
+                mode="markers",
+                name=f"{name} (mixture samples)",
+                marker=dict(size=1.5, color=colours.get(name, "black"), opacity=0.5),
+            )
+        )
         tips = to_world(gm.means.detach().cpu().numpy().reshape(-1, 3))
-        data.append(go.Scatter3d(x=tips[:, 0], y=tips[:, 1], z=tips[:, 2], mode="markers", name=f"{name} (component means)",
-                                 marker=dict(size=3, color=colours.get(name, "black"), symbol="diamond")))
+        data.append(
+            go.Scatter3d(
+                x=tips[:, 0],
+                y=tips[:, 1],
+                z=tips[:, 2],
+                mode="markers",
+                name=f"{name} (component means)",
+                marker=dict(size=3, color=colours.get(name, "black"), symbol="diamond"),
+            )
+        )
     fig = go.Figure(data=data)
     fig.update_layout(scene=dict(aspectmode="data"), title=title)
     return fig
 
 
-def write_plan(out, plan, *, model, environment_world, to_world, validation: dict | None = None, extra: dict | None = None):
+def write_plan(
+    out,
+    plan,
+    *,
+    model,
+    environment_world,
+    to_world,
+    validation: dict | None = None,
+    extra: dict | None = None,
+):
     """Write the files listed in the module docstring for a :class:`~riskplan.planning.chest.ChestPlan`."""
     from pathlib import Path
 
@@ -102,14 +158,18 @@ def write_plan(out, plan, *, model, environment_world, to_world, validation: dic
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     res = plan.optimised
-    trajs = {"nominal": (plan.nominal, plan.nominal_bounds, plan.nominal_bound),
-             "optimised": (res.trajectory, res.bounds, res.bound)}
+    trajs = {
+        "nominal": (plan.nominal, plan.nominal_bounds, plan.nominal_bound),
+        "optimised": (res.trajectory, res.bounds, res.bound),
+    }
     files = []
     for name, (traj, b, P) in trajs.items():
         write_json_atomic(out / f"{name}.json", trajectory_record(name, traj, b, P))
         write_text_atomic(out / f"{name}.csv", trajectory_csv(traj, b, P))
         files += [f"{name}.json", f"{name}.csv"]
-    write_json_atomic(out / "trace.json", {"trace": res.trace.tolist(), "paper": PAPER_FIG7, **res.to_json()})
+    write_json_atomic(
+        out / "trace.json", {"trace": res.trace.tolist(), "paper": PAPER_FIG7, **res.to_json()}
+    )
     fig = trace_figure(res.trace)
     with atomic_path(out / "trace.png", suffix=".png") as tmp:
         fig.savefig(tmp, dpi=120)
@@ -122,25 +182,43 @@ def write_plan(out, plan, *, model, environment_world, to_world, validation: dic
         html.write_html(str(tmp), include_plotlyjs="cdn")
     files += ["trace.json", "trace.png", "chest.html"]
     summary = {
-        "nominal_bound": plan.nominal_bound, "optimised_bound": res.bound, "reduction": res.reduction,
-        "iterations": len(res.trace) - 1, "bound_evaluations": res.evaluations,
-        "start": plan.start.tolist(), "goal": plan.goal.tolist(),
+        "nominal_bound": plan.nominal_bound,
+        "optimised_bound": res.bound,
+        "reduction": res.reduction,
+        "iterations": len(res.trace) - 1,
+        "bound_evaluations": res.evaluations,
+        "start": plan.start.tolist(),
+        "goal": plan.goal.tolist(),
         "goal_tip_base_frame": None if plan.goal_tip is None else plan.goal_tip.tolist(),
-        "roadmap": {"milestones": plan.roadmap.n_vertices, "edges": plan.roadmap.n_edges,
-                    "build_s": plan.roadmap.build_seconds, "ompl_seeded": plan.roadmap.ompl_seeded},
-        "trajectory_length": len(plan.nominal), "timings_s": plan.timings, "settings": plan.settings,
+        "roadmap": {
+            "milestones": plan.roadmap.n_vertices,
+            "edges": plan.roadmap.n_edges,
+            "build_s": plan.roadmap.build_seconds,
+            "ompl_seeded": plan.roadmap.ompl_seeded,
+        },
+        "trajectory_length": len(plan.nominal),
+        "timings_s": plan.timings,
+        "settings": plan.settings,
         "frames": "trajectories in tendon-displacement space; mixtures and goal tip in the robot base frame; chest.html in the world frame",
     }
     if plan.paths is not None:
-        summary["paths"] = {k: {"bound_eq10": v["bound"], "length_m": v["length"], "configurations": len(v["trajectory"])}
-                            for k, v in plan.paths.items()}
+        summary["paths"] = {
+            k: {
+                "bound_eq10": v["bound"],
+                "length_m": v["length"],
+                "configurations": len(v["trajectory"]),
+            }
+            for k, v in plan.paths.items()
+        }
     if validation is not None:
         from riskplan.planning.validate import validation_markdown
 
         write_json_atomic(out / "validation.json", {"rows": validation})
         write_text_atomic(out / "validation.md", validation_markdown(validation))
         files += ["validation.json", "validation.md"]
-        summary["validation"] = [{k: v for k, v in r.items() if k != "robot_per_config"} for r in validation]
+        summary["validation"] = [
+            {k: v for k, v in r.items() if k != "robot_per_config"} for r in validation
+        ]
     if extra:
         summary.update(extra)
     write_json_atomic(out / "plan.json", json.loads(json.dumps(summary, default=float)))
@@ -148,7 +226,9 @@ def write_plan(out, plan, *, model, environment_world, to_world, validation: dic
     return files
 
 
-def scan_goal_tips(model, environment, tips, *, n_milestones: int = 300, seed: int = 0, tolerance: float = 0.005) -> list[dict]:
+def scan_goal_tips(
+    model, environment, tips, *, n_milestones: int = 300, seed: int = 0, tolerance: float = 0.005
+) -> list[dict]:
     """Nominal eq.-10 bound for each candidate goal tip ``(N, 3)`` (base frame) on one roadmap.
 
     The record behind the default scene (issue part 3): which effusion-pocket targets the
@@ -176,5 +256,7 @@ def scan_goal_tips(model, environment, tips, *, n_milestones: int = 300, seed: i
             P, _ = trajectory_risk(bound, traj)
             rows.append({"tip": tip.tolist(), "goal": goal.tolist(), "T": len(traj), "bound": P})
         except PlanningError as exc:
-            rows.append({"tip": tip.tolist(), "goal": None, "T": 0, "bound": None, "reason": str(exc)})
+            rows.append(
+                {"tip": tip.tolist(), "goal": None, "T": 0, "bound": None, "reason": str(exc)}
+            )
     return rows

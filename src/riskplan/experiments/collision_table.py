@@ -53,7 +53,12 @@ def _geometry_source(model=None, model_path=None, robot=None):
     phis = [0.0, 0.0, 0.0, 0.5 * np.pi, np.pi, 1.5 * np.pi, 0.0, np.pi, 0.5 * np.pi, 1.5 * np.pi]
     configs = np.column_stack([curv, phis])
     labels = [f"arc kappa={k:g}/m phi={p / np.pi:.1f}pi" for k, p in configs]
-    return "constant-curvature arcs", lambda c: backbone_mixture(arc_backbone(np.asarray(c)[..., 0], np.asarray(c)[..., 1]), 5), configs, labels
+    return (
+        "constant-curvature arcs",
+        lambda c: backbone_mixture(arc_backbone(np.asarray(c)[..., 0], np.asarray(c)[..., 1]), 5),
+        configs,
+        labels,
+    )
 
 
 def _default_robot():
@@ -70,7 +75,13 @@ def _default_robot():
 
 
 def collision_table(
-    *, seed: int = 0, n_samples: int = 100_000, model=None, model_path=None, robot=None, use_robot: bool = True,
+    *,
+    seed: int = 0,
+    n_samples: int = 100_000,
+    model=None,
+    model_path=None,
+    robot=None,
+    use_robot: bool = True,
     trajectory_steps: int = 10,
 ):
     """Rows of bound vs Monte Carlo for configurations in the chest; returns ``(rows, meta)``.
@@ -104,20 +115,48 @@ def collision_table(
     t_mc = time.perf_counter() - t0
     rows = []
     for i, lab in enumerate(labels):
-        rows.append(dict(label=lab, bound=float(bound[i]), mc=float(mc.probability[i]), mc_low=float(mc.low[i]),
-                         mc_high=float(mc.high[i]), union=float(union[i]), mc_union=float(mcu.probability[i]),
-                         mc_union_low=float(mcu.low[i]), mc_union_high=float(mcu.high[i])))
+        rows.append(
+            dict(
+                label=lab,
+                bound=float(bound[i]),
+                mc=float(mc.probability[i]),
+                mc_low=float(mc.low[i]),
+                mc_high=float(mc.high[i]),
+                union=float(union[i]),
+                mc_union=float(mcu.probability[i]),
+                mc_union_low=float(mcu.low[i]),
+                mc_union_high=float(mcu.high[i]),
+            )
+        )
     # trajectory: straight-line interpolation from home to the most colliding configuration
     target = configs[int(np.argmax(bound))]
     path = configs[0] + np.linspace(0, 1, trajectory_steps)[:, None] * (target - configs[0])
     gmt = make(path)
     tb = trajectory_bound(gmt, env)
     tmc = monte_carlo_trajectory(gmt, env, max(1000, n_samples // 10), seed=seed + 2)
-    rows.append(dict(label=f"trajectory, {trajectory_steps} states home -> {labels[int(np.argmax(bound))]} (eq. 10)",
-                     bound=float(tb), mc=float(tmc.probability), mc_low=float(tmc.low), mc_high=float(tmc.high),
-                     union=float("nan"), mc_union=float("nan"), mc_union_low=float("nan"), mc_union_high=float("nan")))
-    meta = dict(geometry=kind, seed=seed, n_samples=n_samples, triangles=env.n_faces, bound_seconds=t_bound,
-                monte_carlo_seconds=t_mc, configurations=len(labels), trajectory_samples=int(tmc.n))
+    rows.append(
+        dict(
+            label=f"trajectory, {trajectory_steps} states home -> {labels[int(np.argmax(bound))]} (eq. 10)",
+            bound=float(tb),
+            mc=float(tmc.probability),
+            mc_low=float(tmc.low),
+            mc_high=float(tmc.high),
+            union=float("nan"),
+            mc_union=float("nan"),
+            mc_union_low=float("nan"),
+            mc_union_high=float("nan"),
+        )
+    )
+    meta = dict(
+        geometry=kind,
+        seed=seed,
+        n_samples=n_samples,
+        triangles=env.n_faces,
+        bound_seconds=t_bound,
+        monte_carlo_seconds=t_mc,
+        configurations=len(labels),
+        trajectory_samples=int(tmc.n),
+    )
     return rows, meta
 
 
@@ -133,8 +172,14 @@ def to_markdown(rows, meta) -> str:
     for r in rows:
         ratio = r["bound"] / r["mc"] if r["mc"] > 0 else float("inf")
         union = "—" if np.isnan(r["union"]) else f"{r['union']:.4f}"
-        mcu = "—" if np.isnan(r["mc_union"]) else f"{r['mc_union']:.4f} [{r['mc_union_low']:.4f}, {r['mc_union_high']:.4f}]"
-        lines.append(f"| {r['label']} | {r['bound']:.4f} | {r['mc']:.4f} [{r['mc_low']:.4f}, {r['mc_high']:.4f}] | {ratio:.2f} | {union} | {mcu} |")
+        mcu = (
+            "—"
+            if np.isnan(r["mc_union"])
+            else f"{r['mc_union']:.4f} [{r['mc_union_low']:.4f}, {r['mc_union_high']:.4f}]"
+        )
+        lines.append(
+            f"| {r['label']} | {r['bound']:.4f} | {r['mc']:.4f} [{r['mc_low']:.4f}, {r['mc_high']:.4f}] | {ratio:.2f} | {union} | {mcu} |"
+        )
     tail = (
         f"\n\nBound computation: {meta['bound_seconds'] * 1e3:.1f} ms for all {meta['configurations']} configurations "
         f"(both variants); Monte Carlo: {meta['monte_carlo_seconds']:.1f} s.\n"

@@ -26,13 +26,22 @@ import json
 import sys
 import warnings
 
-PLANS = {"edge": {"speed": 1.0, "depth": 0.0}, "depth": {"speed": 1.0, "depth": 0.5},
-         "margin": {"speed": 0.8, "depth": 0.5}}
+PLANS = {
+    "edge": {"speed": 1.0, "depth": 0.0},
+    "depth": {"speed": 1.0, "depth": 0.5},
+    "margin": {"speed": 0.8, "depth": 0.5},
+}
 
 
-def needle_rows(cases=("nominal", "actuation", "material-high", "force"), n: int = 1000, seed: int = 1,
-                plan: str = "margin", controllers=("closed", "closed_identity", "open"), backend: str = "serial",
-                workers: int | None = None):
+def needle_rows(
+    cases=("nominal", "actuation", "material-high", "force"),
+    n: int = 1000,
+    seed: int = 1,
+    plan: str = "margin",
+    controllers=("closed", "closed_identity", "open"),
+    backend: str = "serial",
+    workers: int | None = None,
+):
     """One dict per case: plan length, LQG-MP estimates (Bryson-weighted controller), and the
     rate with its 95 % interval of each of ``controllers`` (``closed``: Bryson weights,
     ``closed_identity``: ``Q = I, R = I``, ``open``: no feedback)."""
@@ -52,18 +61,33 @@ def needle_rows(cases=("nominal", "actuation", "material-high", "force"), n: int
         u = greedy_needle_controls(sim, sim.nominal_params, 40, **PLANS[plan])
         nominal = NominalPlan.from_rollout(sim, sim.initial_state(), u)
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RankDeficiencyWarning)  # the car's lateral direction (docs/control.md)
+            warnings.simplefilter(
+                "ignore", RankDeficiencyWarning
+            )  # the car's lateral direction (docs/control.md)
             lin = linearize(sim, nominal, sim.distribution, seed=0)
-        ctrl = {"closed": lqg_controller(lin), "open": None,
-                "closed_identity": lqg_controller(lin, Q=np.eye(lin.A.shape[1]), R=np.eye(lin.B.shape[2]))}
+        ctrl = {
+            "closed": lqg_controller(lin),
+            "open": None,
+            "closed_identity": lqg_controller(
+                lin, Q=np.eye(lin.A.shape[1]), R=np.eye(lin.B.shape[2])
+            ),
+        }
         row = {"plan": plan, "case": case, "steps": nominal.n_steps}
         for method in ("sigma", "truncation"):
             for drift in (False, True):
                 r = lqgmp(sim, nominal, ctrl["closed"], method=method, drift=drift, seed=0)
                 row[f"lqgmp_{method}{'_drift' if drift else ''}"] = round(r.p_success, 3)
         for name in controllers:
-            mc = monte_carlo_success(sim, nominal, ctrl[name], sim.distribution, n=n, seed=seed, backend=backend,
-                                     workers=workers)
+            mc = monte_carlo_success(
+                sim,
+                nominal,
+                ctrl[name],
+                sim.distribution,
+                n=n,
+                seed=seed,
+                backend=backend,
+                workers=workers,
+            )
             row[name] = [round(mc.probability, 3), round(mc.low, 3), round(mc.high, 3)]
         rows.append(row)
     return rows

@@ -21,7 +21,9 @@ log = logging.getLogger(__name__)
 STAGES = ("robot", "kinematics", "collision", "tissue", "planning", "planning_tissue")
 
 
-def run_demo(out, *, seed: int = 0, workers: int | None = None, stages=STAGES, progress=None) -> Path:
+def run_demo(
+    out, *, seed: int = 0, workers: int | None = None, stages=STAGES, progress=None
+) -> Path:
     """Run ``stages`` in order into ``out`` and write ``out/report.html``; returns its path.
 
     ``progress(done, total, stage, seconds)`` is called before each stage (``seconds=None``) and
@@ -33,7 +35,9 @@ def run_demo(out, *, seed: int = 0, workers: int | None = None, stages=STAGES, p
     out = check_output_folder(out, "out")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise InvalidInputError(f"seed: expected a non-negative integer, got {seed!r}")
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+    if workers is not None and (
+        isinstance(workers, bool) or not isinstance(workers, int) or workers < 1
+    ):
         raise InvalidInputError(f"workers: expected a positive integer or None, got {workers!r}")
     stages = tuple(stages)
     report = Report(out, title="riskplan demo")

@@ -19,7 +19,15 @@ log = logging.getLogger(__name__)
 DEMO_COMPONENTS = 5
 SWEEP_COMPONENTS = (1, 2, 3, 4, 5)
 # The small preset has few configurations: small batches give enough steps per epoch.
-TRAIN = dict(hidden=(64, 64), head_hidden=(32,), batch_size=16, points_per_config=256, lr=3e-3, early_stop_patience=15, lr_patience=5)
+TRAIN = dict(
+    hidden=(64, 64),
+    head_hidden=(32,),
+    batch_size=16,
+    points_per_config=256,
+    lr=3e-3,
+    early_stop_patience=15,
+    lr_patience=5,
+)
 MAIN_EPOCHS = 400
 SWEEP_EPOCHS = 150
 # wall-clock seconds of training (stop at the first epoch end past it): keeps the stage near 60 s
@@ -35,10 +43,14 @@ def _data_paths(ctx: dict, seed: int, workers) -> tuple[Path, Path] | None:
         from riskplan.datasets import generate_splits
         from riskplan.robots import load_robot
     except ImportError as exc:
-        log.warning("kinematics demo: no data set in ctx and riskplan.datasets unavailable (%s)", exc)
+        log.warning(
+            "kinematics demo: no data set in ctx and riskplan.datasets unavailable (%s)", exc
+        )
         return None
     robot = ctx.get("robot") or load_robot("paper")
-    paths = generate_splits(robot, "small", Path(ctx["out"]) / "data" / "small", seed=seed, workers=workers)
+    paths = generate_splits(
+        robot, "small", Path(ctx["out"]) / "data" / "small", seed=seed, workers=workers
+    )
     ctx["train_path"], ctx["test_path"] = paths["train"], paths["test"]
     return Path(paths["train"]), Path(paths["test"])
 
@@ -48,7 +60,11 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
 
     from riskplan.kinematics.data import read_point_clouds
     from riskplan.kinematics.evaluation import evaluate
-    from riskplan.kinematics.plotting import fig_nll_vs_components, fig_samples_vs_truth, plotly_samples_vs_truth
+    from riskplan.kinematics.plotting import (
+        fig_nll_vs_components,
+        fig_samples_vs_truth,
+        plotly_samples_vs_truth,
+    )
     from riskplan.kinematics.sweep import sweep
     from riskplan.kinematics.training import TrainConfig, train
 
@@ -56,7 +72,10 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     sec = report.section("Learned kinematics: mixture density network (MDN paper, Figs. 4-5)")
     paths = _data_paths(ctx, seed, workers)
     if paths is None:
-        Report.text(sec, "Skipped: no point-cloud data set available (the robot/data-set stages did not provide one).")
+        Report.text(
+            sec,
+            "Skipped: no point-cloud data set available (the robot/data-set stages did not provide one).",
+        )
         return
     train_path, test_path = paths
     out = Path(ctx["out"]) / "kinematics"
@@ -72,7 +91,14 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     t_train = time.perf_counter() - t0
     ctx["model"], ctx["model_path"] = model, model_path
 
-    ev = evaluate(model, test_data, n_samples=2048, chamfer_points=1024, seed=seed, max_configs=min(test_data.n_configs, 60))
+    ev = evaluate(
+        model,
+        test_data,
+        n_samples=2048,
+        chamfer_points=1024,
+        seed=seed,
+        max_configs=min(test_data.n_configs, 60),
+    )
     Report.text(
         sec,
         f"Trained a K={model.n_components} MDN on {train_data.n_configs} configurations x {train_data.n_points} points "
@@ -82,19 +108,38 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     rows = [["test NLL [nats/point]", ev.nll], ["Chamfer distance [mm]", ev.chamfer * 1e3]]
     rows += [[f"HDR coverage at level {a:g} (target {a:g})", c] for a, c in ev.calibration.items()]
     Report.table(sec, ["measure", "value"], rows, caption="Evaluation on the test set")
-    report.figure(sec, fig_samples_vs_truth(model, test_data, n_configs=2, n_samples=1500, seed=seed), "kinematics_fig5",
-                  "Fig. 5: samples of the predicted mixture (red) vs ground-truth points (blue), two random test configurations.")
-    report.plotly(sec, plotly_samples_vs_truth(model, test_data, n_configs=2, n_samples=1500, seed=seed), "kinematics_fig5",
-                  "Fig. 5")
+    report.figure(
+        sec,
+        fig_samples_vs_truth(model, test_data, n_configs=2, n_samples=1500, seed=seed),
+        "kinematics_fig5",
+        "Fig. 5: samples of the predicted mixture (red) vs ground-truth points (blue), two random test configurations.",
+    )
+    report.plotly(
+        sec,
+        plotly_samples_vs_truth(model, test_data, n_configs=2, n_samples=1500, seed=seed),
+        "kinematics_fig5",
+        "Fig. 5",
+    )
 
     sweep_cfg = TrainConfig(epochs=SWEEP_EPOCHS, seed=seed, **TRAIN)
-    sw = sweep(train_path, test_path, list(SWEEP_COMPONENTS), sweep_cfg, out=out / "sweep", workers=workers or 2,
-               max_seconds_per_k=SWEEP_TIME_BUDGET)
-    report.figure(sec, fig_nll_vs_components(sw), "kinematics_fig4",
-                  f"Fig. 4: test NLL vs number of components (at most {SWEEP_EPOCHS} epochs or {SWEEP_TIME_BUDGET:g} s each; recommended K={sw.recommended}).")
+    sw = sweep(
+        train_path,
+        test_path,
+        list(SWEEP_COMPONENTS),
+        sweep_cfg,
+        out=out / "sweep",
+        workers=workers or 2,
+        max_seconds_per_k=SWEEP_TIME_BUDGET,
+    )
+    report.figure(
+        sec,
+        fig_nll_vs_components(sw),
+        "kinematics_fig4",
+        f"Fig. 4: test NLL vs number of components (at most {SWEEP_EPOCHS} epochs or {SWEEP_TIME_BUDGET:g} s each; recommended K={sw.recommended}).",
+    )
     Report.table(
-        sec, ["K", "test NLL", "collapsed components"],
+        sec,
+        ["K", "test NLL", "collapsed components"],
         [[e.n_components, e.test_nll, ", ".join(map(str, e.collapsed)) or "-"] for e in sw.entries],
         caption=f"K sweep: {sw.rule}",
     )
-

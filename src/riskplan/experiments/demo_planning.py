@@ -41,7 +41,9 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     from riskplan.planning.risk import ConfigurationBound, trajectory_risk
 
     torch.set_num_threads(1)
-    sec = report.section("Planning in the chest cavity: PRM + Bayesian optimisation (MDN paper section V, Fig. 7)")
+    sec = report.section(
+        "Planning in the chest cavity: PRM + Bayesian optimisation (MDN paper section V, Fig. 7)"
+    )
     model = ctx.get("model")
     if model is None:
         Report.text(sec, "Skipped: no learned kinematic model (the kinematics stage did not run).")
@@ -66,17 +68,49 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     bound = ConfigurationBound(model, env)
     nominal = interpolate_path(rm.shortest_path(start, goal))
     P0, p0 = trajectory_risk(bound, nominal)
-    res = optimise_trajectory(nominal, bound, validity, model.limits, bounds=p0, seed=seed,
-                              config=OptimiserConfig(iterations=ITERATIONS, n_candidates=CANDIDATES))
+    res = optimise_trajectory(
+        nominal,
+        bound,
+        validity,
+        model.limits,
+        bounds=p0,
+        seed=seed,
+        config=OptimiserConfig(iterations=ITERATIONS, n_candidates=CANDIDATES),
+    )
     Report.text(
         sec,
         f"Roadmap: {rm.describe()} (OMPL PRM; valid = every component mean in free space; motions checked every "
         f"{rm.resolution * 1e3:g} mm). Nominal trajectory: {len(nominal)} configurations from zero displacement to the goal "
         f"({how}). Bayesian optimisation, {ITERATIONS} iterations with {CANDIDATES} candidates each.",
     )
-    Report.table(sec, ["trajectory", "eq. 10 bound"], [["nominal (PRM)", P0], ["optimised", res.bound]],
-                 caption=f"Relative reduction {100 * res.reduction:.1f} % in {ITERATIONS} iterations (paper: 15 % -> < 7 % in 50).")
-    report.figure(sec, trace_figure(res.trace), "planning_fig7", "Fig. 7: eq.-10 bound per iteration, with the paper's start and end values.")
-    report.plotly(sec, trajectories_plotly(chest.environment, model, {"nominal": nominal, "optimised": res.trajectory}, chest.to_world,
-                                           samples=30, seed=seed), "planning_chest_3d", "Mixtures along the nominal and optimised trajectories")
-    ctx["chest_plan"] = {"nominal": nominal, "optimised": res.trajectory, "nominal_bound": P0, "optimised_bound": res.bound}
+    Report.table(
+        sec,
+        ["trajectory", "eq. 10 bound"],
+        [["nominal (PRM)", P0], ["optimised", res.bound]],
+        caption=f"Relative reduction {100 * res.reduction:.1f} % in {ITERATIONS} iterations (paper: 15 % -> < 7 % in 50).",
+    )
+    report.figure(
+        sec,
+        trace_figure(res.trace),
+        "planning_fig7",
+        "Fig. 7: eq.-10 bound per iteration, with the paper's start and end values.",
+    )
+    report.plotly(
+        sec,
+        trajectories_plotly(
+            chest.environment,
+            model,
+            {"nominal": nominal, "optimised": res.trajectory},
+            chest.to_world,
+            samples=30,
+            seed=seed,
+        ),
+        "planning_chest_3d",
+        "Mixtures along the nominal and optimised trajectories",
+    )
+    ctx["chest_plan"] = {
+        "nominal": nominal,
+        "optimised": res.trajectory,
+        "nominal_bound": P0,
+        "optimised_bound": res.bound,
+    }

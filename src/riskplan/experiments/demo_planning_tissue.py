@@ -38,12 +38,21 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     out = Path(ctx["out"])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        res = plan_tissue("needle", n_plans=N_PLANS, case=CASE, seed=seed, workers=workers,
-                          rrt_options=RRTOptions(plans_per_tree=PLANS_PER_TREE), check_runs=CHECK_RUNS,
-                          check_others=1)
+        res = plan_tissue(
+            "needle",
+            n_plans=N_PLANS,
+            case=CASE,
+            seed=seed,
+            workers=workers,
+            rrt_options=RRTOptions(plans_per_tree=PLANS_PER_TREE),
+            check_runs=CHECK_RUNS,
+            check_others=1,
+        )
     sel = res.selection
     best = sel.score(sel.best)
-    sec = report.section("Planning in deformable tissue: simulator RRT + LQG-MP (Patil et al. 2011, IV)")
+    sec = report.section(
+        "Planning in deformable tissue: simulator RRT + LQG-MP (Patil et al. 2011, IV)"
+    )
     Report.text(
         sec,
         f"{len(res.plans)} candidate plans from {len(res.trees)} simulator-RRT trees "
@@ -52,12 +61,28 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
         f"under case '{CASE}' ({res.timings['selection']:.1f} s). Selected: candidate {sel.best}, {sel.plan.n_steps} "
         f"steps, LQG-MP P(success) = {best.p_success:.3f}.",
     )
-    report.figure(sec, candidates_figure(res.sim, res.plans, sel.best), "planning_tissue_candidates",
-                  "candidates (grey) and the plan LQG-MP selects (orange), at the end of the selected plan")
-    gif, ex = execution_gif(res.sim, sel.plan, sel.controller, res.sim.sample_params(seed),
-                            out / "planning_tissue_execution.gif", seed=seed)
-    report.image(sec, gif, f"one closed-loop execution under a draw of '{CASE}' (success: {ex.success})")
-    Report.table(sec, HONESTY_HEADER, summary_rows(res),
-                 caption=f"LQG-MP estimate vs {CHECK_RUNS} closed-loop executions (95 % Wilson interval)")
+    report.figure(
+        sec,
+        candidates_figure(res.sim, res.plans, sel.best),
+        "planning_tissue_candidates",
+        "candidates (grey) and the plan LQG-MP selects (orange), at the end of the selected plan",
+    )
+    gif, ex = execution_gif(
+        res.sim,
+        sel.plan,
+        sel.controller,
+        res.sim.sample_params(seed),
+        out / "planning_tissue_execution.gif",
+        seed=seed,
+    )
+    report.image(
+        sec, gif, f"one closed-loop execution under a draw of '{CASE}' (success: {ex.success})"
+    )
+    Report.table(
+        sec,
+        HONESTY_HEADER,
+        summary_rows(res),
+        caption=f"LQG-MP estimate vs {CHECK_RUNS} closed-loop executions (95 % Wilson interval)",
+    )
     ctx["planning_tissue"] = {"p_success": best.p_success, "timings": res.timings}
     log.info("planning_tissue demo: %s", res.timings)

@@ -48,7 +48,14 @@ def fig_shapes(robot, configs):
     for j, d in enumerate(configs):
         sh = shapes[j]
         P = sh.positions
-        ax.plot(P[:, 0], P[:, 1], P[:, 2], color=f"C{j}", lw=2, label=f"d = {tuple(round(x, 3) for x in d)}")
+        ax.plot(
+            P[:, 0],
+            P[:, 1],
+            P[:, 2],
+            color=f"C{j}",
+            lw=2,
+            label=f"d = {tuple(round(x, 3) for x in d)}",
+        )
         for ring in _disk_rings(sh, robot):
             ax.plot(ring[:, 0], ring[:, 1], ring[:, 2], color=f"C{j}", lw=0.8)
     ax.set_xlabel("x [m]")
@@ -74,11 +81,20 @@ def fig_clouds(points, tips, title: str):
     allp = points.reshape(-1, 3)
     c = 0.5 * (allp.min(0) + allp.max(0))
     h = 0.5 * (allp.max(0) - allp.min(0)).max()
-    for k, (pts, ttl) in enumerate(((points[:1], "one start"), (points, f"all {len(points)} starts"))):
+    for k, (pts, ttl) in enumerate(
+        ((points[:1], "one start"), (points, f"all {len(points)} starts"))
+    ):
         ax = fig.add_subplot(1, 3, k + 1, projection="3d")
         for j, cloud in enumerate(pts):
             ax.scatter(cloud[:, 0], cloud[:, 1], cloud[:, 2], s=1.5, color=f"C{j}", alpha=0.7)
-        ax.scatter(tips[: len(pts), 0], tips[: len(pts), 1], tips[: len(pts), 2], color="k", marker="x", s=20)
+        ax.scatter(
+            tips[: len(pts), 0],
+            tips[: len(pts), 1],
+            tips[: len(pts), 2],
+            color="k",
+            marker="x",
+            s=20,
+        )
         ax.set_title(f"{ttl}", fontsize=10)
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
@@ -91,8 +107,17 @@ def fig_clouds(points, tips, title: str):
     mt = tips.mean(0)
     for j, cloud in enumerate(points):
         near = cloud[np.linalg.norm(cloud - mt, axis=1) < 0.015]
-        ax.scatter((near[:, 0] - mt[0]) * 1e3, (near[:, 1] - mt[1]) * 1e3, s=4, color=f"C{j}", alpha=0.7)
-    ax.scatter((tips[:, 0] - mt[0]) * 1e3, (tips[:, 1] - mt[1]) * 1e3, color="k", marker="x", s=30, label="true tips")
+        ax.scatter(
+            (near[:, 0] - mt[0]) * 1e3, (near[:, 1] - mt[1]) * 1e3, s=4, color=f"C{j}", alpha=0.7
+        )
+    ax.scatter(
+        (tips[:, 0] - mt[0]) * 1e3,
+        (tips[:, 1] - mt[1]) * 1e3,
+        color="k",
+        marker="x",
+        s=30,
+        label="true tips",
+    )
     ax.set_aspect("equal")
     ax.set_xlabel("x - mean tip x [mm]")
     ax.set_ylabel("y - mean tip y [mm]")
@@ -123,7 +148,9 @@ def fig_camera_views(robot, protocol, displacements):
         c0, c1 = max(cols.min() - 10, 0), min(cols.max() + 10, cam.width)
         im = ax.imshow(img[r0:r1, c0:c1], cmap="viridis", extent=(c0, c1, r1, r0))
         fig.colorbar(im, ax=ax, label="depth [m]", shrink=0.8)
-        ax.set_title(f"camera {k + 1} at {tuple(round(v, 2) for v in cam.position)} ({int(np.isfinite(img).sum())} px)")
+        ax.set_title(
+            f"camera {k + 1} at {tuple(round(v, 2) for v in cam.position)} ({int(np.isfinite(img).sum())} px)"
+        )
         ax.set_xlabel("column [px]")
         ax.set_ylabel("row [px]")
     ax = fig.add_subplot(1, len(cams) + 1, len(cams) + 1, projection="3d")
@@ -146,7 +173,9 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     t0 = time.perf_counter()
     paths = {}
     for split in ("train", "test"):
-        paths[split] = generate_dataset(robot, PRESET, data / f"{PRESET}_{split}.h5", split=split, seed=seed, workers=workers)
+        paths[split] = generate_dataset(
+            robot, PRESET, data / f"{PRESET}_{split}.h5", split=split, seed=seed, workers=workers
+        )
     t_gen = time.perf_counter() - t0
     ctx["robot"] = robot
     ctx["train_path"], ctx["test_path"] = paths["train"], paths["test"]
@@ -161,28 +190,65 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
         f"two depth cameras on opposite sides, {protocol.n_points} points per cloud. Generated in {t_gen:.1f} s "
         f"(seed {seed}).",
     )
-    report.figure(sec, fig_shapes(robot, SHAPE_CONFIGS), "robot_shapes",
-                  "Robot shapes (backbone and separator disks) for a few tendon displacements (nominal, no hysteresis).")
+    report.figure(
+        sec,
+        fig_shapes(robot, SHAPE_CONFIGS),
+        "robot_shapes",
+        "Robot shapes (backbone and separator disks) for a few tendon displacements (nominal, no hysteresis).",
+    )
 
     train = load_dataset(paths["train"])
     spread = train.tip_spread()
-    i = int(np.argsort(spread)[len(spread) // 2 + len(spread) // 4])  # a target with above-median spread
-    report.figure(sec, fig_clouds(train.points[i], train.tips[i], f"d = {np.round(train.displacements[i], 4).tolist()}"),
-                  "robot_clouds", "One target's point clouds (the paper's Fig. 3): one start (left) and all starts "
-                  "concatenated (right); crosses mark the true tips. The spread comes from the path-dependent transmission.")
-    report.figure(sec, fig_camera_views(robot, protocol, train.displacements[i]), "robot_cameras",
-                  "What each camera sees (depth images, cropped) and the merged cloud before downsampling.")
+    i = int(
+        np.argsort(spread)[len(spread) // 2 + len(spread) // 4]
+    )  # a target with above-median spread
+    report.figure(
+        sec,
+        fig_clouds(
+            train.points[i], train.tips[i], f"d = {np.round(train.displacements[i], 4).tolist()}"
+        ),
+        "robot_clouds",
+        "One target's point clouds (the paper's Fig. 3): one start (left) and all starts "
+        "concatenated (right); crosses mark the true tips. The spread comes from the path-dependent transmission.",
+    )
+    report.figure(
+        sec,
+        fig_camera_views(robot, protocol, train.displacements[i]),
+        "robot_cameras",
+        "What each camera sees (depth images, cropped) and the merged cloud before downsampling.",
+    )
 
     order = np.argsort(spread)[::-1]
-    rows = [[int(k), str(np.round(train.displacements[k] * 1e3, 1).tolist()), float(spread[k] * 1e3),
-             float(np.linalg.norm(train.tips[k] - train.tips[k].mean(0), axis=1).max() * 1e3)] for k in order[:8]]
-    Report.table(sec, ["target", "displacements [mm]", "tip spread RMS [mm]", "max tip deviation [mm]"], rows,
-                 caption="Targets with the largest tip spread over their starts (training split)")
+    rows = [
+        [
+            int(k),
+            str(np.round(train.displacements[k] * 1e3, 1).tolist()),
+            float(spread[k] * 1e3),
+            float(np.linalg.norm(train.tips[k] - train.tips[k].mean(0), axis=1).max() * 1e3),
+        ]
+        for k in order[:8]
+    ]
+    Report.table(
+        sec,
+        ["target", "displacements [mm]", "tip spread RMS [mm]", "max tip deviation [mm]"],
+        rows,
+        caption="Targets with the largest tip spread over their starts (training split)",
+    )
     test = load_dataset(paths["test"])
     Report.table(
         sec,
         ["split", "targets", "clouds", "points/cloud", "tip spread mean [mm]", "median", "max"],
-        [[name, ds.n_configs, ds.n_configs * ds.n_starts, ds.n_points, float(ds.tip_spread().mean() * 1e3),
-          float(np.median(ds.tip_spread()) * 1e3), float(ds.tip_spread().max() * 1e3)] for name, ds in (("train", train), ("test", test))],
+        [
+            [
+                name,
+                ds.n_configs,
+                ds.n_configs * ds.n_starts,
+                ds.n_points,
+                float(ds.tip_spread().mean() * 1e3),
+                float(np.median(ds.tip_spread()) * 1e3),
+                float(ds.tip_spread().max() * 1e3),
+            ]
+            for name, ds in (("train", train), ("test", test))
+        ],
         caption="Data-set shapes and tip spread per target",
     )

@@ -36,8 +36,15 @@ def _margin(sim, state) -> float:
     return float(min(signed_distance_to_polygon(p, poly)[0] for poly in sim.obstacles(state)))
 
 
-def greedy_needle_controls(sim, params, n_steps: int, clearance: float = 0.03, horizon: int = 8,
-                           speed: float = 1.0, depth: float = 0.0) -> np.ndarray:
+def greedy_needle_controls(
+    sim,
+    params,
+    n_steps: int,
+    clearance: float = 0.03,
+    horizon: int = 8,
+    speed: float = 1.0,
+    depth: float = 0.0,
+) -> np.ndarray:
     """Arc lookahead on the simulator: for 9 steering angles at ``speed · v_max`` (full speed by
     default; ``speed < 1`` leaves the feedback controller room to speed up), simulate
     ``horizon`` steps of that constant control; discard arcs that leave the tissue or come
@@ -50,7 +57,9 @@ def greedy_needle_controls(sim, params, n_steps: int, clearance: float = 0.03, h
     if not 0.0 < speed <= 1.0:
         raise InvalidInputError(f"speed: expected a fraction of v_max in (0, 1], got {speed!r}")
     if not 0.0 <= depth < 1.0:
-        raise InvalidInputError(f"depth: expected a fraction of the goal radius in [0, 1), got {depth!r}")
+        raise InvalidInputError(
+            f"depth: expected a fraction of the goal radius in [0, 1), got {depth!r}"
+        )
     v = speed * sim.control_bounds[0, 1]
     r_in = (1.0 - depth) * sim.config.goal_radius
 
@@ -80,7 +89,9 @@ def greedy_needle_controls(sim, params, n_steps: int, clearance: float = 0.03, h
     return np.array(out)
 
 
-def greedy_manipulation_controls(sim, params, n_steps: int, max_move: float = 0.025, eps: float = 0.02) -> np.ndarray:
+def greedy_manipulation_controls(
+    sim, params, n_steps: int, max_move: float = 0.025, eps: float = 0.02
+) -> np.ndarray:
     """Resolved-rate steering on the simulator: estimate the 2×6 Jacobian of the target
     position w.r.t. the forces by forward differences
     (:func:`riskplan.control.linearize.control_jacobian`), take the minimum-norm force change
@@ -98,7 +109,9 @@ def greedy_manipulation_controls(sim, params, n_steps: int, max_move: float = 0.
     for _ in range(n_steps):
         x0 = sim.target(state)
         # the target is x[:2]; the library's B_t machinery (paper IV-B) differentiates the step
-        J = control_jacobian(sim, state, u, params, np.full(sim.control_dim, eps * f_max), x_next=sim.reduced(state))[:2]
+        J = control_jacobian(
+            sim, state, u, params, np.full(sim.control_dim, eps * f_max), x_next=sim.reduced(state)
+        )[:2]
         d = goal - x0
         d *= min(1.0, max_move / max(np.linalg.norm(d), 1e-12))
         step = np.linalg.lstsq(J, d, rcond=None)[0]
@@ -183,11 +196,21 @@ def _case_table(sim, controls, n_samples: int, seed: int, cap_mesh: int | None =
 HEADER = ["case", "draws", "mean final dist.", "sd", "in goal", "collided", "success"]
 
 
-def _scenario_section(report: Report, out: Path, sim, title: str, controls, describe, n_samples: int, seed: int,
-                      caption: str, cap_mesh: int | None = None):
+def _scenario_section(
+    report: Report,
+    out: Path,
+    sim,
+    title: str,
+    controls,
+    describe,
+    n_samples: int,
+    seed: int,
+    caption: str,
+    cap_mesh: int | None = None,
+):
     """Run ``controls`` on the nominal parameters, show the GIF, frames and the per-case table."""
-    from riskplan.scenarios.plotting import save_gif
     from riskplan.scenarios.base import rollout
+    from riskplan.scenarios.plotting import save_gif
 
     sec = report.section(title)
     p0 = sim.nominal_params
@@ -195,7 +218,12 @@ def _scenario_section(report: Report, out: Path, sim, title: str, controls, desc
     gif = save_gif(sim, states, out / f"tissue_{sim.name}.gif")
     Report.text(sec, describe(p0, states))
     report.image(sec, gif, f"{sim.name} execution (animated GIF)")
-    report.figure(sec, _frames_figure(sim, states), f"tissue_{sim.name}_frames", f"frames of the {sim.name} execution")
+    report.figure(
+        sec,
+        _frames_figure(sim, states),
+        f"tissue_{sim.name}_frames",
+        f"frames of the {sim.name} execution",
+    )
     rows = _case_table(sim, controls, n_samples, seed, cap_mesh=cap_mesh)
     Report.table(sec, HEADER, rows, caption=caption)
 
@@ -220,8 +248,15 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
         )
 
     _scenario_section(
-        report, out, needle, "Deformable tissue: needle in a deformable plane (Patil et al. 2011, V-A)", u, needle_text,
-        NEEDLE_SAMPLES, seed, "the same controls executed open loop under each uncertainty case (section V-A)",
+        report,
+        out,
+        needle,
+        "Deformable tissue: needle in a deformable plane (Patil et al. 2011, V-A)",
+        u,
+        needle_text,
+        NEEDLE_SAMPLES,
+        seed,
+        "the same controls executed open loop under each uncertainty case (section V-A)",
     )
     t_needle = time.perf_counter() - t0
     ctx["tissue_needle_controls"] = u
@@ -241,8 +276,14 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
         )
 
     _scenario_section(
-        report, out, manip, "Deformable tissue: internal point manipulation (Patil et al. 2011, V-B)", um, manip_text,
-        MANIP_SAMPLES, seed,
+        report,
+        out,
+        manip,
+        "Deformable tissue: internal point manipulation (Patil et al. 2011, V-B)",
+        um,
+        manip_text,
+        MANIP_SAMPLES,
+        seed,
         f"open-loop outcomes under each uncertainty case (mesh case capped at {MANIP_MESH_CAP} elements in the demo)",
         cap_mesh=MANIP_MESH_CAP,
     )

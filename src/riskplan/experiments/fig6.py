@@ -112,31 +112,61 @@ class ScenarioScale:
     n_controls: int = 6
 
     def __post_init__(self):
-        for name in ("n_candidates", "n_executions", "batch_size", "plans_per_tree", "max_iterations", "n_controls", "goal_samples"):
+        for name in (
+            "n_candidates",
+            "n_executions",
+            "batch_size",
+            "plans_per_tree",
+            "max_iterations",
+            "n_controls",
+            "goal_samples",
+        ):
             v = getattr(self, name)
             if int(v) != v or v < 1:
                 raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
         if int(self.lin_samples) != self.lin_samples or self.lin_samples < 2:
-            raise InvalidInputError(f"lin_samples: expected an integer >= 2, got {self.lin_samples!r}")
+            raise InvalidInputError(
+                f"lin_samples: expected an integer >= 2, got {self.lin_samples!r}"
+            )
 
     def rrt_options(self):
         from riskplan.planning.rrt import RRTOptions
 
-        return RRTOptions(n_controls=self.n_controls, max_iterations=self.max_iterations, plans_per_tree=self.plans_per_tree)
+        return RRTOptions(
+            n_controls=self.n_controls,
+            max_iterations=self.max_iterations,
+            plans_per_tree=self.plans_per_tree,
+        )
 
 
 #: Named scales. ``smoke`` fits ``riskplan reproduce --paper all`` in about 5 minutes on two
 #: cores; ``paper`` is the paper's (100 candidates, 1000 executions per method and case).
 SCALES: dict[str, dict[str, ScenarioScale]] = {
     "smoke": {
-        "needle": ScenarioScale(n_candidates=2, n_executions=20, batch_size=10, lin_samples=6, goal_samples=300,
-                                plans_per_tree=2),
-        "manipulation": ScenarioScale(n_candidates=2, n_executions=6, batch_size=3, lin_samples=4, goal_samples=300,
-                                      plans_per_tree=2),
+        "needle": ScenarioScale(
+            n_candidates=2,
+            n_executions=20,
+            batch_size=10,
+            lin_samples=6,
+            goal_samples=300,
+            plans_per_tree=2,
+        ),
+        "manipulation": ScenarioScale(
+            n_candidates=2,
+            n_executions=6,
+            batch_size=3,
+            lin_samples=4,
+            goal_samples=300,
+            plans_per_tree=2,
+        ),
     },
     "paper": {
-        "needle": ScenarioScale(n_candidates=100, n_executions=1000, batch_size=50, plans_per_tree=10),
-        "manipulation": ScenarioScale(n_candidates=100, n_executions=1000, batch_size=20, plans_per_tree=10),
+        "needle": ScenarioScale(
+            n_candidates=100, n_executions=1000, batch_size=50, plans_per_tree=10
+        ),
+        "manipulation": ScenarioScale(
+            n_candidates=100, n_executions=1000, batch_size=20, plans_per_tree=10
+        ),
     },
 }
 
@@ -175,7 +205,9 @@ class BlobStore:
         path = self.dir / f"{key}.pkl"
         with atomic_path(path) as tmp:
             Path(tmp).write_bytes(data)
-        self.store.put(f"blob.{key}", {"sha256": hashlib.sha256(data).hexdigest(), "bytes": len(data)})
+        self.store.put(
+            f"blob.{key}", {"sha256": hashlib.sha256(data).hexdigest(), "bytes": len(data)}
+        )
 
     def get_or_compute(self, key: str, compute):
         found = self.get(key)
@@ -203,10 +235,22 @@ def evaluate_candidate(args):
         # rank-deficient X_t along straight stretches is expected and documented by linearize
         warnings.simplefilter("ignore", RuntimeWarning)
         try:
-            ctrl, res = evaluate_plan(sim, plan, sim.distribution, n_samples=lin_samples, n_goal_samples=goal_samples,
-                                      seed=seed)
+            ctrl, res = evaluate_plan(
+                sim,
+                plan,
+                sim.distribution,
+                n_samples=lin_samples,
+                n_goal_samples=goal_samples,
+                seed=seed,
+            )
         except failures as exc:
-            return {"p_success": 0.0, "p_collision_free": 0.0, "p_goal": 0.0, "controller": None, "error": str(exc)}
+            return {
+                "p_success": 0.0,
+                "p_collision_free": 0.0,
+                "p_goal": 0.0,
+                "controller": None,
+                "error": str(exc),
+            }
     return {
         "p_success": float(res.p_success),
         "p_collision_free": float(res.p_collision_free),
@@ -226,13 +270,17 @@ def execute_batch(args) -> list[list[int]]:
         gen = np.random.default_rng(s)
         params = sim.distribution.sample(gen)
         ex = execute(sim, plan, controller, params, seed=gen, keep_states=False)
-        out.append([int(ex.success), int(ex.collided), int(ex.reached_goal), int(ex.error is not None)])
+        out.append(
+            [int(ex.success), int(ex.collided), int(ex.reached_goal), int(ex.error is not None)]
+        )
     return out
 
 
 def _seed_for(seed: int, *labels) -> int:
     """A 63-bit seed for a named part of the run (stable across runs and backends)."""
-    words = [int(seed)] + [int.from_bytes(hashlib.sha256(str(x).encode()).digest()[:4], "little") for x in labels]
+    words = [int(seed)] + [
+        int.from_bytes(hashlib.sha256(str(x).encode()).digest()[:4], "little") for x in labels
+    ]
     return int(np.random.SeedSequence(words).generate_state(1, dtype=np.uint64)[0] >> np.uint64(1))
 
 
@@ -286,7 +334,9 @@ def run_scenario(
             raise InvalidInputError(f"cases: expected names from {EVAL_CASES}, got {c!r}")
     blobs = BlobStore(store)
     report = progress or (lambda stage, done, total: None)
-    pmap = partial(imap_tasks, backend=backend, workers=workers, ray_address=ray_address, chunksize=1)
+    pmap = partial(
+        imap_tasks, backend=backend, workers=workers, ray_address=ray_address, chunksize=1
+    )
     na = NOT_APPLICABLE.get(name, {})
 
     # 1. candidate plans: deforming tissue, and (needle) static tissue
@@ -300,8 +350,15 @@ def run_scenario(
         report(f"{name}: RRT candidates ({set_name})", k, len(sets))
 
         def compute(params=params, set_name=set_name):
-            ps, _ = rrt_plans(base, scale.n_candidates, seed=_seed_for(seed, name, "rrt", set_name), params=params,
-                              options=scale.rrt_options(), backend=backend, workers=workers)
+            ps, _ = rrt_plans(
+                base,
+                scale.n_candidates,
+                seed=_seed_for(seed, name, "rrt", set_name),
+                params=params,
+                options=scale.rrt_options(),
+                backend=backend,
+                workers=workers,
+            )
             return ps
 
         plans[set_name] = blobs.get_or_compute(key, compute)
@@ -315,8 +372,16 @@ def run_scenario(
     todo = [it for it in sel_items if selection[it] is None]
     done = len(sel_items) - len(todo)
     report(f"{name}: linearise + LQG-MP", done, len(sel_items))
-    tasks = [(sims[c], plans[s][j], scale.lin_samples, scale.goal_samples, _seed_for(seed, name, "select", c, s, j))
-             for (c, s, j) in todo]
+    tasks = [
+        (
+            sims[c],
+            plans[s][j],
+            scale.lin_samples,
+            scale.goal_samples,
+            _seed_for(seed, name, "select", c, s, j),
+        )
+        for (c, s, j) in todo
+    ]
     for i, res in pmap(evaluate_candidate, tasks):
         selection[todo[i]] = res
         blobs.put(sel_key[todo[i]], res)
@@ -370,7 +435,9 @@ def run_scenario(
             if m in na:
                 out_cases[c][m] = None
                 continue
-            f = np.array([row for b in range(n_batches) for row in flags[c, m, b]], dtype=np.int64).reshape(-1, 4)
+            f = np.array(
+                [row for b in range(n_batches) for row in flags[c, m, b]], dtype=np.int64
+            ).reshape(-1, 4)
             k = int(f[:, 0].sum())
             lo, hi = _wilson(k, len(f))
             s, j, sel = chosen[c, m]
@@ -389,7 +456,13 @@ def run_scenario(
                 "candidate": j,
             }
     sel_out = {
-        c: {s: [{k: v for k, v in selection[c, s, j].items() if k != "controller"} for j in range(len(plans[s]))] for s in plans}
+        c: {
+            s: [
+                {k: v for k, v in selection[c, s, j].items() if k != "controller"}
+                for j in range(len(plans[s]))
+            ]
+            for s in plans
+        }
         for c in cases
     }
     return {
@@ -435,8 +508,16 @@ def claims(cases: dict) -> dict:
         "ours_highest_all": all(highest.values()),
         "ours_separated": separated,
         "mean_rate": {"rrt": r_rrt, "ours_no_select": r_ns, "ours": r_ours},
-        "no_select_vs_rrt": {"points": 100.0 * (r_ns - r_rrt), "relative": rel(r_ns, r_rrt), "paper": 34.0},
-        "no_select_vs_ours": {"points": 100.0 * (r_ns - r_ours), "relative": rel(r_ns, r_ours), "paper": -17.0},
+        "no_select_vs_rrt": {
+            "points": 100.0 * (r_ns - r_rrt),
+            "relative": rel(r_ns, r_rrt),
+            "paper": 34.0,
+        },
+        "no_select_vs_ours": {
+            "points": 100.0 * (r_ns - r_ours),
+            "relative": rel(r_ns, r_ours),
+            "paper": -17.0,
+        },
     }
 
 
@@ -450,8 +531,20 @@ def claims(cases: dict) -> dict:
 #: elements (the top of case 4's range) instead of the planning mesh's 175.
 SINGLE_RUNS = (
     ("fig4", "needle", "actuation", {"actuation": True}, "Fig. 4: actuation noise"),
-    ("fig5", "needle", "material-high", {"youngs_modulus": 150.0}, "Fig. 5: a much stiffer material (E = 150)"),
-    ("fig7cd", "manipulation", "material-high", {"youngs_modulus": 35.0}, "Fig. 7(c, d): softer material (E = 35)"),
+    (
+        "fig5",
+        "needle",
+        "material-high",
+        {"youngs_modulus": 150.0},
+        "Fig. 5: a much stiffer material (E = 150)",
+    ),
+    (
+        "fig7cd",
+        "manipulation",
+        "material-high",
+        {"youngs_modulus": 35.0},
+        "Fig. 7(c, d): softer material (E = 35)",
+    ),
     ("fig7ef", "manipulation", "mesh", {"n_elements": 1000}, "Fig. 7(e, f): a 1000-element mesh"),
 )
 

@@ -25,7 +25,14 @@ import numpy as np
 METHODS = ("random", "bo", "trust_region")
 
 
-def nominal_problem(model="paper", *, chest_seed: int = 0, roadmap_seed: int = 0, goal_tip=None, n_milestones: int = 300):
+def nominal_problem(
+    model="paper",
+    *,
+    chest_seed: int = 0,
+    roadmap_seed: int = 0,
+    goal_tip=None,
+    n_milestones: int = 300,
+):
     """``(model, environment (base frame), validity, bound, nominal (T, m), bounds (T,))`` of the default scene."""
     from riskplan.kinematics import load_model
     from riskplan.planning.chest import DEFAULT_GOAL_TIP
@@ -43,12 +50,21 @@ def nominal_problem(model="paper", *, chest_seed: int = 0, roadmap_seed: int = 0
     validity = MeanValidity(mdl, env)
     rm = build_roadmap(validity, n_milestones=n_milestones, seed=roadmap_seed)
     start = np.clip(np.zeros(mdl.n_tendons), mdl.limits[:, 0], mdl.limits[:, 1])
-    goal = goal_from_tip(rm, mdl, DEFAULT_GOAL_TIP if goal_tip is None else goal_tip, seed=roadmap_seed)
+    goal = goal_from_tip(
+        rm, mdl, DEFAULT_GOAL_TIP if goal_tip is None else goal_tip, seed=roadmap_seed
+    )
     nominal = interpolate_path(rm.shortest_path(start, goal))
     bound = ConfigurationBound(mdl, env)
     _, p = trajectory_risk(bound, nominal)
-    return {"model": mdl, "environment": env, "validity": validity, "bound": bound, "nominal": nominal, "bounds": p,
-            "roadmap": rm}
+    return {
+        "model": mdl,
+        "environment": env,
+        "validity": validity,
+        "bound": bound,
+        "nominal": nominal,
+        "bounds": p,
+        "roadmap": rm,
+    }
 
 
 def _run_one(args):
@@ -60,21 +76,45 @@ def _run_one(args):
     problem, method, seed, iterations = args
     cfg = OptimiserConfig(iterations=iterations, method=method)
     t0 = time.perf_counter()
-    res = optimise_trajectory(problem["nominal"], problem["bound"], problem["validity"], problem["model"].limits,
-                              config=cfg, seed=seed, bounds=problem["bounds"])
-    return {"method": method, "seed": seed, "initial_bound": res.initial_bound, "bound": res.bound,
-            "reduction": res.reduction, "evaluations": res.evaluations, "seconds": time.perf_counter() - t0,
-            "trace": res.trace.tolist()}
+    res = optimise_trajectory(
+        problem["nominal"],
+        problem["bound"],
+        problem["validity"],
+        problem["model"].limits,
+        config=cfg,
+        seed=seed,
+        bounds=problem["bounds"],
+    )
+    return {
+        "method": method,
+        "seed": seed,
+        "initial_bound": res.initial_bound,
+        "bound": res.bound,
+        "reduction": res.reduction,
+        "evaluations": res.evaluations,
+        "seconds": time.perf_counter() - t0,
+        "trace": res.trace.tolist(),
+    }
 
 
-def compare_optimisers(problem: dict, *, methods=METHODS, seeds=(0, 1, 2, 3, 4), iterations: int = 50,
-                       workers: int | None = None, backend: str = "local", on_result=None) -> list[dict]:
+def compare_optimisers(
+    problem: dict,
+    *,
+    methods=METHODS,
+    seeds=(0, 1, 2, 3, 4),
+    iterations: int = 50,
+    workers: int | None = None,
+    backend: str = "local",
+    on_result=None,
+) -> list[dict]:
     """One row per (method, seed): final eq.-10 bound, reduction, evaluations, seconds, trace."""
     from riskplan.parallel import map_tasks
 
     light = {k: v for k, v in problem.items() if k != "roadmap"}  # what the workers need
     tasks = [(light, m, int(s), int(iterations)) for m in methods for s in seeds]
-    return map_tasks(_run_one, tasks, backend=backend, workers=workers, chunksize=1, on_result=on_result)
+    return map_tasks(
+        _run_one, tasks, backend=backend, workers=workers, chunksize=1, on_result=on_result
+    )
 
 
 def summarise(rows: list[dict]) -> list[dict]:
@@ -83,33 +123,56 @@ def summarise(rows: list[dict]) -> list[dict]:
     for m in dict.fromkeys(r["method"] for r in rows):
         b = np.array([r["bound"] for r in rows if r["method"] == m])
         red = np.array([r["reduction"] for r in rows if r["method"] == m])
-        out.append({"method": m, "runs": len(b), "median_bound": float(np.median(b)),
-                    "bound_q25": float(np.quantile(b, 0.25)), "bound_q75": float(np.quantile(b, 0.75)),
-                    "min_bound": float(b.min()), "max_bound": float(b.max()),
-                    "median_reduction": float(np.median(red)), "min_reduction": float(red.min()), "max_reduction": float(red.max()),
-                    "evaluations": int(np.median([r["evaluations"] for r in rows if r["method"] == m])),
-                    "median_seconds": float(np.median([r["seconds"] for r in rows if r["method"] == m]))})
+        out.append(
+            {
+                "method": m,
+                "runs": len(b),
+                "median_bound": float(np.median(b)),
+                "bound_q25": float(np.quantile(b, 0.25)),
+                "bound_q75": float(np.quantile(b, 0.75)),
+                "min_bound": float(b.min()),
+                "max_bound": float(b.max()),
+                "median_reduction": float(np.median(red)),
+                "min_reduction": float(red.min()),
+                "max_reduction": float(red.max()),
+                "evaluations": int(np.median([r["evaluations"] for r in rows if r["method"] == m])),
+                "median_seconds": float(
+                    np.median([r["seconds"] for r in rows if r["method"] == m])
+                ),
+            }
+        )
     return out
 
 
 def to_markdown(summary: list[dict], initial_bound: float) -> str:
-    lines = [f"Nominal eq.-10 bound: {initial_bound:.4f}", "",
-             "| method | runs | bound evaluations | median bound | IQR | range | median reduction | median s |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"Nominal eq.-10 bound: {initial_bound:.4f}",
+        "",
+        "| method | runs | bound evaluations | median bound | IQR | range | median reduction | median s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for s in summary:
-        lines.append(f"| {s['method']} | {s['runs']} | {s['evaluations']} | {s['median_bound']:.4f} | "
-                     f"{s['bound_q25']:.4f}-{s['bound_q75']:.4f} | {s['min_bound']:.4f}-{s['max_bound']:.4f} | "
-                     f"{100 * s['median_reduction']:.1f} % | {s['median_seconds']:.1f} |")
+        lines.append(
+            f"| {s['method']} | {s['runs']} | {s['evaluations']} | {s['median_bound']:.4f} | "
+            f"{s['bound_q25']:.4f}-{s['bound_q75']:.4f} | {s['min_bound']:.4f}-{s['max_bound']:.4f} | "
+            f"{100 * s['median_reduction']:.1f} % | {s['median_seconds']:.1f} |"
+        )
     return "\n".join(lines) + "\n"
 
 
 def trace_table(rows: list[dict], at=(5, 10, 20, 30, 50)) -> str:
     """Markdown: median [min-max] of the best eq.-10 bound after the given iterations, per method."""
     its = [k for k in at if k < len(rows[0]["trace"])]
-    lines = ["| method | " + " | ".join(f"after {k}" for k in its) + " |", "|---|" + "---|" * len(its)]
+    lines = [
+        "| method | " + " | ".join(f"after {k}" for k in its) + " |",
+        "|---|" + "---|" * len(its),
+    ]
     for m in dict.fromkeys(r["method"] for r in rows):
         tr = np.array([r["trace"] for r in rows if r["method"] == m])
-        cells = [f"{100 * np.median(tr[:, k]):.2f} % [{100 * tr[:, k].min():.2f}-{100 * tr[:, k].max():.2f}]" for k in its]
+        cells = [
+            f"{100 * np.median(tr[:, k]):.2f} % [{100 * tr[:, k].min():.2f}-{100 * tr[:, k].max():.2f}]"
+            for k in its
+        ]
         lines.append(f"| {m} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
@@ -143,14 +206,22 @@ def main(argv=None) -> None:
     ap.add_argument("--out", type=Path, default=Path("optimiser-comparison"))
     a = ap.parse_args(argv)
     problem = nominal_problem(a.model)
-    rows = compare_optimisers(problem, seeds=range(a.seeds), iterations=a.iterations, workers=a.workers)
+    rows = compare_optimisers(
+        problem, seeds=range(a.seeds), iterations=a.iterations, workers=a.workers
+    )
     summary = summarise(rows)
     a.out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(a.out / "comparison.json", {"rows": rows, "summary": summary, "nominal_bound": rows[0]["initial_bound"]})
+    write_json_atomic(
+        a.out / "comparison.json",
+        {"rows": rows, "summary": summary, "nominal_bound": rows[0]["initial_bound"]},
+    )
     p = problem["bounds"]
     floor = float(1 - (1 - p[0]) * (1 - p[-1]))  # start and goal never move
-    md = (to_markdown(summary, rows[0]["initial_bound"]) + f"\nFloor (start and goal fixed): {floor:.4f}\n\n"
-          + trace_table(rows))
+    md = (
+        to_markdown(summary, rows[0]["initial_bound"])
+        + f"\nFloor (start and goal fixed): {floor:.4f}\n\n"
+        + trace_table(rows)
+    )
     write_text_atomic(a.out / "comparison.md", md)
     import matplotlib
 

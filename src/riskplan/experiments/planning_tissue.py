@@ -20,9 +20,9 @@ log = logging.getLogger(__name__)
 
 __all__ = [
     "TissuePlanningResult",
-    "plan_tissue",
     "candidates_figure",
     "execution_gif",
+    "plan_tissue",
     "write_outputs",
 ]
 
@@ -44,10 +44,23 @@ class TissuePlanningResult:
     timings: dict = field(default_factory=dict)
 
 
-def plan_tissue(scenario: str = "needle", *, n_plans: int = 100, case: str = "material-high", seed: int = 0,
-                workers: int | None = None, backend: str = "local", rrt_options=None, method: str = "sigma",
-                n_samples: int = 16, check_runs: int = 1000, check_others: int = 2,
-                on_tree=None, on_plan=None, on_check=None) -> TissuePlanningResult:
+def plan_tissue(
+    scenario: str = "needle",
+    *,
+    n_plans: int = 100,
+    case: str = "material-high",
+    seed: int = 0,
+    workers: int | None = None,
+    backend: str = "local",
+    rrt_options=None,
+    method: str = "sigma",
+    n_samples: int = 16,
+    check_runs: int = 1000,
+    check_others: int = 2,
+    on_tree=None,
+    on_plan=None,
+    on_check=None,
+) -> TissuePlanningResult:
     """Run the method on one scenario (``"needle"`` or ``"manipulation"``) and uncertainty
     ``case`` (:data:`riskplan.scenarios.uncertainty.CASE_NAMES`).
 
@@ -65,18 +78,38 @@ def plan_tissue(scenario: str = "needle", *, n_plans: int = 100, case: str = "ma
     options = rrt_options or RRTOptions()
     timings = {}
     t0 = time.perf_counter()
-    plans, trees = rrt_plans(sim, n_plans, seed=seed, options=options, backend=backend, workers=workers,
-                             on_tree=on_tree)
+    plans, trees = rrt_plans(
+        sim, n_plans, seed=seed, options=options, backend=backend, workers=workers, on_tree=on_tree
+    )
     timings["rrt"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    selection = select_plan(sim, plans, sim.distribution, method=method, n_samples=n_samples, seed=seed + 1,
-                            backend=backend, workers=workers, on_result=on_plan)
+    selection = select_plan(
+        sim,
+        plans,
+        sim.distribution,
+        method=method,
+        n_samples=n_samples,
+        seed=seed + 1,
+        backend=backend,
+        workers=workers,
+        on_result=on_plan,
+    )
     timings["selection"] = time.perf_counter() - t0
     rows = []
     if check_runs:
         t0 = time.perf_counter()
-        rows = honesty_check(sim, plans, selection, sim.distribution, others=check_others, n=check_runs,
-                             seed=seed + 2, backend=backend, workers=workers, on_row=on_check)
+        rows = honesty_check(
+            sim,
+            plans,
+            selection,
+            sim.distribution,
+            others=check_others,
+            n=check_runs,
+            seed=seed + 2,
+            backend=backend,
+            workers=workers,
+            on_row=on_check,
+        )
         timings["check"] = time.perf_counter() - t0
     return TissuePlanningResult(scenario, case, seed, sim, plans, trees, selection, rows, timings)
 
@@ -94,20 +127,29 @@ def candidates_figure(sim, plans, best: int, *, title: str | None = None, size: 
 
     fig, ax = plt.subplots(figsize=(size, size))
     chosen = plans[best]
-    draw_frame(ax, sim, list(chosen.states), title=title or f"{sim.name}: {len(plans)} candidates, chosen #{best}")
+    draw_frame(
+        ax,
+        sim,
+        list(chosen.states),
+        title=title or f"{sim.name}: {len(plans)} candidates, chosen #{best}",
+    )
     for i, plan in enumerate(plans):
         if i == best:
             continue
         path = sim.path(plan.states)
         ax.plot(path[:, 0], path[:, 1], "-", color="0.25", lw=0.6, alpha=0.45, zorder=1)
     path = sim.path(chosen.states)
-    ax.plot(path[:, 0], path[:, 1], "-", color="tab:orange", lw=2.5, zorder=5, label="selected (LQG-MP)")
+    ax.plot(
+        path[:, 0], path[:, 1], "-", color="tab:orange", lw=2.5, zorder=5, label="selected (LQG-MP)"
+    )
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
     return fig
 
 
-def execution_gif(sim, plan, controller, params, path, *, seed=0, max_frames: int = 40) -> tuple[Path, object]:
+def execution_gif(
+    sim, plan, controller, params, path, *, seed=0, max_frames: int = 40
+) -> tuple[Path, object]:
     """Animated GIF of one closed-loop LQG execution of ``plan`` under ``params`` (one draw
     of the case); returns the path and the :class:`~riskplan.control.lqg.Execution`."""
     from riskplan.control.lqg import execute
@@ -140,7 +182,9 @@ def _savez_atomic(path: Path, **arrays) -> None:
         np.savez_compressed(tmp, **arrays)
 
 
-def write_outputs(result: TissuePlanningResult, out, *, gif: bool = True, gif_seed: int = 0) -> dict:
+def write_outputs(
+    result: TissuePlanningResult, out, *, gif: bool = True, gif_seed: int = 0
+) -> dict:
     """Write the run into folder ``out`` (atomic writes) and return ``{name: path}``:
 
     * ``candidates.npz`` (:func:`_pack` layout) and ``candidates.json`` (LQG-MP scores);
@@ -159,25 +203,60 @@ def write_outputs(result: TissuePlanningResult, out, *, gif: bool = True, gif_se
     files["candidates.npz"] = out / "candidates.npz"
     _savez_atomic(files["candidates.npz"], **_pack(result.plans))
     files["candidates.json"] = out / "candidates.json"
-    write_json_atomic(files["candidates.json"], {
-        "scenario": result.scenario, "case": result.case, "seed": result.seed, "method": sel.method,
-        "scores": [asdict(s) for s in sorted(sel.ranking, key=lambda s: s.index)],
-        "trees": [{"seed": t.seed, "nodes": t.size, "iterations": t.iterations, "plans": len(t.plans),
-                   "best_goal_distance": t.best_goal_distance} for t in result.trees],
-    })
+    write_json_atomic(
+        files["candidates.json"],
+        {
+            "scenario": result.scenario,
+            "case": result.case,
+            "seed": result.seed,
+            "method": sel.method,
+            "scores": [asdict(s) for s in sorted(sel.ranking, key=lambda s: s.index)],
+            "trees": [
+                {
+                    "seed": t.seed,
+                    "nodes": t.size,
+                    "iterations": t.iterations,
+                    "plans": len(t.plans),
+                    "best_goal_distance": t.best_goal_distance,
+                }
+                for t in result.trees
+            ],
+        },
+    )
     c = sel.controller
     files["selected.npz"] = out / "selected.npz"
-    _savez_atomic(files["selected.npz"], controls=sel.plan.controls, reduced=sel.plan.reduced, L=c.L, K=c.K, P=c.P,
-                  A=c.lin.A, B=c.lin.B, M=c.lin.M, H=c.lin.H, N=c.lin.N)
+    _savez_atomic(
+        files["selected.npz"],
+        controls=sel.plan.controls,
+        reduced=sel.plan.reduced,
+        L=c.L,
+        K=c.K,
+        P=c.P,
+        A=c.lin.A,
+        B=c.lin.B,
+        M=c.lin.M,
+        H=c.lin.H,
+        N=c.lin.N,
+    )
     best = sel.score(sel.best)
     files["selected.json"] = out / "selected.json"
-    write_json_atomic(files["selected.json"], {
-        "scenario": result.scenario, "case": result.case, "seed": result.seed, "index": sel.best,
-        "n_steps": sel.plan.n_steps, "p_success": best.p_success, "p_collision_free": best.p_collision_free,
-        "p_goal": best.p_goal, "method": sel.method,
-        "honesty_check": [dict(asdict(r), inside=r.inside) for r in result.honesty],
-        "timings_s": result.timings, "n_candidates": len(result.plans),
-    })
+    write_json_atomic(
+        files["selected.json"],
+        {
+            "scenario": result.scenario,
+            "case": result.case,
+            "seed": result.seed,
+            "index": sel.best,
+            "n_steps": sel.plan.n_steps,
+            "p_success": best.p_success,
+            "p_collision_free": best.p_collision_free,
+            "p_goal": best.p_goal,
+            "method": sel.method,
+            "honesty_check": [dict(asdict(r), inside=r.inside) for r in result.honesty],
+            "timings_s": result.timings,
+            "n_candidates": len(result.plans),
+        },
+    )
     import matplotlib.pyplot as plt
 
     fig = candidates_figure(sim, result.plans, sel.best)
@@ -189,16 +268,34 @@ def write_outputs(result: TissuePlanningResult, out, *, gif: bool = True, gif_se
     plt.close(fig)
     if gif:
         params = sim.sample_params(gif_seed)
-        files["execution.gif"], _ = execution_gif(sim, sel.plan, sel.controller, params, out / "execution.gif",
-                                                  seed=gif_seed)
+        files["execution.gif"], _ = execution_gif(
+            sim, sel.plan, sel.controller, params, out / "execution.gif", seed=gif_seed
+        )
     return files
 
 
 def summary_rows(result: TissuePlanningResult) -> list[list]:
     """Table rows for the honesty check: candidate, rank, LQG-MP, Monte Carlo, interval."""
-    return [[r.index, r.rank + 1, r.p_lqgmp, r.p_mc, f"[{r.low:.3f}, {r.high:.3f}]", r.n,
-             "yes" if r.inside else "no"] for r in result.honesty]
+    return [
+        [
+            r.index,
+            r.rank + 1,
+            r.p_lqgmp,
+            r.p_mc,
+            f"[{r.low:.3f}, {r.high:.3f}]",
+            r.n,
+            "yes" if r.inside else "no",
+        ]
+        for r in result.honesty
+    ]
 
 
-HONESTY_HEADER = ["candidate", "rank", "P(success) LQG-MP", "success rate (MC)", "95 % interval", "runs", "inside"]
-
+HONESTY_HEADER = [
+    "candidate",
+    "rank",
+    "P(success) LQG-MP",
+    "success rate (MC)",
+    "95 % interval",
+    "runs",
+    "inside",
+]

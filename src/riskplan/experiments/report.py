@@ -40,14 +40,18 @@ class Report:
         section.blocks.append(f"<pre>{html.escape(text)}</pre>")
 
     @staticmethod
-    def table(section: Section, header: list[str], rows: list[list], caption: str | None = None) -> None:
+    def table(
+        section: Section, header: list[str], rows: list[list], caption: str | None = None
+    ) -> None:
         def cell(v):
             return f"{v:.4g}" if isinstance(v, float) else html.escape(str(v))
 
         head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
         body = "".join("<tr>" + "".join(f"<td>{cell(v)}</td>" for v in r) + "</tr>" for r in rows)
         cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
-        section.blocks.append(f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
+        section.blocks.append(
+            f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+        )
 
     def figure(self, section: Section, fig, name: str, caption: str = "", dpi: int = 110) -> Path:
         """Save a matplotlib figure as ``OUT/name.png``, close it, and show it in the section."""
@@ -86,7 +90,12 @@ class Report:
             "</head><body>",
             f"<h1>{html.escape(self.title)}</h1>",
             f"<p>Generated {_dt.datetime.now().isoformat(timespec='seconds')}.</p>",
-            "<ul>" + "".join(f"<li><a href='#s{i}'>{html.escape(s.title)}</a></li>" for i, s in enumerate(self.sections)) + "</ul>",
+            "<ul>"
+            + "".join(
+                f"<li><a href='#s{i}'>{html.escape(s.title)}</a></li>"
+                for i, s in enumerate(self.sections)
+            )
+            + "</ul>",
         ]
         for i, s in enumerate(self.sections):
             parts.append(f"<h2 id='s{i}'>{html.escape(s.title)}</h2>")

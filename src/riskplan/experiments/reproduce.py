@@ -43,11 +43,15 @@ def resolve_scale(scale) -> tuple[str, dict]:
 
     if isinstance(scale, str):
         if scale not in SCALE_NAMES:
-            raise InvalidInputError(f"scale: expected one of {', '.join(SCALE_NAMES)}, got {scale!r}")
+            raise InvalidInputError(
+                f"scale: expected one of {', '.join(SCALE_NAMES)}, got {scale!r}"
+            )
         return scale, {**SCALES[scale], "mdn": MDN_SCALES[scale]}
     if isinstance(scale, dict):
         return "custom", dict(scale)
-    raise InvalidInputError(f"scale: expected one of {', '.join(SCALE_NAMES)} or a dict of scales, got {scale!r}")
+    raise InvalidInputError(
+        f"scale: expected one of {', '.join(SCALE_NAMES)} or a dict of scales, got {scale!r}"
+    )
 
 
 def _check(paper, backend, workers, ray_address):
@@ -61,7 +65,9 @@ def _check(paper, backend, workers, ray_address):
         raise InvalidInputError(f"workers: expected a positive integer, got {workers!r}")
     if ray_address is not None:
         if backend != "ray":
-            raise InvalidInputError(f"address: only used with backend 'ray', got backend {backend!r}")
+            raise InvalidInputError(
+                f"address: only used with backend 'ray', got backend {backend!r}"
+            )
         check_ray_address(ray_address)  # BackendUnavailableError within seconds
 
 
@@ -118,7 +124,13 @@ def reproduce(
         for name in SCENARIOS:
             t0 = time.perf_counter()
             results["deformable"][name] = run_scenario(
-                name, scales[name], store, seed=seed, backend=backend, workers=workers, ray_address=ray_address,
+                name,
+                scales[name],
+                store,
+                seed=seed,
+                backend=backend,
+                workers=workers,
+                ray_address=ray_address,
                 progress=progress,
             )
             timings[f"deformable_{name}_s"] = time.perf_counter() - t0
@@ -126,7 +138,9 @@ def reproduce(
         from riskplan.experiments.reproduce_mdn import run_mdn
 
         t0 = time.perf_counter()
-        results["mdn"] = run_mdn(out / "mdn", scales["mdn"], store, seed=seed, workers=workers, progress=progress)
+        results["mdn"] = run_mdn(
+            out / "mdn", scales["mdn"], store, seed=seed, workers=workers, progress=progress
+        )
         timings["mdn_s"] = time.perf_counter() - t0
     write_json_atomic(out / "results.json", results, sort_keys=True)
     write_json_atomic(out / "timings.json", timings, sort_keys=True)

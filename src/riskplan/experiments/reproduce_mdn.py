@@ -45,18 +45,34 @@ class MDNScale:
 
     def __post_init__(self):
         if not self.components or min(self.components) < 1:
-            raise InvalidInputError(f"components: expected positive integers, got {self.components!r}")
+            raise InvalidInputError(
+                f"components: expected positive integers, got {self.components!r}"
+            )
         object.__setattr__(self, "components", tuple(int(k) for k in self.components))
 
 
 MDN_SCALES = {
     "smoke": MDNScale(),
-    "paper": MDNScale(preset="paper", components=tuple(range(1, 11)), epochs=2000, sweep_epochs=2000,
-                      train_seconds=0.0, sweep_seconds=0.0, timing_configs=10_000),
+    "paper": MDNScale(
+        preset="paper",
+        components=tuple(range(1, 11)),
+        epochs=2000,
+        sweep_epochs=2000,
+        train_seconds=0.0,
+        sweep_seconds=0.0,
+        timing_configs=10_000,
+    ),
 }
 
-TRAIN = dict(hidden=(64, 64), head_hidden=(32,), batch_size=16, points_per_config=256, lr=3e-3,
-             early_stop_patience=15, lr_patience=5)
+TRAIN = dict(
+    hidden=(64, 64),
+    head_hidden=(32,),
+    batch_size=16,
+    points_per_config=256,
+    lr=3e-3,
+    early_stop_patience=15,
+    lr_patience=5,
+)
 
 
 def _timing(model, robot, n: int, seed: int) -> dict:
@@ -78,11 +94,18 @@ def _timing(model, robot, n: int, seed: int) -> dict:
     for q in cfgs[:m]:
         robot.solve_displacements(q)
     cos = (time.perf_counter() - t0) / m
-    return {"mdn_ms": mdn * 1e3, "cosserat_ms": cos * 1e3, "configs": len(cfgs), "cosserat_configs": int(m),
-            "reduction_percent": 100.0 * (1.0 - mdn / cos)}
+    return {
+        "mdn_ms": mdn * 1e3,
+        "cosserat_ms": cos * 1e3,
+        "configs": len(cfgs),
+        "cosserat_configs": int(m),
+        "reduction_percent": 100.0 * (1.0 - mdn / cos),
+    }
 
 
-def run_mdn(out, scale: MDNScale, store, *, seed: int = 0, workers: int | None = None, progress=None) -> dict:
+def run_mdn(
+    out, scale: MDNScale, store, *, seed: int = 0, workers: int | None = None, progress=None
+) -> dict:
     """Figs. 4-5 and the timing of the MDN paper into ``out`` (PNG + plotly pages written
     when first computed). Returns the JSON numbers (also stored under ``mdn.results``)."""
     found = store.get("mdn.results")
@@ -109,14 +132,22 @@ def run_mdn(out, scale: MDNScale, store, *, seed: int = 0, workers: int | None =
     steps = 4
     report("mdn: data set", 0, steps)
     robot = load_robot("paper")
-    paths = generate_splits(robot, scale.preset, out / "data" / scale.preset, seed=seed, workers=workers)
+    paths = generate_splits(
+        robot, scale.preset, out / "data" / scale.preset, seed=seed, workers=workers
+    )
     train_data, test_data = read_point_clouds(paths["train"]), read_point_clouds(paths["test"])
     report("mdn: train (Fig. 5)", 1, steps)
     cfg = TrainConfig(n_components=scale.n_components, epochs=scale.epochs, seed=seed, **TRAIN)
     res = train(train_data, cfg, out=out / "model", max_seconds=scale.train_seconds or None)
     model = res.model
-    ev = evaluate(model, test_data, n_samples=2048, chamfer_points=1024, seed=seed,
-                  max_configs=min(test_data.n_configs, 60))
+    ev = evaluate(
+        model,
+        test_data,
+        n_samples=2048,
+        chamfer_points=1024,
+        seed=seed,
+        max_configs=min(test_data.n_configs, 60),
+    )
     import matplotlib
 
     matplotlib.use("Agg")
@@ -126,11 +157,18 @@ def run_mdn(out, scale: MDNScale, store, *, seed: int = 0, workers: int | None =
     fig.savefig(out / "fig5.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
     plotly_samples_vs_truth(model, test_data, n_configs=2, n_samples=1500, seed=seed).write_html(
-        out / "fig5.html", include_plotlyjs="directory", full_html=True)
+        out / "fig5.html", include_plotlyjs="directory", full_html=True
+    )
     report("mdn: K sweep (Fig. 4)", 2, steps)
-    sw = sweep(paths["train"], paths["test"], list(scale.components),
-               TrainConfig(epochs=scale.sweep_epochs, seed=seed, **TRAIN), out=out / "sweep", workers=workers or 2,
-               max_seconds_per_k=scale.sweep_seconds or None)
+    sw = sweep(
+        paths["train"],
+        paths["test"],
+        list(scale.components),
+        TrainConfig(epochs=scale.sweep_epochs, seed=seed, **TRAIN),
+        out=out / "sweep",
+        workers=workers or 2,
+        max_seconds_per_k=scale.sweep_seconds or None,
+    )
     fig = fig_nll_vs_components(sw)
     fig.savefig(out / "fig4.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
@@ -144,8 +182,15 @@ def run_mdn(out, scale: MDNScale, store, *, seed: int = 0, workers: int | None =
         "test_nll": float(ev.nll),
         "chamfer_mm": float(ev.chamfer * 1e3),
         "calibration": {str(k): float(v) for k, v in ev.calibration.items()},
-        "sweep": [{"k": e.n_components, "test_nll": (float(e.test_nll) if np.isfinite(e.test_nll) else None),
-                   "collapsed": list(map(int, e.collapsed)), "epochs": int(e.epochs)} for e in sw.entries],
+        "sweep": [
+            {
+                "k": e.n_components,
+                "test_nll": (float(e.test_nll) if np.isfinite(e.test_nll) else None),
+                "collapsed": list(map(int, e.collapsed)),
+                "epochs": int(e.epochs),
+            }
+            for e in sw.entries
+        ],
         "recommended_k": int(sw.recommended),
         "timing": timing,
         "figures": {"fig4": "mdn/fig4.png", "fig5": "mdn/fig5.png", "fig5_html": "mdn/fig5.html"},

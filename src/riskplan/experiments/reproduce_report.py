@@ -39,8 +39,10 @@ def _fig6_png(sc: dict):
     ax.set_ylim(0, 105)
     ax.set_ylabel("successful executions [%]")
     ax.legend(fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.1), frameon=False)
-    ax.set_title(f"{sc['scenario']}: {sc['cases'][cases[0]]['ours']['n']} executions per bar, 95 % Wilson intervals",
-                 fontsize=10)
+    ax.set_title(
+        f"{sc['scenario']}: {sc['cases'][cases[0]]['ours']['n']} executions per bar, 95 % Wilson intervals",
+        fontsize=10,
+    )
     return fig
 
 
@@ -57,15 +59,26 @@ def _fig6_plotly(sc: dict):
             continue
         r = [100 * v["rate"] if v else None for v in vals]
         fig.add_bar(
-            name=METHOD_LABELS[m], x=cases, y=r,
-            error_y=dict(type="data", symmetric=False,
-                         array=[100 * (v["high"] - v["rate"]) if v else 0 for v in vals],
-                         arrayminus=[100 * (v["rate"] - v["low"]) if v else 0 for v in vals]),
-            customdata=[[v["successes"], v["n"], -1 if v["predicted"] is None else 100 * v["predicted"]] if v else [0, 0, -1]
-                        for v in vals],
+            name=METHOD_LABELS[m],
+            x=cases,
+            y=r,
+            error_y=dict(
+                type="data",
+                symmetric=False,
+                array=[100 * (v["high"] - v["rate"]) if v else 0 for v in vals],
+                arrayminus=[100 * (v["rate"] - v["low"]) if v else 0 for v in vals],
+            ),
+            customdata=[
+                [v["successes"], v["n"], -1 if v["predicted"] is None else 100 * v["predicted"]]
+                if v
+                else [0, 0, -1]
+                for v in vals
+            ],
             hovertemplate="%{x}: %{y:.1f} %% (%{customdata[0]} of %{customdata[1]}); LQG-MP predicted %{customdata[2]:.1f} %%",
         )
-    fig.update_layout(barmode="group", yaxis_title="successful executions [%]", title=f"Fig. 6, {sc['scenario']}")
+    fig.update_layout(
+        barmode="group", yaxis_title="successful executions [%]", title=f"Fig. 6, {sc['scenario']}"
+    )
     return fig
 
 
@@ -81,7 +94,9 @@ def _single_runs(report: Report, sec, name: str, store, sc: dict, seed: int) -> 
     for case in wanted:
         ours = sc["cases"][case]["ours"]
         plans = blobs.get(f"fig6.{name}.plans.{ours['candidate_set']}")
-        sel = blobs.get(f"fig6.{name}.select.{case}.{ours['candidate_set']}.{ours['candidate']:03d}")
+        sel = blobs.get(
+            f"fig6.{name}.select.{case}.{ours['candidate_set']}.{ours['candidate']:03d}"
+        )
         if plans is None or sel is None:
             continue
         pc[case] = (plans[ours["candidate"]], sel["controller"])
@@ -90,11 +105,21 @@ def _single_runs(report: Report, sec, name: str, store, sc: dict, seed: int) -> 
         fig, axes = plt.subplots(1, 2, figsize=(8, 4))
         for ax, kind in zip(axes, ("open", "closed")):
             ex = r["open" if kind == "open" else "closed"]
-            verdict = "success" if ex.success else ("collision" if ex.collided else "missed the goal")
-            draw_frame(ax, r["sim"], list(ex.states),
-                       title=f"{'without' if kind == 'open' else 'with'} feedback: {verdict}")
-        report.figure(sec, fig, f"{name}_{fig_name}",
-                      f"{r['caption']}: the selected plan executed without (left) and with (right) LQG feedback.")
+            verdict = (
+                "success" if ex.success else ("collision" if ex.collided else "missed the goal")
+            )
+            draw_frame(
+                ax,
+                r["sim"],
+                list(ex.states),
+                title=f"{'without' if kind == 'open' else 'with'} feedback: {verdict}",
+            )
+        report.figure(
+            sec,
+            fig,
+            f"{name}_{fig_name}",
+            f"{r['caption']}: the selected plan executed without (left) and with (right) LQG feedback.",
+        )
 
 
 def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> Path:
@@ -108,26 +133,48 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
 
     out = Path(out)
     cfg = results["config"]
-    rep = Report(out, title=f"riskplan reproduce ({cfg['paper']}, scale {cfg['scale']}, seed {cfg['seed']})")
+    rep = Report(
+        out, title=f"riskplan reproduce ({cfg['paper']}, scale {cfg['scale']}, seed {cfg['seed']})"
+    )
     intro = rep.section("About this run")
-    Report.text(intro, "Every number below is computed by this run; the paper's value stands beside it where the paper "
-                "states one. results.json holds all numbers; timings.json the wall-clock times.")
-    Report.table(intro, ["stage", "seconds"], [[k, float(v)] for k, v in sorted(timings.items()) if k.endswith("_s")],
-                 caption=f"wall-clock times (backend {timings.get('backend')}, workers {timings.get('workers') or 'all cores'})")
+    Report.text(
+        intro,
+        "Every number below is computed by this run; the paper's value stands beside it where the paper "
+        "states one. results.json holds all numbers; timings.json the wall-clock times.",
+    )
+    Report.table(
+        intro,
+        ["stage", "seconds"],
+        [[k, float(v)] for k, v in sorted(timings.items()) if k.endswith("_s")],
+        caption=f"wall-clock times (backend {timings.get('backend')}, workers {timings.get('workers') or 'all cores'})",
+    )
 
     for name, sc in results.get("deformable", {}).items():
         sec = rep.section(f"Deformable-planning paper, Fig. 6: {name}")
         size = sc["scale"]
-        sets = "; ".join(f"{s}: {n} (steps {', '.join(map(str, sc['plan_steps'][s]))})" for s, n in sc["candidates"].items())
-        Report.text(sec, f"RRT candidates per set — {sets} (paper: {DEFORMABLE['candidates']['value']}); "
-                    f"{size['n_executions']} executions per method and case (paper: "
-                    f"{DEFORMABLE['executions_per_case']['value']}).")
+        sets = "; ".join(
+            f"{s}: {n} (steps {', '.join(map(str, sc['plan_steps'][s]))})"
+            for s, n in sc["candidates"].items()
+        )
+        Report.text(
+            sec,
+            f"RRT candidates per set — {sets} (paper: {DEFORMABLE['candidates']['value']}); "
+            f"{size['n_executions']} executions per method and case (paper: "
+            f"{DEFORMABLE['executions_per_case']['value']}).",
+        )
         for m, why in sc["not_applicable"].items():
             Report.text(sec, f"{METHOD_LABELS[m]}: not applicable — {why}.")
-        rep.figure(sec, _fig6_png(sc), f"fig6_{name}", f"Fig. 6 ({name}): percentage of successful executions.")
+        rep.figure(
+            sec,
+            _fig6_png(sc),
+            f"fig6_{name}",
+            f"Fig. 6 ({name}): percentage of successful executions.",
+        )
         path = out / f"fig6_{name}.html"
         _fig6_plotly(sc).write_html(path, include_plotlyjs="directory", full_html=True)
-        sec.blocks.append(f'<p><a href="{html.escape(path.name)}">Fig. 6 ({html.escape(name)}), interactive bars</a></p>')
+        sec.blocks.append(
+            f'<p><a href="{html.escape(path.name)}">Fig. 6 ({html.escape(name)}), interactive bars</a></p>'
+        )
         rows = []
         for c, ms in sc["cases"].items():
             for m in METHODS:
@@ -135,49 +182,131 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
                 if v is None:
                     rows.append([c, METHOD_LABELS[m], "n/a", "", "", "", ""])
                     continue
-                rows.append([c, METHOD_LABELS[m], f"{100 * v['rate']:.1f}", f"[{100 * v['low']:.1f}, {100 * v['high']:.1f}]",
-                             "-" if v["predicted"] is None else f"{100 * v['predicted']:.1f}",
-                             f"{v['collided']} / {v['missed_goal']} / {v['solver_failed']}",
-                             f"{v['candidate_set']} #{v['candidate']}"])
-        Report.table(sec, ["case", "method", "success [%]", "95 % Wilson", "LQG-MP predicted [%]",
-                           "collided / missed goal / solver failed", "plan"], rows,
-                     caption="measured success rate beside LQG-MP's predicted P(success) of the executed plan")
+                rows.append(
+                    [
+                        c,
+                        METHOD_LABELS[m],
+                        f"{100 * v['rate']:.1f}",
+                        f"[{100 * v['low']:.1f}, {100 * v['high']:.1f}]",
+                        "-" if v["predicted"] is None else f"{100 * v['predicted']:.1f}",
+                        f"{v['collided']} / {v['missed_goal']} / {v['solver_failed']}",
+                        f"{v['candidate_set']} #{v['candidate']}",
+                    ]
+                )
+        Report.table(
+            sec,
+            [
+                "case",
+                "method",
+                "success [%]",
+                "95 % Wilson",
+                "LQG-MP predicted [%]",
+                "collided / missed goal / solver failed",
+                "plan",
+            ],
+            rows,
+            caption="measured success rate beside LQG-MP's predicted P(success) of the executed plan",
+        )
         cl = sc["claims"]
-        Report.table(sec, ["claim (paper §V-A)", "paper", "measured"], [
-            ["ours highest in every case", "yes", "yes" if cl["ours_highest_all"] else
-             "no (" + ", ".join(c for c, ok in cl["ours_highest"].items() if not ok) + ")"],
-            ["ours' interval above all others", "'significantly higher'",
-             ", ".join(c for c, ok in cl["ours_separated"].items() if ok) or "in no case"],
-            ["without LQG-MP vs RRT with deformations, percent points", "+34",
-             _fmt(cl["no_select_vs_rrt"]["points"])],
-            ["without LQG-MP vs RRT with deformations, relative %", "+34", _fmt(cl["no_select_vs_rrt"]["relative"])],
-            ["without LQG-MP vs complete method, percent points", "-17", _fmt(cl["no_select_vs_ours"]["points"])],
-            ["without LQG-MP vs complete method, relative %", "-17", _fmt(cl["no_select_vs_ours"]["relative"])],
-        ], caption="the paper's claims; it does not say whether its percentages are points or relative, so both readings")
+        Report.table(
+            sec,
+            ["claim (paper §V-A)", "paper", "measured"],
+            [
+                [
+                    "ours highest in every case",
+                    "yes",
+                    "yes"
+                    if cl["ours_highest_all"]
+                    else "no ("
+                    + ", ".join(c for c, ok in cl["ours_highest"].items() if not ok)
+                    + ")",
+                ],
+                [
+                    "ours' interval above all others",
+                    "'significantly higher'",
+                    ", ".join(c for c, ok in cl["ours_separated"].items() if ok) or "in no case",
+                ],
+                [
+                    "without LQG-MP vs RRT with deformations, percent points",
+                    "+34",
+                    _fmt(cl["no_select_vs_rrt"]["points"]),
+                ],
+                [
+                    "without LQG-MP vs RRT with deformations, relative %",
+                    "+34",
+                    _fmt(cl["no_select_vs_rrt"]["relative"]),
+                ],
+                [
+                    "without LQG-MP vs complete method, percent points",
+                    "-17",
+                    _fmt(cl["no_select_vs_ours"]["points"]),
+                ],
+                [
+                    "without LQG-MP vs complete method, relative %",
+                    "-17",
+                    _fmt(cl["no_select_vs_ours"]["relative"]),
+                ],
+            ],
+            caption="the paper's claims; it does not say whether its percentages are points or relative, so both readings",
+        )
         _single_runs(rep, sec, name, store, sc, seed)
 
     if "mdn" in results:
         r = results["mdn"]
         sec = rep.section("MDN paper: Figs. 4, 5 and the timing against the Cosserat model")
-        Report.text(sec, f"Data: {r['train_configs']} training / {r['test_configs']} test configurations of the simulated "
-                    f"robot (paper: {MDN['train_configs']['value']} / 253 of the physical robot).")
-        rep.image(sec, out / r["figures"]["fig4"], "Fig. 4: test NLL against the number of mixture components K")
-        Report.table(sec, ["K", "test NLL [nats/point]", "collapsed components"],
-                     [[e["k"], "n/a" if e["test_nll"] is None else f"{e['test_nll']:.3f}", ", ".join(map(str, e["collapsed"])) or "-"]
-                      for e in r["sweep"]],
-                     caption=f"recommended K = {r['recommended_k']} (paper: {MDN['fig4_best_k']['value']})")
-        rep.image(sec, out / r["figures"]["fig5"], "Fig. 5: samples of the predicted mixture vs ground-truth points")
-        sec.blocks.append(f'<p><a href="{html.escape(r["figures"]["fig5_html"])}">Fig. 5, interactive 3-D view</a></p>')
+        Report.text(
+            sec,
+            f"Data: {r['train_configs']} training / {r['test_configs']} test configurations of the simulated "
+            f"robot (paper: {MDN['train_configs']['value']} / 253 of the physical robot).",
+        )
+        rep.image(
+            sec,
+            out / r["figures"]["fig4"],
+            "Fig. 4: test NLL against the number of mixture components K",
+        )
+        Report.table(
+            sec,
+            ["K", "test NLL [nats/point]", "collapsed components"],
+            [
+                [
+                    e["k"],
+                    "n/a" if e["test_nll"] is None else f"{e['test_nll']:.3f}",
+                    ", ".join(map(str, e["collapsed"])) or "-",
+                ]
+                for e in r["sweep"]
+            ],
+            caption=f"recommended K = {r['recommended_k']} (paper: {MDN['fig4_best_k']['value']})",
+        )
+        rep.image(
+            sec,
+            out / r["figures"]["fig5"],
+            "Fig. 5: samples of the predicted mixture vs ground-truth points",
+        )
+        sec.blocks.append(
+            f'<p><a href="{html.escape(r["figures"]["fig5_html"])}">Fig. 5, interactive 3-D view</a></p>'
+        )
         t = r["timing"]
-        Report.table(sec, ["quantity", "paper", "measured"], [
-            ["MDN, one configuration [ms]", MDN["mdn_ms"]["value"], f"{t['mdn_ms']:.3f}"],
-            ["Cosserat model, one configuration [ms]", MDN["cosserat_ms"]["value"], f"{t['cosserat_ms']:.3f}"],
-            ["reduction [%]", MDN["speedup_percent"]["value"], f"{t['reduction_percent']:.1f}"],
-            ["test NLL (K = model's) [nats/point]", "plot only", f"{r['test_nll']:.3f}"],
-        ], caption=f"timing over {t['configs']} (MDN) and {t['cosserat_configs']} (Cosserat) random configurations; "
-           "the paper's Cosserat figure is from its ref. [8] (a C++ implementation), ours is riskplan's Python solver")
+        Report.table(
+            sec,
+            ["quantity", "paper", "measured"],
+            [
+                ["MDN, one configuration [ms]", MDN["mdn_ms"]["value"], f"{t['mdn_ms']:.3f}"],
+                [
+                    "Cosserat model, one configuration [ms]",
+                    MDN["cosserat_ms"]["value"],
+                    f"{t['cosserat_ms']:.3f}",
+                ],
+                ["reduction [%]", MDN["speedup_percent"]["value"], f"{t['reduction_percent']:.1f}"],
+                ["test NLL (K = model's) [nats/point]", "plot only", f"{r['test_nll']:.3f}"],
+            ],
+            caption=f"timing over {t['configs']} (MDN) and {t['cosserat_configs']} (Cosserat) random configurations; "
+            "the paper's Cosserat figure is from its ref. [8] (a C++ implementation), ours is riskplan's Python solver",
+        )
         s7 = rep.section("MDN paper: Fig. 7 (Bayesian optimisation of a chest-cavity path)")
-        Report.text(s7, "Not reproduced in this run: the chest planner (riskplan plan chest) is not part of this build. "
-                    f"Paper: collision probability {100 * MDN['collision_before']['value']:.0f} % before and below "
-                    f"{100 * MDN['collision_after']['value']:.0f} % after {MDN['bo_iterations']['value']} BO iterations.")
+        Report.text(
+            s7,
+            "Not reproduced in this run: the chest planner (riskplan plan chest) is not part of this build. "
+            f"Paper: collision probability {100 * MDN['collision_before']['value']:.0f} % before and below "
+            f"{100 * MDN['collision_after']['value']:.0f} % after {MDN['bo_iterations']['value']} BO iterations.",
+        )
     return rep.write()

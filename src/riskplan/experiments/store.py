@@ -66,7 +66,9 @@ class ResultStore:
         try:
             self.fingerprint = fingerprint(config)
         except (TypeError, ValueError) as exc:
-            raise InvalidInputError(f"config: expected JSON-serialisable values, got {config!r}") from exc
+            raise InvalidInputError(
+                f"config: expected JSON-serialisable values, got {config!r}"
+            ) from exc
         self.config = config
         self.records_dir = self.root / "records"
         manifest = self.root / "manifest.json"
@@ -74,7 +76,9 @@ class ResultStore:
             try:
                 meta = json.loads(manifest.read_text(encoding="utf-8"))
             except (OSError, ValueError) as exc:
-                raise DataFormatError(f"{manifest}: not a readable results manifest ({exc})") from exc
+                raise DataFormatError(
+                    f"{manifest}: not a readable results manifest ({exc})"
+                ) from exc
             if meta.get("format") != FORMAT or meta.get("fingerprint") != self.fingerprint:
                 raise DataFormatError(
                     f"{self.root}: holds results of another run configuration "
@@ -84,13 +88,17 @@ class ResultStore:
             self.records_dir.mkdir(parents=True, exist_ok=True)
             write_text_atomic(
                 manifest,
-                json.dumps({"format": FORMAT, "fingerprint": self.fingerprint, "config": config}, indent=1),
+                json.dumps(
+                    {"format": FORMAT, "fingerprint": self.fingerprint, "config": config}, indent=1
+                ),
             )
         self.records_dir.mkdir(parents=True, exist_ok=True)
 
     def _path(self, key: str) -> Path:
         if not isinstance(key, str) or not _KEY.match(key):
-            raise InvalidInputError(f"key: expected letters, digits and _.=- (at most 201 characters), got {key!r}")
+            raise InvalidInputError(
+                f"key: expected letters, digits and _.=- (at most 201 characters), got {key!r}"
+            )
         return self.records_dir / f"{key}.json"
 
     def __contains__(self, key: str) -> bool:
@@ -105,9 +113,13 @@ class ResultStore:
             rec = json.loads(path.read_text(encoding="utf-8"))
             payload, digest, fp = rec["payload"], rec["sha256"], rec["fingerprint"]
         except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise DataFormatError(f"{path}: corrupted results record ({type(exc).__name__}: {exc})") from exc
+            raise DataFormatError(
+                f"{path}: corrupted results record ({type(exc).__name__}: {exc})"
+            ) from exc
         if fp != self.fingerprint:
-            raise DataFormatError(f"{path}: record of another run configuration (fingerprint {fp!r})")
+            raise DataFormatError(
+                f"{path}: record of another run configuration (fingerprint {fp!r})"
+            )
         if _digest(payload) != digest:
             raise DataFormatError(f"{path}: corrupted results record (content hash mismatch)")
         return payload
@@ -117,11 +129,18 @@ class ResultStore:
         path = self._path(key)
         try:
             text = json.dumps(
-                {"key": key, "fingerprint": self.fingerprint, "sha256": _digest(payload), "payload": payload},
+                {
+                    "key": key,
+                    "fingerprint": self.fingerprint,
+                    "sha256": _digest(payload),
+                    "payload": payload,
+                },
                 allow_nan=False,
             )
         except (TypeError, ValueError) as exc:
-            raise InvalidInputError(f"payload of {key!r}: expected finite JSON-serialisable values ({exc})") from exc
+            raise InvalidInputError(
+                f"payload of {key!r}: expected finite JSON-serialisable values ({exc})"
+            ) from exc
         write_text_atomic(path, text)
 
     def get_or_compute(self, key: str, compute: Callable[[], Any]) -> Any:

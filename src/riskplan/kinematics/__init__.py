@@ -8,4 +8,13 @@ from riskplan.kinematics.mdn import MDN, MDNModel, Normalisation
 from riskplan.kinematics.mixture import GaussianMixture
 from riskplan.kinematics.model_io import load_model, resolve_model, save_model, shipped_models
 
-__all__ = ["MDN", "GaussianMixture", "MDNModel", "Normalisation", "load_model", "resolve_model", "save_model", "shipped_models"]
+__all__ = [
+    "MDN",
+    "GaussianMixture",
+    "MDNModel",
+    "Normalisation",
+    "load_model",
+    "resolve_model",
+    "save_model",
+    "shipped_models",
+]

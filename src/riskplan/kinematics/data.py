@@ -21,7 +21,6 @@ from riskplan.errors import DataFormatError
 log = logging.getLogger(__name__)
 
 
-
 @dataclass(frozen=True, eq=False)
 class PointCloudData:
     """Configurations and their ground-truth point clouds (only completed configurations).
@@ -61,8 +60,13 @@ class PointCloudData:
         """The configurations ``idx`` (array of indices), same metadata."""
         idx = np.asarray(idx)
         return PointCloudData(
-            self.displacements[idx], self.points[idx], self.robot_toml, self.robot_name, self.limits,
-            self.content_hash, self.path,
+            self.displacements[idx],
+            self.points[idx],
+            self.robot_toml,
+            self.robot_name,
+            self.limits,
+            self.content_hash,
+            self.path,
         )
 
 
@@ -83,7 +87,10 @@ def displacement_limits(toml_text: str, displacements: np.ndarray) -> np.ndarray
     try:
         robot = robot_from_toml(toml_text)
     except RobotDescriptionError as exc:  # a foreign or synthetic TOML: fall back to the data range
-        log.warning("cannot rebuild the robot from the data set's TOML (%s); using the data range as limits", exc)
+        log.warning(
+            "cannot rebuild the robot from the data set's TOML (%s); using the data range as limits",
+            exc,
+        )
         return np.stack([displacements.min(0), displacements.max(0)], axis=1)
     lim = np.asarray(robot.displacement_limits, dtype=np.float64)
     if lim.shape != (displacements.shape[1], 2):
@@ -117,7 +124,13 @@ def read_point_clouds(path) -> PointCloudData:
     toml_text = str(ds.metadata["robot_toml"])
     limits = displacement_limits(toml_text, disp)
     return PointCloudData(
-        disp, points, toml_text, str(ds.metadata["robot_name"]), limits, content_hash(disp, points), str(path)
+        disp,
+        points,
+        toml_text,
+        str(ds.metadata["robot_name"]),
+        limits,
+        content_hash(disp, points),
+        str(path),
     )
 
 
@@ -130,7 +143,9 @@ def check_compatible(a: PointCloudData | dict, b: PointCloudData, what: str = "d
     m_a = a["n_tendons"] if isinstance(a, dict) else a.n_tendons
     name_a = a.get("robot_name", "") if isinstance(a, dict) else a.robot_name
     if m_a != b.n_tendons:
-        raise DataFormatError(f"{what} {b.path!r} has {b.n_tendons} tendons, the model expects {m_a}")
+        raise DataFormatError(
+            f"{what} {b.path!r} has {b.n_tendons} tendons, the model expects {m_a}"
+        )
     if _normalise_toml(toml_a) != _normalise_toml(b.robot_toml):
         raise DataFormatError(
             f"{what} {b.path!r} was made with robot {b.robot_name!r} whose description differs from the model's robot {name_a!r}"
@@ -141,7 +156,15 @@ def _normalise_toml(text: str) -> str:
     return "\n".join(line.rstrip() for line in text.strip().splitlines())
 
 
-def write_synthetic_dataset(path, displacements, points, *, robot_toml: str = "", robot_name: str = "synthetic", seed: int = 0) -> Path:
+def write_synthetic_dataset(
+    path,
+    displacements,
+    points,
+    *,
+    robot_toml: str = "",
+    robot_name: str = "synthetic",
+    seed: int = 0,
+) -> Path:
     """Write arrays in the data-set schema (for tests and examples without the simulator).
 
     ``displacements (C, m)``, ``points (C, S, P, 3)``; all configurations marked done. Uses
@@ -159,11 +182,25 @@ def write_synthetic_dataset(path, displacements, points, *, robot_toml: str = ""
     path = Path(path)
     with atomic_path(path, suffix=".h5") as tmp:
         f = create_file(
-            tmp, displacements=displacements, n_starts=S, n_points=P, robot_toml=robot_toml, robot_name=robot_name,
-            protocol_json=json.dumps({"kind": "synthetic"}), split="synthetic", seed=seed,
+            tmp,
+            displacements=displacements,
+            n_starts=S,
+            n_points=P,
+            robot_toml=robot_toml,
+            robot_name=robot_name,
+            protocol_json=json.dumps({"kind": "synthetic"}),
+            split="synthetic",
+            seed=seed,
         )
         with f:
             for i in range(C):
-                write_config(f, i, points[i], np.zeros((S, 3)), np.repeat(displacements[i][None], S, 0), np.zeros((S, m)))
+                write_config(
+                    f,
+                    i,
+                    points[i],
+                    np.zeros((S, 3)),
+                    np.repeat(displacements[i][None], S, 0),
+                    np.zeros((S, m)),
+                )
             mark_complete(f)
     return path

@@ -36,13 +36,17 @@ def chamfer_distance(a: np.ndarray, b: np.ndarray) -> float:
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     if a.ndim != 2 or b.ndim != 2 or a.shape[1] != b.shape[1] or len(a) == 0 or len(b) == 0:
-        raise InvalidInputError(f"chamfer_distance: expected non-empty (n, d) and (k, d) point sets, got {a.shape} and {b.shape}")
+        raise InvalidInputError(
+            f"chamfer_distance: expected non-empty (n, d) and (k, d) point sets, got {a.shape} and {b.shape}"
+        )
     dab = cKDTree(b).query(a, k=1)[0]
     dba = cKDTree(a).query(b, k=1)[0]
     return 0.5 * (float(dab.mean()) + float(dba.mean()))
 
 
-def hdr_thresholds(mixture: GaussianMixture, levels=DEFAULT_LEVELS, n_samples: int = 4096, seed=0) -> torch.Tensor:
+def hdr_thresholds(
+    mixture: GaussianMixture, levels=DEFAULT_LEVELS, n_samples: int = 4096, seed=0
+) -> torch.Tensor:
     """Log-density thresholds ``log q_alpha`` of the level-``alpha`` HDRs, shape ``(..., L)``.
 
     ``q_alpha`` is the empirical ``(1 - alpha)`` quantile of ``log p(X)`` over ``n_samples``
@@ -55,7 +59,9 @@ def hdr_thresholds(mixture: GaussianMixture, levels=DEFAULT_LEVELS, n_samples: i
     return torch.quantile(lp, q, dim=-1).movedim(0, -1)
 
 
-def hdr_coverage(mixture: GaussianMixture, points, levels=DEFAULT_LEVELS, n_samples: int = 4096, seed=0) -> torch.Tensor:
+def hdr_coverage(
+    mixture: GaussianMixture, points, levels=DEFAULT_LEVELS, n_samples: int = 4096, seed=0
+) -> torch.Tensor:
     """Fraction of ``points (..., N, 3)`` inside each level-``alpha`` HDR of ``mixture``; ``(..., L)``."""
     thr = hdr_thresholds(mixture, levels, n_samples, seed)
     lp = mixture.log_prob(points)
@@ -90,7 +96,9 @@ class Evaluation:
             "chamfer_mm": self.chamfer * 1e3,
             "calibration": {f"{a:g}": c for a, c in self.calibration.items()},
             "calibration_error": {f"{a:g}": c - a for a, c in self.calibration.items()},
-            "calibration_config_std": {f"{a:g}": float(s) for a, s in zip(self.levels, self.coverage_per_config.std(0))},
+            "calibration_config_std": {
+                f"{a:g}": float(s) for a, s in zip(self.levels, self.coverage_per_config.std(0))
+            },
             "n_configs": self.n_configs,
             "n_points_per_config": self.n_points,
             "nll_units": "nats per point, positions in metres",
@@ -125,7 +133,14 @@ def evaluate(
     Raises :class:`DataFormatError` if ``data`` belongs to another robot.
     """
     levels = _check_levels(levels)
-    check_compatible({"robot_toml": model.robot_toml, "n_tendons": model.n_tendons, "robot_name": model.robot_name}, data)
+    check_compatible(
+        {
+            "robot_toml": model.robot_toml,
+            "n_tendons": model.n_tendons,
+            "robot_name": model.robot_name,
+        },
+        data,
+    )
     rng = np.random.default_rng(seed)
     if max_configs is not None and max_configs < data.n_configs:
         data = data.subset(np.sort(rng.choice(data.n_configs, size=max_configs, replace=False)))

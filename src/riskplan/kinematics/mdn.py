@@ -78,12 +78,18 @@ class MDN(nn.Module):
     ):
         super().__init__()
         if n_inputs < 1 or n_components < 1 or dim < 1:
-            raise InvalidInputError(f"MDN: need n_inputs, n_components, dim >= 1, got {n_inputs}, {n_components}, {dim}")
+            raise InvalidInputError(
+                f"MDN: need n_inputs, n_components, dim >= 1, got {n_inputs}, {n_components}, {dim}"
+            )
         if activation not in ACTIVATIONS:
-            raise InvalidInputError(f"activation: expected one of {ACTIVATIONS}, got {activation!r}")
+            raise InvalidInputError(
+                f"activation: expected one of {ACTIVATIONS}, got {activation!r}"
+            )
         hidden, head_hidden = tuple(int(h) for h in hidden), tuple(int(h) for h in head_hidden)
         if not hidden or any(h < 1 for h in hidden + head_hidden):
-            raise InvalidInputError(f"hidden: expected at least one positive width, got {hidden} (heads {head_hidden})")
+            raise InvalidInputError(
+                f"hidden: expected at least one positive width, got {hidden} (heads {head_hidden})"
+            )
         self.n_inputs, self.n_components, self.dim = n_inputs, n_components, dim
         self.hidden, self.head_hidden, self.activation = hidden, head_hidden, activation
         trunk: list[nn.Module] = []
@@ -130,11 +136,15 @@ class MDN(nn.Module):
         K, d = self.n_components, self.dim
         log_w = torch.log_softmax(logits, dim=-1)
         means = mu.reshape(*batch, K, d)
-        u = build_precision_cholesky(u_raw.reshape(*batch, K, -1), d, self._flat_index, self._is_diag)
+        u = build_precision_cholesky(
+            u_raw.reshape(*batch, K, -1), d, self._flat_index, self._is_diag
+        )
         return log_w, means, u
 
 
-def build_precision_cholesky(u_raw: torch.Tensor, d: int, flat_index=None, is_diag=None) -> torch.Tensor:
+def build_precision_cholesky(
+    u_raw: torch.Tensor, d: int, flat_index=None, is_diag=None
+) -> torch.Tensor:
     """Eq. 2: ``Ubar_jk = U_jk`` for ``j < k``, ``exp(U_jj)`` on the diagonal, zero below.
 
     ``u_raw (..., K, d(d+1)/2)`` lists the upper triangle row by row
@@ -144,13 +154,17 @@ def build_precision_cholesky(u_raw: torch.Tensor, d: int, flat_index=None, is_di
     if flat_index is None:
         rows, cols = torch.triu_indices(d, d, device=u_raw.device)
         flat_index, is_diag = rows * d + cols, rows == cols
-    vals = torch.where(is_diag, torch.exp(torch.clamp(u_raw, -LOG_DIAG_BOUND, LOG_DIAG_BOUND)), u_raw)
+    vals = torch.where(
+        is_diag, torch.exp(torch.clamp(u_raw, -LOG_DIAG_BOUND, LOG_DIAG_BOUND)), u_raw
+    )
     out = u_raw.new_zeros(*u_raw.shape[:-1], d * d)
     out = out.index_copy(out.ndim - 1, flat_index, vals)
     return out.reshape(*u_raw.shape[:-1], d, d)
 
 
-def mixture_log_prob(log_weights: torch.Tensor, means: torch.Tensor, u: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+def mixture_log_prob(
+    log_weights: torch.Tensor, means: torch.Tensor, u: torch.Tensor, points: torch.Tensor
+) -> torch.Tensor:
     """Eq. 1 with eqs. 4-6, from log-weights (stable for weights that underflow to zero).
 
     ``log_weights (..., K)``, ``means (..., K, d)``, ``u (..., K, d, d)``, ``points (..., N, d)``
@@ -162,7 +176,9 @@ def mixture_log_prob(log_weights: torch.Tensor, means: torch.Tensor, u: torch.Te
     sq = (y * y).sum(-1)
     logdet = torch.log(torch.diagonal(u, dim1=-2, dim2=-1)).sum(-1)
     comp = logdet.unsqueeze(-1) - 0.5 * sq
-    return torch.logsumexp(log_weights.unsqueeze(-1) + comp, dim=-2) - 0.5 * d * math.log(2.0 * math.pi)
+    return torch.logsumexp(log_weights.unsqueeze(-1) + comp, dim=-2) - 0.5 * d * math.log(
+        2.0 * math.pi
+    )
 
 
 def mdn_nll(net: MDN, x: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
@@ -196,11 +212,19 @@ class Normalisation:
         return cls(im, isd, oc, osd)
 
     def to_json(self) -> dict:
-        return {k: np.asarray(getattr(self, k), dtype=np.float64).tolist() for k in ("input_mean", "input_scale", "output_centre", "output_scale")}
+        return {
+            k: np.asarray(getattr(self, k), dtype=np.float64).tolist()
+            for k in ("input_mean", "input_scale", "output_centre", "output_scale")
+        }
 
     @classmethod
     def from_json(cls, obj: dict) -> Normalisation:
-        return cls(*(np.asarray(obj[k], dtype=np.float64) for k in ("input_mean", "input_scale", "output_centre", "output_scale")))
+        return cls(
+            *(
+                np.asarray(obj[k], dtype=np.float64)
+                for k in ("input_mean", "input_scale", "output_centre", "output_scale")
+            )
+        )
 
     @property
     def log_scale_sum(self) -> float:
@@ -257,7 +281,9 @@ class MDNModel:
             try:
                 self._robot = robot_from_toml(self.robot_toml)
             except RiskplanError as exc:
-                raise DataFormatError(f"the model's robot {self.robot_name!r} cannot be rebuilt from its stored description: {exc}") from exc
+                raise DataFormatError(
+                    f"the model's robot {self.robot_name!r} cannot be rebuilt from its stored description: {exc}"
+                ) from exc
         return self._robot
 
     # ----------------------------------------------------------- validation
@@ -268,7 +294,9 @@ class MDNModel:
         except (TypeError, ValueError) as exc:
             raise InvalidInputError(f"{name}: cannot convert to a float64 array ({exc})") from exc
         if d.ndim == 0 or d.shape[-1] != self.n_tendons:
-            raise InvalidInputError(f"{name}: expected last dimension {self.n_tendons} (tendons of robot {self.robot_name!r}), got shape {d.shape}")
+            raise InvalidInputError(
+                f"{name}: expected last dimension {self.n_tendons} (tendons of robot {self.robot_name!r}), got shape {d.shape}"
+            )
         if self._bounds is None:
             slack = LIMIT_SLACK * max(1.0, float(np.abs(self.limits).max()))
             self._bounds = (self.limits[:, 0] - slack, self.limits[:, 1] + slack)
@@ -289,7 +317,9 @@ class MDNModel:
         """Differentiable torch path (no input validation): ``(..., m)`` tensor → mixture in metres."""
         p = next(self.net.parameters())
         n = self.normalisation
-        x = (displacements.to(p.dtype) - torch.as_tensor(n.input_mean, dtype=p.dtype)) / torch.as_tensor(n.input_scale, dtype=p.dtype)
+        x = (
+            displacements.to(p.dtype) - torch.as_tensor(n.input_mean, dtype=p.dtype)
+        ) / torch.as_tensor(n.input_scale, dtype=p.dtype)
         log_w, mu, u = self.net(x)
         c = torch.as_tensor(n.output_centre, dtype=p.dtype)
         s = torch.as_tensor(n.output_scale, dtype=p.dtype)
@@ -343,14 +373,20 @@ class _FusedNumpyMDN:
         import scipy.linalg
 
         def lin(layer):
-            return layer.weight.detach().double().numpy().T.copy(), layer.bias.detach().double().numpy().copy()
+            return (
+                layer.weight.detach().double().numpy().T.copy(),
+                layer.bias.detach().double().numpy().copy(),
+            )
 
         trunk = [lin(m) for m in net.trunk if isinstance(m, nn.Linear)]
         # fold (x - mean) / scale into the first layer: W' = W / scale, b' = b - (mean/scale) W
         W0, b0 = trunk[0]
         W0s = W0 / norm.input_scale[:, None]
         trunk[0] = (W0s, b0 - (norm.input_mean[:, None] * W0s).sum(0))
-        heads = [[lin(m) for m in h if isinstance(m, nn.Linear)] for h in (net.weight_head, net.mean_head, net.chol_head)]
+        heads = [
+            [lin(m) for m in h if isinstance(m, nn.Linear)]
+            for h in (net.weight_head, net.mean_head, net.chol_head)
+        ]
         K, d = net.n_components, net.dim
         T = n_cholesky_entries(d)
         # de-normalise means in the last layer: mu = c + s * mu_n
@@ -361,7 +397,9 @@ class _FusedNumpyMDN:
         # one contiguous slice; `targets` scatters them into row-major (K, d, d) storage
         rows, cols = np.triu_indices(d)
         entries = [(k, n) for k in range(K) for n in range(T)]
-        order = [i for i, (k, n) in enumerate(entries) if rows[n] == cols[n]] + [i for i, (k, n) in enumerate(entries) if rows[n] != cols[n]]
+        order = [i for i, (k, n) in enumerate(entries) if rows[n] == cols[n]] + [
+            i for i, (k, n) in enumerate(entries) if rows[n] != cols[n]
+        ]
         Wu, bu = heads[2][-1]
         heads[2][-1] = (Wu[:, order], bu[order])
         fused = []
@@ -374,7 +412,9 @@ class _FusedNumpyMDN:
         self.layers = [(W.astype(self.dtype), b.astype(self.dtype)) for W, b in trunk + fused]
         self.activation = net.activation
         self.K, self.d, self.T = K, d, T
-        self.targets = np.array([entries[i][0] * d * d + rows[entries[i][1]] * d + cols[entries[i][1]] for i in order])
+        self.targets = np.array(
+            [entries[i][0] * d * d + rows[entries[i][1]] * d + cols[entries[i][1]] for i in order]
+        )
         # Ubar = Ubar_n diag(1/s): entry (i, j) scaled by 1/s_j
         self.col_scale = np.array([1.0 / norm.output_scale[cols[entries[i][1]]] for i in order])
         self.n_diag = K * d

@@ -66,9 +66,13 @@ class GaussianMixture:
             )
         K, d = m.shape[-2], m.shape[-1]
         if w.shape != m.shape[:-1]:
-            raise InvalidInputError(f"weights: shape {tuple(w.shape)} does not match means {tuple(m.shape)} (expected {tuple(m.shape[:-1])})")
+            raise InvalidInputError(
+                f"weights: shape {tuple(w.shape)} does not match means {tuple(m.shape)} (expected {tuple(m.shape[:-1])})"
+            )
         if u.shape != m.shape + (d,):
-            raise InvalidInputError(f"precision_cholesky: expected shape {tuple(m.shape) + (d,)}, got {tuple(u.shape)}")
+            raise InvalidInputError(
+                f"precision_cholesky: expected shape {tuple(m.shape) + (d,)}, got {tuple(u.shape)}"
+            )
         if K < 1 or d < 1:
             raise InvalidInputError(f"GaussianMixture: need K >= 1 and d >= 1, got K={K}, d={d}")
         for name, t in (("weights", w), ("means", m), ("precision_cholesky", u)):
@@ -79,10 +83,14 @@ class GaussianMixture:
         total = w.sum(-1)
         if not torch.allclose(total, torch.ones_like(total), atol=WEIGHT_SUM_ATOL, rtol=0):
             worst = float((total - 1).abs().max())
-            raise InvalidInputError(f"weights: must sum to 1 over the last axis (worst deviation {worst:.3g})")
+            raise InvalidInputError(
+                f"weights: must sum to 1 over the last axis (worst deviation {worst:.3g})"
+            )
         lower = torch.tril(u, diagonal=-1)
         if (lower != 0).any():
-            raise InvalidInputError("precision_cholesky: must be upper triangular (entries below the diagonal are non-zero)")
+            raise InvalidInputError(
+                "precision_cholesky: must be upper triangular (entries below the diagonal are non-zero)"
+            )
         diag = torch.diagonal(u, dim1=-2, dim2=-1)
         if (diag <= 0).any():
             raise InvalidInputError(
@@ -135,7 +143,9 @@ class GaussianMixture:
         The leading axes ``...`` must broadcast against the batch shape; values must be finite.
         """
         if points is None or isinstance(points, (str, bytes)):
-            raise InvalidInputError(f"points: expected a numeric array of shape (..., N, {self.dim}), got {type(points).__name__}")
+            raise InvalidInputError(
+                f"points: expected a numeric array of shape (..., N, {self.dim}), got {type(points).__name__}"
+            )
         try:
             x = _as_tensor(points)
         except InvalidInputError as exc:
@@ -193,13 +203,23 @@ class GaussianMixture:
         """
         if n < 0:
             raise InvalidInputError(f"n: expected >= 0, got {n}")
-        gen = seed if isinstance(seed, torch.Generator) else torch.Generator().manual_seed(
-            int(np.random.SeedSequence(seed).generate_state(1)[0]) if seed is None or isinstance(seed, (int, np.integer)) else int(seed)
+        gen = (
+            seed
+            if isinstance(seed, torch.Generator)
+            else torch.Generator().manual_seed(
+                int(np.random.SeedSequence(seed).generate_state(1)[0])
+                if seed is None or isinstance(seed, (int, np.integer))
+                else int(seed)
+            )
         )
         batch = self.batch_shape
         K, d = self.n_components, self.dim
         w = self.weights.reshape(-1, K).detach().cpu().double()
-        comp = torch.multinomial(w, n, replacement=True, generator=gen) if n else torch.zeros(w.shape[0], 0, dtype=torch.long)
+        comp = (
+            torch.multinomial(w, n, replacement=True, generator=gen)
+            if n
+            else torch.zeros(w.shape[0], 0, dtype=torch.long)
+        )
         z = torch.randn(w.shape[0], n, d, generator=gen, dtype=torch.float64).to(self.dtype)
         comp = comp.to(self.device)
         z = z.to(self.device)
@@ -223,18 +243,35 @@ class GaussianMixture:
         )
 
     def detach(self) -> GaussianMixture:
-        return GaussianMixture(self.weights.detach(), self.means.detach(), self.precision_cholesky.detach(), validate=False)
+        return GaussianMixture(
+            self.weights.detach(),
+            self.means.detach(),
+            self.precision_cholesky.detach(),
+            validate=False,
+        )
 
     def numpy(self) -> dict[str, np.ndarray]:
         """``{"weights", "means", "precision_cholesky"}`` as NumPy arrays (detached, on CPU)."""
-        return {k: getattr(self, k).detach().cpu().numpy() for k in ("weights", "means", "precision_cholesky")}
+        return {
+            k: getattr(self, k).detach().cpu().numpy()
+            for k in ("weights", "means", "precision_cholesky")
+        }
 
     @classmethod
-    def from_numpy(cls, weights, means, precision_cholesky, *, validate: bool = True) -> GaussianMixture:
-        return cls(np.asarray(weights), np.asarray(means), np.asarray(precision_cholesky), validate=validate)
+    def from_numpy(
+        cls, weights, means, precision_cholesky, *, validate: bool = True
+    ) -> GaussianMixture:
+        return cls(
+            np.asarray(weights),
+            np.asarray(means),
+            np.asarray(precision_cholesky),
+            validate=validate,
+        )
 
     @classmethod
-    def from_covariances(cls, weights, means, covariances, *, validate: bool = True) -> GaussianMixture:
+    def from_covariances(
+        cls, weights, means, covariances, *, validate: bool = True
+    ) -> GaussianMixture:
         """Build from covariances ``(..., K, d, d)``: ``U = chol(Sigma^{-1})^T``."""
         cov = _as_tensor(covariances)
         if validate and not torch.isfinite(cov).all():
@@ -243,7 +280,9 @@ class GaussianMixture:
             prec = torch.linalg.inv(cov)
             lower = torch.linalg.cholesky((prec + prec.transpose(-1, -2)) / 2)
         except RuntimeError as exc:  # torch raises _LinAlgError (a RuntimeError)
-            raise InvalidInputError(f"covariances: not symmetric positive definite ({exc})") from exc
+            raise InvalidInputError(
+                f"covariances: not symmetric positive definite ({exc})"
+            ) from exc
         return cls(weights, means, lower.transpose(-1, -2), validate=validate)
 
     def __getitem__(self, idx) -> GaussianMixture:
@@ -251,10 +290,14 @@ class GaussianMixture:
         if not isinstance(idx, tuple):
             idx = (idx,)
         if Ellipsis in idx:
-            raise InvalidInputError("GaussianMixture indexing: Ellipsis is not supported; index batch axes explicitly")
+            raise InvalidInputError(
+                "GaussianMixture indexing: Ellipsis is not supported; index batch axes explicitly"
+            )
         if len(idx) > len(self.batch_shape):
             raise InvalidInputError(f"too many indices for batch shape {tuple(self.batch_shape)}")
-        return GaussianMixture(self.weights[idx], self.means[idx], self.precision_cholesky[idx], validate=False)
+        return GaussianMixture(
+            self.weights[idx], self.means[idx], self.precision_cholesky[idx], validate=False
+        )
 
     def __repr__(self) -> str:
         return (

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import itertools
 import json
 import logging
 import platform
@@ -38,14 +39,28 @@ WEIGHTS_NAME = "weights.pt"
 META_NAME = "model.json"
 # keys written by save_model itself (a loaded model's metadata keeps only the others)
 _RESERVED = frozenset(
-    ("format", "format_version", "versions", "architecture", "normalisation", "robot", "weights_file", "weights_sha256")
+    (
+        "format",
+        "format_version",
+        "versions",
+        "architecture",
+        "normalisation",
+        "robot",
+        "weights_file",
+        "weights_sha256",
+    )
 )
 
 
 def _versions() -> dict:
     from riskplan.datasets.storage import _version
 
-    return {"riskplan": _version(), "torch": torch.__version__, "numpy": np.__version__, "python": platform.python_version()}
+    return {
+        "riskplan": _version(),
+        "torch": torch.__version__,
+        "numpy": np.__version__,
+        "python": platform.python_version(),
+    }
 
 
 def save_model(model: MDNModel, path) -> Path:
@@ -111,7 +126,9 @@ def resolve_model(name_or_path) -> Path:
     :class:`DataFormatError` listing the shipped names.
     """
     if not isinstance(name_or_path, (str, Path)):
-        raise InvalidInputError(f"model: expected a folder path or a shipped model name, got {type(name_or_path).__name__}")
+        raise InvalidInputError(
+            f"model: expected a folder path or a shipped model name, got {type(name_or_path).__name__}"
+        )
     path = Path(name_or_path)
     if path.is_file() and path.name in (META_NAME, WEIGHTS_NAME):
         return path.parent
@@ -145,9 +162,13 @@ def load_model(path, robot=None) -> MDNModel:
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise DataFormatError(f"model {str(path)!r}: {META_NAME} is corrupted ({exc})") from exc
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise DataFormatError(f"model {str(path)!r}: {META_NAME} has format={meta.get('format') if isinstance(meta, dict) else None!r}, expected {FORMAT!r}")
+        raise DataFormatError(
+            f"model {str(path)!r}: {META_NAME} has format={meta.get('format') if isinstance(meta, dict) else None!r}, expected {FORMAT!r}"
+        )
     if meta.get("format_version") != FORMAT_VERSION:
-        raise DataFormatError(f"model {str(path)!r}: format_version={meta.get('format_version')!r} is not supported (expected {FORMAT_VERSION})")
+        raise DataFormatError(
+            f"model {str(path)!r}: format_version={meta.get('format_version')!r} is not supported (expected {FORMAT_VERSION})"
+        )
     try:
         arch = meta["architecture"]
         norm = Normalisation.from_json(meta["normalisation"])
@@ -156,7 +177,9 @@ def load_model(path, robot=None) -> MDNModel:
         weights_file = path / meta.get("weights_file", WEIGHTS_NAME)
         expected_hash = meta["weights_sha256"]
     except (KeyError, TypeError, ValueError) as exc:
-        raise DataFormatError(f"model {str(path)!r}: {META_NAME} lacks or has a malformed entry ({type(exc).__name__}: {exc})") from exc
+        raise DataFormatError(
+            f"model {str(path)!r}: {META_NAME} lacks or has a malformed entry ({type(exc).__name__}: {exc})"
+        ) from exc
     if not weights_file.is_file():
         raise DataFormatError(f"model {str(path)!r}: weights file {weights_file.name!r} is missing")
     blob = weights_file.read_bytes()
@@ -170,13 +193,26 @@ def load_model(path, robot=None) -> MDNModel:
     try:
         state = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=True)
         net = MDN(
-            int(arch["n_inputs"]), int(arch["n_components"]), int(arch.get("dim", 3)),
-            tuple(arch["hidden"]), tuple(arch["head_hidden"]), arch.get("activation", "silu"),
+            int(arch["n_inputs"]),
+            int(arch["n_components"]),
+            int(arch.get("dim", 3)),
+            tuple(arch["hidden"]),
+            tuple(arch["head_hidden"]),
+            arch.get("activation", "silu"),
         )
         net = net.to(getattr(torch, arch.get("dtype", "float32")))
         net.load_state_dict(state)
-    except (InvalidInputError, KeyError, TypeError, RuntimeError, ValueError, AttributeError) as exc:
-        raise DataFormatError(f"model {str(path)!r}: weights do not fit the architecture in {META_NAME} ({type(exc).__name__}: {exc})") from exc
+    except (
+        InvalidInputError,
+        KeyError,
+        TypeError,
+        RuntimeError,
+        ValueError,
+        AttributeError,
+    ) as exc:
+        raise DataFormatError(
+            f"model {str(path)!r}: weights do not fit the architecture in {META_NAME} ({type(exc).__name__}: {exc})"
+        ) from exc
     m = net.n_inputs
     if limits.shape != (m, 2) or norm.input_mean.shape != (m,) or norm.output_scale.shape != (3,):
         raise DataFormatError(
@@ -187,7 +223,9 @@ def load_model(path, robot=None) -> MDNModel:
     if extra.get("finished") is False:
         log.warning(
             "model %s is unfinished: saved during a training run that has not ended (best epoch %s); "
-            "resume it with `riskplan train --resume`", path, extra.get("best_epoch")
+            "resume it with `riskplan train --resume`",
+            path,
+            extra.get("best_epoch"),
         )
     model = MDNModel(net, norm, limits, rob.get("toml", ""), rob.get("name", ""), extra)
     if robot is not None:
@@ -213,16 +251,22 @@ def _check_architecture(path: Path, arch) -> None:
     def count(key, low, high, default=None):
         v = arch.get(key, default)
         if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= high:
-            raise DataFormatError(f"{where}: {key} must be an integer in [{low}, {high}], got {v!r}")
+            raise DataFormatError(
+                f"{where}: {key} must be an integer in [{low}, {high}], got {v!r}"
+            )
         return v
 
     def widths(key):
         v = arch.get(key)
         if not isinstance(v, (list, tuple)) or len(v) > MAX_LAYERS:
-            raise DataFormatError(f"{where}: {key} must be a list of at most {MAX_LAYERS} layer widths, got {v!r}")
+            raise DataFormatError(
+                f"{where}: {key} must be a list of at most {MAX_LAYERS} layer widths, got {v!r}"
+            )
         for h in v:
             if isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= MAX_WIDTH:
-                raise DataFormatError(f"{where}: {key} widths must be integers in [1, {MAX_WIDTH}], got {h!r}")
+                raise DataFormatError(
+                    f"{where}: {key} widths must be integers in [1, {MAX_WIDTH}], got {h!r}"
+                )
         return list(v)
 
     m = count("n_inputs", 1, MAX_TENDONS)
@@ -232,14 +276,16 @@ def _check_architecture(path: Path, arch) -> None:
     if not hidden:
         raise DataFormatError(f"{where}: hidden must name at least one layer")
     sizes = [m, *hidden]
-    n = sum((a + 1) * b for a, b in zip(sizes[:-1], sizes[1:]))
+    n = sum((a + 1) * b for a, b in itertools.pairwise(sizes))
     for out in (k, k * d, k * d * (d + 1) // 2):
         hs = [hidden[-1], *heads, out]
-        n += sum((a + 1) * b for a, b in zip(hs[:-1], hs[1:]))
+        n += sum((a + 1) * b for a, b in itertools.pairwise(hs))
     if n > MAX_PARAMETERS:
         raise DataFormatError(f"{where}: {n} parameters exceed the limit of {MAX_PARAMETERS}")
     if arch.get("dtype", "float32") not in ("float32", "float64"):
-        raise DataFormatError(f"{where}: dtype must be 'float32' or 'float64', got {arch.get('dtype')!r}")
+        raise DataFormatError(
+            f"{where}: dtype must be 'float32' or 'float64', got {arch.get('dtype')!r}"
+        )
 
 
 def _check_numbers(path: Path, net, norm, limits: np.ndarray) -> None:
@@ -254,11 +300,17 @@ def _check_numbers(path: Path, net, norm, limits: np.ndarray) -> None:
     for key in ("input_mean", "input_scale", "output_centre", "output_scale"):
         v = getattr(norm, key)
         if not np.all(np.isfinite(v)):
-            raise DataFormatError(f"{where}: {META_NAME} normalisation.{key} contains NaN or inf: {v.tolist()}")
+            raise DataFormatError(
+                f"{where}: {META_NAME} normalisation.{key} contains NaN or inf: {v.tolist()}"
+            )
         if key.endswith("_scale") and not np.all(v > 0):
-            raise DataFormatError(f"{where}: {META_NAME} normalisation.{key} must be > 0, got {v.tolist()}")
+            raise DataFormatError(
+                f"{where}: {META_NAME} normalisation.{key} must be > 0, got {v.tolist()}"
+            )
     if not np.all(np.isfinite(limits)) or not np.all(limits[:, 0] < limits[:, 1]):
-        raise DataFormatError(f"{where}: {META_NAME} robot.displacement_limits must be finite with low < high, got {limits.tolist()}")
+        raise DataFormatError(
+            f"{where}: {META_NAME} robot.displacement_limits must be finite with low < high, got {limits.tolist()}"
+        )
 
 
 def check_robot(model: MDNModel, robot) -> None:
@@ -268,7 +320,9 @@ def check_robot(model: MDNModel, robot) -> None:
     m = int(getattr(robot, "n_tendons", model.n_tendons))
     name = getattr(robot, "name", "?")
     if m != model.n_tendons:
-        raise DataFormatError(f"model was trained for robot {model.robot_name!r} with {model.n_tendons} tendons; robot {name!r} has {m}")
+        raise DataFormatError(
+            f"model was trained for robot {model.robot_name!r} with {model.n_tendons} tendons; robot {name!r} has {m}"
+        )
     toml = robot.toml_text() if hasattr(robot, "toml_text") else str(robot)
     if _normalise_toml(toml) != _normalise_toml(model.robot_toml):
         raise DataFormatError(

@@ -21,9 +21,20 @@ def fig_nll_vs_components(result):
     fig, ax = plt.subplots(figsize=(5.5, 3.6))
     ax.plot(ks, nll, "-o", color="tab:blue", label="test NLL")
     if collapsed.any():
-        ax.plot(ks[collapsed], nll[collapsed], "x", color="tab:red", ms=10, mew=2, label="mode collapse")
+        ax.plot(
+            ks[collapsed], nll[collapsed], "x", color="tab:red", ms=10, mew=2, label="mode collapse"
+        )
     i = int(np.flatnonzero(ks == result.recommended)[0])
-    ax.plot([ks[i]], [nll[i]], "o", ms=13, mfc="none", mec="tab:green", mew=2, label=f"recommended K={result.recommended}")
+    ax.plot(
+        [ks[i]],
+        [nll[i]],
+        "o",
+        ms=13,
+        mfc="none",
+        mec="tab:green",
+        mew=2,
+        label=f"recommended K={result.recommended}",
+    )
     ax.set_xlabel("number of mixture components K")
     ax.set_ylabel("test NLL [nats/point, m]")
     ax.set_xticks(ks)
@@ -81,14 +92,33 @@ def plotly_samples_vs_truth(model, data, n_configs: int = 2, n_samples: int = 20
     from plotly.subplots import make_subplots
 
     idx, samples, gts = _fig5_data(model, data, n_configs, n_samples, seed)
-    fig = make_subplots(rows=1, cols=len(idx), specs=[[{"type": "scene"}] * len(idx)], subplot_titles=[f"config {i}" for i in idx])
+    fig = make_subplots(
+        rows=1,
+        cols=len(idx),
+        specs=[[{"type": "scene"}] * len(idx)],
+        subplot_titles=[f"config {i}" for i in idx],
+    )
     for j in range(len(idx)):
-        for pts, name, color in ((gts[j], "ground truth", "royalblue"), (samples[j], "MDN samples", "crimson")):
+        for pts, name, color in (
+            (gts[j], "ground truth", "royalblue"),
+            (samples[j], "MDN samples", "crimson"),
+        ):
             p = pts * 1e3
             fig.add_trace(
-                go.Scatter3d(x=p[:, 0], y=p[:, 1], z=p[:, 2], mode="markers", name=name, marker=dict(size=1.5, color=color, opacity=0.5), showlegend=j == 0),
-                row=1, col=j + 1,
+                go.Scatter3d(
+                    x=p[:, 0],
+                    y=p[:, 1],
+                    z=p[:, 2],
+                    mode="markers",
+                    name=name,
+                    marker=dict(size=1.5, color=color, opacity=0.5),
+                    showlegend=j == 0,
+                ),
+                row=1,
+                col=j + 1,
             )
-    fig.update_scenes(aspectmode="data", xaxis_title="x [mm]", yaxis_title="y [mm]", zaxis_title="z [mm]")
+    fig.update_scenes(
+        aspectmode="data", xaxis_title="x [mm]", yaxis_title="y [mm]", zaxis_title="z [mm]"
+    )
     fig.update_layout(title="MDN samples (red) vs ground-truth points (blue)", height=600)
     return fig

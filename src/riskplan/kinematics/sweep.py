@@ -45,7 +45,9 @@ def parse_components(spec: str) -> list[int]:
             elif part:
                 out.add(int(part))
     except ValueError as exc:
-        raise InvalidInputError(f"components: expected e.g. '1-10' or '1,3,5', got {spec!r}") from exc
+        raise InvalidInputError(
+            f"components: expected e.g. '1-10' or '1,3,5', got {spec!r}"
+        ) from exc
     if not out or min(out) < 1:
         raise InvalidInputError(f"components: expected positive integers, got {spec!r}")
     return sorted(out)
@@ -99,7 +101,9 @@ def recommend(components, test_nll, collapsed, nll_tolerance: float = DEFAULT_NL
     components = list(components)
     nll = np.asarray(test_nll, dtype=np.float64)
     if len(components) == 0 or len(components) != len(nll):
-        raise InvalidInputError("recommend: components and test_nll must be non-empty and of equal length")
+        raise InvalidInputError(
+            "recommend: components and test_nll must be non-empty and of equal length"
+        )
     if not np.isfinite(nll).any():
         raise InvalidInputError("recommend: no K has a finite test NLL")
     best = np.nanmin(nll)
@@ -118,9 +122,9 @@ def _sweep_one(task: tuple) -> dict:
 
     import torch
 
+    from riskplan.errors import ConvergenceError
     from riskplan.kinematics.data import read_point_clouds
     from riskplan.kinematics.evaluation import component_weight_stats, mode_collapse, nll_per_config
-    from riskplan.errors import ConvergenceError
     from riskplan.kinematics.training import train
 
     train_path, test_path, K, cfg_json, out_dir, threshold, max_seconds = task
@@ -134,8 +138,16 @@ def _sweep_one(task: tuple) -> dict:
     except ConvergenceError as exc:  # one diverging K must not sink the whole sweep; it is reported
         log.warning("K=%d: %s", K, exc)
         return {
-            "n_components": K, "test_nll": float("nan"), "val_nll": float("nan"), "weight_mean": [], "weight_p99": [],
-            "collapsed": [], "epochs": 0, "seconds": time.perf_counter() - t0, "model_path": "", "error": str(exc),
+            "n_components": K,
+            "test_nll": float("nan"),
+            "val_nll": float("nan"),
+            "weight_mean": [],
+            "weight_p99": [],
+            "collapsed": [],
+            "epochs": 0,
+            "seconds": time.perf_counter() - t0,
+            "model_path": "",
+            "error": str(exc),
         }
     nll = float(nll_per_config(res.model, test_data).mean())
     ws = component_weight_stats(res.model, test_data.displacements)
@@ -175,7 +187,11 @@ def sweep(
     from riskplan.kinematics.data import check_compatible, read_point_clouds
     from riskplan.parallel import map_tasks
 
-    components = parse_components(components) if isinstance(components, str) else sorted(set(int(k) for k in components))
+    components = (
+        parse_components(components)
+        if isinstance(components, str)
+        else sorted(set(int(k) for k in components))
+    )
     if not components or components[0] < 1:
         raise InvalidInputError(f"components: expected positive integers, got {components}")
     if not 0.0 < collapse_threshold < 1.0:
@@ -193,11 +209,26 @@ def sweep(
     check_compatible(tr, te, what="test set")
     del tr, te
     out = Path(out)
-    tasks = [(str(train_path), str(test_path), K, config.to_json(), str(out / f"K{K}"), collapse_threshold, max_seconds_per_k) for K in components]
+    tasks = [
+        (
+            str(train_path),
+            str(test_path),
+            K,
+            config.to_json(),
+            str(out / f"K{K}"),
+            collapse_threshold,
+            max_seconds_per_k,
+        )
+        for K in components
+    ]
     backend = "serial" if workers <= 1 or len(tasks) == 1 else "local"
-    results = map_tasks(_sweep_one, tasks, backend=backend, workers=workers, chunksize=1, on_result=on_result)
+    results = map_tasks(
+        _sweep_one, tasks, backend=backend, workers=workers, chunksize=1, on_result=on_result
+    )
     entries = [SweepEntry(**r) for r in results]
-    rec = recommend(components, [e.test_nll for e in entries], [e.collapsed for e in entries], nll_tolerance)
+    rec = recommend(
+        components, [e.test_nll for e in entries], [e.collapsed for e in entries], nll_tolerance
+    )
     rule = (
         f"smallest K without mode collapse (no component with weight < {collapse_threshold:g} on 99% of test "
         f"configurations) whose test NLL is within {nll_tolerance:g} nats/point of the best"

@@ -69,14 +69,25 @@ class TrainConfig:
     max_bad_steps: int = 20
 
     def validate(self) -> None:
-        ints = ("n_components", "epochs", "batch_size", "points_per_config", "val_points", "max_bad_steps")
+        ints = (
+            "n_components",
+            "epochs",
+            "batch_size",
+            "points_per_config",
+            "val_points",
+            "max_bad_steps",
+        )
         for name in ints:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
         for name in ("val_fraction", "lr", "lr_factor", "weight_decay", "min_lr"):
             v = getattr(self, name, 0.0)
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
+            if (
+                isinstance(v, bool)
+                or not isinstance(v, (int, float, np.integer, np.floating))
+                or not math.isfinite(v)
+            ):
                 raise InvalidInputError(f"{name}: expected a finite number, got {v!r}")
         for name in ("early_stop_patience", "lr_patience", "seed"):
             v = getattr(self, name)
@@ -134,7 +145,7 @@ def _torch_dtype(name: str) -> torch.dtype:
 
 def split_indices(n: int, val_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Random split of ``n`` configurations into (train, validation) index arrays."""
-    n_val = int(round(val_fraction * n))
+    n_val = round(val_fraction * n)
     if val_fraction > 0 and n >= 2:
         n_val = min(max(n_val, 1), n - 1)
     perm = np.random.default_rng([seed, 7919]).permutation(n)
@@ -155,29 +166,56 @@ def _grads_finite(net: torch.nn.Module) -> bool:
     return all(p.grad is None or bool(torch.isfinite(p.grad).all()) for p in net.parameters())
 
 
-def build_model(net: MDN, norm: Normalisation, data: PointCloudData, config: TrainConfig, extra: dict | None = None) -> MDNModel:
+def build_model(
+    net: MDN,
+    norm: Normalisation,
+    data: PointCloudData,
+    config: TrainConfig,
+    extra: dict | None = None,
+) -> MDNModel:
     meta = {
         "training": config.to_json(),
-        "data": {"path": data.path, "content_hash": data.content_hash, "n_configs": data.n_configs, "n_points": data.n_points},
+        "data": {
+            "path": data.path,
+            "content_hash": data.content_hash,
+            "n_configs": data.n_configs,
+            "n_points": data.n_points,
+        },
     }
     if extra:
         meta.update(extra)
-    return MDNModel(copy.deepcopy(net).eval(), norm, data.limits.copy(), data.robot_toml, data.robot_name, meta)
+    return MDNModel(
+        copy.deepcopy(net).eval(), norm, data.limits.copy(), data.robot_toml, data.robot_name, meta
+    )
 
 
 class _Evaluator:
     """Validation NLL on a fixed subsample of points (the same every epoch)."""
 
-    def __init__(self, data: PointCloudData, idx: np.ndarray, norm: Normalisation, n_points: int, seed: int, dtype):
+    def __init__(
+        self,
+        data: PointCloudData,
+        idx: np.ndarray,
+        norm: Normalisation,
+        n_points: int,
+        seed: int,
+        dtype,
+    ):
         self.empty = idx.size == 0
         if self.empty:
             return
         rng = np.random.default_rng([seed, 104729])
         N = data.n_points
         take = min(n_points, N)
-        pidx = np.stack([rng.choice(N, size=take, replace=False) for _ in idx]) if take < N else np.broadcast_to(np.arange(N), (idx.size, N))
+        pidx = (
+            np.stack([rng.choice(N, size=take, replace=False) for _ in idx])
+            if take < N
+            else np.broadcast_to(np.arange(N), (idx.size, N))
+        )
         pts = data.points[idx[:, None], pidx]
-        self.x = torch.as_tensor((data.displacements[idx] - norm.input_mean) / norm.input_scale, dtype=dtype)
+        self.x = torch.as_tensor(
+            (data.displacements[idx] - norm.input_mean) / norm.input_scale, dtype=dtype
+        )
         self.p = torch.as_tensor((pts - norm.output_centre) / norm.output_scale, dtype=dtype)
         self.offset = norm.log_scale_sum
 
@@ -225,7 +263,9 @@ def train(
     config = config or TrainConfig()
     config.validate()
     if data.n_configs < 2:
-        raise DataFormatError(f"data set {data.path!r}: need at least 2 configurations to train (train/validation), got {data.n_configs}")
+        raise DataFormatError(
+            f"data set {data.path!r}: need at least 2 configurations to train (train/validation), got {data.n_configs}"
+        )
     dtype = _torch_dtype(config.dtype)
     out = Path(out) if out is not None else None
     if resume and out is None:
@@ -242,12 +282,28 @@ def train(
 
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)
-        net = MDN(data.n_tendons, config.n_components, 3, config.hidden, config.head_hidden, config.activation).to(dtype)
+        net = MDN(
+            data.n_tendons,
+            config.n_components,
+            3,
+            config.hidden,
+            config.head_hidden,
+            config.activation,
+        ).to(dtype)
     opt = torch.optim.Adam(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-    sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, mode="min", factor=config.lr_factor, patience=config.lr_patience, min_lr=config.min_lr)
+    sched = torch.optim.lr_scheduler.ReduceLROnPlateau(
+        opt, mode="min", factor=config.lr_factor, patience=config.lr_patience, min_lr=config.min_lr
+    )
 
     history: list[EpochRecord] = []
-    start_epoch, best_val, best_epoch, best_state, since_best, total_skipped = 0, math.inf, -1, None, 0, 0
+    start_epoch, best_val, best_epoch, best_state, since_best, total_skipped = (
+        0,
+        math.inf,
+        -1,
+        None,
+        0,
+        0,
+    )
     if resume:
         ck = load_checkpoint(out / CHECKPOINT_NAME)
         _check_resume(ck, data, config)
@@ -260,10 +316,15 @@ def train(
         best_val, best_epoch, since_best = ck["best_val"], ck["best_epoch"], ck["since_best"]
         best_state = ck["best_state"]
         total_skipped = ck["skipped_steps"]
-        log.info("resuming at epoch %d (best validation NLL %.4f at epoch %d)", start_epoch, best_val, best_epoch)
+        log.info(
+            "resuming at epoch %d (best validation NLL %.4f at epoch %d)",
+            start_epoch,
+            best_val,
+            best_epoch,
+        )
 
     val = _Evaluator(data, val_idx, norm, config.val_points, config.seed, dtype)
-    x_all = ((data.displacements - norm.input_mean) / norm.input_scale)
+    x_all = (data.displacements - norm.input_mean) / norm.input_scale
     np_dtype = np.float64 if dtype == torch.float64 else np.float32
     centre, scale = norm.output_centre.astype(np_dtype), norm.output_scale.astype(np_dtype)
     n_train, N = train_idx.size, data.n_points
@@ -303,7 +364,9 @@ def train(
                 opt.zero_grad(set_to_none=True)
                 skipped += 1
                 consecutive_bad += 1
-                log.warning("epoch %d step %d: non-finite loss or gradient; step skipped", epoch, step)
+                log.warning(
+                    "epoch %d step %d: non-finite loss or gradient; step skipped", epoch, step
+                )
                 if consecutive_bad >= config.max_bad_steps:
                     raise ConvergenceError(
                         f"training diverged: {consecutive_bad} consecutive steps with non-finite loss or gradient at epoch {epoch}",
@@ -329,7 +392,14 @@ def train(
             best_state = copy.deepcopy(net.state_dict())
         else:
             since_best += 1
-        rec = EpochRecord(epoch, train_nll, val_nll, float(opt.param_groups[0]["lr"]), skipped, time.perf_counter() - t0)
+        rec = EpochRecord(
+            epoch,
+            train_nll,
+            val_nll,
+            float(opt.param_groups[0]["lr"]),
+            skipped,
+            time.perf_counter() - t0,
+        )
         history.append(rec)
         stopped_early = since_best >= config.early_stop_patience
         if out is not None:
@@ -365,12 +435,25 @@ def train(
 
     if best_state is None:
         if not history:
-            raise ConvergenceError("training produced no epoch (epochs already reached by the checkpoint?)", iterations=start_epoch)
-        raise ConvergenceError("training produced no finite validation loss", iterations=len(history))
+            raise ConvergenceError(
+                "training produced no epoch (epochs already reached by the checkpoint?)",
+                iterations=start_epoch,
+            )
+        raise ConvergenceError(
+            "training produced no finite validation loss", iterations=len(history)
+        )
     net.load_state_dict(best_state)
     net.eval()
     model = build_model(
-        net, norm, data, config, {"history": [dataclasses.asdict(h) for h in history], "best_epoch": best_epoch, "finished": True}
+        net,
+        norm,
+        data,
+        config,
+        {
+            "history": [dataclasses.asdict(h) for h in history],
+            "best_epoch": best_epoch,
+            "finished": True,
+        },
     )
     if out is not None:
         model_io.save_model(model, out)
@@ -379,8 +462,15 @@ def train(
 
 def _save_best(net, norm, data, config, history, out, model_io) -> None:
     model = build_model(
-        net, norm, data, config,
-        {"history": [dataclasses.asdict(h) for h in history], "best_epoch": history[-1].epoch, "finished": False},
+        net,
+        norm,
+        data,
+        config,
+        {
+            "history": [dataclasses.asdict(h) for h in history],
+            "best_epoch": history[-1].epoch,
+            "finished": False,
+        },
     )
     model_io.save_model(model, out)
 
@@ -407,16 +497,28 @@ def _refuse_existing_run(out: Path, config: TrainConfig) -> None:
 
 
 def _check_resume(ck: dict, data: PointCloudData, config: TrainConfig) -> None:
-    check_compatible({"robot_toml": ck["robot_toml"], "n_tendons": ck["n_tendons"]}, data, what="data set")
+    check_compatible(
+        {"robot_toml": ck["robot_toml"], "n_tendons": ck["n_tendons"]}, data, what="data set"
+    )
     if ck["data_hash"] != data.content_hash:
         raise DataFormatError(
             f"checkpoint was trained on a data set with content hash {ck['data_hash'][:12]}..., "
             f"but {data.path!r} has {data.content_hash[:12]}...; resume with the same data"
         )
     saved = TrainConfig.from_json(ck["config"])
-    for name in ("n_components", "hidden", "head_hidden", "activation", "dtype", "seed", "val_fraction"):
+    for name in (
+        "n_components",
+        "hidden",
+        "head_hidden",
+        "activation",
+        "dtype",
+        "seed",
+        "val_fraction",
+    ):
         if getattr(saved, name) != getattr(config, name):
-            raise DataFormatError(f"checkpoint has {name}={getattr(saved, name)!r} but the run asks for {getattr(config, name)!r}")
+            raise DataFormatError(
+                f"checkpoint has {name}={getattr(saved, name)!r} but the run asks for {getattr(config, name)!r}"
+            )
 
 
 def save_checkpoint(path, state: dict) -> None:
@@ -436,7 +538,9 @@ def load_checkpoint(path) -> dict:
     try:
         ck = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises many types for damaged archives
-        raise DataFormatError(f"checkpoint {str(path)!r} is corrupted or not a riskplan checkpoint ({type(exc).__name__}: {exc})") from exc
+        raise DataFormatError(
+            f"checkpoint {str(path)!r} is corrupted or not a riskplan checkpoint ({type(exc).__name__}: {exc})"
+        ) from exc
     if not isinstance(ck, dict) or ck.get("format") != CHECKPOINT_FORMAT:
         raise DataFormatError(f"checkpoint {str(path)!r}: not a riskplan MDN checkpoint")
     return ck

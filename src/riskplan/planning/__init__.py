@@ -17,8 +17,20 @@ Deformable tissue (deformable-planning paper, section IV):
 """
 
 from riskplan.planning.bo import OptimisationResult, OptimiserConfig, optimise_trajectory
-from riskplan.planning.prm import MeanValidity, Roadmap, build_roadmap, goal_from_tip, interpolate_path, tip_positions
-from riskplan.planning.risk import ConfigurationBound, compare_paths, least_risk_path, trajectory_risk
+from riskplan.planning.prm import (
+    MeanValidity,
+    Roadmap,
+    build_roadmap,
+    goal_from_tip,
+    interpolate_path,
+    tip_positions,
+)
+from riskplan.planning.risk import (
+    ConfigurationBound,
+    compare_paths,
+    least_risk_path,
+    trajectory_risk,
+)
 from riskplan.planning.validate import (
     MixtureMonteCarlo,
     RobotMonteCarlo,
@@ -34,8 +46,8 @@ __all__ = [
     "MixtureMonteCarlo",
     "OptimisationResult",
     "OptimiserConfig",
-    "RobotMonteCarlo",
     "Roadmap",
+    "RobotMonteCarlo",
     "build_roadmap",
     "compare_paths",
     "execute_on_robot",

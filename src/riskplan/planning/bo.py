@@ -112,13 +112,22 @@ class OptimisationResult:
 
     def to_json(self) -> dict:
         return {
-            "method": self.method, "bound": self.bound, "initial_bound": self.initial_bound, "reduction": self.reduction,
-            "trace": self.trace.tolist(), "chosen": self.chosen.tolist(), "accepted": self.accepted.tolist(),
-            "evaluations": self.evaluations, "seconds": self.seconds, **self.extra,
+            "method": self.method,
+            "bound": self.bound,
+            "initial_bound": self.initial_bound,
+            "reduction": self.reduction,
+            "trace": self.trace.tolist(),
+            "chosen": self.chosen.tolist(),
+            "accepted": self.accepted.tolist(),
+            "evaluations": self.evaluations,
+            "seconds": self.seconds,
+            **self.extra,
         }
 
 
-def _fingerprint(trajectory: np.ndarray, limits: np.ndarray, config: OptimiserConfig, seed: int) -> str:
+def _fingerprint(
+    trajectory: np.ndarray, limits: np.ndarray, config: OptimiserConfig, seed: int
+) -> str:
     h = hashlib.sha256()
     h.update(np.ascontiguousarray(trajectory, dtype=np.float64).tobytes())
     h.update(np.ascontiguousarray(limits, dtype=np.float64).tobytes())
@@ -126,8 +135,14 @@ def _fingerprint(trajectory: np.ndarray, limits: np.ndarray, config: OptimiserCo
     return h.hexdigest()
 
 
-def _acquisition(X: np.ndarray, y: np.ndarray, cand: np.ndarray, best: float, seed_int: int,
-                 warm: dict | None = None) -> tuple[np.ndarray, dict]:
+def _acquisition(
+    X: np.ndarray,
+    y: np.ndarray,
+    cand: np.ndarray,
+    best: float,
+    seed_int: int,
+    warm: dict | None = None,
+) -> tuple[np.ndarray, dict]:
     """Log probability that ``cand (N, m)`` (unit cube) improves on ``best`` under a GP fit to
     ``X (n, m)``, ``y (n,)`` (to be minimised); ``(N,)``, and the fitted hyperparameters.
 
@@ -148,16 +163,22 @@ def _acquisition(X: np.ndarray, y: np.ndarray, cand: np.ndarray, best: float, se
         warnings.simplefilter("ignore")
         gp = SingleTaskGP(tx, ty, outcome_transform=Standardize(m=1))
         if warm:
-            gp.load_state_dict({k: torch.as_tensor(v, dtype=torch.float64) for k, v in warm.items()}, strict=False)
+            gp.load_state_dict(
+                {k: torch.as_tensor(v, dtype=torch.float64) for k, v in warm.items()}, strict=False
+            )
         try:
             fit_gpytorch_mll(ExactMarginalLogLikelihood(gp.likelihood, gp))
-        except Exception as exc:  # noqa: BLE001 - keep the prior hyperparameters, say so
+        except Exception as exc:
             log.warning("GP fit failed (%s); using the prior hyperparameters this iteration", exc)
         gp.eval()
         acq = LogProbabilityOfImprovement(gp, best_f=-float(best))
         with torch.no_grad():
             values = acq(torch.as_tensor(cand, dtype=torch.float64)[:, None, :]).numpy()
-    hyper = {k: v.tolist() for k, v in gp.state_dict().items() if k.startswith(("likelihood.", "mean_module.", "covar_module.")) and "prior" not in k}
+    hyper = {
+        k: v.tolist()
+        for k, v in gp.state_dict().items()
+        if k.startswith(("likelihood.", "mean_module.", "covar_module.")) and "prior" not in k
+    }
     return values, hyper
 
 
@@ -191,7 +212,9 @@ def optimise_trajectory(
     lim = np.asarray(limits, dtype=np.float64)
     traj = np.array(trajectory, dtype=np.float64)
     if traj.ndim != 2 or traj.shape[1] != lim.shape[0] or len(traj) < 2:
-        raise InvalidInputError(f"trajectory: expected shape (T >= 2, {lim.shape[0]}), got {traj.shape}")
+        raise InvalidInputError(
+            f"trajectory: expected shape (T >= 2, {lim.shape[0]}), got {traj.shape}"
+        )
     if not np.all(np.isfinite(traj)):
         raise InvalidInputError("trajectory: contains NaN or inf")
     T, m = traj.shape
@@ -213,11 +236,22 @@ def optimise_trajectory(
     if state is None:
         p0 = np.asarray(bound(traj) if bounds is None else bounds, dtype=np.float64)
         state = {
-            "format": CHECKPOINT_FORMAT, "fingerprint": fp, "iteration": 0,
-            "trajectory": traj.tolist(), "bounds": p0.tolist(), "initial_bound": float(trajectory_probability(p0)),
-            "X": traj.tolist(), "p": p0.tolist(), "trace": [float(trajectory_probability(p0))],
-            "chosen": [], "accepted": [], "radius": float(config.radius), "succ": 0, "fail": 0,
-            "evaluations": 0 if bounds is not None else T, "seconds": 0.0,
+            "format": CHECKPOINT_FORMAT,
+            "fingerprint": fp,
+            "iteration": 0,
+            "trajectory": traj.tolist(),
+            "bounds": p0.tolist(),
+            "initial_bound": float(trajectory_probability(p0)),
+            "X": traj.tolist(),
+            "p": p0.tolist(),
+            "trace": [float(trajectory_probability(p0))],
+            "chosen": [],
+            "accepted": [],
+            "radius": float(config.radius),
+            "succ": 0,
+            "fail": 0,
+            "evaluations": 0 if bounds is not None else T,
+            "seconds": 0.0,
         }
     elapsed0 = float(state["seconds"])
     cur = np.asarray(state["trajectory"])
@@ -232,7 +266,11 @@ def optimise_trajectory(
         chosen, accepted = -1, False
         w = p[inner] if len(inner) else np.zeros(0)
         if len(inner) and w.sum() > 0:
-            i = int(inner[np.argmax(w)]) if config.method == "trust_region" else int(rng.choice(inner, p=w / w.sum()))
+            i = (
+                int(inner[np.argmax(w)])
+                if config.method == "trust_region"
+                else int(rng.choice(inner, p=w / w.sum()))
+            )
             radius = state["radius"] if config.method == "trust_region" else config.radius
             cand = cur[i] + (rng.random((config.n_candidates, m)) * 2 - 1) * radius * span
             cand = np.clip(cand, lim[:, 0], lim[:, 1])
@@ -244,14 +282,23 @@ def optimise_trajectory(
                     rest = 1.0 - np.exp(np.log1p(-np.delete(p, i)).sum())  # eq. 10 without i
                     y = 1.0 - (1.0 - rest) * (1.0 - np.asarray(pX))
                     Xu = (np.asarray(X) - lim[:, 0]) / span
-                    acq, state["gp"] = _acquisition(Xu, y, (cand - lim[:, 0]) / span, best, int(rng.integers(2**31)),
-                                                    state.get("gp"))
+                    acq, state["gp"] = _acquisition(
+                        Xu,
+                        y,
+                        (cand - lim[:, 0]) / span,
+                        best,
+                        int(rng.integers(2**31)),
+                        state.get("gp"),
+                    )
                     order = np.argsort(-acq, kind="stable")
                 x_new = None
                 for j in range(0, len(order), 16):
                     blk = cand[order[j : j + 16]]
-                    ok = validity.motions(np.broadcast_to(cur[i - 1], blk.shape), blk, config.resolution) & \
-                        validity.motions(blk, np.broadcast_to(cur[i + 1], blk.shape), config.resolution)
+                    ok = validity.motions(
+                        np.broadcast_to(cur[i - 1], blk.shape), blk, config.resolution
+                    ) & validity.motions(
+                        blk, np.broadcast_to(cur[i + 1], blk.shape), config.resolution
+                    )
                     if ok.any():
                         x_new = blk[int(np.argmax(ok))]
                         break
@@ -278,7 +325,11 @@ def optimise_trajectory(
             elif state["fail"] >= TR_FAILURE:
                 state["radius"], state["fail"] = max(TR_MIN, state["radius"] / 2), 0
         state.update(
-            iteration=it + 1, trajectory=cur.tolist(), bounds=p.tolist(), X=[x.tolist() for x in X], p=pX,
+            iteration=it + 1,
+            trajectory=cur.tolist(),
+            bounds=p.tolist(),
+            X=[x.tolist() for x in X],
+            p=pX,
             seconds=elapsed0 + time.perf_counter() - t0,
         )
         state["trace"].append(float(trajectory_probability(p)))
@@ -290,9 +341,14 @@ def optimise_trajectory(
             progress(it + 1, int(config.iterations), state["trace"][-1])
 
     return OptimisationResult(
-        trajectory=np.asarray(state["trajectory"]), bounds=np.asarray(state["bounds"]),
-        bound=float(state["trace"][-1]), initial_bound=float(state["initial_bound"]),
-        trace=np.asarray(state["trace"]), chosen=np.asarray(state["chosen"], dtype=int),
-        accepted=np.asarray(state["accepted"], dtype=bool), evaluations=int(state["evaluations"]),
-        seconds=elapsed0 + time.perf_counter() - t0, method=config.method,
+        trajectory=np.asarray(state["trajectory"]),
+        bounds=np.asarray(state["bounds"]),
+        bound=float(state["trace"][-1]),
+        initial_bound=float(state["initial_bound"]),
+        trace=np.asarray(state["trace"]),
+        chosen=np.asarray(state["chosen"], dtype=int),
+        accepted=np.asarray(state["accepted"], dtype=bool),
+        evaluations=int(state["evaluations"]),
+        seconds=elapsed0 + time.perf_counter() - t0,
+        method=config.method,
     )

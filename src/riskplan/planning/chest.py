@@ -105,7 +105,9 @@ def plan_chest(
     for name, v in (("step", step), ("resolution", resolution), ("tip_tolerance", tip_tolerance)):
         _finite_positive(v, name)
     if goal is not None and goal_tip is not None:
-        raise InvalidInputError("give either goal (displacements) or goal_tip (a tip target), not both")
+        raise InvalidInputError(
+            "give either goal (displacements) or goal_tip (a tip target), not both"
+        )
     lim = np.asarray(model.limits, dtype=np.float64)
     m = lim.shape[0]
     if start is None:
@@ -120,13 +122,23 @@ def plan_chest(
         if c is None:
             continue
         if not validity.within_limits(c[None])[0]:
-            raise InvalidInputError(f"{name}: {c.tolist()} is outside the displacement limits {lim.tolist()}")
+            raise InvalidInputError(
+                f"{name}: {c.tolist()} is outside the displacement limits {lim.tolist()}"
+            )
         if not validity(c[None])[0]:
-            raise InvalidInputError(f"{name}: configuration {c.tolist()} is invalid (a component mean of its predicted mixture lies inside an obstacle)")
+            raise InvalidInputError(
+                f"{name}: configuration {c.tolist()} is invalid (a component mean of its predicted mixture lies inside an obstacle)"
+            )
 
     timings = {}
     t = time.perf_counter()
-    roadmap = build_roadmap(validity, n_milestones=n_milestones, seed=seed, resolution=resolution, progress=roadmap_progress)
+    roadmap = build_roadmap(
+        validity,
+        n_milestones=n_milestones,
+        seed=seed,
+        resolution=resolution,
+        progress=roadmap_progress,
+    )
     timings["roadmap_s"] = time.perf_counter() - t
     if goal is None:
         goal_tip = as_array(goal_tip, "goal_tip", shape=(3,))
@@ -143,11 +155,42 @@ def plan_chest(
     nominal_bound, nominal_bounds = trajectory_risk(bound, nominal)
     timings["query_s"] = time.perf_counter() - t
     t = time.perf_counter()
-    res = optimise_trajectory(nominal, bound, validity, lim, config=optimiser, seed=seed, bounds=nominal_bounds,
-                              checkpoint=checkpoint, resume=resume, progress=optimise_progress)
+    res = optimise_trajectory(
+        nominal,
+        bound,
+        validity,
+        lim,
+        config=optimiser,
+        seed=seed,
+        bounds=nominal_bounds,
+        checkpoint=checkpoint,
+        resume=resume,
+        progress=optimise_progress,
+    )
     timings["optimise_s"] = time.perf_counter() - t
-    settings = {"n_milestones": int(n_milestones), "step": step, "resolution": resolution, "seed": int(seed),
-                "tip_tolerance": tip_tolerance, "neighbours": roadmap.n_neighbours,
-                "optimiser": {k: getattr(optimiser, k) for k in ("iterations", "n_candidates", "radius", "method", "resolution")}}
-    return ChestPlan(roadmap, start, goal, None if goal_tip is None else np.asarray(goal_tip, dtype=np.float64), path,
-                     nominal, nominal_bounds, nominal_bound, res, paths, timings, settings)
+    settings = {
+        "n_milestones": int(n_milestones),
+        "step": step,
+        "resolution": resolution,
+        "seed": int(seed),
+        "tip_tolerance": tip_tolerance,
+        "neighbours": roadmap.n_neighbours,
+        "optimiser": {
+            k: getattr(optimiser, k)
+            for k in ("iterations", "n_candidates", "radius", "method", "resolution")
+        },
+    }
+    return ChestPlan(
+        roadmap,
+        start,
+        goal,
+        None if goal_tip is None else np.asarray(goal_tip, dtype=np.float64),
+        path,
+        nominal,
+        nominal_bounds,
+        nominal_bound,
+        res,
+        paths,
+        timings,
+        settings,
+    )

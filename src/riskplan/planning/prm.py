@@ -35,6 +35,7 @@ of its edges (which makes the least-risk search exact, see ``risk.py``).
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 import time
@@ -80,11 +81,15 @@ class MeanValidity:
     def within_limits(self, configs) -> np.ndarray:
         """``(N, m) -> (N,)`` bool."""
         c = np.asarray(configs, dtype=np.float64)
-        return np.all((c >= self.limits[:, 0]) & (c <= self.limits[:, 1]), axis=-1) & np.all(np.isfinite(c), axis=-1)
+        return np.all((c >= self.limits[:, 0]) & (c <= self.limits[:, 1]), axis=-1) & np.all(
+            np.isfinite(c), axis=-1
+        )
 
     def means(self, configs) -> np.ndarray:
         """Component means ``(N, K, 3)`` of the predicted mixtures (configs within limits)."""
-        return self.model.predict(np.asarray(configs, dtype=np.float64)).means.detach().cpu().numpy()
+        return (
+            self.model.predict(np.asarray(configs, dtype=np.float64)).means.detach().cpu().numpy()
+        )
 
     def __call__(self, configs) -> np.ndarray:
         """``(N, m) -> (N,)`` bool: within limits and no component mean inside an obstacle."""
@@ -120,7 +125,7 @@ def interpolate_path(path, step: float = DEFAULT_STEP) -> np.ndarray:
     """
     p = np.asarray(path, dtype=np.float64)
     out = [p[:1]]
-    for a, b in zip(p[:-1], p[1:]):
+    for a, b in itertools.pairwise(p):
         k = max(1, math.ceil(float(np.linalg.norm(b - a)) / step - 1e-12))
         t = np.arange(1, k + 1) / k
         out.append(a + t[:, None] * (b - a))
@@ -132,7 +137,7 @@ def segment_owners(path, step: float = DEFAULT_STEP) -> np.ndarray:
     (``-1`` for the first)."""
     p = np.asarray(path, dtype=np.float64)
     own = [np.array([-1])]
-    for i, (a, b) in enumerate(zip(p[:-1], p[1:])):
+    for i, (a, b) in enumerate(itertools.pairwise(p)):
         k = max(1, math.ceil(float(np.linalg.norm(b - a)) / step - 1e-12))
         own.append(np.full(k, i))
     return np.concatenate(own)
@@ -188,15 +193,19 @@ class Roadmap:
         return np.linalg.norm(v[self.edges[:, 1]] - v[self.edges[:, 0]], axis=-1)
 
     def describe(self) -> str:
-        return (f"{max(self.n_milestones, self.n_vertices)} milestones ({self.n_vertices} connected), "
-                f"{self.n_edges} edges, built in {self.build_seconds:.1f} s")
+        return (
+            f"{max(self.n_milestones, self.n_vertices)} milestones ({self.n_vertices} connected), "
+            f"{self.n_edges} edges, built in {self.build_seconds:.1f} s"
+        )
 
     def connect(self, config) -> tuple[np.ndarray, np.ndarray]:
         """Milestones reachable from ``config (m,)`` by a valid straight motion among its
         ``n_neighbours`` nearest: ``(indices (k,), lengths (k,))``."""
         d = np.linalg.norm(self.vertices - config, axis=-1)
         near = np.argsort(d, kind="stable")[: self.n_neighbours]
-        ok = self.validity.motions(np.broadcast_to(config, (len(near), len(config))), self.vertices[near], self.resolution)
+        ok = self.validity.motions(
+            np.broadcast_to(config, (len(near), len(config))), self.vertices[near], self.resolution
+        )
         return near[ok], d[near[ok]]
 
     def graph_with(self, start, goal, segment_cost=None, edge_costs=None):
@@ -213,20 +222,30 @@ class Roadmap:
         V = self.n_vertices
         if edge_costs is None:
             edge_costs = cost(self.vertices[self.edges[:, 0]], self.vertices[self.edges[:, 1]])
-        rows, cols, vals = [self.edges[:, 0]], [self.edges[:, 1]], [np.asarray(edge_costs, dtype=np.float64)]
+        rows, cols, vals = (
+            [self.edges[:, 0]],
+            [self.edges[:, 1]],
+            [np.asarray(edge_costs, dtype=np.float64)],
+        )
         for node, conf in ((V, start), (V + 1, goal)):
             idx, _ = self.connect(conf)
             rows.append(np.full(len(idx), node))
             cols.append(idx)
             vals.append(cost(np.broadcast_to(conf, (len(idx), len(conf))), self.vertices[idx]))
-        if np.linalg.norm(goal - start) > 0 and self.validity.motions(start[None], goal[None], self.resolution)[0]:
+        if (
+            np.linalg.norm(goal - start) > 0
+            and self.validity.motions(start[None], goal[None], self.resolution)[0]
+        ):
             rows.append(np.array([V]))
             cols.append(np.array([V + 1]))
             vals.append(cost(start[None], goal[None]))
         r, c, v = (np.concatenate(x) for x in (rows, cols, vals))
         # a zero cost would read as "no edge" in a sparse graph
         v = np.maximum(v, 1e-300)
-        g = coo_matrix((np.concatenate([v, v]), (np.concatenate([r, c]), np.concatenate([c, r]))), shape=(V + 2, V + 2))
+        g = coo_matrix(
+            (np.concatenate([v, v]), (np.concatenate([r, c]), np.concatenate([c, r]))),
+            shape=(V + 2, V + 2),
+        )
         return g.tocsr()
 
     def search(self, graph, start, goal) -> np.ndarray:
@@ -261,9 +280,13 @@ class Roadmap:
             c = as_array(c, name, shape=(m,))
             lim = self.validity.limits
             if not self.validity.within_limits(c[None])[0]:
-                raise InvalidInputError(f"{name}: {c.tolist()} is outside the displacement limits {lim.tolist()}")
+                raise InvalidInputError(
+                    f"{name}: {c.tolist()} is outside the displacement limits {lim.tolist()}"
+                )
             if not self.validity(c[None])[0]:
-                raise InvalidInputError(f"{name}: configuration {c.tolist()} is invalid (a component mean of its predicted mixture lies inside an obstacle)")
+                raise InvalidInputError(
+                    f"{name}: configuration {c.tolist()} is invalid (a component mean of its predicted mixture lies inside an obstacle)"
+                )
             out.append(c)
         return out[0], out[1]
 
@@ -301,7 +324,9 @@ def build_roadmap(
         bounds.setHigh(i, float(lim[i, 1]))
     space.setBounds(bounds)
     si = ob.SpaceInformation(space)
-    si.setStateValidityChecker(lambda s: bool(validity(np.array([s[i] for i in range(m)])[None])[0]))
+    si.setStateValidityChecker(
+        lambda s: bool(validity(np.array([s[i] for i in range(m)])[None])[0])
+    )
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     pending: list[np.ndarray] = []
@@ -323,7 +348,9 @@ def build_roadmap(
                 return True
             return False
 
-        def sampleNear(self, state, near, distance):  # pragma: no cover - PRM's growth does not use it
+        def sampleNear(
+            self, state, near, distance
+        ):  # pragma: no cover - PRM's growth does not use it
             return False
 
     class _Motion(ob.MotionValidator):
@@ -370,8 +397,24 @@ def build_roadmap(
         verts[v] = [s[i] for i in range(m)]
         edges.extend((v, w) for w in pd.getEdges(v) if w > v)
     E = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-    log.info("PRM: %d milestones (%d in OMPL), %d edges in %.2f s", nv, prm.milestoneCount(), len(E), elapsed)
-    return Roadmap(verts, E, validity, int(seed), resolution, int(n_neighbours), elapsed, seeded, prm.milestoneCount())
+    log.info(
+        "PRM: %d milestones (%d in OMPL), %d edges in %.2f s",
+        nv,
+        prm.milestoneCount(),
+        len(E),
+        elapsed,
+    )
+    return Roadmap(
+        verts,
+        E,
+        validity,
+        int(seed),
+        resolution,
+        int(n_neighbours),
+        elapsed,
+        seeded,
+        prm.milestoneCount(),
+    )
 
 
 def tip_positions(model, configs) -> np.ndarray:
@@ -380,13 +423,25 @@ def tip_positions(model, configs) -> np.ndarray:
     The mixture's components cover the robot's body; the farthest mean is the one that
     describes its distal end (the tip), in the base frame.
     """
-    mu = model.predict(np.atleast_2d(np.asarray(configs, dtype=np.float64))).means.detach().cpu().numpy()
+    mu = (
+        model.predict(np.atleast_2d(np.asarray(configs, dtype=np.float64)))
+        .means.detach()
+        .cpu()
+        .numpy()
+    )
     far = np.argmax(np.linalg.norm(mu, axis=-1), axis=-1)
     return mu[np.arange(len(mu)), far]
 
 
-def goal_from_tip(roadmap: Roadmap, model, target, *, tolerance: float = DEFAULT_TIP_TOLERANCE,
-                  n_samples: int = 4096, seed: int = 0) -> np.ndarray:
+def goal_from_tip(
+    roadmap: Roadmap,
+    model,
+    target,
+    *,
+    tolerance: float = DEFAULT_TIP_TOLERANCE,
+    n_samples: int = 4096,
+    seed: int = 0,
+) -> np.ndarray:
     """A valid configuration whose predicted tip lies within ``tolerance`` of ``target (3,)`` (base frame).
 
     Candidates: the roadmap's milestones and ``n_samples`` seeded uniform configurations; the
@@ -396,7 +451,12 @@ def goal_from_tip(roadmap: Roadmap, model, target, *, tolerance: float = DEFAULT
     tolerance = _check_positive(tolerance, "tolerance")
     lim = roadmap.validity.limits
     rng = np.random.default_rng(seed)
-    cand = np.vstack([roadmap.vertices, lim[:, 0] + rng.random((int(n_samples), lim.shape[0])) * (lim[:, 1] - lim[:, 0])])
+    cand = np.vstack(
+        [
+            roadmap.vertices,
+            lim[:, 0] + rng.random((int(n_samples), lim.shape[0])) * (lim[:, 1] - lim[:, 0]),
+        ]
+    )
     cand = cand[roadmap.validity(cand)]
     d = np.linalg.norm(tip_positions(model, cand) - target, axis=-1)
     best = int(np.argmin(d))

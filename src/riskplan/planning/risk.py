@@ -86,13 +86,25 @@ class RiskSegmentCost:
         interiors = [interpolate_path(np.stack([x, y]), self.step)[1:-1] for x, y in zip(a, b)]
         counts = np.array([len(x) for x in interiors])
         flat = np.concatenate(interiors + [np.empty((0, a.shape[1]))])
-        inner = np.add.reduceat(self.costs(flat), np.r_[0, np.cumsum(counts)[:-1]]) if len(flat) else np.zeros(len(a))
+        inner = (
+            np.add.reduceat(self.costs(flat), np.r_[0, np.cumsum(counts)[:-1]])
+            if len(flat)
+            else np.zeros(len(a))
+        )
         inner = np.where(counts > 0, inner, 0.0)  # reduceat copies the next value for empty groups
         return inner + 0.5 * (self.costs(a) + self.costs(b))
 
 
-def least_risk_path(roadmap: Roadmap, bound, start, goal, *, step: float = DEFAULT_STEP,
-                    cost: RiskSegmentCost | None = None, progress=None) -> np.ndarray:
+def least_risk_path(
+    roadmap: Roadmap,
+    bound,
+    start,
+    goal,
+    *,
+    step: float = DEFAULT_STEP,
+    cost: RiskSegmentCost | None = None,
+    progress=None,
+) -> np.ndarray:
     """Roadmap path ``(P, m)`` whose trajectory (interpolated at ``step``) has the least eq.-10 bound.
 
     Dijkstra with lazily priced edges: an edge's configurations are evaluated only when the
@@ -116,7 +128,10 @@ def least_risk_path(roadmap: Roadmap, bound, start, goal, *, step: float = DEFAU
         for i in roadmap.connect(c)[0]:
             adj[node].append(int(i))
             adj[int(i)].append(node)
-    if np.linalg.norm(goal - start) > 0 and roadmap.validity.motions(start[None], goal[None], roadmap.resolution)[0]:
+    if (
+        np.linalg.norm(goal - start) > 0
+        and roadmap.validity.motions(start[None], goal[None], roadmap.resolution)[0]
+    ):
         adj[V].append(V + 1)
         adj[V + 1].append(V)
     dist = np.full(V + 2, np.inf)
@@ -155,14 +170,26 @@ def least_risk_path(roadmap: Roadmap, bound, start, goal, *, step: float = DEFAU
     return conf[nodes[::-1]]
 
 
-def compare_paths(roadmap: Roadmap, bound, start, goal, *, step: float = DEFAULT_STEP, progress=None) -> dict:
+def compare_paths(
+    roadmap: Roadmap, bound, start, goal, *, step: float = DEFAULT_STEP, progress=None
+) -> dict:
     """Shortest vs least-risk roadmap path: trajectories, per-configuration and eq.-10 bounds."""
     out = {}
     cost = RiskSegmentCost(bound, step)
-    for name, path in (("shortest", roadmap.shortest_path(start, goal)),
-                       ("least_risk", least_risk_path(roadmap, bound, start, goal, step=step, cost=cost, progress=progress))):
+    for name, path in (
+        ("shortest", roadmap.shortest_path(start, goal)),
+        (
+            "least_risk",
+            least_risk_path(roadmap, bound, start, goal, step=step, cost=cost, progress=progress),
+        ),
+    ):
         traj = interpolate_path(path, step)
         p = -np.expm1(-cost.costs(traj))  # from the cache
-        out[name] = {"path": path, "trajectory": traj, "bounds": p, "bound": float(trajectory_probability(p)),
-                     "length": float(np.linalg.norm(np.diff(path, axis=0), axis=-1).sum())}
+        out[name] = {
+            "path": path,
+            "trajectory": traj,
+            "bounds": p,
+            "bound": float(trajectory_probability(p)),
+            "length": float(np.linalg.norm(np.diff(path, axis=0), axis=-1).sum()),
+        }
     return out

@@ -67,7 +67,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from riskplan._validation import as_array
-from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError, PlanningError, SimulationError
+from riskplan.errors import (
+    ConvergenceError,
+    ElementInversionError,
+    InvalidInputError,
+    PlanningError,
+    SimulationError,
+)
 
 log = logging.getLogger(__name__)
 
@@ -76,8 +82,8 @@ __all__ = [
     "RRTOptions",
     "TreeResult",
     "actuation_std",
-    "planning_space",
     "grow_tree",
+    "planning_space",
     "rrt_plans",
     "sampling_bounds",
 ]
@@ -136,9 +142,17 @@ class PlanningSpace:
             raise InvalidInputError("high: must exceed low on every weighted component")
         k = int(self.steps_per_extension)
         if k != self.steps_per_extension or k < 1:
-            raise InvalidInputError(f"steps_per_extension: expected an integer >= 1, got {self.steps_per_extension!r}")
+            raise InvalidInputError(
+                f"steps_per_extension: expected an integer >= 1, got {self.steps_per_extension!r}"
+            )
         object.__setattr__(self, "steps_per_extension", k)
-        for name, v in (("low", low), ("high", high), ("weights", w), ("periodic", per), ("goal", goal)):
+        for name, v in (
+            ("low", low),
+            ("high", high),
+            ("weights", w),
+            ("periodic", per),
+            ("goal", goal),
+        ):
             v = np.array(v)
             v.setflags(write=False)
             object.__setattr__(self, name, v)
@@ -227,7 +241,9 @@ def planning_space(sim) -> PlanningSpace:
     if space is not None:
         space = space() if callable(space) else space
         if not isinstance(space, PlanningSpace):
-            raise InvalidInputError(f"sim.planning_space: expected a PlanningSpace, got {type(space).__name__}")
+            raise InvalidInputError(
+                f"sim.planning_space: expected a PlanningSpace, got {type(space).__name__}"
+            )
         return space
     from riskplan.scenarios.manipulation import ManipulationScenario
     from riskplan.scenarios.needle import NeedleScenario
@@ -278,11 +294,17 @@ class RRTOptions:
             if int(v) != v or v < 1:
                 raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
         if not 0.0 <= self.goal_bias <= 1.0:
-            raise InvalidInputError(f"goal_bias: expected a value in [0, 1], got {self.goal_bias!r}")
+            raise InvalidInputError(
+                f"goal_bias: expected a value in [0, 1], got {self.goal_bias!r}"
+            )
         if not 0.0 <= self.goal_depth < 1.0:
-            raise InvalidInputError(f"goal_depth: expected a value in [0, 1), got {self.goal_depth!r}")
+            raise InvalidInputError(
+                f"goal_depth: expected a value in [0, 1), got {self.goal_depth!r}"
+            )
         if not (math.isfinite(self.control_margin) and self.control_margin >= 0.0):
-            raise InvalidInputError(f"control_margin: expected a finite value >= 0, got {self.control_margin!r}")
+            raise InvalidInputError(
+                f"control_margin: expected a finite value >= 0, got {self.control_margin!r}"
+            )
 
 
 @dataclass
@@ -337,10 +359,14 @@ def sampling_bounds(sim, options: RRTOptions) -> np.ndarray:
         return bounds
     std = actuation_std(sim)
     if std is None:
-        log.info("rrt: %s has no actuation noise model; controls use the full bounds", type(sim).__name__)
+        log.info(
+            "rrt: %s has no actuation noise model; controls use the full bounds", type(sim).__name__
+        )
         return bounds
     if std.shape != (bounds.shape[0],):
-        raise InvalidInputError(f"sim: actuation noise has {std.shape[0]} components, but {bounds.shape[0]} controls")
+        raise InvalidInputError(
+            f"sim: actuation noise has {std.shape[0]} components, but {bounds.shape[0]} controls"
+        )
     m = options.control_margin * std
     out = np.stack([bounds[:, 0] + m, bounds[:, 1] - m], axis=1)
     if np.any(out[:, 1] <= out[:, 0]):
@@ -366,12 +392,24 @@ def _goal_radius(sim, options: RRTOptions) -> float:
 
 
 def _check_sim(sim) -> None:
-    for name in ("step", "reduced", "initial_state", "control_bounds", "in_collision", "in_goal", "goal_distance"):
+    for name in (
+        "step",
+        "reduced",
+        "initial_state",
+        "control_bounds",
+        "in_collision",
+        "in_goal",
+        "goal_distance",
+    ):
         if not hasattr(sim, name):
-            raise InvalidInputError(f"sim: {type(sim).__name__} lacks {name!r}, which the simulator RRT needs")
+            raise InvalidInputError(
+                f"sim: {type(sim).__name__} lacks {name!r}, which the simulator RRT needs"
+            )
 
 
-def grow_tree(sim, *, seed, params=None, space: PlanningSpace | None = None, options: RRTOptions | None = None) -> TreeResult:
+def grow_tree(
+    sim, *, seed, params=None, space: PlanningSpace | None = None, options: RRTOptions | None = None
+) -> TreeResult:
     """Grow one simulator RRT (paper IV-A) from ``sim.initial_state(params)`` until it has
     ``options.plans_per_tree`` goal nodes or ``options.max_iterations`` iterations.
 
@@ -385,12 +423,16 @@ def grow_tree(sim, *, seed, params=None, space: PlanningSpace | None = None, opt
     space = planning_space(sim) if space is None else space
     options = options or RRTOptions()
     if space.dim != sim.state_dim:
-        raise InvalidInputError(f"space: has dimension {space.dim}, but sim.state_dim = {sim.state_dim}")
+        raise InvalidInputError(
+            f"space: has dimension {space.dim}, but sim.state_dim = {sim.state_dim}"
+        )
     bounds = sampling_bounds(sim, options)
     r_tight = _goal_radius(sim, options)
     q = bounds.shape[0]
     if space.max_control_change is not None and space.max_control_change.shape != (q,):
-        raise InvalidInputError(f"space.max_control_change: expected shape ({q},), got {space.max_control_change.shape}")
+        raise InvalidInputError(
+            f"space.max_control_change: expected shape ({q},), got {space.max_control_change.shape}"
+        )
     gen = np.random.default_rng(seed)
     k_steps = space.steps_per_extension
     n_ctrl = options.n_controls
@@ -502,7 +544,9 @@ def grow_tree(sim, *, seed, params=None, space: PlanningSpace | None = None, opt
     best = float(sim.goal_distance(node_state[best_node]))
     if goal_nodes:
         best = min(best, min(float(sim.goal_distance(node_state[g])) for g in goal_nodes))
-    plans = [_extract(sim, params, root, x0, parents, edge_states, edge_controls, g) for g in goal_nodes]
+    plans = [
+        _extract(sim, params, root, x0, parents, edge_states, edge_controls, g) for g in goal_nodes
+    ]
     return TreeResult(
         seed=int(seed) if isinstance(seed, (int, np.integer)) else -1,
         plans=plans,
@@ -531,7 +575,9 @@ def _extract(sim, params, root, x0, parents, edge_states, edge_controls, leaf: i
         states.extend(edge_states[node])
         controls.append(edge_controls[node])
     reduced = np.stack([x0] + [np.asarray(sim.reduced(s), dtype=np.float64) for s in states[1:]])
-    return NominalPlan(states=tuple(states), controls=np.concatenate(controls), reduced=reduced, params=params)
+    return NominalPlan(
+        states=tuple(states), controls=np.concatenate(controls), reduced=reduced, params=params
+    )
 
 
 def _tree_task(args) -> TreeResult:
@@ -592,7 +638,11 @@ def rrt_plans(
         opts = options if missing >= per else dataclasses.replace(options, plans_per_tree=missing)
         cb = None if on_tree is None else (lambda i, r, _o=offset: on_tree(_o + i, r))
         results = map_tasks(
-            _tree_task, [(sim, s, params, space, opts) for s in batch], backend=backend, workers=workers, on_result=cb
+            _tree_task,
+            [(sim, s, params, space, opts) for s in batch],
+            backend=backend,
+            workers=workers,
+            on_result=cb,
         )
         used += n_trees
         trees.extend(results)
@@ -607,5 +657,10 @@ def rrt_plans(
             "raise options.max_iterations or n_controls, or check that the goal is reachable"
         )
     if len(plans) < n_plans:
-        log.warning("simulator RRT: %d of %d plans within the budget (%d trees)", len(plans), n_plans, len(trees))
+        log.warning(
+            "simulator RRT: %d of %d plans within the budget (%d trees)",
+            len(plans),
+            n_plans,
+            len(trees),
+        )
     return plans[: int(n_plans)], trees

@@ -31,11 +31,24 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError, SimulationError
+from riskplan.errors import (
+    ConvergenceError,
+    ElementInversionError,
+    InvalidInputError,
+    SimulationError,
+)
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PlanScore", "Selection", "HonestyRow", "common_draws", "evaluate_plan", "select_plan", "honesty_check"]
+__all__ = [
+    "HonestyRow",
+    "PlanScore",
+    "Selection",
+    "common_draws",
+    "evaluate_plan",
+    "honesty_check",
+    "select_plan",
+]
 
 _FAILURES = (ConvergenceError, ElementInversionError, SimulationError, np.linalg.LinAlgError)
 
@@ -83,8 +96,18 @@ class Selection:
         raise InvalidInputError(f"index: no candidate {index}")
 
 
-def evaluate_plan(sim, plan, distribution=None, *, method: str = "sigma", n_samples: int = 16,
-                  n_goal_samples: int = 2000, Q=None, R=None, seed=None):
+def evaluate_plan(
+    sim,
+    plan,
+    distribution=None,
+    *,
+    method: str = "sigma",
+    n_samples: int = 16,
+    n_goal_samples: int = 2000,
+    Q=None,
+    R=None,
+    seed=None,
+):
     """Linearise ``plan``, build its LQG controller and its LQG-MP estimate.
 
     Returns ``(controller, result)`` (:class:`~riskplan.control.lqg.LQGController`,
@@ -111,10 +134,18 @@ def _evaluate_one(index, sim, plan, draws, kwargs, seed):
     try:
         controller, result = evaluate_plan(sim, plan, draws, seed=seed, **kwargs)
     except _FAILURES as exc:
-        score = PlanScore(index, 0.0, 0.0, 0.0, plan.n_steps, error=str(exc), cpu_s=time.process_time() - cpu0)
+        score = PlanScore(
+            index, 0.0, 0.0, 0.0, plan.n_steps, error=str(exc), cpu_s=time.process_time() - cpu0
+        )
         return score, None, None
-    score = PlanScore(index, float(result.p_success), float(result.p_collision_free), float(result.p_goal),
-                      plan.n_steps, cpu_s=time.process_time() - cpu0)
+    score = PlanScore(
+        index,
+        float(result.p_success),
+        float(result.p_collision_free),
+        float(result.p_goal),
+        plan.n_steps,
+        cpu_s=time.process_time() - cpu0,
+    )
     return score, controller, result
 
 
@@ -129,9 +160,21 @@ def _evaluate_chunk(args):
         return [_evaluate_one(i, sim, plan, draws, kwargs, seed) for i, plan, seed in items]
 
 
-def select_plan(sim, plans, distribution=None, *, method: str = "sigma", n_samples: int = 16,
-                n_goal_samples: int = 2000, Q=None, R=None, seed=0, backend: str = "local",
-                workers: int | None = None, on_result=None) -> Selection:
+def select_plan(
+    sim,
+    plans,
+    distribution=None,
+    *,
+    method: str = "sigma",
+    n_samples: int = 16,
+    n_goal_samples: int = 2000,
+    Q=None,
+    R=None,
+    seed=0,
+    backend: str = "local",
+    workers: int | None = None,
+    on_result=None,
+) -> Selection:
     """Evaluate every candidate with LQG-MP and select the most likely to succeed (paper IV-D).
 
     ``plans``: the candidate :class:`~riskplan.control.NominalPlan` list; ``method``:
@@ -161,17 +204,30 @@ def select_plan(sim, plans, distribution=None, *, method: str = "sigma", n_sampl
             if on_result is not None:
                 on_result(i, r[0])
 
-    map_tasks(_evaluate_chunk, [(sim, c, draws, kwargs) for c in chunks], backend=backend, workers=workers,
-              chunksize=1, on_result=collect)
+    map_tasks(
+        _evaluate_chunk,
+        [(sim, c, draws, kwargs) for c in chunks],
+        backend=backend,
+        workers=workers,
+        chunksize=1,
+        on_result=collect,
+    )
     scores = [o[0] for o in out]
     ranking = sorted(scores, key=lambda s: (-s.p_success, s.index))
     ok = [s for s in ranking if s.error is None]
     if not ok:
-        raise PlanningError(f"plan selection: none of the {len(plans)} candidates could be linearised ({scores[0].error})")
+        raise PlanningError(
+            f"plan selection: none of the {len(plans)} candidates could be linearised ({scores[0].error})"
+        )
     best = ok[0].index
     return Selection(
-        ranking=ranking, best=best, plan=plans[best], controller=out[best][1], result=out[best][2],
-        controllers=[o[1] for o in out], method=method,
+        ranking=ranking,
+        best=best,
+        plan=plans[best],
+        controller=out[best][1],
+        result=out[best][2],
+        controllers=[o[1] for o in out],
+        method=method,
     )
 
 
@@ -209,8 +265,19 @@ class HonestyRow:
         return self.low <= self.p_lqgmp <= self.high
 
 
-def honesty_check(sim, plans, selection: Selection, distribution=None, *, others: int = 2, n: int = 1000,
-                  seed=0, backend: str = "local", workers: int | None = None, on_row=None) -> list[HonestyRow]:
+def honesty_check(
+    sim,
+    plans,
+    selection: Selection,
+    distribution=None,
+    *,
+    others: int = 2,
+    n: int = 1000,
+    seed=0,
+    backend: str = "local",
+    workers: int | None = None,
+    on_row=None,
+) -> list[HonestyRow]:
     """LQG-MP ``P(success)`` against the success rate of ``n`` closed-loop LQG executions
     for the selected plan and ``others`` more (at even quantiles of the ranking, down to the
     worst usable candidate).
@@ -230,15 +297,34 @@ def honesty_check(sim, plans, selection: Selection, distribution=None, *, others
     usable = [s for s in selection.ranking if s.error is None]
     # the selected plan, then ``others`` ranks at even quantiles of the rest (the last one the worst)
     k = min(int(others), len(usable) - 1)
-    picks = [0] + sorted(set(np.linspace(0, len(usable) - 1, k + 1)[1:].round().astype(int).tolist()))
+    picks = [0] + sorted(
+        set(np.linspace(0, len(usable) - 1, k + 1)[1:].round().astype(int).tolist())
+    )
     seeds = spawn_seeds(seed, len(picks))
     rows = []
     for rank, s in zip(picks, seeds):
         score = usable[rank]
-        est = monte_carlo_success(sim, plans[score.index], selection.controllers[score.index], distribution,
-                                  n=int(n), seed=s, backend=backend, workers=workers)
-        rows.append(HonestyRow(index=score.index, rank=rank, p_lqgmp=score.p_success, p_mc=est.probability,
-                               low=est.low, high=est.high, n=est.n))
+        est = monte_carlo_success(
+            sim,
+            plans[score.index],
+            selection.controllers[score.index],
+            distribution,
+            n=int(n),
+            seed=s,
+            backend=backend,
+            workers=workers,
+        )
+        rows.append(
+            HonestyRow(
+                index=score.index,
+                rank=rank,
+                p_lqgmp=score.p_success,
+                p_mc=est.probability,
+                low=est.low,
+                high=est.high,
+                n=est.n,
+            )
+        )
         if on_row is not None:
             on_row(rows[-1])
     return rows

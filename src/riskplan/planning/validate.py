@@ -125,7 +125,9 @@ class MixtureMonteCarlo:
 def _estimate(hits, n: int, confidence: float) -> MonteCarloEstimate:
     hits = np.asarray(hits, dtype=np.int64)
     low, high = binomial_interval(hits, n, confidence, "wilson")
-    return MonteCarloEstimate(hits / n, np.asarray(low), np.asarray(high), hits, n, confidence, "wilson")
+    return MonteCarloEstimate(
+        hits / n, np.asarray(low), np.asarray(high), hits, n, confidence, "wilson"
+    )
 
 
 def _check_seed(seed) -> int:
@@ -146,7 +148,9 @@ def _as_robot(robot):
 
         return load_robot(robot)
     if not hasattr(robot, "solve_displacements") or not hasattr(robot, "toml_text"):
-        raise InvalidInputError(f"robot: expected a TendonRobot or a robot name/path, got {type(robot).__name__}")
+        raise InvalidInputError(
+            f"robot: expected a TendonRobot or a robot name/path, got {type(robot).__name__}"
+        )
     return robot
 
 
@@ -154,7 +158,9 @@ def _check_trajectory(trajectory, robot) -> np.ndarray:
     m = robot.n_tendons
     traj = as_array(trajectory, "trajectory", min_ndim=2)
     if traj.ndim != 2 or traj.shape[1] != m or traj.shape[0] < 1:
-        raise InvalidInputError(f"trajectory: expected shape (T, {m}) with T >= 1 for robot {robot.name!r} ({m} tendons), got {traj.shape}")
+        raise InvalidInputError(
+            f"trajectory: expected shape (T, {m}) with T >= 1 for robot {robot.name!r} ({m} tendons), got {traj.shape}"
+        )
     lim = np.asarray(robot.displacement_limits, dtype=np.float64)
     check_range(traj, "trajectory", low=lim[:, 0], high=lim[:, 1])
     return traj
@@ -162,7 +168,9 @@ def _check_trajectory(trajectory, robot) -> np.ndarray:
 
 def _check_environment(environment) -> Environment:
     if not isinstance(environment, Environment) or environment.dim != 3:
-        raise InvalidInputError(f"environment: expected a 3-D Environment (robot base frame), got {environment!r}")
+        raise InvalidInputError(
+            f"environment: expected a 3-D Environment (robot base frame), got {environment!r}"
+        )
     return environment
 
 
@@ -218,7 +226,9 @@ def simulate_executions(robot, trajectory, seeds, *, return_frames: bool = False
     return P
 
 
-def tube_clearance(environment: Environment, backbones, radius: float, *, resolution: float = RESOLUTION) -> np.ndarray:
+def tube_clearance(
+    environment: Environment, backbones, radius: float, *, resolution: float = RESOLUTION
+) -> np.ndarray:
     """Signed clearance of a tube of ``radius`` around backbones ``(..., n, 3)``; ``(...,)`` [m].
 
     ``min_s sd(x(s)) - radius`` over the polyline (negative: the tube enters an obstacle),
@@ -251,7 +261,9 @@ def tube_clearance(environment: Environment, backbones, radius: float, *, resolu
     return (clear - radius).reshape(shape)
 
 
-def disk_clearance(environment: Environment, s, positions, rotations, body, *, resolution: float = 1e-3) -> np.ndarray:
+def disk_clearance(
+    environment: Environment, s, positions, rotations, body, *, resolution: float = 1e-3
+) -> np.ndarray:
     """Signed clearance of the separator disks of ``body`` (:class:`~riskplan.robots.geometry.BodyGeometry`)
     on backbones ``positions (..., n, 3)``, ``rotations (..., n, 3, 3)`` at arc lengths ``s (n,)``; ``(...,)`` [m].
 
@@ -288,7 +300,11 @@ def disk_clearance(environment: Environment, s, positions, rotations, body, *, r
             pts.extend(np.stack([rho * np.cos(a), rho * np.sin(a)], axis=-1))
         uv = np.asarray(pts)  # (Q, 2) in the disk plane
         Fn = F[near]  # (A, 3, 3)
-        X = C[near][:, None, :] + uv[None, :, 0, None] * Fn[:, None, :, 0] + uv[None, :, 1, None] * Fn[:, None, :, 1]
+        X = (
+            C[near][:, None, :]
+            + uv[None, :, 0, None] * Fn[:, None, :, 0]
+            + uv[None, :, 1, None] * Fn[:, None, :, 1]
+        )
         clear[near] = environment.signed_distance(X).min(axis=1) - half
     return clear.min(axis=1).reshape(shape)
 
@@ -376,7 +392,11 @@ def execute_on_robot(
     if body not in BODIES:
         raise InvalidInputError(f"body: expected one of {BODIES}, got {body!r}")
     if radius is None:
-        r = default_radius(robot) if body == "tube" else _geometry(robot.toml_text()).backbone_radius
+        r = (
+            default_radius(robot)
+            if body == "tube"
+            else _geometry(robot.toml_text()).backbone_radius
+        )
     else:
         r = float(radius)
     if not (np.isfinite(r) and r >= 0):
@@ -385,12 +405,19 @@ def execute_on_robot(
         raise InvalidInputError(f"resolution: expected a positive length, got {resolution!r}")
     seeds = spawn_seeds(seed, n)
     # a fresh copy without cached search structures travels to the workers (they do not pickle)
-    env_copy = env if backend == "serial" else Environment(env.vertices, env.faces, env.face_obstacle, env.names, validate=False)
+    env_copy = (
+        env
+        if backend == "serial"
+        else Environment(env.vertices, env.faces, env.face_obstacle, env.names, validate=False)
+    )
     h = hashlib.sha256()
     for a in (env.vertices, env.faces, env.face_obstacle):
         h.update(np.ascontiguousarray(a).tobytes())
     toml = robot.toml_text()
-    items = [(toml, traj, h.hexdigest(), env_copy, body, r, resolution, seeds[k : k + chunk]) for k in range(0, n, chunk)]
+    items = [
+        (toml, traj, h.hexdigest(), env_copy, body, r, resolution, seeds[k : k + chunk])
+        for k in range(0, n, chunk)
+    ]
     parts = map_tasks(_task, items, backend=backend, workers=workers, chunksize=1)
     clearance = np.concatenate(parts, axis=0)  # (n, T)
     hit = clearance < 0
@@ -405,8 +432,15 @@ def execute_on_robot(
     )
 
 
-def mixture_monte_carlo(model, trajectory, environment: Environment, n: int = 100_000, seed: int = 0,
-                        *, confidence: float = 0.95) -> MixtureMonteCarlo:
+def mixture_monte_carlo(
+    model,
+    trajectory,
+    environment: Environment,
+    n: int = 100_000,
+    seed: int = 0,
+    *,
+    confidence: float = 0.95,
+) -> MixtureMonteCarlo:
     """Monte Carlo of the model's mixtures along ``trajectory (T, m)``.
 
     Each trial draws one point from every configuration's mixture independently
@@ -421,7 +455,9 @@ def mixture_monte_carlo(model, trajectory, environment: Environment, n: int = 10
     m = int(getattr(model, "n_tendons", -1))
     traj = as_array(trajectory, "trajectory", min_ndim=2)
     if traj.ndim != 2 or traj.shape[1] != m or traj.shape[0] < 1:
-        raise InvalidInputError(f"trajectory: expected shape (T, {m}) with T >= 1 for a model of {m} tendons, got {traj.shape}")
+        raise InvalidInputError(
+            f"trajectory: expected shape (T, {m}) with T >= 1 for a model of {m} tendons, got {traj.shape}"
+        )
     gm = model.predict(traj)
     s1, s2 = spawn_seeds(seed, 2)
     return MixtureMonteCarlo(
@@ -468,46 +504,56 @@ def validation_table(
         robot = robot_from_toml(model.robot_toml)
     robot = _as_robot(robot)
     if int(model.n_tendons) != robot.n_tendons:
-        raise InvalidInputError(f"model: has {model.n_tendons} tendons, robot {robot.name!r} has {robot.n_tendons}")
+        raise InvalidInputError(
+            f"model: has {model.n_tendons} tendons, robot {robot.name!r} has {robot.n_tendons}"
+        )
     rows = []
     for name, traj in trajectories.items():
         traj = _check_trajectory(traj, robot)
         gm = model.predict(traj)
         per = mixture_bound(gm, environment)
         mix = mixture_monte_carlo(model, traj, environment, n_mixture, seed)
-        rob = execute_on_robot(robot, traj, environment, n_robot, seed, radius=radius, backend=backend, workers=workers)
-        dsk = execute_on_robot(robot, traj, environment, n_robot, seed, body="disks", backend=backend, workers=workers)
-        rows.append({
-            "name": str(name),
-            "T": int(traj.shape[0]),
-            "bound": float(trajectory_bound(gm, environment)),
-            "bound_union": float(trajectory_bound(gm, environment, mixture_combine="union")),
-            "max_config_bound": float(per.max()),
-            "mixture_mc": float(mix.trajectory.probability),
-            "mixture_low": float(mix.trajectory.low),
-            "mixture_high": float(mix.trajectory.high),
-            "n_mixture": int(n_mixture),
-            "robot_mc": float(rob.trajectory.probability),
-            "robot_low": float(rob.trajectory.low),
-            "robot_high": float(rob.trajectory.high),
-            "robot_hits": int(rob.trajectory.hits),
-            "robot_per_config": rob.per_configuration.probability.tolist(),
-            "robot_disks_mc": float(dsk.trajectory.probability),
-            "robot_disks_low": float(dsk.trajectory.low),
-            "robot_disks_high": float(dsk.trajectory.high),
-            "robot_disks_hits": int(dsk.trajectory.hits),
-            "robot_disks_per_config": dsk.per_configuration.probability.tolist(),
-            "n_robot": int(n_robot),
-            "radius": rob.radius,
-        })
+        rob = execute_on_robot(
+            robot, traj, environment, n_robot, seed, radius=radius, backend=backend, workers=workers
+        )
+        dsk = execute_on_robot(
+            robot, traj, environment, n_robot, seed, body="disks", backend=backend, workers=workers
+        )
+        rows.append(
+            {
+                "name": str(name),
+                "T": int(traj.shape[0]),
+                "bound": float(trajectory_bound(gm, environment)),
+                "bound_union": float(trajectory_bound(gm, environment, mixture_combine="union")),
+                "max_config_bound": float(per.max()),
+                "mixture_mc": float(mix.trajectory.probability),
+                "mixture_low": float(mix.trajectory.low),
+                "mixture_high": float(mix.trajectory.high),
+                "n_mixture": int(n_mixture),
+                "robot_mc": float(rob.trajectory.probability),
+                "robot_low": float(rob.trajectory.low),
+                "robot_high": float(rob.trajectory.high),
+                "robot_hits": int(rob.trajectory.hits),
+                "robot_per_config": rob.per_configuration.probability.tolist(),
+                "robot_disks_mc": float(dsk.trajectory.probability),
+                "robot_disks_low": float(dsk.trajectory.low),
+                "robot_disks_high": float(dsk.trajectory.high),
+                "robot_disks_hits": int(dsk.trajectory.hits),
+                "robot_disks_per_config": dsk.per_configuration.probability.tolist(),
+                "n_robot": int(n_robot),
+                "radius": rob.radius,
+            }
+        )
     return rows
 
 
 def validation_markdown(rows: list[dict]) -> str:
     """Markdown table of :func:`validation_table` rows (probabilities in %)."""
-    head = ("| trajectory | eq.-10 bound | eq. 10, any-component bound | MC of the MDN mixtures (95 % CI) "
-            "| MC on the robot, tube (95 % CI) | MC on the robot, backbone + disks (95 % CI) |\n"
-            "|---|---|---|---|---|---|")
+    head = (
+        "| trajectory | eq.-10 bound | eq. 10, any-component bound | MC of the MDN mixtures (95 % CI) "
+        "| MC on the robot, tube (95 % CI) | MC on the robot, backbone + disks (95 % CI) |\n"
+        "|---|---|---|---|---|---|"
+    )
     lines = [head]
     for r in rows:
         lines.append(

@@ -17,15 +17,21 @@ from riskplan.robots.params import (
     params_to_toml,
     parse_robot_toml,
 )
-from riskplan.robots.robot import PACKAGED_ROBOTS, RodShape, TendonRobot, load_robot, robot_from_toml
+from riskplan.robots.robot import (
+    PACKAGED_ROBOTS,
+    RodShape,
+    TendonRobot,
+    load_robot,
+    robot_from_toml,
+)
 
 __all__ = [
+    "PACKAGED_ROBOTS",
     "Backbone",
     "BasePose",
     "Disks",
     "Gravity",
     "HysteresisParams",
-    "PACKAGED_ROBOTS",
     "RobotParams",
     "RodShape",
     "Tendon",

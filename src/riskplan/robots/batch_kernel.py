@@ -70,7 +70,14 @@ N_ROWS = 107
 @njit(cache=True, error_model="numpy", inline="always")
 def _strains(W, row, c):
     """Strains ``(v, u)`` of configuration ``c`` stored at ``W[row : row + 6, c]``, as a 6-tuple."""
-    return (W[row + 0, c], W[row + 1, c], W[row + 2, c], W[row + 3, c], W[row + 4, c], W[row + 5, c])
+    return (
+        W[row + 0, c],
+        W[row + 1, c],
+        W[row + 2, c],
+        W[row + 3, c],
+        W[row + 4, c],
+        W[row + 5, c],
+    )
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -129,7 +136,9 @@ def _jacobian_add_tendon(W, c, sc, t0, t1, t2, r):
     r0 = r[0]
     r1 = r[1]
     r2 = r[2]
-    a00, a11, a22, a01, a02, a12, b00, b01, b02, b10, b11, b12, b20, b21, b22 = tendon_stiffness(sc, t0, t1, t2, r)
+    a00, a11, a22, a01, a02, a12, b00, b01, b02, b10, b11, b12, b20, b21, b22 = tendon_stiffness(
+        sc, t0, t1, t2, r
+    )
     W[JACOBIAN + 0, c] += a00
     W[JACOBIAN + 1, c] += a01
     W[JACOBIAN + 2, c] += a11
@@ -562,9 +571,9 @@ def _solve_chunk(taus, b0, rod, tol, maxit, P, Rout, status):
         _jac_chol_slope(W, T, rt_all, drt_all, ddrt_all, j1, kse, kbt, STRAIN_NEXT, SLOPE_NEXT)
         for a in range(6):
             for c in range(CHUNK):
-                W[STRAIN_MID + a, c] = 0.5 * (W[STRAIN + a, c] + W[STRAIN_NEXT + a, c]) + 0.125 * h * (
-                    W[SLOPE + a, c] - W[SLOPE_NEXT + a, c]
-                )
+                W[STRAIN_MID + a, c] = 0.5 * (
+                    W[STRAIN + a, c] + W[STRAIN_NEXT + a, c]
+                ) + 0.125 * h * (W[SLOPE + a, c] - W[SLOPE_NEXT + a, c])
         _rk4(W, h)
         _emit(W, P, Rout, b0, nb, k + 1)
         for a in range(
@@ -578,7 +587,9 @@ def _solve_chunk(taus, b0, rod, tol, maxit, P, Rout, status):
 
 
 @njit(cache=True)
-def _solve_serial(taus, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, P, Rout, status):
+def _solve_serial(
+    taus, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, P, Rout, status
+):
     rod = RodTables(rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps)
     nch = (taus.shape[0] + CHUNK - 1) // CHUNK
     for ch in range(nch):
@@ -586,16 +597,16 @@ def _solve_serial(taus, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, to
 
 
 @njit(cache=True, parallel=True)
-def _solve_parallel(taus, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, P, Rout, status):
+def _solve_parallel(
+    taus, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, P, Rout, status
+):
     rod = RodTables(rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps)
     nch = (taus.shape[0] + CHUNK - 1) // CHUNK
     for ch in prange(nch):
         _solve_chunk(taus, ch * CHUNK, rod, tol, maxit, P, Rout, status)
 
 
-def solve_tensions_batch(
-    robot, tensions, *, parallel: bool | None = None, validate: bool = True
-):
+def solve_tensions_batch(robot, tensions, *, parallel: bool | None = None, validate: bool = True):
     """Shapes of ``robot`` (no gravity) for tensions ``(B, m)`` [N], in the robot's base frame.
 
     Same discretisation and tolerances as :func:`cosserat.shape_free` (what

@@ -46,7 +46,11 @@ def _pixel_count(value, name: str) -> int:
 
 def _real(value, name: str, what: str = "a finite number") -> float:
     """``value`` as a finite ``float``; raises :class:`InvalidInputError` naming ``name``."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(float(value)):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, numbers.Real)
+        or not math.isfinite(float(value))
+    ):
         raise InvalidInputError(f"{name}: expected {what}, got {value!r}")
     return float(value)
 
@@ -55,7 +59,9 @@ def _fov(value, name: str) -> float:
     """A field of view in degrees, ``0 < value < 180``."""
     v = _real(value, name, "a field of view in degrees, 0 < fov < 180")
     if not 0.0 < v < 180.0:
-        raise InvalidInputError(f"{name}: expected a field of view in degrees, 0 < fov < 180, got {value!r}")
+        raise InvalidInputError(
+            f"{name}: expected a field of view in degrees, 0 < fov < 180, got {value!r}"
+        )
     return v
 
 
@@ -64,7 +70,9 @@ def _check_samples(points, normals) -> tuple[np.ndarray, np.ndarray]:
     p = as_array(points, "points", shape=(None, 3))
     n = as_array(normals, "normals", shape=(None, 3))
     if len(n) != len(p):
-        raise InvalidInputError(f"normals: expected one normal per point ({len(p)}), got shape {n.shape}")
+        raise InvalidInputError(
+            f"normals: expected one normal per point ({len(p)}), got shape {n.shape}"
+        )
     return p, n
 
 
@@ -107,17 +115,23 @@ class PinholeCamera:
             or not np.allclose(R.T @ R, np.eye(3), atol=1e-9)
             or np.linalg.det(R) <= 0
         ):
-            raise InvalidInputError("rotation: expected a proper 3x3 rotation matrix (columns = camera axes)")
+            raise InvalidInputError(
+                "rotation: expected a proper 3x3 rotation matrix (columns = camera axes)"
+            )
         # normalise in place (frozen dataclass): pixel counts to int, the rest to float
         for name in ("width", "height"):
             object.__setattr__(self, name, _pixel_count(getattr(self, name), name))
         for name in ("fx", "fy"):
             v = _real(getattr(self, name), name, "a positive finite focal length in pixels")
             if not v > 0:
-                raise InvalidInputError(f"{name}: expected a positive finite focal length in pixels, got {v}")
+                raise InvalidInputError(
+                    f"{name}: expected a positive finite focal length in pixels, got {v}"
+                )
             object.__setattr__(self, name, v)
         for name in ("cx", "cy"):
-            object.__setattr__(self, name, _real(getattr(self, name), name, "a finite principal point in pixels"))
+            object.__setattr__(
+                self, name, _real(getattr(self, name), name, "a finite principal point in pixels")
+            )
         for name in ("depth_noise_std", "depth_noise_quadratic"):
             v = _real(getattr(self, name), name, "a finite noise std >= 0")
             if v < 0:
@@ -128,7 +142,9 @@ class PinholeCamera:
             raise InvalidInputError(f"max_depth: expected a depth in m, got {self.max_depth!r}")
         hi = float(self.max_depth)
         if not 0 < lo < hi:  # also rejects a NaN max_depth; inf means no far limit
-            raise InvalidInputError(f"min_depth/max_depth: expected 0 < min < max, got {self.min_depth}, {self.max_depth}")
+            raise InvalidInputError(
+                f"min_depth/max_depth: expected 0 < min < max, got {self.min_depth}, {self.max_depth}"
+            )
         object.__setattr__(self, "min_depth", lo)
         object.__setattr__(self, "max_depth", hi)
 
@@ -146,8 +162,18 @@ class PinholeCamera:
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
     @classmethod
-    def look_at(cls, position, target, up=(0.0, 0.0, 1.0), *, width: int = 640, height: int = 480,
-                hfov_deg: float = 87.0, vfov_deg: float | None = None, **kwargs) -> PinholeCamera:
+    def look_at(
+        cls,
+        position,
+        target,
+        up=(0.0, 0.0, 1.0),
+        *,
+        width: int = 640,
+        height: int = 480,
+        hfov_deg: float = 87.0,
+        vfov_deg: float | None = None,
+        **kwargs,
+    ) -> PinholeCamera:
         """Camera at ``position`` looking at ``target`` with image-up close to ``up`` (base frame).
 
         Focal lengths from the field of view: ``fx = (width / 2) / tan(hfov / 2)``, likewise
@@ -174,8 +200,17 @@ class PinholeCamera:
         R = np.stack([x, y, z], axis=1)
         fx = 0.5 * width / math.tan(math.radians(hfov_deg) / 2)
         fy = fx if vfov_deg is None else 0.5 * height / math.tan(math.radians(vfov_deg) / 2)
-        return cls(tuple(float(v) for v in c), tuple(tuple(float(v) for v in row) for row in R), width, height,
-                   fx, fy, 0.5 * (width - 1), 0.5 * (height - 1), **kwargs)
+        return cls(
+            tuple(float(v) for v in c),
+            tuple(tuple(float(v) for v in row) for row in R),
+            width,
+            height,
+            fx,
+            fy,
+            0.5 * (width - 1),
+            0.5 * (height - 1),
+            **kwargs,
+        )
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -188,7 +223,9 @@ class PinholeCamera:
         d = dict(d)
         unknown = set(d) - set(cls.__dataclass_fields__)
         if unknown or "position" not in d or "rotation" not in d:
-            raise InvalidInputError(f"camera: expected keys {sorted(cls.__dataclass_fields__)}, got {sorted(d)}")
+            raise InvalidInputError(
+                f"camera: expected keys {sorted(cls.__dataclass_fields__)}, got {sorted(d)}"
+            )
         try:
             d["position"] = tuple(float(v) for v in d["position"])
             d["rotation"] = tuple(tuple(float(v) for v in r) for r in d["rotation"])
@@ -201,7 +238,9 @@ class PinholeCamera:
         return depth / min(self.fx, self.fy)
 
 
-def default_cameras(distance: float = 0.4, height: float = 0.1, azimuth_deg: float = 90.0, **kwargs) -> tuple[PinholeCamera, PinholeCamera]:
+def default_cameras(
+    distance: float = 0.4, height: float = 0.1, azimuth_deg: float = 90.0, **kwargs
+) -> tuple[PinholeCamera, PinholeCamera]:
     """Two cameras on opposite sides of the robot, ``distance`` m from the base axis at ``height`` m,
     looking horizontally at the axis. ``azimuth_deg`` is the direction of the first camera in the
     base x-y plane (the second is at ``azimuth + 180``). The default (90 deg) puts them on the
@@ -219,7 +258,9 @@ def project(points, camera: PinholeCamera):
     q = (np.asarray(points, dtype=np.float64) - camera.c) @ camera.R
     z = q[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        uv = np.stack([camera.fx * q[..., 0] / z + camera.cx, camera.fy * q[..., 1] / z + camera.cy], axis=-1)
+        uv = np.stack(
+            [camera.fx * q[..., 0] / z + camera.cx, camera.fy * q[..., 1] / z + camera.cy], axis=-1
+        )
     return q, uv
 
 
@@ -267,7 +308,9 @@ def render(points, normals, camera: PinholeCamera, seed=None):
     return _render(points, normals, camera, as_generator(seed))
 
 
-def _render(points: np.ndarray, normals: np.ndarray, camera: PinholeCamera, rng: np.random.Generator):
+def _render(
+    points: np.ndarray, normals: np.ndarray, camera: PinholeCamera, rng: np.random.Generator
+):
     """:func:`render` on checked float64 arrays."""
     idx, pix = _visible_samples(points, normals, camera)
     p = points[idx]
@@ -310,7 +353,9 @@ def capture(points, normals, cameras, n_points: int | None = 512, seed=None) -> 
     except TypeError:
         cameras = ()
     if not cameras or not all(isinstance(c, PinholeCamera) for c in cameras):
-        raise InvalidInputError(f"cameras: expected a non-empty sequence of PinholeCamera, got {cameras!r}")
+        raise InvalidInputError(
+            f"cameras: expected a non-empty sequence of PinholeCamera, got {cameras!r}"
+        )
     n_children = len(cameras) + 1
     if isinstance(seed, np.random.Generator):
         ss = getattr(seed.bit_generator, "seed_seq", None)
@@ -321,9 +366,14 @@ def capture(points, normals, cameras, n_points: int | None = 512, seed=None) -> 
         try:
             ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
         except (TypeError, ValueError) as exc:
-            raise InvalidInputError(f"seed: expected None, a non-negative int, a SeedSequence or a Generator, got {seed!r}") from exc
+            raise InvalidInputError(
+                f"seed: expected None, a non-negative int, a SeedSequence or a Generator, got {seed!r}"
+            ) from exc
         children = ss.spawn(n_children)
-    clouds = [_render(points, normals, cam, np.random.default_rng(ch))[0] for cam, ch in zip(cameras, children)]
+    clouds = [
+        _render(points, normals, cam, np.random.default_rng(ch))[0]
+        for cam, ch in zip(cameras, children)
+    ]
     cloud = np.concatenate(clouds, axis=0)
     if n_points is None:
         return cloud

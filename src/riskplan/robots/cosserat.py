@@ -51,26 +51,39 @@ callers) before timing.
 
 from riskplan.robots.displacement import solve_displacement_batch, solve_displacement_tensions
 from riskplan.robots.integration import shape_free, shape_free_batch, shape_loaded
-from riskplan.robots.rod_tables import LOCAL_FAIL, OK, OUTER_FAIL, RodTables, rod_tables, tendon_offset_table, tendon_offsets
-from riskplan.robots.strains import local_jacobian, local_residual, local_strains, local_strains_chord
+from riskplan.robots.rod_tables import (
+    LOCAL_FAIL,
+    OK,
+    OUTER_FAIL,
+    RodTables,
+    rod_tables,
+    tendon_offset_table,
+    tendon_offsets,
+)
+from riskplan.robots.strains import (
+    local_jacobian,
+    local_residual,
+    local_strains,
+    local_strains_chord,
+)
 from riskplan.robots.tendon_lengths import lengths_and_jacobian
 
 __all__ = [
-    "OK",
     "LOCAL_FAIL",
+    "OK",
     "OUTER_FAIL",
     "RodTables",
-    "rod_tables",
-    "tendon_offsets",
-    "tendon_offset_table",
-    "local_residual",
+    "lengths_and_jacobian",
     "local_jacobian",
+    "local_residual",
     "local_strains",
     "local_strains_chord",
+    "rod_tables",
     "shape_free",
     "shape_free_batch",
     "shape_loaded",
-    "lengths_and_jacobian",
-    "solve_displacement_tensions",
     "solve_displacement_batch",
+    "solve_displacement_tensions",
+    "tendon_offset_table",
+    "tendon_offsets",
 ]

@@ -16,6 +16,7 @@ from riskplan.robots.tendon_lengths import lengths_and_jacobian
 # step halvings of the displacement solve's line search (2**-30 ~ 1e-9 of a Newton step)
 LINE_SEARCH_MAXIT = 30
 
+
 @njit(cache=True, inline="always")
 def complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack):
     """Newton system ``Jm step = phi`` of the complementarity problem at ``tau`` (see
@@ -114,7 +115,9 @@ def line_search(d, kinv, l0, tau, step, merit, fb, rod, tols, work):
             tol, maxit, lengths, dl,
         )  # fmt: skip
         if st == OK:
-            res_t, merit_t = complementarity_system(d, kinv, l0, trial, lengths, dl, Jt, pt, fb, slack_t)
+            res_t, merit_t = complementarity_system(
+                d, kinv, l0, trial, lengths, dl, Jt, pt, fb, slack_t
+            )
             if merit_t <= (1.0 - 1e-4 * alpha) * merit or res_t <= dtol:
                 return True, res_t, merit_t
         alpha *= 0.5
@@ -122,7 +125,25 @@ def line_search(d, kinv, l0, tau, step, merit, fb, rod, tols, work):
 
 
 @njit(cache=True)
-def solve_displacement_tensions(d, kinv, l0, tau0, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, tau, info):
+def solve_displacement_tensions(
+    d,
+    kinv,
+    l0,
+    tau0,
+    rt_all,
+    drt_all,
+    ddrt_all,
+    kse,
+    kbt,
+    length,
+    n_steps,
+    tol,
+    maxit,
+    dtol,
+    outer_maxit,
+    tau,
+    info,
+):
     """Tensions for tendon displacements ``d (m,)`` with compliant tendons and slack (no loads).
 
     Complementarity (per tendon)::
@@ -157,7 +178,9 @@ def solve_displacement_tensions(d, kinv, l0, tau0, rt_all, drt_all, ddrt_all, ks
     info[0] = 0
     info[1] = 1e300
     fb = False
-    st = lengths_and_jacobian(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl)
+    st = lengths_and_jacobian(
+        tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl
+    )
     if st != OK:
         return st
     res, merit = complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack)
@@ -172,7 +195,9 @@ def solve_displacement_tensions(d, kinv, l0, tau0, rt_all, drt_all, ddrt_all, ks
         accepted = False
         for attempt in range(2):
             if search_direction(Jm, phi, merit, slack, attempt == 1, Jc, step, m):
-                accepted, res_t, merit_t = line_search(d, kinv, l0, tau, step, merit, fb, rod, tols, work)
+                accepted, res_t, merit_t = line_search(
+                    d, kinv, l0, tau, step, merit, fb, rod, tols, work
+                )
                 if accepted:
                     break
         if not accepted:
@@ -182,7 +207,23 @@ def solve_displacement_tensions(d, kinv, l0, tau0, rt_all, drt_all, ddrt_all, ks
             # (it is not smooth): continue with the Fischer-Burmeister form, whose merit has
             # no such points when dg/dtau is positive semidefinite, as a compliance matrix is
             fb = True
-            if lengths_and_jacobian(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl) != OK:
+            if (
+                lengths_and_jacobian(
+                    tau,
+                    rt_all,
+                    drt_all,
+                    ddrt_all,
+                    kse,
+                    kbt,
+                    length,
+                    n_steps,
+                    tol,
+                    maxit,
+                    lengths,
+                    dl,
+                )
+                != OK
+            ):
                 return LOCAL_FAIL
             res, merit = complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack)
             continue
@@ -200,16 +241,67 @@ def solve_displacement_tensions(d, kinv, l0, tau0, rt_all, drt_all, ddrt_all, ks
 
 
 @njit(cache=True)
-def solve_displacement_batch(ds, kinv, l0, tau0s, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus, infos, status):
+def solve_displacement_batch(
+    ds,
+    kinv,
+    l0,
+    tau0s,
+    rt_all,
+    drt_all,
+    ddrt_all,
+    kse,
+    kbt,
+    length,
+    n_steps,
+    tol,
+    maxit,
+    dtol,
+    outer_maxit,
+    taus,
+    infos,
+    status,
+):
     """Batched :func:`solve_displacement_tensions` over ``ds (B, m)``; a configuration that fails
     from its start ``tau0s[b]`` is tried once more from the slack state (``infos`` of the last try)."""
     slack_start = np.zeros(ds.shape[1])
     for b in range(ds.shape[0]):
         st = solve_displacement_tensions(
-            ds[b], kinv, l0, tau0s[b], rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus[b], infos[b]
+            ds[b],
+            kinv,
+            l0,
+            tau0s[b],
+            rt_all,
+            drt_all,
+            ddrt_all,
+            kse,
+            kbt,
+            length,
+            n_steps,
+            tol,
+            maxit,
+            dtol,
+            outer_maxit,
+            taus[b],
+            infos[b],
         )
         if st != OK:
             st = solve_displacement_tensions(
-                ds[b], kinv, l0, slack_start, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, dtol, outer_maxit, taus[b], infos[b]
+                ds[b],
+                kinv,
+                l0,
+                slack_start,
+                rt_all,
+                drt_all,
+                ddrt_all,
+                kse,
+                kbt,
+                length,
+                n_steps,
+                tol,
+                maxit,
+                dtol,
+                outer_maxit,
+                taus[b],
+                infos[b],
             )
         status[b] = st

@@ -84,9 +84,16 @@ def interpolate_frames(s, positions, rotations, s_new):
     tang = rotations[..., 2]  # (..., n, 3) body z axes
     t0 = tang[..., j, :]
     t1 = tang[..., j + 1, :]
-    P = (h00[:, None] * positions[..., j, :] + (h10 * h)[:, None] * t0
-         + h01[:, None] * positions[..., j + 1, :] + (h11 * h)[:, None] * t1)
-    Rl = rotations[..., j, :, :] * (1 - w)[:, None, None] + rotations[..., j + 1, :, :] * w[:, None, None]
+    P = (
+        h00[:, None] * positions[..., j, :]
+        + (h10 * h)[:, None] * t0
+        + h01[:, None] * positions[..., j + 1, :]
+        + (h11 * h)[:, None] * t1
+    )
+    Rl = (
+        rotations[..., j, :, :] * (1 - w)[:, None, None]
+        + rotations[..., j + 1, :, :] * w[:, None, None]
+    )
     U, _, Vt = np.linalg.svd(Rl)
     R = U @ Vt
     return P, R
@@ -131,14 +138,25 @@ def sample_cap(position, rotation, radius: float, spacing: float, *, exclude_bel
     for k in range(1, n_pol):
         pol = 0.5 * np.pi * k / n_pol  # polar angle from the tip direction d3
         phi = _ring_angles(radius * np.sin(pol), spacing)
-        dirs.append(np.stack([np.sin(pol) * np.cos(phi), np.sin(pol) * np.sin(phi), np.full_like(phi, np.cos(pol))], -1))
+        dirs.append(
+            np.stack(
+                [
+                    np.sin(pol) * np.cos(phi),
+                    np.sin(pol) * np.sin(phi),
+                    np.full_like(phi, np.cos(pol)),
+                ],
+                -1,
+            )
+        )
     d = np.concatenate(dirs)  # body frame unit vectors (a, 3)
     d = d[radius * d[:, 2] > exclude_below]
     N = d @ np.swapaxes(rotation, -1, -2)
     return position[..., None, :] + radius * N, N
 
 
-def sample_disk(position, rotation, radius: float, thickness: float, inner_radius: float, spacing: float):
+def sample_disk(
+    position, rotation, radius: float, thickness: float, inner_radius: float, spacing: float
+):
     """Closed cylinder (side + two annular faces ``inner_radius <= rho <= radius``) of a disk.
 
     The disk is centred at ``position (..., 3)`` with its axis along the third column of
@@ -193,30 +211,45 @@ def sample_surface(s, positions, rotations, body: BodyGeometry):
     positions = np.asarray(positions, dtype=np.float64)
     rotations = np.asarray(rotations, dtype=np.float64)
     if s.ndim != 1 or len(s) < 2 or np.any(np.diff(s) <= 0):
-        raise InvalidInputError(f"s: expected strictly increasing arc lengths (n >= 2,), got shape {s.shape}")
+        raise InvalidInputError(
+            f"s: expected strictly increasing arc lengths (n >= 2,), got shape {s.shape}"
+        )
     n = len(s)
     if positions.shape[-2:] != (n, 3):
         raise InvalidInputError(f"positions: expected shape (..., {n}, 3), got {positions.shape}")
     if rotations.shape[-3:] != (n, 3, 3) or rotations.shape[:-3] != positions.shape[:-2]:
-        raise InvalidInputError(f"rotations: expected shape {positions.shape[:-2] + (n, 3, 3)}, got {rotations.shape}")
+        raise InvalidInputError(
+            f"rotations: expected shape {positions.shape[:-2] + (n, 3, 3)}, got {rotations.shape}"
+        )
     if not (np.all(np.isfinite(positions)) and np.all(np.isfinite(rotations))):
         raise InvalidInputError("positions/rotations: contain NaN or inf")
     half = 0.5 * body.disk_thickness
     exclude = [(ds - half, ds + half) for ds in body.disk_s]
     parts_p, parts_n = [], []
-    p, nv = sample_tube(s, positions, rotations, body.backbone_radius, body.spacing, exclude=exclude)
+    p, nv = sample_tube(
+        s, positions, rotations, body.backbone_radius, body.spacing, exclude=exclude
+    )
     parts_p.append(p)
     parts_n.append(nv)
     if body.tip_cap:
         L = s[-1]
-        inside = [ds + half - L for ds in body.disk_s if ds - half < L < ds + half]  # a disk at the tip
-        p, nv = sample_cap(positions[..., -1, :], rotations[..., -1, :, :], body.backbone_radius, body.spacing,
-                           exclude_below=max(inside, default=0.0))
+        inside = [
+            ds + half - L for ds in body.disk_s if ds - half < L < ds + half
+        ]  # a disk at the tip
+        p, nv = sample_cap(
+            positions[..., -1, :],
+            rotations[..., -1, :, :],
+            body.backbone_radius,
+            body.spacing,
+            exclude_below=max(inside, default=0.0),
+        )
         parts_p.append(p)
         parts_n.append(nv)
     if body.disk_s:
         Pd, Rd = interpolate_frames(s, positions, rotations, np.asarray(body.disk_s))
-        p, nv = sample_disk(Pd, Rd, body.disk_radius, body.disk_thickness, body.backbone_radius, body.spacing)
+        p, nv = sample_disk(
+            Pd, Rd, body.disk_radius, body.disk_thickness, body.backbone_radius, body.spacing
+        )
         shp = p.shape[:-3] + (-1, 3)
         parts_p.append(p.reshape(shp))
         parts_n.append(nv.reshape(shp))

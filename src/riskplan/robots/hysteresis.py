@@ -35,7 +35,13 @@ from riskplan._validation import as_array, as_generator, check_range
 from riskplan.errors import InvalidInputError
 from riskplan.robots.params import HysteresisParams
 
-__all__ = ["HysteresisState", "HysteresisModel", "effective_displacements", "play_operator", "robot_after_path"]
+__all__ = [
+    "HysteresisModel",
+    "HysteresisState",
+    "effective_displacements",
+    "play_operator",
+    "robot_after_path",
+]
 
 
 @dataclass(frozen=True)
@@ -71,7 +77,9 @@ def _check_path(path) -> np.ndarray:
     """A commanded path ``(..., T, m)`` with at least one configuration (T >= 1)."""
     c = as_array(path, "path", min_ndim=2)
     if c.shape[-2] == 0:
-        raise InvalidInputError(f"path: expected at least one configuration (T >= 1), got shape {c.shape}")
+        raise InvalidInputError(
+            f"path: expected at least one configuration (T >= 1), got shape {c.shape}"
+        )
     return c
 
 
@@ -149,7 +157,9 @@ class HysteresisModel:
         eff = np.clip(e + offset, self._lim[:, 0], self._lim[:, 1])
         return HysteresisState(e), eff
 
-    def straight_line(self, starts, targets, rng=None, *, start_state: HysteresisState | None = None):
+    def straight_line(
+        self, starts, targets, rng=None, *, start_state: HysteresisState | None = None
+    ):
         """Effective displacements after moving straight from ``starts (..., m)`` to ``targets (..., m)``.
 
         Each tendon's command is monotone along a straight line, so the play operator's end value
@@ -172,7 +182,14 @@ class HysteresisModel:
         return new, self.robot.solve_displacements(eff)
 
 
-def robot_after_path(robot, path, *, state: HysteresisState | None = None, seed=None, params: HysteresisParams | None = None):
+def robot_after_path(
+    robot,
+    path,
+    *,
+    state: HysteresisState | None = None,
+    seed=None,
+    params: HysteresisParams | None = None,
+):
     """Shape of ``robot`` after the commanded path ``(T, m)`` through the hysteresis model.
 
     ``state`` defaults to rest at the path's first point; ``seed`` (int/Generator/None) draws
@@ -187,7 +204,14 @@ def robot_after_path(robot, path, *, state: HysteresisState | None = None, seed=
     return model.shape_after(state, c, rng)[1]
 
 
-def effective_displacements(robot, path, *, state: HysteresisState | None = None, seed=None, params: HysteresisParams | None = None) -> np.ndarray:
+def effective_displacements(
+    robot,
+    path,
+    *,
+    state: HysteresisState | None = None,
+    seed=None,
+    params: HysteresisParams | None = None,
+) -> np.ndarray:
     """Effective displacements ``(..., m)`` the robot receives after the commanded ``path (..., T, m)``.
 
     ``state`` defaults to rest at the path's first point (no lag); ``seed`` (int, SeedSequence,

@@ -12,7 +12,13 @@ from numba import njit
 
 from riskplan.robots.linalg6 import chol_factor6
 from riskplan.robots.rod_tables import LOCAL_FAIL, OK, RodTables
-from riskplan.robots.strains import local_jacobian, local_strains, local_strains_chord, strain_slope, tendon_speeds
+from riskplan.robots.strains import (
+    local_jacobian,
+    local_strains,
+    local_strains_chord,
+    strain_slope,
+    tendon_speeds,
+)
 
 
 @njit(cache=True, inline="always")
@@ -84,7 +90,22 @@ def pose_derivative(R, x, dR, dp):
 
 
 @njit(cache=True)
-def shape_free(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, x_out, lengths):
+def shape_free(
+    tau,
+    rt_all,
+    drt_all,
+    ddrt_all,
+    kse,
+    kbt,
+    length,
+    n_steps,
+    tol,
+    maxit,
+    p_out,
+    R_out,
+    x_out,
+    lengths,
+):
     """Shape under tendon tensions ``tau (m,)`` without external loads (no shooting).
 
     Strains solve (2)-(3) at the step nodes only; their slopes ``x'`` follow from the implicit
@@ -115,7 +136,12 @@ def shape_free(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, m
     x1 = np.empty(6)
     d1 = np.empty(6)
     xm = np.empty(6)
-    if local_strains_chord(x0, tau, rt_all[0], drt_all[0], zero, zero, kse, kbt, tol, maxit, F, L, fac) < 0:
+    if (
+        local_strains_chord(
+            x0, tau, rt_all[0], drt_all[0], zero, zero, kse, kbt, tol, maxit, F, L, fac
+        )
+        < 0
+    ):
         return LOCAL_FAIL
     local_jacobian(x0, tau, rt_all[0], drt_all[0], kse, kbt, L)
     if not chol_factor6(L):
@@ -140,7 +166,12 @@ def shape_free(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, m
                 x1[a] = x0[a] + h * d0[a]
             else:
                 x1[a] = 5.0 * xa[a] + 2.0 * h * da[a] - 4.0 * x0[a] + 4.0 * h * d0[a]
-        if local_strains_chord(x1, tau, rt_all[j1], drt_all[j1], zero, zero, kse, kbt, tol, maxit, F, L, fac) < 0:
+        if (
+            local_strains_chord(
+                x1, tau, rt_all[j1], drt_all[j1], zero, zero, kse, kbt, tol, maxit, F, L, fac
+            )
+            < 0
+        ):
             return LOCAL_FAIL
         local_jacobian(x1, tau, rt_all[j1], drt_all[j1], kse, kbt, L)
         if not chol_factor6(L):
@@ -169,12 +200,42 @@ def shape_free(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, m
 
 
 @njit(cache=True)
-def shape_free_batch(taus, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, p_out, R_out, lengths_out, status):
+def shape_free_batch(
+    taus,
+    rt_all,
+    drt_all,
+    ddrt_all,
+    kse,
+    kbt,
+    length,
+    n_steps,
+    tol,
+    maxit,
+    p_out,
+    R_out,
+    lengths_out,
+    status,
+):
     """Batched :func:`shape_free`: ``taus (B, m)`` -> ``p_out (B, n+1, 3)``, ``R_out (B, n+1, 3, 3)``."""
     B = taus.shape[0]
     x_out = np.empty((n_steps + 1, 6))
     for b in range(B):
-        status[b] = shape_free(taus[b], rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, p_out[b], R_out[b], x_out, lengths_out[b])
+        status[b] = shape_free(
+            taus[b],
+            rt_all,
+            drt_all,
+            ddrt_all,
+            kse,
+            kbt,
+            length,
+            n_steps,
+            tol,
+            maxit,
+            p_out[b],
+            R_out[b],
+            x_out,
+            lengths_out[b],
+        )
 
 
 @njit(cache=True)
@@ -222,7 +283,9 @@ def loaded_derivative(y, node, tau, rod, f, x, tol, maxit, work, dy):
 
 
 @njit(cache=True)
-def shape_loaded(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, f, N0, M0, tol, maxit, Y):
+def shape_loaded(
+    tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, f, N0, M0, tol, maxit, Y
+):
     """Integrate (1)-(3) from base values ``N0, M0`` with distributed force ``f (3,)`` (base frame).
 
     ``Y (n+1, 18+m)`` receives the states ``(p, R row-major, N, M, l)``. Returns a status code.

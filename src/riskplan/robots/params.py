@@ -19,17 +19,17 @@ from riskplan.errors import RobotDescriptionError
 
 __all__ = [
     "Backbone",
-    "Disks",
-    "Tendon",
-    "Gravity",
     "BasePose",
+    "Disks",
+    "Gravity",
     "HysteresisParams",
     "RobotParams",
-    "parse_robot_toml",
+    "Tendon",
     "load_robot_params",
+    "parse_robot_toml",
+    "quaternion_to_matrix",
     "read_robot_text",
     "rpy_to_matrix",
-    "quaternion_to_matrix",
 ]
 
 
@@ -64,12 +64,14 @@ class Backbone:
     def kbt(self) -> np.ndarray:
         """Diagonal of ``K_bt = diag(E I, E I, G J)`` (bending, bending, torsion)."""
         I = self.second_moment
-        return np.array([self.youngs_modulus * I, self.youngs_modulus * I, self.shear_modulus * 2 * I])
+        return np.array(
+            [self.youngs_modulus * I, self.youngs_modulus * I, self.shear_modulus * 2 * I]
+        )
 
     @property
     def n_steps(self) -> int:
         """Number of integration steps: ``ceil(length / step)`` (the step is shortened to fit)."""
-        return max(1, int(math.ceil(self.length / self.step - 1e-9)))
+        return max(1, math.ceil(self.length / self.step - 1e-9))
 
 
 @dataclass(frozen=True)
@@ -159,7 +161,14 @@ MAX_POLY_TERMS = 16
 def rpy_to_matrix(rpy) -> np.ndarray:
     """Roll-pitch-yaw (extrinsic x, then y, then z): ``R = Rz(yaw) Ry(pitch) Rx(roll)``."""
     r, p, y = (float(a) for a in rpy)
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    cr, sr, cp, sp, cy, sy = (
+        math.cos(r),
+        math.sin(r),
+        math.cos(p),
+        math.sin(p),
+        math.cos(y),
+        math.sin(y),
+    )
     Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
     Ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
     Rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
@@ -179,7 +188,9 @@ def quaternion_to_matrix(q) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- parsing helpers
-def _num(table: dict, key: str, path: str, *, default=None, positive=False, nonneg=False, allow_inf=False) -> float:
+def _num(
+    table: dict, key: str, path: str, *, default=None, positive=False, nonneg=False, allow_inf=False
+) -> float:
     full = f"{path}.{key}" if path else key
     if key not in table:
         if default is None:
@@ -187,14 +198,20 @@ def _num(table: dict, key: str, path: str, *, default=None, positive=False, nonn
         return float(default)
     val = table[key]
     if isinstance(val, bool) or not isinstance(val, (int, float)):
-        raise RobotDescriptionError(f"robot description: '{full}' must be a number, got {val!r}", key=full)
+        raise RobotDescriptionError(
+            f"robot description: '{full}' must be a number, got {val!r}", key=full
+        )
     val = float(val)
     if math.isnan(val) or (math.isinf(val) and not allow_inf):
-        raise RobotDescriptionError(f"robot description: '{full}' must be finite, got {val}", key=full)
+        raise RobotDescriptionError(
+            f"robot description: '{full}' must be finite, got {val}", key=full
+        )
     if positive and not val > 0:
         raise RobotDescriptionError(f"robot description: '{full}' must be > 0, got {val}", key=full)
     if nonneg and not val >= 0:
-        raise RobotDescriptionError(f"robot description: '{full}' must be >= 0, got {val}", key=full)
+        raise RobotDescriptionError(
+            f"robot description: '{full}' must be >= 0, got {val}", key=full
+        )
     return val
 
 
@@ -205,15 +222,23 @@ def _vec(table: dict, key: str, path: str, n: int | None, *, default=None) -> tu
             raise RobotDescriptionError(f"robot description: missing key '{full}'", key=full)
         return tuple(float(v) for v in default)
     val = table[key]
-    if not isinstance(val, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in val):
-        raise RobotDescriptionError(f"robot description: '{full}' must be a list of numbers, got {val!r}", key=full)
+    if not isinstance(val, list) or not all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) for v in val
+    ):
+        raise RobotDescriptionError(
+            f"robot description: '{full}' must be a list of numbers, got {val!r}", key=full
+        )
     if n is not None and len(val) != n:
-        raise RobotDescriptionError(f"robot description: '{full}' must have {n} entries, got {len(val)}", key=full)
+        raise RobotDescriptionError(
+            f"robot description: '{full}' must have {n} entries, got {len(val)}", key=full
+        )
     if n is None and len(val) == 0:
         raise RobotDescriptionError(f"robot description: '{full}' must not be empty", key=full)
     out = tuple(float(v) for v in val)
     if not all(math.isfinite(v) for v in out):
-        raise RobotDescriptionError(f"robot description: '{full}' must be finite, got {val!r}", key=full)
+        raise RobotDescriptionError(
+            f"robot description: '{full}' must be finite, got {val!r}", key=full
+        )
     return out
 
 
@@ -242,21 +267,35 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
     """
     if not isinstance(text, str):
         raise RobotDescriptionError(
-            f"robot description: expected TOML text (str), got {type(text).__name__}; decode bytes as UTF-8 first", key=None
+            f"robot description: expected TOML text (str), got {type(text).__name__}; decode bytes as UTF-8 first",
+            key=None,
         )
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise RobotDescriptionError(f"robot description: not valid TOML ({exc})", key=None) from exc
-    _check_unknown(doc, {"name", "backbone", "disks", "tendons", "gravity", "base", "hysteresis"}, "")
+    _check_unknown(
+        doc, {"name", "backbone", "disks", "tendons", "gravity", "base", "hysteresis"}, ""
+    )
     name = doc.get("name", default_name)
     if not isinstance(name, str) or not name:
-        raise RobotDescriptionError("robot description: 'name' must be a non-empty string", key="name")
+        raise RobotDescriptionError(
+            "robot description: 'name' must be a non-empty string", key="name"
+        )
 
     b = _table(doc, "backbone")
     _check_unknown(
         b,
-        {"length", "outer_radius", "inner_radius", "youngs_modulus", "shear_modulus", "poisson_ratio", "density", "step"},
+        {
+            "length",
+            "outer_radius",
+            "inner_radius",
+            "youngs_modulus",
+            "shear_modulus",
+            "poisson_ratio",
+            "density",
+            "step",
+        },
         "backbone",
     )
     length = _num(b, "length", "backbone", positive=True)
@@ -264,7 +303,8 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
     ri = _num(b, "inner_radius", "backbone", default=0.0, nonneg=True)
     if ri >= ro:
         raise RobotDescriptionError(
-            f"robot description: 'backbone.inner_radius' ({ri}) must be < outer_radius ({ro})", key="backbone.inner_radius"
+            f"robot description: 'backbone.inner_radius' ({ri}) must be < outer_radius ({ro})",
+            key="backbone.inner_radius",
         )
     E = _num(b, "youngs_modulus", "backbone", positive=True)
     if "shear_modulus" in b and "poisson_ratio" in b:
@@ -278,13 +318,16 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
         nu = _num(b, "poisson_ratio", "backbone", default=0.3)
         if not -1.0 < nu < 0.5:
             raise RobotDescriptionError(
-                f"robot description: 'backbone.poisson_ratio' must lie in (-1, 0.5), got {nu}", key="backbone.poisson_ratio"
+                f"robot description: 'backbone.poisson_ratio' must lie in (-1, 0.5), got {nu}",
+                key="backbone.poisson_ratio",
             )
         G = E / (2.0 * (1.0 + nu))
     density = _num(b, "density", "backbone", default=1000.0, nonneg=True)
     step = _num(b, "step", "backbone", default=0.005, positive=True)
     if step > length:
-        raise RobotDescriptionError(f"robot description: 'backbone.step' ({step}) exceeds the length", key="backbone.step")
+        raise RobotDescriptionError(
+            f"robot description: 'backbone.step' ({step}) exceeds the length", key="backbone.step"
+        )
     if length / step > MAX_STEPS:
         raise RobotDescriptionError(
             f"robot description: length / step = {length:g} / {step:g} = {length / step:.3g} integration steps per shape, more "
@@ -297,17 +340,25 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
     _check_unknown(d, {"count", "radius", "thickness", "density", "positions"}, "disks")
     count = d.get("count", 0)
     if isinstance(count, bool) or not isinstance(count, int) or not 0 <= count <= MAX_DISKS:
-        raise RobotDescriptionError(f"robot description: 'disks.count' must be an integer in [0, {MAX_DISKS}], got {count!r}", key="disks.count")
+        raise RobotDescriptionError(
+            f"robot description: 'disks.count' must be an integer in [0, {MAX_DISKS}], got {count!r}",
+            key="disks.count",
+        )
     if "positions" in d:
         pos = _vec(d, "positions", "disks", count if count else None)
         if count == 0:
             count = len(pos)
         if count > MAX_DISKS:
-            raise RobotDescriptionError(f"robot description: {count} disk positions, more than the limit of {MAX_DISKS}", key="disks.positions")
+            raise RobotDescriptionError(
+                f"robot description: {count} disk positions, more than the limit of {MAX_DISKS}",
+                key="disks.positions",
+            )
     else:
         pos = tuple(length * (k + 1) / count for k in range(count))
     if any(not (0.0 <= p <= length) for p in pos):
-        raise RobotDescriptionError("robot description: 'disks.positions' must lie in [0, length]", key="disks.positions")
+        raise RobotDescriptionError(
+            "robot description: 'disks.positions' must lie in [0, length]", key="disks.positions"
+        )
     disks = Disks(
         count,
         _num(d, "radius", "disks", default=max(2 * ro, 0.01), positive=True),
@@ -318,18 +369,27 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
 
     tl = doc.get("tendons")
     if not isinstance(tl, list) or len(tl) == 0:
-        raise RobotDescriptionError("robot description: at least one '[[tendons]]' entry is required", key="tendons")
+        raise RobotDescriptionError(
+            "robot description: at least one '[[tendons]]' entry is required", key="tendons"
+        )
     if len(tl) > MAX_TENDONS:
-        raise RobotDescriptionError(f"robot description: {len(tl)} tendons, more than the limit of {MAX_TENDONS}", key="tendons")
+        raise RobotDescriptionError(
+            f"robot description: {len(tl)} tendons, more than the limit of {MAX_TENDONS}",
+            key="tendons",
+        )
     tendons = []
     for i, t in enumerate(tl):
         path = f"tendons[{i}]"
         if not isinstance(t, dict):
             raise RobotDescriptionError(f"robot description: '{path}' must be a table", key=path)
-        _check_unknown(t, {"name", "theta", "radius", "stiffness", "displacement_limits", "max_tension"}, path)
+        _check_unknown(
+            t, {"name", "theta", "radius", "stiffness", "displacement_limits", "max_tension"}, path
+        )
         tname = t.get("name", f"tendon-{i}")
         if not isinstance(tname, str):
-            raise RobotDescriptionError(f"robot description: '{path}.name' must be a string", key=f"{path}.name")
+            raise RobotDescriptionError(
+                f"robot description: '{path}.name' must be a string", key=f"{path}.name"
+            )
         theta = _vec(t, "theta", path, None)
         radius = _vec(t, "radius", path, None)
         for key, poly in (("theta", theta), ("radius", radius)):
@@ -342,12 +402,16 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
         ss = np.linspace(0.0, length, 201)
         rs = np.polynomial.polynomial.polyval(ss, radius)
         if np.any(rs <= 0):
-            raise RobotDescriptionError(f"robot description: '{path}.radius' gives r(s) <= 0 on [0, length]", key=f"{path}.radius")
+            raise RobotDescriptionError(
+                f"robot description: '{path}.radius' gives r(s) <= 0 on [0, length]",
+                key=f"{path}.radius",
+            )
         k = _num(t, "stiffness", path, default=math.inf, positive=True, allow_inf=True)
         lim = _vec(t, "displacement_limits", path, 2)
         if not lim[0] < lim[1]:
             raise RobotDescriptionError(
-                f"robot description: '{path}.displacement_limits' needs low < high, got {lim}", key=f"{path}.displacement_limits"
+                f"robot description: '{path}.displacement_limits' needs low < high, got {lim}",
+                key=f"{path}.displacement_limits",
             )
         tmax = _num(t, "max_tension", path, positive=True)
         tendons.append(Tendon(tname, theta, radius, k, (lim[0], lim[1]), tmax))
@@ -356,7 +420,9 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
     _check_unknown(g, {"enabled", "vector"}, "gravity")
     enabled = g.get("enabled", False)
     if not isinstance(enabled, bool):
-        raise RobotDescriptionError("robot description: 'gravity.enabled' must be true or false", key="gravity.enabled")
+        raise RobotDescriptionError(
+            "robot description: 'gravity.enabled' must be true or false", key="gravity.enabled"
+        )
     gravity = Gravity(enabled, _vec(g, "vector", "gravity", 3, default=(0.0, 0.0, -9.81)))
 
     bp = _table(doc, "base", required=False)
@@ -364,21 +430,30 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
     position = _vec(bp, "position", "base", 3, default=(0.0, 0.0, 0.0))
     given = [k for k in ("rpy", "quaternion", "rotation") if k in bp]
     if len(given) > 1:
-        raise RobotDescriptionError(f"robot description: give only one of base.rpy/quaternion/rotation, got {given}", key=f"base.{given[1]}")
+        raise RobotDescriptionError(
+            f"robot description: give only one of base.rpy/quaternion/rotation, got {given}",
+            key=f"base.{given[1]}",
+        )
     if "rpy" in bp:
         Rm = rpy_to_matrix(_vec(bp, "rpy", "base", 3))
     elif "quaternion" in bp:
         q = _vec(bp, "quaternion", "base", 4)
         if np.linalg.norm(q) < 1e-12:
-            raise RobotDescriptionError("robot description: 'base.quaternion' must be non-zero", key="base.quaternion")
+            raise RobotDescriptionError(
+                "robot description: 'base.quaternion' must be non-zero", key="base.quaternion"
+            )
         Rm = quaternion_to_matrix(q)
     elif "rotation" in bp:
         rows = bp["rotation"]
         if not isinstance(rows, list) or len(rows) != 3:
-            raise RobotDescriptionError("robot description: 'base.rotation' must be a 3x3 list", key="base.rotation")
+            raise RobotDescriptionError(
+                "robot description: 'base.rotation' must be a 3x3 list", key="base.rotation"
+            )
         Rm = np.array([_vec({"r": r}, "r", "base.rotation", 3) for r in rows])
         if not np.allclose(Rm.T @ Rm, np.eye(3), atol=1e-6) or np.linalg.det(Rm) < 0:
-            raise RobotDescriptionError("robot description: 'base.rotation' must be a rotation matrix", key="base.rotation")
+            raise RobotDescriptionError(
+                "robot description: 'base.rotation' must be a rotation matrix", key="base.rotation"
+            )
     else:
         Rm = np.eye(3)
     base = BasePose(position, tuple(tuple(float(v) for v in row) for row in Rm))

@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 
-def plot_shape(shapes, robot=None, *, ax=None, title: str | None = None, color="C0", alpha: float = 1.0):
+def plot_shape(
+    shapes, robot=None, *, ax=None, title: str | None = None, color="C0", alpha: float = 1.0
+):
     """Draw backbone curve(s) in 3-D and, with ``robot``, the separator disks as circles.
 
     ``shapes``: a :class:`~riskplan.robots.RodShape` (single or batched). Returns the figure.
@@ -31,7 +33,9 @@ def plot_shape(shapes, robot=None, *, ax=None, title: str | None = None, color="
                 w = (sd - s[k - 1]) / (s[k] - s[k - 1])
                 c = (1 - w) * P[b, k - 1] + w * P[b, k]
                 R = Rs[b, k if w > 0.5 else k - 1]
-                circ = c + d.radius * (np.cos(phi)[:, None] * R[:, 0] + np.sin(phi)[:, None] * R[:, 1])
+                circ = c + d.radius * (
+                    np.cos(phi)[:, None] * R[:, 0] + np.sin(phi)[:, None] * R[:, 1]
+                )
                 ax.plot(circ[:, 0], circ[:, 1], circ[:, 2], color="0.4", lw=1, alpha=alpha)
     pts = P.reshape(-1, 3)
     ctr = 0.5 * (pts.max(0) + pts.min(0))

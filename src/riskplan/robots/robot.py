@@ -29,7 +29,7 @@ from riskplan.robots.params import (
     rpy_to_matrix,
 )
 
-__all__ = ["RodShape", "TendonRobot", "load_robot", "robot_from_toml", "PACKAGED_ROBOTS"]
+__all__ = ["PACKAGED_ROBOTS", "RodShape", "TendonRobot", "load_robot", "robot_from_toml"]
 
 log = logging.getLogger(__name__)
 
@@ -81,7 +81,11 @@ class RodShape:
         """``{"tip", "backbone", "tensions"}`` of a single shape (plain lists)."""
         if self.batch_shape:
             raise InvalidInputError("to_json: expected a single shape; index the batch first")
-        return {"tip": self.tip.tolist(), "backbone": self.positions.tolist(), "tensions": self.tensions.tolist()}
+        return {
+            "tip": self.tip.tolist(),
+            "backbone": self.positions.tolist(),
+            "tensions": self.tensions.tolist(),
+        }
 
 
 @njit(cache=True)
@@ -123,12 +127,18 @@ class TendonRobot:
         self._theta = _poly_table([t.theta for t in params.tendons])
         self._radius = _poly_table([t.radius for t in params.tendons])
         #: the per-robot arrays every Cosserat kernel takes (:class:`cosserat.RodTables`)
-        self.tables = cosserat.rod_tables(self._theta, self._radius, bb.kse, bb.kbt, self._L, self._n)
-        self._kinv = np.array([0.0 if math.isinf(t.stiffness) else 1.0 / t.stiffness for t in params.tendons])
+        self.tables = cosserat.rod_tables(
+            self._theta, self._radius, bb.kse, bb.kbt, self._L, self._n
+        )
+        self._kinv = np.array(
+            [0.0 if math.isinf(t.stiffness) else 1.0 / t.stiffness for t in params.tendons]
+        )
         m = self.n_tendons
         self._l0 = np.empty(m)
         dl = np.empty((m, m))
-        st = cosserat.lengths_and_jacobian(np.zeros(m), *self.tables, LOCAL_TOL, LOCAL_MAXIT, self._l0, dl)
+        st = cosserat.lengths_and_jacobian(
+            np.zeros(m), *self.tables, LOCAL_TOL, LOCAL_MAXIT, self._l0, dl
+        )
         if st != cosserat.OK:  # pragma: no cover - the straight rod always solves
             raise ConvergenceError("rest-length computation failed")
         self._G0 = -dl  # d(shortening)/d tau at tau = 0, used for start values
@@ -183,22 +193,32 @@ class TendonRobot:
     @property
     def loaded(self) -> bool:
         """True when gravity is on (the shooting solver is used)."""
-        return bool(self.params.gravity.enabled and self._lam > 0 and any(self.params.gravity.vector))
+        return bool(
+            self.params.gravity.enabled and self._lam > 0 and any(self.params.gravity.vector)
+        )
 
     def toml_text(self) -> str:
         """The robot file (TOML) that rebuilds this robot."""
         return self._toml if self._toml is not None else params_to_toml(self.params)
 
-    def with_base_pose(self, position=(0.0, 0.0, 0.0), *, rotation=None, rpy=None, quaternion=None) -> TendonRobot:
+    def with_base_pose(
+        self, position=(0.0, 0.0, 0.0), *, rotation=None, rpy=None, quaternion=None
+    ) -> TendonRobot:
         """The same robot with another base pose (give one of rotation matrix, rpy, quaternion)."""
-        given = [k for k, v in (("rotation", rotation), ("rpy", rpy), ("quaternion", quaternion)) if v is not None]
+        given = [
+            k
+            for k, v in (("rotation", rotation), ("rpy", rpy), ("quaternion", quaternion))
+            if v is not None
+        ]
         if len(given) > 1:
             raise InvalidInputError(f"with_base_pose: give one orientation, got {given}")
         pos = as_array(position, "position", shape=(3,))
         if rotation is not None:
             Rm = as_array(rotation, "rotation", shape=(3, 3))
             if not np.allclose(Rm.T @ Rm, np.eye(3), atol=1e-8) or np.linalg.det(Rm) <= 0:
-                raise InvalidInputError("rotation: expected a proper rotation matrix (R^T R = I, det R = 1)")
+                raise InvalidInputError(
+                    "rotation: expected a proper rotation matrix (R^T R = I, det R = 1)"
+                )
         elif quaternion is not None:
             q = as_array(quaternion, "quaternion", shape=(4,))
             if np.linalg.norm(q) < 1e-12:
@@ -212,8 +232,14 @@ class TendonRobot:
     def with_gravity(self, enabled: bool = True, vector=None) -> TendonRobot:
         """The same robot with gravity switched on/off (``vector`` in the world frame, m/s^2)."""
         if not isinstance(enabled, (bool, np.bool_)):
-            raise InvalidInputError(f"enabled: expected True or False, got {enabled!r} ({type(enabled).__name__})")
-        vec = self.params.gravity.vector if vector is None else tuple(as_array(vector, "vector", shape=(3,)).tolist())
+            raise InvalidInputError(
+                f"enabled: expected True or False, got {enabled!r} ({type(enabled).__name__})"
+            )
+        vec = (
+            self.params.gravity.vector
+            if vector is None
+            else tuple(as_array(vector, "vector", shape=(3,)).tolist())
+        )
         return TendonRobot(replace(self.params, gravity=Gravity(bool(enabled), vec)))
 
     def __repr__(self) -> str:
@@ -223,12 +249,20 @@ class TendonRobot:
     def _check(self, value, name, low, high):
         """``value (..., m)`` as a float array within ``[low, high]`` (per-tendon arrays ``(m,)``)."""
         # fast path: a well-formed array passes with one compiled loop (no temporaries)
-        if isinstance(value, np.ndarray) and value.dtype == np.float64 and value.ndim >= 1 and value.shape[-1] == self.n_tendons and value.flags.c_contiguous:
+        if (
+            isinstance(value, np.ndarray)
+            and value.dtype == np.float64
+            and value.ndim >= 1
+            and value.shape[-1] == self.n_tendons
+            and value.flags.c_contiguous
+        ):
             if in_limits(value, low, high):
                 return value
         arr = as_array(value, name, min_ndim=1)
         if arr.shape[-1] != self.n_tendons:
-            raise InvalidInputError(f"{name}: expected last dimension {self.n_tendons} (one per tendon), got shape {arr.shape}")
+            raise InvalidInputError(
+                f"{name}: expected last dimension {self.n_tendons} (one per tendon), got shape {arr.shape}"
+            )
         check_range(arr, name, low=low, high=high)
         return arr
 
@@ -247,11 +281,18 @@ class TendonRobot:
             Rb = base.matrix
             P = P @ Rb.T + np.asarray(base.position)
             Rs = np.einsum("ij,...jk->...ik", Rb, Rs)
-        return RodShape(self._s, P.reshape(batch + (n, 3)), Rs.reshape(batch + (n, 3, 3)), tau.reshape(batch + (self.n_tendons,)))
+        return RodShape(
+            self._s,
+            P.reshape(batch + (n, 3)),
+            Rs.reshape(batch + (n, 3, 3)),
+            tau.reshape(batch + (self.n_tendons,)),
+        )
 
     def _gravity_base(self) -> np.ndarray:
         """Distributed force per unit length in the base frame [N/m]."""
-        return self._lam * (self.params.base.matrix.T @ np.asarray(self.params.gravity.vector, dtype=float))
+        return self._lam * (
+            self.params.base.matrix.T @ np.asarray(self.params.gravity.vector, dtype=float)
+        )
 
     # ---------------------------------------------------------------------- solving
     def solve_tensions(self, tensions, *, validate: bool = True) -> RodShape:
@@ -269,7 +310,9 @@ class TendonRobot:
         if tau.ndim == 1 and not self.loaded:
             return self._solve_single_free(tau)
         batch = tau.shape[:-1]
-        flat = np.array(tau.reshape(-1, self.n_tendons), dtype=np.float64, order="C")  # a copy: the shape owns it
+        flat = np.array(
+            tau.reshape(-1, self.n_tendons), dtype=np.float64, order="C"
+        )  # a copy: the shape owns it
         B, n, m = flat.shape[0], self._n + 1, self.n_tendons
         P = np.empty((B, n, 3))
         Rs = np.empty((B, n, 3, 3))
@@ -281,7 +324,9 @@ class TendonRobot:
         elif not self.loaded:
             lengths = np.empty((B, m))
             status = np.empty(B, dtype=np.int64)
-            cosserat.shape_free_batch(flat, *self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, lengths, status)
+            cosserat.shape_free_batch(
+                flat, *self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, lengths, status
+            )
             bad = np.flatnonzero(status != cosserat.OK)
             if bad.size:
                 raise self.local_failure_error(flat[bad[0]])
@@ -301,7 +346,9 @@ class TendonRobot:
         n, m = self._n + 1, self.n_tendons
         P = np.empty((n, 3))
         Rs = np.empty((n, 3, 3))
-        st = cosserat.shape_free(tau, *self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, np.empty((n, 6)), np.empty(m))
+        st = cosserat.shape_free(
+            tau, *self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, np.empty((n, 6)), np.empty(m)
+        )
         if st != cosserat.OK:
             raise self.local_failure_error(tau)
         # a non-finite value anywhere propagates along the RK4 pass to the tip position
@@ -318,7 +365,12 @@ class TendonRobot:
         kse, kbt = self.tables.kse, self.tables.kbt
         for k in range(self._n + 1):
             rt, drt = self.tables.offsets[2 * k], self.tables.offset_slopes[2 * k]
-            if cosserat.local_strains(x, tau, rt, drt, zero, zero, kse, kbt, LOCAL_TOL, LOCAL_MAXIT, F, J, rhs) < 0:
+            if (
+                cosserat.local_strains(
+                    x, tau, rt, drt, zero, zero, kse, kbt, LOCAL_TOL, LOCAL_MAXIT, F, J, rhs
+                )
+                < 0
+            ):
                 res = float(cosserat.local_residual(x, tau, rt, drt, zero, zero, kse, kbt, F))
                 return ConvergenceError(
                     f"local strain solve failed at s = {self._s[k]:.4g} m for tensions {tau.tolist()} "
@@ -326,7 +378,9 @@ class TendonRobot:
                     residual=res,
                     iterations=LOCAL_MAXIT,
                 )
-        return ConvergenceError(f"local strain solve failed for tensions {tau.tolist()} (a plain Newton re-solve converges)")
+        return ConvergenceError(
+            f"local strain solve failed for tensions {tau.tolist()} (a plain Newton re-solve converges)"
+        )
 
     def _shoot(self, tau) -> np.ndarray:
         """States ``(n+1, 18+m)`` of the loaded rod: ``N(0) = f L`` exactly, ``M(0)`` by Newton."""
@@ -339,7 +393,10 @@ class TendonRobot:
         Rs = np.empty((n + 1, 3, 3))
         X = np.empty((n + 1, 6))
         lengths = np.empty(m)
-        if cosserat.shape_free(tau, *self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths) != cosserat.OK:
+        if (
+            cosserat.shape_free(tau, *self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths)
+            != cosserat.OK
+        ):
             raise self.local_failure_error(tau)
         mid = 0.5 * (P[1:] + P[:-1])
         M0 = np.cross(mid - P[0], f).sum(0) * (L / n)
@@ -348,11 +405,13 @@ class TendonRobot:
         def residual(M):
             st = cosserat.shape_loaded(tau, *self.tables, f, N0, M, LOCAL_TOL, LOCAL_MAXIT, Y)
             if st != cosserat.OK:
-                raise ConvergenceError(f"local strain solve failed while shooting (tensions {tau.tolist()})")
+                raise ConvergenceError(
+                    f"local strain solve failed while shooting (tensions {tau.tolist()})"
+                )
             return Y[-1, 15:18].copy()
 
         res = np.inf
-        for it in range(SHOOT_MAXIT):
+        for _it in range(SHOOT_MAXIT):
             r = residual(M0)
             res = float(np.abs(r).max())
             if res <= SHOOT_TOL * max(1.0, scale * 1e3):
@@ -365,7 +424,9 @@ class TendonRobot:
                 Jm[:, j] = (residual(Mp) - r) / eps
             M0 = M0 - np.linalg.solve(Jm, r)
         raise ConvergenceError(
-            f"shooting did not converge in {SHOOT_MAXIT} iterations (tip moment residual {res:.3g} N m)", residual=res, iterations=SHOOT_MAXIT
+            f"shooting did not converge in {SHOOT_MAXIT} iterations (tip moment residual {res:.3g} N m)",
+            residual=res,
+            iterations=SHOOT_MAXIT,
         )
 
     def solve_displacements(self, displacements, *, validate: bool = True) -> RodShape:
@@ -388,10 +449,18 @@ class TendonRobot:
         tau = self.tensions_for_displacements(flat, validate=False)
         over = tau > self._tmax * (1 + 1e-9)
         if np.any(over):
-            log.warning("displacements need tensions above max_tension in %d configuration(s)", int(np.any(over, -1).sum()))
+            log.warning(
+                "displacements need tensions above max_tension in %d configuration(s)",
+                int(np.any(over, -1).sum()),
+            )
         shape = self.solve_tensions(tau, validate=False)
         n = self._n + 1
-        return RodShape(shape.s, shape.positions.reshape(batch + (n, 3)), shape.rotations.reshape(batch + (n, 3, 3)), tau.reshape(batch + (self.n_tendons,)))
+        return RodShape(
+            shape.s,
+            shape.positions.reshape(batch + (n, 3)),
+            shape.rotations.reshape(batch + (n, 3, 3)),
+            tau.reshape(batch + (self.n_tendons,)),
+        )
 
     def tensions_for_displacements(self, displacements, *, validate: bool = True) -> np.ndarray:
         """Tensions ``(..., m)`` [N] that realise tendon displacements ``(..., m)`` (see :meth:`solve_displacements`)."""
@@ -403,7 +472,11 @@ class TendonRobot:
         flat = np.ascontiguousarray(d.reshape(-1, self.n_tendons))
         B, m = flat.shape
         if self.loaded:
-            tau = np.stack([self._tensions_loaded(flat[b]) for b in range(B)]) if B else np.zeros((0, m))
+            tau = (
+                np.stack([self._tensions_loaded(flat[b]) for b in range(B)])
+                if B
+                else np.zeros((0, m))
+            )
             return tau.reshape(batch + (m,))
         # start: the linearisation at tau = 0 (see __init__), clipped to tau >= 0
         tau0 = np.ascontiguousarray(np.maximum(flat @ self._A0pinv.T, 0.0))
@@ -411,7 +484,18 @@ class TendonRobot:
         infos = np.empty((B, 2))
         status = np.empty(B, dtype=np.int64)
         cosserat.solve_displacement_batch(
-            flat, self._kinv, self._l0, tau0, *self.tables, LOCAL_TOL, LOCAL_MAXIT, DISP_TOL, DISP_MAXIT, tau, infos, status
+            flat,
+            self._kinv,
+            self._l0,
+            tau0,
+            *self.tables,
+            LOCAL_TOL,
+            LOCAL_MAXIT,
+            DISP_TOL,
+            DISP_MAXIT,
+            tau,
+            infos,
+            status,
         )
         bad = np.flatnonzero(status != cosserat.OK)
         if bad.size:
@@ -438,7 +522,12 @@ class TendonRobot:
                 out[b] = self._shoot(flat[b])[-1, 18:]
             else:
                 dl = np.empty((m, m))
-                if cosserat.lengths_and_jacobian(flat[b], *self.tables, LOCAL_TOL, LOCAL_MAXIT, out[b], dl) != cosserat.OK:
+                if (
+                    cosserat.lengths_and_jacobian(
+                        flat[b], *self.tables, LOCAL_TOL, LOCAL_MAXIT, out[b], dl
+                    )
+                    != cosserat.OK
+                ):
                     raise self.local_failure_error(flat[b])
         return out.reshape(batch + (m,))
 
@@ -456,7 +545,7 @@ class TendonRobot:
             return self._l0 - self._shoot(t)[-1, 18:] + t * self._kinv - d
 
         res = np.inf
-        for it in range(DISP_MAXIT):
+        for _it in range(DISP_MAXIT):
             gv = g(tau)
             act = tau > gv
             phi = np.where(act, gv, tau)
@@ -471,19 +560,28 @@ class TendonRobot:
                 col = (g(tp) - gv) / eps
                 Jm[act, j] = col[act]
             tau = np.maximum(tau - np.linalg.solve(Jm, phi), 0.0)
-        raise ConvergenceError(f"tension solve with gravity did not converge (residual {res:.3g} m)", residual=res, iterations=DISP_MAXIT)
+        raise ConvergenceError(
+            f"tension solve with gravity did not converge (residual {res:.3g} m)",
+            residual=res,
+            iterations=DISP_MAXIT,
+        )
 
 
 def _robot_text(name_or_path) -> tuple[str, str]:
     key = str(name_or_path)
     if key in PACKAGED_ROBOTS:
-        return resources.files("riskplan").joinpath("data", PACKAGED_ROBOTS[key]).read_text(encoding="utf-8"), key
+        return resources.files("riskplan").joinpath("data", PACKAGED_ROBOTS[key]).read_text(
+            encoding="utf-8"
+        ), key
     p = Path(key)
     if not p.is_file():
         raise RobotDescriptionError(
-            f"robot: {key!r} is neither a packaged robot ({', '.join(PACKAGED_ROBOTS)}) nor a TOML file", key="robot"
+            f"robot: {key!r} is neither a packaged robot ({', '.join(PACKAGED_ROBOTS)}) nor a TOML file",
+            key="robot",
         )
-    return read_robot_text(p), p.stem  # RobotDescriptionError naming the file if unreadable or not UTF-8
+    return read_robot_text(
+        p
+    ), p.stem  # RobotDescriptionError naming the file if unreadable or not UTF-8
 
 
 def load_robot(name_or_path="paper") -> TendonRobot:

@@ -111,4 +111,12 @@ def rod_tables(theta_c, radius_c, kse, kbt, length: float, n_steps: int) -> RodT
     """:class:`RodTables` from the routing polynomials ``theta_c (m, Kt)``, ``radius_c (m, Kr)``
     (ascending powers of s), the stiffness diagonals and the discretisation."""
     rt, drt, ddrt = tendon_offset_table(theta_c, radius_c, length, n_steps)
-    return RodTables(rt, drt, ddrt, np.ascontiguousarray(kse, dtype=np.float64), np.ascontiguousarray(kbt, dtype=np.float64), float(length), int(n_steps))
+    return RodTables(
+        rt,
+        drt,
+        ddrt,
+        np.ascontiguousarray(kse, dtype=np.float64),
+        np.ascontiguousarray(kbt, dtype=np.float64),
+        float(length),
+        int(n_steps),
+    )

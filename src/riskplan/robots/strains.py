@@ -12,7 +12,6 @@ from numba import njit
 
 from riskplan.robots.linalg6 import chol_factor6, chol_solve6
 
-
 # ----------------------------------------------------------------------------------------
 # Per-tendon terms, shared by the scalar kernels here and the lockstep kernel
 # (``batch_kernel``); compiled inline, so each caller runs the same operations in the same
@@ -144,7 +143,9 @@ def local_jacobian(x, tau, rt, drt, kse, kbt, J):
         t1 = w1 / nw
         t2 = w2 / nw
         sc = ti / nw
-        a00, a11, a22, a01, a02, a12, b00, b01, b02, b10, b11, b12, b20, b21, b22 = tendon_stiffness(sc, t0, t1, t2, row3(rt, i))
+        a00, a11, a22, a01, a02, a12, b00, b01, b02, b10, b11, b12, b20, b21, b22 = (
+            tendon_stiffness(sc, t0, t1, t2, row3(rt, i))
+        )
         J[0, 0] += a00
         J[0, 1] += a01
         J[0, 2] += a02
@@ -262,7 +263,9 @@ def strain_slope(x, tau, rt, drt, ddrt, L, out):
         t0 = w0 / nw
         t1 = w1 / nw
         t2 = w2 / nw
-        c0, c1, c2, c3, c4, c5 = tendon_slope_source(ti, nw, t0, t1, t2, x, row3(rt, i), row3(drt, i), row3(ddrt, i))
+        c0, c1, c2, c3, c4, c5 = tendon_slope_source(
+            ti, nw, t0, t1, t2, x, row3(rt, i), row3(drt, i), row3(ddrt, i)
+        )
         out[0] -= c0
         out[1] -= c1
         out[2] -= c2

@@ -14,7 +14,9 @@ from riskplan.robots.strains import local_jacobian, local_strains_chord, row3, t
 
 
 @njit(cache=True)
-def lengths_and_jacobian(tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl):
+def lengths_and_jacobian(
+    tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl
+):
     """Tendon path lengths ``l (m,)`` and ``dl[i, j] = d l_i / d tau_j`` without external loads.
 
     Uses Simpson's rule on the RK4 nodes; the sensitivity of the local strains is

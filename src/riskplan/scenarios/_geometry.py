@@ -33,12 +33,16 @@ def points_in_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return (np.sum(cond & (x < xc), axis=1) % 2) == 1
 
 
-def segments_intersect(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> np.ndarray:
+def segments_intersect(
+    a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray
+) -> np.ndarray:
     """Proper or touching intersection of every segment ``a (A, 2)`` with every ``b (B, 2)``:
     ``(A, B)`` bool (collinear overlaps count as intersecting)."""
 
     def orient(p, q, r):
-        return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
+        return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (
+            r[..., 0] - p[..., 0]
+        )
 
     A0, A1 = a0[:, None, :], a1[:, None, :]
     B0, B1 = b0[None, :, :], b1[None, :, :]
@@ -124,7 +128,9 @@ class PointLocator:
     one whose smallest coordinate is largest (inside when ``>= -tol``).
     """
 
-    def __init__(self, nodes: np.ndarray, triangles: np.ndarray, cells: int | None = None, tol: float = 1e-10):
+    def __init__(
+        self, nodes: np.ndarray, triangles: np.ndarray, cells: int | None = None, tol: float = 1e-10
+    ):
         nodes = np.asarray(nodes, dtype=np.float64)
         triangles = np.asarray(triangles, dtype=np.int64)
         if cells is None:

@@ -44,16 +44,16 @@ from riskplan._validation import as_array, as_generator, check_range
 from riskplan.errors import InvalidInputError
 
 __all__ = [
+    "FEMScenario",
     "SimParams",
     "SimState",
     "Simulator",
-    "FEMScenario",
-    "frozen_array",
-    "rollout",
     "actuation_noise",
-    "check_control",
     "apply_actuation_noise",
+    "check_control",
+    "frozen_array",
     "gaussian_noise",
+    "rollout",
 ]
 
 
@@ -112,9 +112,13 @@ class SimParams:
         try:
             n = int(self.n_elements)
         except (TypeError, ValueError) as exc:
-            raise InvalidInputError(f"n_elements: expected an integer, got {self.n_elements!r}") from exc
+            raise InvalidInputError(
+                f"n_elements: expected an integer, got {self.n_elements!r}"
+            ) from exc
         if n != self.n_elements or not (8 <= n <= 5000):
-            raise InvalidInputError(f"n_elements: expected an integer in [8, 5000], got {self.n_elements!r}")
+            raise InvalidInputError(
+                f"n_elements: expected an integer in [8, 5000], got {self.n_elements!r}"
+            )
         object.__setattr__(self, "youngs_modulus", e)
         object.__setattr__(self, "poissons_ratio", nu)
         object.__setattr__(self, "force_scale", f)
@@ -123,12 +127,16 @@ class SimParams:
         if self.actuation_cov is not None:
             cov = as_array(self.actuation_cov, "actuation_cov", min_ndim=2)
             if cov.ndim != 2 or cov.shape[0] != cov.shape[1]:
-                raise InvalidInputError(f"actuation_cov: expected a square (m, m) matrix, got shape {cov.shape}")
+                raise InvalidInputError(
+                    f"actuation_cov: expected a square (m, m) matrix, got shape {cov.shape}"
+                )
             if not np.allclose(cov, cov.T, rtol=1e-12, atol=1e-15):
                 raise InvalidInputError("actuation_cov: must be symmetric")
             if np.linalg.eigvalsh(cov).min() < -1e-14 * max(1.0, float(np.abs(cov).max())):
                 raise InvalidInputError("actuation_cov: must be positive semi-definite")
-            object.__setattr__(self, "actuation_cov", tuple(tuple(float(v) for v in row) for row in cov))
+            object.__setattr__(
+                self, "actuation_cov", tuple(tuple(float(v) for v in row) for row in cov)
+            )
 
     def replace(self, **changes) -> SimParams:
         """A copy with some fields changed (validated again)."""
@@ -161,7 +169,9 @@ def actuation_noise(params: SimParams, t: int, m: int) -> np.ndarray | None:
     if factor is None:
         return None
     if factor.shape[0] != m:
-        raise InvalidInputError(f"params.actuation_cov: expected a ({m}, {m}) covariance, got {factor.shape}")
+        raise InvalidInputError(
+            f"params.actuation_cov: expected a ({m}, {m}) covariance, got {factor.shape}"
+        )
     z = np.random.default_rng([params.actuation_seed, int(t)]).standard_normal(m)
     return factor @ z
 
@@ -199,7 +209,11 @@ class SimState:
 
     def arrays(self) -> dict[str, np.ndarray]:
         """All array fields by name (for comparisons and storage)."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if isinstance(getattr(self, f.name), np.ndarray)}
+        return {
+            f.name: getattr(self, f.name)
+            for f in dataclasses.fields(self)
+            if isinstance(getattr(self, f.name), np.ndarray)
+        }
 
     def identical(self, other: SimState) -> bool:
         """Bit-for-bit equality of every field (the snapshot/restore contract)."""
@@ -213,7 +227,6 @@ class SimState:
             elif a != b:
                 return False
         return True
-
 
 
 class FEMScenario:
@@ -283,7 +296,9 @@ class FEMScenario:
 
     def _check_state(self, state, params: SimParams) -> None:
         if not isinstance(state, self.state_type):
-            raise InvalidInputError(f"state: expected a {self.state_type.__name__}, got {type(state).__name__}")
+            raise InvalidInputError(
+                f"state: expected a {self.state_type.__name__}, got {type(state).__name__}"
+            )
         if state.n_elements != params.n_elements:
             raise InvalidInputError(
                 f"state: lives on a {state.n_elements}-element mesh but params.n_elements = {params.n_elements}"
@@ -291,7 +306,9 @@ class FEMScenario:
 
     def _data(self, state):
         if not isinstance(state, self.state_type):
-            raise InvalidInputError(f"state: expected a {self.state_type.__name__}, got {type(state).__name__}")
+            raise InvalidInputError(
+                f"state: expected a {self.state_type.__name__}, got {type(state).__name__}"
+            )
         return self.mesh_data(state.n_elements)
 
     def _points(self, state) -> np.ndarray:
@@ -353,7 +370,9 @@ class Simulator(Protocol):
         ...
 
 
-def rollout(sim: Simulator, state: SimState, controls, params: SimParams | None = None) -> list[SimState]:
+def rollout(
+    sim: Simulator, state: SimState, controls, params: SimParams | None = None
+) -> list[SimState]:
     """Apply ``controls (T, q)`` from ``state``; returns the ``T + 1`` states ``[y_0, ..., y_T]``."""
     u = as_array(controls, "controls", shape=(None, sim.control_dim))
     states = [state]
@@ -373,14 +392,20 @@ def check_control(control, bounds: np.ndarray, name: str = "control") -> np.ndar
         u = None
     # fast path (hot loop of planners): one shape test and one vectorised comparison,
     # which is False for NaN, so every failure takes the slow path with a full message
-    if u is not None and u.shape == (bounds.shape[0],) and ((bounds[:, 0] <= u) & (u <= bounds[:, 1])).all():
+    if (
+        u is not None
+        and u.shape == (bounds.shape[0],)
+        and ((bounds[:, 0] <= u) & (u <= bounds[:, 1])).all()
+    ):
         return u.copy() if u is control else u
     u = as_array(control, name, shape=(bounds.shape[0],))
     check_range(u, name, bounds[:, 0], bounds[:, 1])
     return u  # pragma: no cover - check_range raised
 
 
-def apply_actuation_noise(u: np.ndarray, params: SimParams, t: int, bounds: np.ndarray) -> np.ndarray:
+def apply_actuation_noise(
+    u: np.ndarray, params: SimParams, t: int, bounds: np.ndarray
+) -> np.ndarray:
     """``clip(u + w_t, bounds)``: the control an actuator with noise actually applies.
 
     Clipping models saturation (e.g. a car without reverse cannot drive at negative
@@ -400,4 +425,3 @@ def gaussian_noise(cov: np.ndarray, noise, rng, dim: int, name: str = "noise") -
         return np.zeros(dim)
     gen = as_generator(rng)
     return gen.multivariate_normal(np.zeros(dim), cov, method="cholesky")
-

@@ -62,7 +62,6 @@ class ChestParams:
     def validate(self) -> None:
         import math
         import numbers
-
         from dataclasses import fields
 
         for f in fields(self):
@@ -72,24 +71,43 @@ class ChestParams:
             want_int = f.name in ("n_ribs", "subdivisions", "rib_segments", "rib_sides")
             ok = isinstance(v, numbers.Integral) if want_int else isinstance(v, numbers.Real)
             if isinstance(v, bool) or not ok or (not want_int and not math.isfinite(v)):
-                raise InvalidInputError(f"{f.name}: expected a finite {'integer' if want_int else 'number'}, got {v!r}")
+                raise InvalidInputError(
+                    f"{f.name}: expected a finite {'integer' if want_int else 'number'}, got {v!r}"
+                )
         try:
             a = np.asarray(self.cavity_semi_axes, dtype=float)
         except (TypeError, ValueError) as exc:
-            raise InvalidInputError(f"cavity_semi_axes: expected three positive lengths, got {self.cavity_semi_axes!r}") from exc
+            raise InvalidInputError(
+                f"cavity_semi_axes: expected three positive lengths, got {self.cavity_semi_axes!r}"
+            ) from exc
         if a.shape != (3,) or not np.all(np.isfinite(a)) or np.any(a <= 0):
-            raise InvalidInputError(f"cavity_semi_axes: expected three positive lengths, got {self.cavity_semi_axes}")
-        for name in ("wall_thickness", "port_depth", "rib_spacing", "rib_radius", "spine_radius", "lung_gap", "heart_gap", "diaphragm_gap"):
+            raise InvalidInputError(
+                f"cavity_semi_axes: expected three positive lengths, got {self.cavity_semi_axes}"
+            )
+        for name in (
+            "wall_thickness",
+            "port_depth",
+            "rib_spacing",
+            "rib_radius",
+            "spine_radius",
+            "lung_gap",
+            "heart_gap",
+            "diaphragm_gap",
+        ):
             if not getattr(self, name) > 0:
                 raise InvalidInputError(f"{name}: expected > 0, got {getattr(self, name)}")
         if abs(self.insertion_height) >= 0.8 * a[2]:
-            raise InvalidInputError(f"insertion_height: must lie within +-0.8 of the cavity half-height {a[2]}")
+            raise InvalidInputError(
+                f"insertion_height: must lie within +-0.8 of the cavity half-height {a[2]}"
+            )
         if not 0 <= self.shape_noise < 0.3:
             raise InvalidInputError(f"shape_noise: expected in [0, 0.3), got {self.shape_noise}")
         if not 1 <= self.subdivisions <= 5:
             raise InvalidInputError(f"subdivisions: expected 1..5, got {self.subdivisions}")
         if self.n_ribs < 0 or self.rib_segments < 8 or self.rib_sides < 3:
-            raise InvalidInputError("n_ribs >= 0, rib_segments >= 8 and rib_sides >= 3 are required")
+            raise InvalidInputError(
+                "n_ribs >= 0, rib_segments >= 8 and rib_sides >= 3 are required"
+            )
 
 
 @dataclass
@@ -115,7 +133,9 @@ class Chest:
 
     def to_base(self, points_world) -> np.ndarray:
         """World points ``(..., 3)`` to the robot base frame: ``R^T (x - p)``."""
-        return (np.asarray(points_world, dtype=np.float64) - self.base_position) @ self.base_rotation
+        return (
+            np.asarray(points_world, dtype=np.float64) - self.base_position
+        ) @ self.base_rotation
 
     @property
     def base_pose(self):
@@ -130,7 +150,9 @@ class Chest:
         :func:`riskplan.collision.frames.load_environment` gives back :attr:`base_environment`."""
         from riskplan.collision.frames import save_environment
 
-        return save_environment(self.environment, path, base_pose=self.base_pose, metadata=self.metadata())
+        return save_environment(
+            self.environment, path, base_pose=self.base_pose, metadata=self.metadata()
+        )
 
     def metadata(self) -> dict:
         return {
@@ -224,7 +246,9 @@ def build_chest(seed: int = 0, params: ChestParams | None = None, **overrides) -
         off = params.rib_radius - params.rib_protrusion
         phi = np.linspace(0, 2 * np.pi, params.rib_segments, endpoint=False)
         # offset along the ellipse normal (approximately: scale each semi-axis by the same margin)
-        curve = np.column_stack([(A * s + off) * np.cos(phi), (B * s + off) * np.sin(phi), np.full_like(phi, z)])
+        curve = np.column_stack(
+            [(A * s + off) * np.cos(phi), (B * s + off) * np.sin(phi), np.full_like(phi, z)]
+        )
         meshes[f"rib{i}"] = _tube_loop(curve, params.rib_radius, params.rib_sides)
 
     # vertebral column
@@ -266,7 +290,10 @@ def build_chest(seed: int = 0, params: ChestParams | None = None, **overrides) -
     ray = -direction
     t_in = 1.0 / np.sqrt((ray[0] / (A * s)) ** 2 + (ray[1] / (B * s)) ** 2)
     s_out = np.sqrt(1 - (h / (C + params.wall_thickness)) ** 2)
-    t_out = 1.0 / np.sqrt((ray[0] / ((A + params.wall_thickness) * s_out)) ** 2 + (ray[1] / ((B + params.wall_thickness) * s_out)) ** 2)
+    t_out = 1.0 / np.sqrt(
+        (ray[0] / ((A + params.wall_thickness) * s_out)) ** 2
+        + (ray[1] / ((B + params.wall_thickness) * s_out)) ** 2
+    )
     inner_point = np.array([0.0, 0.0, h]) + t_in * ray
     insertion_point = np.array([0.0, 0.0, h]) + t_out * ray
     base_position = inner_point + params.port_depth * direction
@@ -295,8 +322,14 @@ def chest_figure(chest: Chest, robot_points=None):
     import matplotlib.pyplot as plt
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    colors = {"body_wall": (0.85, 0.7, 0.6, 0.08), "spine": (0.9, 0.9, 0.8, 0.6), "diaphragm": (0.7, 0.3, 0.3, 0.5),
-              "lung_right": (0.9, 0.6, 0.65, 0.5), "lung_left": (0.9, 0.6, 0.65, 0.5), "heart": (0.7, 0.1, 0.1, 0.6)}
+    colors = {
+        "body_wall": (0.85, 0.7, 0.6, 0.08),
+        "spine": (0.9, 0.9, 0.8, 0.6),
+        "diaphragm": (0.7, 0.3, 0.3, 0.5),
+        "lung_right": (0.9, 0.6, 0.65, 0.5),
+        "lung_left": (0.9, 0.6, 0.65, 0.5),
+        "heart": (0.7, 0.1, 0.1, 0.6),
+    }
     fig = plt.figure(figsize=(11, 5))
     for k, (title, exterior) in enumerate((("exterior", True), ("interior", False))):
         ax = fig.add_subplot(1, 2, k + 1, projection="3d")
@@ -307,7 +340,9 @@ def chest_figure(chest: Chest, robot_points=None):
             if exterior:
                 col = (0.85, 0.7, 0.6, 0.35)
             tri = m.vertices[m.faces]
-            ax.add_collection3d(Poly3DCollection(tri, facecolor=col, edgecolor=(0, 0, 0, 0.03), linewidth=0.1))
+            ax.add_collection3d(
+                Poly3DCollection(tri, facecolor=col, edgecolor=(0, 0, 0, 0.03), linewidth=0.1)
+            )
         p = chest.insertion_point
         ax.scatter(*p, color="red", s=60)
         if robot_points is not None and not exterior:
@@ -333,13 +368,42 @@ def chest_plotly(chest: Chest, robot_points=None):
     data = []
     for name, m in chest.meshes.items():
         V, F = m.vertices, m.faces
-        data.append(go.Mesh3d(x=V[:, 0], y=V[:, 1], z=V[:, 2], i=F[:, 0], j=F[:, 1], k=F[:, 2], name=name,
-                              opacity=0.15 if name == "body_wall" else 0.6, showlegend=True))
+        data.append(
+            go.Mesh3d(
+                x=V[:, 0],
+                y=V[:, 1],
+                z=V[:, 2],
+                i=F[:, 0],
+                j=F[:, 1],
+                k=F[:, 2],
+                name=name,
+                opacity=0.15 if name == "body_wall" else 0.6,
+                showlegend=True,
+            )
+        )
     p = chest.insertion_point
-    data.append(go.Scatter3d(x=[p[0]], y=[p[1]], z=[p[2]], mode="markers", marker=dict(size=6, color="red"), name="insertion"))
+    data.append(
+        go.Scatter3d(
+            x=[p[0]],
+            y=[p[1]],
+            z=[p[2]],
+            mode="markers",
+            marker=dict(size=6, color="red"),
+            name="insertion",
+        )
+    )
     if robot_points is not None:
         r = np.asarray(robot_points)
-        data.append(go.Scatter3d(x=r[:, 0], y=r[:, 1], z=r[:, 2], mode="markers", marker=dict(size=1.5, color="blue"), name="robot"))
+        data.append(
+            go.Scatter3d(
+                x=r[:, 0],
+                y=r[:, 1],
+                z=r[:, 2],
+                mode="markers",
+                marker=dict(size=1.5, color="blue"),
+                name="robot",
+            )
+        )
     fig = go.Figure(data=data)
     fig.update_layout(scene=dict(aspectmode="data"), title="procedural chest cavity")
     return fig

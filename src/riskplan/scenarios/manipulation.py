@@ -45,7 +45,7 @@ from riskplan.scenarios.base import (
     gaussian_noise,
 )
 
-__all__ = ["ManipulationConfig", "ManipulationState", "ManipulationScenario"]
+__all__ = ["ManipulationConfig", "ManipulationScenario", "ManipulationState"]
 
 
 def _default_outline():
@@ -66,7 +66,9 @@ class ManipulationConfig:
 
     outline: np.ndarray = field(default_factory=_default_outline)
     fixed_edge: int = 1
-    manipulators: np.ndarray = field(default_factory=lambda: np.array([[0.0, 0.3], [0.0, 0.8], [0.5, 1.0]]))
+    manipulators: np.ndarray = field(
+        default_factory=lambda: np.array([[0.0, 0.3], [0.0, 0.8], [0.5, 1.0]])
+    )
     target: tuple[float, float] = (0.45, 0.5)
     goal_center: tuple[float, float] = (0.33, 0.3)
     goal_radius: float = 0.04
@@ -84,9 +86,17 @@ class ManipulationConfig:
             raise InvalidInputError("outline: need at least 3 vertices")
         object.__setattr__(self, "outline", frozen_array(outline))
         if not 0 <= int(self.fixed_edge) < len(outline):
-            raise InvalidInputError(f"fixed_edge: expected an index in [0, {len(outline) - 1}], got {self.fixed_edge}")
-        object.__setattr__(self, "manipulators", frozen_array(as_array(self.manipulators, "manipulators", shape=(None, 2))))
-        object.__setattr__(self, "obstacle", frozen_array(as_array(self.obstacle, "obstacle", shape=(None, 2))))
+            raise InvalidInputError(
+                f"fixed_edge: expected an index in [0, {len(outline) - 1}], got {self.fixed_edge}"
+            )
+        object.__setattr__(
+            self,
+            "manipulators",
+            frozen_array(as_array(self.manipulators, "manipulators", shape=(None, 2))),
+        )
+        object.__setattr__(
+            self, "obstacle", frozen_array(as_array(self.obstacle, "obstacle", shape=(None, 2)))
+        )
         as_array(self.target, "target", shape=(2,))
         as_array(self.goal_center, "goal_center", shape=(2,))
         for name in ("goal_radius", "patch_radius", "f_max", "sensing_std"):
@@ -112,7 +122,9 @@ class ManipulationConfig:
         boundary (the outline without the fixed edge), away from its ends."""
         n = len(self.outline)
         i0 = (int(self.fixed_edge) + 1) % n
-        chain = np.array([self.outline[(i0 + k) % n] for k in range(n)])  # free part: chain[0] .. chain[n-1]
+        chain = np.array(
+            [self.outline[(i0 + k) % n] for k in range(n)]
+        )  # free part: chain[0] .. chain[n-1]
         seg = np.diff(chain, axis=0)
         length = np.sqrt((seg**2).sum(1))
         cum = np.concatenate([[0.0], np.cumsum(length)])
@@ -168,10 +180,19 @@ class _MeshData:
         scale = float(np.ptp(cfg.outline, axis=0).max())
         self.mesh = mesh
         self.fixed = _nodes_on_segment(mesh.nodes, cfg.fixed_segment, 1e-9 * scale)
-        W = np.stack([patch_weights(mesh, c, cfg.patch_radius, on="boundary") for c in cfg.manipulators], axis=1)
+        W = np.stack(
+            [patch_weights(mesh, c, cfg.patch_radius, on="boundary") for c in cfg.manipulators],
+            axis=1,
+        )
         W[self.fixed] = 0.0  # load on the support is taken by it
         self.W = W
-        pts = np.concatenate([np.asarray(cfg.target, dtype=np.float64)[None], cfg.boundary_points(), cfg.manipulators])
+        pts = np.concatenate(
+            [
+                np.asarray(cfg.target, dtype=np.float64)[None],
+                cfg.boundary_points(),
+                cfg.manipulators,
+            ]
+        )
         self.interp = locate(mesh, pts)
         self.loop = _boundary_loop(mesh.boundary_edges)
         nb = cfg.n_boundary
@@ -191,7 +212,9 @@ class ManipulationScenario(FEMScenario):
     name = "manipulation"
     state_type = ManipulationState
 
-    def __init__(self, config: ManipulationConfig | None = None, distribution=None, cache_size: int = 16):
+    def __init__(
+        self, config: ManipulationConfig | None = None, distribution=None, cache_size: int = 16
+    ):
         super().__init__(config or ManipulationConfig(), distribution, cache_size)
         cfg = self.config
         m = len(cfg.manipulators)
@@ -232,7 +255,10 @@ class ManipulationScenario(FEMScenario):
     def actuation_cov(self) -> tuple:
         """Default actuation noise for this scenario: ``(0.1 f_max)²`` per component."""
         s2 = (0.1 * self.config.f_max) ** 2
-        return tuple(tuple(s2 if i == j else 0.0 for j in range(self.control_dim)) for i in range(self.control_dim))
+        return tuple(
+            tuple(s2 if i == j else 0.0 for j in range(self.control_dim))
+            for i in range(self.control_dim)
+        )
 
     def _make_mesh_data(self, n_elements: int) -> _MeshData:
         return _MeshData(self.config, n_elements)
@@ -261,7 +287,9 @@ class ManipulationScenario(FEMScenario):
         (what ``state.displacement`` balances)."""
         return self.mesh_data(state.n_elements).W @ state.forces
 
-    def step(self, state: ManipulationState, control, params: SimParams | None = None) -> ManipulationState:
+    def step(
+        self, state: ManipulationState, control, params: SimParams | None = None
+    ) -> ManipulationState:
         """``y_{t+1} = g(y_t, u_t, s)`` (paper eq. 1): quasi-static neo-Hookean equilibrium
         under the manipulator forces ``control (6,)`` (× ``force_scale``, plus actuation
         noise if ``params`` has some), warm-started from ``state``.
@@ -277,7 +305,9 @@ class ManipulationScenario(FEMScenario):
         forces = params.force_scale * u.reshape(-1, 2)
         f = self.mesh_data(params.n_elements).W @ forces
         try:
-            disp, info = self.model(params).solve_with_info(f, state.displacement, load_steps=self.config.load_steps)
+            disp, _info = self.model(params).solve_with_info(
+                f, state.displacement, load_steps=self.config.load_steps
+            )
         except ElementInversionError as exc:
             raise ElementInversionError(
                 f"manipulation step t={state.t} -> {state.t + 1} with forces {forces.round(4).tolist()}: {exc}",
@@ -292,7 +322,9 @@ class ManipulationScenario(FEMScenario):
             ) from exc
         if not np.all(np.isfinite(disp)):  # pragma: no cover - the solver raises first
             raise ConvergenceError(f"manipulation step t={state.t}: non-finite displacement")
-        return ManipulationState(t=state.t + 1, displacement=disp, n_elements=state.n_elements, forces=forces)
+        return ManipulationState(
+            t=state.t + 1, displacement=disp, n_elements=state.n_elements, forces=forces
+        )
 
     def reduced(self, state: ManipulationState) -> np.ndarray:
         """``x = (p_target, P_boundary)`` ``(2 + 2 n_boundary,)`` (paper V-B)."""
@@ -301,7 +333,9 @@ class ManipulationScenario(FEMScenario):
     def observe(self, x, noise=None, rng=None) -> np.ndarray:
         """``z = H x + n`` (paper eq. 3): the boundary points only."""
         x = as_array(x, "x", shape=(self.state_dim,))
-        return self.observation_matrix @ x + gaussian_noise(self.sensing_cov, noise, rng, self.obs_dim)
+        return self.observation_matrix @ x + gaussian_noise(
+            self.sensing_cov, noise, rng, self.obs_dim
+        )
 
     # ---- geometry of a state ------------------------------------------------------------
     def target(self, state) -> np.ndarray:

@@ -52,7 +52,7 @@ from riskplan.scenarios.base import (
     gaussian_noise,
 )
 
-__all__ = ["NeedleConfig", "NeedleState", "NeedleScenario", "car_step"]
+__all__ = ["NeedleConfig", "NeedleScenario", "NeedleState", "car_step"]
 
 
 def car_step(pose, v, phi, *, tau: float = 0.1, r_min: float = 0.25, phi_max: float = math.pi / 3):
@@ -65,7 +65,11 @@ def car_step(pose, v, phi, *, tau: float = 0.1, r_min: float = 0.25, phi_max: fl
         th = float(pose[2])
         s = tau * float(v)
         return np.array(
-            [pose[0] + s * math.cos(th), pose[1] + s * math.sin(th), th + s * math.tan(phi) / (r_min * math.tan(phi_max))]
+            [
+                pose[0] + s * math.cos(th),
+                pose[1] + s * math.sin(th),
+                th + s * math.tan(phi) / (r_min * math.tan(phi_max)),
+            ]
         )
     pose = np.asarray(pose, dtype=np.float64)
     th = pose[..., 2]
@@ -119,14 +123,26 @@ class NeedleConfig:
     plane: str = "stress"
 
     def __post_init__(self):
-        for name in ("width", "height", "goal_radius", "v_max", "phi_max", "tau", "r_min", "sensing_std"):
+        for name in (
+            "width",
+            "height",
+            "goal_radius",
+            "v_max",
+            "phi_max",
+            "tau",
+            "r_min",
+            "sensing_std",
+        ):
             v = float(getattr(self, name))
             if not math.isfinite(v) or v <= 0:
                 raise InvalidInputError(f"{name}: must be finite and > 0, got {v!r}")
         if self.phi_max >= math.pi / 2:
             raise InvalidInputError(f"phi_max: must be < pi/2, got {self.phi_max}")
         as_array(self.start, "start", shape=(3,))
-        obs = tuple(frozen_array(as_array(p, f"obstacles[{i}]", shape=(None, 2))) for i, p in enumerate(self.obstacles))
+        obs = tuple(
+            frozen_array(as_array(p, f"obstacles[{i}]", shape=(None, 2)))
+            for i, p in enumerate(self.obstacles)
+        )
         object.__setattr__(self, "obstacles", obs)
 
     @property
@@ -147,9 +163,13 @@ class _MeshData:
 
         mesh = mesh_polygon(cfg.corners, n_elements)
         self.mesh = mesh
-        self.base = LinearElasticModel(mesh, Material(50.0, 0.4, plane=cfg.plane), mesh.vertex_nodes)
+        self.base = LinearElasticModel(
+            mesh, Material(50.0, 0.4, plane=cfg.plane), mesh.vertex_nodes
+        )
         self.locator = geo.PointLocator(mesh.nodes, mesh.triangles)
-        pts = np.concatenate([*cfg.obstacles, cfg.goal_polygon, np.asarray(cfg.goal_center, dtype=np.float64)[None]])
+        pts = np.concatenate(
+            [*cfg.obstacles, cfg.goal_polygon, np.asarray(cfg.goal_center, dtype=np.float64)[None]]
+        )
         self.interp = locate(mesh, pts)
         self.obstacle_slices = np.cumsum([0] + [len(p) for p in cfg.obstacles])
         k = int(self.obstacle_slices[-1])
@@ -172,7 +192,9 @@ class _NeedleModel:
         from riskplan.deformable import Material
 
         self.data = data
-        self.model = data.base.with_material(Material(params.youngs_modulus, params.poissons_ratio, plane=plane))
+        self.model = data.base.with_material(
+            Material(params.youngs_modulus, params.poissons_ratio, plane=plane)
+        )
         n = 2 * data.mesh.n_nodes
         free = self.model.free_dofs
         self.n_dofs = n
@@ -219,7 +241,9 @@ class NeedleScenario(FEMScenario):
 
     def __init__(self, config: NeedleConfig | None = None, distribution=None, cache_size: int = 32):
         super().__init__(config or NeedleConfig(), distribution, cache_size)
-        self._bounds = np.array([[0.0, self.config.v_max], [-self.config.phi_max, self.config.phi_max]])
+        self._bounds = np.array(
+            [[0.0, self.config.v_max], [-self.config.phi_max, self.config.phi_max]]
+        )
         self._bounds.setflags(write=False)
         H = np.zeros((2, 3))
         H[0, 0] = H[1, 1] = 1.0
@@ -257,7 +281,9 @@ class NeedleScenario(FEMScenario):
         d = self.mesh_data(params.n_elements)
         p = self.config.start if pose is None else pose
         p = as_array(p, "pose", shape=(3,))
-        return NeedleState(t=0, displacement=np.zeros((d.mesh.n_nodes, 2)), n_elements=params.n_elements, pose=p)
+        return NeedleState(
+            t=0, displacement=np.zeros((d.mesh.n_nodes, 2)), n_elements=params.n_elements, pose=p
+        )
 
     def step(self, state: NeedleState, control, params: SimParams | None = None) -> NeedleState:
         """``y_{t+1} = g(y_t, u_t, s)`` (paper eq. 1 with the V-A car and a linear FEM).

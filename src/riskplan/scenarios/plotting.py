@@ -13,7 +13,7 @@ import numpy as np
 
 from riskplan.errors import require
 
-__all__ = ["draw_frame", "save_frames", "save_gif", "figure_for", "frame_indices"]
+__all__ = ["draw_frame", "figure_for", "frame_indices", "save_frames", "save_gif"]
 
 
 def _triangles(sim, state):
@@ -37,7 +37,9 @@ def figure_for(sim, size: float = 4.8):
     return fig, ax
 
 
-def draw_frame(ax, sim, states, k: int | None = None, *, title: str | None = None, show_undeformed: bool = True):
+def draw_frame(
+    ax, sim, states, k: int | None = None, *, title: str | None = None, show_undeformed: bool = True
+):
     """Draw ``states[k]`` (default: the last) of scenario ``sim`` on ``ax``.
 
     Shows the deformed mesh (grey), the undeformed outline (dashed), obstacles (dark
@@ -80,7 +82,9 @@ def draw_frame(ax, sim, states, k: int | None = None, *, title: str | None = Non
         if np.any(st.forces):
             scale = 0.1 / max(sim.config.f_max, 1e-12)
             for p, f in zip(mp, st.forces):
-                ax.arrow(p[0], p[1], scale * f[0], scale * f[1], width=0.004, color="tab:red", alpha=0.8)
+                ax.arrow(
+                    p[0], p[1], scale * f[0], scale * f[1], width=0.004, color="tab:red", alpha=0.8
+                )
     xl, yl = _limits(sim)
     ax.set_xlim(*xl)
     ax.set_ylim(*yl)
@@ -99,7 +103,16 @@ def frame_indices(n_states: int, max_frames: int) -> list[int]:
     return idx.tolist()
 
 
-def save_frames(sim, states, out_dir, *, prefix: str = "frame", max_frames: int = 60, dpi: int = 90, on_frame=None) -> list[Path]:
+def save_frames(
+    sim,
+    states,
+    out_dir,
+    *,
+    prefix: str = "frame",
+    max_frames: int = 60,
+    dpi: int = 90,
+    on_frame=None,
+) -> list[Path]:
     """Write PNG frames ``out_dir/{prefix}_{k:04d}.png`` of (at most ``max_frames``) states."""
     plt = require("matplotlib.pyplot", "viz")
     out = Path(out_dir)
@@ -131,7 +144,9 @@ def save_gif(sim, states, path, *, max_frames: int = 60, fps: int = 8, dpi: int 
     fig, ax = figure_for(sim)
     writer = PillowWriter(fps=fps)
     try:
-        with atomic_path(path, suffix=".gif") as tmp:  # PillowWriter picks the format from the suffix
+        with atomic_path(
+            path, suffix=".gif"
+        ) as tmp:  # PillowWriter picks the format from the suffix
             with writer.saving(fig, str(tmp), dpi=dpi):
                 for k in frame_indices(len(states), max_frames):
                     draw_frame(ax, sim, states, k)

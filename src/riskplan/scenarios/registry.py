@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from riskplan.errors import InvalidInputError
 
-__all__ = ["make_scenario", "SCENARIO_NAMES"]
+__all__ = ["SCENARIO_NAMES", "make_scenario"]
 
 #: Names accepted by :func:`make_scenario` (and the CLI ``--scenario`` option).
 SCENARIO_NAMES = ("needle", "manipulation")
@@ -31,5 +31,7 @@ def make_scenario(name: str, case: str = "nominal"):
         sim = ManipulationScenario()
         sim.distribution = get_case(case, sim.nominal_params, actuation_cov=sim.actuation_cov())
     else:
-        raise InvalidInputError(f"scenario: expected one of {', '.join(SCENARIO_NAMES)}, got {name!r}")
+        raise InvalidInputError(
+            f"scenario: expected one of {', '.join(SCENARIO_NAMES)}, got {name!r}"
+        )
     return sim

@@ -19,16 +19,16 @@ from riskplan.scenarios.base import (  # noqa: F401
     gaussian_noise,
     rollout,
 )
-from riskplan.scenarios.registry import SCENARIO_NAMES, make_scenario  # noqa: F401
+from riskplan.scenarios.registry import SCENARIO_NAMES, make_scenario
 
 __all__ = [
+    "SCENARIO_NAMES",
+    "FEMScenario",
     "SimParams",
     "SimState",
     "Simulator",
-    "FEMScenario",
-    "frozen_array",
-    "rollout",
     "actuation_noise",
+    "frozen_array",
     "make_scenario",
-    "SCENARIO_NAMES",
+    "rollout",
 ]

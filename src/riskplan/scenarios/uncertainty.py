@@ -38,13 +38,13 @@ from riskplan.errors import InvalidInputError
 from riskplan.scenarios.base import SimParams
 
 __all__ = [
-    "ParamDistribution",
-    "Nominal",
-    "MaterialUncertainty",
-    "ActuationNoise",
-    "MeshUncertainty",
-    "InteractionForceUncertainty",
     "CASE_NAMES",
+    "ActuationNoise",
+    "InteractionForceUncertainty",
+    "MaterialUncertainty",
+    "MeshUncertainty",
+    "Nominal",
+    "ParamDistribution",
     "get_case",
     "needle_actuation_cov",
 ]
@@ -98,13 +98,17 @@ class Nominal(ParamDistribution):
     name: str = "nominal"
 
 
-def _truncated_normal(gen: np.random.Generator, mean: float, var: float, low: float, high: float) -> float:
+def _truncated_normal(
+    gen: np.random.Generator, mean: float, var: float, low: float, high: float
+) -> float:
     sd = math.sqrt(var)
     for _ in range(10_000):
         v = mean + sd * float(gen.standard_normal())
         if low < v < high:
             return v
-    raise InvalidInputError(f"cannot draw from N({mean}, {var}) inside ({low}, {high}): range too unlikely")
+    raise InvalidInputError(
+        f"cannot draw from N({mean}, {var}) inside ({low}, {high}): range too unlikely"
+    )
 
 
 @dataclass(frozen=True)
@@ -120,7 +124,9 @@ class MaterialUncertainty(ParamDistribution):
 
     def __post_init__(self):
         if not (self.youngs_mean > 0 and self.youngs_var >= 0 and self.poisson_var >= 0):
-            raise InvalidInputError("MaterialUncertainty: need youngs_mean > 0 and non-negative variances")
+            raise InvalidInputError(
+                "MaterialUncertainty: need youngs_mean > 0 and non-negative variances"
+            )
         if not -1.0 < self.poisson_mean < 0.5:
             raise InvalidInputError(f"poisson_mean: must lie in (-1, 0.5), got {self.poisson_mean}")
 
@@ -147,7 +153,9 @@ class MaterialUncertainty(ParamDistribution):
     @classmethod
     def high(cls, base: SimParams | None = None) -> MaterialUncertainty:
         """Paper case 2: E ~ N(50, 75), ν ~ N(0.4, 4e-4)."""
-        return cls(base=base or SimParams(), name="material-high", youngs_var=75.0, poisson_var=4e-4)
+        return cls(
+            base=base or SimParams(), name="material-high", youngs_var=75.0, poisson_var=4e-4
+        )
 
 
 @dataclass(frozen=True)
@@ -174,7 +182,9 @@ class ActuationNoise(ParamDistribution):
         return np.asarray(self.cov)
 
     def _draw(self, gen):
-        return self.base.replace(actuation_cov=self.cov, actuation_seed=int(gen.integers(0, 2**63 - 1)))
+        return self.base.replace(
+            actuation_cov=self.cov, actuation_seed=int(gen.integers(0, 2**63 - 1))
+        )
 
 
 @dataclass(frozen=True)
@@ -188,7 +198,9 @@ class MeshUncertainty(ParamDistribution):
 
     def __post_init__(self):
         if not (8 <= self.low <= self.high <= 5000):
-            raise InvalidInputError(f"MeshUncertainty: need 8 <= low <= high <= 5000, got {self.low}, {self.high}")
+            raise InvalidInputError(
+                f"MeshUncertainty: need 8 <= low <= high <= 5000, got {self.low}, {self.high}"
+            )
 
     @property
     def mean(self) -> float:
@@ -213,7 +225,9 @@ class InteractionForceUncertainty(ParamDistribution):
 
     def __post_init__(self):
         if not (0.0 <= self.low <= self.high and math.isfinite(self.high)):
-            raise InvalidInputError(f"InteractionForceUncertainty: need 0 <= low <= high, got {self.low}, {self.high}")
+            raise InvalidInputError(
+                f"InteractionForceUncertainty: need 0 <= low <= high, got {self.low}, {self.high}"
+            )
 
     @property
     def mean(self) -> float:
@@ -241,7 +255,9 @@ def get_case(name: str, base: SimParams | None = None, actuation_cov=None) -> Pa
     if name == "material-high":
         return MaterialUncertainty.high(base)
     if name == "actuation":
-        return ActuationNoise(base=base, cov=needle_actuation_cov() if actuation_cov is None else actuation_cov)
+        return ActuationNoise(
+            base=base, cov=needle_actuation_cov() if actuation_cov is None else actuation_cov
+        )
     if name == "mesh":
         return MeshUncertainty(base=base)
     if name == "force":

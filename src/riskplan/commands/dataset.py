@@ -82,11 +82,11 @@ def summarize(path) -> dict:
 
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
-    sub = typer.Typer(
-        help="Point-cloud data sets by the MDN paper's protocol (generate, inspect).",
-        no_args_is_help=True,
+    from riskplan.commands._shared import add_group
+
+    sub = add_group(
+        app, "dataset", "Point-cloud data sets by the MDN paper's protocol (generate, inspect)."
     )
-    app.add_typer(sub, name="dataset")
 
     @sub.command("generate")
     def generate(
@@ -111,7 +111,7 @@ def register(app: typer.Typer) -> None:
         """Generate a data set (resumable: rerun the same command after an interruption)."""
         import time
 
-        from riskplan.commands._progress import progress_bar, stop_interrupted
+        from riskplan.commands._shared import progress_bar, stop_interrupted
         from riskplan.datasets import generate_dataset, get_protocol
         from riskplan.errors import InvalidInputError
         from riskplan.robots import load_robot

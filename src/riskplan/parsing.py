@@ -214,7 +214,7 @@ def _text_rows(text: str, name: str, filename: str) -> list[list[float]]:
         line = line.strip()
         if not line or line.startswith("#"):
             continue
-        fields = line.split(",")
+        fields = line.replace(";", ",").split(",")
         if not rows and not header_seen and not any(_is_number(f) for f in fields):
             header_seen = True  # one header line (no field is a number) before the data
             continue

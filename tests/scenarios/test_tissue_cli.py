@@ -9,8 +9,8 @@ import pytest
 from typer.testing import CliRunner
 
 from riskplan.cli import app
-from riskplan.scenarios.controls import read_controls
 from riskplan.errors import DataFormatError, InvalidInputError
+from riskplan.scenarios.controls import read_controls
 
 runner = CliRunner()
 

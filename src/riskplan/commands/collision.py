@@ -12,11 +12,11 @@ from pathlib import Path
 
 import typer
 
+from riskplan.commands._shared import add_group, base_pose_option
+
 
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
-    from riskplan.commands._shared import add_group
-
     env_app = add_group(app, "env", "Build obstacle environments (meshes) for planning.")
 
     @env_app.command("chest")
@@ -74,11 +74,7 @@ def register(app: typer.Typer) -> None:
             "--env",
             help="'chest' (procedural) or a mesh file; its frame comes from the sidecar FILE.json that `riskplan env chest` writes, or from --base-pose.",
         ),
-        base_pose: str = typer.Option(
-            None,
-            "--base-pose",
-            help="Robot base in the mesh's frame: x,y,z,qw,qx,qy,qz (m, quaternion), a JSON file with base_position/base_rotation, or 'identity' (mesh already in the base frame). Overrides the sidecar.",
-        ),
+        base_pose: str = base_pose_option(),
         displacements: str = typer.Option(
             None,
             "--displacements",

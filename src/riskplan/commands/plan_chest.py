@@ -7,6 +7,8 @@ from pathlib import Path
 
 import typer
 
+from riskplan.commands._shared import base_pose_option
+
 
 def _check_finite(**values):
     import math
@@ -38,11 +40,7 @@ def register(plan_app: typer.Typer) -> None:
             "--env",
             help="Patient mesh (STL/OBJ/PLY); its frame comes from the sidecar FILE.json that `riskplan env chest` writes, or from --base-pose. Default: the procedural chest.",
         ),
-        base_pose: str = typer.Option(
-            None,
-            "--base-pose",
-            help="Robot base in the mesh's frame: x,y,z,qw,qx,qy,qz (m, quaternion), a JSON file with base_position/base_rotation, or 'identity' (mesh already in the base frame). Overrides the sidecar.",
-        ),
+        base_pose: str = base_pose_option(),
         chest_seed: int = typer.Option(
             0, "--chest-seed", help="Seed of the procedural chest's organ shapes."
         ),

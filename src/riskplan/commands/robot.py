@@ -16,6 +16,12 @@ from pathlib import Path
 
 import typer
 
+from riskplan.commands._shared import add_group
+
+_ROBOT = typer.Option(
+    "paper", "--robot", help="Packaged robot name ('paper') or a robot TOML file."
+)
+
 
 def _finite_or_none(value):
     """``value`` with every non-finite float (``inf``, ``nan``) replaced by ``None``, recursively."""
@@ -35,15 +41,11 @@ def _dumps(value) -> str:
 
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
-    from riskplan.commands._shared import add_group
-
     sub = add_group(app, "robot", "Tendon-driven continuum robots: shapes and descriptions.")
 
     @sub.command("shape")
     def shape(
-        robot: str = typer.Option(
-            "paper", "--robot", help="Packaged robot name ('paper') or a robot TOML file."
-        ),
+        robot: str = _ROBOT,
         displacements: str = typer.Option(
             None,
             "--displacements",
@@ -103,9 +105,7 @@ def register(app: typer.Typer) -> None:
 
     @sub.command("info")
     def info(
-        robot: str = typer.Option(
-            "paper", "--robot", help="Packaged robot name ('paper') or a robot TOML file."
-        ),
+        robot: str = _ROBOT,
         as_json: bool = typer.Option(
             False,
             "--json",

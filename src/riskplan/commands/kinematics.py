@@ -1,6 +1,11 @@
 """`riskplan` subcommands for the kinematics area: train, predict, sweep, evaluate.
 
 Heavy imports (torch, h5py, matplotlib) stay inside the commands.
+
+``train`` and ``sweep`` declare the same training options (``_BATCH_SIZE`` ... ``_SEED``,
+shared objects, so one default and one help text each) and build their ``TrainConfig`` with
+one helper, :func:`_config`. Their signatures still list those options one by one on
+purpose: typer reads a command's options from its signature and has no option groups.
 """
 
 from __future__ import annotations

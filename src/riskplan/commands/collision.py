@@ -104,7 +104,6 @@ def register(app: typer.Typer) -> None:
         json_out: bool = typer.Option(False, "--json", help="Print JSON."),
     ) -> None:
         """P(collision) of the robot's geometry distribution at given configurations."""
-
         from riskplan.collision import monte_carlo_probability, probability_of_collision
         from riskplan.errors import InvalidInputError
         from riskplan.parsing import parse_numbers, parse_rows

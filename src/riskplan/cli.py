@@ -15,6 +15,8 @@ from pathlib import Path
 
 import typer
 
+from riskplan.commands._shared import workers_option
+
 app = typer.Typer(
     name="riskplan",
     help="Risk-aware motion planning for medical robots.",
@@ -64,10 +66,10 @@ def demo(
         Path("demo-out"), "--out", "-o", help="Folder for report.html and figures."
     ),
     seed: int = typer.Option(0, min=0, help="Master seed."),
-    workers: int = typer.Option(0, min=0, help="Worker processes (0: one per core)."),
+    workers: int = workers_option(),
 ) -> None:
     """Run the main job on embedded defaults and write OUT/report.html."""
-    from riskplan.commands._progress import progress_bar
+    from riskplan.commands._shared import progress_bar
     from riskplan.experiments.demo import run_demo
 
     with progress_bar() as bar:
@@ -102,8 +104,11 @@ def bench(
         raise typer.BadParameter(
             f"unknown area {area!r}; expected one of {', '.join(BENCH_AREAS)}", param_hint="AREA"
         )
-    _limit_torch_threads()
+    import torch
+
     from riskplan.bench import machine_info
+
+    torch.set_num_threads(1)  # one thread each is faster on few shared cores (_setup_threads)
 
     mod = importlib.import_module(f"riskplan.bench.{area.replace('-', '_')}")
     figures = dict(mod.run(quick=quick))
@@ -131,15 +136,6 @@ def _flat_items(d: dict, prefix: str = ""):
             yield from _flat_items(v, f"{prefix}{k}.")
         else:
             yield f"{prefix}{k}", v
-
-
-def _limit_torch_threads() -> None:
-    try:
-        import torch
-
-        torch.set_num_threads(1)
-    except ImportError:  # pragma: no cover
-        pass
 
 
 for _area in AREAS:

@@ -19,13 +19,20 @@ def test_bench_keys():
     assert all(np.isfinite(v) and v > 0 for v in figures.values())
 
 
-def test_bench_setups_are_the_stated_problems():
-    mesh, model, pts = tissue._linear_setup(175)
-    assert mesh.n_elements == 175 and pts.n_points == 12
-    mesh, model, W, pts = tissue._nonlinear_setup(175)
-    assert mesh.n_elements == 175 and W.shape == (mesh.n_nodes, 3)
-    np.testing.assert_allclose(W.sum(0), 1.0, rtol=1e-12, atol=1e-12)
-    f = W @ np.array([[1.0, 0.2], [0.1, -1.0], [-0.8, -0.3]])
-    u = model.solve(f)
-    assert np.linalg.norm(model.residual(u, f)) <= model.rtol * np.linalg.norm(f) + model.atol
-    assert np.abs(u).max() > 1e-3  # the load deforms the body visibly
+def test_bench_times_the_scenarios_public_step(tol):
+    # needle: the planning mesh, a pose inside the tissue; the step pushes the tissue and the
+    # collision check answers from the deformed obstacles
+    sim, p, s, u = tissue.needle_setup(175)
+    assert sim.mesh_data(p.n_elements).mesh.n_elements == 175 and sim.inside(s)
+    s1 = sim.step(s, u, p)
+    assert np.abs(s1.displacement).max() > 1e-4 and isinstance(sim.in_collision(s1), bool)
+    # manipulation: the timed state is the equilibrium under forces 0.5; the timed step
+    # (warm-started from it) reaches the equilibrium of the new forces that a cold solve from
+    # the undeformed body reaches
+    sim, p, s, u = tissue.manipulation_setup(175)
+    assert sim.mesh_data(p.n_elements).mesh.n_elements == 175 and s.t == 1
+    warm = sim.step(s, u, p)
+    cold = sim.step(sim.initial_state(p), u, p)
+    np.testing.assert_allclose(warm.displacement, cold.displacement, **tol["newton_paths"])
+    assert np.abs(warm.displacement - s.displacement).max() > 1e-4  # the force change moves it
+    assert sim.reduced(warm).shape == (sim.state_dim,)

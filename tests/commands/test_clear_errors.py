@@ -74,6 +74,9 @@ USAGE = [  # rejected by the option parser itself (exit code 2), before anything
     ["dataset", "generate", "--out", "{d}/x.h5", "--workers", "-1"],
     ["demo", "--out", "{d}/demo", "--seed", "-3"],
     ["collision", "--arc", "8,0", "--samples", "0"],
+    # --workers is one shared option (min 0) wherever a command runs a process pool
+    ["plan", "tissue", "--out", "{d}/pt", "--workers", "-1"],
+    ["reproduce", "--out", "{d}/rp", "--workers", "-1"],
 ]
 
 

@@ -67,3 +67,13 @@ def test_single_split_and_errors(tmp_path):
     bad.write_text("x")
     r = runner.invoke(app, ["dataset", "info", str(bad)])
     assert r.exit_code != 0
+
+
+def test_split_paths_name_the_files_of_generate_splits():
+    from pathlib import Path
+
+    from riskplan.datasets import split_paths
+
+    want = {"train": Path("a/d_train.h5"), "test": Path("a/d_test.h5")}
+    assert split_paths("a/d.h5") == want and split_paths(Path("a/d")) == want
+    assert split_paths("d.h5", ("test",)) == {"test": Path("d_test.h5")}

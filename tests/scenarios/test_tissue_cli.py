@@ -9,8 +9,8 @@ import pytest
 from typer.testing import CliRunner
 
 from riskplan.cli import app
-from riskplan.commands.tissue import read_controls
 from riskplan.errors import DataFormatError, InvalidInputError
+from riskplan.scenarios.controls import read_controls
 
 runner = CliRunner()
 
@@ -112,7 +112,7 @@ def test_read_controls_formats(tmp_path, tol):
 
 
 def test_step_cost_keys():
-    from riskplan.commands.tissue import step_costs
+    from riskplan.bench.tissue import step_costs
 
     out = step_costs(quick=True)
     for n in (175, 1000):

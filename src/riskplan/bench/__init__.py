@@ -6,6 +6,6 @@ returning the figures its issue names; the ``bench`` command adds ``machine``
 Benchmarks measure; tests never assert times.
 """
 
-from riskplan.bench._timing import machine_info, median_time
+from riskplan.bench._timing import cpu_model, machine_info, median_time
 
-__all__ = ["machine_info", "median_time"]
+__all__ = ["cpu_model", "machine_info", "median_time"]

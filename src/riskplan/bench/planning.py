@@ -12,23 +12,11 @@ model. ``quick``: 40 milestones, 2 seeds x 2 iterations (a smoke test, not the f
 from __future__ import annotations
 
 import os
-import platform
 import time
 
 import numpy as np
 
-from riskplan.bench._timing import median_time
-
-
-def _cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:  # pragma: no cover
-        pass
-    return platform.processor() or "unknown"
+from riskplan.bench import cpu_model, median_time
 
 
 def run(quick: bool = False, model: str = "paper") -> dict:
@@ -75,6 +63,6 @@ def run(quick: bool = False, model: str = "paper") -> dict:
         "seeds": len(rows),
         "iterations": iterations,
         "setup_s": float(setup_s),
-        "cpu_model": _cpu_model(),
+        "cpu_model": cpu_model(),
         "cpu_cores": os.cpu_count(),
     }

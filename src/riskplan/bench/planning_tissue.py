@@ -18,20 +18,9 @@ and 4 manipulation plans (keys ``..._rrt_10_s`` / ``..._rrt_4_s``), for a smoke 
 
 from __future__ import annotations
 
-import platform
 import time
 
-
-def cpu_model() -> str:
-    """The CPU's model name (from /proc/cpuinfo where there is one)."""
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.lower().startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:  # pragma: no cover - not Linux
-        pass
-    return platform.processor() or platform.machine()
+from riskplan.bench import cpu_model
 
 
 def measure(scenario: str, n_plans: int, *, seed: int = 0, workers: int | None = None) -> dict:

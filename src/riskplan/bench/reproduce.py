@@ -23,20 +23,10 @@ core, not the share of it the scheduler gave.
 from __future__ import annotations
 
 import os
-import platform
 import tempfile
 import time
 
-
-def _cpu() -> str:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:  # pragma: no cover - non-Linux
-        pass
-    return platform.processor() or "unknown"
+from riskplan.bench import cpu_model
 
 
 def executions_per_s(name: str, n_per_case: int, seed: int = 0, costs: dict | None = None) -> float:
@@ -90,7 +80,7 @@ def run(quick: bool = False) -> dict:
         "manipulation_rrt_s_per_candidate": manipulation["rrt_s"],
         "manipulation_select_s_per_candidate_case": manipulation["select_s"],
         "smoke_all_s": None,
-        "cpu": _cpu(),
+        "cpu": cpu_model(),
         "cores": len(os.sched_getaffinity(0))
         if hasattr(os, "sched_getaffinity")
         else os.cpu_count(),

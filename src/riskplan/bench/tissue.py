@@ -1,18 +1,24 @@
-"""Speed of one tissue-simulator step: ``riskplan bench tissue --json``.
+"""Speed of one tissue-simulator step, timed through the scenarios' public ``step``:
+``riskplan bench tissue --json`` and ``riskplan tissue step-cost``.
 
-One *step* is what a planner's simulator does per control: a quasi-static solve under a
-small load change, warm-started from the previous state, then the material points read
-off the new state.
+One *step* is what a planner's simulator does per control: ``Scenario.step`` (the
+quasi-static response to the new load, warm-started from the given state) and then the
+deformed geometry read off the new state. Medians over repeated calls from one state
+with one control, warm caches (mesh, FEM model and compiled kernels built before timing),
+nominal parameters, meshes of 175 elements (the planning mesh) and 1000 elements:
 
-* linear (needle scenario, V-A): unit square fixed at its corners, E = 50, ν = 0.4; the
-  needle tip moves a little each step: locate the tip in the mesh, build the nodal force
-  vector of a unit point force along the motion (P1 weights), solve with the cached
-  factorisation, interpolate 12 material points (obstacle corners and goal);
-* nonlinear (manipulation scenario, V-B): unit square, bottom-right boundary fixed,
-  three manipulators push on boundary patches (precomputed patch weights); the
-  manipulator forces change by a small control increment each step; neo-Hookean Newton
-  solve warm-started from the previous equilibrium; interpolate the target and 8
-  boundary points.
+* needle (V-A, linear elasticity): :meth:`NeedleScenario.step` at the pose
+  ``(0.3, 0.45, 0.2)`` with ``u = (0.5, 0.3)``, alone (``needle_step_us_N``) and followed by
+  :meth:`NeedleScenario.in_collision`, which reads the deformed obstacles' material points
+  (``needle_step_and_collision_us_N``; :func:`linear_step_ms`);
+* manipulation (V-B, neo-Hookean): :meth:`ManipulationScenario.step` from the equilibrium
+  under forces 0.5 to a small force change (warm-started Newton; ``manipulation_step_ms_N``)
+  and :meth:`ManipulationScenario.reduced`, the target and boundary points
+  (``manipulation_reduced_us_N``); step and ``reduced`` together: :func:`nonlinear_step_ms`.
+
+:func:`run` (``riskplan bench tissue``) reports ``linear_step_ms_N`` and
+``nonlinear_step_ms_N``, the step plus reading the points; :func:`step_costs` (``riskplan
+tissue step-cost``) the parts, in µs or ms as the key says.
 """
 
 from __future__ import annotations
@@ -21,100 +27,93 @@ import numpy as np
 
 from riskplan.bench import median_time
 
+#: Element counts timed: the planning mesh and a fine one.
+ELEMENTS = (175, 1000)
 
-def _linear_setup(n_elements: int):
-    from riskplan.deformable import LinearElasticModel, Material, locate, mesh_polygon, rectangle
 
-    mesh = mesh_polygon(rectangle(), n_elements)
-    model = LinearElasticModel(mesh, Material(50.0, 0.4), mesh.vertex_nodes)
-    pts = np.array(
-        [
-            [0.3, 0.3],
-            [0.4, 0.3],
-            [0.4, 0.45],
-            [0.3, 0.45],
-            [0.6, 0.6],
-            [0.7, 0.6],
-            [0.7, 0.7],
-            [0.6, 0.7],
-            [0.8, 0.85],
-            [0.85, 0.85],
-            [0.85, 0.9],
-            [0.8, 0.9],
-        ]
-    )
-    return mesh, model, locate(mesh, pts)
+def needle_setup(n_elements: int):
+    """``(scenario, params, state, control)`` of the needle step timed here (module docstring)."""
+    from riskplan.scenarios.base import SimParams
+    from riskplan.scenarios.needle import NeedleScenario
+
+    sim = NeedleScenario()
+    params = SimParams(n_elements=n_elements)
+    state = sim.initial_state(params, pose=(0.3, 0.45, 0.2))
+    return sim, params, state, np.array([0.5, 0.3])
+
+
+def manipulation_setup(n_elements: int):
+    """``(scenario, params, state, control)`` of the manipulation step timed here: the state
+    is the equilibrium under forces 0.5, the control a small change of them."""
+    from riskplan.scenarios.base import SimParams
+    from riskplan.scenarios.manipulation import ManipulationScenario
+
+    sim = ManipulationScenario()
+    params = SimParams(n_elements=n_elements)
+    state = sim.step(sim.initial_state(params), np.full(6, 0.5), params)
+    control = np.full(6, 0.5) + 0.05 * np.array([1.0, -1.0, 0.5, 0.2, -0.3, 0.1])
+    return sim, params, state, control
+
+
+def _step_and_collision(sim, p, s, u):
+    return lambda: sim.in_collision(sim.step(s, u, p))
+
+
+def _step_and_reduced(sim, p, s, u):
+    return lambda: sim.reduced(sim.step(s, u, p))
 
 
 def linear_step_ms(n_elements: int, repeats: int = 200) -> float:
-    from riskplan.deformable.locate import locate_points
-
-    mesh, model, material_points = _linear_setup(n_elements)
-    maps = mesh.barycentric_maps
-    tri = mesh.triangles
-    n = 2 * mesh.n_nodes
-    state = {"x": np.array([0.1, 0.2]), "k": 0}
-    heading = np.array([np.cos(0.7), np.sin(0.7)])
-
-    def step():
-        k = state["k"] = (state["k"] + 1) % 100
-        tip = state["x"] + 0.005 * k * heading
-        elem, lam = locate_points(maps, tip[None])
-        nodes = tri[elem[0]]
-        f = np.zeros(n)
-        f[2 * nodes] = lam[0] * heading[0]
-        f[2 * nodes + 1] = lam[0] * heading[1]
-        u = model.solve_flat(f)
-        return material_points.positions(u.reshape(-1, 2))
-
-    return 1e3 * median_time(step, repeats=repeats, warmup=5)
-
-
-def _nonlinear_setup(n_elements: int):
-    from riskplan.deformable import (
-        Material,
-        NeoHookeanModel,
-        locate,
-        mesh_polygon,
-        patch_weights,
-        rectangle,
-    )
-
-    mesh = mesh_polygon(rectangle(), n_elements)
-    x, y = mesh.nodes[:, 0], mesh.nodes[:, 1]
-    fixed = np.flatnonzero(((y == 0.0) & (x >= 0.6)) | ((x == 1.0) & (y <= 0.4)))
-    model = NeoHookeanModel(mesh, Material(50.0, 0.4), fixed)
-    W = np.stack(
-        [patch_weights(mesh, c, 0.1) for c in ([0.0, 0.5], [0.5, 1.0], [1.0, 0.8])], axis=1
-    )  # (N, 3)
-    b = mesh.boundary_nodes
-    pts = np.vstack([[0.45, 0.55], mesh.nodes[b[:: max(1, len(b) // 8)][:8]]])
-    return mesh, model, W, locate(mesh, pts)
+    """Median milliseconds of a needle step plus its collision check (module docstring)."""
+    return 1e3 * median_time(_step_and_collision(*needle_setup(n_elements)), repeats, warmup=20)
 
 
 def nonlinear_step_ms(n_elements: int, repeats: int = 30) -> float:
-    _mesh, model, W, material_points = _nonlinear_setup(n_elements)
-    base = np.array([[1.0, 0.2], [0.1, -1.0], [-0.8, -0.3]])  # manipulator forces (3, 2)
-    state = {"u": model.solve(W @ base), "k": 0}
+    """Median milliseconds of a manipulation step plus ``reduced`` (module docstring)."""
+    return 1e3 * median_time(_step_and_reduced(*manipulation_setup(n_elements)), repeats, warmup=2)
 
-    def step():
-        k = state["k"] = state["k"] + 1
-        control = base * (1.0 + 0.05 * np.sin(0.3 * k))  # small load change per step
-        u = model.solve(W @ control, u0=state["u"])
-        state["u"] = u
-        return material_points.positions(u)
 
-    return 1e3 * median_time(step, repeats=repeats, warmup=3)
+def _needle_costs(n: int, reps: int) -> dict:
+    sim, p, s, u = setup = needle_setup(n)
+    step_s = median_time(lambda: sim.step(s, u, p), repeats=reps, warmup=20)
+    both_s = median_time(_step_and_collision(*setup), repeats=reps, warmup=20)
+    return {
+        f"needle_step_us_{n}": round(1e6 * step_s, 1),
+        f"needle_step_and_collision_us_{n}": round(1e6 * both_s, 1),
+    }
+
+
+def _manipulation_costs(n: int, reps: int, step_reps: int) -> dict:
+    sim, p, s, u = manipulation_setup(n)
+    step_s = median_time(lambda: sim.step(s, u, p), repeats=step_reps, warmup=2)
+    reduced_s = median_time(lambda: sim.reduced(s), repeats=reps, warmup=10)
+    return {
+        f"manipulation_step_ms_{n}": round(1e3 * step_s, 2),
+        f"manipulation_reduced_us_{n}": round(1e6 * reduced_s, 1),
+    }
+
+
+def step_costs(quick: bool = False) -> dict:
+    """The parts of a step (module docstring): ``needle_step_us_N``,
+    ``needle_step_and_collision_us_N``, ``manipulation_step_ms_N``,
+    ``manipulation_reduced_us_N`` for ``N`` in :data:`ELEMENTS`."""
+    reps = 200 if quick else 2000
+    out = {}
+    for n in ELEMENTS:
+        out.update(_needle_costs(n, reps))
+    for n in ELEMENTS:
+        out.update(_manipulation_costs(n, reps, 10 if quick else 40))
+    return out
 
 
 def run(quick: bool = False) -> dict:
     """``{"linear_step_ms_175", "linear_step_ms_1000", "nonlinear_step_ms_175",
-    "nonlinear_step_ms_1000"}``: median milliseconds per simulator step."""
+    "nonlinear_step_ms_1000"}``: median milliseconds per simulator step (module docstring)."""
     r_lin = 50 if quick else 300
     r_nl = 10 if quick else 40
-    return {
-        "linear_step_ms_175": round(linear_step_ms(175, r_lin), 4),
-        "linear_step_ms_1000": round(linear_step_ms(1000, r_lin), 4),
-        "nonlinear_step_ms_175": round(nonlinear_step_ms(175, r_nl), 3),
-        "nonlinear_step_ms_1000": round(nonlinear_step_ms(1000, r_nl), 3),
-    }
+    out = {}
+    for n in ELEMENTS:
+        out[f"linear_step_ms_{n}"] = round(linear_step_ms(n, r_lin), 4)
+    for n in ELEMENTS:
+        out[f"nonlinear_step_ms_{n}"] = round(nonlinear_step_ms(n, r_nl), 3)
+    return out

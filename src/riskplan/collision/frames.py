@@ -102,7 +102,8 @@ class BasePose:
     @classmethod
     def parse(cls, text: str) -> BasePose:
         """Command-line form: ``identity`` (the mesh is already in the base frame), a JSON file
-        (see :meth:`from_json`), or ``x,y,z,qw,qx,qy,qz`` (metres, quaternion)."""
+        (see :meth:`from_json`), or ``x,y,z,qw,qx,qy,qz`` (metres, quaternion; seven numbers
+        by the convention of :mod:`riskplan.parsing`)."""
         if not isinstance(text, str) or not text.strip():
             raise InvalidInputError(
                 f"base pose: expected 'identity', a JSON file or x,y,z,qw,qx,qy,qz, got {text!r}"
@@ -113,16 +114,14 @@ class BasePose:
         p = Path(text)
         if p.suffix.lower() == ".json" or p.is_file():
             return cls.from_json(p)
+        from riskplan.parsing import parse_numbers
+
         try:
-            v = [float(s) for s in text.split(",")]
-        except ValueError as exc:
+            v = parse_numbers(text, "base pose", count=7)
+        except InvalidInputError as exc:
             raise InvalidInputError(
-                f"base pose: expected 'identity', a JSON file or x,y,z,qw,qx,qy,qz, got {text!r}"
-            ) from exc
-        if len(v) != 7:
-            raise InvalidInputError(
-                f"base pose: expected 7 comma-separated numbers x,y,z,qw,qx,qy,qz, got {len(v)}"
-            )
+                f"{exc}; expected 'identity', a JSON file or x,y,z,qw,qx,qy,qz"
+            ) from None
         return cls.from_quaternion(v[:3], v[3:])
 
     def to_world(self, points_base) -> np.ndarray:

@@ -12,24 +12,12 @@ from pathlib import Path
 
 import typer
 
-
-def _floats(text: str | None, name: str) -> list[float] | None:
-    from riskplan.errors import InvalidInputError
-
-    if text is None:
-        return None
-    try:
-        return [float(v) for v in text.replace(";", ",").split(",") if v.strip()]
-    except ValueError as exc:
-        raise InvalidInputError(f"{name}: expected comma-separated numbers, got {text!r}") from exc
+from riskplan.commands._shared import add_group, base_pose_option
 
 
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
-    env_app = typer.Typer(
-        help="Build obstacle environments (meshes) for planning.", no_args_is_help=True
-    )
-    app.add_typer(env_app, name="env")
+    env_app = add_group(app, "env", "Build obstacle environments (meshes) for planning.")
 
     @env_app.command("chest")
     def env_chest(
@@ -86,11 +74,7 @@ def register(app: typer.Typer) -> None:
             "--env",
             help="'chest' (procedural) or a mesh file; its frame comes from the sidecar FILE.json that `riskplan env chest` writes, or from --base-pose.",
         ),
-        base_pose: str = typer.Option(
-            None,
-            "--base-pose",
-            help="Robot base in the mesh's frame: x,y,z,qw,qx,qy,qz (m, quaternion), a JSON file with base_position/base_rotation, or 'identity' (mesh already in the base frame). Overrides the sidecar.",
-        ),
+        base_pose: str = base_pose_option(),
         displacements: str = typer.Option(
             None,
             "--displacements",
@@ -120,12 +104,10 @@ def register(app: typer.Typer) -> None:
         json_out: bool = typer.Option(False, "--json", help="Print JSON."),
     ) -> None:
         """P(collision) of the robot's geometry distribution at given configurations."""
-        import numpy as np
-
         from riskplan.collision import monte_carlo_probability, probability_of_collision
         from riskplan.errors import InvalidInputError
+        from riskplan.parsing import parse_numbers, parse_rows
 
-        configs = []
         if arc is not None and (displacements is not None or model is not None):
             raise InvalidInputError(
                 "--arc describes the geometry itself; give either --arc or --displacements (with --model), not both"
@@ -133,33 +115,21 @@ def register(app: typer.Typer) -> None:
         if arc is not None:
             from riskplan.collision.robot_geometry import arc_backbone, backbone_mixture
 
-            ka = _floats(arc, "--arc")
-            if len(ka) != 2:
-                raise InvalidInputError("--arc: expected 'kappa,phi'")
+            ka = parse_numbers(arc, "--arc", count=2)
             gm = backbone_mixture(arc_backbone(ka[0], ka[1])[None], 5)
             configs = [ka]
         else:
             if displacements is None:
                 raise InvalidInputError("--displacements (or --arc) is required")
-            configs = [_floats(c, "--displacements") for c in displacements.split(";") if c.strip()]
-            if not configs or len({len(c) for c in configs}) != 1 or not configs[0]:
-                raise InvalidInputError(
-                    f"--displacements: expected one or more configurations of equal length ('d1,d2,...;d1,d2,...'), got {displacements!r}"
-                )
-            d = np.asarray(configs, dtype=np.float64)
+            d = parse_rows(displacements, "--displacements")
+            configs = d.tolist()
             if model is not None:
                 from riskplan.kinematics import load_model
 
                 gm = load_model(model).predict(d)
             else:
                 from riskplan.collision.robot_geometry import robot_mixture
-
-                try:
-                    from riskplan.robots import load_robot
-                except ImportError as exc:
-                    raise InvalidInputError(
-                        "no robot model is available here; pass --model or --arc"
-                    ) from exc
+                from riskplan.robots import load_robot
 
                 gm = robot_mixture(load_robot(robot), d)
         if env == "chest":

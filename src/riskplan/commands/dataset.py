@@ -13,80 +13,13 @@ from pathlib import Path
 import typer
 
 
-def _outputs(out: Path, split: str) -> dict[str, Path]:
-    """``--split both`` treats OUT as a stem: ``data.h5`` -> ``data_train.h5``, ``data_test.h5``."""
-    if split != "both":
-        return {split: out}
-    stem = out.with_suffix("") if out.suffix == ".h5" else out
-    return {sp: stem.with_name(f"{stem.name}_{sp}.h5") for sp in ("train", "test")}
-
-
-def summarize(path) -> dict:
-    """Summary of a data-set file: robot, protocol, configurations done, cloud and tip spread."""
-    import numpy as np
-
-    from riskplan.datasets import load_dataset
-    from riskplan.errors import RiskplanError
-
-    ds = load_dataset(path)
-    done = ds.done
-    summary = {
-        "file": str(path),
-        "robot": ds.metadata.get("robot_name"),
-        "split": ds.metadata.get("split"),
-        "seed": ds.metadata.get("seed"),
-        "riskplan_version": ds.metadata.get("riskplan_version"),
-        "created": ds.metadata.get("created"),
-        "complete": ds.complete,
-        "protocol": {k: v for k, v in ds.metadata["protocol"].items() if k != "cameras"},
-        "n_cameras": len(ds.metadata["protocol"].get("cameras", [])),
-        "configs_done": int(done.sum()),
-        "configs_total": ds.n_configs,
-        "points_shape": list(ds.points.shape),
-    }
-    if done.any():
-        tips = ds.tips[done]
-        spread = ds.tip_spread()[done]
-        pts = ds.points[done].astype(np.float64)
-        cen = pts.mean(axis=2)  # (C, S, 3) cloud centroids: their spread over the starts
-        cen_rms = np.sqrt(((cen - cen.mean(axis=1, keepdims=True)) ** 2).sum(-1).mean(-1))
-        summary.update(
-            tip_spread_mm={
-                "mean": float(spread.mean() * 1e3),
-                "median": float(np.median(spread) * 1e3),
-                "max": float(spread.max() * 1e3),
-            },
-            tip_range_m={
-                "min": tips.reshape(-1, 3).min(0).tolist(),
-                "max": tips.reshape(-1, 3).max(0).tolist(),
-            },
-            centroid_spread_mm={
-                "mean": float(cen_rms.mean() * 1e3),
-                "max": float(cen_rms.max() * 1e3),
-            },
-            bbox_m={
-                "min": pts.reshape(-1, 3).min(0).tolist(),
-                "max": pts.reshape(-1, 3).max(0).tolist(),
-            },
-        )
-        try:
-            tmax = np.asarray(ds.robot.tension_limits, dtype=np.float64)
-            over = np.any(ds.tensions[done] > tmax * (1 + 1e-9), axis=-1)
-            summary["arrivals_over_max_tension"] = float(over.mean())
-        except (
-            RiskplanError
-        ) as exc:  # a robot file this version cannot rebuild must not stop the summary
-            summary["arrivals_over_max_tension"] = f"unknown ({exc})"
-    return summary
-
-
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
-    sub = typer.Typer(
-        help="Point-cloud data sets by the MDN paper's protocol (generate, inspect).",
-        no_args_is_help=True,
+    from riskplan.commands._shared import add_group
+
+    sub = add_group(
+        app, "dataset", "Point-cloud data sets by the MDN paper's protocol (generate, inspect)."
     )
-    app.add_typer(sub, name="dataset")
 
     @sub.command("generate")
     def generate(
@@ -111,8 +44,8 @@ def register(app: typer.Typer) -> None:
         """Generate a data set (resumable: rerun the same command after an interruption)."""
         import time
 
-        from riskplan.commands._progress import progress_bar, stop_interrupted
-        from riskplan.datasets import generate_dataset, get_protocol
+        from riskplan.commands._shared import progress_bar, stop_interrupted
+        from riskplan.datasets import generate_dataset, get_protocol, split_paths
         from riskplan.errors import InvalidInputError
         from riskplan.robots import load_robot
 
@@ -120,7 +53,7 @@ def register(app: typer.Typer) -> None:
             raise InvalidInputError(f"split: expected train, test or both, got {split!r}")
         protocol = get_protocol(preset)
         rob = load_robot(robot)
-        outputs = _outputs(out, split)
+        outputs = split_paths(out) if split == "both" else {split: out}
         t0 = time.perf_counter()
         with progress_bar() as bar:
             for sp, path in outputs.items():
@@ -163,6 +96,8 @@ def register(app: typer.Typer) -> None:
         as_json: bool = typer.Option(False, "--json", help="Print JSON."),
     ) -> None:
         """Summarise a data set: robot, protocol, configurations done/total, point spread."""
+        from riskplan.datasets import summarize
+
         s = summarize(file)
         if as_json:
             typer.echo(json.dumps(s, indent=2))

@@ -1,6 +1,11 @@
 """`riskplan` subcommands for the kinematics area: train, predict, sweep, evaluate.
 
 Heavy imports (torch, h5py, matplotlib) stay inside the commands.
+
+``train`` and ``sweep`` declare the same training options (``_BATCH_SIZE`` ... ``_SEED``,
+shared objects, so one default and one help text each) and build their ``TrainConfig`` with
+one helper, :func:`_config`. Their signatures still list those options one by one on
+purpose: typer reads a command's options from its signature and has no option groups.
 """
 
 from __future__ import annotations
@@ -10,61 +15,46 @@ from pathlib import Path
 
 import typer
 
-_HIDDEN_HELP = "Comma-separated widths of the shared trunk."
+# Options that `train` and `sweep` share (same names as the TrainConfig fields they set).
+_BATCH_SIZE = typer.Option(32, help="Configurations per step.")
+_POINTS_PER_CONFIG = typer.Option(256, help="Points drawn per configuration per step.")
+_LR = typer.Option(3e-3, help="Adam learning rate.")
+_HIDDEN = typer.Option("64,64", help="Comma-separated widths of the shared trunk.")
+_HEAD_HIDDEN = typer.Option(
+    "32", help="Comma-separated hidden widths of each head ('' for linear heads)."
+)
+_ACTIVATION = typer.Option("silu", help="silu, tanh or relu.")
+_SEED = typer.Option(0, min=0, help="Seed (initialisation, split, batches).")
 
 
-def _widths(spec: str, name: str) -> tuple[int, ...]:
-    from riskplan.errors import InvalidInputError
+def _config(options: dict, **renamed):
+    """The validated ``TrainConfig`` of a command: every option named like a ``TrainConfig``
+    field (pass the command's ``locals()``), plus ``renamed`` fields; ``hidden`` and
+    ``head_hidden`` are comma-separated widths (:func:`riskplan.parsing.parse_numbers`)."""
+    import dataclasses
 
-    try:
-        out = tuple(int(x) for x in spec.split(",") if x.strip())
-    except ValueError as exc:
-        raise InvalidInputError(f"{name}: expected comma-separated integers, got {spec!r}") from exc
-    return out
-
-
-def _config(**kw):
     from riskplan.kinematics.training import TrainConfig
+    from riskplan.parsing import parse_numbers
 
-    kw["hidden"] = _widths(kw["hidden"], "--hidden")
-    kw["head_hidden"] = _widths(kw["head_hidden"], "--head-hidden")
+    names = {f.name for f in dataclasses.fields(TrainConfig)}
+    kw = {k: v for k, v in options.items() if k in names}
+    kw.update(renamed)
+    for key in ("hidden", "head_hidden"):
+        opt = "--" + key.replace("_", "-")
+        kw[key] = tuple(parse_numbers(kw[key], opt, integers=True, allow_empty=True))
     cfg = TrainConfig(**kw)
     cfg.validate()
     return cfg
 
 
 def _parse_displacements(spec: str):
-    """``"0.01,0,0,0"``; several configurations separated by ``;``; or a .npy/.json/.csv file."""
-    import numpy as np
+    """``--displacements``: ``"0.01,0,0,0"`` (one configuration, ``(m,)``), rows separated
+    by ``;`` (``(N, m)``), or a table file (:func:`riskplan.parsing.read_table`)."""
+    from riskplan.parsing import TABLE_SUFFIXES, parse_rows, read_table
 
-    from riskplan.errors import InvalidInputError
-
-    p = Path(spec)
-    if p.suffix in (".npy", ".json", ".csv", ".txt") and p.is_file():
-        try:
-            if p.suffix == ".npy":
-                arr = np.load(p, allow_pickle=False)
-            elif p.suffix == ".json":
-                arr = json.loads(p.read_text(encoding="utf-8"))
-            else:
-                arr = np.loadtxt(p, delimiter=",", ndmin=2)
-            arr = np.asarray(arr, dtype=np.float64)
-        except (OSError, ValueError, TypeError, UnicodeDecodeError, EOFError) as exc:
-            raise InvalidInputError(
-                f"--displacements: cannot read {p.name} as a table of numbers ({type(exc).__name__}: {exc})"
-            ) from exc
-        if arr.ndim not in (1, 2) or arr.size == 0:
-            raise InvalidInputError(
-                f"--displacements: {p.name} must hold one configuration or a (N, m) table, got shape {arr.shape}"
-            )
-        return arr
-    try:
-        rows = [[float(v) for v in r.split(",") if v.strip()] for r in spec.split(";") if r.strip()]
-        arr = np.asarray(rows, dtype=np.float64)
-    except ValueError as exc:
-        raise InvalidInputError(
-            f"--displacements: expected numbers like '0.01,0,0,0' (';' between configurations) or a file, got {spec!r}"
-        ) from exc
+    if Path(spec).suffix.lower() in TABLE_SUFFIXES:
+        return read_table(spec, "--displacements")
+    arr = parse_rows(spec, "--displacements")
     return arr[0] if arr.shape[0] == 1 else arr
 
 
@@ -81,14 +71,12 @@ def register(app: typer.Typer) -> None:
         ),
         components: int = typer.Option(5, "--components", "-k", help="Mixture components K."),
         epochs: int = typer.Option(100, min=1, help="Maximum epochs."),
-        batch_size: int = typer.Option(32, help="Configurations per step."),
-        points_per_config: int = typer.Option(256, help="Points drawn per configuration per step."),
-        lr: float = typer.Option(3e-3, help="Adam learning rate."),
-        hidden: str = typer.Option("64,64", help=_HIDDEN_HELP),
-        head_hidden: str = typer.Option(
-            "32", help="Comma-separated hidden widths of each head ('' for linear heads)."
-        ),
-        activation: str = typer.Option("silu", help="silu, tanh or relu."),
+        batch_size: int = _BATCH_SIZE,
+        points_per_config: int = _POINTS_PER_CONFIG,
+        lr: float = _LR,
+        hidden: str = _HIDDEN,
+        head_hidden: str = _HEAD_HIDDEN,
+        activation: str = _ACTIVATION,
         val_fraction: float = typer.Option(
             0.1, help="Fraction of configurations held out for validation."
         ),
@@ -98,7 +86,7 @@ def register(app: typer.Typer) -> None:
         lr_patience: int = typer.Option(
             4, min=0, help="Halve the learning rate after this many epochs without improvement."
         ),
-        seed: int = typer.Option(0, min=0, help="Seed (initialisation, split, batches)."),
+        seed: int = _SEED,
         dtype: str = typer.Option("float32", help="float32 or float64."),
         resume: bool = typer.Option(False, "--resume", help="Continue from OUT/checkpoint.pt."),
         overwrite: bool = typer.Option(
@@ -106,28 +94,14 @@ def register(app: typer.Typer) -> None:
         ),
     ) -> None:
         """Train a mixture density network on a point-cloud data set."""
+        cfg = _config(locals(), n_components=components, early_stop_patience=patience)
         import torch
 
-        from riskplan.commands._progress import progress_bar, stop_interrupted
+        from riskplan.commands._shared import progress_bar, stop_interrupted
         from riskplan.kinematics.data import read_point_clouds
         from riskplan.kinematics.training import train as run_train
 
         torch.set_num_threads(1)
-        cfg = _config(
-            n_components=components,
-            epochs=epochs,
-            batch_size=batch_size,
-            points_per_config=points_per_config,
-            lr=lr,
-            hidden=hidden,
-            head_hidden=head_hidden,
-            activation=activation,
-            val_fraction=val_fraction,
-            early_stop_patience=patience,
-            lr_patience=lr_patience,
-            seed=seed,
-            dtype=dtype,
-        )
         ds = read_point_clouds(data)
         with progress_bar() as bar:
             task = bar.add_task("training", total=cfg.epochs, status="")
@@ -173,7 +147,7 @@ def register(app: typer.Typer) -> None:
             ...,
             "--displacements",
             "-d",
-            help="'d1,d2,...' (m); ';' between configurations; or a .npy/.json/.csv file.",
+            help="'d1,d2,...' (m); ';' between configurations; or a .csv/.txt/.json/.npy file.",
         ),
         json_out: bool = typer.Option(False, "--json", help="Print the mixture as JSON."),
     ) -> None:
@@ -221,14 +195,14 @@ def register(app: typer.Typer) -> None:
         ),
         components: str = typer.Option("1-10", help="K values, e.g. '1-10' or '1,3,5'."),
         epochs: int = typer.Option(40, min=1, help="Maximum epochs per K."),
-        batch_size: int = typer.Option(32),
-        points_per_config: int = typer.Option(256),
-        lr: float = typer.Option(3e-3),
-        hidden: str = typer.Option("64,64", help=_HIDDEN_HELP),
-        head_hidden: str = typer.Option("32"),
-        activation: str = typer.Option("silu"),
+        batch_size: int = _BATCH_SIZE,
+        points_per_config: int = _POINTS_PER_CONFIG,
+        lr: float = _LR,
+        hidden: str = _HIDDEN,
+        head_hidden: str = _HEAD_HIDDEN,
+        activation: str = _ACTIVATION,
         patience: int = typer.Option(8, min=0, help="Early stopping patience (epochs)."),
-        seed: int = typer.Option(0, min=0),
+        seed: int = _SEED,
         workers: int = typer.Option(1, min=1, help="Train this many K at once (processes)."),
         collapse_threshold: float = typer.Option(
             0.01, help="Mode collapse: weight below this on 99% of test configurations."
@@ -238,23 +212,13 @@ def register(app: typer.Typer) -> None:
         ),
     ) -> None:
         """Train one model per K and plot test NLL vs K (the paper's Fig. 4)."""
-        from riskplan.commands._progress import progress_bar
+        cfg = _config(locals(), early_stop_patience=patience)
+        from riskplan.commands._shared import progress_bar
         from riskplan.io import write_json_atomic
         from riskplan.kinematics.plotting import fig_nll_vs_components
         from riskplan.kinematics.sweep import parse_components
         from riskplan.kinematics.sweep import sweep as run_sweep
 
-        cfg = _config(
-            epochs=epochs,
-            batch_size=batch_size,
-            points_per_config=points_per_config,
-            lr=lr,
-            hidden=hidden,
-            head_hidden=head_hidden,
-            activation=activation,
-            early_stop_patience=patience,
-            seed=seed,
-        )
         ks = parse_components(components)
         with progress_bar() as bar:
             task = bar.add_task("K sweep", total=len(ks), status="")

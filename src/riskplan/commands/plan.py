@@ -12,10 +12,10 @@ PLANNERS = ("plan_chest", "plan_tissue")
 
 
 def register(app: typer.Typer) -> None:
-    plan_app = typer.Typer(
-        help="Plan motions under uncertainty (chest cavity, deformable tissue).",
-        no_args_is_help=True,
+    from riskplan.commands._shared import add_group
+
+    plan_app = add_group(
+        app, "plan", "Plan motions under uncertainty (chest cavity, deformable tissue)."
     )
     for name in PLANNERS:
         importlib.import_module(f"riskplan.commands.{name}").register(plan_app)
-    app.add_typer(plan_app, name="plan")

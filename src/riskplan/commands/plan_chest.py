@@ -7,19 +7,7 @@ from pathlib import Path
 
 import typer
 
-
-def _floats(text, name, n=None):
-    from riskplan.errors import InvalidInputError
-
-    if text is None:
-        return None
-    try:
-        vals = [float(v) for v in text.replace(";", ",").split(",") if v.strip()]
-    except ValueError as exc:
-        raise InvalidInputError(f"{name}: expected comma-separated numbers, got {text!r}") from exc
-    if n is not None and len(vals) != n:
-        raise InvalidInputError(f"{name}: expected {n} comma-separated numbers, got {len(vals)}")
-    return vals
+from riskplan.commands._shared import base_pose_option
 
 
 def _check_finite(**values):
@@ -52,11 +40,7 @@ def register(plan_app: typer.Typer) -> None:
             "--env",
             help="Patient mesh (STL/OBJ/PLY); its frame comes from the sidecar FILE.json that `riskplan env chest` writes, or from --base-pose. Default: the procedural chest.",
         ),
-        base_pose: str = typer.Option(
-            None,
-            "--base-pose",
-            help="Robot base in the mesh's frame: x,y,z,qw,qx,qy,qz (m, quaternion), a JSON file with base_position/base_rotation, or 'identity' (mesh already in the base frame). Overrides the sidecar.",
-        ),
+        base_pose: str = base_pose_option(),
         chest_seed: int = typer.Option(
             0, "--chest-seed", help="Seed of the procedural chest's organ shapes."
         ),
@@ -123,9 +107,10 @@ def register(plan_app: typer.Typer) -> None:
         import torch
 
         from riskplan.collision import Environment
-        from riskplan.commands._progress import progress_bar
+        from riskplan.commands._shared import progress_bar
         from riskplan.errors import DataFormatError, InvalidInputError
         from riskplan.kinematics import load_model
+        from riskplan.parsing import parse_numbers
         from riskplan.planning.bo import OptimiserConfig
         from riskplan.planning.chest import plan_chest
 
@@ -144,6 +129,9 @@ def register(plan_app: typer.Typer) -> None:
                     f"--robot {robot!r} has {rob.n_tendons} tendons but the model {model!r} has {mdl.n_tendons}"
                 )
         m = mdl.n_tendons
+        goal_tip_xyz = None if goal_tip is None else parse_numbers(goal_tip, "--goal-tip", count=3)
+        goal_d = None if goal is None else parse_numbers(goal, "--goal", count=m)
+        start_d = None if start is None else parse_numbers(start, "--start", count=m)
         if env is None:
             if base_pose is not None:
                 raise InvalidInputError(
@@ -183,9 +171,9 @@ def register(plan_app: typer.Typer) -> None:
             plan = plan_chest(
                 mdl,
                 env_base,
-                start=_floats(start, "--start", m),
-                goal=_floats(goal, "--goal", m),
-                goal_tip=_floats(goal_tip, "--goal-tip", 3),
+                start=start_d,
+                goal=goal_d,
+                goal_tip=goal_tip_xyz,
                 tip_tolerance=tip_tolerance,
                 n_milestones=milestones,
                 step=step,

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-SCENARIOS = ("needle", "manipulation")
+from riskplan.commands._shared import progress_bar, workers_option
 
 
 def register(plan_app: typer.Typer) -> None:
@@ -25,7 +25,7 @@ def register(plan_app: typer.Typer) -> None:
             help="nominal | material-low | material-high | actuation | mesh | force",
         ),
         out: Path = typer.Option(..., "--out", help="output folder (npz, JSON, PNG, GIF)"),
-        workers: int = typer.Option(0, "--workers", help="worker processes (0: one per core)"),
+        workers: int = workers_option("worker processes (0: one per core)"),
         seed: int = typer.Option(0, "--seed", help="master seed (trees, linearisation, checks)"),
         method: str = typer.Option(
             "sigma", "--method", help="LQG-MP collision estimate: sigma (paper) | truncation"
@@ -44,7 +44,6 @@ def register(plan_app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
-        from riskplan.commands._progress import progress_bar
         from riskplan.errors import InvalidInputError
         from riskplan.experiments.planning_tissue import (
             HONESTY_HEADER,
@@ -53,16 +52,19 @@ def register(plan_app: typer.Typer) -> None:
             write_outputs,
         )
         from riskplan.planning.rrt import RRTOptions
+        from riskplan.scenarios.registry import SCENARIO_NAMES
         from riskplan.scenarios.uncertainty import CASE_NAMES
 
-        if scenario not in SCENARIOS:
+        if scenario not in SCENARIO_NAMES:
             raise InvalidInputError(
-                f"scenario: expected one of {', '.join(SCENARIOS)}, got {scenario!r}"
+                f"--scenario: expected one of {', '.join(SCENARIO_NAMES)}, got {scenario!r}"
             )
         if case not in CASE_NAMES:
-            raise InvalidInputError(f"case: expected one of {', '.join(CASE_NAMES)}, got {case!r}")
+            raise InvalidInputError(
+                f"--case: expected one of {', '.join(CASE_NAMES)}, got {case!r}"
+            )
         if plans < 1:
-            raise InvalidInputError(f"plans: expected >= 1, got {plans}")
+            raise InvalidInputError(f"--plans: expected >= 1, got {plans}")
         options = RRTOptions()
         n_trees = -(-plans // options.plans_per_tree)
         console = Console(stderr=True)

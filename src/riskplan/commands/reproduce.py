@@ -7,6 +7,8 @@ from pathlib import Path
 
 import typer
 
+from riskplan.commands._shared import workers_option
+
 
 def register(app: typer.Typer) -> None:
     @app.command()
@@ -21,7 +23,7 @@ def register(app: typer.Typer) -> None:
             "--address",
             help="Ray cluster address (host:port, ray://host:port or auto); with --backend ray.",
         ),
-        workers: int = typer.Option(0, help="Worker processes (0: one per core)."),
+        workers: int = workers_option(),
         seed: int = typer.Option(0, help="Master seed."),
         out: Path = typer.Option(
             Path("reproduce-out"),
@@ -34,7 +36,7 @@ def register(app: typer.Typer) -> None:
 
         Rerunning the same command continues from OUT/store and gives the same results.json.
         """
-        from riskplan.commands._progress import progress_bar
+        from riskplan.commands._shared import progress_bar
         from riskplan.experiments.reproduce import reproduce as run
 
         with progress_bar() as bar:

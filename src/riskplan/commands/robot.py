@@ -16,17 +16,11 @@ from pathlib import Path
 
 import typer
 
+from riskplan.commands._shared import add_group
 
-def _floats(text: str, name: str) -> list[float]:
-    from riskplan.errors import InvalidInputError
-
-    try:
-        vals = [float(v) for v in text.replace(";", ",").split(",") if v.strip()]
-    except ValueError as exc:
-        raise InvalidInputError(f"{name}: expected comma-separated numbers, got {text!r}") from exc
-    if not vals:
-        raise InvalidInputError(f"{name}: expected comma-separated numbers, got {text!r}")
-    return vals
+_ROBOT = typer.Option(
+    "paper", "--robot", help="Packaged robot name ('paper') or a robot TOML file."
+)
 
 
 def _finite_or_none(value):
@@ -47,21 +41,19 @@ def _dumps(value) -> str:
 
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
-    sub = typer.Typer(
-        help="Tendon-driven continuum robots: shapes and descriptions.", no_args_is_help=True
-    )
-    app.add_typer(sub, name="robot")
+    sub = add_group(app, "robot", "Tendon-driven continuum robots: shapes and descriptions.")
 
     @sub.command("shape")
     def shape(
-        robot: str = typer.Option(
-            "paper", "--robot", help="Packaged robot name ('paper') or a robot TOML file."
-        ),
+        robot: str = _ROBOT,
         displacements: str = typer.Option(
-            None, "--displacements", "-d", help="Tendon displacements (m), comma-separated."
+            None,
+            "--displacements",
+            "-d",
+            help="Tendon displacements (m), comma-separated, one per tendon.",
         ),
         tensions: str = typer.Option(
-            None, "--tensions", "-t", help="Tendon tensions [N], comma-separated."
+            None, "--tensions", "-t", help="Tendon tensions (N), comma-separated, one per tendon."
         ),
         gravity: bool = typer.Option(
             None, "--gravity/--no-gravity", help="Override the robot file's gravity setting."
@@ -75,6 +67,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Solve the robot's shape for tendon displacements or tensions."""
         from riskplan.errors import InvalidInputError
+        from riskplan.parsing import parse_numbers
         from riskplan.robots import load_robot
 
         if (displacements is None) == (tensions is None):
@@ -87,9 +80,10 @@ def register(app: typer.Typer) -> None:
         if gravity is not None:
             r = r.with_gravity(gravity)
         if displacements is not None:
-            s = r.solve_displacements(_floats(displacements, "displacements"))
+            d = parse_numbers(displacements, "--displacements", count=r.n_tendons)
+            s = r.solve_displacements(d)
         else:
-            s = r.solve_tensions(_floats(tensions, "tensions"))
+            s = r.solve_tensions(parse_numbers(tensions, "--tensions", count=r.n_tendons))
         if as_json:
             typer.echo(_dumps(s.to_json()))
         else:
@@ -111,9 +105,7 @@ def register(app: typer.Typer) -> None:
 
     @sub.command("info")
     def info(
-        robot: str = typer.Option(
-            "paper", "--robot", help="Packaged robot name ('paper') or a robot TOML file."
-        ),
+        robot: str = _ROBOT,
         as_json: bool = typer.Option(
             False,
             "--json",

@@ -6,7 +6,12 @@
 >>> ds.points.shape   # (C, S, P, 3)                                                    # doctest: +SKIP
 """
 
-from riskplan.datasets.generate import generate_dataset, generate_splits, simulate_target
+from riskplan.datasets.generate import (
+    generate_dataset,
+    generate_splits,
+    simulate_target,
+    split_paths,
+)
 from riskplan.datasets.protocol import (
     PRESETS,
     Protocol,
@@ -17,6 +22,7 @@ from riskplan.datasets.protocol import (
     target_configurations,
 )
 from riskplan.datasets.storage import FORMAT, FORMAT_VERSION, Dataset, load_dataset
+from riskplan.datasets.summary import summarize
 
 __all__ = [
     "FORMAT",
@@ -31,6 +37,8 @@ __all__ = [
     "load_dataset",
     "random_starts",
     "simulate_target",
+    "split_paths",
     "straight_path",
+    "summarize",
     "target_configurations",
 ]

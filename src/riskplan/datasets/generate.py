@@ -377,17 +377,21 @@ def _generate_locked(
 def generate_splits(
     robot, preset, stem, *, seed: int = 0, splits=("train", "test"), **kwargs
 ) -> dict[str, Path]:
-    """Generate several splits: ``<stem>_train.h5`` and ``<stem>_test.h5`` (``stem`` without ``.h5``).
+    """Generate several splits: ``<stem>_train.h5`` and ``<stem>_test.h5`` (:func:`split_paths`).
 
     Each split uses the same ``seed``; the per-target seeds also depend on the split.
     Returns ``{split: path}``.
     """
+    return {
+        sp: generate_dataset(robot, preset, path, split=sp, seed=seed, **kwargs)
+        for sp, path in split_paths(stem, splits).items()
+    }
+
+
+def split_paths(stem, splits=("train", "test")) -> dict[str, Path]:
+    """The file of each split: ``data.h5`` (or ``data``) -> ``{"train": data_train.h5,
+    "test": data_test.h5}``."""
     stem = Path(stem)
     if stem.suffix == ".h5":
         stem = stem.with_suffix("")
-    return {
-        sp: generate_dataset(
-            robot, preset, stem.with_name(f"{stem.name}_{sp}.h5"), split=sp, seed=seed, **kwargs
-        )
-        for sp in splits
-    }
+    return {sp: stem.with_name(f"{stem.name}_{sp}.h5") for sp in splits}

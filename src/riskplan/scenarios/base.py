@@ -371,13 +371,17 @@ class Simulator(Protocol):
 
 
 def rollout(
-    sim: Simulator, state: SimState, controls, params: SimParams | None = None
+    sim: Simulator, state: SimState, controls, params: SimParams | None = None, *, on_step=None
 ) -> list[SimState]:
-    """Apply ``controls (T, q)`` from ``state``; returns the ``T + 1`` states ``[y_0, ..., y_T]``."""
+    """Apply ``controls (T, q)`` from ``state``; returns the ``T + 1`` states ``[y_0, ..., y_T]``.
+
+    ``on_step(new_state)``, if given, is called after each step (progress display)."""
     u = as_array(controls, "controls", shape=(None, sim.control_dim))
     states = [state]
     for k in range(u.shape[0]):
         states.append(sim.step(states[-1], u[k], params))
+        if on_step is not None:
+            on_step(states[-1])
     return states
 
 

@@ -1,0 +1,64 @@
+"""Summary of a data-set file (``riskplan dataset info``): robot, protocol, configurations
+done, and the spread of tips, cloud centroids and points."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from riskplan.datasets.storage import load_dataset
+from riskplan.errors import RiskplanError
+
+__all__ = ["summarize"]
+
+
+def summarize(path) -> dict:
+    """Summary of a data-set file: robot, protocol, configurations done, cloud and tip spread."""
+    ds = load_dataset(path)
+    done = ds.done
+    summary = {
+        "file": str(path),
+        "robot": ds.metadata.get("robot_name"),
+        "split": ds.metadata.get("split"),
+        "seed": ds.metadata.get("seed"),
+        "riskplan_version": ds.metadata.get("riskplan_version"),
+        "created": ds.metadata.get("created"),
+        "complete": ds.complete,
+        "protocol": {k: v for k, v in ds.metadata["protocol"].items() if k != "cameras"},
+        "n_cameras": len(ds.metadata["protocol"].get("cameras", [])),
+        "configs_done": int(done.sum()),
+        "configs_total": ds.n_configs,
+        "points_shape": list(ds.points.shape),
+    }
+    if done.any():
+        tips = ds.tips[done]
+        spread = ds.tip_spread()[done]
+        pts = ds.points[done].astype(np.float64)
+        cen = pts.mean(axis=2)  # (C, S, 3) cloud centroids: their spread over the starts
+        cen_rms = np.sqrt(((cen - cen.mean(axis=1, keepdims=True)) ** 2).sum(-1).mean(-1))
+        summary.update(
+            tip_spread_mm={
+                "mean": float(spread.mean() * 1e3),
+                "median": float(np.median(spread) * 1e3),
+                "max": float(spread.max() * 1e3),
+            },
+            tip_range_m={
+                "min": tips.reshape(-1, 3).min(0).tolist(),
+                "max": tips.reshape(-1, 3).max(0).tolist(),
+            },
+            centroid_spread_mm={
+                "mean": float(cen_rms.mean() * 1e3),
+                "max": float(cen_rms.max() * 1e3),
+            },
+            bbox_m={
+                "min": pts.reshape(-1, 3).min(0).tolist(),
+                "max": pts.reshape(-1, 3).max(0).tolist(),
+            },
+        )
+        try:
+            tmax = np.asarray(ds.robot.tension_limits, dtype=np.float64)
+            over = np.any(ds.tensions[done] > tmax * (1 + 1e-9), axis=-1)
+            summary["arrivals_over_max_tension"] = float(over.mean())
+        except RiskplanError as exc:
+            # a robot file this version cannot rebuild must not stop the summary
+            summary["arrivals_over_max_tension"] = f"unknown ({exc})"
+    return summary

@@ -41,10 +41,10 @@ the plan's stored state ``y*_t`` (``sim.obstacles(y*_t)``), with the 2-D collisi
 
 The sigma estimate is conservative by construction, and far below the linear model's own
 probability when a plan passes within a few standard deviations of an obstacle: the
-χ²₂ factor is the mass of the whole ``c_t``-σ ellipse, so it counts every direction as
-leading into an obstacle, where the mass actually beyond the nearest edge is about
-``1 − Φ(c_t)`` (``c_t = 0.5``: 0.88 against ≤ 0.31); and multiplying the factors treats
-strongly correlated steps as independent. On an RRT needle plan (docs/planning.md,
+χ²₂ factor counts the mass outside the whole ``c_t``-σ ellipse, as if every direction led
+into an obstacle, where the mass inside one convex obstacle is at most ``1 − Φ(c_t)``
+(beyond the tangent at its nearest point; ``c_t = 0.5``: 0.88 against ≤ 0.31); and
+multiplying the factors treats strongly correlated steps as independent. On an RRT needle plan (docs/planning.md,
 "rank 20") sigma gave 0.097, the linear model sampled 0.746, and closed-loop executions on
 the true simulator 0.739–0.755. Use ``"truncation"`` or ``"sampling"`` where the number
 itself matters rather than the ranking.
@@ -276,9 +276,10 @@ def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed
             free[t] = 0.0
             continue
         idx = np.flatnonzero(alive)
+        live = xi[idx]
         hit = np.zeros(idx.size, dtype=bool)
         for ij in col:
-            hit |= np.asarray(env.contains(plan.reduced[t + 1][ij] + xi[idx][:, ij]), dtype=bool)
+            hit |= np.asarray(env.contains(plan.reduced[t + 1][ij] + live[:, ij]), dtype=bool)
         alive[idx[hit]] = False
         free[t] = float(alive.sum()) / before
     goal_env = polygon_environment([sim.goal(plan.states[T])])

@@ -92,3 +92,36 @@ def test_goal_at_any_stops_at_the_first_goal_state(rng):
         execute(sim, plan, None, plan.params, goal_at="first")
     with pytest.raises(InvalidInputError, match="goal_at"):
         monte_carlo_success(sim, plan, None, n=3, goal_at="first")
+
+
+def test_memoryless_system_gets_no_feedback(rng, tol):
+    # x_{t+1} = B u_t + noise (no memory of x_t, like the manipulation scenario's
+    # quasi-static equilibria): the linearisation finds A_t = 0, and the LQR gain
+    # L_t = −(R + Bᵀ P B)⁻¹ Bᵀ P A_t is zero. The loop runs (the filter's estimate moves
+    # with the measurements) but applies u*_t, so every execution equals the open-loop one
+    # with the same draws: the Fig. 6 "ours without selection" = "RRT" equality.
+    _, B, _ = toy_system(rng)
+    sim = LinearToy(
+        np.zeros((3, 3)), B, distribution=ActuationNoise(cov=tuple(map(tuple, 0.01 * np.eye(3))))
+    )
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), rng.uniform(-0.5, 0.5, (5, 3)))
+    sim._goal = square(*plan.reduced[-1, :2], 0.2)
+    lin = linearize(sim, plan, sim.distribution, n_samples=32, seed=0)
+    np.testing.assert_allclose(lin.A, 0.0, **tol["float64_abs"])
+    ctrl = lqg_controller(lin)
+    np.testing.assert_allclose(ctrl.L, 0.0, **tol["float64_abs"])
+    moved = 0.0
+    for k in range(10):
+        runs = []
+        for c in (None, ctrl):
+            gen = np.random.default_rng(k)
+            runs.append(execute(sim, plan, c, sim.distribution.sample(gen), seed=gen))
+        np.testing.assert_allclose(runs[1].controls, plan.controls, **tol["float64_abs"])
+        np.testing.assert_allclose(runs[1].x, runs[0].x, **tol["float64_abs"])
+        moved = max(moved, float(np.abs(runs[1].estimates - plan.reduced).max()))
+    assert moved > 0.01  # the estimate did follow the deviations
+    # with memory (A = I) the same construction does feed back
+    sim_m = LinearToy(np.eye(3), B, distribution=sim.distribution)
+    plan_m = NominalPlan.from_rollout(sim_m, sim_m.initial_state(), plan.controls)
+    lin_m = linearize(sim_m, plan_m, sim_m.distribution, n_samples=32, seed=0)
+    assert np.abs(lqg_controller(lin_m).L).max() > 0.1

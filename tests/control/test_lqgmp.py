@@ -195,7 +195,7 @@ def test_manipulation_points_and_methods():
         warnings.simplefilter("ignore")
         lin = linearize(sim, plan, n_a_runs=4, n_samples=0, seed=0)
     ctrl = lqg_controller(lin)
-    for m in ("sigma", "truncation"):
+    for m in ("sigma", "truncation", "sampling"):
         r = lqgmp(sim, plan, ctrl, method=m, n_goal_samples=200, seed=0)
         assert r.cov.shape == (4, 52, 52) and 0.0 <= r.p_success <= 1.0
         assert r.p_goal == 0.0  # three small pushes do not bring the target into the goal disk
@@ -248,3 +248,83 @@ def test_drift_mean_matches_monte_carlo(rng):
         xi.mean(0),
         res.mean[T],
     )
+
+
+def _wall(x_edge, y_lo, y_hi):
+    """A rectangle whose near (left) edge is the line x = x_edge for y in [y_lo, y_hi]."""
+    return np.array([[x_edge, y_lo], [x_edge + 100, y_lo], [x_edge + 100, y_hi], [x_edge, y_hi]])
+
+
+def test_persistent_deviation_along_a_wall_closed_form():
+    # A = B = I, no feedback, noise in the first step only: x̄_t = m_0 for every t >= 1, so
+    # the T steps along a wall at distance d are one event, P(no collision) = Φ(d/σ) exactly.
+    # The sigma estimate multiplies T ellipse factors (1 − exp(−d²/2σ²))^T instead.
+    from riskplan.control.lqg import LQGController
+
+    T, sd, d = 10, 0.1, 0.1
+    sim = LinearToy(np.eye(3), np.eye(3), sensing_std=0.1)
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), np.tile([0.0, 0.1, 0.0], (T, 1)))
+    sim._obstacles = [_wall(d, -10.0, 10.0)]
+    sim._goal = square(0.0, 1.0, 100.0)
+    M = np.zeros((T, 3, 3))
+    M[0] = sd**2 * np.eye(3)
+    lin = Linearization(
+        A=np.broadcast_to(np.eye(3), (T, 3, 3)),
+        B=np.broadcast_to(np.eye(3), (T, 3, 3)),
+        M=M,
+        H=np.broadcast_to(sim.observation_matrix, (T, 2, 3)),
+        N=np.broadcast_to(sim.sensing_cov, (T, 2, 2)),
+        rank=np.full(T, 3),
+    )
+    zeros = np.zeros
+    ctrl = LQGController(
+        L=zeros((T, 3, 3)), K=zeros((T, 3, 2)), P=zeros((T, 3, 3)), P0=zeros((3, 3)), lin=lin
+    )
+    exact = float(ndtr(d / sd))  # 0.841
+    n = 40_000
+    smp = lqgmp(sim, plan, ctrl, method="sampling", n_goal_samples=n, seed=0)
+    se = math.sqrt(exact * (1 - exact) / n)
+    assert abs(smp.p_success - exact) < 4.5 * se, (smp.p_success, exact)
+    assert smp.p_goal == 1.0 and smp.p_free_steps[1:].min() == 1.0  # nothing new after step 1
+    sig = lqgmp(sim, plan, ctrl, method="sigma", n_goal_samples=10)
+    np.testing.assert_allclose(sig.p_success, (-math.expm1(-0.5 * (d / sd) ** 2)) ** T, rtol=1e-9)
+    assert sig.p_success < 0.02  # 0.39^10: the estimator, not the model, loses the plan
+    trunc = lqgmp(sim, plan, ctrl, method="truncation", n_goal_samples=10)
+    # the first step is exact; the moment-matched Gaussian of the survivors has a tail
+    # beyond the line again, which each later step counts anew (0.73 here against 0.84)
+    np.testing.assert_allclose(trunc.p_free_steps[0], exact, rtol=0, atol=1e-9)
+    assert np.all(trunc.p_free_steps[1:] < 1.0)
+    assert sig.p_success < trunc.p_success < exact
+
+
+def test_sampling_matches_closed_loop_of_the_linear_system(rng):
+    # The decisive check of LQG-MP: on a linear system with Gaussian noise (the toy with
+    # actuation noise, its exact linearisation, the LQG controller), executions *are* the
+    # linear-Gaussian model. A path along a wall close to the controlled spread, with
+    # correlated steps (A = I): "sampling" must agree with the executions within Monte
+    # Carlo error (about 0.45 both); the sigma estimate is conservative (a lower bound per
+    # step) and here far below them (0.001), which is why it must not be read as a
+    # probability (truncation: 0.39).
+    T = 8
+    sim = LinearToy(
+        np.eye(3),
+        np.eye(3),
+        sensing_std=0.05,
+        distribution=ActuationNoise(cov=tuple(map(tuple, SIGMA_W**2 * np.eye(3)))),
+    )
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), np.tile([0.0, 0.1, 0.0], (T, 1)))
+    sim._obstacles = [_wall(0.12, 0.15, 0.85)]  # beside steps 2..8
+    sim._goal = square(0.0, 0.8, 0.3)
+    ctrl = lqg_controller(_exact(sim, T))
+    n_mc, n_s = 2000, 40_000
+    mc = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=n_mc, seed=3)
+    smp = lqgmp(sim, plan, ctrl, method="sampling", n_goal_samples=n_s, seed=0)
+    p = mc.probability
+    se = math.sqrt(p * (1 - p) * (1 / n_mc + 1 / n_s))
+    assert 0.2 < p < 0.9, p  # the wall matters
+    assert abs(smp.p_success - p) < 4.5 * se, (smp.p_success, p, se)
+    np.testing.assert_allclose(np.prod(smp.p_free_steps), smp.p_collision_free, rtol=1e-12)
+    sig = lqgmp(sim, plan, ctrl, method="sigma", n_goal_samples=n_s, seed=0)
+    # union bound on the per-step ellipse factors: a rigorous lower bound of P(no collision)
+    assert 1.0 - np.sum(1.0 - sig.p_free_steps) <= smp.p_collision_free
+    assert sig.p_success < mc.low, (sig.p_success, mc.low)

@@ -13,6 +13,7 @@ def test_nominal_row():
         assert lo <= p <= hi
     # without parameter uncertainty the plan (which reaches the goal) succeeds: sensing noise only
     assert row["lqgmp_sigma"] > 0.9 and row["closed"][0] == 1.0
+    assert row["lqgmp_sampling"] >= row["lqgmp_sigma"] - 0.05  # sigma is the conservative one
 
 
 def test_unknown_plan():

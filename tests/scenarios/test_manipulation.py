@@ -153,3 +153,16 @@ def test_solver_failure_is_reported_with_context():
         assert exc.elements is not None and exc.min_jacobian <= 0
     else:
         assert exc.residual is not None and np.isfinite(exc.residual)
+
+
+def test_next_equilibrium_does_not_depend_on_the_previous_state(manip, tol):
+    # quasi-static steps: the state after a step is the equilibrium under that step's forces,
+    # whatever state it started from. This is why the linearisation finds A_t ≈ 0 along
+    # manipulation plans and the LQR puts no feedback on them (docs/reproduce.md, Fig. 6).
+    p = SimParams()
+    u = np.array([0.3, -0.2, 0.2, 0.1, -0.1, 0.3])
+    a = manip.step(manip.initial_state(p), np.array([0.6, 0.2, -0.3, -0.2, 0.2, -0.4]), p)
+    b = manip.step(manip.initial_state(p), np.array([-0.2, 0.4, 0.1, 0.3, 0.4, 0.2]), p)
+    assert np.abs(manip.reduced(a) - manip.reduced(b)).max() > 0.02  # different starts
+    xa, xb = manip.reduced(manip.step(a, u, p)), manip.reduced(manip.step(b, u, p))
+    np.testing.assert_allclose(xa, xb, **tol["solver"])

@@ -28,7 +28,10 @@ def register(plan_app: typer.Typer) -> None:
         workers: int = workers_option("worker processes (0: one per core)"),
         seed: int = typer.Option(0, "--seed", help="master seed (trees, linearisation, checks)"),
         method: str = typer.Option(
-            "sigma", "--method", help="LQG-MP collision estimate: sigma (paper) | truncation"
+            "sigma",
+            "--method",
+            help="LQG-MP collision estimate: sigma (paper; conservative) | truncation | "
+            "sampling (trajectories of the linear model)",
         ),
         check_runs: int = typer.Option(
             1000, "--check-runs", help="closed-loop executions per checked plan (0: skip)"

@@ -1,7 +1,7 @@
 """Honesty check of LQG-MP (issue 11, part 5; the deformable paper never reports it): for the
 needle scenario, a plan (the tissue demo's greedy arc steering on the nominal parameters),
-its LQG controller, the LQG-MP P(success) (sigma and truncation; the paper's zero-mean model
-and with the drift carried), against the success rate of closed-loop and open-loop
+its LQG controller, the LQG-MP P(success) (sigma, truncation and sampling; the paper's
+zero-mean model and with the drift carried), against the success rate of closed-loop and open-loop
 executions on the true simulator with 95 % Wilson intervals, per uncertainty case.
 
 Two plans (docs/control.md, "Honesty check"):
@@ -73,7 +73,7 @@ def needle_rows(
             ),
         }
         row = {"plan": plan, "case": case, "steps": nominal.n_steps}
-        for method in ("sigma", "truncation"):
+        for method in ("sigma", "truncation", "sampling"):
             for drift in (False, True):
                 r = lqgmp(sim, nominal, ctrl["closed"], method=method, drift=drift, seed=0)
                 row[f"lqgmp_{method}{'_drift' if drift else ''}"] = round(r.p_success, 3)

@@ -178,8 +178,9 @@ def select_plan(
     """Evaluate every candidate with LQG-MP and select the most likely to succeed (paper IV-D).
 
     ``plans``: the candidate :class:`~riskplan.control.NominalPlan` list; ``method``:
-    ``"sigma"`` (the paper's) or ``"truncation"`` (Patil 2012), see
-    :mod:`riskplan.control.lqgmp`; ``on_result(i, score)`` is called as plans finish.
+    ``"sigma"`` (the paper's; a conservative bound, far below the model's probability for
+    plans passing close to obstacles), ``"truncation"`` (Patil 2012) or ``"sampling"``
+    (trajectories of the linear model), see :mod:`riskplan.control.lqgmp`; ``on_result(i, score)`` is called as plans finish.
     Raises :class:`~riskplan.errors.PlanningError` if no candidate could be evaluated.
     """
     from riskplan.errors import PlanningError

@@ -122,7 +122,7 @@ def test_response_equals_fem_solve(needle, n_elements, dense):
     s = needle.step(needle.initial_state(p, pose=(0.4, 0.45, 0.3)), [0.5, 0.2], p)
     f = needle.nodal_forces(s, p)
     ref = needle.model(p).model.solve(f)
-    np.testing.assert_allclose(s.displacement, ref, **TOL["fem_response"])
+    np.testing.assert_allclose(s.displacement, ref, **TOL["float64_accumulated"])
     r = needle.model(p).model.residual(s.displacement, f)
     assert np.linalg.norm(r) <= TOL["linear_fem"]["atol"]
 

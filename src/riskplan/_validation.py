@@ -66,22 +66,20 @@ def check_range(
     a = np.asarray(arr)
     if low is not None:
         bad = (a < low) if low_inclusive else (a <= low)
-        if np.any(bad):
-            idx = tuple(int(i) for i in np.argwhere(bad)[0])
-            lo = np.broadcast_to(low, a.shape)[idx]
-            op = ">=" if low_inclusive else ">"
-            raise InvalidInputError(
-                f"{name}: value {a[idx]:.6g} at index {idx} violates {name} {op} {lo:.6g}"
-            )
+        _raise_first(a, bad, low, name, ">=" if low_inclusive else ">")
     if high is not None:
         bad = (a > high) if high_inclusive else (a >= high)
-        if np.any(bad):
-            idx = tuple(int(i) for i in np.argwhere(bad)[0])
-            hi = np.broadcast_to(high, a.shape)[idx]
-            op = "<=" if high_inclusive else "<"
-            raise InvalidInputError(
-                f"{name}: value {a[idx]:.6g} at index {idx} violates {name} {op} {hi:.6g}"
-            )
+        _raise_first(a, bad, high, name, "<=" if high_inclusive else "<")
+
+
+def _raise_first(a, bad, limit, name: str, op: str) -> None:
+    """:class:`InvalidInputError` naming the first element of ``a`` where ``bad`` holds."""
+    if np.any(bad):
+        idx = tuple(int(i) for i in np.argwhere(bad)[0])
+        lim = np.broadcast_to(limit, a.shape)[idx]
+        raise InvalidInputError(
+            f"{name}: value {a[idx]:.6g} at index {idx} violates {name} {op} {lim:.6g}"
+        )
 
 
 def as_generator(seed) -> np.random.Generator:

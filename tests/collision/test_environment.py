@@ -63,7 +63,7 @@ def test_closest_points_match_brute_force(rng, boxes_env):
     d, c, _f = boxes_env.closest_points(pts)
     db, cb, _ = K.closest_points_brute(boxes_env.vertices, boxes_env.faces, pts)
     np.testing.assert_allclose(d, db, **TOL["float64_ref"])
-    np.testing.assert_allclose(c, cb, atol=1e-7)
+    np.testing.assert_allclose(c, cb, **TOL["closest_point"])
     sd = boxes_env.signed_distance(pts)
     np.testing.assert_array_equal(sd < 0, boxes_env.contains(pts))
 

@@ -17,6 +17,7 @@ from riskplan.collision import (
 )
 from riskplan.errors import DataFormatError, InvalidInputError
 from tests.collision.conftest import box_mesh
+from tests.conftest import TOL
 
 
 def _rotation(rng):
@@ -86,7 +87,7 @@ def test_saved_world_mesh_loads_in_the_base_frame(tmp_path, world_scene, rng, to
     U = np.broadcast_to(np.eye(3) / 0.02, (6, 3, 3))
     # (mesh files store float32 vertices)
     np.testing.assert_allclose(
-        gaussian_bound(mu, U, loaded), gaussian_bound(mu, U, base_env), rtol=1e-4, atol=1e-9
+        gaussian_bound(mu, U, loaded), gaussian_bound(mu, U, base_env), **TOL["float32_mesh_bound"]
     )
     # an explicit pose (here the same one, from the sidecar file) gives the same environment
     explicit = load_environment(path, base_pose=BasePose.from_json(tmp_path / "scene.ply.json"))
@@ -97,7 +98,9 @@ def test_base_frame_mesh_and_missing_frame(tmp_path, world_scene):
     base_env, world, _pose = world_scene
     path = save_environment(base_env, tmp_path / "base.stl")
     assert json.loads((tmp_path / "base.stl.json").read_text())["frame"] == "base"
-    np.testing.assert_allclose(load_environment(path).bounds, base_env.bounds, rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(
+        load_environment(path).bounds, base_env.bounds, **TOL["float32_vertices"]
+    )
     (tmp_path / "base.stl.json").unlink()
     with pytest.raises(InvalidInputError, match="frame is unknown"):
         load_environment(path)
@@ -125,6 +128,5 @@ def test_chest_file_round_trip(tmp_path):
     np.testing.assert_allclose(
         gaussian_bound(mu, U, loaded),
         gaussian_bound(mu, U, chest.base_environment),
-        rtol=1e-4,
-        atol=1e-9,
+        **TOL["float32_mesh_bound"],
     )

@@ -54,7 +54,11 @@ def naive_patil(V, F, mu, U):
         b = d_all[j]
         a = c_all[j] / b
         bs.append(b)
-        active = [i for i in active if i != j and not np.all(tri[i] @ a >= b - 1e-9 * (1 + b))]
+        active = [
+            i
+            for i in active
+            if i != j and not np.all(tri[i] @ a >= b - TOL["on_surface"]["atol"] * (1 + b))
+        ]
     return np.sum(ndtr(-np.array(bs))), len(bs)
 
 
@@ -79,7 +83,7 @@ def test_halfspace_closed_form_2d_anisotropic():
 
 
 def test_far_obstacle_is_zero_and_inside_is_at_least_half(boxes_env):
-    assert gaussian_bound(np.array([50.0, 50, 50]), np.eye(3), boxes_env) < 1e-15
+    assert gaussian_bound(np.array([50.0, 50, 50]), np.eye(3), boxes_env) < TOL["round_off"]["atol"]
     inside = gaussian_bound(np.array([1.5, 0, 0]), np.eye(3) * 10, boxes_env)
     assert inside >= 0.5
     terms = gaussian_bound_terms(
@@ -98,11 +102,11 @@ def test_whitening_commutes_with_geometry(rng, boxes_env):
         x = unwhiten(cw[None], mu, U)[0]
         np.testing.assert_allclose(mahalanobis(x[None], mu, U)[0], dw, **TOL["float64_ref"])
         # x is on the original surface, and no surface point is Mahalanobis-closer
-        assert boxes_env.closest_points(x)[0] < 1e-9
+        assert boxes_env.closest_points(x)[0] < TOL["on_surface"]["atol"]
         import trimesh
 
         pts, _ = trimesh.sample.sample_surface(boxes_env.to_trimesh(), 20000, seed=1)
-        assert mahalanobis(pts, mu, U).min() >= dw - 1e-9
+        assert mahalanobis(pts, mu, U).min() >= dw - TOL["on_surface"]["atol"]
         np.testing.assert_allclose(
             whiten(unwhiten(cw[None], mu, U), mu, U)[0], cw, **TOL["float64_ref"]
         )
@@ -121,7 +125,7 @@ def test_fast_equals_naive(rng, boxes_env):
         assert terms.n_constraints == ncons
         # the cut-off changes the bound by at most the chi tail
         np.testing.assert_allclose(
-            gaussian_bound(mu, U, boxes_env), min(1.0, ref), rtol=1e-8, atol=1e-15
+            gaussian_bound(mu, U, boxes_env), min(1.0, ref), **TOL["cutoff_tail"]
         )
 
 
@@ -129,7 +133,7 @@ def test_free_region_is_free(rng, boxes_env):
     mu, U = np.array([0.1, -0.2, 0.0]), random_upper(rng, 3)
     fr = free_region(mu, U, boxes_env)
     pts = mu + rng.normal(size=(20000, 3)) * 2.0
-    inside_poly = np.all(pts @ fr.normals.T <= fr.offsets - 1e-9, axis=1)
+    inside_poly = np.all(pts @ fr.normals.T <= fr.offsets - TOL["on_surface"]["atol"], axis=1)
     assert inside_poly.sum() > 100
     assert not boxes_env.contains(pts[inside_poly]).any()
 
@@ -179,7 +183,7 @@ def test_bound_never_below_monte_carlo(seed, dim, scale):
         gm, env, 4000, seed=seed, confidence=0.999, interval="clopper-pearson"
     )
     assert 0.0 <= bound <= 1.0
-    assert bound >= mc.low - 1e-12
+    assert bound >= mc.low - TOL["float64_abs"]["atol"]
 
 
 def test_extruded_2d_agrees_with_3d(rng):
@@ -198,7 +202,7 @@ def test_extruded_2d_agrees_with_3d(rng):
         U3[2, 2] = 1.0 / 0.1
         p2 = gaussian_bound(mu2, U2, env2)
         p3 = gaussian_bound(np.r_[mu2, 0.0], U3, env3)
-        np.testing.assert_allclose(p3, p2, rtol=1e-9, atol=1e-14)
+        np.testing.assert_allclose(p3, p2, **TOL["extruded_2d"])
         pts = rng.normal(size=(200, 2)) * 2
         np.testing.assert_array_equal(
             env3.contains(np.column_stack([pts, np.zeros(200)])), env2.contains(pts)

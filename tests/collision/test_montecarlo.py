@@ -15,6 +15,7 @@ from riskplan.collision import (
 from riskplan.errors import InvalidInputError
 from riskplan.kinematics import GaussianMixture
 from tests.collision.conftest import box_mesh
+from tests.conftest import TOL
 
 
 @pytest.mark.parametrize(
@@ -24,7 +25,7 @@ def test_intervals_match_scipy(method, scipy_method):
     for k, n in ((0, 50), (3, 50), (25, 50), (50, 50), (137, 10000)):
         lo, hi = binomial_interval(k, n, 0.95, method)
         ci = binomtest(k, n).proportion_ci(0.95, method=scipy_method)
-        np.testing.assert_allclose([lo, hi], [ci.low, ci.high], rtol=1e-8, atol=1e-12)
+        np.testing.assert_allclose([lo, hi], [ci.low, ci.high], **TOL["scipy_reference"])
 
 
 def test_seeded_and_consistent(boxes_env):

@@ -18,6 +18,7 @@ from riskplan.collision import (
 )
 from riskplan.kinematics import GaussianMixture
 from tests.collision.conftest import box_mesh
+from tests.conftest import TOL
 from tests.properties import (
     PROPERTY,
     any_float,
@@ -112,7 +113,9 @@ def test_arbitrary_base_poses(text):
     pose = call(BasePose.parse, text)
     if pose is not None:
         assert_finite(pose.position, pose.rotation)
-        np.testing.assert_allclose(pose.rotation.T @ pose.rotation, np.eye(3), atol=1e-6)
+        np.testing.assert_allclose(
+            pose.rotation.T @ pose.rotation, np.eye(3), **TOL["orthonormality"]
+        )
 
 
 @pytest.mark.parametrize("points", [np.full((2, 3), np.nan), np.zeros((0, 3)), np.zeros(3)])

@@ -17,7 +17,7 @@ def test_arc_closed_form():
         P[-1], [0.0, (1 - np.cos(k * L)) / k, np.sin(k * L) / k], **TOL["float64_ref"]
     )
     steps = np.linalg.norm(np.diff(P, axis=0), axis=1)
-    np.testing.assert_allclose(steps.sum(), L, rtol=1e-3)  # chords of a unit-speed curve
+    np.testing.assert_allclose(steps.sum(), L, **TOL["chord_length"])  # a unit-speed curve
     straight = arc_backbone(0.0, 0.0, L)
     np.testing.assert_allclose(straight[:, 2], np.linspace(0, L, 41), **TOL["float64_ref"])
     assert arc_backbone(np.zeros((2, 3)), 0.0).shape == (2, 3, 41, 3)
@@ -28,7 +28,7 @@ def test_backbone_mixture():
     gm = backbone_mixture(P, 5, radius=0.01, sigma=0.002)
     assert tuple(gm.batch_shape) == (2,) and gm.n_components == 5 and gm.dim == 3
     m = gm.numpy()["means"]
-    np.testing.assert_allclose(m[0, :, :2], 0.0, atol=1e-12)
+    np.testing.assert_allclose(m[0, :, :2], 0.0, **TOL["float64_abs"])
     assert np.all(np.diff(m[0, :, 2]) > 0)
     cov = gm.covariances.numpy()
     # straight robot: variance across the backbone = radius^2 / 4 + sigma^2

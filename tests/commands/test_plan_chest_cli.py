@@ -11,6 +11,7 @@ from typer.testing import CliRunner
 
 from riskplan.cli import app
 from riskplan.errors import DataFormatError, InvalidInputError, PlanningError
+from tests.conftest import TOL, approx_tol
 
 runner = CliRunner()
 
@@ -94,7 +95,8 @@ def test_plan_chest_tiny(tiny, tmp_path):
     )
     assert opt["bound_eq10"] <= nominal["bound_eq10"]
     assert (
-        plan["paths"]["least_risk"]["bound_eq10"] <= plan["paths"]["shortest"]["bound_eq10"] + 1e-12
+        plan["paths"]["least_risk"]["bound_eq10"]
+        <= plan["paths"]["shortest"]["bound_eq10"] + TOL["float64_abs"]["atol"]
     )
     assert nominal["configurations"][0] == [0.0, 0.0] and nominal["configurations"][-1] == [
         0.03,
@@ -194,4 +196,4 @@ def test_plan_chest_reads_the_mesh_sidecar(tiny, tmp_path):
     na = json.loads((tmp_path / "a" / "nominal.json").read_text())
     nb = json.loads((tmp_path / "b" / "nominal.json").read_text())
     assert na["configurations"] == nb["configurations"]
-    assert na["bound_eq10"] == pytest.approx(nb["bound_eq10"], rel=1e-12, abs=0)
+    assert na["bound_eq10"] == pytest.approx(nb["bound_eq10"], **approx_tol("float64_exact_rel"))

@@ -11,6 +11,7 @@ import pytest
 from riskplan.control import NominalPlan, linearize
 from riskplan.control.linearize import RankDeficiencyWarning
 from riskplan.errors import InvalidInputError, SimulationError
+from tests.conftest import TOL
 
 from .toy import FORCE, LinearToy, toy_system
 
@@ -27,8 +28,8 @@ def test_linear_toy_exact_A_B(rng, tol):
     lin = linearize(sim, plan, seed=1)
     assert lin.A.shape == (5, 3, 3) and lin.B.shape == (5, 3, 3) and lin.H.shape == (5, 2, 3)
     # finite differences of an affine map: exact up to rounding of x ~ 1 divided by ε ~ 0.02
-    np.testing.assert_allclose(lin.A, np.broadcast_to(A, lin.A.shape), rtol=1e-8, atol=1e-8)
-    np.testing.assert_allclose(lin.B, np.broadcast_to(B, lin.B.shape), rtol=1e-8, atol=1e-8)
+    np.testing.assert_allclose(lin.A, np.broadcast_to(A, lin.A.shape), **tol["float64_ref"])
+    np.testing.assert_allclose(lin.B, np.broadcast_to(B, lin.B.shape), **tol["float64_ref"])
     np.testing.assert_array_equal(lin.M, 0.0)
     np.testing.assert_array_equal(lin.H[0], sim.observation_matrix)
     assert (lin.rank == 3).all()
@@ -43,8 +44,10 @@ def test_linear_toy_M_within_monte_carlo_tolerance(rng):
     M_true = np.outer(c, c) * FORCE.variance
     # the estimate is (mean of (f-1)²) c cᵀ; (f-1)² with f-1 ~ U[-1,1] has mean 1/3, variance 4/45
     rel_sd = math.sqrt(4 / 45) / (1 / 3) / math.sqrt(n)
-    np.testing.assert_allclose(lin.M[0], lin.M[1], rtol=1e-12, atol=1e-15)  # same draws every step
-    np.testing.assert_allclose(lin.M[0], M_true, rtol=4 * rel_sd, atol=1e-12)
+    np.testing.assert_allclose(
+        lin.M[0], lin.M[1], **TOL["float64_exact_small"]
+    )  # same draws every step
+    np.testing.assert_allclose(lin.M[0], M_true, rtol=4 * rel_sd, atol=TOL["float64_abs"]["atol"])
 
 
 def test_actuation_noise_enters_M(rng):
@@ -88,12 +91,14 @@ def test_rank_deficient_warns_and_keeps_prior(tol):
         lin = linearize(sim, plan, seed=0)
     assert (lin.rank == 2).all()
     np.testing.assert_allclose(
-        lin.A[:, :2, :2], np.broadcast_to(A[:2, :2], (3, 2, 2)), rtol=1e-8, atol=1e-8
+        lin.A[:, :2, :2], np.broadcast_to(A[:2, :2], (3, 2, 2)), **tol["float64_ref"]
     )
     np.testing.assert_allclose(lin.A[:, 2, 2], 1.0, **tol["float64_exact"])  # identity prior
     with pytest.warns(RankDeficiencyWarning):
         lin0 = linearize(sim, plan, seed=0, a_prior="zero")
-    np.testing.assert_allclose(lin0.A[:, 2, 2], 0.0, atol=1e-12)  # the paper's plain pseudo-inverse
+    np.testing.assert_allclose(
+        lin0.A[:, 2, 2], 0.0, **tol["float64_abs"]
+    )  # the paper's plain pseudo-inverse
 
 
 def test_non_finite_state_names_step(rng):
@@ -145,5 +150,5 @@ def test_needle_matches_car_jacobian():
                 [cfg.tau * math.tan(phi) * k, cfg.tau * v * k / math.cos(phi) ** 2],
             ]
         )
-        np.testing.assert_allclose(lin.B[t], B_true, rtol=0, atol=2e-3)
-        np.testing.assert_allclose(lin.A[t], A_true, rtol=0, atol=1e-3)
+        np.testing.assert_allclose(lin.B[t], B_true, **TOL["needle_car_B"])
+        np.testing.assert_allclose(lin.A[t], A_true, **TOL["needle_car_A"])

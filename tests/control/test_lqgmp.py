@@ -13,6 +13,7 @@ from riskplan.control import NominalPlan, execute, lqg_controller, lqgmp, monte_
 from riskplan.control.linearize import Linearization
 from riskplan.errors import InvalidInputError
 from riskplan.scenarios.uncertainty import ActuationNoise
+from tests.conftest import TOL
 
 from .toy import LinearToy, square, toy_system
 
@@ -59,14 +60,14 @@ def test_joint_covariance_matches_monte_carlo(rng):
         xi[k, 3:] = ex.estimates[-1] - plan.reduced[-1]
     S = res.cov[T]
     w, v = np.linalg.eigh(S)
-    keep = w > 1e-10 * w.max()
+    keep = w > TOL["covariance_support"]["rtol"] * w.max()
     W = v[:, keep] / np.sqrt(w[keep])  # whitening of the support
     E = (xi @ W).T @ (xi @ W) / n  # ≈ I, entries with sd sqrt(2/n) (diagonal) and sqrt(1/n)
     sd = np.where(np.eye(keep.sum(), dtype=bool), math.sqrt(2 / n), math.sqrt(1 / n))
     assert np.all(np.abs(E - np.eye(keep.sum())) < 4.5 * sd), np.round(E, 3)
     # and nothing outside the support
     if (~keep).any():
-        assert np.abs(xi @ v[:, ~keep]).max() < 1e-6
+        assert np.abs(xi @ v[:, ~keep]).max() < TOL["covariance_support"]["atol"]
 
 
 def test_p_goal_matches_monte_carlo_success(rng):
@@ -105,9 +106,9 @@ def test_half_plane_closed_form(rng):
     sigma = lqgmp(sim, plan, ctrl, method="sigma", n_goal_samples=10)
     sx = math.sqrt(sigma.cov[1, 0, 0])  # before truncation
     exact_free = float(ndtr(d / sx))
-    np.testing.assert_allclose(trunc.p_collision_free, exact_free, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(trunc.p_collision_free, exact_free, **TOL["half_plane_truncation"])
     np.testing.assert_allclose(
-        sigma.p_collision_free, -math.expm1(-0.5 * (d / sx) ** 2), rtol=1e-9, atol=0
+        sigma.p_collision_free, -math.expm1(-0.5 * (d / sx) ** 2), **TOL["half_plane_sigma"]
     )
     assert sigma.p_collision_free < exact_free  # the chi-square ball is conservative
     # truncation removes the mass beyond the line: the mean moves away from it
@@ -174,7 +175,7 @@ def test_sigma_vectorised_equals_loop(rng):
     sim.obstacles = changing
     loop = lqgmp(sim, plan, ctrl, n_goal_samples=10)
     assert np.any((fast.p_free_steps > 0) & (fast.p_free_steps < 1))
-    np.testing.assert_allclose(loop.p_free_steps, fast.p_free_steps, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(loop.p_free_steps, fast.p_free_steps, **TOL["float64_accumulated"])
 
 
 def test_manipulation_points_and_methods():
@@ -229,7 +230,10 @@ def test_drift_mean_matches_monte_carlo(rng):
     sim._goal = square(0, 0, 100.0)
     lin = linearize(sim, plan, dist, n_samples=4000, seed=0)
     np.testing.assert_allclose(
-        lin.drift, np.broadcast_to(0.5 * c, (T, 3)), rtol=0, atol=0.05 * np.abs(c).max()
+        lin.drift,
+        np.broadcast_to(0.5 * c, (T, 3)),
+        rtol=0,
+        atol=TOL["monte_carlo_mean"]["atol"] * np.abs(c).max(),
     )
     ctrl = lqg_controller(lin)
     res = lqgmp(sim, plan, ctrl, drift=True, n_goal_samples=10)
@@ -287,12 +291,14 @@ def test_persistent_deviation_along_a_wall_closed_form():
     assert abs(smp.p_success - exact) < 4.5 * se, (smp.p_success, exact)
     assert smp.p_goal == 1.0 and smp.p_free_steps[1:].min() == 1.0  # nothing new after step 1
     sig = lqgmp(sim, plan, ctrl, method="sigma", n_goal_samples=10)
-    np.testing.assert_allclose(sig.p_success, (-math.expm1(-0.5 * (d / sd) ** 2)) ** T, rtol=1e-9)
+    np.testing.assert_allclose(
+        sig.p_success, (-math.expm1(-0.5 * (d / sd) ** 2)) ** T, **TOL["half_plane_sigma"]
+    )
     assert sig.p_success < 0.02  # 0.39^10: the estimator, not the model, loses the plan
     trunc = lqgmp(sim, plan, ctrl, method="truncation", n_goal_samples=10)
     # the first step is exact; the moment-matched Gaussian of the survivors has a tail
     # beyond the line again, which each later step counts anew (0.73 here against 0.84)
-    np.testing.assert_allclose(trunc.p_free_steps[0], exact, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(trunc.p_free_steps[0], exact, **TOL["half_plane_truncation"])
     assert np.all(trunc.p_free_steps[1:] < 1.0)
     assert sig.p_success < trunc.p_success < exact
 
@@ -323,7 +329,9 @@ def test_sampling_matches_closed_loop_of_the_linear_system(rng):
     se = math.sqrt(p * (1 - p) * (1 / n_mc + 1 / n_s))
     assert 0.2 < p < 0.9, p  # the wall matters
     assert abs(smp.p_success - p) < 4.5 * se, (smp.p_success, p, se)
-    np.testing.assert_allclose(np.prod(smp.p_free_steps), smp.p_collision_free, rtol=1e-12)
+    np.testing.assert_allclose(
+        np.prod(smp.p_free_steps), smp.p_collision_free, **TOL["float64_exact_rel"]
+    )
     sig = lqgmp(sim, plan, ctrl, method="sigma", n_goal_samples=n_s, seed=0)
     # union bound on the per-step ellipse factors: a rigorous lower bound of P(no collision)
     assert 1.0 - np.sum(1.0 - sig.p_free_steps) <= smp.p_collision_free

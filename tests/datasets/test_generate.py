@@ -20,6 +20,7 @@ from riskplan.datasets import (
 )
 from riskplan.datasets.storage import partial_path
 from riskplan.errors import DataFormatError, InvalidInputError
+from tests.conftest import TOL
 
 TINY = PRESETS["tiny"]
 ARRAYS = ("displacements", "points", "tips", "starts", "tensions", "done")
@@ -187,9 +188,9 @@ def test_clouds_in_base_frame_whatever_the_base_pose(robot):
     target = np.array([0.0, 0.02, 0.0, 0.01])
     a = simulate_target(robot, TINY, target, seed=5)
     b = simulate_target(moved, TINY, target, seed=5)
-    np.testing.assert_allclose(b["tips"], a["tips"], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(b["tips"], a["tips"], **TOL["float64_abs"])
     # float32 clouds: equal up to float64 round-off crossing a float32 rounding boundary
-    np.testing.assert_allclose(b["points"], a["points"], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(b["points"], a["points"], **TOL["float32_rounding"])
 
 
 def test_bad_input(robot, tmp_path):

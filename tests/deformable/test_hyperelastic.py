@@ -102,7 +102,7 @@ def test_small_loads_nonlinear_matches_linear(manip):
         diffs.append(np.linalg.norm(un - ul) / np.linalg.norm(ul))
     diffs = np.array(diffs)
     # the relative difference is O(load): ~10x per decade, and small at small loads
-    assert diffs[0] < 1e-3, diffs
+    assert diffs[0] < TOL["small_load_linear"]["rtol"], diffs
     np.testing.assert_allclose(diffs[1:] / diffs[:-1], 10.0, **TOL["convergence_ratio"])
 
 

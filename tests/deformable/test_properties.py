@@ -8,10 +8,13 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from riskplan.deformable import LinearElasticModel, Material, mesh_polygon, point_load, rectangle
+from tests.conftest import TOL
 from tests.properties import PROPERTY, any_float, arrays_or_junk, assert_finite, call, junk
 
 MESH = mesh_polygon(rectangle(), 40)
-MODEL = LinearElasticModel(MESH, Material(50.0, 0.4), np.flatnonzero(MESH.nodes[:, 1] < 1e-9))
+MODEL = LinearElasticModel(
+    MESH, Material(50.0, 0.4), np.flatnonzero(MESH.nodes[:, 1] < TOL["on_surface"]["atol"])
+)
 
 
 @PROPERTY

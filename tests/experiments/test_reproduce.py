@@ -14,6 +14,7 @@ import pytest
 from riskplan.errors import BackendUnavailableError, DataFormatError, InvalidInputError
 from riskplan.experiments.fig6 import ScenarioScale, claims, run_scenario
 from riskplan.experiments.store import ResultStore
+from tests.conftest import approx_tol
 from tests.test_parallel_ray_cluster import ray_head  # noqa: F401  (fixture: a Ray head on 127.0.0.1)
 
 #: One candidate per set, two executions per method, one case: every stage runs once.
@@ -144,10 +145,14 @@ def test_claims_both_readings():
     assert c["ours_highest"] == {"a": True, "b": False}
     assert c["ours_separated"] == {"a": True, "b": False}
     # averages: rrt 0.3, without selection 0.5, ours 0.55
-    assert c["no_select_vs_rrt"]["points"] == pytest.approx(20.0, rel=1e-12)
-    assert c["no_select_vs_rrt"]["relative"] == pytest.approx(100 * (0.5 / 0.3 - 1), rel=1e-12)
-    assert c["no_select_vs_ours"]["points"] == pytest.approx(-5.0, rel=1e-12)
-    assert c["no_select_vs_ours"]["relative"] == pytest.approx(100 * (0.5 / 0.55 - 1), rel=1e-12)
+    assert c["no_select_vs_rrt"]["points"] == pytest.approx(20.0, **approx_tol("float64_exact"))
+    assert c["no_select_vs_rrt"]["relative"] == pytest.approx(
+        100 * (0.5 / 0.3 - 1), **approx_tol("float64_exact")
+    )
+    assert c["no_select_vs_ours"]["points"] == pytest.approx(-5.0, **approx_tol("float64_exact"))
+    assert c["no_select_vs_ours"]["relative"] == pytest.approx(
+        100 * (0.5 / 0.55 - 1), **approx_tol("float64_exact")
+    )
 
 
 @pytest.mark.parametrize(

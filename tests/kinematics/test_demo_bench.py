@@ -4,6 +4,7 @@ import math
 
 from riskplan.experiments import demo_kinematics
 from riskplan.experiments.report import Report
+from tests.conftest import TOL
 
 
 def test_demo_stage_on_synthetic_data(synth_paths, tmp_path, monkeypatch):
@@ -36,5 +37,5 @@ def test_bench_keys():
         assert math.isclose(
             out["speedup_vs_cosserat"],
             out["cosserat_single_ms"] / out["mdn_single_ms"],
-            rel_tol=1e-12,
+            rel_tol=TOL["float64_exact_rel"]["rtol"],
         )

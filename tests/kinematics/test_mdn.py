@@ -13,6 +13,7 @@ from riskplan.kinematics.mdn import (
     build_precision_cholesky,
     mixture_log_prob,
 )
+from tests.conftest import TOL
 
 LIMITS = np.array([[-0.01, 0.04]] * 4)
 
@@ -66,7 +67,12 @@ def test_numpy_fast_path_equals_torch(rng, tol):
         ref = m.mixture(torch.as_tensor(d))
         for name in ("weights", "means", "precision_cholesky"):
             a, b = getattr(fast, name).numpy(), getattr(ref, name).detach().numpy()
-            np.testing.assert_allclose(a, b, rtol=1e-11, atol=1e-12 * np.abs(b).max())
+            np.testing.assert_allclose(
+                a,
+                b,
+                rtol=tol["numpy_vs_torch"]["rtol"],
+                atol=tol["numpy_vs_torch"]["atol"] * np.abs(b).max(),
+            )
         fast.validate()
 
 
@@ -81,11 +87,14 @@ def test_numpy_fast_path_float32_network(rng, tol):
         fast.weights.numpy(), ref.weights.detach().numpy(), **tol["float32_ref"]
     )
     np.testing.assert_allclose(
-        fast.means.numpy(), ref.means.detach().numpy(), rtol=1e-4, atol=1e-6
-    )  # metres
+        fast.means.numpy(), ref.means.detach().numpy(), **tol["float32_means"]
+    )
     u_ref = ref.precision_cholesky.detach().numpy()
     np.testing.assert_allclose(
-        fast.precision_cholesky.numpy(), u_ref, rtol=1e-4, atol=1e-4 * np.abs(u_ref).max()
+        fast.precision_cholesky.numpy(),
+        u_ref,
+        rtol=tol["float32_scaled"]["rtol"],
+        atol=tol["float32_scaled"]["atol"] * np.abs(u_ref).max(),
     )
 
 
@@ -115,7 +124,9 @@ def test_large_batch_equals_loop(rng):
         one = m.predict(d[i])
         for name in ("weights", "means", "precision_cholesky"):
             np.testing.assert_allclose(
-                getattr(big, name).numpy()[i], getattr(one, name).numpy(), rtol=1e-12, atol=1e-15
+                getattr(big, name).numpy()[i],
+                getattr(one, name).numpy(),
+                **TOL["float64_exact_small"],
             )
 
 
@@ -127,7 +138,7 @@ def test_predict_float32_and_float64(rng, tol):
     assert g64.dtype == torch.float64 and g32.dtype == torch.float32
     x = g64.sample(16, seed=1)
     np.testing.assert_allclose(
-        g32.log_prob(x.float()).numpy(), g64.log_prob(x).numpy(), rtol=1e-4, atol=1e-3
+        g32.log_prob(x.float()).numpy(), g64.log_prob(x).numpy(), **tol["float32_log_density"]
     )
     # the torch module in float32 agrees with float64
     m32 = MDNModel(m.net.float(), m.normalisation, LIMITS)

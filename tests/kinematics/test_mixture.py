@@ -5,6 +5,7 @@ from scipy.stats import multivariate_normal
 
 from riskplan.errors import InvalidInputError
 from riskplan.kinematics import GaussianMixture
+from tests.conftest import TOL
 
 
 def _random_mixture(rng, batch=(), K=4, d=3):
@@ -62,7 +63,7 @@ def test_sample_moments(rng):
     full_cov = second - np.outer(mean, mean)
     se = np.sqrt(np.diag(full_cov) / len(s))
     assert np.all(np.abs(s.mean(0) - mean) < 5 * se)
-    np.testing.assert_allclose(np.cov(s.T), full_cov, rtol=0.02, atol=0.02)
+    np.testing.assert_allclose(np.cov(s.T), full_cov, **TOL["monte_carlo_cov"])
 
 
 def test_sample_seeded_and_batched(rng):

@@ -12,6 +12,7 @@ from typer.testing import CliRunner
 
 from riskplan.errors import DataFormatError
 from riskplan.kinematics import load_model, model_io, resolve_model, shipped_models
+from tests.conftest import TOL
 
 
 def test_paper_is_shipped_with_its_provenance():
@@ -44,7 +45,7 @@ def test_paper_predicts_finite_mixtures_in_limits(rng):
     w, mu, cov = gm.weights.numpy(), gm.means.numpy(), gm.covariances.numpy()
     assert w.shape == (16, 10) and mu.shape == (16, 10, 3) and cov.shape == (16, 10, 3, 3)
     assert np.all(np.isfinite(w)) and np.all(np.isfinite(mu)) and np.all(np.isfinite(cov))
-    np.testing.assert_allclose(w.sum(-1), 1.0, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(w.sum(-1), 1.0, **TOL["float64_exact"])
     assert np.all(np.linalg.eigvalsh(cov) > 0)
     # the robot is 0.2 m long: component means lie within reach of the base
     assert np.all(np.linalg.norm(mu, axis=-1) < 0.3)

@@ -14,6 +14,7 @@ from riskplan.planning.prm import (
     segment_owners,
     tip_positions,
 )
+from tests.conftest import TOL
 from tests.planning.conftest import GOAL, LIMITS, START
 
 
@@ -66,7 +67,9 @@ def test_trajectory_valid_and_spaced(roadmap, model, scene):
     np.testing.assert_array_equal(traj[-1], GOAL)
     assert np.all((traj >= LIMITS[:, 0]) & (traj <= LIMITS[:, 1]))
     assert _means_free(model, scene, traj).all()
-    assert np.linalg.norm(np.diff(traj, axis=0), axis=-1).max() <= 0.0025 + 1e-12
+    assert (
+        np.linalg.norm(np.diff(traj, axis=0), axis=-1).max() <= 0.0025 + TOL["float64_abs"]["atol"]
+    )
     assert roadmap.validity.motions(traj[:-1], traj[1:]).all()
     # the straight line is blocked by the box, so the path bends
     assert len(path) > 2
@@ -78,7 +81,7 @@ def test_interpolate_keeps_vertices():
     path = np.array([[0.0, 0.0], [0.01, 0.0], [0.01, 0.0035]])
     traj = interpolate_path(path, 0.0025)
     assert len(traj) == 1 + 4 + 2
-    np.testing.assert_allclose(traj[4], path[1], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(traj[4], path[1], **TOL["round_off"])
 
 
 def test_same_seed_same_roadmap_and_trajectory(model, scene, roadmap):

@@ -13,6 +13,7 @@ from riskplan.control import NominalPlan
 from riskplan.errors import InvalidInputError, PlanningError
 from riskplan.planning.rrt import PlanningSpace, RRTOptions, grow_tree, planning_space, rrt_plans
 from riskplan.scenarios.manipulation import ManipulationScenario
+from tests.conftest import TOL
 from tests.planning.conftest import SMALL_MESH, PointRobot
 
 
@@ -99,7 +100,7 @@ def test_manipulation_plan(tmp_path):
     # consecutive controls respect the scenario's rate limit
     space = planning_space(sim)
     steps = np.abs(np.diff(np.vstack([np.zeros(6), plan.controls]), axis=0))
-    assert np.all(steps <= space.max_control_change + 1e-12)
+    assert np.all(steps <= space.max_control_change + TOL["float64_abs"]["atol"])
 
 
 def test_no_plan_raises_planning_error_with_tree_size_and_distance():
@@ -192,7 +193,7 @@ def test_plans_end_in_tightened_goal_with_margined_controls(near_needle, needle_
         assert near_needle.goal_distance(plan.states[-1]) <= 0.5 * r
         v, phi = plan.controls[:, 0], plan.controls[:, 1]
         assert np.all((v >= 0.1) & (v <= v_max - 0.1))
-        assert np.all(np.abs(phi) <= phi_max - math.radians(10.0) + 1e-12)
+        assert np.all(np.abs(phi) <= phi_max - math.radians(10.0) + TOL["float64_abs"]["atol"])
 
 
 def test_manipulation_sampling_bounds_keep_two_sigma():
@@ -203,7 +204,7 @@ def test_manipulation_sampling_bounds_keep_two_sigma():
     b = sampling_bounds(sim, RRTOptions())
     # actuation noise 0.1 f_max per component: margin 0.2 f_max
     np.testing.assert_allclose(
-        b, np.tile([-0.8 * f, 0.8 * f], (sim.control_dim, 1)), rtol=0, atol=1e-15
+        b, np.tile([-0.8 * f, 0.8 * f], (sim.control_dim, 1)), **TOL["round_off"]
     )
     assert np.array_equal(sampling_bounds(sim, RRTOptions(control_margin=0.0)), sim.control_bounds)
     with pytest.raises(InvalidInputError, match="control_margin"):

@@ -11,6 +11,7 @@ from riskplan.control.lqgmp import lqgmp
 from riskplan.errors import InvalidInputError, SimulationError
 from riskplan.planning.select import common_draws, evaluate_plan, honesty_check, select_plan
 from riskplan.scenarios.uncertainty import get_case
+from tests.conftest import approx_tol
 from tests.planning.conftest import SMALL_MESH
 
 CASE = get_case("actuation", SMALL_MESH)
@@ -32,7 +33,9 @@ def test_ranking_and_chosen_plan(near_needle, needle_result, selection):
     assert selection.best == selection.ranking[0].index and selection.plan is plans[selection.best]
     for s in selection.ranking:
         assert 0.0 <= s.p_success <= 1.0 and s.error is None
-        assert s.p_success == pytest.approx(s.p_collision_free * s.p_goal, rel=1e-12, abs=1e-15)
+        assert s.p_success == pytest.approx(
+            s.p_collision_free * s.p_goal, **approx_tol("float64_exact_small")
+        )
     # the chosen plan's gains fit its dimensions
     T, q, p = selection.plan.n_steps, near_needle.control_dim, near_needle.state_dim
     assert selection.controller.L.shape == (T, q, p)
@@ -41,7 +44,7 @@ def test_ranking_and_chosen_plan(near_needle, needle_result, selection):
     # depend on the goal samples' seed)
     again = lqgmp(near_needle, selection.plan, selection.controller, n_goal_samples=500, seed=0)
     assert again.p_collision_free == pytest.approx(
-        selection.result.p_collision_free, rel=1e-12, abs=1e-15
+        selection.result.p_collision_free, **approx_tol("float64_exact_small")
     )
 
 

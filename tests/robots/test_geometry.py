@@ -88,8 +88,8 @@ def test_disk_points_on_cylinder_with_outward_normals(rng):
     face = np.isclose(np.abs(h), 0.001, **TOL["float64_abs"])
     assert np.all(side | face)
     assert (
-        np.all(np.abs(h) <= 0.001 + 1e-12)
-        and np.all(rho <= 0.01 + 1e-12)
+        np.all(np.abs(h) <= 0.001 + TOL["float64_abs"]["atol"])
+        and np.all(rho <= 0.01 + TOL["float64_abs"]["atol"])
         and np.all(rho[face] >= 0.003)
     )
     np.testing.assert_allclose(np.linalg.norm(nrm, axis=1), 1.0, **TOL["float64_ref"])

@@ -28,7 +28,7 @@ def test_play_operator_band(rng):
     e = np.zeros(1)
     for t in range(200):
         e = play_operator(e, c[t : t + 1], b)
-        assert abs(e[0] - c[t, 0]) <= b + 1e-15
+        assert abs(e[0] - c[t, 0]) <= b + TOL["round_off"]["atol"]
     # monotone rise then fall: lag below on the way up, above on the way down
     assert play_operator(0.0, np.array([[1.0], [2.0]]), b)[0] == pytest.approx(2.0 - b)
     assert play_operator(3.0, np.array([[2.5], [2.0]]), b)[0] == pytest.approx(2.0 + b)

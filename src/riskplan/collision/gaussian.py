@@ -124,6 +124,17 @@ def check_gaussians(means, precision_cholesky, d: int) -> tuple[np.ndarray, np.n
     return mu, u
 
 
+def _patil(environment: Environment, mus, us, cutoff, record: bool):
+    """:func:`~riskplan.collision._kernels.gaussian_bounds` (the Patil construction) of the
+    Gaussians ``mus (N, d)``, ``us (N, d, d)`` against ``environment``; ``record`` keeps the
+    half-spaces of the first one."""
+    centers, radii = environment._spheres
+    return K.gaussian_bounds(
+        environment.vertices, environment.faces, centers, radii, mus, us, float(cutoff),
+        BEHIND_EPS, record,
+    )  # fmt: skip
+
+
 def gaussian_bound_terms(
     means,
     precision_cholesky,
@@ -150,18 +161,7 @@ def gaussian_bound_terms(
     shape = mu.shape[:-1]
     mus = np.ascontiguousarray(mu.reshape(-1, d))
     us = np.ascontiguousarray(u.reshape(-1, d, d))
-    centers, radii = environment._spheres
-    s, ncons, touching, truncated, _, _, _ = K.gaussian_bounds(
-        environment.vertices,
-        environment.faces,
-        centers,
-        radii,
-        mus,
-        us,
-        float(cutoff),
-        BEHIND_EPS,
-        False,
-    )
+    s, ncons, touching, truncated, _, _, _ = _patil(environment, mus, us, cutoff, False)
     if not np.all(
         np.isfinite(s)
     ):  # the kernel is built to avoid this; never return NaN as a probability
@@ -237,18 +237,7 @@ def free_region(
     mu, u = check_gaussians(
         np.asarray(mean)[None], np.asarray(precision_cholesky)[None], environment.dim
     )
-    centers, radii = environment._spheres
-    _, _, _, _, A, B, _ = K.gaussian_bounds(
-        environment.vertices,
-        environment.faces,
-        centers,
-        radii,
-        mu,
-        u,
-        float(cutoff),
-        BEHIND_EPS,
-        True,
-    )
+    _, _, _, _, A, B, _ = _patil(environment, mu, u, cutoff, True)
     normals = A @ u[0]
     return FreeRegion(normals=normals, offsets=B + normals @ mu[0], whitened_normals=A, distances=B)
 

@@ -10,6 +10,10 @@ task, start ``j`` gets child ``j`` of that seed and splits it into the start dra
 per-run hysteresis variation and the camera noise. A configuration's data therefore depend
 only on (robot, protocol, split, seed, i): the same on the serial, local and Ray backends,
 and the same whether a generation ran in one go or was killed and resumed.
+
+:func:`generate_dataset` checks its arguments and hands them unchanged to
+``_generate_locked``, the part that runs while the output file's lock is held; the two
+parameter lists match on purpose (a forwarding, not repeated logic).
 """
 
 from __future__ import annotations

@@ -444,34 +444,24 @@ def train(
         )
     net.load_state_dict(best_state)
     net.eval()
-    model = build_model(
-        net,
-        norm,
-        data,
-        config,
-        {
-            "history": [dataclasses.asdict(h) for h in history],
-            "best_epoch": best_epoch,
-            "finished": True,
-        },
-    )
+    model = _model_with_history(net, norm, data, config, history, best_epoch, finished=True)
     if out is not None:
         model_io.save_model(model, out)
     return TrainResult(model, history, best_epoch, best_val, stopped_early, total_skipped)
 
 
+def _model_with_history(net, norm, data, config, history, best_epoch, *, finished: bool):
+    """:func:`build_model` with the training record (epoch history, best epoch, finished)."""
+    record = {
+        "history": [dataclasses.asdict(h) for h in history],
+        "best_epoch": best_epoch,
+        "finished": finished,
+    }
+    return build_model(net, norm, data, config, record)
+
+
 def _save_best(net, norm, data, config, history, out, model_io) -> None:
-    model = build_model(
-        net,
-        norm,
-        data,
-        config,
-        {
-            "history": [dataclasses.asdict(h) for h in history],
-            "best_epoch": history[-1].epoch,
-            "finished": False,
-        },
-    )
+    model = _model_with_history(net, norm, data, config, history, history[-1].epoch, finished=False)
     model_io.save_model(model, out)
 
 

@@ -19,12 +19,23 @@ re-solved by the scalar kernel. Every operation on one configuration is the scal
 operation in the same order, so results agree with it bit for bit (tested).
 
 One source for the arithmetic: the per-tendon terms (``strains.tendon_tangent``,
-``tendon_stiffness``, ``tendon_slope_source``) and the RK4 row step (``integration.rk4_row``)
-are the scalar kernels' own inline helpers, fed here with one configuration's column of ``W``.
-What stays written out is deliberate: the 6x6 Cholesky factor and solve on the packed lower
-triangle (:func:`_factor_column`, :func:`_solve_column`, once each) are unrolled so that LLVM
-keeps the 21 entries in registers and vectorises across the chunk; the scalar kernel's
-``linalg6`` loops do the same operations in the same order.
+``unit_tangent``, ``tendon_stiffness``, ``tendon_slope_source``) and the RK4 row step
+(``integration.rk4_row``) are the scalar kernels' own inline helpers, fed here with one
+configuration's column of ``W``.
+
+Repetition that is deliberate (a duplicate-code scan lists it):
+
+* the 6x6 Cholesky factor and solve on the packed lower triangle (:func:`_factor_column`,
+  :func:`_solve_column`, once each) are unrolled, row after row of the same shape, so that LLVM
+  keeps the 21 entries in registers and vectorises across the chunk; the scalar kernel's
+  ``linalg6`` loops do the same operations in the same order;
+* :func:`_jac_chol_slope` repeats the tendon loop of :func:`_jac_chol` because it fuses the
+  Jacobian and the slope's right-hand side into one pass over the tendons (calling both
+  would evaluate every tendon tangent twice per node);
+* the six rows of a strain vector are written one statement each (``W[row + 0, c] = b0`` ...)
+  because the 6x6 solve returns scalars, not an array (no allocation in the loop);
+* :func:`_solve_serial` and :func:`_solve_parallel` differ only in ``range`` / ``prange``:
+  numba compiles a parallel loop only in a function of its own.
 
 Tendon path lengths are not computed (the shape needs none).
 """
@@ -40,7 +51,12 @@ from riskplan.errors import ConvergenceError, InvalidInputError
 from riskplan.robots import cosserat
 from riskplan.robots.integration import rk4_row
 from riskplan.robots.rod_tables import RodTables
-from riskplan.robots.strains import tendon_slope_source, tendon_stiffness, tendon_tangent
+from riskplan.robots.strains import (
+    tendon_slope_source,
+    tendon_stiffness,
+    tendon_tangent,
+    unit_tangent,
+)
 
 __all__ = ["CHUNK", "solve_tensions_batch"]
 
@@ -402,9 +418,8 @@ def _jac_chol(W, T, rt_all, drt_all, node, kse, kbt, strain_row, always):
         q = (drt_all[node, i, 0], drt_all[node, i, 1], drt_all[node, i, 2])
         for c in range(CHUNK):
             ti = T[i, c]
-            w0, w1, w2 = tendon_tangent(_strains(W, strain_row, c), r, q)
-            nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-            _jacobian_add_tendon(W, c, ti / nw, w0 / nw, w1 / nw, w2 / nw, r)
+            nw, t0, t1, t2 = unit_tangent(_strains(W, strain_row, c), r, q)
+            _jacobian_add_tendon(W, c, ti / nw, t0, t1, t2, r)
     for c in range(CHUNK):
         upd = always or W[REFACTOR, c] != 0.0
         bad = _factor_column(W, c, upd)
@@ -431,11 +446,7 @@ def _jac_chol_slope(W, T, rt_all, drt_all, ddrt_all, node, kse, kbt, strain_row,
         for c in range(CHUNK):
             ti = T[i, c]
             x = _strains(W, strain_row, c)
-            w0, w1, w2 = tendon_tangent(x, r, q)
-            nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-            t0 = w0 / nw
-            t1 = w1 / nw
-            t2 = w2 / nw
+            nw, t0, t1, t2 = unit_tangent(x, r, q)
             _jacobian_add_tendon(W, c, ti / nw, t0, t1, t2, r)
             c0, c1, c2, c3, c4, c5 = tendon_slope_source(ti, nw, t0, t1, t2, x, r, q, dd)
             W[slope_row + 0, c] -= c0

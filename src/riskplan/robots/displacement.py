@@ -1,6 +1,13 @@
 """Tensions for tendon displacements: the complementarity problem of compliant tendons that
 may go slack (semismooth Newton with a Levenberg-Marquardt fallback and a line search),
-without external loads."""
+without external loads.
+
+The entry points called from Python (:func:`solve_displacement_tensions`,
+:func:`solve_displacement_batch`) take the seven :class:`~riskplan.robots.rod_tables.RodTables`
+fields as separate arrays, like those of :mod:`riskplan.robots.integration`: plain arrays cross
+the Python boundary ten times faster than a named tuple, so these parameter lists repeat by
+design; inside compiled code the tables travel as one ``RodTables``.
+"""
 
 from __future__ import annotations
 
@@ -207,23 +214,10 @@ def solve_displacement_tensions(
             # (it is not smooth): continue with the Fischer-Burmeister form, whose merit has
             # no such points when dg/dtau is positive semidefinite, as a compliance matrix is
             fb = True
-            if (
-                lengths_and_jacobian(
-                    tau,
-                    rt_all,
-                    drt_all,
-                    ddrt_all,
-                    kse,
-                    kbt,
-                    length,
-                    n_steps,
-                    tol,
-                    maxit,
-                    lengths,
-                    dl,
-                )
-                != OK
-            ):
+            st = lengths_and_jacobian(
+                tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl
+            )
+            if st != OK:
                 return LOCAL_FAIL
             res, merit = complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack)
             continue
@@ -265,43 +259,13 @@ def solve_displacement_batch(
     from its start ``tau0s[b]`` is tried once more from the slack state (``infos`` of the last try)."""
     slack_start = np.zeros(ds.shape[1])
     for b in range(ds.shape[0]):
-        st = solve_displacement_tensions(
-            ds[b],
-            kinv,
-            l0,
-            tau0s[b],
-            rt_all,
-            drt_all,
-            ddrt_all,
-            kse,
-            kbt,
-            length,
-            n_steps,
-            tol,
-            maxit,
-            dtol,
-            outer_maxit,
-            taus[b],
-            infos[b],
-        )
-        if st != OK:
+        st = OUTER_FAIL
+        for attempt in range(2):
+            start = tau0s[b] if attempt == 0 else slack_start
             st = solve_displacement_tensions(
-                ds[b],
-                kinv,
-                l0,
-                slack_start,
-                rt_all,
-                drt_all,
-                ddrt_all,
-                kse,
-                kbt,
-                length,
-                n_steps,
-                tol,
-                maxit,
-                dtol,
-                outer_maxit,
-                taus[b],
-                infos[b],
-            )
+                ds[b], kinv, l0, start, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps,
+                tol, maxit, dtol, outer_maxit, taus[b], infos[b],
+            )  # fmt: skip
+            if st == OK:
+                break
         status[b] = st

@@ -196,12 +196,8 @@ def robot_after_path(
     the run-to-run variation (None: nominal, deterministic). Returns a :class:`RodShape`.
     Raises :class:`InvalidInputError` for an empty path (T = 0).
     """
-    model = HysteresisModel(robot, params)
-    c = _check_path(path)
-    if state is None:
-        state = model.initial_state(c[..., 0, :])
-    rng = None if seed is None else as_generator(seed)
-    return model.shape_after(state, c, rng)[1]
+    eff = effective_displacements(robot, path, state=state, seed=seed, params=params)
+    return robot.solve_displacements(eff)
 
 
 def effective_displacements(

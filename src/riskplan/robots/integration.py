@@ -3,6 +3,16 @@ local strains solved at the step nodes (no external loads: :func:`shape_free`), 
 loaded case (gravity, tip loads) that integrates the resultants ``N, M`` too
 (:func:`shape_loaded`, shot on the base values by ``TendonRobot``). Equations: module
 docstring of :mod:`riskplan.robots.cosserat`.
+
+:func:`rk4_row` writes the four RK4 stages out one after the other (four blocks of the same
+shape) on purpose: the twelve stage values stay scalars in registers, with no stage loop or
+temporary array, and the same inline function serves the scalar pass (:func:`rk4_pose_step`)
+and the lockstep kernel of :mod:`riskplan.robots.batch_kernel`, which vectorises it across
+configurations. The entry points called from Python (:func:`shape_free`,
+:func:`shape_free_batch`, :func:`shape_loaded`) list the seven
+:class:`~riskplan.robots.rod_tables.RodTables` fields as separate arguments, as the
+displacement solve's do: plain arrays cross the Python boundary ten times faster than a named
+tuple (see that module), so these parameter lists repeat by design.
 """
 
 from __future__ import annotations

@@ -294,6 +294,12 @@ class TendonRobot:
             self.params.base.matrix.T @ np.asarray(self.params.gravity.vector, dtype=float)
         )
 
+    def _batch_input(self, values, check, validate: bool):
+        """``(flat, batch)``: ``values (..., m)``, checked by ``check`` when ``validate``, as a
+        C-contiguous float array ``flat (B, m)``, and the leading shape ``batch``."""
+        a = check(values) if validate else np.asarray(values, dtype=float)
+        return np.ascontiguousarray(a.reshape(-1, self.n_tendons)), a.shape[:-1]
+
     # ---------------------------------------------------------------------- solving
     def solve_tensions(self, tensions, *, validate: bool = True) -> RodShape:
         """Shape for tendon tensions ``(..., m)`` [N], ``0 <= tension <= max_tension``.
@@ -303,10 +309,7 @@ class TendonRobot:
         SIMD kernel of :mod:`riskplan.robots.batch_kernel`, same results); with gravity: shooting on the base moment
         (:func:`cosserat.shape_loaded`). Raises :class:`ConvergenceError` if a solve fails.
         """
-        if validate:
-            tau = self.check_tensions(tensions)
-        else:
-            tau = np.asarray(tensions, dtype=float)
+        tau = self.check_tensions(tensions) if validate else np.asarray(tensions, dtype=float)
         if tau.ndim == 1 and not self.loaded:
             return self._solve_single_free(tau)
         batch = tau.shape[:-1]
@@ -440,12 +443,7 @@ class TendonRobot:
         tensions above ``max_tension`` are returned with a logged warning (the limit bounds
         tension *input*). Raises :class:`ConvergenceError` with the residual on failure.
         """
-        if validate:
-            d = self.check_displacements(displacements)
-        else:
-            d = np.asarray(displacements, dtype=float)
-        batch = d.shape[:-1]
-        flat = np.ascontiguousarray(d.reshape(-1, self.n_tendons))
+        flat, batch = self._batch_input(displacements, self.check_displacements, validate)
         tau = self.tensions_for_displacements(flat, validate=False)
         over = tau > self._tmax * (1 + 1e-9)
         if np.any(over):
@@ -464,12 +462,7 @@ class TendonRobot:
 
     def tensions_for_displacements(self, displacements, *, validate: bool = True) -> np.ndarray:
         """Tensions ``(..., m)`` [N] that realise tendon displacements ``(..., m)`` (see :meth:`solve_displacements`)."""
-        if validate:
-            d = self.check_displacements(displacements)
-        else:
-            d = np.asarray(displacements, dtype=float)
-        batch = d.shape[:-1]
-        flat = np.ascontiguousarray(d.reshape(-1, self.n_tendons))
+        flat, batch = self._batch_input(displacements, self.check_displacements, validate)
         B, m = flat.shape
         if self.loaded:
             tau = (
@@ -509,12 +502,7 @@ class TendonRobot:
 
     def tendon_lengths(self, tensions, *, validate: bool = True) -> np.ndarray:
         """Tendon path lengths ``l_i = int |v + u x r_i + r_i'| ds`` ``(..., m)`` [m] for tensions ``(..., m)``."""
-        if validate:
-            tau = self.check_tensions(tensions)
-        else:
-            tau = np.asarray(tensions, dtype=float)
-        batch = tau.shape[:-1]
-        flat = np.ascontiguousarray(tau.reshape(-1, self.n_tendons))
+        flat, batch = self._batch_input(tensions, self.check_tensions, validate)
         m = self.n_tendons
         out = np.empty(flat.shape)
         for b in range(flat.shape[0]):

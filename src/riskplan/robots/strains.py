@@ -2,6 +2,12 @@
 residual, Jacobian (R&W eqs. 13-16), Newton and chord/Newton solves, the strain slope
 ``x' = -J^{-1} dF/ds`` (implicit function theorem = R&W's ODE for ``v', u'``) and the tendon
 speeds ``|w_i|``. Strains ``x = (v, u) (6,)``; tendon offsets ``rt, drt (m, 3)`` at that node.
+
+:func:`local_strains` (Newton, a fresh factor every step: the loaded shooting path, whose
+right-hand sides change between RK4 stages) and :func:`local_strains_chord` (reuses the last
+factor while the residual falls fast: the unloaded pass, node after node) share the shape of
+their loop on purpose: one function with a mode flag would add a branch and a factor-state
+argument to the innermost solve of both hot paths for the sake of eight lines.
 """
 
 from __future__ import annotations
@@ -33,6 +39,15 @@ def tendon_tangent(x, r, dr):
         x[1] + x[5] * r[0] - x[3] * r[2] + dr[1],
         x[2] + x[3] * r[1] - x[4] * r[0] + dr[2],
     )
+
+
+@njit(cache=True, inline="always")
+def unit_tangent(x, r, dr):
+    """``(|w|, t0, t1, t2)``: the length of the tendon tangent ``w`` (:func:`tendon_tangent`)
+    and the unit tangent ``t = w / |w|``."""
+    w0, w1, w2 = tendon_tangent(x, r, dr)
+    nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    return nw, w0 / nw, w1 / nw, w2 / nw
 
 
 @njit(cache=True, inline="always")
@@ -137,11 +152,7 @@ def local_jacobian(x, tau, rt, drt, kse, kbt, J):
         r0 = rt[i, 0]
         r1 = rt[i, 1]
         r2 = rt[i, 2]
-        w0, w1, w2 = tendon_tangent(x, row3(rt, i), row3(drt, i))
-        nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-        t0 = w0 / nw
-        t1 = w1 / nw
-        t2 = w2 / nw
+        nw, t0, t1, t2 = unit_tangent(x, row3(rt, i), row3(drt, i))
         sc = ti / nw
         a00, a11, a22, a01, a02, a12, b00, b01, b02, b10, b11, b12, b20, b21, b22 = (
             tendon_stiffness(sc, t0, t1, t2, row3(rt, i))
@@ -258,11 +269,7 @@ def strain_slope(x, tau, rt, drt, ddrt, L, out):
         ti = tau[i]
         if ti == 0.0:
             continue
-        w0, w1, w2 = tendon_tangent(x, row3(rt, i), row3(drt, i))
-        nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-        t0 = w0 / nw
-        t1 = w1 / nw
-        t2 = w2 / nw
+        nw, t0, t1, t2 = unit_tangent(x, row3(rt, i), row3(drt, i))
         c0, c1, c2, c3, c4, c5 = tendon_slope_source(
             ti, nw, t0, t1, t2, x, row3(rt, i), row3(drt, i), row3(ddrt, i)
         )

@@ -3,14 +3,12 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 
 from riskplan.robots.linalg6 import chol_factor6, chol_solve6
 from riskplan.robots.rod_tables import LOCAL_FAIL, OK
-from riskplan.robots.strains import local_jacobian, local_strains_chord, row3, tendon_tangent
+from riskplan.robots.strains import local_jacobian, local_strains_chord, row3, unit_tangent
 
 
 @njit(cache=True)
@@ -68,11 +66,7 @@ def lengths_and_jacobian(
             r0 = rt[i, 0]
             r1 = rt[i, 1]
             r2 = rt[i, 2]
-            w0, w1, w2 = tendon_tangent(x, row3(rt, i), row3(drt, i))
-            nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-            t0 = w0 / nw
-            t1 = w1 / nw
-            t2 = w2 / nw
+            nw, t0, t1, t2 = unit_tangent(x, row3(rt, i), row3(drt, i))
             lengths[i] += wgt * nw
             G[0, i] = t0
             G[1, i] = t1

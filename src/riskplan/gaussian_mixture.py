@@ -165,8 +165,39 @@ def draw_components(
     return mu + np.einsum("...ij,...j->...i", L, z)
 
 
+class MixtureBatch:
+    """Shape properties and batch indexing shared by :class:`NumpyMixture` and the torch
+    ``GaussianMixture``: both hold ``weights``, ``means``, ``precision_cholesky`` and take
+    ``(weights, means, precision_cholesky, *, validate)`` in their constructors."""
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        return self.weights.shape[:-1]
+
+    @property
+    def n_components(self) -> int:
+        return self.weights.shape[-1]
+
+    @property
+    def dim(self) -> int:
+        return self.means.shape[-1]
+
+    def __getitem__(self, idx):
+        """Index the batch axes: ``gm[3]``, ``gm[:, 0]`` (a mixture of the same type)."""
+        if not isinstance(idx, tuple):
+            idx = (idx,)
+        if Ellipsis in idx:
+            raise InvalidInputError(
+                f"{type(self).__name__} indexing: Ellipsis is not supported; index batch axes "
+                "explicitly"
+            )
+        if len(idx) > len(self.batch_shape):
+            raise InvalidInputError(f"too many indices for batch shape {tuple(self.batch_shape)}")
+        return type(self)(*(getattr(self, name)[idx] for name in FIELDS), validate=False)
+
+
 @dataclass(frozen=True, eq=False)
-class NumpyMixture:
+class NumpyMixture(MixtureBatch):
     """A batch of ``K``-component Gaussian mixtures in ``d`` dimensions, as float64 arrays.
 
     Construct from arrays (anything ``numpy.asarray`` reads as real numbers); they become
@@ -196,18 +227,6 @@ class NumpyMixture:
         )
 
     # ------------------------------------------------------------ properties
-    @property
-    def batch_shape(self) -> tuple[int, ...]:
-        return self.weights.shape[:-1]
-
-    @property
-    def n_components(self) -> int:
-        return self.weights.shape[-1]
-
-    @property
-    def dim(self) -> int:
-        return self.means.shape[-1]
-
     @property
     def covariance_factors(self) -> np.ndarray:
         """``U_k^{-1}`` (upper triangular, ``U^{-1} U^{-T} = Sigma``), shape ``(..., K, d, d)``."""
@@ -303,20 +322,6 @@ class NumpyMixture:
     def numpy(self) -> dict[str, np.ndarray]:
         """``{"weights", "means", "precision_cholesky"}`` (as the torch type's ``numpy()``)."""
         return {name: getattr(self, name) for name in FIELDS}
-
-    def __getitem__(self, idx) -> NumpyMixture:
-        """Index the batch axes: ``gm[3]``, ``gm[:, 0]``."""
-        if not isinstance(idx, tuple):
-            idx = (idx,)
-        if Ellipsis in idx:
-            raise InvalidInputError(
-                "NumpyMixture indexing: Ellipsis is not supported; index batch axes explicitly"
-            )
-        if len(idx) > len(self.batch_shape):
-            raise InvalidInputError(f"too many indices for batch shape {tuple(self.batch_shape)}")
-        return NumpyMixture(
-            self.weights[idx], self.means[idx], self.precision_cholesky[idx], validate=False
-        )
 
     def __repr__(self) -> str:
         return (

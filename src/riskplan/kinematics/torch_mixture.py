@@ -24,6 +24,7 @@ import torch
 from riskplan.errors import InvalidInputError
 from riskplan.gaussian_mixture import (
     FIELDS,
+    MixtureBatch,
     NumpyMixture,
     check_mixture_arrays,
     check_point_shape,
@@ -32,7 +33,7 @@ from riskplan.gaussian_mixture import (
 
 
 @dataclass(frozen=True, eq=False)
-class GaussianMixture:
+class GaussianMixture(MixtureBatch):
     """A batch of ``K``-component Gaussian mixtures in ``d`` dimensions.
 
     Construct with tensors or arrays; NumPy inputs become float64 tensors. Pass
@@ -61,18 +62,7 @@ class GaussianMixture:
         check_mixture_arrays(*(_host_array(getattr(self, name)) for name in FIELDS))
 
     # ------------------------------------------------------------ properties
-    @property
-    def batch_shape(self) -> torch.Size:
-        return self.weights.shape[:-1]
-
-    @property
-    def n_components(self) -> int:
-        return self.weights.shape[-1]
-
-    @property
-    def dim(self) -> int:
-        return self.means.shape[-1]
-
+    # batch_shape (a torch.Size here), n_components, dim and batch indexing: MixtureBatch
     @property
     def dtype(self) -> torch.dtype:
         return self.means.dtype
@@ -248,20 +238,6 @@ class GaussianMixture:
         else:
             u = precision_cholesky_from_covariances(cov)
         return cls(weights, means, u, validate=validate)
-
-    def __getitem__(self, idx) -> GaussianMixture:
-        """Index the batch axes: ``gm[3]``, ``gm[:, 0]``."""
-        if not isinstance(idx, tuple):
-            idx = (idx,)
-        if Ellipsis in idx:
-            raise InvalidInputError(
-                "GaussianMixture indexing: Ellipsis is not supported; index batch axes explicitly"
-            )
-        if len(idx) > len(self.batch_shape):
-            raise InvalidInputError(f"too many indices for batch shape {tuple(self.batch_shape)}")
-        return GaussianMixture(
-            self.weights[idx], self.means[idx], self.precision_cholesky[idx], validate=False
-        )
 
     def __repr__(self) -> str:
         return (

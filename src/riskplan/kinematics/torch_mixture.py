@@ -141,7 +141,8 @@ class GaussianMixture(MixtureBatch):
     def sample(self, n: int, seed=None) -> torch.Tensor:
         """Draw ``n`` points from each mixture; returns ``(..., n, d)``.
 
-        ``seed``: ``None``, an int or a ``torch.Generator``.
+        ``seed``: ``None``, an int or a ``torch.Generator``. The draws come from torch's
+        generator, so they differ from ``to_numpy().sample(n, seed)`` (same distribution).
         """
         if n < 0:
             raise InvalidInputError(f"n: expected >= 0, got {n}")

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import ast
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import riskplan
@@ -56,3 +59,17 @@ def test_library_never_imports_the_application_layer():
                 if parts[0] == "riskplan" and len(parts) > 1 and parts[1] in APPLICATION:
                     bad.append(f"{rel}: {name}")
     assert not bad, bad
+
+
+def test_array_packages_import_without_torch():
+    """The mixture core and collision are array code: importing them never imports torch
+    (a torch ``GaussianMixture`` is still accepted, through its ``to_numpy()``)."""
+    code = (
+        "import sys\n"
+        "import riskplan.gaussian_mixture, riskplan.collision, riskplan.collision.robot_geometry\n"
+        "print(sorted(m for m in sys.modules if m == 'torch' or m.startswith('torch.')))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=os.environ
+    )
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr

@@ -4,9 +4,15 @@ deformable-planning paper section IV-D for 2-D states among tissue obstacles).
 
 One core serves 3-D triangle meshes and 2-D polygons:
 
+>>> from riskplan.gaussian_mixture import NumpyMixture
 >>> env = Environment.from_polygons([[[1, -1], [2, -1], [2, 1], [1, 1]]])
->>> gm = GaussianMixture.from_covariances([1.0], [[0.0, 0.0]], [np.eye(2) * 0.25])   # doctest: +SKIP
->>> probability_of_collision(gm, env)                                                # doctest: +SKIP
+>>> gm = NumpyMixture.from_covariances([1.0], [[0.0, 0.0]], [np.eye(2) * 0.25])
+>>> float(probability_of_collision(gm, env))  # 1 - Phi(2): the mean is 2 sigma from the box
+0.0227...
+
+Mixtures are :class:`~riskplan.gaussian_mixture.NumpyMixture` batches or the torch
+:class:`riskplan.kinematics.GaussianMixture` the MDN predicts (converted by its
+``to_numpy()``); this package never imports torch itself.
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ from riskplan.collision.gaussian import (
     precision_cholesky_from_covariance,
 )
 from riskplan.collision.geometry import mahalanobis, unwhiten, whiten
-from riskplan.collision.mixture import COMBINES, component_bounds, mixture_bound
+from riskplan.collision.mixture_bounds import COMBINES, component_bounds, mixture_bound
 from riskplan.collision.montecarlo import (
     MonteCarloEstimate,
     binomial_interval,
@@ -55,7 +61,10 @@ def probability_of_collision(
     seed=None,
     validate: bool = True,
 ) -> np.ndarray:
-    """Collision probability of a :class:`~riskplan.kinematics.GaussianMixture` batch; ``(...,)`` in [0, 1].
+    """Collision probability of a mixture batch; ``(...,)`` in [0, 1].
+
+    ``mixture``: a :class:`~riskplan.gaussian_mixture.NumpyMixture` or a torch
+    :class:`~riskplan.kinematics.GaussianMixture` (converted by its ``to_numpy()``).
 
     ``method``:
 

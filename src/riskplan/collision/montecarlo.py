@@ -20,8 +20,9 @@ import numpy as np
 
 from riskplan._validation import as_generator
 from riskplan.collision.environment import Environment, check_environment
-from riskplan.collision.mixture import COMBINES, mixture_arrays
+from riskplan.collision.mixture_bounds import COMBINES, check_mixture
 from riskplan.errors import InvalidInputError
+from riskplan.gaussian_mixture import NumpyMixture, draw_components
 
 INTERVALS = ("wilson", "clopper-pearson")
 # points per chunk (bounds memory at about 100 MB of float64 temporaries)
@@ -78,22 +79,14 @@ def binomial_interval(
     return np.clip(low, 0.0, 1.0), np.clip(high, 0.0, 1.0)
 
 
-def _sample_components(rng, w, m, uinv, n, combine):
-    """Draws ``(B, n, S, d)``: S=1 point from the mixture (weighted) or S=K, one per component (union)."""
-    B, K, d = m.shape
-    if combine == "weighted":
-        cdf = np.cumsum(w, axis=-1)
-        cdf[:, -1] = np.inf  # guards round-off: every uniform falls in some component
-        u = rng.random((B, n))
-        comp = (u[..., None] >= cdf[:, None, :]).sum(-1)  # (B, n)
-        comp = np.minimum(comp, K - 1)[..., None]  # (B, n, 1)
-    else:
-        comp = np.broadcast_to(np.arange(K), (B, n, K))
-    z = rng.standard_normal(comp.shape + (d,))
-    bi = np.arange(B)[:, None, None]
-    mu = m[bi, comp]  # (B, n, S, d)
-    L = uinv[bi, comp]  # (B, n, S, d, d)
-    return mu + np.einsum("...ij,...j->...i", L, z)
+def _flat_parameters(gm: NumpyMixture) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``weights (B, K)``, ``means (B, K, d)`` and ``U^{-1} (B, K, d, d)`` over the flattened batch."""
+    K, d = gm.n_components, gm.dim
+    return (
+        gm.weights.reshape(-1, K),
+        gm.means.reshape(-1, K, d),
+        np.linalg.inv(gm.precision_cholesky.reshape(-1, K, d, d)),
+    )
 
 
 def _check_n(n_samples) -> int:
@@ -139,18 +132,16 @@ def monte_carlo_probability(
         raise InvalidInputError(f"combine: expected one of {COMBINES}, got {combine!r}")
     n = _check_n(n_samples)
     check_environment(environment)
-    w, m, u = mixture_arrays(mixture, environment.dim, validate=validate)
-    shape = w.shape[:-1]
-    K, d = m.shape[-2], m.shape[-1]
-    w, m, u = w.reshape(-1, K), m.reshape(-1, K, d), u.reshape(-1, K, d, d)
-    uinv = np.linalg.inv(u)
+    gm = check_mixture(mixture, environment.dim, validate=validate)
+    shape = gm.batch_shape
+    w, m, uinv = _flat_parameters(gm)
     rng = as_generator(seed)
     hits = np.zeros(w.shape[0], dtype=np.int64)
-    per = max(1, CHUNK // (w.shape[0] * (K if combine == "union" else 1)))
+    per = max(1, CHUNK // (w.shape[0] * (gm.n_components if combine == "union" else 1)))
     done = 0
     while done < n:
         c = min(per, n - done)
-        x = _sample_components(rng, w, m, uinv, c, combine)  # (B, c, S, d)
+        x = draw_components(rng, w, m, uinv, c, one_per_component=combine == "union")
         inside = environment.contains(x).any(-1)  # (B, c)
         hits += inside.sum(-1)
         done += c
@@ -192,13 +183,12 @@ def monte_carlo_trajectory(
         raise InvalidInputError(f"combine: expected one of {COMBINES}, got {combine!r}")
     n = _check_n(n_samples)
     check_environment(environment)
-    w, m, u = mixture_arrays(mixtures, environment.dim, validate=validate)
-    if w.ndim < 2:
+    gm = check_mixture(mixtures, environment.dim, validate=validate)
+    if len(gm.batch_shape) < 1:
         raise InvalidInputError("mixtures: expected a batch axis of states (batch shape (..., T))")
-    shape, T = w.shape[:-2], w.shape[-2]
-    K, d = m.shape[-2], m.shape[-1]
-    w, m, u = w.reshape(-1, K), m.reshape(-1, K, d), u.reshape(-1, K, d, d)
-    uinv = np.linalg.inv(u)
+    shape, T = gm.batch_shape[:-1], gm.batch_shape[-1]
+    K, d = gm.n_components, gm.dim
+    w, m, uinv = _flat_parameters(gm)
     B = w.shape[0] // T
     rng = as_generator(seed)
     hits = np.zeros(B, dtype=np.int64)
@@ -207,7 +197,8 @@ def monte_carlo_trajectory(
     done = 0
     while done < n:
         c = min(per, n - done)
-        x = _sample_components(rng, w, m, uinv, c, combine).reshape(B, T, c, S, d)
+        x = draw_components(rng, w, m, uinv, c, one_per_component=combine == "union")
+        x = x.reshape(B, T, c, S, d)
         hit = environment.contains(x).any(-1).any(1)  # (B, c)
         if segments and T > 1:
             seg = environment.segments_collide(x[:, :-1], x[:, 1:])  # (B, T-1, c, S)

@@ -10,6 +10,11 @@ points along the piece plus the cross-section spread of the body (points on disk
 ``radius`` around the backbone: variance ``radius^2 / 2`` per direction normal to the
 tangent, ``radius^2 / 4`` for a uniform disk; we use ``radius^2 / 4``) plus an isotropic
 ``sigma^2`` for shape uncertainty. Weights are equal.
+
+:func:`backbone_numpy_mixture` and :func:`robot_numpy_mixture` return the torch-free
+:class:`~riskplan.gaussian_mixture.NumpyMixture`; :func:`backbone_mixture` and
+:func:`robot_mixture` return the same mixture as a torch
+:class:`riskplan.kinematics.GaussianMixture` (torch is imported only when they are called).
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from riskplan.errors import InvalidInputError
+from riskplan.gaussian_mixture import NumpyMixture
 
 
 def arc_backbone(curvature, bend_angle, length: float = 0.2, n: int = 41) -> np.ndarray:
@@ -36,15 +42,13 @@ def arc_backbone(curvature, bend_angle, length: float = 0.2, n: int = 41) -> np.
     return np.stack([r * np.cos(phi), r * np.sin(phi), z + 0 * r], axis=-1)
 
 
-def backbone_mixture(
+def backbone_numpy_mixture(
     positions, n_components: int = 5, *, radius: float = 0.01, sigma: float = 0.003
-):
+) -> NumpyMixture:
     """Gaussian mixture ``(..., K)`` over the body around backbone points ``positions (..., n, 3)``.
 
-    Returns a :class:`riskplan.kinematics.GaussianMixture` (float64, d = 3).
+    Returns a :class:`~riskplan.gaussian_mixture.NumpyMixture` (float64, d = 3).
     """
-    from riskplan.kinematics.mixture import GaussianMixture
-
     P = np.asarray(positions, dtype=np.float64)
     if P.ndim < 2 or P.shape[-1] != 3 or P.shape[-2] < 2 * n_components:
         raise InvalidInputError(
@@ -73,19 +77,43 @@ def backbone_mixture(
     means = np.stack(means, axis=-2)
     covs = np.stack(covs, axis=-3)
     w = np.full(means.shape[:-1], 1.0 / n_components)
-    return GaussianMixture.from_covariances(w, means, covs)
+    return NumpyMixture.from_covariances(w, means, covs)
+
+
+def robot_numpy_mixture(
+    robot, displacements, n_components: int = 5, *, radius: float = 0.01, sigma: float = 0.003
+) -> NumpyMixture:
+    """Mixture over the body of ``robot`` at tendon ``displacements (..., m)``.
+
+    Uses the robot's deterministic model (``robot.solve_displacements(d).positions``, base frame)
+    and :func:`backbone_numpy_mixture`; a stand-in for a trained MDN when none is available.
+    """
+    d = np.asarray(displacements, dtype=np.float64)
+    shape = robot.solve_displacements(d)
+    return backbone_numpy_mixture(
+        np.asarray(shape.positions, dtype=np.float64), n_components, radius=radius, sigma=sigma
+    )
+
+
+def backbone_mixture(
+    positions, n_components: int = 5, *, radius: float = 0.01, sigma: float = 0.003
+):
+    """:func:`backbone_numpy_mixture` as a torch :class:`riskplan.kinematics.GaussianMixture`."""
+    return _torch_mixture(
+        backbone_numpy_mixture(positions, n_components, radius=radius, sigma=sigma)
+    )
 
 
 def robot_mixture(
     robot, displacements, n_components: int = 5, *, radius: float = 0.01, sigma: float = 0.003
 ):
-    """Mixture over the body of ``robot`` at tendon ``displacements (..., m)``.
-
-    Uses the robot's deterministic model (``robot.solve_displacements(d).positions``, base frame)
-    and :func:`backbone_mixture`; a stand-in for a trained MDN when none is available.
-    """
-    d = np.asarray(displacements, dtype=np.float64)
-    shape = robot.solve_displacements(d)
-    return backbone_mixture(
-        np.asarray(shape.positions, dtype=np.float64), n_components, radius=radius, sigma=sigma
+    """:func:`robot_numpy_mixture` as a torch :class:`riskplan.kinematics.GaussianMixture`."""
+    return _torch_mixture(
+        robot_numpy_mixture(robot, displacements, n_components, radius=radius, sigma=sigma)
     )
+
+
+def _torch_mixture(mixture: NumpyMixture):
+    from riskplan.kinematics import GaussianMixture
+
+    return GaussianMixture.from_numpy_mixture(mixture)

@@ -12,7 +12,7 @@ import numpy as np
 
 from riskplan.collision.environment import Environment
 from riskplan.collision.gaussian import DEFAULT_CUTOFF
-from riskplan.collision.mixture import mixture_bound
+from riskplan.collision.mixture_bounds import mixture_bound
 from riskplan.errors import InvalidInputError
 
 TRAJECTORY_COMBINES = ("independent", "union")

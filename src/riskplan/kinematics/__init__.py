@@ -5,8 +5,8 @@
 """
 
 from riskplan.kinematics.mdn import MDN, MDNModel, Normalisation
-from riskplan.kinematics.mixture import GaussianMixture
 from riskplan.kinematics.model_io import load_model, resolve_model, save_model, shipped_models
+from riskplan.kinematics.torch_mixture import GaussianMixture
 
 __all__ = [
     "MDN",

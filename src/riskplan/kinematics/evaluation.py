@@ -24,7 +24,7 @@ import torch
 from riskplan.errors import InvalidInputError
 from riskplan.kinematics.data import PointCloudData, check_compatible
 from riskplan.kinematics.mdn import MDNModel
-from riskplan.kinematics.mixture import GaussianMixture
+from riskplan.kinematics.torch_mixture import GaussianMixture
 
 DEFAULT_LEVELS = (0.5, 0.9, 0.95)
 

@@ -30,7 +30,7 @@ from torch import nn
 
 from riskplan._validation import as_array
 from riskplan.errors import InvalidInputError
-from riskplan.kinematics.mixture import GaussianMixture
+from riskplan.kinematics.torch_mixture import GaussianMixture
 
 # exp of a raw diagonal entry is clamped to exp(+-LOG_DIAG_BOUND): eq. 2 holds exactly inside this
 # range (standard deviations from 2e-9 to 5e8 in normalised units), and outside it the output and its

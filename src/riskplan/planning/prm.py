@@ -45,6 +45,7 @@ import numpy as np
 
 from riskplan._validation import as_array
 from riskplan.errors import InvalidInputError, PlanningError
+from riskplan.gaussian_mixture import as_numpy_mixture
 
 log = logging.getLogger(__name__)
 
@@ -66,8 +67,9 @@ def _check_positive(value, name: str) -> float:
 class MeanValidity:
     """Validity of configurations: within limits and every component mean in free space.
 
-    ``model``: anything with ``predict(configs (N, m)) -> GaussianMixture`` and ``limits (m, 2)``
-    (an :class:`~riskplan.kinematics.MDNModel`); ``environment``: an
+    ``model``: anything with ``predict(configs (N, m))`` returning a mixture (a torch
+    ``GaussianMixture`` or a :class:`~riskplan.gaussian_mixture.NumpyMixture`) and
+    ``limits (m, 2)`` (an :class:`~riskplan.kinematics.MDNModel`); ``environment``: an
     :class:`~riskplan.collision.Environment` in the model's (robot base) frame.
     """
 
@@ -87,9 +89,8 @@ class MeanValidity:
 
     def means(self, configs) -> np.ndarray:
         """Component means ``(N, K, 3)`` of the predicted mixtures (configs within limits)."""
-        return (
-            self.model.predict(np.asarray(configs, dtype=np.float64)).means.detach().cpu().numpy()
-        )
+        gm = self.model.predict(np.asarray(configs, dtype=np.float64))
+        return as_numpy_mixture(gm, validate=False).means
 
     def __call__(self, configs) -> np.ndarray:
         """``(N, m) -> (N,)`` bool: within limits and no component mean inside an obstacle."""
@@ -423,12 +424,8 @@ def tip_positions(model, configs) -> np.ndarray:
     The mixture's components cover the robot's body; the farthest mean is the one that
     describes its distal end (the tip), in the base frame.
     """
-    mu = (
-        model.predict(np.atleast_2d(np.asarray(configs, dtype=np.float64)))
-        .means.detach()
-        .cpu()
-        .numpy()
-    )
+    gm = model.predict(np.atleast_2d(np.asarray(configs, dtype=np.float64)))
+    mu = as_numpy_mixture(gm, validate=False).means
     far = np.argmax(np.linalg.norm(mu, axis=-1), axis=-1)
     return mu[np.arange(len(mu)), far]
 

@@ -65,6 +65,7 @@ from riskplan.collision import (
 )
 from riskplan.collision.trajectory import trajectory_bound
 from riskplan.errors import InvalidInputError
+from riskplan.gaussian_mixture import as_numpy_mixture
 from riskplan.parallel import BACKENDS, map_tasks, spawn_seeds
 
 log = logging.getLogger(__name__)
@@ -458,7 +459,7 @@ def mixture_monte_carlo(
         raise InvalidInputError(
             f"trajectory: expected shape (T, {m}) with T >= 1 for a model of {m} tendons, got {traj.shape}"
         )
-    gm = model.predict(traj)
+    gm = as_numpy_mixture(model.predict(traj))
     s1, s2 = spawn_seeds(seed, 2)
     return MixtureMonteCarlo(
         trajectory=monte_carlo_trajectory(gm, env, n, seed=s1, confidence=confidence),
@@ -510,7 +511,7 @@ def validation_table(
     rows = []
     for name, traj in trajectories.items():
         traj = _check_trajectory(traj, robot)
-        gm = model.predict(traj)
+        gm = as_numpy_mixture(model.predict(traj))
         per = mixture_bound(gm, environment)
         mix = mixture_monte_carlo(model, traj, environment, n_mixture, seed)
         rob = execute_on_robot(

@@ -1,4 +1,8 @@
-"""Collision probability of a Gaussian mixture (MDN paper section V, eq. 9).
+"""Collision probability bounds of Gaussian mixtures (MDN paper section V, eq. 9).
+
+Mixtures are :class:`~riskplan.gaussian_mixture.NumpyMixture` batches; a torch
+:class:`riskplan.kinematics.GaussianMixture` is accepted too and converted by its
+``to_numpy()``. Nothing here imports torch.
 
 Two quantities, side by side:
 
@@ -26,38 +30,23 @@ import numpy as np
 from riskplan.collision.environment import Environment, check_environment
 from riskplan.collision.gaussian import DEFAULT_CUTOFF, gaussian_bound_terms
 from riskplan.errors import InvalidInputError
+from riskplan.gaussian_mixture import NumpyMixture, as_numpy_mixture
 
 COMBINES = ("weighted", "union")
 
 
-def mixture_arrays(
-    mixture, d: int, *, validate: bool = True
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(weights (..., K), means (..., K, d), U (..., K, d, d))`` as float64 NumPy arrays.
+def check_mixture(mixture, d: int, *, validate: bool = True) -> NumpyMixture:
+    """``mixture`` as a :class:`~riskplan.gaussian_mixture.NumpyMixture` of dimension ``d``.
 
-    ``mixture`` is a :class:`riskplan.kinematics.GaussianMixture` (re-validated when ``validate``).
+    Accepts a ``NumpyMixture`` or a torch :class:`riskplan.kinematics.GaussianMixture`
+    (converted by its ``to_numpy()``); re-validated when ``validate``.
     """
-    if not all(hasattr(mixture, a) for a in ("weights", "means", "precision_cholesky")):
+    out = as_numpy_mixture(mixture, validate=validate)
+    if out.dim != d:
         raise InvalidInputError(
-            f"mixture: expected a GaussianMixture, got {type(mixture).__name__}"
+            f"mixture: dimension {out.dim} does not match the {d}-D environment"
         )
-    if validate and hasattr(mixture, "validate"):
-        mixture.validate()
-    arrs = (
-        mixture.numpy()
-        if hasattr(mixture, "numpy")
-        else {
-            k: np.asarray(getattr(mixture, k)) for k in ("weights", "means", "precision_cholesky")
-        }
-    )
-    w = np.asarray(arrs["weights"], dtype=np.float64)
-    m = np.asarray(arrs["means"], dtype=np.float64)
-    u = np.asarray(arrs["precision_cholesky"], dtype=np.float64)
-    if m.shape[-1] != d:
-        raise InvalidInputError(
-            f"mixture: dimension {m.shape[-1]} does not match the {d}-D environment"
-        )
-    return w, m, u
+    return out
 
 
 def component_bounds(
@@ -65,9 +54,11 @@ def component_bounds(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-component bounds ``p_i = min(1, sum_j (1 - Phi(b_ij)))`` and weights; both ``(..., K)``."""
     check_environment(environment)
-    w, m, u = mixture_arrays(mixture, environment.dim, validate=validate)
-    terms = gaussian_bound_terms(m, u, environment, cutoff=cutoff, validate=validate)
-    return terms.bound, w
+    gm = check_mixture(mixture, environment.dim, validate=validate)
+    terms = gaussian_bound_terms(
+        gm.means, gm.precision_cholesky, environment, cutoff=cutoff, validate=validate
+    )
+    return terms.bound, gm.weights
 
 
 def mixture_bound(

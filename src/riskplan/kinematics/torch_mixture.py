@@ -1,16 +1,10 @@
-"""Batched Gaussian mixtures parameterised by precision Cholesky factors.
+"""The differentiable torch Gaussian mixture the MDN predicts (MDN paper, eqs. 1-6).
 
-This type is the seam between the learned kinematics (which produce it), the
-collision estimators (which consume it) and the planners.
-
-Parameterisation (MDN paper, eqs. 1-6): component ``k`` has weight ``w_k``, mean
-``mu_k`` and an upper-triangular matrix ``U_k`` with positive diagonal such that the
-precision is ``Sigma_k^{-1} = U_k^T U_k`` (eq. 3). Then
-
-    log N(x; mu_k, Sigma_k) = -d/2 log(2 pi) + sum_i log U_k[i, i] - 1/2 ||U_k (x - mu_k)||^2
-
-(eqs. 4-6: ``det Sigma^{-1/2} = prod diag U`` and the quadratic form is a squared norm),
-and ``log p(x) = logsumexp_k (log w_k + log N(x; mu_k, Sigma_k))`` (eq. 1).
+:class:`GaussianMixture` holds the same parameters as the NumPy core
+:class:`riskplan.gaussian_mixture.NumpyMixture` (whose docstring states the formulas) as torch
+tensors, so densities keep their gradients and live on the network's device and dtype. It is
+built on the core: parameters and points are checked by the core's functions, covariances are
+converted there, and ``to_numpy()`` hands the mixture to the array code (collision, planning).
 
 Shapes (leading batch axes ``...`` are shared by all three tensors)::
 
@@ -28,12 +22,18 @@ import numpy as np
 import torch
 
 from riskplan.errors import InvalidInputError
-
-WEIGHT_SUM_ATOL = 1e-5
+from riskplan.gaussian_mixture import (
+    FIELDS,
+    MixtureBatch,
+    NumpyMixture,
+    check_mixture_arrays,
+    check_point_shape,
+    precision_cholesky_from_covariances,
+)
 
 
 @dataclass(frozen=True, eq=False)
-class GaussianMixture:
+class GaussianMixture(MixtureBatch):
     """A batch of ``K``-component Gaussian mixtures in ``d`` dimensions.
 
     Construct with tensors or arrays; NumPy inputs become float64 tensors. Pass
@@ -57,60 +57,12 @@ class GaussianMixture:
 
     # ------------------------------------------------------------------ checks
     def validate(self) -> None:
-        """Raise :class:`InvalidInputError` if the parameters do not form a valid mixture."""
-        w, m, u = self.weights, self.means, self.precision_cholesky
-        if w.ndim < 1 or m.ndim < 2 or u.ndim < 3:
-            raise InvalidInputError(
-                f"GaussianMixture: expected weights (..., K), means (..., K, d), precision_cholesky (..., K, d, d); "
-                f"got {tuple(w.shape)}, {tuple(m.shape)}, {tuple(u.shape)}"
-            )
-        K, d = m.shape[-2], m.shape[-1]
-        if w.shape != m.shape[:-1]:
-            raise InvalidInputError(
-                f"weights: shape {tuple(w.shape)} does not match means {tuple(m.shape)} (expected {tuple(m.shape[:-1])})"
-            )
-        if u.shape != m.shape + (d,):
-            raise InvalidInputError(
-                f"precision_cholesky: expected shape {tuple(m.shape) + (d,)}, got {tuple(u.shape)}"
-            )
-        if K < 1 or d < 1:
-            raise InvalidInputError(f"GaussianMixture: need K >= 1 and d >= 1, got K={K}, d={d}")
-        for name, t in (("weights", w), ("means", m), ("precision_cholesky", u)):
-            if not torch.isfinite(t).all():
-                raise InvalidInputError(f"{name}: contains NaN or inf")
-        if (w < 0).any():
-            raise InvalidInputError("weights: must be non-negative")
-        total = w.sum(-1)
-        if not torch.allclose(total, torch.ones_like(total), atol=WEIGHT_SUM_ATOL, rtol=0):
-            worst = float((total - 1).abs().max())
-            raise InvalidInputError(
-                f"weights: must sum to 1 over the last axis (worst deviation {worst:.3g})"
-            )
-        lower = torch.tril(u, diagonal=-1)
-        if (lower != 0).any():
-            raise InvalidInputError(
-                "precision_cholesky: must be upper triangular (entries below the diagonal are non-zero)"
-            )
-        diag = torch.diagonal(u, dim1=-2, dim2=-1)
-        if (diag <= 0).any():
-            raise InvalidInputError(
-                "precision_cholesky: diagonal must be positive (the precision must be positive definite); "
-                f"smallest diagonal entry {float(diag.min()):.3g}"
-            )
+        """Raise :class:`InvalidInputError` if the parameters do not form a valid mixture
+        (:func:`riskplan.gaussian_mixture.check_mixture_arrays` on detached CPU copies)."""
+        check_mixture_arrays(*(_host_array(getattr(self, name)) for name in FIELDS))
 
     # ------------------------------------------------------------ properties
-    @property
-    def batch_shape(self) -> torch.Size:
-        return self.weights.shape[:-1]
-
-    @property
-    def n_components(self) -> int:
-        return self.weights.shape[-1]
-
-    @property
-    def dim(self) -> int:
-        return self.means.shape[-1]
-
+    # batch_shape (a torch.Size here), n_components, dim and batch indexing: MixtureBatch
     @property
     def dtype(self) -> torch.dtype:
         return self.means.dtype
@@ -154,17 +106,7 @@ class GaussianMixture:
             raise InvalidInputError(f"points: cannot convert to a numeric array ({exc})") from exc
         if x.is_complex() or x.dtype == torch.bool:
             raise InvalidInputError(f"points: expected real numbers, got dtype {x.dtype}")
-        if x.ndim < 2 or x.shape[-1] != self.dim:
-            raise InvalidInputError(
-                f"points: expected shape (..., N, {self.dim}) for a {self.dim}-D mixture, got {tuple(x.shape)}"
-            )
-        try:
-            torch.broadcast_shapes(x.shape[:-2], self.batch_shape)
-        except RuntimeError as exc:
-            raise InvalidInputError(
-                f"points: leading shape {tuple(x.shape[:-2])} does not broadcast against the batch shape "
-                f"{tuple(self.batch_shape)}"
-            ) from exc
+        check_point_shape(tuple(x.shape), self.dim, tuple(self.batch_shape))
         if not torch.isfinite(x).all():
             raise InvalidInputError("points: contain NaN or inf")
         return x.to(self.dtype)
@@ -199,7 +141,8 @@ class GaussianMixture:
     def sample(self, n: int, seed=None) -> torch.Tensor:
         """Draw ``n`` points from each mixture; returns ``(..., n, d)``.
 
-        ``seed``: ``None``, an int or a ``torch.Generator``.
+        ``seed``: ``None``, an int or a ``torch.Generator``. The draws come from torch's
+        generator, so they differ from ``to_numpy().sample(n, seed)`` (same distribution).
         """
         if n < 0:
             raise InvalidInputError(f"n: expected >= 0, got {n}")
@@ -252,10 +195,14 @@ class GaussianMixture:
 
     def numpy(self) -> dict[str, np.ndarray]:
         """``{"weights", "means", "precision_cholesky"}`` as NumPy arrays (detached, on CPU)."""
-        return {
-            k: getattr(self, k).detach().cpu().numpy()
-            for k in ("weights", "means", "precision_cholesky")
-        }
+        return {name: getattr(self, name).detach().cpu().numpy() for name in FIELDS}
+
+    def to_numpy(self, *, validate: bool = True) -> NumpyMixture:
+        """This mixture as a float64 :class:`~riskplan.gaussian_mixture.NumpyMixture` (detached,
+        on CPU; no copy for float64 CPU tensors), checked again when ``validate``."""
+        return NumpyMixture(
+            *(_host_array(getattr(self, name)) for name in FIELDS), validate=validate
+        )
 
     @classmethod
     def from_numpy(
@@ -269,41 +216,43 @@ class GaussianMixture:
         )
 
     @classmethod
+    def from_numpy_mixture(
+        cls, mixture: NumpyMixture, *, validate: bool = False
+    ) -> GaussianMixture:
+        """The torch mixture (float64 tensors sharing the arrays' memory) of a ``NumpyMixture``."""
+        return cls(*(getattr(mixture, name) for name in FIELDS), validate=validate)
+
+    @classmethod
     def from_covariances(
         cls, weights, means, covariances, *, validate: bool = True
     ) -> GaussianMixture:
-        """Build from covariances ``(..., K, d, d)``: ``U = chol(Sigma^{-1})^T``."""
-        cov = _as_tensor(covariances)
-        if validate and not torch.isfinite(cov).all():
-            raise InvalidInputError("covariances: contains NaN or inf")
-        try:
-            prec = torch.linalg.inv(cov)
-            lower = torch.linalg.cholesky((prec + prec.transpose(-1, -2)) / 2)
-        except RuntimeError as exc:  # torch raises _LinAlgError (a RuntimeError)
-            raise InvalidInputError(
-                f"covariances: not symmetric positive definite ({exc})"
-            ) from exc
-        return cls(weights, means, lower.transpose(-1, -2), validate=validate)
+        """Build from covariances ``(..., K, d, d)``: ``U = chol(Sigma^{-1})^T``.
 
-    def __getitem__(self, idx) -> GaussianMixture:
-        """Index the batch axes: ``gm[3]``, ``gm[:, 0]``."""
-        if not isinstance(idx, tuple):
-            idx = (idx,)
-        if Ellipsis in idx:
-            raise InvalidInputError(
-                "GaussianMixture indexing: Ellipsis is not supported; index batch axes explicitly"
-            )
-        if len(idx) > len(self.batch_shape):
-            raise InvalidInputError(f"too many indices for batch shape {tuple(self.batch_shape)}")
-        return GaussianMixture(
-            self.weights[idx], self.means[idx], self.precision_cholesky[idx], validate=False
-        )
+        The factor is computed in float64 by
+        :func:`riskplan.gaussian_mixture.precision_cholesky_from_covariances` (not
+        differentiable) and returned in the covariances' dtype and device.
+        """
+        cov = covariances
+        if isinstance(cov, torch.Tensor):
+            u = precision_cholesky_from_covariances(_host_array(cov))
+            u = torch.as_tensor(u).to(dtype=cov.dtype, device=cov.device)
+        else:
+            u = precision_cholesky_from_covariances(cov)
+        return cls(weights, means, u, validate=validate)
 
     def __repr__(self) -> str:
         return (
             f"GaussianMixture(batch_shape={tuple(self.batch_shape)}, K={self.n_components}, d={self.dim}, "
             f"dtype={self.dtype})"
         )
+
+
+def _host_array(t: torch.Tensor) -> np.ndarray:
+    """``t`` as a NumPy array on the host (detached; float64 unless float32 or float64)."""
+    t = t.detach().cpu()
+    if t.dtype not in (torch.float32, torch.float64):
+        t = t.to(torch.float64)
+    return t.numpy()
 
 
 def _as_tensor(x) -> torch.Tensor:

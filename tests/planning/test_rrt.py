@@ -219,12 +219,12 @@ def test_point_robot_tight_goal(point_robot):
 
 
 def test_zero_margins_reproduce_previous_plans(near_needle, point_robot):
-    """goal_depth = control_margin = 0 reproduces, bit for bit, plans stored from the tree
-    before the margins existed."""
+    """goal_depth = control_margin = 0 and goal_entry = False reproduce, bit for bit, plans
+    stored from the tree before the margins and the goal-entry ranking existed."""
     from pathlib import Path
 
     ref = np.load(Path(__file__).parent / "data" / "rrt_plans_v1.npz")
-    old = RRTOptions(goal_depth=0.0, control_margin=0.0)
+    old = RRTOptions(goal_depth=0.0, control_margin=0.0, goal_entry=False)
     tree = grow_tree(point_robot, seed=11, options=dataclasses.replace(old, plans_per_tree=3))
     assert len(tree.plans) == 3
     for i, p in enumerate(tree.plans):
@@ -238,8 +238,43 @@ def test_zero_margins_reproduce_previous_plans(near_needle, point_robot):
         assert p.reduced.tobytes() == ref[f"needle_{i}_reduced"].tobytes()
 
 
+def test_goal_entry_keeps_an_edge_through_the_goal():
+    """Towards the goal point, an edge whose first state is in the goal and whose end lies
+    beyond it (farther than its node) ends in the goal with goal_entry, and is dropped
+    without it (the end is no closer), so that tree never reaches the goal."""
+    robot = PointRobot(goal=(0.2, 0.2), goal_radius=0.05, obstacle=((0.8, 0.8), (0.9, 0.9)))
+    robot._bounds = np.array([[0.9, 1.0], [0.9, 1.0]])  # every step moves ~(0.095, 0.095)
+    space = PlanningSpace(
+        low=[0, 0],
+        high=[1, 1],
+        weights=[1, 1],
+        periodic=[False, False],
+        goal=robot.goal_center,
+        steps_per_extension=3,
+    )
+    opts = RRTOptions(
+        n_controls=2, goal_bias=1.0, max_iterations=20, plans_per_tree=1, goal_depth=0.0
+    )
+    tree = grow_tree(robot, seed=0, space=space, options=opts)
+    assert len(tree.plans) == 1
+    plan = tree.plans[0]
+    assert plan.n_steps == 1  # the edge ends at its first state, in the goal
+    assert robot.in_goal(plan.states[-1])
+    x_end = plan.reduced[0] + 3 * (plan.reduced[1] - plan.reduced[0])  # the dropped far end
+    assert math.dist(x_end, robot.goal_center) > math.dist(plan.reduced[0], robot.goal_center)
+    old = grow_tree(robot, seed=0, space=space, options=dataclasses.replace(opts, goal_entry=False))
+    assert old.plans == [] and old.size == 1
+
+
 @pytest.mark.parametrize(
-    ("field", "value"), [("goal_depth", 1.0), ("goal_depth", -0.1), ("control_margin", -1.0)]
+    ("field", "value"),
+    [
+        ("goal_depth", 1.0),
+        ("goal_depth", -0.1),
+        ("control_margin", -1.0),
+        ("goal_entry", 1),
+        ("goal_entry", "yes"),
+    ],
 )
 def test_margin_options_validated(field, value):
     with pytest.raises(InvalidInputError, match=field):

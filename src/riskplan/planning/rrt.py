@@ -20,7 +20,9 @@ One iteration (paper IV-A):
    ``control_margin`` actuation standard deviations, or within
    ``max_control_change`` of the node's own control), simulate each for
    ``steps_per_extension`` steps from the node's stored state and rank them by the
-   distance of their end state to ``x_sample``;
+   distance of their end state to ``x_sample``; towards the goal point, a candidate with
+   a state in the (tightened) goal ranks first, since its edge ends there
+   (``goal_entry``, see :class:`RRTOptions`);
 4. take the best candidate whose every intermediate state lies inside the space's box and
    is collision-free against the *deformed* obstacles (``sim.in_collision``); candidates
    are checked lazily in rank order, so collision checks are paid only until one passes;
@@ -277,8 +279,17 @@ class RRTOptions:
     actuation noise (:func:`actuation_std`). A nominal control on a bound has its noise
     clipped on one side (a biased execution) and leaves the feedback no authority in that
     direction; 2σ keeps about 98 % of each one-sided noise draw inside the bounds.
-    0: the whole bounds (as are ``goal_depth = control_margin = 0``, the plans of the
-    original tree, bit for bit).
+    0: the whole bounds.
+
+    ``goal_entry``: in a goal-directed extension (the goal point sampled), a candidate
+    edge with a state in the (tightened) goal ranks before the others (it ends there, so
+    its end *is* in the goal), the others by the distance of their end state as usual.
+    Without it a candidate that passes through the goal and comes out on the far side
+    ranks by that far end, and is dropped when the far end is no closer than the node
+    (with ``goal_depth = 0.5`` needle trees then often ran to ``max_iterations``;
+    docs/planning.md). False: every candidate ranked by
+    its end state (``goal_entry = False, goal_depth = control_margin = 0``: the plans of
+    the original tree, bit for bit).
     """
 
     n_controls: int = 4
@@ -287,6 +298,7 @@ class RRTOptions:
     plans_per_tree: int = 10
     goal_depth: float = 0.5
     control_margin: float = 2.0
+    goal_entry: bool = True
 
     def __post_init__(self):
         for name in ("n_controls", "max_iterations", "plans_per_tree"):
@@ -301,6 +313,8 @@ class RRTOptions:
             raise InvalidInputError(
                 f"goal_depth: expected a value in [0, 1), got {self.goal_depth!r}"
             )
+        if not isinstance(self.goal_entry, (bool, np.bool_)):
+            raise InvalidInputError(f"goal_entry: expected True or False, got {self.goal_entry!r}")
         if not (math.isfinite(self.control_margin) and self.control_margin >= 0.0):
             raise InvalidInputError(
                 f"control_margin: expected a finite value >= 0, got {self.control_margin!r}"
@@ -389,6 +403,14 @@ def _goal_radius(sim, options: RRTOptions) -> float:
             f"options.goal_depth: {type(sim).__name__} has no goal_radius (nor config.goal_radius); use goal_depth=0"
         )
     return (1.0 - options.goal_depth) * float(r)
+
+
+def _in_goal(sim, st, r_tight: float) -> bool:
+    """Whether ``st`` ends an edge: in ``sim``'s goal and within ``r_tight`` of its centre
+    (the cheaper distance test first)."""
+    if r_tight == math.inf:
+        return bool(sim.in_goal(st))
+    return bool(sim.goal_distance(st) <= r_tight and sim.in_goal(st))
 
 
 def _check_sim(sim) -> None:
@@ -493,6 +515,11 @@ def grow_tree(
         ok = np.isfinite(ends[:, 0])
         dist = space.distance(np.where(ok[:, None], ends, 0.0), x_s, to_goal=to_goal)
         dist[~ok] = np.inf
+        if to_goal and options.goal_entry:
+            # an edge through the goal ends there: it ranks first (stable among such edges)
+            for c in np.flatnonzero(ok):
+                if any(_in_goal(sim, st, r_tight) for st in traj[c]):
+                    dist[c] = -1.0
         added = False
         for c in np.argsort(dist, kind="stable"):
             if not ok[c] or (to_goal and dist[c] >= dn[near]):
@@ -504,7 +531,7 @@ def grow_tree(
                 if not (np.all(np.isfinite(xj)) and space.contains(xj)) or sim.in_collision(st):
                     accepted = False
                     break
-                if sim.in_goal(st) and (r_tight == math.inf or sim.goal_distance(st) <= r_tight):
+                if _in_goal(sim, st, r_tight):
                     goal_at = j
                     break
             if not accepted:

@@ -62,13 +62,13 @@ def car_step(pose, v, phi, *, tau: float = 0.1, r_min: float = 0.25, phi_max: fl
     ``(x + τ v cos θ, y + τ v sin θ, θ + τ v tan φ / (r_min tan φ_max))``. No validation.
     """
     if np.ndim(pose) == 1 and np.ndim(v) == 0 and np.ndim(phi) == 0:  # scalar fast path
-        th = float(pose[2])
+        x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
         s = tau * float(v)
         return np.array(
             [
-                pose[0] + s * math.cos(th),
-                pose[1] + s * math.sin(th),
-                th + s * math.tan(phi) / (r_min * math.tan(phi_max)),
+                x + s * math.cos(th),
+                y + s * math.sin(th),
+                th + s * math.tan(float(phi)) / (r_min * math.tan(phi_max)),
             ]
         )
     pose = np.asarray(pose, dtype=np.float64)
@@ -90,6 +90,17 @@ class NeedleState(SimState):
     def __post_init__(self):
         super().__post_init__()
         object.__setattr__(self, "pose", frozen_array(self.pose))
+
+    @classmethod
+    def _owned(cls, t: int, displacement: np.ndarray, n_elements: int, pose: np.ndarray):
+        """The state of :meth:`NeedleScenario.step` without the defensive copies:
+        ``displacement (n_nodes, 2)`` and ``pose (3,)`` must be new C-contiguous float64
+        arrays that nothing else holds (they are made read-only here)."""
+        displacement.setflags(write=False)
+        pose.setflags(write=False)
+        out = object.__new__(cls)
+        out.__dict__.update(t=t, displacement=displacement, n_elements=n_elements, pose=pose)
+        return out
 
 
 def _default_obstacles():
@@ -196,6 +207,10 @@ class _NeedleModel:
             Material(params.youngs_modulus, params.poissons_ratio, plane=plane)
         )
         n = 2 * data.mesh.n_nodes
+        tri = data.mesh.triangles
+        #: ``(n_elements, 6)`` flat DOFs of each element's nodes, x then y (the load gather)
+        self.element_dofs = np.concatenate([2 * tri, 2 * tri + 1], axis=1)
+        self.element_dofs.setflags(write=False)
         free = self.model.free_dofs
         self.n_dofs = n
         self.green = None
@@ -300,23 +315,23 @@ class NeedleScenario(FEMScenario):
         cfg = self.config
         pose = car_step(state.pose, u[0], u[1], tau=cfg.tau, r_min=cfg.r_min, phi_max=cfg.phi_max)
         disp = self._tissue_response(pose, params)
-        return NeedleState(t=state.t + 1, displacement=disp, n_elements=state.n_elements, pose=pose)
+        # pose and disp are new arrays: no defensive copies (a hot path of the planners)
+        return NeedleState._owned(state.t + 1, disp, state.n_elements, pose)
 
     def _tissue_response(self, pose: np.ndarray, params: SimParams) -> np.ndarray:
+        """A new ``(n_nodes, 2)`` array: the displacement of the push at ``pose``."""
         m = self.model(params)
         d = m.data
-        n_nodes = d.mesh.n_nodes
         if params.force_scale == 0.0:
-            return np.zeros((n_nodes, 2))
-        elem, lam = d.locator.locate(pose[:2])
+            return np.zeros((d.mesh.n_nodes, 2))
+        elem, lam = d.locator.locate(pose)  # reads pose[0], pose[1]
         if elem < 0:  # the robot has left the tissue: nothing to push
-            return np.zeros((n_nodes, 2))
-        nodes = d.mesh.triangles[elem]
-        fx = params.force_scale * math.cos(pose[2])
-        fy = params.force_scale * math.sin(pose[2])
-        dofs = np.concatenate([2 * nodes, 2 * nodes + 1])
-        vals = np.concatenate([lam * fx, lam * fy])
-        return m.response(dofs, vals)
+            return np.zeros((d.mesh.n_nodes, 2))
+        th = float(pose[2])
+        vals = np.empty(6)
+        vals[:3] = lam * (params.force_scale * math.cos(th))
+        vals[3:] = lam * (params.force_scale * math.sin(th))
+        return m.response(m.element_dofs[elem], vals)
 
     def nodal_forces(self, state: NeedleState, params: SimParams | None = None) -> np.ndarray:
         """The consistent nodal forces ``(n_nodes, 2)`` the robot applies in ``state``

@@ -52,7 +52,7 @@ from riskplan.scenarios.base import (
     gaussian_noise,
 )
 
-__all__ = ["NeedleConfig", "NeedleScenario", "NeedleState", "car_step"]
+__all__ = ["NeedleConfig", "NeedleScenario", "NeedleState", "car_steer", "car_step"]
 
 
 def car_step(pose, v, phi, *, tau: float = 0.1, r_min: float = 0.25, phi_max: float = math.pi / 3):
@@ -78,6 +78,53 @@ def car_step(pose, v, phi, *, tau: float = 0.1, r_min: float = 0.25, phi_max: fl
     out[..., 1] = pose[..., 1] + tau * v * np.sin(th)
     out[..., 2] = th + tau * v * np.tan(phi) / (r_min * math.tan(phi_max))
     return out
+
+
+def car_steer(
+    pose,
+    target,
+    bounds,
+    n_steps: int,
+    *,
+    tau: float = 0.1,
+    r_min: float = 0.25,
+    phi_max: float = math.pi / 3,
+) -> np.ndarray:
+    """A constant control ``(v, φ)`` inside ``bounds (2, 2)`` that drives the car of
+    :func:`car_step` from ``pose (3,)`` to the point ``target[:2]`` in at most ``n_steps``
+    steps, exactly where the bounds allow.
+
+    Held for ``j`` steps, a constant control moves the car along chords of length
+    ``s = τ v`` whose directions turn by ``Δ = s tan φ / (r_min tan φ_max)`` each step, so
+    (a geometric sum) it ends at distance ``s |sin(jΔ/2) / sin(Δ/2)|`` in the direction
+    ``θ + (j − 1) Δ/2``. Hitting a target at distance ``L`` and bearing ``α`` off the
+    heading needs ``Δ = 2α / (j − 1)`` and ``s = L sin(Δ/2) / sin(jΔ/2)``; the fewest steps
+    ``j ∈ [2, n_steps]`` whose ``(v, φ)`` lie in the bounds is used. If none does (the
+    target too far, too near or too far off the heading): the steering of the circle
+    through the target tangent to the heading (curvature ``2 sin α / L``, pure pursuit)
+    and the speed that covers that arc (length ``L α / sin α``) in one step, each clipped
+    to the bounds (the fastest speed for a target behind the car).
+    """
+    x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
+    dx, dy = float(target[0]) - x, float(target[1]) - y
+    dist = math.hypot(dx, dy)
+    (v_lo, v_hi), (phi_lo, phi_hi) = (float(b) for b in bounds[0]), (float(b) for b in bounds[1])
+    k = r_min * math.tan(phi_max)  # tan φ = k · (heading change per unit length)
+    if dist == 0.0:
+        return np.array([v_lo, min(max(0.0, phi_lo), phi_hi)])
+    alpha = (math.atan2(dy, dx) - th + math.pi) % (2.0 * math.pi) - math.pi
+    for j in range(2, int(n_steps) + 1):
+        half = alpha / (j - 1)  # Δ/2
+        s = dist / j if abs(half) < 1e-12 else dist * math.sin(half) / math.sin(j * half)
+        if not s > 0.0:
+            continue
+        v, phi = s / tau, math.atan(k * 2.0 * half / s)
+        if v_lo <= v <= v_hi and phi_lo <= phi <= phi_hi:
+            return np.array([v, phi])
+    phi = math.atan(k * 2.0 * math.sin(alpha) / dist)
+    arc = dist if abs(alpha) < 1e-12 else dist * alpha / math.sin(alpha)
+    v = min(max(arc / tau, v_lo), v_hi) if abs(alpha) < 0.5 * math.pi else v_hi
+    return np.array([v, min(max(phi, phi_lo), phi_hi)])
 
 
 @dataclass(frozen=True, eq=False)

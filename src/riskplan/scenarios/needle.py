@@ -102,8 +102,9 @@ def car_steer(
     ``j ∈ [2, n_steps]`` whose ``(v, φ)`` lie in the bounds is used. If none does (the
     target too far, too near or too far off the heading): the steering of the circle
     through the target tangent to the heading (curvature ``2 sin α / L``, pure pursuit)
-    and the speed that covers that arc (length ``L α / sin α``) in one step, each clipped
-    to the bounds (the fastest speed for a target behind the car).
+    and the speed that covers that arc (length ``L α / sin α``) in ``n_steps`` steps, each
+    clipped to the bounds (the fastest speed for a target behind the car): the end of the
+    edge gets as near the target as the bounds let it.
     """
     x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
     dx, dy = float(target[0]) - x, float(target[1]) - y
@@ -123,7 +124,7 @@ def car_steer(
             return np.array([v, phi])
     phi = math.atan(k * 2.0 * math.sin(alpha) / dist)
     arc = dist if abs(alpha) < 1e-12 else dist * alpha / math.sin(alpha)
-    v = min(max(arc / tau, v_lo), v_hi) if abs(alpha) < 0.5 * math.pi else v_hi
+    v = min(max(arc / (n_steps * tau), v_lo), v_hi) if abs(alpha) < 0.5 * math.pi else v_hi
     return np.array([v, min(max(phi, phi_lo), phi_hi)])
 
 

@@ -220,12 +220,13 @@ def test_point_robot_tight_goal(point_robot):
 
 
 def test_zero_margins_reproduce_previous_plans(near_needle, point_robot):
-    """goal_depth = control_margin = 0 reproduces, bit for bit, plans stored from the tree
-    before the margins existed."""
+    """goal_depth = control_margin = 0 with goal_entry = goal_steer = False reproduce, bit
+    for bit, plans stored from the tree before the margins, the goal-entry ranking and the
+    goal steering existed."""
     from pathlib import Path
 
     ref = np.load(Path(__file__).parent / "data" / "rrt_plans_v1.npz")
-    old = RRTOptions(goal_depth=0.0, control_margin=0.0)
+    old = RRTOptions(goal_depth=0.0, control_margin=0.0, goal_entry=False, goal_steer=False)
     tree = grow_tree(point_robot, seed=11, options=dataclasses.replace(old, plans_per_tree=3))
     assert len(tree.plans) == 3
     for i, p in enumerate(tree.plans):
@@ -239,8 +240,81 @@ def test_zero_margins_reproduce_previous_plans(near_needle, point_robot):
         assert p.reduced.tobytes() == ref[f"needle_{i}_reduced"].tobytes()
 
 
+def test_goal_entry_keeps_an_edge_through_the_goal():
+    """Towards the goal point, an edge whose first state is in the goal and whose end lies
+    beyond it (farther than its node) ends in the goal with goal_entry, and is dropped
+    without it (the end is no closer), so that tree never reaches the goal."""
+    robot = PointRobot(goal=(0.2, 0.2), goal_radius=0.05, obstacle=((0.8, 0.8), (0.9, 0.9)))
+    robot._bounds = np.array([[0.9, 1.0], [0.9, 1.0]])  # every step moves ~(0.095, 0.095)
+    space = PlanningSpace(
+        low=[0, 0],
+        high=[1, 1],
+        weights=[1, 1],
+        periodic=[False, False],
+        goal=robot.goal_center,
+        steps_per_extension=3,
+    )
+    opts = RRTOptions(
+        n_controls=2, goal_bias=1.0, max_iterations=20, plans_per_tree=1, goal_depth=0.0
+    )
+    tree = grow_tree(robot, seed=0, space=space, options=opts)
+    assert len(tree.plans) == 1
+    plan = tree.plans[0]
+    assert plan.n_steps == 1  # the edge ends at its first state, in the goal
+    assert robot.in_goal(plan.states[-1])
+    x_end = plan.reduced[0] + 3 * (plan.reduced[1] - plan.reduced[0])  # the dropped far end
+    assert math.dist(x_end, robot.goal_center) > math.dist(plan.reduced[0], robot.goal_center)
+    old = grow_tree(robot, seed=0, space=space, options=dataclasses.replace(opts, goal_entry=False))
+    assert old.plans == [] and old.size == 1
+
+
+def test_goal_steer_control_is_a_candidate_towards_the_goal_only():
+    """A space's steer is called in goal-directed extensions only, from the nearest node to
+    the goal point, and its control replaces the last candidate: with one candidate per
+    extension, every edge of a tree grown towards the goal alone holds a steered control."""
+    robot = PointRobot(goal=(0.5, 0.3), goal_radius=0.05, obstacle=((0.8, 0.8), (0.9, 0.9)))
+    calls = []
+
+    def steer(x, target, bounds, k):
+        calls.append((np.array(x), np.array(target), k))
+        return np.clip((target - x) / (0.1 * k), bounds[:, 0], bounds[:, 1])
+
+    space = dataclasses.replace(robot.planning_space, steps_per_extension=2, steer=steer)
+    opts = RRTOptions(n_controls=1, goal_bias=1.0, max_iterations=50, plans_per_tree=1)
+    tree = grow_tree(robot, seed=0, space=space, options=opts)
+    assert len(tree.plans) == 1
+    plan = tree.plans[0]
+    # a straight line from (0.1, 0.1) towards (0.5, 0.3): the steered controls, in order
+    assert all(np.array_equal(t, robot.goal_center) and k == 2 for _, t, k in calls)
+    steered = [np.clip((t - x) / 0.2, -1, 1) for x, t, _ in calls]
+    for i, u in enumerate(plan.controls[::2]):
+        np.testing.assert_array_equal(u, steered[i])
+    assert robot.in_goal(plan.states[-1])
+    # without steering the candidates are random: another tree from the same seed
+    other = grow_tree(
+        robot, seed=0, space=space, options=dataclasses.replace(opts, goal_steer=False)
+    )
+    assert len(calls) == tree.iterations
+    assert not other.plans or other.plans[0].controls.tobytes() != plan.controls.tobytes()
+
+
+def test_steer_must_be_callable():
+    with pytest.raises(InvalidInputError, match="steer"):
+        PlanningSpace(
+            low=[0, 0], high=[1, 1], weights=[1, 1], periodic=[False, False], goal=[1, 1], steer=3
+        )
+
+
 @pytest.mark.parametrize(
-    ("field", "value"), [("goal_depth", 1.0), ("goal_depth", -0.1), ("control_margin", -1.0)]
+    ("field", "value"),
+    [
+        ("goal_steer", 0),
+        ("goal_depth", 1.0),
+        ("goal_depth", -0.1),
+        ("control_margin", -1.0),
+        ("goal_entry", 1),
+        ("goal_entry", "yes"),
+    ],
 )
 def test_margin_options_validated(field, value):
     with pytest.raises(InvalidInputError, match=field):

@@ -11,7 +11,7 @@ import pytest
 
 from riskplan.errors import InvalidInputError
 from riskplan.scenarios import _geometry as geo
-from riskplan.scenarios.needle import NeedleConfig, NeedleScenario, car_step
+from riskplan.scenarios.needle import NeedleConfig, NeedleScenario, car_steer, car_step
 from riskplan.scenarios.simulator import SimParams, rollout
 from tests.conftest import TOL
 
@@ -69,6 +69,71 @@ def test_car_step_batch_equals_loop(rng, tol):
     batch = car_step(poses, v, phi)
     loop = np.array([car_step(poses[i], v[i], phi[i]) for i in range(7)])
     np.testing.assert_allclose(batch, loop, **tol["float64_exact"])
+
+
+# the RRT's sampling bounds: 2σ of the actuation noise inside [0, 0.5] x [-φ_max, φ_max]
+STEER_BOUNDS = np.array([[0.1, 0.4], [-PHIMAX + math.radians(10), PHIMAX - math.radians(10)]])
+
+
+@pytest.mark.parametrize(
+    ("bearing", "dist", "steps"),
+    [(0.0, 0.05, 2), (0.0, 0.11, 3), (0.01, 0.03, 2), (0.05, 0.06, 3), (-0.04, 0.09, 3)],
+)
+def test_car_steer_lands_on_target(bearing, dist, steps, tol):
+    """Inside the bounds the control, held for the fewest possible steps, puts the Euler
+    car exactly on the target (the oracle is car_step itself)."""
+    pose = np.array([0.3, 0.4, 0.7])
+    a = pose[2] + bearing
+    target = pose[:2] + dist * np.array([math.cos(a), math.sin(a)])
+    u = car_steer(pose, target, STEER_BOUNDS, 3)
+    assert np.all((u >= STEER_BOUNDS[:, 0]) & (u <= STEER_BOUNDS[:, 1]))
+    p, path = pose, []
+    for _ in range(3):
+        p = car_step(p, u[0], u[1])
+        path.append(p[:2])
+    np.testing.assert_allclose(path[steps - 1], target, **tol["float64_ref"])
+    if steps == 3:  # two steps were not enough within the bounds
+        assert np.linalg.norm(path[1] - target) > 1e-6
+
+
+def test_car_steer_random_targets_in_bounds_and_exact_when_feasible(rng):
+    """Random targets: the control is always inside the bounds; whenever a constant control
+    well inside the bounds (a dense grid, two cells in from each bound) puts the 2nd or
+    3rd state within 0.1 mm of the target, car_steer's control hits it exactly."""
+    lo, hi = STEER_BOUNDS[:, 0], STEER_BOUNDS[:, 1]
+    cell = (hi - lo) / 120
+    V, PHI = np.meshgrid(
+        np.linspace(lo[0] + 2 * cell[0], hi[0] - 2 * cell[0], 117),
+        np.linspace(lo[1] + 2 * cell[1], hi[1] - 2 * cell[1], 117),
+    )
+    n_exact = 0
+    for _ in range(80):
+        pose = np.r_[rng.uniform(0.2, 0.8, 2), rng.uniform(-math.pi, math.pi)]
+        a = pose[2] + rng.uniform(-0.12, 0.12)
+        target = pose[:2] + rng.uniform(0.01, 0.14) * np.array([math.cos(a), math.sin(a)])
+        u = car_steer(pose, target, STEER_BOUNDS, 3)
+        assert np.all((u >= lo) & (u <= hi))
+        p, miss = pose, []
+        for _ in range(3):
+            p = car_step(p, u[0], u[1])
+            miss.append(np.linalg.norm(p[:2] - target))
+        q, best = np.broadcast_to(pose, V.shape + (3,)), np.inf
+        for j in range(3):
+            q = car_step(q, V, PHI)
+            if j >= 1:
+                best = min(best, np.linalg.norm(q[..., :2] - target, axis=-1).min())
+        if best < 1e-4:
+            assert min(miss[1:]) < TOL["float64_abs"]["atol"]
+            n_exact += 1
+    assert n_exact >= 10, n_exact  # the check above was exercised
+
+
+def test_car_steer_target_behind_turns_hardest_at_full_speed():
+    pose = np.array([0.5, 0.5, 0.0])
+    u = car_steer(pose, [0.45, 0.52], STEER_BOUNDS, 3)  # behind, to the left
+    np.testing.assert_array_equal(u, [0.4, STEER_BOUNDS[1, 1]])
+    u = car_steer(pose, [0.45, 0.48], STEER_BOUNDS, 3)  # behind, to the right
+    np.testing.assert_array_equal(u, [0.4, STEER_BOUNDS[1, 0]])
 
 
 def test_step_matches_car_kinematics(needle, tol):

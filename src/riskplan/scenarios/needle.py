@@ -52,7 +52,7 @@ from riskplan.scenarios.base import (
     gaussian_noise,
 )
 
-__all__ = ["NeedleConfig", "NeedleScenario", "NeedleState", "car_step"]
+__all__ = ["NeedleConfig", "NeedleScenario", "NeedleState", "car_steer", "car_step"]
 
 
 def car_step(pose, v, phi, *, tau: float = 0.1, r_min: float = 0.25, phi_max: float = math.pi / 3):
@@ -62,13 +62,13 @@ def car_step(pose, v, phi, *, tau: float = 0.1, r_min: float = 0.25, phi_max: fl
     ``(x + τ v cos θ, y + τ v sin θ, θ + τ v tan φ / (r_min tan φ_max))``. No validation.
     """
     if np.ndim(pose) == 1 and np.ndim(v) == 0 and np.ndim(phi) == 0:  # scalar fast path
-        th = float(pose[2])
+        x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
         s = tau * float(v)
         return np.array(
             [
-                pose[0] + s * math.cos(th),
-                pose[1] + s * math.sin(th),
-                th + s * math.tan(phi) / (r_min * math.tan(phi_max)),
+                x + s * math.cos(th),
+                y + s * math.sin(th),
+                th + s * math.tan(float(phi)) / (r_min * math.tan(phi_max)),
             ]
         )
     pose = np.asarray(pose, dtype=np.float64)
@@ -78,6 +78,54 @@ def car_step(pose, v, phi, *, tau: float = 0.1, r_min: float = 0.25, phi_max: fl
     out[..., 1] = pose[..., 1] + tau * v * np.sin(th)
     out[..., 2] = th + tau * v * np.tan(phi) / (r_min * math.tan(phi_max))
     return out
+
+
+def car_steer(
+    pose,
+    target,
+    bounds,
+    n_steps: int,
+    *,
+    tau: float = 0.1,
+    r_min: float = 0.25,
+    phi_max: float = math.pi / 3,
+) -> np.ndarray:
+    """A constant control ``(v, φ)`` inside ``bounds (2, 2)`` that drives the car of
+    :func:`car_step` from ``pose (3,)`` to the point ``target[:2]`` in at most ``n_steps``
+    steps, exactly where the bounds allow.
+
+    Held for ``j`` steps, a constant control moves the car along chords of length
+    ``s = τ v`` whose directions turn by ``Δ = s tan φ / (r_min tan φ_max)`` each step, so
+    (a geometric sum) it ends at distance ``s |sin(jΔ/2) / sin(Δ/2)|`` in the direction
+    ``θ + (j − 1) Δ/2``. Hitting a target at distance ``L`` and bearing ``α`` off the
+    heading needs ``Δ = 2α / (j − 1)`` and ``s = L sin(Δ/2) / sin(jΔ/2)``; the fewest steps
+    ``j ∈ [2, n_steps]`` whose ``(v, φ)`` lie in the bounds is used. If none does (the
+    target too far, too near or too far off the heading): the steering of the circle
+    through the target tangent to the heading (curvature ``2 sin α / L``, pure pursuit)
+    and the speed that covers that arc (length ``L α / sin α``) in ``n_steps`` steps, each
+    clipped to the bounds (the fastest speed for a target behind the car): the end of the
+    edge gets as near the target as the bounds let it.
+    """
+    x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
+    dx, dy = float(target[0]) - x, float(target[1]) - y
+    dist = math.hypot(dx, dy)
+    (v_lo, v_hi), (phi_lo, phi_hi) = (float(b) for b in bounds[0]), (float(b) for b in bounds[1])
+    k = r_min * math.tan(phi_max)  # tan φ = k · (heading change per unit length)
+    if dist == 0.0:
+        return np.array([v_lo, min(max(0.0, phi_lo), phi_hi)])
+    alpha = (math.atan2(dy, dx) - th + math.pi) % (2.0 * math.pi) - math.pi
+    for j in range(2, int(n_steps) + 1):
+        half = alpha / (j - 1)  # Δ/2
+        s = dist / j if abs(half) < 1e-12 else dist * math.sin(half) / math.sin(j * half)
+        if not s > 0.0:
+            continue
+        v, phi = s / tau, math.atan(k * 2.0 * half / s)
+        if v_lo <= v <= v_hi and phi_lo <= phi <= phi_hi:
+            return np.array([v, phi])
+    phi = math.atan(k * 2.0 * math.sin(alpha) / dist)
+    arc = dist if abs(alpha) < 1e-12 else dist * alpha / math.sin(alpha)
+    v = min(max(arc / (n_steps * tau), v_lo), v_hi) if abs(alpha) < 0.5 * math.pi else v_hi
+    return np.array([v, min(max(phi, phi_lo), phi_hi)])
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,6 +138,17 @@ class NeedleState(SimState):
     def __post_init__(self):
         super().__post_init__()
         object.__setattr__(self, "pose", frozen_array(self.pose))
+
+    @classmethod
+    def _owned(cls, t: int, displacement: np.ndarray, n_elements: int, pose: np.ndarray):
+        """The state of :meth:`NeedleScenario.step` without the defensive copies:
+        ``displacement (n_nodes, 2)`` and ``pose (3,)`` must be new C-contiguous float64
+        arrays that nothing else holds (they are made read-only here)."""
+        displacement.setflags(write=False)
+        pose.setflags(write=False)
+        out = object.__new__(cls)
+        out.__dict__.update(t=t, displacement=displacement, n_elements=n_elements, pose=pose)
+        return out
 
 
 def _default_obstacles():
@@ -196,6 +255,10 @@ class _NeedleModel:
             Material(params.youngs_modulus, params.poissons_ratio, plane=plane)
         )
         n = 2 * data.mesh.n_nodes
+        tri = data.mesh.triangles
+        #: ``(n_elements, 6)`` flat DOFs of each element's nodes, x then y (the load gather)
+        self.element_dofs = np.concatenate([2 * tri, 2 * tri + 1], axis=1)
+        self.element_dofs.setflags(write=False)
         free = self.model.free_dofs
         self.n_dofs = n
         self.green = None
@@ -300,23 +363,23 @@ class NeedleScenario(FEMScenario):
         cfg = self.config
         pose = car_step(state.pose, u[0], u[1], tau=cfg.tau, r_min=cfg.r_min, phi_max=cfg.phi_max)
         disp = self._tissue_response(pose, params)
-        return NeedleState(t=state.t + 1, displacement=disp, n_elements=state.n_elements, pose=pose)
+        # pose and disp are new arrays: no defensive copies (a hot path of the planners)
+        return NeedleState._owned(state.t + 1, disp, state.n_elements, pose)
 
     def _tissue_response(self, pose: np.ndarray, params: SimParams) -> np.ndarray:
+        """A new ``(n_nodes, 2)`` array: the displacement of the push at ``pose``."""
         m = self.model(params)
         d = m.data
-        n_nodes = d.mesh.n_nodes
         if params.force_scale == 0.0:
-            return np.zeros((n_nodes, 2))
-        elem, lam = d.locator.locate(pose[:2])
+            return np.zeros((d.mesh.n_nodes, 2))
+        elem, lam = d.locator.locate(pose)  # reads pose[0], pose[1]
         if elem < 0:  # the robot has left the tissue: nothing to push
-            return np.zeros((n_nodes, 2))
-        nodes = d.mesh.triangles[elem]
-        fx = params.force_scale * math.cos(pose[2])
-        fy = params.force_scale * math.sin(pose[2])
-        dofs = np.concatenate([2 * nodes, 2 * nodes + 1])
-        vals = np.concatenate([lam * fx, lam * fy])
-        return m.response(dofs, vals)
+            return np.zeros((d.mesh.n_nodes, 2))
+        th = float(pose[2])
+        vals = np.empty(6)
+        vals[:3] = lam * (params.force_scale * math.cos(th))
+        vals[3:] = lam * (params.force_scale * math.sin(th))
+        return m.response(m.element_dofs[elem], vals)
 
     def nodal_forces(self, state: NeedleState, params: SimParams | None = None) -> np.ndarray:
         """The consistent nodal forces ``(n_nodes, 2)`` the robot applies in ``state``

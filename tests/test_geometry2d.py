@@ -92,10 +92,11 @@ def test_points_on_edges_and_vertices_are_inside():
     tri = np.array([[0.0, 0.0], [4.0, 0.0], [0.0, 4.0]])  # slanted edge through lattice points
     assert geo.points_in_polygon(np.array([[1.0, 3.0], [2.0, 2.0], [3.0, 1.0]]), tri).all()
     assert not geo.points_in_polygon(np.array([[2.0, 2.0 + 1e-12]]), tri)[0]
-    env_v, env_e = SQ, geo.polygon_edges(4)
-    assert geo.contains_points(env_v, env_e, on).all()
+    segs = geo.edge_segments(SQ, geo.polygon_edges(4))
+    np.testing.assert_array_equal(segs, geo.polygon_segments(SQ))
+    assert geo.contains_points(segs, on).all()
     # the integer winding number keeps the half-open rule: left and bottom edges count
-    w = geo.winding_numbers(env_v, env_e, np.array([[0.0, 0.5], [1.0, 0.5], [0.5, 0.0]]))
+    w = geo.winding_numbers(segs, np.array([[0.0, 0.5], [1.0, 0.5], [0.5, 0.0]]))
     assert w.tolist() == [1, 0, 1]
 
 
@@ -123,8 +124,8 @@ def test_segment_contact_cases(a0, a1, b0, b1, meet):
     assert geo.segments_intersect(args[2], args[3], args[0], args[1])[0, 0] == meet  # symmetric
     assert geo.segments_intersect(args[1], args[0], args[3], args[2])[0, 0] == meet  # reversed
     assert _exact_segments_meet(a0, a1, b0, b1) == meet  # the oracle agrees on the cases
-    V = np.array([b0, b1], dtype=float)
-    assert geo.segments_hit(V, np.array([[0, 1]]), args[0], args[1])[0] == meet
+    segs = np.array([[*b0, *b1]], dtype=float)
+    assert geo.segments_hit(segs, args[0], args[1])[0] == meet
 
 
 def test_polygon_contact_cases():
@@ -176,9 +177,8 @@ def test_segments_on_a_grid_match_exact_arithmetic(rng):
     assert ref.any() and not ref.all()
     assert np.array_equal(got, ref)
     # the soup query is the pairwise test reduced over the edges
-    V = np.concatenate([b0, b1])
-    E = np.column_stack([np.arange(60), np.arange(60, 120)])
-    assert np.array_equal(geo.segments_hit(V, E, a0, a1), ref.any(axis=1))
+    segs = np.concatenate([b0, b1], axis=1)
+    assert np.array_equal(geo.segments_hit(segs, a0, a1), ref.any(axis=1))
 
 
 def test_random_polygons_match_brute_force(rng):
@@ -195,10 +195,10 @@ def test_random_polygons_match_brute_force(rng):
             [_angle_winding(p, poly) != 0 if not o else True for p, o in zip(pts, on)]
         )
         assert np.array_equal(geo.points_in_polygon(pts, poly), ref)
-        V, E = poly, geo.polygon_edges(k)
-        assert np.array_equal(geo.contains_points(V, E, pts), ref)
+        segs = geo.polygon_segments(poly)
+        assert np.array_equal(geo.contains_points(segs, pts), ref)
         off = ~on
-        w = geo.winding_numbers(V, E, pts[off])
+        w = geo.winding_numbers(segs, pts[off])
         sign = 1 if geo.polygon_area(poly) > 0 else -1
         assert np.array_equal(w, sign * np.array([_angle_winding(p, poly) for p in pts[off]]))
         # simple-polygon check: rejected iff two non-adjacent edges meet (exact)
@@ -266,7 +266,7 @@ def test_closest_points_match_a_vectorised_formula(rng, tol):
     np.testing.assert_allclose(
         geo.point_polygon_distance(pts, poly), d.min(1), **tol["float64_exact"]
     )
-    dist, closest, edge = geo.closest_points_on_edges(poly, geo.polygon_edges(13), pts)
+    dist, closest, edge = geo.closest_points_on_segments(geo.polygon_segments(poly), pts)
     np.testing.assert_allclose(dist, d.min(1), **tol["float64_exact"])
     np.testing.assert_allclose(np.linalg.norm(closest - pts, axis=1), dist, **tol["float64_exact"])
     np.testing.assert_array_equal(edge, d.argmin(1))
@@ -283,14 +283,18 @@ def test_overlapping_loops_add_up(rng):
     hole = geo.rectangle_polygon((0.2, 0.2), (0.6, 0.6))[::-1]
     V = np.vstack([a, b, hole])
     E = np.vstack([geo.polygon_edges(4), geo.polygon_edges(4, 4), geo.polygon_edges(4, 8)])
+    segs = geo.edge_segments(V, E)
     pts = rng.uniform(-0.5, 3.5, (400, 2))
     ref = np.array(
         [_angle_winding(p, a) + _angle_winding(p, b) + _angle_winding(p, hole) for p in pts]
     )
-    np.testing.assert_array_equal(geo.winding_numbers(V, E, pts), ref)
-    np.testing.assert_array_equal(geo.contains_points(V, E, pts), ref > 0)
-    # the hole's edge belongs to the (closed) solid
-    assert geo.contains_points(V, E, np.array([[0.2, 0.4], [0.4, 0.6]])).all()
+    np.testing.assert_array_equal(geo.winding_numbers(segs, pts), ref)
+    np.testing.assert_array_equal(geo.contains_points(segs, pts), ref > 0)
+    # the hole's edge belongs to the (closed) solid; the edges inside the other square
+    # are on the boundary of one and inside the other
+    on = np.array([[0.2, 0.4], [0.4, 0.6], [0.6, 0.6], [1.5, 2.0], [2.0, 1.5], [2.0, 2.0]])
+    assert geo.contains_points(segs, on).all()
+    assert geo.winding_numbers(segs, np.array([[1.5, 1.5]]))[0] == 2
 
 
 def test_polygons_intersect_cases():  # the scenarios' original cases

@@ -20,7 +20,7 @@ import math
 import numba as nb
 import numpy as np
 
-from riskplan.geometry2d import closest_point_on_segment, closest_points_on_edges
+from riskplan.geometry2d import closest_point_on_segment, closest_points_on_segments
 
 # ---------------------------------------------------------------- closest points
 
@@ -127,10 +127,14 @@ def closest_points_brute(V, F, P):
     """Exact closest points of ``P (n, d)`` on faces ``F`` (brute force over faces).
 
     Returns ``(dist (n,), closest (n, d), face (n,))``. In 2-D this is
-    :func:`riskplan.geometry2d.closest_points_on_edges`; in 3-D a test oracle.
+    :func:`riskplan.geometry2d.closest_points_on_segments`; in 3-D a test oracle.
     """
     if V.shape[1] == 2:
-        return closest_points_on_edges(V, F, P)
+        S = np.empty((F.shape[0], 4))
+        for f in range(F.shape[0]):
+            a, b = F[f, 0], F[f, 1]
+            S[f, 0], S[f, 1], S[f, 2], S[f, 3] = V[a, 0], V[a, 1], V[b, 0], V[b, 1]
+        return closest_points_on_segments(S, P)
     n = P.shape[0]
     dist = np.full(n, np.inf)
     closest = np.zeros((n, 3))

@@ -31,8 +31,9 @@ from riskplan.collision.geometry import (
 from riskplan.errors import InvalidInputError
 from riskplan.geometry2d import (
     check_simple_polygon,
-    closest_points_on_edges,
+    closest_points_on_segments,
     contains_points,
+    edge_segments,
     polygon_area,
     polygon_edges,
     segments_hit,
@@ -325,6 +326,11 @@ class Environment:
         return np.ascontiguousarray(c), np.ascontiguousarray(r * (1 + 1e-12) + 1e-300)
 
     @cached_property
+    def _segments(self) -> np.ndarray:
+        """2-D: ``(E, 4)`` edge rows ``(x0, y0, x1, y1)`` for the planar kernels."""
+        return edge_segments(self.vertices, self.faces)
+
+    @cached_property
     def _rotation(self) -> np.ndarray:
         # A fixed generic rotation: rays along its x axis avoid the axis-aligned edges and
         # vertices of typical meshes (a ray through an edge would be counted twice or not at all).
@@ -384,7 +390,7 @@ class Environment:
                 Pr = np.ascontiguousarray(P @ self._rotation.T)
             w = K.winding_numbers_3d(Vr, self.faces, Pr, origin, cell, shape_g, start, items)
         else:
-            w = winding_numbers(self.vertices, self.faces, P)
+            w = winding_numbers(self._segments, P)
         return w.reshape(shape)
 
     def contains(self, points) -> np.ndarray:
@@ -395,7 +401,7 @@ class Environment:
         """
         if self.dim == 2:
             P, shape = _as_points(points, 2)
-            return contains_points(self.vertices, self.faces, P).reshape(shape)
+            return contains_points(self._segments, P).reshape(shape)
         return self.winding_number(points) > 0
 
     def closest_points(self, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -405,7 +411,7 @@ class Environment:
             sq, face, closest = self._aabb.squared_distance(self.vertices, self.faces, P)
             dist = np.sqrt(np.maximum(sq, 0.0))
         else:
-            dist, closest, face = closest_points_on_edges(self.vertices, self.faces, P)
+            dist, closest, face = closest_points_on_segments(self._segments, P)
         return dist.reshape(shape), closest.reshape(shape + (self.dim,)), face.reshape(shape)
 
     def signed_distance(self, points) -> np.ndarray:
@@ -429,7 +435,7 @@ class Environment:
                 self.vertices, self.faces, P0, P1, origin, cell, shape_g, start_g, items
             )
         else:
-            cross = segments_hit(self.vertices, self.faces, P0, P1)
+            cross = segments_hit(self._segments, P0, P1)
         return (inside | cross).reshape(shape)
 
 

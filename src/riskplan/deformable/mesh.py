@@ -26,8 +26,10 @@ from riskplan.errors import InvalidInputError, require
 from riskplan.geometry2d import (
     TriangleLocator,
     check_simple_polygon,
+    closest_points_on_segments,
     points_in_polygon,
     polygon_area,
+    polygon_segments,
     rectangle_polygon,
 )
 
@@ -190,8 +192,9 @@ class TissueMesh:
 
 
 def _build_pslg(poly: np.ndarray, keep: np.ndarray):
-    """Vertices/segments for Triangle: keep points on an edge split that edge, the rest
-    must lie strictly inside. Returns (vertices, segments, index of each keep point)."""
+    """Vertices/segments for Triangle: keep points within ``1e-9`` of the polygon's extent
+    of a vertex are that vertex, within it of an edge split that edge, the rest must lie
+    inside. Returns (vertices, segments, index of each keep point)."""
     scale = float(np.ptp(poly, axis=0).max())
     tol = 1e-9 * scale
     n = len(poly)
@@ -199,21 +202,19 @@ def _build_pslg(poly: np.ndarray, keep: np.ndarray):
     keep_index = np.empty(len(keep), dtype=np.int64)
     verts = [v for v in poly]
     interior = []
+    # distance of each keep point to the boundary: the edge-snapping rule of the mesher
+    # is "within tol of an edge" (a named tolerance, not the exact contact rule)
+    dist, _, edge = closest_points_on_segments(polygon_segments(poly), keep)
     for k, p in enumerate(keep):
         dv = np.sqrt(((poly - p) ** 2).sum(1))
         if dv.min() <= tol:
             keep_index[k] = int(dv.argmin())
-            continue
-        placed = False
-        for i in range(n):
+        elif dist[k] <= tol:  # on edge i, away from its ends: splits it at t in (0, 1)
+            i = int(edge[k])
             a, b = poly[i], poly[(i + 1) % n]
             ab = b - a
-            t = float(np.dot(p - a, ab) / np.dot(ab, ab))
-            if 0.0 < t < 1.0 and np.linalg.norm(a + t * ab - p) <= tol:
-                on_edge.setdefault(i, []).append((t, k))
-                placed = True
-                break
-        if not placed:
+            on_edge.setdefault(i, []).append((float(np.dot(p - a, ab) / np.dot(ab, ab)), k))
+        else:
             interior.append(k)
     if interior:
         inside = points_in_polygon(keep[interior], poly)

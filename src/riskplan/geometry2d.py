@@ -4,7 +4,7 @@ Polygons are ``(k, 2)`` float64 vertex arrays, closed implicitly (the last verte
 the first). Sets of edges (the 2-D obstacles of :class:`riskplan.collision.Environment`:
 closed, oriented loops) are ``segments (E, 4)`` with rows ``(x0, y0, x1, y1)``
 (:func:`edge_segments`, :func:`polygon_segments`); the kernels read them contiguously,
-which makes 2-D containment about 30 % faster than gathering through an index array.
+which makes 2-D containment about 25 % cheaper than gathering through an index array.
 Triangle meshes are ``nodes (N, 2)`` with ``triangles (T, 3)``.
 
 Boundary convention (the one rule of this module): **sets are closed; contact counts.**
@@ -181,7 +181,7 @@ def _crossing_counts(segments, points):
                     elif c == 0.0:
                         w += _ON_EDGE
                 elif y1 == py:  # ends on the ray's line, from below or level
-                    if (x1 - px) * (py - y0) == 0.0 and min(x0, x1) <= px <= max(x0, x1):
+                    if px == x1 or (y0 == py and min(x0, x1) <= px <= max(x0, x1)):
                         w += _ON_EDGE
             elif y1 <= py:  # downward across (or onto) the ray's line
                 c = (x1 - x0) * (py - y0) - (px - x0) * (y1 - y0)

@@ -107,12 +107,12 @@ class LinearToy:
         return self._goal
 
     def in_collision(self, state):
-        from riskplan.scenarios._geometry import points_in_polygon
+        from riskplan.geometry2d import points_in_polygon
 
         return any(points_in_polygon(state.x[None, :2], o)[0] for o in self._obstacles)
 
     def in_goal(self, state):
-        from riskplan.scenarios._geometry import points_in_polygon
+        from riskplan.geometry2d import points_in_polygon
 
         return bool(points_in_polygon(state.x[None, :2], self._goal)[0])
 

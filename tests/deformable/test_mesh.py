@@ -120,7 +120,7 @@ def test_derived_arrays_are_cached_read_only_properties(square175):
         assert getattr(mesh, name) is first  # computed once
         assert not first.flags.writeable
         np.testing.assert_array_equal(first, fn(mesh.nodes, mesh.triangles))
-    assert mesh.centroid_tree is mesh.centroid_tree
+    assert mesh.locator is mesh.locator
     assert mesh.boundary_edges is mesh.boundary_edges and not mesh.boundary_edges.flags.writeable
 
 

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import torch
 
+from riskplan import geometry2d as geo
 from riskplan.kinematics import GaussianMixture
-from riskplan.scenarios import _geometry as geo
 from riskplan.scenarios.base import SimParams, check_control, frozen_array
 from riskplan.scenarios.needle import NeedleConfig, NeedleScenario
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from riskplan import geometry2d as geo
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
-from riskplan.scenarios import _geometry as geo
 from riskplan.scenarios.manipulation import ManipulationConfig, ManipulationScenario
 from riskplan.scenarios.simulator import SimParams, rollout
 from tests.conftest import TOL

@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
+from riskplan import geometry2d as geo
 from riskplan.errors import InvalidInputError
-from riskplan.scenarios import _geometry as geo
 from riskplan.scenarios.needle import NeedleConfig, NeedleScenario, car_steer, car_step
 from riskplan.scenarios.simulator import SimParams, rollout
 from tests.conftest import TOL

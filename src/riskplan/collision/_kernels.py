@@ -5,6 +5,9 @@ Callers validate; these functions trust shapes and dtypes. Conventions:
 * ``V (nv, d)`` float64 vertices, ``F (nf, d)`` int64 faces: triangles in 3-D, segments in 2-D
   (a face has ``d`` vertices, so one code path serves both dimensions).
 * Whitened coordinates ``y = U (x - mu)`` (MDN paper eq. 8): the Gaussian becomes N(0, I).
+* Planar queries (2-D winding numbers, segment tests, closest points on edges) and the
+  boundary convention they follow live in :mod:`riskplan.geometry2d`; the whitened loop here
+  calls its ``closest_point_on_segment``.
 
 References: closest point on a triangle, Ericson, *Real-Time Collision Detection* (2005) §5.1.5;
 segment/triangle intersection, Moller & Trumbore (1997); winding number by signed ray crossings.
@@ -16,6 +19,8 @@ import math
 
 import numba as nb
 import numpy as np
+
+from riskplan.geometry2d import closest_point_on_segment, closest_points_on_segments
 
 # ---------------------------------------------------------------- closest points
 
@@ -117,64 +122,46 @@ def _norm3(x, y, z):
     return m * math.sqrt(x * x + y * y + z * z)
 
 
-@nb.njit(cache=True, inline="always")
-def _closest_seg(ax, ay, bx, by, px, py):
-    """Closest point of segment ``ab`` to ``p`` in 2-D; returns (x, y)."""
-    ex, ey = bx - ax, by - ay
-    ee = ex * ex + ey * ey
-    t = 0.0
-    if ee > 0.0:
-        t = ((px - ax) * ex + (py - ay) * ey) / ee
-        if t < 0.0:
-            t = 0.0
-        elif t > 1.0:
-            t = 1.0
-    return ax + t * ex, ay + t * ey
-
-
 @nb.njit(cache=True)
 def closest_points_brute(V, F, P):
     """Exact closest points of ``P (n, d)`` on faces ``F`` (brute force over faces).
 
-    Returns ``(dist (n,), closest (n, d), face (n,))``. Used in 2-D and as a test oracle in 3-D.
+    Returns ``(dist (n,), closest (n, d), face (n,))``. In 2-D this is
+    :func:`riskplan.geometry2d.closest_points_on_segments`; in 3-D a test oracle.
     """
+    if V.shape[1] == 2:
+        S = np.empty((F.shape[0], 4))
+        for f in range(F.shape[0]):
+            a, b = F[f, 0], F[f, 1]
+            S[f, 0], S[f, 1], S[f, 2], S[f, 3] = V[a, 0], V[a, 1], V[b, 0], V[b, 1]
+        return closest_points_on_segments(S, P)
     n = P.shape[0]
-    d = V.shape[1]
     dist = np.full(n, np.inf)
-    closest = np.zeros((n, d))
+    closest = np.zeros((n, 3))
     face = np.full(n, -1, dtype=np.int64)
     for i in range(n):
         best = np.inf
         for f in range(F.shape[0]):
-            if d == 3:
-                a, b, c = F[f, 0], F[f, 1], F[f, 2]
-                qx, qy, qz = _closest_tri(
-                    V[a, 0],
-                    V[a, 1],
-                    V[a, 2],
-                    V[b, 0],
-                    V[b, 1],
-                    V[b, 2],
-                    V[c, 0],
-                    V[c, 1],
-                    V[c, 2],
-                    P[i, 0],
-                    P[i, 1],
-                    P[i, 2],
-                )
-                s = (qx - P[i, 0]) ** 2 + (qy - P[i, 1]) ** 2 + (qz - P[i, 2]) ** 2
-                if s < best:
-                    best = s
-                    closest[i, 0], closest[i, 1], closest[i, 2] = qx, qy, qz
-                    face[i] = f
-            else:
-                a, b = F[f, 0], F[f, 1]
-                qx, qy = _closest_seg(V[a, 0], V[a, 1], V[b, 0], V[b, 1], P[i, 0], P[i, 1])
-                s = (qx - P[i, 0]) ** 2 + (qy - P[i, 1]) ** 2
-                if s < best:
-                    best = s
-                    closest[i, 0], closest[i, 1] = qx, qy
-                    face[i] = f
+            a, b, c = F[f, 0], F[f, 1], F[f, 2]
+            qx, qy, qz = _closest_tri(
+                V[a, 0],
+                V[a, 1],
+                V[a, 2],
+                V[b, 0],
+                V[b, 1],
+                V[b, 2],
+                V[c, 0],
+                V[c, 1],
+                V[c, 2],
+                P[i, 0],
+                P[i, 1],
+                P[i, 2],
+            )
+            s = (qx - P[i, 0]) ** 2 + (qy - P[i, 1]) ** 2 + (qz - P[i, 2]) ** 2
+            if s < best:
+                best = s
+                closest[i, 0], closest[i, 1], closest[i, 2] = qx, qy, qz
+                face[i] = f
         dist[i] = math.sqrt(best)
     return dist, closest, face
 
@@ -244,7 +231,9 @@ def _whitened_closest(V, F, muh, Uh, t, scale, centers, radii, cutoff, W, cp, dh
             cp[n, 0], cp[n, 1], cp[n, 2] = qx, qy, qz
             rh = _norm3(qx, qy, qz)
         else:
-            qx, qy = _closest_seg(W[n, 0, 0], W[n, 0, 1], W[n, 1, 0], W[n, 1, 1], 0.0, 0.0)
+            qx, qy = closest_point_on_segment(
+                W[n, 0, 0], W[n, 0, 1], W[n, 1, 0], W[n, 1, 1], 0.0, 0.0
+            )
             cp[n, 0], cp[n, 1] = qx, qy
             rh = _norm3(qx, qy, 0.0)
         # rh * scale is inf (face infinitely far) or 0 (touching), never NaN: rh is finite
@@ -479,26 +468,6 @@ def winding_numbers_3d(Vr, F, P, origin, cell, shape, start, items):
 
 
 @nb.njit(cache=True)
-def winding_numbers_2d(V, F, P):
-    """Winding number of points ``P (n, 2)`` w.r.t. closed oriented polylines (segments ``F``)."""
-    n = P.shape[0]
-    out = np.zeros(n, dtype=np.int64)
-    for i in range(n):
-        px, py = P[i, 0], P[i, 1]
-        w = 0
-        for f in range(F.shape[0]):
-            x0, y0 = V[F[f, 0], 0], V[F[f, 0], 1]
-            x1, y1 = V[F[f, 1], 0], V[F[f, 1], 1]
-            if y0 <= py:
-                if y1 > py and (x1 - x0) * (py - y0) - (px - x0) * (y1 - y0) > 0.0:
-                    w += 1
-            elif y1 <= py and (x1 - x0) * (py - y0) - (px - x0) * (y1 - y0) < 0.0:
-                w -= 1
-        out[i] = w
-    return out
-
-
-@nb.njit(cache=True)
 def segments_hit_3d(V, F, P0, P1, origin, cell, shape, start, items):
     """True where segment ``P0[i] -> P1[i]`` crosses a triangle (Moller-Trumbore, t in [0, 1])."""
     n = P0.shape[0]
@@ -552,35 +521,4 @@ def segments_hit_3d(V, F, P0, P1, origin, cell, shape, start, items):
                             hit = True
                             break
         out[i] = hit
-    return out
-
-
-@nb.njit(cache=True)
-def segments_hit_2d(V, F, P0, P1):
-    """True where segment ``P0[i] -> P1[i]`` crosses a polygon edge (proper or touching)."""
-    n = P0.shape[0]
-    out = np.zeros(n, dtype=np.bool_)
-    for i in range(n):
-        ax, ay, bx, by = P0[i, 0], P0[i, 1], P1[i, 0], P1[i, 1]
-        for f in range(F.shape[0]):
-            cx, cy = V[F[f, 0], 0], V[F[f, 0], 1]
-            dx, dy = V[F[f, 1], 0], V[F[f, 1], 1]
-            d1 = (dx - cx) * (ay - cy) - (dy - cy) * (ax - cx)
-            d2 = (dx - cx) * (by - cy) - (dy - cy) * (bx - cx)
-            d3 = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
-            d4 = (bx - ax) * (dy - ay) - (by - ay) * (dx - ax)
-            if ((d1 > 0.0) != (d2 > 0.0) or d1 == 0.0 or d2 == 0.0) and (
-                (d3 > 0.0) != (d4 > 0.0) or d3 == 0.0 or d4 == 0.0
-            ):
-                if d1 == 0.0 and d2 == 0.0:
-                    # collinear: overlap of projections
-                    if (
-                        max(ax, bx) < min(cx, dx)
-                        or max(cx, dx) < min(ax, bx)
-                        or max(ay, by) < min(cy, dy)
-                        or max(cy, dy) < min(ay, by)
-                    ):
-                        continue
-                out[i] = True
-                break
     return out

@@ -24,12 +24,21 @@ from riskplan._validation import as_array
 from riskplan.collision import _kernels as K
 from riskplan.collision.geometry import (
     check_closed_mesh,
-    check_simple_polygon,
     extrude_polygon,
     signed_volume,
     whiten,
 )
 from riskplan.errors import InvalidInputError
+from riskplan.geometry2d import (
+    check_simple_polygon,
+    closest_points_on_segments,
+    contains_points,
+    edge_segments,
+    polygon_area,
+    polygon_edges,
+    segments_hit,
+    winding_numbers,
+)
 
 log = logging.getLogger(__name__)
 
@@ -169,14 +178,11 @@ class Environment:
                 if not np.all(np.isfinite(arr)):
                     raise InvalidInputError(f"polygons[{i}]: contains NaN or inf")
                 arr = check_simple_polygon(arr, f"polygons[{i}]")
-            elif (
-                np.sum(arr[:, 0] * np.roll(arr[:, 1], -1) - np.roll(arr[:, 0], -1) * arr[:, 1]) < 0
-            ):
+            elif polygon_area(arr) < 0:
                 arr = arr[::-1]
             k = len(arr)
-            idx = np.arange(k)
             Vs.append(arr)
-            Fs.append(np.column_stack([idx, (idx + 1) % k]) + offset)
+            Fs.append(polygon_edges(k, offset))
             owners.append(np.full(k, i, dtype=np.int64))
             offset += k
         return cls(np.vstack(Vs), np.vstack(Fs), np.concatenate(owners), names, validate=False)
@@ -320,6 +326,11 @@ class Environment:
         return np.ascontiguousarray(c), np.ascontiguousarray(r * (1 + 1e-12) + 1e-300)
 
     @cached_property
+    def _segments(self) -> np.ndarray:
+        """2-D: ``(E, 4)`` edge rows ``(x0, y0, x1, y1)`` for the planar kernels."""
+        return edge_segments(self.vertices, self.faces)
+
+    @cached_property
     def _rotation(self) -> np.ndarray:
         # A fixed generic rotation: rays along its x axis avoid the axis-aligned edges and
         # vertices of typical meshes (a ray through an edge would be counted twice or not at all).
@@ -365,7 +376,11 @@ class Environment:
 
     # ------------------------------------------------------------- queries
     def winding_number(self, points) -> np.ndarray:
-        """Integer winding number of points ``(..., d)`` = number of obstacles containing them; ``(...,)``."""
+        """Integer winding number of points ``(..., d)`` = number of obstacles containing them; ``(...,)``.
+
+        Points exactly on a 2-D edge follow the half-open crossing rule of
+        :func:`riskplan.geometry2d.winding_numbers`; :meth:`contains` counts them as inside.
+        """
         P, shape = _as_points(points, self.dim)
         if self.dim == 3:
             Vr, origin, cell, shape_g, start, items = self._ray_grid
@@ -375,11 +390,18 @@ class Environment:
                 Pr = np.ascontiguousarray(P @ self._rotation.T)
             w = K.winding_numbers_3d(Vr, self.faces, Pr, origin, cell, shape_g, start, items)
         else:
-            w = K.winding_numbers_2d(self.vertices, self.faces, P)
+            w = winding_numbers(self._segments, P)
         return w.reshape(shape)
 
     def contains(self, points) -> np.ndarray:
-        """``(...,)`` bool: True where a point ``(..., d)`` lies inside at least one obstacle."""
+        """``(...,)`` bool: True where a point ``(..., d)`` lies inside at least one obstacle.
+
+        In 2-D obstacles are closed sets (a point on an edge is inside; the convention of
+        :mod:`riskplan.geometry2d`); in 3-D a point exactly on a face may go either way.
+        """
+        if self.dim == 2:
+            P, shape = _as_points(points, 2)
+            return contains_points(self._segments, P).reshape(shape)
         return self.winding_number(points) > 0
 
     def closest_points(self, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -389,7 +411,7 @@ class Environment:
             sq, face, closest = self._aabb.squared_distance(self.vertices, self.faces, P)
             dist = np.sqrt(np.maximum(sq, 0.0))
         else:
-            dist, closest, face = K.closest_points_brute(self.vertices, self.faces, P)
+            dist, closest, face = closest_points_on_segments(self._segments, P)
         return dist.reshape(shape), closest.reshape(shape + (self.dim,)), face.reshape(shape)
 
     def signed_distance(self, points) -> np.ndarray:
@@ -413,7 +435,7 @@ class Environment:
                 self.vertices, self.faces, P0, P1, origin, cell, shape_g, start_g, items
             )
         else:
-            cross = K.segments_hit_2d(self.vertices, self.faces, P0, P1)
+            cross = segments_hit(self._segments, P0, P1)
         return (inside | cross).reshape(shape)
 
 

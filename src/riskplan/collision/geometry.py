@@ -1,4 +1,6 @@
-"""Pure array helpers for obstacle geometry: whitening, mesh checks, polygon checks, extrusion.
+"""Pure array helpers for obstacle geometry: whitening, closed-mesh checks, extrusion.
+
+Polygon checks and every other planar query live in :mod:`riskplan.geometry2d`.
 
 Whitening (MDN paper eq. 8): for a Gaussian ``N(mu, Sigma)`` with ``Sigma^{-1} = U^T U``,
 ``y = U (x - mu)`` maps the Gaussian to ``N(0, I)`` and the Mahalanobis distance
@@ -90,50 +92,6 @@ def check_closed_mesh(vertices: np.ndarray, faces: np.ndarray, name: str) -> Non
             f"{name}: mesh is not closed (watertight): edge {int(e[i, 0])}-{int(e[i, 1])} has only one face "
             f"({int((~has_rev).sum())} open edges)"
         )
-
-
-def check_simple_polygon(poly: np.ndarray, name: str) -> np.ndarray:
-    """Validate a polygon ``(k, 2)`` and return it counter-clockwise.
-
-    Rejects fewer than 3 vertices, repeated consecutive vertices, zero area and
-    self-intersections (non-adjacent edges that touch or cross).
-    """
-    if poly.ndim != 2 or poly.shape[1] != 2 or poly.shape[0] < 3:
-        raise InvalidInputError(
-            f"{name}: expected a (k >= 3, 2) vertex array, got shape {poly.shape}"
-        )
-    nxt = np.roll(poly, -1, axis=0)
-    seg = nxt - poly
-    scale = float(np.ptp(poly, axis=0).max()) or 1.0
-    if np.any(np.linalg.norm(seg, axis=1) <= 1e-12 * scale):
-        raise InvalidInputError(f"{name}: repeated consecutive vertices (zero-length edge)")
-    area = 0.5 * float(np.sum(poly[:, 0] * nxt[:, 1] - nxt[:, 0] * poly[:, 1]))
-    if abs(area) <= 1e-12 * scale * scale:
-        raise InvalidInputError(f"{name}: polygon has zero area (degenerate)")
-    k = len(poly)
-    if k > 3:
-        a, b = poly, nxt
-
-        # orientation tests for every pair of edges (k is small for tissue polygons)
-        def orient(p, q, r):
-            return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (
-                r[..., 0] - p[..., 0]
-            )
-
-        A, B = a[:, None], b[:, None]
-        C, D = a[None, :], b[None, :]
-        d1, d2 = orient(C, D, A), orient(C, D, B)
-        d3, d4 = orient(A, B, C), orient(A, B, D)
-        cross = (np.sign(d1) * np.sign(d2) <= 0) & (np.sign(d3) * np.sign(d4) <= 0)
-        i, j = np.triu_indices(k, 1)
-        adjacent = (j == i + 1) | ((i == 0) & (j == k - 1))
-        hit = cross[i, j] & ~adjacent
-        if np.any(hit):
-            h = int(np.flatnonzero(hit)[0])
-            raise InvalidInputError(
-                f"{name}: polygon self-intersects (edges {int(i[h])} and {int(j[h])})"
-            )
-    return poly if area > 0 else poly[::-1].copy()
 
 
 def extrude_polygon(poly: np.ndarray, z0: float, z1: float) -> tuple[np.ndarray, np.ndarray]:

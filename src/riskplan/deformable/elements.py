@@ -11,6 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
+# the barycentric maps of P1 elements are plain triangle geometry, shared with point location
+from riskplan.geometry2d import barycentric_maps as barycentric_maps
+
 
 def signed_areas(nodes: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Signed areas ``(T,)`` of triangles ``(T, 3)`` over ``nodes (N, 2)``; > 0 when
@@ -40,16 +43,6 @@ def shape_gradients(nodes: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     g1 = np.stack([d2[:, 1], -d2[:, 0]], axis=1) / det[:, None]
     g2 = np.stack([-d1[:, 1], d1[:, 0]], axis=1) / det[:, None]
     return np.stack([-(g1 + g2), g1, g2], axis=1)
-
-
-def barycentric_maps(nodes: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """``(T, 3, 3)`` matrices ``M_e`` with ``λ = M_e @ [x, y, 1]`` (inverse of the
-    affine map ``[x; y; 1] = [[x_a], [y_a], [1]] λ``)."""
-    p = nodes[triangles]  # (T, 3, 2)
-    A = np.ones((len(triangles), 3, 3))
-    A[:, 0, :] = p[:, :, 0]
-    A[:, 1, :] = p[:, :, 1]
-    return np.linalg.inv(A)
 
 
 def deformation_gradients(u_elem: np.ndarray, G: np.ndarray) -> np.ndarray:

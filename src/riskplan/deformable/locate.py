@@ -20,14 +20,18 @@ import numpy as np
 from riskplan._validation import as_array
 from riskplan.deformable.mesh import TissueMesh
 from riskplan.errors import InvalidInputError
+from riskplan.geometry2d import BARYCENTRIC_TOL
 
-#: A point counts as inside when its smallest barycentric coordinate is >= -INSIDE_TOL.
-INSIDE_TOL = 1e-10
+#: A point counts as inside when its smallest barycentric coordinate is >= -INSIDE_TOL
+#: (the closed convention of :mod:`riskplan.geometry2d`).
+INSIDE_TOL = BARYCENTRIC_TOL
 
 
 def locate_points(maps: np.ndarray, points: np.ndarray, chunk: int = 256, candidates=None):
     """Containing element ``(P,)`` and barycentric weights ``(P, 3)`` of ``points (P, 2)``
-    given the elements' ``maps (T, 3, 3)`` (``TissueMesh.barycentric_maps``).
+    given the elements' ``maps (T, 3, 3)`` (``TissueMesh.barycentric_maps``), by exhaustive
+    search: the reference for the grid locator ``TissueMesh.locator``, which :func:`locate`
+    and :func:`contains` use.
 
     Picks, for each point, the element whose smallest barycentric coordinate is largest;
     element ``-1`` when that value is below ``-INSIDE_TOL`` (outside the mesh).
@@ -62,19 +66,6 @@ def locate_points(maps: np.ndarray, points: np.ndarray, chunk: int = 256, candid
         elem[idx] = np.where(ok, e, -1)
         lam[idx] = b[np.arange(len(q)), e]
     return elem, lam
-
-
-#: Above this many (point, element) pairs, candidates come from a k-d tree of centroids.
-_TREE_MIN_PAIRS = 4_000
-_TREE_K = 8
-
-
-def _locate_in_mesh(mesh: TissueMesh, pts: np.ndarray):
-    cand = None
-    if len(pts) * mesh.n_elements > _TREE_MIN_PAIRS:
-        k = min(_TREE_K, mesh.n_elements)
-        cand = mesh.centroid_tree.query(pts, k=k)[1].reshape(len(pts), k)
-    return locate_points(mesh.barycentric_maps, pts, candidates=cand)
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,7 +133,7 @@ def locate(mesh: TissueMesh, points) -> Interpolator:
     if pts.ndim > 2:
         raise InvalidInputError(f"points: expected shape (P, 2) or (2,), got {pts.shape}")
     pts = np.ascontiguousarray(pts.reshape(-1, 2))
-    elem, lam = _locate_in_mesh(mesh, pts)
+    elem, lam = mesh.locator.locate_points(pts)
     outside = np.flatnonzero(elem < 0)
     if outside.size:
         raise InvalidInputError(
@@ -161,5 +152,5 @@ def locate(mesh: TissueMesh, points) -> Interpolator:
 def contains(mesh: TissueMesh, points) -> np.ndarray:
     """``(P,)`` bool: which reference points ``(P, 2)`` lie in the mesh (no error)."""
     pts = np.ascontiguousarray(as_array(points, "points", last_dim=2).reshape(-1, 2))
-    elem, _ = _locate_in_mesh(mesh, pts)
+    elem, _ = mesh.locator.locate_points(pts)
     return elem >= 0

@@ -23,6 +23,15 @@ from riskplan._validation import as_array
 from riskplan.deformable import elements
 from riskplan.deformable.elements import boundary_edges, signed_areas
 from riskplan.errors import InvalidInputError, require
+from riskplan.geometry2d import (
+    TriangleLocator,
+    check_simple_polygon,
+    closest_points_on_segments,
+    points_in_polygon,
+    polygon_area,
+    polygon_segments,
+    rectangle_polygon,
+)
 
 #: Relative area (w.r.t. the bounding-box area) below which a triangle is degenerate.
 DEGENERATE_RTOL = 1e-12
@@ -57,7 +66,7 @@ class TissueMesh:
     (naming them), out-of-range indices, or nodes used by no triangle.
 
     Derived arrays are computed on first use and kept (read-only): ``areas``,
-    ``boundary_edges``, ``shape_gradients``, ``barycentric_maps``, ``centroid_tree``.
+    ``boundary_edges``, ``shape_gradients``, ``barycentric_maps``, ``locator``.
     """
 
     nodes: np.ndarray
@@ -137,12 +146,10 @@ class TissueMesh:
         return _readonly(elements.barycentric_maps(self.nodes, self.triangles))
 
     @cached_property
-    def centroid_tree(self):
-        """``scipy.spatial.cKDTree`` of the element centroids (candidate elements for
-        point location)."""
-        from scipy.spatial import cKDTree
-
-        return cKDTree(self.nodes[self.triangles].mean(axis=1))
+    def locator(self) -> TriangleLocator:
+        """Grid point locator of the elements (:class:`riskplan.geometry2d.TriangleLocator`,
+        on the cached ``barycentric_maps``)."""
+        return TriangleLocator(self.nodes, self.triangles, maps=self.barycentric_maps)
 
     @property
     def boundary_nodes(self) -> np.ndarray:
@@ -184,54 +191,10 @@ class TissueMesh:
 # polygon meshing
 
 
-def _segments_intersect(p1, p2, q1, q2) -> bool:
-    def orient(a, b, c):
-        return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
-
-    d1, d2 = orient(q1, q2, p1), orient(q1, q2, p2)
-    d3, d4 = orient(p1, p2, q1), orient(p1, p2, q2)
-    return (d1 * d2 < 0) and (d3 * d4 < 0)
-
-
-def _check_polygon(vertices: np.ndarray) -> tuple[np.ndarray, bool]:
-    """Validate a simple polygon; return it counter-clockwise and whether it was reversed."""
-    n = len(vertices)
-    if n < 3:
-        raise InvalidInputError(f"vertices: a polygon needs at least 3 vertices, got {n}")
-    x, y = vertices[:, 0], vertices[:, 1]
-    area = 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
-    scale = float(np.ptp(vertices, axis=0).max())
-    if abs(area) <= 1e-12 * scale**2:
-        raise InvalidInputError("vertices: the polygon has zero area")
-    edge = np.roll(vertices, -1, axis=0) - vertices
-    if np.any(np.sqrt((edge**2).sum(1)) <= 1e-12 * scale):
-        raise InvalidInputError("vertices: repeated consecutive vertices")
-    for i in range(n):
-        for j in range(i + 2, n):
-            if i == 0 and j == n - 1:
-                continue
-            if _segments_intersect(
-                vertices[i], vertices[(i + 1) % n], vertices[j], vertices[(j + 1) % n]
-            ):
-                raise InvalidInputError(
-                    f"vertices: polygon edges {i} and {j} intersect (not a simple polygon)"
-                )
-    return (vertices, False) if area > 0 else (vertices[::-1].copy(), True)
-
-
-def _point_in_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    x, y = pts[:, 0:1], pts[:, 1:2]
-    x0, y0 = poly[:, 0][None], poly[:, 1][None]
-    x1, y1 = np.roll(poly[:, 0], -1)[None], np.roll(poly[:, 1], -1)[None]
-    cond = (y0 > y) != (y1 > y)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        xc = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
-    return (np.sum(cond & (x < xc), axis=1) % 2) == 1
-
-
 def _build_pslg(poly: np.ndarray, keep: np.ndarray):
-    """Vertices/segments for Triangle: keep points on an edge split that edge, the rest
-    must lie strictly inside. Returns (vertices, segments, index of each keep point)."""
+    """Vertices/segments for Triangle: keep points within ``1e-9`` of the polygon's extent
+    of a vertex are that vertex, within it of an edge split that edge, the rest must lie
+    inside. Returns (vertices, segments, index of each keep point)."""
     scale = float(np.ptp(poly, axis=0).max())
     tol = 1e-9 * scale
     n = len(poly)
@@ -239,24 +202,22 @@ def _build_pslg(poly: np.ndarray, keep: np.ndarray):
     keep_index = np.empty(len(keep), dtype=np.int64)
     verts = [v for v in poly]
     interior = []
+    # distance of each keep point to the boundary: the edge-snapping rule of the mesher
+    # is "within tol of an edge" (a named tolerance, not the exact contact rule)
+    dist, _, edge = closest_points_on_segments(polygon_segments(poly), keep)
     for k, p in enumerate(keep):
         dv = np.sqrt(((poly - p) ** 2).sum(1))
         if dv.min() <= tol:
             keep_index[k] = int(dv.argmin())
-            continue
-        placed = False
-        for i in range(n):
+        elif dist[k] <= tol:  # on edge i, away from its ends: splits it at t in (0, 1)
+            i = int(edge[k])
             a, b = poly[i], poly[(i + 1) % n]
             ab = b - a
-            t = float(np.dot(p - a, ab) / np.dot(ab, ab))
-            if 0.0 < t < 1.0 and np.linalg.norm(a + t * ab - p) <= tol:
-                on_edge.setdefault(i, []).append((t, k))
-                placed = True
-                break
-        if not placed:
+            on_edge.setdefault(i, []).append((float(np.dot(p - a, ab) / np.dot(ab, ab)), k))
+        else:
             interior.append(k)
     if interior:
-        inside = _point_in_polygon(keep[interior], poly)
+        inside = points_in_polygon(keep[interior], poly)
         if not np.all(inside):
             bad = keep[np.asarray(interior)[~inside]]
             raise InvalidInputError(f"keep_points: {bad[:3].tolist()} lie outside the polygon")
@@ -335,7 +296,9 @@ def mesh_polygon(
     :class:`InvalidInputError` is raised.
     """
     tri_mod = require("triangle", "fem")
-    poly, flipped = _check_polygon(as_array(vertices, "vertices", shape=(None, 2)))
+    vertices = as_array(vertices, "vertices", shape=(None, 2))
+    poly = check_simple_polygon(vertices, "vertices")
+    flipped = polygon_area(vertices) < 0
     if not isinstance(n_elements, (int, np.integer)) or isinstance(n_elements, bool):
         raise InvalidInputError(f"n_elements: expected an int, got {type(n_elements).__name__}")
     n_elements = int(n_elements)
@@ -352,8 +315,7 @@ def mesh_polygon(
     )
     verts, segs, keep_index = _build_pslg(poly, keep)
     pslg = {"vertices": verts, "segments": segs}
-    x, y = poly[:, 0], poly[:, 1]
-    area = 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+    area = polygon_area(poly)
 
     cache: dict[float, dict] = {}
 
@@ -409,4 +371,4 @@ def mesh_polygon(
 def rectangle(width: float = 1.0, height: float = 1.0, origin=(0.0, 0.0)) -> np.ndarray:
     """``(4, 2)`` counter-clockwise corners of an axis-aligned rectangle."""
     x0, y0 = float(origin[0]), float(origin[1])
-    return np.array([[x0, y0], [x0 + width, y0], [x0 + width, y0 + height], [x0, y0 + height]])
+    return rectangle_polygon((x0, y0), (x0 + width, y0 + height))

@@ -30,7 +30,7 @@ MANIP_MESH_CAP = 400  # largest mesh drawn in the manipulation mesh case (keeps 
 
 def _margin(sim, state) -> float:
     """Clearance of the needle to the deformed obstacles (negative inside one)."""
-    from riskplan.scenarios._geometry import signed_distance_to_polygon
+    from riskplan.geometry2d import signed_distance_to_polygon
 
     p = state.pose[None, :2]
     return float(min(signed_distance_to_polygon(p, poly)[0] for poly in sim.obstacles(state)))

@@ -32,9 +32,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from riskplan import geometry2d as geo
 from riskplan._validation import as_array, as_generator
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
-from riskplan.scenarios import _geometry as geo
 from riskplan.scenarios.base import (
     FEMScenario,
     SimParams,

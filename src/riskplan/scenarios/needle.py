@@ -39,9 +39,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from riskplan import geometry2d as geo
 from riskplan._validation import as_array
 from riskplan.errors import InvalidInputError
-from riskplan.scenarios import _geometry as geo
 from riskplan.scenarios.base import (
     FEMScenario,
     SimParams,
@@ -225,7 +225,7 @@ class _MeshData:
         self.base = LinearElasticModel(
             mesh, Material(50.0, 0.4, plane=cfg.plane), mesh.vertex_nodes
         )
-        self.locator = geo.PointLocator(mesh.nodes, mesh.triangles)
+        self.locator = mesh.locator
         pts = np.concatenate(
             [*cfg.obstacles, cfg.goal_polygon, np.asarray(cfg.goal_center, dtype=np.float64)[None]]
         )

@@ -161,16 +161,30 @@ def _mirror(u: np.ndarray, w: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     return np.clip(v, bounds[:, 0], bounds[:, 1])
 
 
-def control_jacobian(sim, state, control, params, epsilon, x_next=None, t: int = 0) -> np.ndarray:
+def _stepper(sim):
+    """``run(state, u, params, near)``: ``sim.step_near`` where the simulator has one (its
+    solver starts from ``near``, a state expected close to the result), else ``sim.step``."""
+    step_near = getattr(sim, "step_near", None)
+    if step_near is None:
+        return lambda state, u, params, near: sim.step(state, u, params)
+    return step_near
+
+
+def control_jacobian(
+    sim, state, control, params, epsilon, x_next=None, t: int = 0, near=None
+) -> np.ndarray:
     """``B (p, q)``: forward differences of ``sim.reduced(sim.step(state, u, params))`` in ``u``.
 
     ``epsilon (q,)`` per component (sign flipped where ``u + ε`` leaves the upper bound);
-    ``x_next (p,)`` is the unperturbed result (computed if not given). Paper IV-B, ``B_t``.
+    ``x_next (p,)`` is the unperturbed result (computed if not given); ``near``: the
+    unperturbed next state, the solver's start for simulators with ``step_near``. Paper
+    IV-B, ``B_t``.
     """
+    run = _stepper(sim)
     bounds = np.asarray(sim.control_bounds, dtype=np.float64)
     u = np.asarray(control, dtype=np.float64)
     if x_next is None:
-        x_next = _checked(sim, sim.step(state, u, params), t + 1, "nominal control")
+        x_next = _checked(sim, run(state, u, params, near), t + 1, "nominal control")
     eps = np.asarray(epsilon, dtype=np.float64)
     q = u.shape[0]
     B = np.empty((x_next.shape[0], q))
@@ -179,7 +193,7 @@ def control_jacobian(sim, state, control, params, epsilon, x_next=None, t: int =
         du = u.copy()
         du[j] += e
         B[:, j] = (
-            _checked(sim, sim.step(state, du, params), t + 1, f"control component {j} perturbed")
+            _checked(sim, run(state, du, params, near), t + 1, f"control component {j} perturbed")
             - x_next
         ) / e
     return B
@@ -191,6 +205,7 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seed
     params = plan.params
     p = plan.reduced.shape[1]
     prior = np.eye(p) if a_prior == "identity" else np.zeros((p, p))
+    run = _stepper(sim)
     out = []
     for t, seed in zip(ts, seeds):
         y_t = plan.states[t]
@@ -205,9 +220,9 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seed
             X0 = np.empty((p, K))
             X1 = np.empty((p, K))
             for k in range(K):
-                yk = sim.step(y_prev, _mirror(u_prev, Z[k], bounds), params)
+                yk = run(y_prev, _mirror(u_prev, Z[k], bounds), params, y_t)
                 X0[:, k] = sim.reduced(yk)
-                X1[:, k] = sim.reduced(sim.step(yk, u_t, params))
+                X1[:, k] = sim.reduced(run(yk, u_t, params, plan.states[t + 1]))
             _finite(X0, t, "A runs")
             _finite(X1, t + 1, "A runs")
             X0 -= plan.reduced[t][:, None]
@@ -220,13 +235,15 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seed
             else:
                 pinv = (Vt[keep].T / s[keep]) @ U[:, keep].T  # (K, p)
                 A = prior + (X1 - prior @ X0) @ pinv
-        B = control_jacobian(sim, y_t, u_t, params, eps, x_next=x_next, t=t)
+        B = control_jacobian(
+            sim, y_t, u_t, params, eps, x_next=x_next, t=t, near=plan.states[t + 1]
+        )
         M = np.zeros((p, p))
         drift = np.zeros(p)
         if draws:
             D = np.empty((len(draws), p))
             for i, s_i in enumerate(draws):
-                D[i] = sim.reduced(sim.step(y_t, u_t, s_i))
+                D[i] = sim.reduced(run(y_t, u_t, s_i, plan.states[t + 1]))
             _finite(D, t + 1, "parameter draws")
             D -= x_next
             M = D.T @ D / len(draws)

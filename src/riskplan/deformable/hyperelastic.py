@@ -78,6 +78,23 @@ class _State:
 # restarted from the same few states (the linearisation's runs from a plan's states) reuse them
 START_CACHE = 4
 
+# sparsity layouts by (triangles, free DOFs): models of one mesh with different materials
+# (a parameter distribution's draws) share one; a layout is never modified after it is built
+_PATTERNS: OrderedDict = OrderedDict()
+_PATTERN_CACHE = 8
+
+
+def _tangent_pattern(triangles: np.ndarray, free_dofs: np.ndarray, n_dofs: int) -> TangentPattern:
+    key = (triangles.shape, triangles.tobytes(), free_dofs.tobytes(), int(n_dofs))
+    pattern = _PATTERNS.get(key)
+    if pattern is None:
+        pattern = _PATTERNS[key] = TangentPattern(triangles, free_dofs, n_dofs)
+        if len(_PATTERNS) > _PATTERN_CACHE:
+            _PATTERNS.popitem(last=False)
+    else:
+        _PATTERNS.move_to_end(key)
+    return pattern
+
 
 class HyperelasticModel:
     """Hyperelastic P1 model on ``mesh`` with ``fixed_nodes`` held (zero displacement
@@ -125,7 +142,7 @@ class HyperelasticModel:
         self._tri_flat = np.ascontiguousarray(mesh.triangles.ravel())
         self._n = 2 * mesh.n_nodes
         self.fixed_dofs, self.free_dofs = split_dofs(self.fixed_nodes, self._n)
-        self._pattern = TangentPattern(self._tri, self.free_dofs, self._n)
+        self._pattern = _tangent_pattern(self._tri, self.free_dofs, self._n)
         self._starts: OrderedDict = OrderedDict()
 
     def __getstate__(self):

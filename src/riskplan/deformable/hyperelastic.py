@@ -105,7 +105,10 @@ class HyperelasticModel:
     and the load balanced by the warm start. Linear systems: the reduced tangent is
     ordered by reverse Cuthill-McKee once and factorised as a banded Cholesky matrix
     (symmetric positive definite at stable states); when Cholesky fails (indefinite
-    tangent) a sparse LU is used instead.
+    tangent) a sparse LU is used instead. The model keeps its last ``START_CACHE``
+    evaluated start displacements with their factorisations (keyed by the exact
+    displacement), so solves restarted from one state share that work; results are those
+    of a fresh model, bit for bit.
     """
 
     def __init__(

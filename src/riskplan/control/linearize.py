@@ -36,9 +36,13 @@ Estimation, per step ``t`` (each run restarts the simulator from a stored plan s
   the rest) for every ``K > q``; more runs only average the second-order (curvature) part
   of the deviations. ``K = 2q`` keeps twice the runs the subspace needs. Checked on a
   linear system (the same ``A_t`` for ``K = 2q`` and ``2p``, to rounding) and on the
-  manipulation scenario (``p = 26``, ``q = 6``: ``A_t``, ``B_t``, ``M_t`` and the LQG-MP
-  ``P(success)`` of ``K = 12`` against ``K = 52`` differ by no more than ``K = 52`` with
-  another seed does; docs/planning.md). ``n_a_runs=2 * sim.state_dim`` restores the paper's.
+  manipulation scenario (``p = 26``, ``q = 6``): ``B_t`` and ``M_t`` do not use the
+  A-runs; both ``K = 12`` and ``K = 52`` give ``A_t B_{t-1} ≈ 0`` (the new equilibrium
+  forgets the previous force); they differ off that subspace (with 52 runs the
+  second-order part lifts ``X_t`` to full numerical rank and ``A_t ≈ 0``; with 12 the
+  prior stays on 14 directions), and the LQG-MP ``P(success)`` of the two differs by less
+  than that of ``K = 52`` under another seed (docs/planning.md).
+  ``n_a_runs=2 * sim.state_dim`` restores the paper's.
 * ``B_t``: ``q`` runs from ``y*_t`` with ``u*_t + ε_j e_j``; column ``j`` is
   ``(x^j_{t+1} − x*_{t+1}) / ε_j`` (forward difference; ``ε_j → −ε_j`` at an upper bound).
   Default ``ε_j = 10⁻³ (high_j − low_j)``.

@@ -130,11 +130,14 @@ def test_needle_matches_car_jacobian():
     # the lateral direction (X_t has rank 2); the identity prior is exact there.
     from riskplan.scenarios.needle import NeedleScenario
 
+    # The paper's K = 2p A-runs: the fit averages the car's curvature over the runs, and the
+    # default K = 2q = 4 leaves about 1.6x its error (median over 8 seeds 4.6e-4 against
+    # 2.8e-4 for K = 6, largest 2.0e-3 against 7.8e-4).
     sim = NeedleScenario()
     u = sim.random_controls(8, seed=4)
     plan = NominalPlan.from_rollout(sim, sim.initial_state(), u)
     with pytest.warns(RankDeficiencyWarning, match="lowest rank 2"):
-        lin = linearize(sim, plan, seed=0)
+        lin = linearize(sim, plan, n_a_runs=2 * sim.state_dim, seed=0)
     cfg = sim.config
     k = 1.0 / (cfg.r_min * math.tan(cfg.phi_max))
     for t in range(1, 8):
@@ -152,3 +155,71 @@ def test_needle_matches_car_jacobian():
         )
         np.testing.assert_allclose(lin.B[t], B_true, **TOL["needle_car_B"])
         np.testing.assert_allclose(lin.A[t], A_true, **TOL["needle_car_A"])
+
+
+def test_k_2q_gives_the_same_A_as_2p_on_a_linear_system(rng):
+    # p = 6 > q = 2: the A-runs excite only span(B), for any K; the fit there is exact and
+    # the identity prior fills the rest, so K = 2q (the default) and the paper's K = 2p agree
+    p, q = 6, 2
+    A, B, c = toy_system(rng, p=p, q=q)
+    sim = LinearToy(A, B, c)
+    plan = _plan(sim, rng, T=4)
+    with pytest.warns(RankDeficiencyWarning, match="lowest rank 2"):
+        default = linearize(sim, plan, seed=3)
+    with pytest.warns(RankDeficiencyWarning):
+        k2q = linearize(sim, plan, n_a_runs=2 * q, seed=3)
+    np.testing.assert_array_equal(default.A, k2q.A)  # the default is K = 2 min(p, q)
+    Pb = B @ np.linalg.pinv(B)  # projection onto span(B)
+    expected = np.eye(p) + (A - np.eye(p)) @ Pb
+    for K, seed in ((2 * q, 4), (2 * p, 3), (2 * p, 5)):
+        with pytest.warns(RankDeficiencyWarning):
+            lin = linearize(sim, plan, n_a_runs=K, seed=seed)
+        np.testing.assert_allclose(
+            lin.A, np.broadcast_to(expected, lin.A.shape), **TOL["float64_ref"]
+        )
+        np.testing.assert_allclose(lin.A, default.A, **TOL["float64_ref"])
+        np.testing.assert_array_equal(lin.B, default.B)  # B does not use the A-runs
+        assert (lin.rank[1:] == q).all()
+
+
+@pytest.mark.filterwarnings("ignore::riskplan.control.linearize.RankDeficiencyWarning")
+def test_manipulation_k_2q_and_2p_and_solver_start(tol):
+    # quasi-static manipulation: the new equilibrium depends only on the current forces, so
+    # A_t maps the deviations the previous control excites (the columns of B_{t-1}) to zero;
+    # K = 2q and K = 2p both find that, and B, M do not depend on K. Starting the solves
+    # near the plan's states (step_near) changes B and M by no more than the solver tolerance.
+    from riskplan.scenarios.manipulation import ManipulationScenario
+    from riskplan.scenarios.uncertainty import get_case
+
+    sim = ManipulationScenario()
+    case = get_case("material-high")
+    u = sim.random_controls(3, seed=2)
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), u)
+    draws = case.sample_many(3, 7)
+    draws = [d.replace(n_elements=plan.params.n_elements) for d in draws]
+    q, p = sim.control_dim, sim.state_dim
+    lins = {K: linearize(sim, plan, draws, n_a_runs=K, seed=1) for K in (2 * q, 2 * p)}
+    for K, lin in lins.items():
+        for t in range(1, plan.n_steps):
+            B_prev = lin.B[t - 1]
+            # second order in the perturbation (1 % of the force range)
+            assert np.linalg.norm(lin.A[t] @ B_prev) <= 1e-2 * np.linalg.norm(B_prev), K
+    np.testing.assert_array_equal(lins[2 * q].B, lins[2 * p].B)
+    np.testing.assert_array_equal(lins[2 * q].M, lins[2 * p].M)
+
+    class PlainSteps:  # the same simulator without step_near
+        def __init__(self, inner):
+            self._inner = inner
+
+        def __getattr__(self, name):
+            if name == "step_near":
+                raise AttributeError(name)
+            return getattr(self._inner, name)
+
+    plain = linearize(PlainSteps(sim), plan, draws, n_a_runs=2 * q, seed=1)
+    # each run's equilibrium within the solver's tolerance (newton_paths) of the other's:
+    # B's forward differences then differ by at most 2 · 1e-8 / ε
+    eps = 1e-3 * 2 * sim.config.f_max
+    atol_B = 2 * TOL["newton_paths"]["atol"] / eps
+    np.testing.assert_allclose(lins[2 * q].B, plain.B, rtol=0.0, atol=atol_B)
+    np.testing.assert_allclose(lins[2 * q].M, plain.M, **TOL["solver_start_M"])

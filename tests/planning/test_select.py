@@ -63,6 +63,33 @@ def test_evaluate_plan_matches_selection(near_needle, needle_result, selection):
     assert np.array_equal(ctrl.L, selection.controllers[i].L)
 
 
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_n_a_runs_reaches_the_linearisation(near_needle, needle_result):
+    # the paper's K = 2p instead of the default 2q: select_plan passes it to linearize
+    from riskplan.parallel import spawn_seeds
+
+    plans, _ = needle_result
+    K = 2 * near_needle.state_dim
+    sel = select_plan(
+        near_needle,
+        plans[:1],
+        CASE,
+        n_samples=2,
+        n_goal_samples=200,
+        n_a_runs=K,
+        seed=3,
+        backend="serial",
+    )
+    draws = common_draws(near_needle, CASE, 2, 3)
+    seed = spawn_seeds(3, 1)[0]
+    paper, _ = evaluate_plan(
+        near_needle, plans[0], draws, n_goal_samples=200, n_a_runs=K, seed=seed
+    )
+    default, _ = evaluate_plan(near_needle, plans[0], draws, n_goal_samples=200, seed=seed)
+    assert np.array_equal(sel.controllers[0].lin.A, paper.lin.A)
+    assert not np.array_equal(paper.lin.A, default.lin.A)
+
+
 def test_failed_candidate_scores_zero(near_needle, needle_result, monkeypatch):
     plans, _ = needle_result
     real = riskplan.control.linearize

@@ -3,8 +3,8 @@
 On one needle plan (the tissue demo's greedy arc steering on the nominal parameters,
 40-step budget), uncertainty case ``actuation``:
 
-* ``needle_linearize_ms``: :func:`riskplan.control.linearize` of the plan (K = 2p A-runs,
-  q B-runs, 16 parameter draws per step), serial;
+* ``needle_linearize_ms``: :func:`riskplan.control.linearize` of the plan (its default
+  K = 2 min(p, q) A-runs, q B-runs, 16 parameter draws per step), serial;
 * ``needle_gains_ms``: LQR + Kalman gains; ``needle_lqgmp_sigma_ms`` /
   ``needle_lqgmp_truncation_ms``: :func:`riskplan.control.lqgmp` (2000 goal samples);
 * ``needle_per_plan_ms``: linearize + gains + LQG-MP (sigma), the selection's unit of work,
@@ -12,7 +12,8 @@ On one needle plan (the tissue demo's greedy arc steering on the nominal paramet
 * ``needle_mc_1000_s``: 1000 closed-loop executions (:func:`monte_carlo_success`), serial.
 
 Not quick: the same for one manipulation plan (resolved-rate steering, 14-step budget), and
-``manipulation_linearize_k2q_ms`` with ``n_a_runs = 2q = 12`` instead of ``2p = 52``.
+``manipulation_linearize_k2p_ms`` with the paper's ``n_a_runs = 2p = 52`` instead of the
+default ``2q = 12``.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ def _timed(fn, repeats: int) -> tuple[float, object]:
 
 
 def _scenario_figures(
-    name: str, plan_controls, repeats: int, mc_runs: int, k_2q: bool = False
+    name: str, plan_controls, repeats: int, mc_runs: int, k_2p: bool = False
 ) -> dict:
     from riskplan.control import NominalPlan, linearize, lqg_controller, lqgmp, monte_carlo_success
     from riskplan.control.linearize import RankDeficiencyWarning
@@ -58,13 +59,13 @@ def _scenario_figures(
         f"{name}_per_plan_ms": 1e3 * per_plan,
         f"{name}_selection_100_est_s": 100 * per_plan / 2,
     }
-    if k_2q:
+    if k_2p:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RankDeficiencyWarning)
             t_k, _ = _timed(
-                lambda: linearize(sim, plan, n_a_runs=2 * sim.control_dim, seed=0), repeats
+                lambda: linearize(sim, plan, n_a_runs=2 * sim.state_dim, seed=0), repeats
             )
-        out[f"{name}_linearize_k2q_ms"] = 1e3 * t_k
+        out[f"{name}_linearize_k2p_ms"] = 1e3 * t_k
     if mc_runs:
         t0 = time.perf_counter()
         monte_carlo_success(sim, plan, ctrl, sim.distribution, n=mc_runs, seed=0)
@@ -91,7 +92,7 @@ def run(quick: bool = False) -> dict:
                 lambda sim, p: greedy_manipulation_controls(sim, p, 14),
                 repeats=1,
                 mc_runs=0,
-                k_2q=True,
+                k_2p=True,
             )
         )
     return {k: (float(v) if not isinstance(v, int) else v) for k, v in figures.items()}

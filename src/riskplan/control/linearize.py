@@ -12,7 +12,7 @@ measurement taken after step ``t`` (the same indexing as :func:`~riskplan.contro
 Estimation, per step ``t`` (each run restarts the simulator from a stored plan state):
 
 * ``A_t`` (paper "Numerical estimation of matrix A_t"): the state cannot be perturbed
-  directly, so ``K = 2p`` runs apply ``u*_{t-1} + w_k``, ``w_k ~ N(0, W)``, from ``y*_{t-1}``
+  directly, so ``K`` runs apply ``u*_{t-1} + w_k``, ``w_k ~ N(0, W)``, from ``y*_{t-1}``
   (giving ``x*_t + x̄^k_t``), then ``u*_t`` (giving ``x*_{t+1} + x̄^k_{t+1}``). With the
   deviations as columns of ``X_t (p, K)`` and ``X_{t+1} (p, K)``,
 
@@ -28,6 +28,21 @@ Estimation, per step ``t`` (each run restarts the simulator from a stored plan s
   clipped. Step ``t = 0`` has no earlier control to perturb; the start state is known
   exactly (``x̄_0 = 0``), so ``A_0`` only multiplies a zero deviation, and we set
   ``A_0 = A_1`` (``A_prior`` if ``T = 1``).
+
+  ``K``: the paper takes ``K = 2p``; our default is ``K = 2 min(p, q)``. The deviations
+  come from perturbing the ``q``-dimensional control, so to first order
+  ``X_t = J_t [w_1 … w_K]`` with ``J_t = ∂x_t/∂u_{t-1} (p, q)``: ``rank X_t ≤ q`` whatever
+  ``K``, and the fit ``A_t`` acts on the same ``q``-dimensional subspace (the prior fills
+  the rest) for every ``K > q``; more runs only average the second-order (curvature) part
+  of the deviations. ``K = 2q`` keeps twice the runs the subspace needs. Checked on a
+  linear system (the same ``A_t`` for ``K = 2q`` and ``2p``, to rounding) and on the
+  manipulation scenario (``p = 26``, ``q = 6``): ``B_t`` and ``M_t`` do not use the
+  A-runs; both ``K = 12`` and ``K = 52`` give ``A_t B_{t-1} ≈ 0`` (the new equilibrium
+  forgets the previous force); they differ off that subspace (with 52 runs the
+  second-order part lifts ``X_t`` to full numerical rank and ``A_t ≈ 0``; with 12 the
+  prior stays on 14 directions), and the LQG-MP ``P(success)`` of the two differs by less
+  than that of ``K = 52`` under another seed (docs/planning.md).
+  ``n_a_runs=2 * sim.state_dim`` restores the paper's.
 * ``B_t``: ``q`` runs from ``y*_t`` with ``u*_t + ε_j e_j``; column ``j`` is
   ``(x^j_{t+1} − x*_{t+1}) / ε_j`` (forward difference; ``ε_j → −ε_j`` at an upper bound).
   Default ``ε_j = 10⁻³ (high_j − low_j)``.
@@ -40,6 +55,12 @@ Estimation, per step ``t`` (each run restarts the simulator from a stored plan s
   The mean ``d̄_t`` of the ``d_i`` is kept as ``Linearization.drift`` (beyond the paper).
 * ``H_t``, ``N_t``: ``sim.observation_matrix`` and ``sim.sensing_cov`` (constant), or the
   ``H``/``N`` arguments.
+
+Simulators with a ``step_near(state, control, params, near)`` method (the manipulation
+scenario: a quasi-static solve whose answer depends only on the applied forces) get the
+nominal state the run is expected to land near (``y*_t`` for the first A-run step,
+``y*_{t+1}`` for the others) as the solver's start; the result is ``step``'s up to the
+solver tolerance, in a fraction of the Newton iterations.
 
 Steps are independent; they run in chunks on :func:`riskplan.parallel.map_tasks` with one
 seed per step from :func:`riskplan.parallel.spawn_seeds`, so the result does not depend
@@ -161,16 +182,30 @@ def _mirror(u: np.ndarray, w: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     return np.clip(v, bounds[:, 0], bounds[:, 1])
 
 
-def control_jacobian(sim, state, control, params, epsilon, x_next=None, t: int = 0) -> np.ndarray:
+def _stepper(sim):
+    """``run(state, u, params, near)``: ``sim.step_near`` where the simulator has one (its
+    solver starts from ``near``, a state expected close to the result), else ``sim.step``."""
+    step_near = getattr(sim, "step_near", None)
+    if step_near is None:
+        return lambda state, u, params, near: sim.step(state, u, params)
+    return step_near
+
+
+def control_jacobian(
+    sim, state, control, params, epsilon, x_next=None, t: int = 0, near=None
+) -> np.ndarray:
     """``B (p, q)``: forward differences of ``sim.reduced(sim.step(state, u, params))`` in ``u``.
 
     ``epsilon (q,)`` per component (sign flipped where ``u + ε`` leaves the upper bound);
-    ``x_next (p,)`` is the unperturbed result (computed if not given). Paper IV-B, ``B_t``.
+    ``x_next (p,)`` is the unperturbed result (computed if not given); ``near``: the
+    unperturbed next state, the solver's start for simulators with ``step_near``. Paper
+    IV-B, ``B_t``.
     """
+    run = _stepper(sim)
     bounds = np.asarray(sim.control_bounds, dtype=np.float64)
     u = np.asarray(control, dtype=np.float64)
     if x_next is None:
-        x_next = _checked(sim, sim.step(state, u, params), t + 1, "nominal control")
+        x_next = _checked(sim, run(state, u, params, near), t + 1, "nominal control")
     eps = np.asarray(epsilon, dtype=np.float64)
     q = u.shape[0]
     B = np.empty((x_next.shape[0], q))
@@ -179,7 +214,7 @@ def control_jacobian(sim, state, control, params, epsilon, x_next=None, t: int =
         du = u.copy()
         du[j] += e
         B[:, j] = (
-            _checked(sim, sim.step(state, du, params), t + 1, f"control component {j} perturbed")
+            _checked(sim, run(state, du, params, near), t + 1, f"control component {j} perturbed")
             - x_next
         ) / e
     return B
@@ -191,6 +226,7 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seed
     params = plan.params
     p = plan.reduced.shape[1]
     prior = np.eye(p) if a_prior == "identity" else np.zeros((p, p))
+    run = _stepper(sim)
     out = []
     for t, seed in zip(ts, seeds):
         y_t = plan.states[t]
@@ -205,9 +241,9 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seed
             X0 = np.empty((p, K))
             X1 = np.empty((p, K))
             for k in range(K):
-                yk = sim.step(y_prev, _mirror(u_prev, Z[k], bounds), params)
+                yk = run(y_prev, _mirror(u_prev, Z[k], bounds), params, y_t)
                 X0[:, k] = sim.reduced(yk)
-                X1[:, k] = sim.reduced(sim.step(yk, u_t, params))
+                X1[:, k] = sim.reduced(run(yk, u_t, params, plan.states[t + 1]))
             _finite(X0, t, "A runs")
             _finite(X1, t + 1, "A runs")
             X0 -= plan.reduced[t][:, None]
@@ -220,13 +256,15 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seed
             else:
                 pinv = (Vt[keep].T / s[keep]) @ U[:, keep].T  # (K, p)
                 A = prior + (X1 - prior @ X0) @ pinv
-        B = control_jacobian(sim, y_t, u_t, params, eps, x_next=x_next, t=t)
+        B = control_jacobian(
+            sim, y_t, u_t, params, eps, x_next=x_next, t=t, near=plan.states[t + 1]
+        )
         M = np.zeros((p, p))
         drift = np.zeros(p)
         if draws:
             D = np.empty((len(draws), p))
             for i, s_i in enumerate(draws):
-                D[i] = sim.reduced(sim.step(y_t, u_t, s_i))
+                D[i] = sim.reduced(run(y_t, u_t, s_i, plan.states[t + 1]))
             _finite(D, t + 1, "parameter draws")
             D -= x_next
             M = D.T @ D / len(draws)
@@ -286,10 +324,11 @@ def linearize(
         ``diag((0.01 (high − low))²)``.
     epsilon : scalar or (q,) perturbation for ``B_t``; default ``10⁻³ (high − low)``.
     n_samples : parameter draws for ``M_t`` (ignored for an explicit list).
-    n_a_runs : K, runs per step for ``A_t`` (default ``2p``, the paper's choice). One control
-        step excites at most ``q`` directions to first order (rank ``X_t <= q``), so for
-        ``p >> q`` (manipulation: p = 26, q = 6) ``K = 2q`` keeps the information at a
-        fraction of the cost.
+    n_a_runs : K, runs per step for ``A_t``; default ``2 min(p, q)``. One control step
+        excites at most ``q`` directions to first order (rank ``X_t <= q``), so ``K = 2q``
+        keeps the information of the paper's ``K = 2p`` at a fraction of the cost for
+        ``p >> q`` (manipulation: p = 26, q = 6; module docstring). ``2 * sim.state_dim``
+        is the paper's choice.
     a_prior : ``"identity"`` (default) or ``"zero"`` (the paper's plain pseudo-inverse).
     rcond : relative cut-off of the singular values of ``X_t``.
     H, N : observation model override, ``(m, p)`` and ``(m, m)``.
@@ -336,7 +375,7 @@ def linearize(
     )
     if np.any(eps <= 0):
         raise InvalidInputError(f"epsilon: expected > 0, got {eps}")
-    n_a_runs = 2 * p if n_a_runs is None else n_a_runs
+    n_a_runs = 2 * min(p, q) if n_a_runs is None else n_a_runs
     if int(n_a_runs) != n_a_runs or n_a_runs < 1:
         raise InvalidInputError(f"n_a_runs: expected a positive integer, got {n_a_runs!r}")
     n_a_runs = int(n_a_runs)

@@ -28,6 +28,7 @@ forces/tangents and the sparse layouts in :mod:`.assembly`, banded Cholesky in
 from __future__ import annotations
 
 import logging
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,9 +65,35 @@ class SolveInfo:
 
 
 class _State:
-    """Everything evaluated at one displacement (internal, per Newton iterate)."""
+    """Everything evaluated at one displacement (internal, per Newton iterate); ``solver``
+    is the factorised tangent there, built on first use."""
 
-    __slots__ = ("F", "Finv", "J", "energy", "fint", "lnJ", "u")
+    __slots__ = ("F", "Finv", "J", "energy", "fint", "lnJ", "solver", "u")
+
+    def __init__(self):
+        self.solver = None
+
+
+# evaluated start displacements (with their factorised tangents) a model keeps: solves
+# restarted from the same few states (the linearisation's runs from a plan's states) reuse them
+START_CACHE = 4
+
+# sparsity layouts by (triangles, free DOFs): models of one mesh with different materials
+# (a parameter distribution's draws) share one; a layout is never modified after it is built
+_PATTERNS: OrderedDict = OrderedDict()
+_PATTERN_CACHE = 8
+
+
+def _tangent_pattern(triangles: np.ndarray, free_dofs: np.ndarray, n_dofs: int) -> TangentPattern:
+    key = (triangles.shape, triangles.tobytes(), free_dofs.tobytes(), int(n_dofs))
+    pattern = _PATTERNS.get(key)
+    if pattern is None:
+        pattern = _PATTERNS[key] = TangentPattern(triangles, free_dofs, n_dofs)
+        if len(_PATTERNS) > _PATTERN_CACHE:
+            _PATTERNS.popitem(last=False)
+    else:
+        _PATTERNS.move_to_end(key)
+    return pattern
 
 
 class HyperelasticModel:
@@ -78,7 +105,10 @@ class HyperelasticModel:
     and the load balanced by the warm start. Linear systems: the reduced tangent is
     ordered by reverse Cuthill-McKee once and factorised as a banded Cholesky matrix
     (symmetric positive definite at stable states); when Cholesky fails (indefinite
-    tangent) a sparse LU is used instead.
+    tangent) a sparse LU is used instead. The model keeps its last ``START_CACHE``
+    evaluated start displacements with their factorisations (keyed by the exact
+    displacement), so solves restarted from one state share that work; results are those
+    of a fresh model, bit for bit.
     """
 
     def __init__(
@@ -115,7 +145,28 @@ class HyperelasticModel:
         self._tri_flat = np.ascontiguousarray(mesh.triangles.ravel())
         self._n = 2 * mesh.n_nodes
         self.fixed_dofs, self.free_dofs = split_dofs(self.fixed_nodes, self._n)
-        self._pattern = TangentPattern(self._tri, self.free_dofs, self._n)
+        self._pattern = _tangent_pattern(self._tri, self.free_dofs, self._n)
+        self._starts: OrderedDict = OrderedDict()
+
+    def __getstate__(self):
+        state = self.__dict__.copy()
+        state["_starts"] = OrderedDict()
+        return state
+
+    def _start(self, u_flat: np.ndarray) -> _State:
+        """:meth:`_evaluate` of a solve's start, from a small cache keyed by the exact
+        displacement (the state and its factorisation are pure functions of it, so a hit
+        changes no result). The cached ``u`` is private: callers copy before returning it."""
+        key = u_flat.tobytes()
+        st = self._starts.get(key)
+        if st is None:
+            st = self._evaluate(u_flat.copy())
+            self._starts[key] = st
+            if len(self._starts) > START_CACHE:
+                self._starts.popitem(last=False)
+        else:
+            self._starts.move_to_end(key)
+        return st
 
     # ---- pure evaluations -------------------------------------------------------------
     def _F(self, u_flat: np.ndarray) -> np.ndarray:
@@ -160,8 +211,14 @@ class HyperelasticModel:
         return element_tangents(A, self._G, self._areas)
 
     def _factor(self, st: _State):
-        """A solver ``r -> K⁻¹ r`` for the reduced tangent at ``st``: banded Cholesky in
-        the pattern's RCM order, sparse LU when the tangent is not positive definite."""
+        """A solver ``r -> K⁻¹ r`` for the reduced tangent at ``st`` (kept on ``st``)."""
+        if st.solver is None:
+            st.solver = self._new_factor(st)
+        return st.solver
+
+    def _new_factor(self, st: _State):
+        """Banded Cholesky in the pattern's RCM order, sparse LU when the tangent is not
+        positive definite."""
         import scipy.linalg
 
         Ke = self._element_tangents(st).reshape(-1)
@@ -224,11 +281,10 @@ class HyperelasticModel:
         )
 
     # ---- Newton -------------------------------------------------------------------
-    def _newton(self, u: np.ndarray, f: np.ndarray, fscale: float):
-        """Newton + backtracking on Π from ``u`` (flat) for the load ``f`` (flat).
-        Returns (u, iterations, residual) or raises."""
+    def _newton(self, st: _State, f: np.ndarray, fscale: float):
+        """Newton + backtracking on Π from the evaluated state ``st`` for the load ``f``
+        (flat). Returns (state, iterations, residual) or raises."""
         free = self.free_dofs
-        st = self._evaluate(u)
         if st.energy is None:
             self._raise_inverted(st.J, " at the start of a load step")
         tol = self.rtol * fscale + self.atol
@@ -237,7 +293,7 @@ class HyperelasticModel:
         rn = float(np.linalg.norm(r))
         for it in range(self.max_iter + 1):
             if rn <= tol:
-                return st.u, it, rn
+                return st, it, rn
             if it == self.max_iter:
                 break
             try:
@@ -281,11 +337,11 @@ class HyperelasticModel:
             iterations=self.max_iter,
         )
 
-    def _dirichlet_predictor(self, u: np.ndarray, dub: np.ndarray) -> np.ndarray:
+    def _dirichlet_predictor(self, st: _State, dub: np.ndarray) -> np.ndarray:
         """Move the fixed DOFs by ``dub`` and the free ones by the linearised response
-        ``−K_ff⁻¹ K_fc dub`` (tangent at ``u``), so a prescribed motion does not crush
-        the elements next to the supports."""
-        st = self._evaluate(u)
+        ``−K_ff⁻¹ K_fc dub`` (tangent at the evaluated state ``st``), so a prescribed
+        motion does not crush the elements next to the supports."""
+        u = st.u
         if st.energy is None:
             self._raise_inverted(st.J, " before a prescribed-displacement increment")
         Kfull = self.tangent(u.reshape(-1, 2), full=True)
@@ -334,13 +390,14 @@ class HyperelasticModel:
             )
         if u0 is None:
             u = np.zeros(self._n)
+            cur = self._start(u)
             f0 = np.zeros(self._n)
         else:
             u = self._check_u(u0, "u0")
-            st = self._evaluate(u)
-            if st.energy is None:
-                self._raise_inverted(st.J, " in u0")
-            f0 = st.fint.copy()
+            cur = self._start(u)
+            if cur.energy is None:
+                self._raise_inverted(cur.J, " in u0")
+            f0 = cur.fint.copy()
             f0[self.fixed_dofs] = 0.0
         ub0 = u[self.fixed_dofs].copy()
         moving = bool(np.any(ub != ub0))
@@ -363,11 +420,13 @@ class HyperelasticModel:
             s1 = min(1.0, s + ds)
             fs = f if s1 == 1.0 else f0 + s1 * (f - f0)
             try:
-                start = u
+                start = cur
                 if moving:
                     target = ub if s1 == 1.0 else ub0 + s1 * (ub - ub0)
-                    start = self._dirichlet_predictor(u, target - u[self.fixed_dofs])
-                u_new, it, rn = self._newton(start, fs, fscale)
+                    start = self._evaluate(
+                        self._dirichlet_predictor(cur, target - u[self.fixed_dofs])
+                    )
+                st_new, it, rn = self._newton(start, fs, fscale)
             except (ConvergenceError, ElementInversionError) as exc:
                 if halvings >= max_halvings:
                     raise exc
@@ -377,12 +436,12 @@ class HyperelasticModel:
                 continue
             iters += it
             steps += 1
-            u, s = u_new, s1
+            cur, u, s = st_new, st_new.u, s1
             if it <= 4:  # an easy increment: let the next one grow back towards 1/load_steps
                 ds = min(2.0 * ds, 1.0 / int(load_steps))
-        J = self.jacobians(u.reshape(-1, 2))
-        return u.reshape(-1, 2), SolveInfo(
-            iterations=iters, load_steps=steps, residual=rn, min_jacobian=float(J.min())
+        # a copy: ``u`` may be a cached start's (private) array
+        return u.reshape(-1, 2).copy(), SolveInfo(
+            iterations=iters, load_steps=steps, residual=rn, min_jacobian=float(cur.J.min())
         )
 
     def solve(self, nodal_forces, u0=None, *, fixed_values=None, load_steps: int = 1) -> np.ndarray:

@@ -104,6 +104,7 @@ def evaluate_plan(
     method: str = "sigma",
     n_samples: int = 16,
     n_goal_samples: int = 2000,
+    n_a_runs: int | None = None,
     Q=None,
     R=None,
     seed=None,
@@ -112,8 +113,10 @@ def evaluate_plan(
 
     Returns ``(controller, result)`` (:class:`~riskplan.control.lqg.LQGController`,
     :class:`~riskplan.control.lqgmp.LQGMPResult`). ``distribution``: S for ``M_t`` (``None``:
-    ``sim.distribution``); ``n_samples``: its draws per step; ``Q``, ``R``: LQR costs
-    (default identities); ``seed``: linearisation perturbations and goal samples.
+    ``sim.distribution``); ``n_samples``: its draws per step; ``n_a_runs``: the A-runs per
+    step of :func:`~riskplan.control.linearize` (``None``: its default ``2 min(p, q)``;
+    ``2 * sim.state_dim`` is the paper's); ``Q``, ``R``: LQR costs (default identities);
+    ``seed``: linearisation perturbations and goal samples.
     """
     from riskplan.control import linearize
     from riskplan.control.lqg import lqg_controller
@@ -121,7 +124,7 @@ def evaluate_plan(
     from riskplan.parallel import spawn_seeds
 
     s_lin, s_mp = spawn_seeds(seed, 2)
-    lin = linearize(sim, plan, distribution, n_samples=n_samples, seed=s_lin)
+    lin = linearize(sim, plan, distribution, n_samples=n_samples, n_a_runs=n_a_runs, seed=s_lin)
     controller = lqg_controller(lin, Q=Q, R=R)
     result = lqgmp(sim, plan, controller, method=method, n_goal_samples=n_goal_samples, seed=s_mp)
     return controller, result
@@ -168,6 +171,7 @@ def select_plan(
     method: str = "sigma",
     n_samples: int = 16,
     n_goal_samples: int = 2000,
+    n_a_runs: int | None = None,
     Q=None,
     R=None,
     seed=0,
@@ -180,7 +184,9 @@ def select_plan(
     ``plans``: the candidate :class:`~riskplan.control.NominalPlan` list; ``method``:
     ``"sigma"`` (the paper's; a conservative bound, far below the model's probability for
     plans passing close to obstacles), ``"truncation"`` (Patil 2012) or ``"sampling"``
-    (trajectories of the linear model), see :mod:`riskplan.control.lqgmp`; ``on_result(i, score)`` is called as plans finish.
+    (trajectories of the linear model), see :mod:`riskplan.control.lqgmp`; ``n_a_runs``:
+    A-runs per step of the linearisation (:func:`evaluate_plan`); ``on_result(i, score)`` is
+    called as plans finish.
     Raises :class:`~riskplan.errors.PlanningError` if no candidate could be evaluated.
     """
     from riskplan.errors import PlanningError
@@ -190,7 +196,14 @@ def select_plan(
     if not plans:
         raise InvalidInputError("plans: expected at least one candidate plan")
     draws = common_draws(sim, distribution, n_samples, seed)
-    kwargs = dict(method=method, n_samples=n_samples, n_goal_samples=n_goal_samples, Q=Q, R=R)
+    kwargs = dict(
+        method=method,
+        n_samples=n_samples,
+        n_goal_samples=n_goal_samples,
+        n_a_runs=n_a_runs,
+        Q=Q,
+        R=R,
+    )
     seeds = spawn_seeds(seed, len(plans))
     items = list(zip(range(len(plans)), plans, seeds))
     # one simulator per chunk: a scenario travels without its FEM caches, so chunks of plans

@@ -206,14 +206,16 @@ class ManipulationScenario(FEMScenario):
     :class:`~riskplan.scenarios.base.Simulator`.
 
     Dimensions: controls q = 2 × (number of manipulators) = 6; reduced state
-    p = 2 + 2 n_boundary (26 by default); measurements 2 n_boundary.
+    p = 2 + 2 n_boundary (26 by default); measurements 2 n_boundary. ``cache_size``: FEM
+    models kept (one per distinct ``(E, ν, n_elements)``; the plan selection cycles through
+    the nominal model and its 16 parameter draws, which a cache of 16 would evict one by one).
     """
 
     name = "manipulation"
     state_type = ManipulationState
 
     def __init__(
-        self, config: ManipulationConfig | None = None, distribution=None, cache_size: int = 16
+        self, config: ManipulationConfig | None = None, distribution=None, cache_size: int = 32
     ):
         super().__init__(config or ManipulationConfig(), distribution, cache_size)
         cfg = self.config
@@ -298,6 +300,34 @@ class ManipulationScenario(FEMScenario):
         :class:`ElementInversionError` / :class:`ConvergenceError` (message says which
         step, which forces, which elements / what residual) if the solve fails.
         """
+        return self._step(state, control, params, None)
+
+    def step_near(
+        self,
+        state: ManipulationState,
+        control,
+        params: SimParams | None = None,
+        near: ManipulationState | None = None,
+    ) -> ManipulationState:
+        """:meth:`step`, with the Newton solve started from ``near``'s displacement (a state
+        expected close to the result, e.g. the nominal plan's next state when
+        :func:`riskplan.control.linearize` perturbs a control), falling back to the start
+        from ``state`` if that solve fails.
+
+        The equilibrium depends only on the applied forces (module docstring), so the
+        result equals :meth:`step`'s up to the solver tolerance (``rtol = 1e-9`` of the
+        load); a start near the answer only saves Newton iterations. ``near=None`` (or on
+        another mesh) is :meth:`step`.
+        """
+        params = params or self.nominal_params
+        if near is None or near.n_elements != params.n_elements:
+            return self._step(state, control, params, None)
+        try:
+            return self._step(state, control, params, near.displacement)
+        except (ConvergenceError, ElementInversionError):
+            return self._step(state, control, params, None)
+
+    def _step(self, state, control, params, u0) -> ManipulationState:
         params = params or self.nominal_params
         self._check_state(state, params)
         u = check_control(control, self._bounds)
@@ -306,7 +336,9 @@ class ManipulationScenario(FEMScenario):
         f = self.mesh_data(params.n_elements).W @ forces
         try:
             disp, _info = self.model(params).solve_with_info(
-                f, state.displacement, load_steps=self.config.load_steps
+                f,
+                state.displacement if u0 is None else u0,
+                load_steps=self.config.load_steps,
             )
         except ElementInversionError as exc:
             raise ElementInversionError(

@@ -150,3 +150,19 @@ def test_report_shows_the_panel(fig7, tmp_path):
     assert "Fig. 7" in text and "fig7.html" in text
     assert f"{100 * r['claims']['nominal']:.2f}" in text
     assert f"{100 * r['claims']['final']:.2f}" in text
+
+
+def test_cli_prints_the_claim(fig7, tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    import riskplan.experiments.reproduce as rp
+    from riskplan.cli import app
+
+    _, r, _ = fig7
+    monkeypatch.setattr(rp, "reproduce", lambda out, **k: {"config": {}, "mdn": {"fig7": r}})
+    res = CliRunner().invoke(app, ["reproduce", "--paper", "mdn", "--out", str(tmp_path / "o")])
+    assert res.exit_code == 0, res.output
+    c = r["claims"]
+    assert (
+        f"{100 * c['nominal']:.1f} % -> {100 * c['final']:.1f} % after 3 iterations" in res.output
+    )

@@ -196,3 +196,22 @@ def test_task_pool_bad_input():
         TaskPool("mpi")
     with pytest.raises(InvalidInputError, match="workers"):
         TaskPool("local", workers=0)
+
+
+@pytest.mark.ray
+def test_task_pool_on_ray_initialises_once():
+    """Ray is started on entering the block (unless already running), serves explicit and
+    implicit calls, and is stopped on leaving it only if the pool started it."""
+    ray = pytest.importorskip("ray")
+    from riskplan.parallel import TaskPool
+
+    task = functools.partial(spawn_seeds, n=4)  # a library function: Ray imports it by module
+    seeds = spawn_seeds(3, 6)
+    was_running = ray.is_initialized()
+    with TaskPool("ray", workers=2) as pool:
+        assert ray.is_initialized()
+        a = pool.map(task, seeds)
+        b = map_tasks(task, seeds, backend="ray")
+        assert ray.is_initialized()
+    assert ray.is_initialized() == was_running
+    assert a == b == [task(s) for s in seeds]

@@ -1,4 +1,5 @@
 import functools
+import os
 
 import numpy as np
 import pytest
@@ -135,3 +136,82 @@ def test_killed_parent_leaves_no_process_behind(tmp_path, sig):
         for p in family | _descendants(proc.pid):
             if _alive(p):
                 os.kill(p, signal.SIGKILL)
+
+
+def _pid(_item) -> int:
+    import os
+
+    return os.getpid()
+
+
+def test_task_pool_reuses_its_workers_across_calls():
+    """Explicit and implicit calls inside one ``with TaskPool`` block run on the same two
+    worker processes (one pool started); results equal the serial ones."""
+    from riskplan.parallel import TaskPool, active_pool
+
+    seeds = spawn_seeds(5, 12)
+    ref = [_draw(s) for s in seeds]
+    with TaskPool("local", workers=2) as pool:
+        assert active_pool() is pool
+        pids = set(pool.map(_pid, range(8), chunksize=1))
+        got = map_tasks(_draw, seeds, backend="local", chunksize=2)  # implicit: no workers given
+        pids |= set(map_tasks(_pid, range(8), backend="local", workers=2, chunksize=1))
+        assert pool.pools_started == 1
+        # a call the pool cannot serve (other worker count) starts its own pool
+        other = set(map_tasks(_pid, range(4), backend="local", workers=3, chunksize=1))
+        assert pool.pools_started == 1 and not (other & pids)
+    assert active_pool() is None
+    assert len(pids) <= 2 and os.getpid() not in pids
+    for r, g in zip(ref, got):
+        np.testing.assert_array_equal(r, g)
+
+
+def test_task_pool_restarts_after_a_failed_call():
+    from riskplan.parallel import TaskPool
+
+    with TaskPool("local", workers=2) as pool:
+        before = set(pool.map(_pid, range(4), chunksize=1))
+        with pytest.raises(ZeroDivisionError):
+            pool.map(functools.partial(divmod, 1), [1, 0, 2], chunksize=1)
+        after = set(pool.map(_pid, range(4), chunksize=1))
+        assert pool.pools_started == 2 and not (before & after)  # the old workers were ended
+    for pid in before | after:  # every worker is gone after the block
+        assert not os.path.exists(f"/proc/{pid}") or _is_zombie(pid)
+    with pytest.raises(InvalidInputError, match="close"):
+        pool.map(abs, [1])
+
+
+def _is_zombie(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as fh:
+            return fh.read().rsplit(b")", 1)[1].split()[0] in (b"Z", b"X")
+    except OSError:
+        return True
+
+
+def test_task_pool_bad_input():
+    from riskplan.parallel import TaskPool
+
+    with pytest.raises(InvalidInputError, match="backend"):
+        TaskPool("mpi")
+    with pytest.raises(InvalidInputError, match="workers"):
+        TaskPool("local", workers=0)
+
+
+@pytest.mark.ray
+def test_task_pool_on_ray_initialises_once():
+    """Ray is started on entering the block (unless already running), serves explicit and
+    implicit calls, and is stopped on leaving it only if the pool started it."""
+    ray = pytest.importorskip("ray")
+    from riskplan.parallel import TaskPool
+
+    task = functools.partial(spawn_seeds, n=4)  # a library function: Ray imports it by module
+    seeds = spawn_seeds(3, 6)
+    was_running = ray.is_initialized()
+    with TaskPool("ray", workers=2) as pool:
+        assert ray.is_initialized()
+        a = pool.map(task, seeds)
+        b = map_tasks(task, seeds, backend="ray")
+        assert ray.is_initialized()
+    assert ray.is_initialized() == was_running
+    assert a == b == [task(s) for s in seeds]

@@ -12,10 +12,23 @@ thread that ends the worker within :data:`PARENT_POLL_SECONDS` once the parent p
 gone (SIGKILL, SIGTERM, a crash), so no worker, forkserver or resource tracker is left
 behind. When the consumer stops early (an exception, Ctrl-C, ``close()``), pending tasks
 are cancelled and the workers are terminated instead of finishing their chunks.
+
+Reusing workers: every :func:`map_tasks` / :func:`imap_tasks` call on its own starts a pool
+(``local``: processes that import the library, several seconds each on a loaded machine) or a
+Ray instance and stops it at the end. A job of many parallel stages opens one
+:class:`TaskPool` instead::
+
+    with TaskPool("local", workers=2) as pool:
+        a = pool.map(f, items)          # explicit
+        b = map_tasks(g, more)          # implicit: calls inside the block that ask for the
+                                        # pool's backend (and its or no worker count) use it
+
+Results are the same with or without a pool (each task's result depends only on its item).
 """
 
 from __future__ import annotations
 
+import contextvars
 import logging
 import os
 import socket
@@ -120,6 +133,195 @@ def _limit_threads() -> None:
         pass
 
 
+def _check_workers(workers) -> None:
+    if workers is not None and (
+        isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1
+    ):
+        raise InvalidInputError(
+            f"workers: expected a positive integer (or None for all cores), got {workers!r}"
+        )
+
+
+#: The :class:`TaskPool` whose ``with`` block is running in this context (thread, task).
+_ACTIVE_POOL: contextvars.ContextVar = contextvars.ContextVar("riskplan_task_pool", default=None)
+
+
+class TaskPool:
+    """Workers kept alive across many :func:`map_tasks` calls (a context manager).
+
+    ``backend``: ``"serial"``, ``"local"`` or ``"ray"``; ``workers``: processes (``None``: one
+    per core); ``ray_address``: as in :func:`imap_tasks`. ``local`` workers start on the
+    first call that needs them and stay until :meth:`close` (the end of the ``with`` block);
+    Ray is initialised once on entry (when not already) and shut down on exit. Inside the
+    ``with`` block, :func:`imap_tasks` / :func:`map_tasks` calls of this thread that ask for
+    the same backend with the same or no worker count (and no other Ray address) run on it.
+
+    Clean ends as without a pool: worker initialiser and watchdog unchanged; when a call ends
+    early (a task raised, Ctrl-C, the consumer closed the generator) the workers are
+    terminated and the next call starts fresh ones. One call at a time per pool.
+    """
+
+    def __init__(
+        self, backend: str = "local", workers: int | None = None, ray_address: str | None = None
+    ):
+        if backend not in BACKENDS:
+            raise InvalidInputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
+        _check_workers(workers)
+        self.backend = backend
+        self.workers = int(workers or default_workers())
+        self.ray_address = ray_address
+        self.pools_started = 0  #: local process pools started so far (diagnostics)
+        self._executor = None
+        self._ray = None
+        self._ray_started_here = False
+        self._token = None
+        self._closed = False
+
+    # --- lifecycle ------------------------------------------------------------------------
+    def __enter__(self) -> TaskPool:
+        if self.backend == "ray":
+            self._ensure_ray()
+        self._token = _ACTIVE_POOL.set(self)
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if self._token is not None:
+            _ACTIVE_POOL.reset(self._token)
+            self._token = None
+        if exc_type is not None:
+            self._terminate()
+        self.close()
+
+    def close(self) -> None:
+        """Stop the workers (waiting for them) and Ray if this pool started it."""
+        self._closed = True
+        if self._executor is not None:
+            ex, self._executor = self._executor, None
+            ex.shutdown(wait=True)
+        if self._ray_started_here:
+            self._ray.shutdown()
+            self._ray_started_here = False
+
+    def _terminate(self) -> None:
+        if self._executor is not None:
+            ex, self._executor = self._executor, None
+            _terminate_pool(ex)
+
+    def accepts(self, backend: str, workers: int | None, ray_address: str | None) -> bool:
+        """Whether a call asking for ``backend`` / ``workers`` / ``ray_address`` can run here."""
+        return (
+            not self._closed
+            and backend == self.backend
+            and (workers is None or int(workers) == self.workers)
+            and (ray_address is None or ray_address == self.ray_address)
+        )
+
+    # --- backends -------------------------------------------------------------------------
+    def _ensure_executor(self):
+        if self._executor is None:
+            import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor
+
+            # forkserver: safe with torch / OpenMP state in the parent, unlike fork.
+            ctx = mp.get_context("forkserver")
+            self._executor = ProcessPoolExecutor(
+                max_workers=self.workers,
+                mp_context=ctx,
+                initializer=_init_worker,
+                initargs=(os.getpid(),),
+            )
+            self.pools_started += 1
+        return self._executor
+
+    def _ensure_ray(self):
+        if self._ray is None:
+            self._ray = require("ray", "ray")
+        ray = self._ray
+        if not ray.is_initialized():
+            if self.ray_address:
+                check_ray_address(self.ray_address)
+            # "local": always a fresh local instance, never a cluster some `ray start` left behind.
+            kwargs = (
+                {"address": self.ray_address}
+                if self.ray_address
+                else {"address": "local", "num_cpus": self.workers}
+            )
+            try:
+                ray.init(
+                    ignore_reinit_error=True, log_to_driver=False, include_dashboard=False, **kwargs
+                )
+            except ConnectionError as exc:
+                raise BackendUnavailableError(
+                    f"ray_address={self.ray_address!r}: cannot connect to a Ray cluster ({exc})"
+                ) from exc
+            self._ray_started_here = True
+        return ray
+
+    # --- mapping --------------------------------------------------------------------------
+    def imap(
+        self, fn: Callable[[Any], Any], items: Iterable[Any], *, chunksize: int | None = None
+    ) -> Iterator[tuple[int, Any]]:
+        """Yield ``(index, fn(item))`` as tasks complete (see :func:`imap_tasks`)."""
+        if self._closed:
+            raise InvalidInputError("TaskPool: used after close()")
+        indexed = list(enumerate(items))
+        if not indexed:
+            return
+        if chunksize is None:
+            chunksize = max(1, len(indexed) // (4 * self.workers))
+        chunks = [indexed[k : k + chunksize] for k in range(0, len(indexed), chunksize)]
+
+        if self.backend == "serial" or (self.backend == "local" and self.workers == 1):
+            for chunk in chunks:
+                yield from _run_chunk(fn, chunk)
+            return
+
+        if self.backend == "local":
+            from concurrent.futures import FIRST_COMPLETED, wait
+
+            pool = self._ensure_executor()
+            try:
+                pending = {pool.submit(_run_chunk, fn, c) for c in chunks}
+                while pending:
+                    done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                    for fut in done:
+                        yield from fut.result()
+            except BaseException:  # a task failed, Ctrl-C, or the consumer closed the generator
+                self._terminate()
+                raise
+            return
+
+        ray = self._ensure_ray()
+        remote = ray.remote(_run_chunk)
+        refs = [remote.remote(fn, c) for c in chunks]
+        while refs:
+            done, refs = ray.wait(refs, num_returns=1)
+            for ref in done:
+                yield from ray.get(ref)
+
+    def map(
+        self,
+        fn: Callable[[Any], Any],
+        items: Iterable[Any],
+        *,
+        chunksize: int | None = None,
+        on_result: Callable[[int, Any], None] | None = None,
+    ) -> list[Any]:
+        """``[fn(item) for item in items]`` in task order (see :func:`map_tasks`)."""
+        items = list(items)
+        out: list[Any] = [None] * len(items)
+        for i, r in self.imap(fn, items, chunksize=chunksize):
+            out[i] = r
+            if on_result is not None:
+                on_result(i, r)
+        return out
+
+
+def active_pool() -> TaskPool | None:
+    """The :class:`TaskPool` whose ``with`` block encloses this call, if any."""
+    return _ACTIVE_POOL.get()
+
+
 def imap_tasks(
     fn: Callable[[Any], Any],
     items: Iterable[Any],
@@ -128,82 +330,38 @@ def imap_tasks(
     workers: int | None = None,
     chunksize: int | None = None,
     ray_address: str | None = None,
+    pool: TaskPool | None = None,
 ) -> Iterator[tuple[int, Any]]:
     """Yield ``(index, fn(item))`` as tasks complete (order not guaranteed except for ``serial``).
 
     ``fn`` must be picklable (a module-level function or ``functools.partial`` of one)
     for the ``local`` and ``ray`` backends. Exceptions raised by a task propagate.
+
+    ``pool``: run on this :class:`TaskPool` (``backend``, ``workers`` and ``ray_address`` are
+    then the pool's). Without it, the enclosing ``with TaskPool(...)`` block's pool is used
+    when it accepts the call (:meth:`TaskPool.accepts`), else a pool is started for this
+    call and stopped at its end.
     """
     if backend not in BACKENDS:
         raise InvalidInputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
-    indexed = list(enumerate(items))
-    if not indexed:
+    _check_workers(workers)
+    if pool is None:
+        active = _ACTIVE_POOL.get()
+        if active is not None and active.accepts(backend, workers, ray_address):
+            pool = active
+    if pool is not None:
+        yield from pool.imap(fn, items, chunksize=chunksize)
         return
-    if workers is not None and (
-        isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1
-    ):
-        raise InvalidInputError(
-            f"workers: expected a positive integer (or None for all cores), got {workers!r}"
-        )
-    workers = workers or default_workers()
-    if chunksize is None:
-        chunksize = max(1, len(indexed) // (4 * workers))
-    chunks = [indexed[k : k + chunksize] for k in range(0, len(indexed), chunksize)]
-
-    if backend == "serial" or (backend == "local" and workers == 1):
-        for chunk in chunks:
-            yield from _run_chunk(fn, chunk)
+    items = list(items)
+    if not items:
         return
-
-    if backend == "local":
-        import multiprocessing as mp
-        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-
-        # forkserver: safe with torch / OpenMP state in the parent, unlike fork.
-        ctx = mp.get_context("forkserver")
-        pool = ProcessPoolExecutor(
-            max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(os.getpid(),)
-        )
-        try:
-            pending = {pool.submit(_run_chunk, fn, c) for c in chunks}
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    yield from fut.result()
-        except BaseException:  # a task failed, Ctrl-C, or the consumer closed the generator
-            _terminate_pool(pool)
-            raise
-        pool.shutdown(wait=True)
-        return
-
-    ray = require("ray", "ray")
-    started_here = False
-    if not ray.is_initialized():
-        if ray_address:
-            check_ray_address(ray_address)
-        # "local": always a fresh local instance, never a cluster some `ray start` left behind.
-        kwargs = (
-            {"address": ray_address} if ray_address else {"address": "local", "num_cpus": workers}
-        )
-        try:
-            ray.init(
-                ignore_reinit_error=True, log_to_driver=False, include_dashboard=False, **kwargs
-            )
-        except ConnectionError as exc:
-            raise BackendUnavailableError(
-                f"ray_address={ray_address!r}: cannot connect to a Ray cluster ({exc})"
-            ) from exc
-        started_here = True
+    # a pool for this call only (not made the active one: a generator runs in its consumer's
+    # context); a Ray instance someone else started is used and left running
+    own = TaskPool(backend, workers, ray_address)
     try:
-        remote = ray.remote(_run_chunk)
-        refs = [remote.remote(fn, c) for c in chunks]
-        while refs:
-            done, refs = ray.wait(refs, num_returns=1)
-            for ref in done:
-                yield from ray.get(ref)
+        yield from own.imap(fn, items, chunksize=chunksize)
     finally:
-        if started_here:
-            ray.shutdown()
+        own.close()
 
 
 def parse_ray_address(address: str) -> tuple[str, int] | None:
@@ -252,16 +410,23 @@ def map_tasks(
     chunksize: int | None = None,
     ray_address: str | None = None,
     on_result: Callable[[int, Any], None] | None = None,
+    pool: TaskPool | None = None,
 ) -> list[Any]:
     """``[fn(item) for item in items]`` on ``backend``, in task order.
 
     ``on_result(index, result)`` is called as each task completes (for progress
-    bars or incremental saving).
+    bars or incremental saving). ``pool``: see :func:`imap_tasks`.
     """
     items = list(items)
     out: list[Any] = [None] * len(items)
     for i, r in imap_tasks(
-        fn, items, backend=backend, workers=workers, chunksize=chunksize, ray_address=ray_address
+        fn,
+        items,
+        backend=backend,
+        workers=workers,
+        chunksize=chunksize,
+        ray_address=ray_address,
+        pool=pool,
     ):
         out[i] = r
         if on_result is not None:

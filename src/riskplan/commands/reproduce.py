@@ -64,5 +64,19 @@ def register(app: typer.Typer) -> None:
                 f"{100 * cl['mean_rate']['ours_no_select']:.1f} %, ours {100 * cl['mean_rate']['ours']:.1f} %; "
                 f"ours highest in every case: {'yes' if cl['ours_highest_all'] else 'no'}"
             )
+        f7 = results.get("mdn", {}).get("fig7")
+        if f7 is not None:
+            from riskplan.experiments.paper_values import MDN
+
+            c = f7["claims"]
+            before, after = MDN["collision_before"]["value"], MDN["collision_after"]["value"]
+            verdict = {True: "yes", False: "no", None: "not decided at this scale"}
+            typer.echo(
+                f"mdn Fig. 7: eq. 10 bound {100 * c['nominal']:.1f} % -> {100 * c['final']:.1f} % after "
+                f"{c['iterations']} iterations (paper: about {100 * before:.0f} % -> below "
+                f"{100 * after:.0f} % after {c['paper_iterations']}); below {100 * after:.0f} % after "
+                f"{c['paper_iterations']}: "
+                f"{verdict[c['below_after_paper_iterations']]}"
+            )
         typer.echo(f"results: {Path(out) / 'results.json'}")
         typer.echo(f"report: {Path(out) / 'report.html'}")

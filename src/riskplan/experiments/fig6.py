@@ -302,6 +302,7 @@ def run_scenario(
     ray_address: str | None = None,
     progress=None,
     cases=EVAL_CASES,
+    pool=None,
 ) -> dict:
     """The Fig. 6 evaluation of scenario ``name`` (``"needle"`` or ``"manipulation"``).
 
@@ -313,6 +314,9 @@ def run_scenario(
     seed : master seed; every part derives its own (:func:`_seed_for`).
     backend, workers, ray_address : :func:`riskplan.parallel.imap_tasks`.
     progress : optional ``progress(stage, done, total)`` callback.
+    pool : a :class:`riskplan.parallel.TaskPool` to run the selection and execution tasks on
+        (the RRT candidates use the enclosing ``with TaskPool`` block's pool); ``None``: as
+        :func:`riskplan.parallel.imap_tasks` decides.
 
     Returns
     -------
@@ -335,7 +339,12 @@ def run_scenario(
     blobs = BlobStore(store)
     report = progress or (lambda stage, done, total: None)
     pmap = partial(
-        imap_tasks, backend=backend, workers=workers, ray_address=ray_address, chunksize=1
+        imap_tasks,
+        backend=backend,
+        workers=workers,
+        ray_address=ray_address,
+        chunksize=1,
+        pool=pool,
     )
     na = NOT_APPLICABLE.get(name, {})
 

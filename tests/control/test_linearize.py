@@ -223,3 +223,25 @@ def test_manipulation_k_2q_and_2p_and_solver_start(tol):
     atol_B = 2 * TOL["newton_paths"]["atol"] / eps
     np.testing.assert_allclose(lins[2 * q].B, plain.B, rtol=0.0, atol=atol_B)
     np.testing.assert_allclose(lins[2 * q].M, plain.M, **TOL["solver_start_M"])
+
+
+@pytest.mark.filterwarnings("ignore::riskplan.control.linearize.RankDeficiencyWarning")
+def test_simulator_declared_prior_is_the_default():
+    # ManipulationScenario is quasi-static and declares a_prior = "zero": with K = 2q the
+    # unexcited directions get A = 0 (what K = 2p finds from data), not the identity; an
+    # explicit a_prior still wins, and the needle (no declaration) keeps the identity prior.
+    from riskplan.scenarios.manipulation import ManipulationScenario
+
+    sim = ManipulationScenario()
+    assert sim.a_prior == "zero"
+    u = sim.random_controls(3, seed=2)
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), u)
+    default = linearize(sim, plan, [], seed=1)
+    zero = linearize(sim, plan, [], a_prior="zero", seed=1)
+    ident = linearize(sim, plan, [], a_prior="identity", seed=1)
+    np.testing.assert_array_equal(default.A, zero.A)
+    p = sim.state_dim
+    for t in range(1, plan.n_steps):
+        # identity prior: 1 on the p - rank unexcited directions; zero prior: (near) nothing
+        assert np.trace(ident.A[t]) > 0.5 * (p - ident.rank[t])
+        assert np.linalg.norm(zero.A[t], 2) < 0.1 * np.linalg.norm(zero.B[t], 2)

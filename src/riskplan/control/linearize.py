@@ -303,7 +303,7 @@ def linearize(
     epsilon=None,
     n_samples: int = 16,
     n_a_runs: int | None = None,
-    a_prior: str = "identity",
+    a_prior: str | None = None,
     rcond: float = 1e-8,
     H=None,
     N=None,
@@ -329,7 +329,11 @@ def linearize(
         keeps the information of the paper's ``K = 2p`` at a fraction of the cost for
         ``p >> q`` (manipulation: p = 26, q = 6; module docstring). ``2 * sim.state_dim``
         is the paper's choice.
-    a_prior : ``"identity"`` (default) or ``"zero"`` (the paper's plain pseudo-inverse).
+    a_prior : ``"identity"`` or ``"zero"`` (the paper's plain pseudo-inverse); ``None``
+        (default): the simulator's own ``a_prior`` attribute if it declares one, else
+        ``"identity"``. A quasi-static simulator, whose next state does not depend on the
+        previous one (:class:`~riskplan.scenarios.manipulation.ManipulationScenario`),
+        declares ``"zero"``: its exact ``A`` is 0 in every direction, excited or not.
     rcond : relative cut-off of the singular values of ``X_t``.
     H, N : observation model override, ``(m, p)`` and ``(m, m)``.
     seed : seeds the perturbations and the parameter draws.
@@ -345,6 +349,8 @@ def linearize(
 
     if not isinstance(plan, NominalPlan):
         raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
+    if a_prior is None:
+        a_prior = getattr(sim, "a_prior", "identity")
     if a_prior not in A_PRIORS:
         raise InvalidInputError(f"a_prior: expected one of {A_PRIORS}, got {a_prior!r}")
     if not (0.0 <= float(rcond) < 1.0):

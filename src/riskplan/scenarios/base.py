@@ -332,7 +332,10 @@ class Simulator(Protocol):
     against obstacles; default ``((0, 1),)``), ``goal_point_indices`` (the pair checked
     against the goal; default ``(0, 1)``), ``obstacles(state)`` / ``goal(state)`` (deformed
     polygons), ``in_collision(state)`` / ``in_goal(state)``, ``state_scale (p,)`` (acceptable
-    deviation of each component of x, the scale of the LQR's default Bryson weights).
+    deviation of each component of x, the scale of the LQR's default Bryson weights),
+    ``a_prior`` (``"identity"`` or ``"zero"``: what :func:`riskplan.control.linearize` assumes
+    for state directions its control perturbations cannot excite — a deviation that persists,
+    or one the next step forgets; default ``"identity"``).
     """
 
     control_dim: int

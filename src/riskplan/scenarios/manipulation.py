@@ -213,6 +213,11 @@ class ManipulationScenario(FEMScenario):
 
     name = "manipulation"
     state_type = ManipulationState
+    #: Quasi-static: each step solves for the equilibrium under the current forces from any
+    #: start (tested in tests/scenarios/test_manipulation.py), so a deviation of the state is
+    #: forgotten by the next step and the exact ``A_t`` is 0 — also in the directions the
+    #: linearisation's control perturbations do not excite (``riskplan.control.linearize``).
+    a_prior = "zero"
 
     def __init__(
         self, config: ManipulationConfig | None = None, distribution=None, cache_size: int = 32

@@ -263,11 +263,15 @@ def register(app: typer.Typer) -> None:
         samples: int = typer.Option(
             4096, min=1, help="Mixture samples per configuration for the HDR thresholds."
         ),
-        chamfer_points: int = typer.Option(2048, help="Points per cloud for the Chamfer distance."),
-        max_configs: int = typer.Option(
-            0, help="Evaluate a random subset of this many configurations (0: all)."
+        chamfer_points: int = typer.Option(
+            2048, min=1, help="Points per cloud for the Chamfer distance."
         ),
-        figure_configs: int = typer.Option(2, help="Random test configurations shown in Fig. 5."),
+        max_configs: int = typer.Option(
+            0, min=0, help="Evaluate a random subset of this many configurations (0: all)."
+        ),
+        figure_configs: int = typer.Option(
+            2, min=1, help="Random test configurations shown in Fig. 5."
+        ),
         seed: int = typer.Option(0, min=0),
     ) -> None:
         """Test NLL, Chamfer distance, HDR calibration and the paper's Fig. 5."""

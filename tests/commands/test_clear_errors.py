@@ -143,3 +143,10 @@ def test_help_texts_keep_their_units_and_name_real_commands():
         if argv[0] != "collision":
             assert "(m)" in out, argv  # "[m]" was swallowed as rich markup
         assert "kinematics train" not in out
+
+
+def test_version():
+    from riskplan import __version__
+
+    res = runner.invoke(app, ["--version"])
+    assert res.exit_code == 0 and res.output.strip() == f"riskplan {__version__}"

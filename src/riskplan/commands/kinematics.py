@@ -133,8 +133,14 @@ def register(app: typer.Typer) -> None:
                     bar,
                     f"the checkpoint in {out} is kept; continue with the same command plus --resume",
                 ) from None
+        # without a validation split (--val-fraction 0, or too few configurations) training
+        # scores and early-stops on the training NLL
+        from riskplan.kinematics.training import split_indices
+
+        has_val = split_indices(ds.n_configs, cfg.val_fraction, cfg.seed)[1].size > 0
+        scored = "validation" if has_val else "training (no validation split)"
         typer.echo(
-            f"best validation NLL {res.best_val_nll:.4f} nats/point at epoch {res.best_epoch} "
+            f"best {scored} NLL {res.best_val_nll:.4f} nats/point at epoch {res.best_epoch} "
             f"({len(res.history)} epochs{', stopped early' if res.stopped_early else ''}, {res.skipped_steps} skipped steps); model: {out}"
         )
 

@@ -171,3 +171,11 @@ def test_controls_validated_before_any_simulation(tmp_path):
         app, ["tissue", "simulate", "--steps", "2", "--seed", "-1", "--out", str(out)]
     )
     assert isinstance(r.exception, InvalidInputError) and "--seed" in str(r.exception)
+
+
+def test_manipulation_random_controls_bad_count():
+    from riskplan.scenarios.manipulation import ManipulationScenario
+
+    with pytest.raises(InvalidInputError, match="n_steps"):
+        ManipulationScenario().random_controls(-1, seed=0)
+    assert ManipulationScenario().random_controls(0, seed=0).shape == (0, 6)

@@ -29,3 +29,26 @@ def test_convergence_error_carries_residual():
 def test_require_names_extra():
     with pytest.raises(errors.MissingDependencyError, match=r"riskplan\[nope\]"):
         errors.require("riskplan_module_that_does_not_exist", "nope")
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, "zero"])
+def test_bad_seed_is_a_named_error(seed):
+    # NumPy's own ValueError/TypeError used to reach the user as a traceback
+    from riskplan._validation import as_generator
+    from riskplan.scenarios.chest import build_chest
+
+    with pytest.raises(errors.InvalidInputError, match="seed"):
+        as_generator(seed)
+    with pytest.raises(errors.InvalidInputError, match="seed"):
+        build_chest(seed, subdivisions=1)
+
+
+def test_good_seeds_give_the_numpy_generator():
+    import numpy as np
+
+    from riskplan._validation import as_generator
+
+    g = np.random.default_rng(3)
+    assert as_generator(g) is g
+    assert as_generator(5).random() == np.random.default_rng(5).random()
+    assert as_generator([5, 7]).random() == np.random.default_rng([5, 7]).random()

@@ -83,7 +83,17 @@ def _raise_first(a, bad, limit, name: str, op: str) -> None:
 
 
 def as_generator(seed) -> np.random.Generator:
-    """``seed`` may be ``None``, an int, a ``SeedSequence`` or a ``Generator``."""
+    """``seed`` may be ``None``, an int, a ``SeedSequence`` or a ``Generator``.
+
+    Anything NumPy cannot seed from (a negative integer, a float, a string) raises
+    :class:`InvalidInputError` naming ``seed``.
+    """
     if isinstance(seed, np.random.Generator):
         return seed
-    return np.random.default_rng(seed)
+    try:
+        return np.random.default_rng(seed)
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(
+            f"seed: expected None, a non-negative integer, a SeedSequence or a Generator, "
+            f"got {seed!r} ({exc})"
+        ) from exc

@@ -49,9 +49,24 @@ def _setup_threads() -> None:
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        from riskplan import __version__
+
+        typer.echo(f"riskplan {__version__}")
+        raise typer.Exit()
+
+
 @app.callback()
 def _main(
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log diagnostics to stderr."),
+    version: bool = typer.Option(
+        False,
+        "--version",
+        callback=_print_version,
+        is_eager=True,
+        help="Print the version and exit.",
+    ),
 ) -> None:
     _setup_threads()
     logging.basicConfig(

@@ -141,7 +141,9 @@ def read_table(path, name: str, *, key: str | None = None) -> np.ndarray:
       lines and ``#`` lines are skipped, and one header line before the first row;
     * ``.json``: a list of rows ``[[...], ...]``, one row ``[...]``, or (with ``key``) an
       object holding the list under ``key``;
-    * ``.npy``: a NumPy array (no pickles).
+    * ``.npy``: a NumPy array (no pickles);
+    * ``.npz`` (only with ``key``): the array stored under ``key`` (e.g. the ``controls`` of
+      the ``selected.npz`` that ``riskplan plan tissue`` writes).
 
     Returns a float64 array: ``(N, m)`` from a text file, as stored (1-D or 2-D) from JSON
     and ``.npy``. Checks only that it holds finite numbers in a 1-D or non-empty 2-D
@@ -150,13 +152,27 @@ def read_table(path, name: str, *, key: str | None = None) -> np.ndarray:
     """
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix not in TABLE_SUFFIXES:
+    suffixes = TABLE_SUFFIXES + ((".npz",) if key is not None else ())
+    if suffix not in suffixes:
         raise DataFormatError(
-            f"{name}: {path.name}: expected a file ending in {', '.join(TABLE_SUFFIXES)}"
+            f"{name}: {path.name}: expected a file ending in {', '.join(suffixes)}"
         )
     if not path.is_file():
         raise DataFormatError(f"{name}: no such file {str(path)!r}")
-    if suffix == ".npy":
+    if suffix == ".npz":
+        try:
+            with np.load(path, allow_pickle=False) as npz:
+                files = list(npz.files)
+                rows = npz[key] if key in files else None
+        except (OSError, ValueError, EOFError) as exc:
+            raise DataFormatError(
+                f"{name}: cannot read {path.name} as a .npz file ({exc})"
+            ) from exc
+        if rows is None:
+            raise DataFormatError(
+                f"{name}: {path.name} holds no {key!r} array (it has {', '.join(files) or 'none'})"
+            )
+    elif suffix == ".npy":
         try:
             arr = np.load(path, allow_pickle=False)
         except (OSError, ValueError, EOFError) as exc:

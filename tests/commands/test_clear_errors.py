@@ -77,6 +77,47 @@ USAGE = [  # rejected by the option parser itself (exit code 2), before anything
     # --workers is one shared option (min 0) wherever a command runs a process pool
     ["plan", "tissue", "--out", "{d}/pt", "--workers", "-1"],
     ["reproduce", "--out", "{d}/rp", "--workers", "-1"],
+    # seeds and counts: once tracebacks from NumPy, or errors after the planning had run
+    ["plan", "chest", "--out", "{d}/pc", "--seed", "-1"],
+    ["plan", "chest", "--out", "{d}/pc", "--chest-seed", "-1"],
+    ["plan", "chest", "--out", "{d}/pc", "--workers", "-1"],
+    ["plan", "chest", "--out", "{d}/pc", "--milestones", "0"],
+    ["plan", "tissue", "--out", "{d}/pt", "--seed", "-1"],
+    ["plan", "tissue", "--out", "{d}/pt", "--check-runs", "-1"],
+    ["reproduce", "--out", "{d}/rp", "--seed", "-1"],
+    [
+        "evaluate",
+        "--model",
+        "paper",
+        "--data",
+        "{d}/data.h5",
+        "--out",
+        "{d}/e",
+        "--max-configs",
+        "-1",
+    ],
+    [
+        "evaluate",
+        "--model",
+        "paper",
+        "--data",
+        "{d}/data.h5",
+        "--out",
+        "{d}/e",
+        "--figure-configs",
+        "-1",
+    ],
+    [
+        "evaluate",
+        "--model",
+        "paper",
+        "--data",
+        "{d}/data.h5",
+        "--out",
+        "{d}/e",
+        "--chamfer-points",
+        "0",
+    ],
 ]
 
 
@@ -102,3 +143,10 @@ def test_help_texts_keep_their_units_and_name_real_commands():
         if argv[0] != "collision":
             assert "(m)" in out, argv  # "[m]" was swallowed as rich markup
         assert "kinematics train" not in out
+
+
+def test_version():
+    from riskplan import __version__
+
+    res = runner.invoke(app, ["--version"])
+    assert res.exit_code == 0 and res.output.strip() == f"riskplan {__version__}"

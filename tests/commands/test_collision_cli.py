@@ -42,6 +42,23 @@ def test_collision_arc_json():
     assert rows[0]["probability"] >= rows[0]["mc_low"]
 
 
+def test_collision_union_reference_estimates_the_union_event():
+    # the reference column must estimate what the method bounds: for the union methods the
+    # event "any of K points, one per component, collides", not "a mixture point collides"
+    def rows(method):
+        res = runner.invoke(
+            app, ["collision", "--arc", "8,0", "--samples", "2000", "--method", method, "--json"]
+        )
+        assert res.exit_code == 0, res.output
+        return json.loads(res.output)[0]
+
+    mc_union, union, weighted = rows("monte_carlo_union"), rows("union"), rows("monte_carlo")
+    assert mc_union["monte_carlo"] == mc_union["probability"]  # same samples, same seed
+    assert union["monte_carlo"] == mc_union["probability"]
+    assert union["probability"] >= union["mc_low"]
+    assert weighted["monte_carlo"] == weighted["probability"]
+
+
 def test_collision_requires_configuration():
     res = runner.invoke(app, ["collision"])
     assert res.exit_code != 0

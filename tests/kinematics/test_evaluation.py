@@ -97,3 +97,20 @@ def test_mode_collapse():
     assert mode_collapse(np.array([0.5, 0.5]), 0.01) == []
     with pytest.raises(InvalidInputError):
         mode_collapse(np.array([0.5]), 1.5)
+
+
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        ({"max_configs": -1}, "max_configs"),
+        ({"max_configs": 0}, "max_configs"),
+        ({"chamfer_points": 0}, "chamfer_points"),
+        ({"n_samples": -5}, "n_samples"),
+        ({"seed": -1}, "seed"),
+    ],
+)
+def test_evaluate_bad_counts_are_named(trained, synth_small, kwargs, name):
+    # max_configs=-1 used to reach NumPy's "negative dimensions" ValueError
+    res, _ = trained
+    with pytest.raises(InvalidInputError, match=name):
+        evaluate(res.model, read_point_clouds(synth_small), **kwargs)

@@ -146,3 +146,11 @@ def test_log_prob_overflowing_quadratic_form_is_minus_inf_not_nan():
     gm = GaussianMixture([1.0], [[0.0, 0.0]], u)
     lp = gm.log_prob(np.array([[1e300, -1e300], [0.0, 0.0]]))
     assert lp[0] == -np.inf and np.isfinite(lp[1])
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, "x", True])
+def test_sample_bad_seed_is_named(seed):
+    # a negative seed used to reach NumPy's SeedSequence ValueError
+    gm = GaussianMixture([1.0], [[0.0, 0.0, 0.0]], np.eye(3)[None])
+    with pytest.raises(InvalidInputError, match="seed"):
+        gm.sample(2, seed=seed)

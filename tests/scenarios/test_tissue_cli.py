@@ -111,6 +111,26 @@ def test_read_controls_formats(tmp_path, tol):
         read_controls(j, 2)
 
 
+def test_read_controls_npz(tmp_path, tol):
+    # the selected.npz of `riskplan plan tissue` replays; a file of several plans is refused
+    u = np.array([[0.1, 0.2], [0.3, -0.4], [0.5, 0.0]])
+    one = tmp_path / "selected.npz"
+    np.savez(one, controls=u, reduced=np.zeros((4, 3)))
+    np.testing.assert_allclose(read_controls(one, 2), u, **tol["float64_exact"])
+    several = tmp_path / "candidates.npz"
+    np.savez(several, controls=u, control_offsets=np.array([0, 1, 3]))
+    with pytest.raises(DataFormatError, match="several plans"):
+        read_controls(several, 2)
+    other = tmp_path / "other.npz"
+    np.savez(other, forces=u)
+    with pytest.raises(DataFormatError, match="no 'controls' array"):
+        read_controls(other, 2)
+    fake = tmp_path / "fake.npz"
+    fake.write_text("not a zip")
+    with pytest.raises(DataFormatError, match=r"fake\.npz"):
+        read_controls(fake, 2)
+
+
 def test_step_cost_keys():
     from riskplan.bench.tissue import step_costs
 
@@ -151,3 +171,11 @@ def test_controls_validated_before_any_simulation(tmp_path):
         app, ["tissue", "simulate", "--steps", "2", "--seed", "-1", "--out", str(out)]
     )
     assert isinstance(r.exception, InvalidInputError) and "--seed" in str(r.exception)
+
+
+def test_manipulation_random_controls_bad_count():
+    from riskplan.scenarios.manipulation import ManipulationScenario
+
+    with pytest.raises(InvalidInputError, match="n_steps"):
+        ManipulationScenario().random_controls(-1, seed=0)
+    assert ManipulationScenario().random_controls(0, seed=0).shape == (0, 6)

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import typer
 
+from riskplan.commands._shared import workers_option
+
 
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
@@ -31,7 +33,7 @@ def register(app: typer.Typer) -> None:
         split: str = typer.Option(
             "both", help="train, test, or both (writes OUT_train.h5 and OUT_test.h5)."
         ),
-        workers: int = typer.Option(None, min=1, help="Worker processes (default: all cores)."),
+        workers: int = workers_option(),
         backend: str = typer.Option("local", help="local (process pool), serial, or ray."),
         seed: int = typer.Option(
             0, min=0, help="Master seed of starts, hysteresis variation and camera noise."
@@ -74,7 +76,7 @@ def register(app: typer.Typer) -> None:
                         path,
                         split=sp,
                         seed=seed,
-                        workers=workers,
+                        workers=workers or None,
                         backend=backend,
                         progress=progress,
                         overwrite=overwrite,

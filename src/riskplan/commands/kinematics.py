@@ -133,8 +133,14 @@ def register(app: typer.Typer) -> None:
                     bar,
                     f"the checkpoint in {out} is kept; continue with the same command plus --resume",
                 ) from None
+        # without a validation split (--val-fraction 0, or too few configurations) training
+        # scores and early-stops on the training NLL
+        from riskplan.kinematics.training import split_indices
+
+        has_val = split_indices(ds.n_configs, cfg.val_fraction, cfg.seed)[1].size > 0
+        scored = "validation" if has_val else "training (no validation split)"
         typer.echo(
-            f"best validation NLL {res.best_val_nll:.4f} nats/point at epoch {res.best_epoch} "
+            f"best {scored} NLL {res.best_val_nll:.4f} nats/point at epoch {res.best_epoch} "
             f"({len(res.history)} epochs{', stopped early' if res.stopped_early else ''}, {res.skipped_steps} skipped steps); model: {out}"
         )
 
@@ -263,11 +269,15 @@ def register(app: typer.Typer) -> None:
         samples: int = typer.Option(
             4096, min=1, help="Mixture samples per configuration for the HDR thresholds."
         ),
-        chamfer_points: int = typer.Option(2048, help="Points per cloud for the Chamfer distance."),
-        max_configs: int = typer.Option(
-            0, help="Evaluate a random subset of this many configurations (0: all)."
+        chamfer_points: int = typer.Option(
+            2048, min=1, help="Points per cloud for the Chamfer distance."
         ),
-        figure_configs: int = typer.Option(2, help="Random test configurations shown in Fig. 5."),
+        max_configs: int = typer.Option(
+            0, min=0, help="Evaluate a random subset of this many configurations (0: all)."
+        ),
+        figure_configs: int = typer.Option(
+            2, min=1, help="Random test configurations shown in Fig. 5."
+        ),
         seed: int = typer.Option(0, min=0),
     ) -> None:
         """Test NLL, Chamfer distance, HDR calibration and the paper's Fig. 5."""

@@ -42,7 +42,7 @@ def register(plan_app: typer.Typer) -> None:
         ),
         base_pose: str = base_pose_option(),
         chest_seed: int = typer.Option(
-            0, "--chest-seed", help="Seed of the procedural chest's organ shapes."
+            0, "--chest-seed", min=0, help="Seed of the procedural chest's organ shapes."
         ),
         goal_tip: str = typer.Option(
             None,
@@ -57,16 +57,18 @@ def register(plan_app: typer.Typer) -> None:
             0.005, "--tip-tolerance", help="Goal tip tolerance (m)."
         ),
         iterations: int = typer.Option(
-            50, "--iterations", help="Optimisation iterations (one bound evaluation each)."
+            50, "--iterations", min=0, help="Optimisation iterations (one bound evaluation each)."
         ),
-        candidates: int = typer.Option(256, "--candidates", help="Candidates drawn per iteration."),
+        candidates: int = typer.Option(
+            256, "--candidates", min=1, help="Candidates drawn per iteration."
+        ),
         radius: float = typer.Option(
             0.1, "--radius", help="Neighbourhood half-width, fraction of each tendon's range."
         ),
         method: str = typer.Option(
             "bo", "--method", help="bo (the paper's), random (local search), trust_region."
         ),
-        milestones: int = typer.Option(300, "--milestones", help="PRM milestones."),
+        milestones: int = typer.Option(300, "--milestones", min=2, help="PRM milestones."),
         step: float = typer.Option(
             0.0025, "--step", help="Largest step between trajectory configurations (m)."
         ),
@@ -86,18 +88,23 @@ def register(plan_app: typer.Typer) -> None:
         executions: int = typer.Option(
             1000,
             "--executions",
+            min=0,
             help="Validation: executions of each trajectory on the simulated robot (0: skip).",
         ),
         mixture_samples: int = typer.Option(
-            100_000, "--mixture-samples", help="Validation: Monte Carlo trials of the MDN mixtures."
+            100_000,
+            "--mixture-samples",
+            min=1,
+            help="Validation: Monte Carlo trials of the MDN mixtures.",
         ),
         workers: int = typer.Option(
             1,
             "--workers",
+            min=1,
             help="Worker processes for the validation (1: in this process, the fastest on 2 shared cores).",
         ),
         seed: int = typer.Option(
-            0, "--seed", help="Seed of the roadmap, goal search, optimiser and validation."
+            0, "--seed", min=0, help="Seed of the roadmap, goal search, optimiser and validation."
         ),
         resume: bool = typer.Option(
             False, "--resume", help="Continue an interrupted optimisation from OUT/checkpoint.json."
@@ -116,8 +123,6 @@ def register(plan_app: typer.Typer) -> None:
 
         torch.set_num_threads(1)
         _check_finite(tip_tolerance=tip_tolerance, radius=radius, step=step, resolution=resolution)
-        if executions < 0 or mixture_samples < 1:
-            raise InvalidInputError("--executions must be >= 0 and --mixture-samples >= 1")
         mdl = load_model(model)
         rob = None
         if robot is not None:

@@ -26,7 +26,9 @@ def register(plan_app: typer.Typer) -> None:
         ),
         out: Path = typer.Option(..., "--out", help="output folder (npz, JSON, PNG, GIF)"),
         workers: int = workers_option("worker processes (0: one per core)"),
-        seed: int = typer.Option(0, "--seed", help="master seed (trees, linearisation, checks)"),
+        seed: int = typer.Option(
+            0, "--seed", min=0, help="master seed (trees, linearisation, checks)"
+        ),
         method: str = typer.Option(
             "sigma",
             "--method",
@@ -34,10 +36,10 @@ def register(plan_app: typer.Typer) -> None:
             "sampling (trajectories of the linear model)",
         ),
         check_runs: int = typer.Option(
-            1000, "--check-runs", help="closed-loop executions per checked plan (0: skip)"
+            1000, "--check-runs", min=0, help="closed-loop executions per checked plan (0: skip)"
         ),
         check_others: int = typer.Option(
-            2, "--check-others", help="plans checked besides the selected one"
+            2, "--check-others", min=0, help="plans checked besides the selected one"
         ),
         gif: bool = typer.Option(
             True, "--gif/--no-gif", help="write an animation of one closed-loop execution"

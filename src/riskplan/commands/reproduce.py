@@ -24,7 +24,7 @@ def register(app: typer.Typer) -> None:
             help="Ray cluster address (host:port, ray://host:port or auto); with --backend ray.",
         ),
         workers: int = workers_option(),
-        seed: int = typer.Option(0, help="Master seed."),
+        seed: int = typer.Option(0, min=0, help="Master seed."),
         out: Path = typer.Option(
             Path("reproduce-out"),
             "--out",

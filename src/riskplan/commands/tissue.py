@@ -33,7 +33,10 @@ def register(app: typer.Typer) -> None:
     def simulate(
         scenario: str = typer.Option("needle", "--scenario", help="needle | manipulation"),
         controls: str = typer.Option(
-            "random", "--controls", help="FILE (CSV or JSON, one (T, q) row per step) or 'random'"
+            "random",
+            "--controls",
+            help="FILE (CSV, JSON or .npy, one (T, q) row per step; or the selected.npz of "
+            "`riskplan plan tissue`) or 'random'",
         ),
         out: Path = typer.Option(
             ..., "--out", help="output folder for frames, GIF and summary.json"

@@ -34,7 +34,7 @@ from functools import partial
 
 import numpy as np
 
-from riskplan._validation import as_array
+from riskplan._validation import as_array, as_generator
 from riskplan.control.kalman import kalman_gains
 from riskplan.control.linearize import Linearization
 from riskplan.control.lqr import lqr_gains
@@ -171,7 +171,7 @@ def execute(
     simulator returns a non-finite state.
     """
     _check_goal_at(goal_at)
-    gen = np.random.default_rng(seed)
+    gen = as_generator(seed)
     T = plan.n_steps
     bounds = np.asarray(sim.control_bounds, dtype=np.float64)
     lo, hi = bounds[:, 0], bounds[:, 1]

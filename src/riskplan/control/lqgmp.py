@@ -70,6 +70,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from riskplan._validation import as_generator
 from riskplan.control.lqg import LQGController
 from riskplan.control.plan import NominalPlan
 from riskplan.errors import InvalidInputError
@@ -257,7 +258,7 @@ def _factor(S: np.ndarray) -> np.ndarray:
 
 def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed) -> LQGMPResult:
     """``method="sampling"``: ``n`` joint trajectories of the linear-Gaussian recursion."""
-    gen = np.random.default_rng(seed)
+    gen = as_generator(seed)
     T = plan.n_steps
     p = plan.reduced.shape[1]
     n = int(n)
@@ -411,7 +412,7 @@ def lqgmp(
         free = fast
     p_free = float(np.prod(free))
     # P(goal): sample the final true state
-    gen = np.random.default_rng(seed)
+    gen = as_generator(seed)
     Sx = cov[T, :p, :p]
     w, v = np.linalg.eigh(0.5 * (Sx + Sx.T))
     fac = v * np.sqrt(np.clip(w, 0.0, None))

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from riskplan._validation import as_generator
 from riskplan.errors import InvalidInputError
 from riskplan.kinematics.data import PointCloudData, check_compatible
 from riskplan.kinematics.mdn import MDNModel
@@ -115,6 +116,11 @@ def nll_per_config(model: MDNModel, data: PointCloudData, chunk: int = 64) -> np
     return out
 
 
+def _check_count(v, name: str) -> None:
+    if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
+        raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
+
+
 def evaluate(
     model: MDNModel,
     data: PointCloudData,
@@ -130,9 +136,14 @@ def evaluate(
     ``n_samples`` mixture draws per configuration estimate the HDR thresholds;
     Chamfer uses ``min(chamfer_points, N)`` model samples against as many ground-truth
     points (a random subset). ``max_configs`` evaluates a random subset of configurations.
-    Raises :class:`DataFormatError` if ``data`` belongs to another robot.
+    Raises :class:`DataFormatError` if ``data`` belongs to another robot and
+    :class:`InvalidInputError` for counts below 1.
     """
     levels = _check_levels(levels)
+    for name, v in (("n_samples", n_samples), ("chamfer_points", chamfer_points)):
+        _check_count(v, name)
+    if max_configs is not None:
+        _check_count(max_configs, "max_configs")
     check_compatible(
         {
             "robot_toml": model.robot_toml,
@@ -141,7 +152,7 @@ def evaluate(
         },
         data,
     )
-    rng = np.random.default_rng(seed)
+    rng = as_generator(seed)
     if max_configs is not None and max_configs < data.n_configs:
         data = data.subset(np.sort(rng.choice(data.n_configs, size=max_configs, replace=False)))
     C, N = data.n_configs, data.n_points

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from riskplan.errors import require
+from riskplan._validation import as_generator
+from riskplan.errors import InvalidInputError, require
 
 
 def fig_nll_vs_components(result):
@@ -45,7 +46,10 @@ def fig_nll_vs_components(result):
 
 
 def _fig5_data(model, data, n_configs: int, n_samples: int, seed: int):
-    rng = np.random.default_rng(seed)
+    for name, v in (("n_configs", n_configs), ("n_samples", n_samples)):
+        if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
+            raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
+    rng = as_generator(seed)
     idx = np.sort(rng.choice(data.n_configs, size=min(n_configs, data.n_configs), replace=False))
     gm = model.predict(data.displacements[idx])
     samples = gm.sample(n_samples, seed=seed).numpy()

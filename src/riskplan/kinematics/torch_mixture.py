@@ -146,15 +146,18 @@ class GaussianMixture(MixtureBatch):
         """
         if n < 0:
             raise InvalidInputError(f"n: expected >= 0, got {n}")
-        gen = (
-            seed
-            if isinstance(seed, torch.Generator)
-            else torch.Generator().manual_seed(
+        if isinstance(seed, torch.Generator):
+            gen = seed
+        elif (
+            seed is None or (isinstance(seed, int | np.integer) and not isinstance(seed, bool))
+        ) and (seed is None or seed >= 0):
+            gen = torch.Generator().manual_seed(
                 int(np.random.SeedSequence(seed).generate_state(1)[0])
-                if seed is None or isinstance(seed, (int, np.integer))
-                else int(seed)
             )
-        )
+        else:
+            raise InvalidInputError(
+                f"seed: expected None, a non-negative integer or a torch.Generator, got {seed!r}"
+            )
         batch = self.batch_shape
         K, d = self.n_components, self.dim
         w = self.weights.reshape(-1, K).detach().cpu().double()

@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from riskplan._validation import as_array
+from riskplan._validation import as_array, as_generator
 from riskplan.errors import InvalidInputError, PlanningError
 from riskplan.gaussian_mixture import as_numpy_mixture
 
@@ -315,6 +315,7 @@ def build_roadmap(
     if int(n_neighbours) < 1:
         raise InvalidInputError(f"n_neighbours: expected >= 1, got {n_neighbours}")
     resolution = _check_positive(resolution, "resolution")
+    rng = as_generator(seed)  # a named error for a bad seed before OMPL is seeded with it
     seeded = _seed_ompl(seed)
     lim = validity.limits
     m = validity.n
@@ -328,7 +329,6 @@ def build_roadmap(
     si.setStateValidityChecker(
         lambda s: bool(validity(np.array([s[i] for i in range(m)])[None])[0])
     )
-    rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     pending: list[np.ndarray] = []
     stats = {"drawn": 0}
@@ -447,7 +447,7 @@ def goal_from_tip(
     target = as_array(target, "goal_tip", shape=(3,))
     tolerance = _check_positive(tolerance, "tolerance")
     lim = roadmap.validity.limits
-    rng = np.random.default_rng(seed)
+    rng = as_generator(seed)
     cand = np.vstack(
         [
             roadmap.vertices,

@@ -563,8 +563,10 @@ def _robot_text(name_or_path) -> tuple[str, str]:
         ), key
     p = Path(key)
     if not p.is_file():
+        why = "it is a folder" if p.is_dir() else "no such file"
         raise RobotDescriptionError(
-            f"robot: {key!r} is neither a packaged robot ({', '.join(PACKAGED_ROBOTS)}) nor a TOML file",
+            f"robot: {key!r} is neither a packaged robot ({', '.join(PACKAGED_ROBOTS)}) "
+            f"nor a TOML file ({why})",
             key="robot",
         )
     return read_robot_text(

@@ -30,6 +30,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
+from riskplan._validation import as_generator
 from riskplan.errors import InvalidInputError
 
 
@@ -221,7 +222,7 @@ def build_chest(seed: int = 0, params: ChestParams | None = None, **overrides) -
 
     params = replace(params or ChestParams(), **overrides)
     params.validate()
-    rng = np.random.default_rng(seed)
+    rng = as_generator(seed)
     A, B, C = params.cavity_semi_axes
     h = params.insertion_height
     sub = params.subdivisions

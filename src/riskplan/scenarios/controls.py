@@ -7,7 +7,10 @@
 * ``.csv`` / ``.txt``: comma-separated numbers, one step per line; blank lines, lines
   starting with ``#`` and one header line before the data (e.g. ``v,phi``) are skipped;
 * ``.json``: a list of rows ``[[v, phi], ...]`` or an object ``{"controls": [[...], ...]}``;
-* ``.npy``: a ``(T, q)`` array.
+* ``.npy``: a ``(T, q)`` array;
+* ``.npz``: the array under ``controls``, e.g. the ``selected.npz`` of ``riskplan plan tissue``
+  (so ``riskplan tissue simulate --controls OUT/selected.npz`` replays the selected plan open
+  loop).
 """
 
 from __future__ import annotations
@@ -33,6 +36,14 @@ def read_controls(path, control_dim: int, bounds=None) -> np.ndarray:
     """
     path = Path(path)
     arr = read_table(path, "controls", key="controls")
+    if path.suffix.lower() == ".npz":
+        with np.load(path, allow_pickle=False) as npz:
+            several = "control_offsets" in npz.files
+        if several:  # candidates.npz: every candidate's controls, one after the other
+            raise DataFormatError(
+                f"controls: {path.name} holds several plans (control_offsets); expected one "
+                "plan, e.g. the selected.npz of `riskplan plan tissue`"
+            )
     if arr.ndim != 2:
         raise DataFormatError(
             f"controls: expected a non-empty (T, {control_dim}) table, got shape {arr.shape}"

@@ -43,6 +43,27 @@ def test_bad_seed_is_a_named_error(seed):
         build_chest(seed, subdivisions=1)
 
 
+@pytest.mark.parametrize("seed", [-1, 1.5, "zero"])
+def test_bad_seed_of_the_tissue_planner_is_a_named_error(seed):
+    # spawn_seeds (every parallel stage), the simulator RRT and the linearisation
+    from riskplan.control import NominalPlan, linearize
+    from riskplan.parallel import spawn_seeds
+    from riskplan.planning.rrt import rrt_plans
+    from riskplan.scenarios.needle import NeedleScenario
+
+    sim = NeedleScenario()
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), sim.random_controls(3, seed=0))
+    for call in (
+        lambda: spawn_seeds(seed, 2),
+        lambda: rrt_plans(sim, 1, seed=seed),
+        lambda: linearize(sim, plan, [], seed=seed),
+    ):
+        with pytest.raises(errors.InvalidInputError, match="seed"):
+            call()
+    with pytest.raises(errors.InvalidInputError, match="n_steps"):
+        sim.random_controls(-1, seed=0)
+
+
 def test_good_seeds_give_the_numpy_generator():
     import numpy as np
 

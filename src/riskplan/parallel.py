@@ -47,8 +47,17 @@ RAY_CONNECT_TIMEOUT_S = 5.0
 
 
 def spawn_seeds(seed: int | None, n: int) -> list[int]:
-    """``n`` independent 63-bit integer seeds derived from ``seed`` (NumPy ``SeedSequence.spawn``)."""
-    ss = np.random.SeedSequence(seed)
+    """``n`` independent 63-bit integer seeds derived from ``seed`` (NumPy ``SeedSequence.spawn``).
+
+    A seed NumPy cannot use (a negative integer, a float, a string) raises
+    :class:`~riskplan.errors.InvalidInputError` naming ``seed``.
+    """
+    try:
+        ss = np.random.SeedSequence(seed)
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(
+            f"seed: expected None or a non-negative integer, got {seed!r} ({exc})"
+        ) from exc
     return [int(c.generate_state(2, dtype=np.uint64)[0] >> np.uint64(1)) for c in ss.spawn(n)]
 
 

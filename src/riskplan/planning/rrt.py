@@ -71,7 +71,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskplan._validation import as_array
+from riskplan._validation import as_array, as_generator
 from riskplan.errors import (
     ConvergenceError,
     ElementInversionError,
@@ -488,7 +488,7 @@ def grow_tree(
         raise InvalidInputError(
             f"space.max_control_change: expected shape ({q},), got {space.max_control_change.shape}"
         )
-    gen = np.random.default_rng(seed)
+    gen = as_generator(seed)
     k_steps = space.steps_per_extension
     n_ctrl = options.n_controls
 

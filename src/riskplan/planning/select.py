@@ -115,7 +115,8 @@ def evaluate_plan(
     :class:`~riskplan.control.lqgmp.LQGMPResult`). ``distribution``: S for ``M_t`` (``None``:
     ``sim.distribution``); ``n_samples``: its draws per step; ``n_a_runs``: the A-runs per
     step of :func:`~riskplan.control.linearize` (``None``: its default ``2 min(p, q)``;
-    ``2 * sim.state_dim`` is the paper's); ``Q``, ``R``: LQR costs (default identities);
+    ``2 * sim.state_dim`` is the paper's); ``Q``, ``R``: LQR costs (default: Bryson's rule from the simulator's scales, see
+    :func:`~riskplan.control.lqg.lqg_controller`);
     ``seed``: linearisation perturbations and goal samples.
     """
     from riskplan.control import linearize

@@ -453,6 +453,8 @@ class NeedleScenario(FEMScenario):
         smoothed random walk inside the bounds (for demos and tests)."""
         from riskplan._validation import as_generator
 
+        if isinstance(n_steps, bool) or not isinstance(n_steps, int | np.integer) or n_steps < 0:
+            raise InvalidInputError(f"n_steps: expected an integer >= 0, got {n_steps!r}")
         gen = as_generator(seed)
         v = gen.uniform(0.6, 1.0, n_steps) * self.config.v_max
         phi = np.clip(np.cumsum(gen.normal(0.0, 0.25, n_steps)) * 0.5, -1, 1) * self.config.phi_max

@@ -214,3 +214,22 @@ def test_disk_clearance_closed_form(robot, tol):
         got = disk_clearance(env, s, np.stack([P, P]), np.stack([R, R]), geom)
         assert got.shape == (2,)
         np.testing.assert_allclose(got, a - geom.disk_radius, **tol["float64_ref"])
+
+
+def test_endpoint_warnings_name_a_colliding_start_or_goal():
+    from riskplan.planning.validate import endpoint_warnings
+
+    rows = [
+        {"name": "nominal", "n_robot": 50, "robot_per_config": [0.0, 0.4, 1.0]},
+        {"name": "optimised", "n_robot": 50, "robot_per_config": [0.6, 0.0, 0.2]},
+        {"name": "clear", "n_robot": 50, "robot_per_config": [0.0, 0.0, 0.49]},
+    ]
+    lines = endpoint_warnings(rows)
+    assert len(lines) == 2
+    assert lines[0].startswith("nominal: the goal configuration") and "100 % of 50" in lines[0]
+    assert lines[1].startswith("optimised: the start configuration") and "60 %" in lines[1]
+    # a one-configuration trajectory is reported once; a lower threshold catches more
+    assert len(endpoint_warnings([{"name": "x", "n_robot": 5, "robot_per_config": [1.0]}])) == 1
+    assert len(endpoint_warnings(rows, threshold=0.2)) == 4
+    with pytest.raises(InvalidInputError, match="threshold"):
+        endpoint_warnings(rows, threshold=0.0)

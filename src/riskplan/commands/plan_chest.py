@@ -239,7 +239,9 @@ def register(plan_app: typer.Typer) -> None:
             f"({100 * res.reduction:.1f} % lower, {len(res.trace) - 1} iterations, {res.evaluations} bound evaluations)"
         )
         if validation is not None:
-            from riskplan.planning.validate import validation_markdown
+            from riskplan.planning.validate import endpoint_warnings, validation_markdown
 
             typer.echo(validation_markdown(validation))
+            for line in endpoint_warnings(validation):
+                typer.echo(f"warning: {line}", err=True)
         typer.echo(f"wrote {out}")

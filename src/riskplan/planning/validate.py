@@ -565,3 +565,29 @@ def validation_markdown(rows: list[dict]) -> str:
             f"[{100 * r['robot_disks_low']:.1f}, {100 * r['robot_disks_high']:.1f}] |"
         )
     return "\n".join(lines) + "\n"
+
+
+def endpoint_warnings(rows: list[dict], threshold: float = 0.5) -> list[str]:
+    """Warnings for :func:`validation_table` rows whose first or last configuration collides
+    on the robot in at least ``threshold`` of the executions.
+
+    Start and goal stay fixed while a trajectory is optimised, so when the robot's body already
+    touches an obstacle there, no trajectory between them can do better on the robot, whatever
+    its eq.-10 bound: the remedy is a start or goal with clearance. Returns one line per
+    affected end point (empty list: nothing to say).
+    """
+    if not 0.0 < float(threshold) <= 1.0:
+        raise InvalidInputError(f"threshold: expected a fraction in (0, 1], got {threshold!r}")
+    out = []
+    for row in rows:
+        per = row.get("robot_per_config") or []
+        for label, k in (("start", 0), ("goal", len(per) - 1)):
+            if per and per[k] >= threshold:
+                out.append(
+                    f"{row['name']}: the {label} configuration itself collides in "
+                    f"{100 * per[k]:.0f} % of {row['n_robot']} robot executions; no trajectory "
+                    f"with this {label} can avoid that (choose one with clearance)"
+                )
+            if len(per) == 1:
+                break
+    return out

@@ -73,3 +73,13 @@ def test_array_packages_import_without_torch():
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=os.environ
     )
     assert out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+def test_one_version():
+    # riskplan.__version__ is what data sets and model files record; it must be the installed
+    # distribution's version (pyproject.toml)
+    from importlib.metadata import version
+
+    import riskplan
+
+    assert riskplan.__version__ == version("riskplan")

@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+import riskplan
 from riskplan.errors import DataFormatError
 
 log = logging.getLogger(__name__)
@@ -79,15 +80,6 @@ def reach_bound(robot_toml: str) -> float | None:
     return REACH_FACTOR * (p.backbone.length + r)
 
 
-def _version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return version("riskplan")
-    except Exception:  # pragma: no cover - not installed
-        return "0+unknown"
-
-
 def _attr(f, key):
     v = f.attrs.get(key)
     if isinstance(v, bytes):
@@ -122,7 +114,7 @@ def create_file(
     try:
         f.attrs["format"] = FORMAT
         f.attrs["format_version"] = FORMAT_VERSION
-        f.attrs["riskplan_version"] = _version()
+        f.attrs["riskplan_version"] = riskplan.__version__
         f.attrs["robot_toml"] = robot_toml
         f.attrs["robot_name"] = robot_name
         f.attrs["protocol"] = protocol_json

@@ -53,10 +53,10 @@ _RESERVED = frozenset(
 
 
 def _versions() -> dict:
-    from riskplan.datasets.storage import _version
+    import riskplan
 
     return {
-        "riskplan": _version(),
+        "riskplan": riskplan.__version__,
         "torch": torch.__version__,
         "numpy": np.__version__,
         "python": platform.python_version(),

@@ -245,3 +245,39 @@ def test_simulator_declared_prior_is_the_default():
         # identity prior: 1 on the p - rank unexcited directions; zero prior: (near) nothing
         assert np.trace(ident.A[t]) > 0.5 * (p - ident.rank[t])
         assert np.linalg.norm(zero.A[t], 2) < 0.1 * np.linalg.norm(zero.B[t], 2)
+
+
+@pytest.mark.filterwarnings("ignore::riskplan.control.linearize.RankDeficiencyWarning")
+def test_mesh_draws_enter_M_through_transfer_state(tol):
+    # The manipulation can move a stored state onto another mesh (quasi-static: any start
+    # gives the same equilibrium), so the mesh case's draws run on their own meshes and M_t
+    # is not zero; a simulator without transfer_state runs them on the plan's mesh (M = 0).
+    from riskplan.scenarios.base import SimParams, rollout
+    from riskplan.scenarios.manipulation import ManipulationScenario
+
+    sim = ManipulationScenario()
+    u = sim.random_controls(3, seed=2)
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), u)
+    other = SimParams(n_elements=400)
+    # oracle: a step from the transferred state equals the same step of a rollout on that mesh
+    direct = rollout(sim, sim.initial_state(other), u[:2], other)[-1]
+    moved = sim.transfer_state(plan.states[1], other)
+    assert moved.n_elements == 400 and moved.t == 1
+    np.testing.assert_allclose(
+        sim.reduced(sim.step(moved, u[1], other)), sim.reduced(direct), **tol["newton_paths"]
+    )
+
+    class NoTransfer:
+        def __init__(self, inner):
+            self._inner = inner
+
+        def __getattr__(self, name):
+            if name == "transfer_state":
+                raise AttributeError(name)
+            return getattr(self._inner, name)
+
+    draws = [SimParams(n_elements=n) for n in (60, 400)]
+    with_mesh = linearize(sim, plan, draws, seed=1)
+    without = linearize(NoTransfer(sim), plan, draws, seed=1)
+    assert np.all(np.trace(with_mesh.M, axis1=1, axis2=2) > 0)
+    np.testing.assert_array_equal(without.M, 0.0)

@@ -264,7 +264,11 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seed
         if draws:
             D = np.empty((len(draws), p))
             for i, s_i in enumerate(draws):
-                D[i] = sim.reduced(run(y_t, u_t, s_i, plan.states[t + 1]))
+                if s_i.n_elements != params.n_elements:  # only with sim.transfer_state
+                    y_i = sim.transfer_state(y_t, s_i)
+                    D[i] = sim.reduced(run(y_i, u_t, s_i, None))
+                else:
+                    D[i] = sim.reduced(run(y_t, u_t, s_i, plan.states[t + 1]))
             _finite(D, t + 1, "parameter draws")
             D -= x_next
             M = D.T @ D / len(draws)
@@ -290,6 +294,8 @@ def _param_draws(sim, plan: NominalPlan, params_distribution, n_samples: int, se
             f"params_distribution: expected a distribution with sample_many/sample or a list of SimParams, "
             f"got {type(params_distribution).__name__}"
         )
+    if callable(getattr(sim, "transfer_state", None)):
+        return list(draws)  # mesh draws run on their own meshes (_steps)
     n_el = plan.params.n_elements
     return [d if d.n_elements == n_el else d.replace(n_elements=n_el) for d in draws]
 

@@ -335,7 +335,10 @@ class Simulator(Protocol):
     deviation of each component of x, the scale of the LQR's default Bryson weights),
     ``a_prior`` (``"identity"`` or ``"zero"``: what :func:`riskplan.control.linearize` assumes
     for state directions its control perturbations cannot excite — a deviation that persists,
-    or one the next step forgets; default ``"identity"``).
+    or one the next step forgets; default ``"identity"``), ``transfer_state(state, params)``
+    (``state`` as a start on the mesh of ``params``, so that ``linearize`` can run
+    mesh-size draws of ``M_t`` on their own meshes), ``step_near(state, u, params, near)``
+    (``step`` with the solver started from ``near``).
     """
 
     control_dim: int

@@ -289,6 +289,22 @@ class ManipulationScenario(FEMScenario):
             forces=np.zeros((len(self.config.manipulators), 2)),
         )
 
+    def transfer_state(self, state: ManipulationState, params: SimParams) -> ManipulationState:
+        """``state`` as a start on the mesh of ``params`` (another ``n_elements``).
+
+        Exact for this quasi-static scenario: the next step's equilibrium does not depend on
+        the state it starts from (tested), so the undeformed body of the other mesh at the
+        same step index is as good a start as any. :func:`riskplan.control.linearize` uses it
+        to run the mesh-size draws of ``M_t`` on their own meshes.
+        """
+        out = self.initial_state(params)
+        return ManipulationState(
+            t=state.t,
+            displacement=out.displacement,
+            n_elements=out.n_elements,
+            forces=out.forces,
+        )
+
     def nodal_forces(self, state: ManipulationState) -> np.ndarray:
         """Consistent nodal forces ``(n_nodes, 2)`` of the forces applied in ``state``
         (what ``state.displacement`` balances)."""

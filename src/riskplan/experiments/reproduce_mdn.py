@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from riskplan.errors import InvalidInputError
+from riskplan.experiments.demo_kinematics import TRAIN as DEMO_TRAIN
 
 log = logging.getLogger(__name__)
 
@@ -78,15 +79,8 @@ MDN_SCALES = {
     ),
 }
 
-TRAIN = dict(
-    hidden=(64, 64),
-    head_hidden=(32,),
-    batch_size=16,
-    points_per_config=256,
-    lr=3e-3,
-    early_stop_patience=15,
-    lr_patience=5,
-)
+#: Training settings: the demo's (network size, batches, learning-rate schedule, early stop).
+TRAIN = DEMO_TRAIN
 
 
 def _timing(model, robot, n: int, seed: int) -> dict:

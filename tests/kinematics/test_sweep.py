@@ -57,3 +57,25 @@ def test_sweep_checks_data_before_training(synth_paths, tmp_path):
     with pytest.raises(DataFormatError, match="differs"):
         sweep(synth_paths[0], foreign, [1], TrainConfig(epochs=1), out=tmp_path / "sw")
     assert not (tmp_path / "sw").exists()
+
+
+def test_sweep_uses_the_backend_it_is_given(synth_paths, tmp_path, monkeypatch):
+    # reproduce passes its backend through (a serial or Ray run must not start local pools);
+    # without one, workers > 1 means a local pool as before
+    import riskplan.parallel as par
+
+    seen = []
+    real = par.map_tasks
+
+    def spy(fn, items, **kw):
+        seen.append((kw["backend"], kw["workers"]))
+        return real(fn, items, **{**kw, "backend": "serial"})
+
+    monkeypatch.setattr(par, "map_tasks", spy)
+    cfg = TrainConfig(epochs=1, dtype="float64", **FAST)
+    sweep(
+        synth_paths[0], synth_paths[1], "1-2", cfg, out=tmp_path / "a", workers=2, backend="serial"
+    )
+    sweep(synth_paths[0], synth_paths[1], "1-2", cfg, out=tmp_path / "b", workers=2)
+    sweep(synth_paths[0], synth_paths[1], "1-2", cfg, out=tmp_path / "c", workers=None)
+    assert seen == [("serial", 2), ("local", 2), ("serial", None)]

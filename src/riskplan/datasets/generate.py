@@ -199,6 +199,7 @@ def generate_dataset(
     seed: int = 0,
     workers: int | None = None,
     backend: str = "local",
+    ray_address: str | None = None,
     progress: Callable[[int, int], None] | None = None,
     overwrite: bool = False,
     max_new: int | None = None,
@@ -215,7 +216,7 @@ def generate_dataset(
         when every configuration is done.
     split: ``"train"`` or ``"test"`` (disjoint sets of targets of the same protocol).
     seed: master seed of the starts, hysteresis variation and camera noise.
-    workers, backend: parallel map (:func:`riskplan.parallel.imap_tasks`).
+    workers, backend, ray_address: parallel map (:func:`riskplan.parallel.imap_tasks`).
     progress: ``progress(done, total)`` after each finished configuration.
     overwrite: replace an existing ``out`` / ``<out>.partial`` made with other settings.
     max_new: compute at most this many configurations in this call and leave the rest for a
@@ -264,6 +265,7 @@ def generate_dataset(
             seed,
             workers,
             backend,
+            ray_address,
             progress,
             overwrite,
             max_new,
@@ -280,6 +282,7 @@ def _generate_locked(
     seed,
     workers,
     backend,
+    ray_address,
     progress,
     overwrite,
     max_new,
@@ -361,7 +364,12 @@ def _generate_locked(
             nw = workers or 2
             chunksize = max(1, min(8, len(items) // (4 * nw) if items else 1))
         for k, (pts, tips, starts, tens) in imap_tasks(
-            _task, items, backend=backend, workers=workers, chunksize=chunksize
+            _task,
+            items,
+            backend=backend,
+            workers=workers,
+            chunksize=chunksize,
+            ray_address=ray_address,
         ):
             storage.write_config(f, int(todo[k]), pts, tips, starts, tens)
             n_done += 1

@@ -146,7 +146,14 @@ def reproduce(
 
             t0 = time.perf_counter()
             results["mdn"] = run_mdn(
-                out / "mdn", scales["mdn"], store, seed=seed, workers=workers, progress=progress
+                out / "mdn",
+                scales["mdn"],
+                store,
+                seed=seed,
+                workers=workers,
+                backend=backend,
+                ray_address=ray_address,
+                progress=progress,
             )
             timings["mdn_s"] = time.perf_counter() - t0
             t0 = time.perf_counter()

@@ -114,10 +114,20 @@ def _timing(model, robot, n: int, seed: int) -> dict:
 
 
 def run_mdn(
-    out, scale: MDNScale, store, *, seed: int = 0, workers: int | None = None, progress=None
+    out,
+    scale: MDNScale,
+    store,
+    *,
+    seed: int = 0,
+    workers: int | None = None,
+    backend: str = "local",
+    ray_address: str | None = None,
+    progress=None,
 ) -> dict:
     """Figs. 4-5 and the timing of the MDN paper into ``out`` (PNG + plotly pages written
-    when first computed). Returns the JSON numbers (also stored under ``mdn.results``)."""
+    when first computed). Returns the JSON numbers (also stored under ``mdn.results``).
+    ``workers``, ``backend``, ``ray_address``: the data sets' and the K sweep's task maps
+    (inside ``reproduce``'s :class:`~riskplan.parallel.TaskPool` they run on its workers)."""
     found = store.get("mdn.results")
     if found is not None:
         return found
@@ -143,7 +153,13 @@ def run_mdn(
     report("mdn: data set", 0, steps)
     robot = load_robot("paper")
     paths = generate_splits(
-        robot, scale.preset, out / "data" / scale.preset, seed=seed, workers=workers
+        robot,
+        scale.preset,
+        out / "data" / scale.preset,
+        seed=seed,
+        workers=workers,
+        backend=backend,
+        ray_address=ray_address,
     )
     train_data, test_data = read_point_clouds(paths["train"]), read_point_clouds(paths["test"])
     report("mdn: train (Fig. 5)", 1, steps)
@@ -176,7 +192,9 @@ def run_mdn(
         list(scale.components),
         TrainConfig(epochs=scale.sweep_epochs, seed=seed, **TRAIN),
         out=out / "sweep",
-        workers=workers or 2,
+        workers=workers,
+        backend=backend,
+        ray_address=ray_address,
         max_seconds_per_k=scale.sweep_seconds or None,
     )
     fig = fig_nll_vs_components(sw)

@@ -171,7 +171,9 @@ def sweep(
     config: TrainConfig | None = None,
     *,
     out,
-    workers: int = 1,
+    workers: int | None = 1,
+    backend: str | None = None,
+    ray_address: str | None = None,
     collapse_threshold: float = DEFAULT_COLLAPSE_THRESHOLD,
     nll_tolerance: float = DEFAULT_NLL_TOLERANCE,
     on_result=None,
@@ -180,7 +182,8 @@ def sweep(
     """Train one model per ``K`` in ``components`` and score it on ``test_path`` (Fig. 4).
 
     Models go to ``out/K{K}/``. ``workers > 1`` trains several ``K`` at once in
-    processes. ``on_result(index, entry_dict)`` reports each finished ``K``.
+    processes; ``backend`` (``None``: ``"local"`` when ``workers > 1``, else ``"serial"``),
+    ``ray_address``: :func:`riskplan.parallel.map_tasks` (``workers=None``: its default). ``on_result(index, entry_dict)`` reports each finished ``K``.
     ``max_seconds_per_k``: wall-clock budget of each training (see ``train(max_seconds=)``).
     Both data sets are checked (readable, non-empty, same robot) before any training.
     """
@@ -198,8 +201,12 @@ def sweep(
         raise InvalidInputError(f"collapse_threshold: expected in (0, 1), got {collapse_threshold}")
     if not nll_tolerance >= 0.0:
         raise InvalidInputError(f"nll_tolerance: expected >= 0, got {nll_tolerance}")
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise InvalidInputError(f"workers: expected a positive integer, got {workers!r}")
+    if workers is not None and (
+        isinstance(workers, bool) or not isinstance(workers, int) or workers < 1
+    ):
+        raise InvalidInputError(
+            f"workers: expected a positive integer (or None for all cores), got {workers!r}"
+        )
     from riskplan.io import check_output_folder
 
     check_output_folder(out, "out")
@@ -221,9 +228,16 @@ def sweep(
         )
         for K in components
     ]
-    backend = "serial" if workers <= 1 or len(tasks) == 1 else "local"
+    if backend is None:
+        backend = "serial" if (workers or 0) <= 1 or len(tasks) == 1 else "local"
     results = map_tasks(
-        _sweep_one, tasks, backend=backend, workers=workers, chunksize=1, on_result=on_result
+        _sweep_one,
+        tasks,
+        backend=backend,
+        workers=workers,
+        chunksize=1,
+        ray_address=ray_address,
+        on_result=on_result,
     )
     entries = [SweepEntry(**r) for r in results]
     rec = recommend(

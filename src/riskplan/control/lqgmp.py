@@ -82,9 +82,15 @@ __all__ = [
     "lqgmp",
     "point_indices",
     "polygon_environment",
+    "segment_pairs",
 ]
 
 METHODS = ("sigma", "truncation", "sampling")
+
+#: interior points per declared collision segment that the sigma and truncation methods
+#: check (at ``λ = k / (SEGMENT_POINTS + 1)``), besides the end points and the crossing test
+#: of the mean segment
+SEGMENT_POINTS = 8
 
 # whitened variance below which a direction counts as deterministic (no truncation, no bound)
 _TINY = 1e-300
@@ -126,6 +132,62 @@ def point_indices(sim) -> tuple[np.ndarray, np.ndarray]:
             f"collision_point_indices/goal_point_indices: expected indices in [0, {p})"
         )
     return col, goal
+
+
+def segment_pairs(sim) -> np.ndarray:
+    """``(s, 2) int``: the declared collision segments, rows of ``collision_point_indices``
+    joined by a straight edge of the body (``sim.collision_segments``; none by default).
+
+    A body whose outline is sensed at a few points (manipulation: 12 boundary points spaced
+    0.28 apart around an obstacle 0.14 wide) passes an obstacle corner *between* points;
+    the points alone then call a colliding plan free. With segments, LQG-MP checks the
+    straight edges between the points too (module docstring).
+    """
+    k = len(point_indices(sim)[0])
+    segs = getattr(sim, "collision_segments", ())
+    segs = np.asarray(segs, dtype=np.int64).reshape(-1, 2)
+    if segs.size and (segs.min() < 0 or segs.max() >= k or np.any(segs[:, 0] == segs[:, 1])):
+        raise InvalidInputError(
+            f"collision_segments: expected pairs of distinct indices in [0, {k})"
+        )
+    return segs
+
+
+def _check_points(col, segs):
+    """Points checked by the sigma/truncation methods as ``(i, j, λ)``: point ``(1 − λ)
+    P_i + λ P_j`` (``P_i`` the 2-D point ``x[col[i]]``); the points themselves, then
+    :data:`SEGMENT_POINTS` interior points of each segment."""
+    k = len(col)
+    lam = np.arange(1, SEGMENT_POINTS + 1) / (SEGMENT_POINTS + 1)
+    i = np.concatenate([np.arange(k), np.repeat(segs[:, 0], lam.size)])
+    j = np.concatenate([np.arange(k), np.repeat(segs[:, 1], lam.size)])
+    lm = np.concatenate([np.zeros(k), np.tile(lam, len(segs))])
+    return i, j, lm
+
+
+def _mix(col, chk, x, S):
+    """Means ``(..., n, 2)`` and covariances ``(..., n, 2, 2)`` of the check points for
+    states ``x (..., p)`` (nominal + mean deviation) and covariances ``S (..., ≥p, ≥p)``."""
+    i, j, lm = chk
+    a, b = col[i], col[j]  # (n, 2)
+    w0, w1 = (1.0 - lm)[:, None], lm[:, None]
+    pts = w0 * x[..., a] + w1 * x[..., b]
+    Saa = S[..., a[:, :, None], a[:, None, :]]
+    Sbb = S[..., b[:, :, None], b[:, None, :]]
+    Sab = S[..., a[:, :, None], b[:, None, :]]
+    W0, W1 = w0[..., None], w1[..., None]
+    covs = W0 * W0 * Saa + W1 * W1 * Sbb + W0 * W1 * (Sab + np.swapaxes(Sab, -1, -2))
+    return pts, covs
+
+
+def _segments_cross(polys, p0, p1) -> bool:
+    """True if one of the segments ``p0[i] -> p1[i]`` meets an edge of ``polys``."""
+    from riskplan import geometry2d as geo
+
+    if not len(p0):
+        return False
+    a, b = _edges(polys)
+    return bool(geo.segments_hit(np.concatenate([a, b], axis=1), p0, p1).any())
 
 
 def polygon_environment(polygons):
@@ -226,7 +288,7 @@ def sigma_distances(starts, ends, points, covs) -> tuple[np.ndarray, np.ndarray]
     return c, inside
 
 
-def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
+def _sigma_free(sim, plan, mean, cov, col, p, segs) -> np.ndarray | None:
     """Vectorised ``method="sigma"`` over all steps and points; None if the obstacle
     polygons change size along the plan (then the per-step loop runs)."""
     T = plan.n_steps
@@ -239,15 +301,20 @@ def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
     E = [_edges(ps) for ps in polys]
     starts = np.stack([e[0] for e in E])[:, None]  # (T, 1, E, 2)
     ends = np.stack([e[1] for e in E])[:, None]
-    pts = plan.reduced[1:][:, col] + mean[1:][:, col]  # (T, k, 2)
-    covs = cov[1:][:, col[:, :, None], col[:, None, :]]  # (T, k, 2, 2)
+    xm = plan.reduced[1:] + mean[1:, :p]
+    pts, covs = _mix(col, _check_points(col, segs), xm, cov[1:])  # (T, n, 2), (T, n, 2, 2)
     ok = np.linalg.eigvalsh(covs).min(axis=-1) > 1e-24
     covs = np.where(ok[..., None, None], covs, np.eye(2))
     c, inside = sigma_distances(starts, ends, pts, covs)
     c = np.where(ok, c, np.inf)
     cmin = c.min(axis=1)
     free = np.where(np.isinf(cmin), 1.0, -np.expm1(-0.5 * np.minimum(cmin, 1e150) ** 2))
-    return np.where(inside.any(axis=1), 0.0, free)
+    hit = inside.any(axis=1)
+    if len(segs):
+        for t in range(T):
+            if not hit[t]:
+                hit[t] = _segments_cross(polys[t], xm[t][col[segs[:, 0]]], xm[t][col[segs[:, 1]]])
+    return np.where(hit, 0.0, free)
 
 
 def _factor(S: np.ndarray) -> np.ndarray:
@@ -256,7 +323,9 @@ def _factor(S: np.ndarray) -> np.ndarray:
     return v * np.sqrt(np.clip(w, 0.0, None))
 
 
-def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed) -> LQGMPResult:
+def _sampled(
+    sim, plan, controller, F, Qn, dm, mean, cov, col, segs, goal_idx, n, seed
+) -> LQGMPResult:
     """``method="sampling"``: ``n`` joint trajectories of the linear-Gaussian recursion."""
     gen = as_generator(seed)
     T = plan.n_steps
@@ -281,6 +350,16 @@ def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed
         hit = np.zeros(idx.size, dtype=bool)
         for ij in col:
             hit |= np.asarray(env.contains(plan.reduced[t + 1][ij] + live[:, ij]), dtype=bool)
+        if len(segs):
+            from riskplan import geometry2d as geo
+
+            a, b = _edges(polys)
+            edges = np.concatenate([a, b], axis=1)
+            xs = plan.reduced[t + 1] + live[:, :p]
+            for i0, i1 in segs:
+                todo = ~hit
+                if todo.any():
+                    hit[todo] |= geo.segments_hit(edges, xs[todo][:, col[i0]], xs[todo][:, col[i1]])
         alive[idx[hit]] = False
         free[t] = float(alive.sum()) / before
     goal_env = polygon_environment([sim.goal(plan.states[T])])
@@ -343,6 +422,8 @@ def lqgmp(
             f"n_goal_samples: expected a positive integer, got {n_goal_samples!r}"
         )
     col, goal_idx = point_indices(sim)
+    segs = segment_pairs(sim)
+    chk = _check_points(col, segs)
     T = plan.n_steps
     p = plan.reduced.shape[1]
     F, Qn, dm = joint_covariances(controller, drift)
@@ -361,9 +442,21 @@ def lqgmp(
             cov[t + 1] = S = 0.5 * (S + S.T)
         if method == "sampling":
             return _sampled(
-                sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n_goal_samples, seed
+                sim,
+                plan,
+                controller,
+                F,
+                Qn,
+                dm,
+                mean,
+                cov,
+                col,
+                segs,
+                goal_idx,
+                n_goal_samples,
+                seed,
             )
-        fast = _sigma_free(sim, plan, mean, cov, col, p)
+        fast = _sigma_free(sim, plan, mean, cov, col, p, segs)
         S = cov[0].copy()
         mu = np.zeros(2 * p)
     for t in range(T if truncating or fast is None else 0):
@@ -377,29 +470,39 @@ def lqgmp(
             continue
         env = polygon_environment(polys)
         xs = plan.reduced[t + 1]
-        pts = xs[col] + mu[col]  # (k, 2)
-        if bool(env.contains(pts).any()):
+        xm = xs + mu[:p]
+        pts, covs = _mix(col, chk, xm, S)  # (n, 2), (n, 2, 2)
+        if bool(env.contains(pts).any()) or _segments_cross(
+            polys, xm[col[segs[:, 0]]], xm[col[segs[:, 1]]]
+        ):
             free[t] = 0.0
             mean[t + 1], cov[t + 1] = mu, S
             continue
         if truncating:
             p_t = 0.0
-            for j, ij in enumerate(col):
-                Sp = S[np.ix_(ij, ij)]
+            for j in range(len(pts)):
+                ia, ib, lj = col[chk[0][j]], col[chk[1][j]], chk[2][j]
+                # this point's covariance under the truncations so far
+                Sp = _mix(col, (chk[0][j : j + 1], chk[1][j : j + 1], chk[2][j : j + 1]), xs, S)[1][
+                    0
+                ]
                 if np.linalg.eigvalsh(Sp).min() <= 1e-24:
                     continue  # a deterministic point outside every obstacle: no risk
                 U = precision_cholesky_from_covariance(Sp)
-                fr = free_region(pts[j], U, env, cutoff=cutoff)
+                pj = (1.0 - lj) * (xs[ia] + mu[ia]) + lj * (xs[ib] + mu[ib])
+                fr = free_region(pj, U, env, cutoff=cutoff)
                 p_t += float(fr.bound_terms.sum())
+                x0 = (1.0 - lj) * xs[ia] + lj * xs[ib]
                 for a, off in zip(fr.normals, fr.offsets):
                     c = np.zeros(2 * p)
-                    c[ij] = a
-                    mu, S = _truncate(mu, S, c, off - float(a @ xs[ij]))
+                    c[ia] += (1.0 - lj) * a
+                    c[ib] += lj * a
+                    mu, S = _truncate(mu, S, c, off - float(a @ x0))
             free[t] = 1.0 - min(1.0, p_t)
         else:
             c_min = math.inf
-            for j, ij in enumerate(col):
-                Sp = S[np.ix_(ij, ij)]
+            for j in range(len(pts)):
+                Sp = covs[j]
                 if np.linalg.eigvalsh(Sp).min() <= 1e-24:
                     continue
                 U = precision_cholesky_from_covariance(Sp)

@@ -78,19 +78,14 @@ from riskplan.errors import InvalidInputError
 __all__ = [
     "METHODS",
     "LQGMPResult",
+    "body_points",
     "joint_covariances",
     "lqgmp",
     "point_indices",
     "polygon_environment",
-    "segment_pairs",
 ]
 
 METHODS = ("sigma", "truncation", "sampling")
-
-#: interior points per declared collision segment that the sigma and truncation methods
-#: check (at ``λ = k / (SEGMENT_POINTS + 1)``), besides the end points and the crossing test
-#: of the mean segment
-SEGMENT_POINTS = 8
 
 # whitened variance below which a direction counts as deterministic (no truncation, no bound)
 _TINY = 1e-300
@@ -134,60 +129,73 @@ def point_indices(sim) -> tuple[np.ndarray, np.ndarray]:
     return col, goal
 
 
-def segment_pairs(sim) -> np.ndarray:
-    """``(s, 2) int``: the declared collision segments, rows of ``collision_point_indices``
-    joined by a straight edge of the body (``sim.collision_segments``; none by default).
+def body_points(sim, plan: NominalPlan, t: int, col: np.ndarray):
+    """The 2-D points of the body that LQG-MP checks at step ``t``:
+    ``(base (n, 2), a (n,), b (n,), lam (n,), outline)``.
 
-    A body whose outline is sensed at a few points (manipulation: 12 boundary points spaced
-    0.28 apart around an obstacle 0.14 wide) passes an obstacle corner *between* points;
-    the points alone then call a colliding plan free. With segments, LQG-MP checks the
-    straight edges between the points too (module docstring).
+    Point ``r`` is ``base[r] + (1 − lam[r]) d_a + lam[r] d_b`` where ``d_i`` is the
+    deviation ``x_t − x*_t`` of the collision point ``col[i]`` (``a``, ``b`` rows of
+    ``collision_point_indices``). By default these are the collision points themselves
+    (``base = x*_t[col]``, ``a = b``, ``lam = 0``, ``outline = False``). A simulator whose body
+    is wider than its reduced state's points declares ``collision_outline(state)`` returning
+    ``(base, a, b, lam)`` for the nominal state ``y*_t``: the points of the body's outline
+    (a closed polygon, in order), each moving with an interpolation of the deviations of
+    two collision points. Then ``outline = True`` and LQG-MP also checks the outline's edges
+    (module docstring). The manipulation declares its deformed boundary nodes, each
+    interpolated by arc length between the two sensed points around it: its 12 sensed
+    points are about 0.28 apart, wider than the obstacle (0.14), so the points alone call
+    an outline that wraps round an obstacle corner free.
     """
-    k = len(point_indices(sim)[0])
-    segs = getattr(sim, "collision_segments", ())
-    segs = np.asarray(segs, dtype=np.int64).reshape(-1, 2)
-    if segs.size and (segs.min() < 0 or segs.max() >= k or np.any(segs[:, 0] == segs[:, 1])):
-        raise InvalidInputError(
-            f"collision_segments: expected pairs of distinct indices in [0, {k})"
-        )
-    return segs
-
-
-def _check_points(col, segs):
-    """Points checked by the sigma/truncation methods as ``(i, j, λ)``: point ``(1 − λ)
-    P_i + λ P_j`` (``P_i`` the 2-D point ``x[col[i]]``); the points themselves, then
-    :data:`SEGMENT_POINTS` interior points of each segment."""
+    hook = getattr(sim, "collision_outline", None)
     k = len(col)
-    lam = np.arange(1, SEGMENT_POINTS + 1) / (SEGMENT_POINTS + 1)
-    i = np.concatenate([np.arange(k), np.repeat(segs[:, 0], lam.size)])
-    j = np.concatenate([np.arange(k), np.repeat(segs[:, 1], lam.size)])
-    lm = np.concatenate([np.zeros(k), np.tile(lam, len(segs))])
-    return i, j, lm
+    if hook is None:
+        idx = np.arange(k)
+        return plan.reduced[t][col], idx, idx, np.zeros(k), False
+    base, a, b, lam = hook(plan.states[t])
+    base = np.asarray(base, dtype=np.float64)
+    a = np.asarray(a, dtype=np.int64)
+    b = np.asarray(b, dtype=np.int64)
+    lam = np.asarray(lam, dtype=np.float64)
+    n = len(base)
+    if (
+        base.shape != (n, 2)
+        or n < 2
+        or a.shape != (n,)
+        or b.shape != (n,)
+        or lam.shape != (n,)
+        or not np.all(np.isfinite(base))
+        or a.min() < 0
+        or b.min() < 0
+        or max(a.max(), b.max()) >= k
+        or not np.all((lam >= 0) & (lam <= 1))
+    ):
+        raise InvalidInputError(
+            "collision_outline: expected (points (n, 2) finite, a (n,), b (n,) in "
+            f"[0, {k}), lam (n,) in [0, 1]) with n >= 2"
+        )
+    return base, a, b, lam, True
 
 
-def _mix(col, chk, x, S):
-    """Means ``(..., n, 2)`` and covariances ``(..., n, 2, 2)`` of the check points for
-    states ``x (..., p)`` (nominal + mean deviation) and covariances ``S (..., ≥p, ≥p)``."""
-    i, j, lm = chk
-    a, b = col[i], col[j]  # (n, 2)
-    w0, w1 = (1.0 - lm)[:, None], lm[:, None]
-    pts = w0 * x[..., a] + w1 * x[..., b]
-    Saa = S[..., a[:, :, None], a[:, None, :]]
-    Sbb = S[..., b[:, :, None], b[:, None, :]]
-    Sab = S[..., a[:, :, None], b[:, None, :]]
+def _mix(col, a, b, lam, base, mu, S):
+    """Means ``(..., n, 2)`` and covariances ``(..., n, 2, 2)`` of body points
+    (:func:`body_points`) for mean deviations ``mu (..., ≥p)`` and covariances
+    ``S (..., ≥p, ≥p)``."""
+    ia, ib = col[a], col[b]  # (n, 2)
+    w0, w1 = (1.0 - lam)[:, None], lam[:, None]
+    pts = base + w0 * mu[..., ia] + w1 * mu[..., ib]
+    Saa = S[..., ia[:, :, None], ia[:, None, :]]
+    Sbb = S[..., ib[:, :, None], ib[:, None, :]]
+    Sab = S[..., ia[:, :, None], ib[:, None, :]]
     W0, W1 = w0[..., None], w1[..., None]
     covs = W0 * W0 * Saa + W1 * W1 * Sbb + W0 * W1 * (Sab + np.swapaxes(Sab, -1, -2))
     return pts, covs
 
 
-def _segments_cross(polys, p0, p1) -> bool:
-    """True if one of the segments ``p0[i] -> p1[i]`` meets an edge of ``polys``."""
+def _outline_meets(polys, ring) -> bool:
+    """True if the closed polygon ``ring (n, 2)`` meets one of ``polys``."""
     from riskplan import geometry2d as geo
 
-    if not len(p0):
-        return False
-    a, b = _edges(polys)
-    return bool(geo.segments_hit(np.concatenate([a, b], axis=1), p0, p1).any())
+    return any(geo.polygons_intersect(ring, q) for q in polys)
 
 
 def polygon_environment(polygons):
@@ -288,9 +296,9 @@ def sigma_distances(starts, ends, points, covs) -> tuple[np.ndarray, np.ndarray]
     return c, inside
 
 
-def _sigma_free(sim, plan, mean, cov, col, p, segs) -> np.ndarray | None:
+def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
     """Vectorised ``method="sigma"`` over all steps and points; None if the obstacle
-    polygons change size along the plan (then the per-step loop runs)."""
+    polygons or the body points change size along the plan (then the per-step loop runs)."""
     T = plan.n_steps
     polys = [sim.obstacles(plan.states[t + 1]) for t in range(T)]
     if not len(polys[0]):
@@ -298,11 +306,17 @@ def _sigma_free(sim, plan, mean, cov, col, p, segs) -> np.ndarray | None:
     sizes = {tuple(len(q) for q in ps) for ps in polys}
     if len(sizes) != 1:
         return None
+    bodies = [body_points(sim, plan, t + 1, col) for t in range(T)]
+    if len({len(bd[0]) for bd in bodies}) != 1 or len({bd[1].tobytes() for bd in bodies}) != 1:
+        return None
+    if len({bd[2].tobytes() + bd[3].tobytes() for bd in bodies}) != 1:
+        return None
+    _, a, b, lam, outline = bodies[0]
+    base = np.stack([bd[0] for bd in bodies])  # (T, n, 2)
     E = [_edges(ps) for ps in polys]
     starts = np.stack([e[0] for e in E])[:, None]  # (T, 1, E, 2)
     ends = np.stack([e[1] for e in E])[:, None]
-    xm = plan.reduced[1:] + mean[1:, :p]
-    pts, covs = _mix(col, _check_points(col, segs), xm, cov[1:])  # (T, n, 2), (T, n, 2, 2)
+    pts, covs = _mix(col, a, b, lam, base, mean[1:, :p], cov[1:])
     ok = np.linalg.eigvalsh(covs).min(axis=-1) > 1e-24
     covs = np.where(ok[..., None, None], covs, np.eye(2))
     c, inside = sigma_distances(starts, ends, pts, covs)
@@ -310,10 +324,8 @@ def _sigma_free(sim, plan, mean, cov, col, p, segs) -> np.ndarray | None:
     cmin = c.min(axis=1)
     free = np.where(np.isinf(cmin), 1.0, -np.expm1(-0.5 * np.minimum(cmin, 1e150) ** 2))
     hit = inside.any(axis=1)
-    if len(segs):
-        for t in range(T):
-            if not hit[t]:
-                hit[t] = _segments_cross(polys[t], xm[t][col[segs[:, 0]]], xm[t][col[segs[:, 1]]])
+    if outline:
+        hit |= np.array([_outline_meets(polys[t], pts[t]) for t in range(T)])
     return np.where(hit, 0.0, free)
 
 
@@ -323,10 +335,10 @@ def _factor(S: np.ndarray) -> np.ndarray:
     return v * np.sqrt(np.clip(w, 0.0, None))
 
 
-def _sampled(
-    sim, plan, controller, F, Qn, dm, mean, cov, col, segs, goal_idx, n, seed
-) -> LQGMPResult:
+def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed) -> LQGMPResult:
     """``method="sampling"``: ``n`` joint trajectories of the linear-Gaussian recursion."""
+    from riskplan import geometry2d as geo
+
     gen = as_generator(seed)
     T = plan.n_steps
     p = plan.reduced.shape[1]
@@ -347,19 +359,18 @@ def _sampled(
             continue
         idx = np.flatnonzero(alive)
         live = xi[idx]
-        hit = np.zeros(idx.size, dtype=bool)
-        for ij in col:
-            hit |= np.asarray(env.contains(plan.reduced[t + 1][ij] + live[:, ij]), dtype=bool)
-        if len(segs):
-            from riskplan import geometry2d as geo
-
-            a, b = _edges(polys)
-            edges = np.concatenate([a, b], axis=1)
-            xs = plan.reduced[t + 1] + live[:, :p]
-            for i0, i1 in segs:
-                todo = ~hit
-                if todo.any():
-                    hit[todo] |= geo.segments_hit(edges, xs[todo][:, col[i0]], xs[todo][:, col[i1]])
+        base, a, b, lam, outline = body_points(sim, plan, t + 1, col)
+        w0, w1 = (1.0 - lam)[:, None], lam[:, None]
+        body = base + w0 * live[:, col[a]] + w1 * live[:, col[b]]  # (m, nb, 2)
+        m, nb = body.shape[:2]
+        hit = np.asarray(env.contains(body.reshape(-1, 2)), dtype=bool).reshape(m, nb).any(axis=1)
+        if outline:
+            s0, s1 = _edges(polys)
+            nxt = np.roll(body, -1, axis=1)
+            edge_hit = geo.segments_hit(
+                np.concatenate([s0, s1], axis=1), body.reshape(-1, 2), nxt.reshape(-1, 2)
+            )
+            hit |= edge_hit.reshape(m, nb).any(axis=1)
         alive[idx[hit]] = False
         free[t] = float(alive.sum()) / before
     goal_env = polygon_environment([sim.goal(plan.states[T])])
@@ -422,8 +433,6 @@ def lqgmp(
             f"n_goal_samples: expected a positive integer, got {n_goal_samples!r}"
         )
     col, goal_idx = point_indices(sim)
-    segs = segment_pairs(sim)
-    chk = _check_points(col, segs)
     T = plan.n_steps
     p = plan.reduced.shape[1]
     F, Qn, dm = joint_covariances(controller, drift)
@@ -451,12 +460,11 @@ def lqgmp(
                 mean,
                 cov,
                 col,
-                segs,
                 goal_idx,
                 n_goal_samples,
                 seed,
             )
-        fast = _sigma_free(sim, plan, mean, cov, col, p, segs)
+        fast = _sigma_free(sim, plan, mean, cov, col, p)
         S = cov[0].copy()
         mu = np.zeros(2 * p)
     for t in range(T if truncating or fast is None else 0):
@@ -469,35 +477,30 @@ def lqgmp(
             mean[t + 1], cov[t + 1] = mu, S
             continue
         env = polygon_environment(polys)
-        xs = plan.reduced[t + 1]
-        xm = xs + mu[:p]
-        pts, covs = _mix(col, chk, xm, S)  # (n, 2), (n, 2, 2)
-        if bool(env.contains(pts).any()) or _segments_cross(
-            polys, xm[col[segs[:, 0]]], xm[col[segs[:, 1]]]
-        ):
+        base, a, b, lam, outline = body_points(sim, plan, t + 1, col)
+        pts, covs = _mix(col, a, b, lam, base, mu[:p], S)  # (n, 2), (n, 2, 2)
+        if bool(env.contains(pts).any()) or (outline and _outline_meets(polys, pts)):
             free[t] = 0.0
             mean[t + 1], cov[t + 1] = mu, S
             continue
         if truncating:
             p_t = 0.0
             for j in range(len(pts)):
-                ia, ib, lj = col[chk[0][j]], col[chk[1][j]], chk[2][j]
-                # this point's covariance under the truncations so far
-                Sp = _mix(col, (chk[0][j : j + 1], chk[1][j : j + 1], chk[2][j : j + 1]), xs, S)[1][
-                    0
-                ]
+                ia, ib, lj = col[a[j]], col[b[j]], lam[j]
+                sl = slice(j, j + 1)
+                # this point under the truncations so far
+                pj, Sp = _mix(col, a[sl], b[sl], lam[sl], base[sl], mu[:p], S)
+                pj, Sp = pj[0], Sp[0]
                 if np.linalg.eigvalsh(Sp).min() <= 1e-24:
                     continue  # a deterministic point outside every obstacle: no risk
                 U = precision_cholesky_from_covariance(Sp)
-                pj = (1.0 - lj) * (xs[ia] + mu[ia]) + lj * (xs[ib] + mu[ib])
                 fr = free_region(pj, U, env, cutoff=cutoff)
                 p_t += float(fr.bound_terms.sum())
-                x0 = (1.0 - lj) * xs[ia] + lj * xs[ib]
-                for a, off in zip(fr.normals, fr.offsets):
+                for nrm, off in zip(fr.normals, fr.offsets):
                     c = np.zeros(2 * p)
-                    c[ia] += (1.0 - lj) * a
-                    c[ib] += lj * a
-                    mu, S = _truncate(mu, S, c, off - float(a @ x0))
+                    c[ia] += (1.0 - lj) * nrm
+                    c[ib] += lj * nrm
+                    mu, S = _truncate(mu, S, c, off - float(nrm @ base[j]))
             free[t] = 1.0 - min(1.0, p_t)
         else:
             c_min = math.inf

@@ -87,6 +87,10 @@ __all__ = [
 
 METHODS = ("sigma", "truncation", "sampling")
 
+#: points checked inside each edge of a declared outline by the sigma and truncation methods
+#: (evenly spaced; the sampling method tests the edges themselves)
+OUTLINE_POINTS = 8
+
 # whitened variance below which a direction counts as deterministic (no truncation, no bound)
 _TINY = 1e-300
 
@@ -176,18 +180,30 @@ def body_points(sim, plan: NominalPlan, t: int, col: np.ndarray):
     return base, a, b, lam, True
 
 
-def _mix(col, a, b, lam, base, mu, S):
-    """Means ``(..., n, 2)`` and covariances ``(..., n, 2, 2)`` of body points
-    (:func:`body_points`) for mean deviations ``mu (..., ≥p)`` and covariances
-    ``S (..., ≥p, ≥p)``."""
-    ia, ib = col[a], col[b]  # (n, 2)
-    w0, w1 = (1.0 - lam)[:, None], lam[:, None]
-    pts = base + w0 * mu[..., ia] + w1 * mu[..., ib]
-    Saa = S[..., ia[:, :, None], ia[:, None, :]]
-    Sbb = S[..., ib[:, :, None], ib[:, None, :]]
-    Sab = S[..., ia[:, :, None], ib[:, None, :]]
-    W0, W1 = w0[..., None], w1[..., None]
-    covs = W0 * W0 * Saa + W1 * W1 * Sbb + W0 * W1 * (Sab + np.swapaxes(Sab, -1, -2))
+def _weights(body, k):
+    """``(base (n, 2), W (n, k), n_vertices)``: the checked points of a body
+    (:func:`body_points`) as ``base + W d`` (``d (k, 2)`` the collision points' deviations).
+    With an outline, :data:`OUTLINE_POINTS` points inside each edge follow its vertices."""
+    base, a, b, lam, outline = body
+    n = len(base)
+    W = np.zeros((n, k))
+    W[np.arange(n), a] += 1.0 - lam
+    W[np.arange(n), b] += lam
+    if not outline:
+        return base, W, n
+    nxt = np.roll(np.arange(n), -1)
+    s = (np.arange(1, OUTLINE_POINTS + 1) / (OUTLINE_POINTS + 1))[:, None, None]
+    Wi = ((1.0 - s) * W[None] + s * W[nxt][None]).reshape(-1, k)
+    bi = ((1.0 - s) * base[None] + s * base[nxt][None]).reshape(-1, 2)
+    return np.concatenate([base, bi]), np.concatenate([W, Wi]), n
+
+
+def _mix(col, W, base, mu, S):
+    """Means ``(..., n, 2)`` and covariances ``(..., n, 2, 2)`` of the points
+    ``base + W d`` for mean deviations ``mu (..., ≥p)`` and covariances ``S (..., ≥p, ≥p)``."""
+    Sp = S[..., col[:, None, :, None], col[None, :, None, :]]  # (..., k, k, 2, 2)
+    pts = base + np.einsum("rk,...kd->...rd", W, mu[..., col])
+    covs = np.einsum("ri,rj,...ijab->...rab", W, W, Sp)
     return pts, covs
 
 
@@ -311,12 +327,15 @@ def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
         return None
     if len({bd[2].tobytes() + bd[3].tobytes() for bd in bodies}) != 1:
         return None
-    _, a, b, lam, outline = bodies[0]
-    base = np.stack([bd[0] for bd in bodies])  # (T, n, 2)
+    outline = bodies[0][4]
+    k = len(col)
+    dense = [_weights(bd, k) for bd in bodies]
+    W, nv = dense[0][1], dense[0][2]
+    base = np.stack([d[0] for d in dense])  # (T, n, 2)
     E = [_edges(ps) for ps in polys]
     starts = np.stack([e[0] for e in E])[:, None]  # (T, 1, E, 2)
     ends = np.stack([e[1] for e in E])[:, None]
-    pts, covs = _mix(col, a, b, lam, base, mean[1:, :p], cov[1:])
+    pts, covs = _mix(col, W, base, mean[1:, :p], cov[1:])
     ok = np.linalg.eigvalsh(covs).min(axis=-1) > 1e-24
     covs = np.where(ok[..., None, None], covs, np.eye(2))
     c, inside = sigma_distances(starts, ends, pts, covs)
@@ -325,7 +344,7 @@ def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
     free = np.where(np.isinf(cmin), 1.0, -np.expm1(-0.5 * np.minimum(cmin, 1e150) ** 2))
     hit = inside.any(axis=1)
     if outline:
-        hit |= np.array([_outline_meets(polys[t], pts[t]) for t in range(T)])
+        hit |= np.array([_outline_meets(polys[t], pts[t, :nv]) for t in range(T)])
     return np.where(hit, 0.0, free)
 
 
@@ -359,9 +378,11 @@ def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed
             continue
         idx = np.flatnonzero(alive)
         live = xi[idx]
-        base, a, b, lam, outline = body_points(sim, plan, t + 1, col)
-        w0, w1 = (1.0 - lam)[:, None], lam[:, None]
-        body = base + w0 * live[:, col[a]] + w1 * live[:, col[b]]  # (m, nb, 2)
+        bd = body_points(sim, plan, t + 1, col)
+        outline = bd[4]
+        base, W, nv = _weights(bd, len(col))
+        base, W = base[:nv], W[:nv]  # the edges themselves are tested below
+        body = base + np.einsum("rk,mkd->mrd", W, live[:, col])  # (m, nb, 2)
         m, nb = body.shape[:2]
         hit = np.asarray(env.contains(body.reshape(-1, 2)), dtype=bool).reshape(m, nb).any(axis=1)
         if outline:
@@ -477,19 +498,20 @@ def lqgmp(
             mean[t + 1], cov[t + 1] = mu, S
             continue
         env = polygon_environment(polys)
-        base, a, b, lam, outline = body_points(sim, plan, t + 1, col)
-        pts, covs = _mix(col, a, b, lam, base, mu[:p], S)  # (n, 2), (n, 2, 2)
-        if bool(env.contains(pts).any()) or (outline and _outline_meets(polys, pts)):
+        bd = body_points(sim, plan, t + 1, col)
+        outline = bd[4]
+        base, W, nv = _weights(bd, len(col))
+        pts, covs = _mix(col, W, base, mu[:p], S)  # (n, 2), (n, 2, 2)
+        if bool(env.contains(pts).any()) or (outline and _outline_meets(polys, pts[:nv])):
             free[t] = 0.0
             mean[t + 1], cov[t + 1] = mu, S
             continue
         if truncating:
             p_t = 0.0
             for j in range(len(pts)):
-                ia, ib, lj = col[a[j]], col[b[j]], lam[j]
                 sl = slice(j, j + 1)
                 # this point under the truncations so far
-                pj, Sp = _mix(col, a[sl], b[sl], lam[sl], base[sl], mu[:p], S)
+                pj, Sp = _mix(col, W[sl], base[sl], mu[:p], S)
                 pj, Sp = pj[0], Sp[0]
                 if np.linalg.eigvalsh(Sp).min() <= 1e-24:
                     continue  # a deterministic point outside every obstacle: no risk
@@ -498,8 +520,8 @@ def lqgmp(
                 p_t += float(fr.bound_terms.sum())
                 for nrm, off in zip(fr.normals, fr.offsets):
                     c = np.zeros(2 * p)
-                    c[ia] += (1.0 - lj) * nrm
-                    c[ib] += lj * nrm
+                    for i in np.flatnonzero(W[j]):
+                        c[col[i]] += W[j, i] * nrm
                     mu, S = _truncate(mu, S, c, off - float(nrm @ base[j]))
             free[t] = 1.0 - min(1.0, p_t)
         else:

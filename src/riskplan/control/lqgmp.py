@@ -18,7 +18,11 @@ and ``Σ_{t+1} = F_t Σ_t F_tᵀ + G_t diag(M_t, N_t) G_tᵀ``, ``Σ_0 = diag(P0
 starts at the plan). Control clipping is ignored (a linear model).
 
 The true state at ``t`` is ``x_t ~ N(x*_t + μ_t[:p], Σ_t[:p, :p])``. Collision is checked for
-the 2-D points of ``x`` named by :func:`point_indices` against the *deformed* obstacles of
+the 2-D points of ``x`` named by :func:`point_indices` (or, when the simulator declares
+``collision_outline``, for the body's closed outline whose vertices move with interpolated
+deviations of those points, :func:`body_points`: vertices plus :data:`OUTLINE_POINTS`
+points inside each edge for sigma and truncation, a mean outline meeting an obstacle
+giving 0; vertices and edges of every sampled outline for sampling) against the *deformed* obstacles of
 the plan's stored state ``y*_t`` (``sim.obstacles(y*_t)``), with the 2-D collision API
 (:func:`riskplan.collision.free_region`, the Patil 2012 construction):
 

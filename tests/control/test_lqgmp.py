@@ -414,3 +414,15 @@ def test_outline_sampling_matches_closed_loop_segment_collisions():
     assert mc.low - 0.024 <= res.p_success <= mc.high + 0.024, (res.p_success, mc.low, mc.high)
     sig = lqgmp(sim, plan, ctrl, method="sigma", n_goal_samples=10)
     assert sig.p_success < res.p_success  # sigma stays conservative on the outline too
+
+
+def test_outline_sigma_vectorised_equals_loop(monkeypatch):
+    import importlib
+
+    mod = importlib.import_module("riskplan.control.lqgmp")
+    sim, plan, ctrl = _two_point(3, square(0.5, 0.05 + 0.01, 0.05), 0.01, True)
+    fast = lqgmp(sim, plan, ctrl, n_goal_samples=10)
+    monkeypatch.setattr(mod, "_sigma_free", lambda *a: None)
+    loop = lqgmp(sim, plan, ctrl, n_goal_samples=10)
+    assert np.all((fast.p_free_steps > 0) & (fast.p_free_steps < 1))
+    np.testing.assert_allclose(loop.p_free_steps, fast.p_free_steps, **TOL["float64_accumulated"])

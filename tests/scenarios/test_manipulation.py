@@ -153,7 +153,11 @@ def test_collision_outline_interpolates_the_sensed_points(manip, tol):
     # edge is exactly their interpolation (x = 0 edge: the points at y ~ 0.86 ... 0.01)
     ref = manip.mesh_data(s.n_elements).mesh.nodes[manip.mesh_data(s.n_elements).loop]
     P = manip.config.boundary_points()
-    on_left = (np.abs(ref[:, 0]) < 1e-12) & (ref[:, 1] < P[6, 1]) & (ref[:, 1] > P[9, 1])
+    on_left = (
+        (np.abs(ref[:, 0]) < tol["float64_abs"]["atol"])
+        & (ref[:, 1] < P[6, 1])
+        & (ref[:, 1] > P[9, 1])
+    )
     assert on_left.sum() >= 3
     interp = (1 - lam[on_left, None]) * P[a[on_left]] + lam[on_left, None] * P[b[on_left]]
     np.testing.assert_allclose(interp, ref[on_left], **tol["float64_ref"])

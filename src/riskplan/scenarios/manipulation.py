@@ -271,14 +271,10 @@ class ManipulationScenario(FEMScenario):
         cov.setflags(write=False)
         self.sensing_cov = cov
         # where the 2-D points of x are (LQG-MP, riskplan.control.lqgmp): collision is
-        # judged on the sensed boundary points, the goal on the target
+        # judged on the deformed outline moving with the sensed boundary points
+        # (collision_outline), the goal on the target
         self.collision_point_indices = tuple((2 + 2 * i, 3 + 2 * i) for i in range(cfg.n_boundary))
         self.goal_point_indices = (0, 1)
-        # the outline between consecutive sensed points, as straight edges: the points are
-        # ~0.28 apart on the default object, wider than the obstacle (0.14), so the points
-        # alone would call an outline wrapped round the obstacle free. The chain is open:
-        # the part through the fixed edge (its ends and neighbours barely move) is not checked
-        self.collision_segments = tuple((i, i + 1) for i in range(cfg.n_boundary - 1))
 
     @property
     def state_scale(self) -> np.ndarray:

@@ -336,3 +336,93 @@ def test_sampling_matches_closed_loop_of_the_linear_system(rng):
     # union bound on the per-step ellipse factors: a rigorous lower bound of P(no collision)
     assert 1.0 - np.sum(1.0 - sig.p_free_steps) <= smp.p_collision_free
     assert sig.p_success < mc.low, (sig.p_success, mc.low)
+
+
+class _TwoPointBody(LinearToy):
+    """x = (P0, P1): a rigid-free 'body' whose edge P0 → P1 is part of it; collision of the
+    true simulator = the segment meets an obstacle (the points alone are not the body)."""
+
+    collision_point_indices = ((0, 1), (2, 3))
+
+    def in_collision(self, state):
+        from riskplan.geometry2d import segments_intersect
+
+        ring = np.array([state.x[:2], state.x[2:]])
+        return any(
+            bool(segments_intersect(ring[:1], ring[1:], o, np.roll(o, -1, axis=0)).any())
+            for o in self._obstacles
+        )
+
+
+def _two_point(T, obstacle, sigma_w, with_outline):
+    sim = _TwoPointBody(
+        np.eye(4),
+        np.eye(4),
+        H=np.eye(4),
+        sensing_std=0.005,
+        x0=np.array([0.0, 0.0, 1.0, 0.0]),
+        obstacles=[obstacle],
+        goal=square(0.0, 0.0, 10.0),
+        distribution=ActuationNoise(cov=tuple(map(tuple, sigma_w**2 * np.eye(4)))),
+    )
+    if with_outline:
+        # the body is the segment P0 P1: its two end points, each moving with its own point
+        sim.collision_outline = lambda state: (
+            np.array([state.x[:2], state.x[2:]]),
+            np.array([0, 1]),
+            np.array([0, 1]),
+            np.zeros(2),
+        )
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), np.zeros((T, 4)))
+    Sw = sigma_w**2 * np.eye(4)
+    lin = Linearization(
+        A=np.broadcast_to(np.eye(4), (T, 4, 4)),
+        B=np.broadcast_to(np.eye(4), (T, 4, 4)),
+        M=np.broadcast_to(Sw, (T, 4, 4)),
+        H=np.broadcast_to(np.eye(4), (T, 4, 4)),
+        N=np.broadcast_to(sim.sensing_cov, (T, 4, 4)),
+        rank=np.full(T, 4),
+    )
+    return sim, plan, lqg_controller(lin)
+
+
+def test_edge_through_an_obstacle_is_not_free():
+    # two points 0.45 (45 sd) either side of a thin obstacle: the points alone are safe,
+    # the edge between them crosses it
+    wall = square(0.5, 0.0, 0.05)
+    for with_outline in (False, True):
+        sim, plan, ctrl = _two_point(3, wall, 0.01, with_outline)
+        for m in ("sigma", "truncation", "sampling"):
+            r = lqgmp(sim, plan, ctrl, method=m, n_goal_samples=500, seed=0)
+            if with_outline:
+                assert r.p_collision_free == 0.0 and r.p_success == 0.0, (m, r.p_success)
+            else:  # what the points alone say (the defect the outline removes)
+                assert r.p_collision_free > 0.99, (m, r.p_collision_free)
+    mc = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=20, seed=0)
+    assert mc.successes == 0
+
+
+def test_outline_sampling_matches_closed_loop_segment_collisions():
+    # an obstacle just above the edge's middle: P(collision) is intermediate, and only the
+    # edge can touch it (the points stay ~0.4 away)
+    T = 3
+    sim, plan, ctrl = _two_point(T, square(0.5, 0.05 + 0.01, 0.05), 0.01, True)
+    res = lqgmp(sim, plan, ctrl, method="sampling", n_goal_samples=4000, seed=1)
+    mc = monte_carlo_success(sim, plan, ctrl, sim.distribution, n=600, seed=2)
+    assert 0.1 < res.p_success < 0.9, res.p_success
+    # the sampling estimate's own error is <= 0.5/sqrt(4000) ~ 0.008: widen by 3 of it
+    assert mc.low - 0.024 <= res.p_success <= mc.high + 0.024, (res.p_success, mc.low, mc.high)
+    sig = lqgmp(sim, plan, ctrl, method="sigma", n_goal_samples=10)
+    assert sig.p_success < res.p_success  # sigma stays conservative on the outline too
+
+
+def test_outline_sigma_vectorised_equals_loop(monkeypatch):
+    import importlib
+
+    mod = importlib.import_module("riskplan.control.lqgmp")
+    sim, plan, ctrl = _two_point(3, square(0.5, 0.05 + 0.01, 0.05), 0.01, True)
+    fast = lqgmp(sim, plan, ctrl, n_goal_samples=10)
+    monkeypatch.setattr(mod, "_sigma_free", lambda *a: None)
+    loop = lqgmp(sim, plan, ctrl, n_goal_samples=10)
+    assert np.all((fast.p_free_steps > 0) & (fast.p_free_steps < 1))
+    np.testing.assert_allclose(loop.p_free_steps, fast.p_free_steps, **TOL["float64_accumulated"])

@@ -140,6 +140,29 @@ def test_collision_with_obstacle(manip):
     assert not manip.in_collision(manip.step(s0, np.array([-1.5, -1.5, 0, 0, 0, 0])))
 
 
+def test_collision_outline_interpolates_the_sensed_points(manip, tol):
+    # LQG-MP's body (riskplan.control.lqgmp.body_points): the deformed boundary, each node
+    # moving with an arc-length interpolation of the two sensed points around it
+    s = manip.step(manip.initial_state(), np.array([-1.0, 0.5, -1.0, -0.5, 0.3, 0.5]))
+    pts, a, b, lam = manip.collision_outline(s)
+    np.testing.assert_array_equal(pts, manip.outline(s))
+    assert np.all((lam >= 0) & (lam <= 1)) and np.all((b == a) | (b == a + 1))
+    nb = manip.config.n_boundary
+    assert a.min() == 0 and b.max() == nb - 1 and len(pts) > nb
+    # in the reference configuration a node between two sensed points on one straight
+    # edge is exactly their interpolation (x = 0 edge: the points at y ~ 0.86 ... 0.01)
+    ref = manip.mesh_data(s.n_elements).mesh.nodes[manip.mesh_data(s.n_elements).loop]
+    P = manip.config.boundary_points()
+    on_left = (
+        (np.abs(ref[:, 0]) < tol["float64_abs"]["atol"])
+        & (ref[:, 1] < P[6, 1])
+        & (ref[:, 1] > P[9, 1])
+    )
+    assert on_left.sum() >= 3
+    interp = (1 - lam[on_left, None]) * P[a[on_left]] + lam[on_left, None] * P[b[on_left]]
+    np.testing.assert_allclose(interp, ref[on_left], **tol["float64_ref"])
+
+
 def test_mesh_sizes_and_actuation_noise(manip):
     p = SimParams(n_elements=60, actuation_cov=manip.actuation_cov(), actuation_seed=9)
     states = rollout(manip, manip.initial_state(p), _controls(manip, 4, 4), p)

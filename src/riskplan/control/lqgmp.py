@@ -18,7 +18,11 @@ and ``Σ_{t+1} = F_t Σ_t F_tᵀ + G_t diag(M_t, N_t) G_tᵀ``, ``Σ_0 = diag(P0
 starts at the plan). Control clipping is ignored (a linear model).
 
 The true state at ``t`` is ``x_t ~ N(x*_t + μ_t[:p], Σ_t[:p, :p])``. Collision is checked for
-the 2-D points of ``x`` named by :func:`point_indices` against the *deformed* obstacles of
+the 2-D points of ``x`` named by :func:`point_indices` (or, when the simulator declares
+``collision_outline``, for the body's closed outline whose vertices move with interpolated
+deviations of those points, :func:`body_points`: vertices plus :data:`OUTLINE_POINTS`
+points inside each edge for sigma and truncation, a mean outline meeting an obstacle
+giving 0; vertices and edges of every sampled outline for sampling) against the *deformed* obstacles of
 the plan's stored state ``y*_t`` (``sim.obstacles(y*_t)``), with the 2-D collision API
 (:func:`riskplan.collision.free_region`, the Patil 2012 construction):
 
@@ -78,6 +82,7 @@ from riskplan.errors import InvalidInputError
 __all__ = [
     "METHODS",
     "LQGMPResult",
+    "body_points",
     "joint_covariances",
     "lqgmp",
     "point_indices",
@@ -85,6 +90,10 @@ __all__ = [
 ]
 
 METHODS = ("sigma", "truncation", "sampling")
+
+#: points checked inside each edge of a declared outline by the sigma and truncation methods
+#: (evenly spaced; the sampling method tests the edges themselves)
+OUTLINE_POINTS = 8
 
 # whitened variance below which a direction counts as deterministic (no truncation, no bound)
 _TINY = 1e-300
@@ -126,6 +135,87 @@ def point_indices(sim) -> tuple[np.ndarray, np.ndarray]:
             f"collision_point_indices/goal_point_indices: expected indices in [0, {p})"
         )
     return col, goal
+
+
+def body_points(sim, plan: NominalPlan, t: int, col: np.ndarray):
+    """The 2-D points of the body that LQG-MP checks at step ``t``:
+    ``(base (n, 2), a (n,), b (n,), lam (n,), outline)``.
+
+    Point ``r`` is ``base[r] + (1 − lam[r]) d_a + lam[r] d_b`` where ``d_i`` is the
+    deviation ``x_t − x*_t`` of the collision point ``col[i]`` (``a``, ``b`` rows of
+    ``collision_point_indices``). By default these are the collision points themselves
+    (``base = x*_t[col]``, ``a = b``, ``lam = 0``, ``outline = False``). A simulator whose body
+    is wider than its reduced state's points declares ``collision_outline(state)`` returning
+    ``(base, a, b, lam)`` for the nominal state ``y*_t``: the points of the body's outline
+    (a closed polygon, in order), each moving with an interpolation of the deviations of
+    two collision points. Then ``outline = True`` and LQG-MP also checks the outline's edges
+    (module docstring). The manipulation declares its deformed boundary nodes, each
+    interpolated by arc length between the two sensed points around it: its 12 sensed
+    points are about 0.28 apart, wider than the obstacle (0.14), so the points alone call
+    an outline that wraps round an obstacle corner free.
+    """
+    hook = getattr(sim, "collision_outline", None)
+    k = len(col)
+    if hook is None:
+        idx = np.arange(k)
+        return plan.reduced[t][col], idx, idx, np.zeros(k), False
+    base, a, b, lam = hook(plan.states[t])
+    base = np.asarray(base, dtype=np.float64)
+    a = np.asarray(a, dtype=np.int64)
+    b = np.asarray(b, dtype=np.int64)
+    lam = np.asarray(lam, dtype=np.float64)
+    n = len(base)
+    if (
+        base.shape != (n, 2)
+        or n < 2
+        or a.shape != (n,)
+        or b.shape != (n,)
+        or lam.shape != (n,)
+        or not np.all(np.isfinite(base))
+        or a.min() < 0
+        or b.min() < 0
+        or max(a.max(), b.max()) >= k
+        or not np.all((lam >= 0) & (lam <= 1))
+    ):
+        raise InvalidInputError(
+            "collision_outline: expected (points (n, 2) finite, a (n,), b (n,) in "
+            f"[0, {k}), lam (n,) in [0, 1]) with n >= 2"
+        )
+    return base, a, b, lam, True
+
+
+def _weights(body, k):
+    """``(base (n, 2), W (n, k), n_vertices)``: the checked points of a body
+    (:func:`body_points`) as ``base + W d`` (``d (k, 2)`` the collision points' deviations).
+    With an outline, :data:`OUTLINE_POINTS` points inside each edge follow its vertices."""
+    base, a, b, lam, outline = body
+    n = len(base)
+    W = np.zeros((n, k))
+    W[np.arange(n), a] += 1.0 - lam
+    W[np.arange(n), b] += lam
+    if not outline:
+        return base, W, n
+    nxt = np.roll(np.arange(n), -1)
+    s = (np.arange(1, OUTLINE_POINTS + 1) / (OUTLINE_POINTS + 1))[:, None, None]
+    Wi = ((1.0 - s) * W[None] + s * W[nxt][None]).reshape(-1, k)
+    bi = ((1.0 - s) * base[None] + s * base[nxt][None]).reshape(-1, 2)
+    return np.concatenate([base, bi]), np.concatenate([W, Wi]), n
+
+
+def _mix(col, W, base, mu, S):
+    """Means ``(..., n, 2)`` and covariances ``(..., n, 2, 2)`` of the points
+    ``base + W d`` for mean deviations ``mu (..., ≥p)`` and covariances ``S (..., ≥p, ≥p)``."""
+    Sp = S[..., col[:, None, :, None], col[None, :, None, :]]  # (..., k, k, 2, 2)
+    pts = base + np.einsum("rk,...kd->...rd", W, mu[..., col])
+    covs = np.einsum("ri,rj,...ijab->...rab", W, W, Sp)
+    return pts, covs
+
+
+def _outline_meets(polys, ring) -> bool:
+    """True if the closed polygon ``ring (n, 2)`` meets one of ``polys``."""
+    from riskplan import geometry2d as geo
+
+    return any(geo.polygons_intersect(ring, q) for q in polys)
 
 
 def polygon_environment(polygons):
@@ -228,7 +318,7 @@ def sigma_distances(starts, ends, points, covs) -> tuple[np.ndarray, np.ndarray]
 
 def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
     """Vectorised ``method="sigma"`` over all steps and points; None if the obstacle
-    polygons change size along the plan (then the per-step loop runs)."""
+    polygons or the body points change size along the plan (then the per-step loop runs)."""
     T = plan.n_steps
     polys = [sim.obstacles(plan.states[t + 1]) for t in range(T)]
     if not len(polys[0]):
@@ -236,18 +326,30 @@ def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
     sizes = {tuple(len(q) for q in ps) for ps in polys}
     if len(sizes) != 1:
         return None
+    bodies = [body_points(sim, plan, t + 1, col) for t in range(T)]
+    if len({len(bd[0]) for bd in bodies}) != 1 or len({bd[1].tobytes() for bd in bodies}) != 1:
+        return None
+    if len({bd[2].tobytes() + bd[3].tobytes() for bd in bodies}) != 1:
+        return None
+    outline = bodies[0][4]
+    k = len(col)
+    dense = [_weights(bd, k) for bd in bodies]
+    W, nv = dense[0][1], dense[0][2]
+    base = np.stack([d[0] for d in dense])  # (T, n, 2)
     E = [_edges(ps) for ps in polys]
     starts = np.stack([e[0] for e in E])[:, None]  # (T, 1, E, 2)
     ends = np.stack([e[1] for e in E])[:, None]
-    pts = plan.reduced[1:][:, col] + mean[1:][:, col]  # (T, k, 2)
-    covs = cov[1:][:, col[:, :, None], col[:, None, :]]  # (T, k, 2, 2)
+    pts, covs = _mix(col, W, base, mean[1:, :p], cov[1:])
     ok = np.linalg.eigvalsh(covs).min(axis=-1) > 1e-24
     covs = np.where(ok[..., None, None], covs, np.eye(2))
     c, inside = sigma_distances(starts, ends, pts, covs)
     c = np.where(ok, c, np.inf)
     cmin = c.min(axis=1)
     free = np.where(np.isinf(cmin), 1.0, -np.expm1(-0.5 * np.minimum(cmin, 1e150) ** 2))
-    return np.where(inside.any(axis=1), 0.0, free)
+    hit = inside.any(axis=1)
+    if outline:
+        hit |= np.array([_outline_meets(polys[t], pts[t, :nv]) for t in range(T)])
+    return np.where(hit, 0.0, free)
 
 
 def _factor(S: np.ndarray) -> np.ndarray:
@@ -258,6 +360,8 @@ def _factor(S: np.ndarray) -> np.ndarray:
 
 def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed) -> LQGMPResult:
     """``method="sampling"``: ``n`` joint trajectories of the linear-Gaussian recursion."""
+    from riskplan import geometry2d as geo
+
     gen = as_generator(seed)
     T = plan.n_steps
     p = plan.reduced.shape[1]
@@ -278,9 +382,20 @@ def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed
             continue
         idx = np.flatnonzero(alive)
         live = xi[idx]
-        hit = np.zeros(idx.size, dtype=bool)
-        for ij in col:
-            hit |= np.asarray(env.contains(plan.reduced[t + 1][ij] + live[:, ij]), dtype=bool)
+        bd = body_points(sim, plan, t + 1, col)
+        outline = bd[4]
+        base, W, nv = _weights(bd, len(col))
+        base, W = base[:nv], W[:nv]  # the edges themselves are tested below
+        body = base + np.einsum("rk,mkd->mrd", W, live[:, col])  # (m, nb, 2)
+        m, nb = body.shape[:2]
+        hit = np.asarray(env.contains(body.reshape(-1, 2)), dtype=bool).reshape(m, nb).any(axis=1)
+        if outline:
+            s0, s1 = _edges(polys)
+            nxt = np.roll(body, -1, axis=1)
+            edge_hit = geo.segments_hit(
+                np.concatenate([s0, s1], axis=1), body.reshape(-1, 2), nxt.reshape(-1, 2)
+            )
+            hit |= edge_hit.reshape(m, nb).any(axis=1)
         alive[idx[hit]] = False
         free[t] = float(alive.sum()) / before
     goal_env = polygon_environment([sim.goal(plan.states[T])])
@@ -361,7 +476,18 @@ def lqgmp(
             cov[t + 1] = S = 0.5 * (S + S.T)
         if method == "sampling":
             return _sampled(
-                sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n_goal_samples, seed
+                sim,
+                plan,
+                controller,
+                F,
+                Qn,
+                dm,
+                mean,
+                cov,
+                col,
+                goal_idx,
+                n_goal_samples,
+                seed,
             )
         fast = _sigma_free(sim, plan, mean, cov, col, p)
         S = cov[0].copy()
@@ -376,30 +502,36 @@ def lqgmp(
             mean[t + 1], cov[t + 1] = mu, S
             continue
         env = polygon_environment(polys)
-        xs = plan.reduced[t + 1]
-        pts = xs[col] + mu[col]  # (k, 2)
-        if bool(env.contains(pts).any()):
+        bd = body_points(sim, plan, t + 1, col)
+        outline = bd[4]
+        base, W, nv = _weights(bd, len(col))
+        pts, covs = _mix(col, W, base, mu[:p], S)  # (n, 2), (n, 2, 2)
+        if bool(env.contains(pts).any()) or (outline and _outline_meets(polys, pts[:nv])):
             free[t] = 0.0
             mean[t + 1], cov[t + 1] = mu, S
             continue
         if truncating:
             p_t = 0.0
-            for j, ij in enumerate(col):
-                Sp = S[np.ix_(ij, ij)]
+            for j in range(len(pts)):
+                sl = slice(j, j + 1)
+                # this point under the truncations so far
+                pj, Sp = _mix(col, W[sl], base[sl], mu[:p], S)
+                pj, Sp = pj[0], Sp[0]
                 if np.linalg.eigvalsh(Sp).min() <= 1e-24:
                     continue  # a deterministic point outside every obstacle: no risk
                 U = precision_cholesky_from_covariance(Sp)
-                fr = free_region(pts[j], U, env, cutoff=cutoff)
+                fr = free_region(pj, U, env, cutoff=cutoff)
                 p_t += float(fr.bound_terms.sum())
-                for a, off in zip(fr.normals, fr.offsets):
+                for nrm, off in zip(fr.normals, fr.offsets):
                     c = np.zeros(2 * p)
-                    c[ij] = a
-                    mu, S = _truncate(mu, S, c, off - float(a @ xs[ij]))
+                    for i in np.flatnonzero(W[j]):
+                        c[col[i]] += W[j, i] * nrm
+                    mu, S = _truncate(mu, S, c, off - float(nrm @ base[j]))
             free[t] = 1.0 - min(1.0, p_t)
         else:
             c_min = math.inf
-            for j, ij in enumerate(col):
-                Sp = S[np.ix_(ij, ij)]
+            for j in range(len(pts)):
+                Sp = covs[j]
                 if np.linalg.eigvalsh(Sp).min() <= 1e-24:
                     continue
                 U = precision_cholesky_from_covariance(Sp)

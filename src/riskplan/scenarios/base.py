@@ -333,6 +333,9 @@ class Simulator(Protocol):
     against the goal; default ``(0, 1)``), ``obstacles(state)`` / ``goal(state)`` (deformed
     polygons), ``in_collision(state)`` / ``in_goal(state)``, ``state_scale (p,)`` (acceptable
     deviation of each component of x, the scale of the LQR's default Bryson weights),
+    ``collision_outline(state)`` (the body's outline in ``state`` as points that move with
+    interpolated deviations of the collision points, checked by LQG-MP instead of the bare
+    points: :func:`riskplan.control.lqgmp.body_points`),
     ``a_prior`` (``"identity"`` or ``"zero"``: what :func:`riskplan.control.linearize` assumes
     for state directions its control perturbations cannot excite — a deviation that persists,
     or one the next step forgets; default ``"identity"``), ``transfer_state(state, params)``

@@ -126,10 +126,17 @@ def test_read_table_formats(tmp_path):
     np.testing.assert_array_equal(read_table(npy, "x"), want)
 
 
+def test_read_table_reads_a_byte_order_mark(tmp_path):
+    # spreadsheet exports often start a UTF-8 file with a BOM
+    path = tmp_path / "bom.csv"
+    path.write_bytes("\ufeff0.1,0.2\n0.3,0.4\n".encode())
+    np.testing.assert_array_equal(read_table(path, "controls"), [[0.1, 0.2], [0.3, 0.4]])
+
+
 @pytest.mark.parametrize(
     "name, content, match",
     [
-        ("a.csv", "0.1,0.2\n0.3\n", "different lengths"),
+        ("a.csv", "0.1,0.2\n0.3\n", "line 2 has 1 numbers, the first row 2"),
         ("b.csv", "0.1,nan\n", "line 1 .* not a finite number"),
         ("c.csv", "v,phi\n0.1,0.2\nw,x\n", "line 3"),  # only one header line, before the data
         ("d.csv", "0.1;0.2\n", "one row per line"),

@@ -182,7 +182,7 @@ def read_table(path, name: str, *, key: str | None = None) -> np.ndarray:
         rows = arr
     else:
         try:
-            text = path.read_text(encoding="utf-8")
+            text = path.read_text(encoding="utf-8-sig")  # a spreadsheet's byte-order mark
         except UnicodeDecodeError as exc:
             raise DataFormatError(f"{name}: {path.name} is not UTF-8 text ({exc})") from exc
         if suffix == ".json":
@@ -242,4 +242,9 @@ def _text_rows(text: str, name: str, filename: str) -> list[list[float]]:
             raise DataFormatError(
                 f"{name}: {filename} line {i + 1} is not a row of comma-separated numbers ({exc})"
             ) from None
+        if len(rows[-1]) != len(rows[0]):
+            raise DataFormatError(
+                f"{name}: {filename} line {i + 1} has {len(rows[-1])} numbers, the first row "
+                f"{len(rows[0])}"
+            )
     return rows

@@ -279,5 +279,11 @@ def test_mesh_draws_enter_M_through_transfer_state(tol):
     draws = [SimParams(n_elements=n) for n in (60, 400)]
     with_mesh = linearize(sim, plan, draws, seed=1)
     without = linearize(NoTransfer(sim), plan, draws, seed=1)
-    assert np.all(np.trace(with_mesh.M, axis1=1, axis2=2) > 0)
     np.testing.assert_array_equal(without.M, 0.0)
+    # oracle: M_t from rollouts of the plan's controls on each draw's own mesh
+    runs = [rollout(sim, sim.initial_state(d), u, d) for d in draws]
+    for t in range(plan.n_steps):
+        D = np.array([sim.reduced(r[t + 1]) for r in runs]) - plan.reduced[t + 1]
+        atol = 4 * np.abs(D).max() * tol["newton_paths"]["atol"]
+        np.testing.assert_allclose(with_mesh.M[t], D.T @ D / len(draws), rtol=0.0, atol=atol)
+        assert np.trace(with_mesh.M[t]) > 0

@@ -290,12 +290,36 @@ def test_goal_steer_control_is_a_candidate_towards_the_goal_only():
     for i, u in enumerate(plan.controls[::2]):
         np.testing.assert_array_equal(u, steered[i])
     assert robot.in_goal(plan.states[-1])
-    # without steering the candidates are random: another tree from the same seed
-    other = grow_tree(
-        robot, seed=0, space=space, options=dataclasses.replace(opts, goal_steer=False)
-    )
     assert len(calls) == tree.iterations
-    assert not other.plans or other.plans[0].controls.tobytes() != plan.controls.tobytes()
+    # without goal_steer the space's rule is never asked
+    calls.clear()
+    grow_tree(robot, seed=0, space=space, options=dataclasses.replace(opts, goal_steer=False))
+    assert calls == []
+
+
+def test_steered_control_keeps_the_rate_limit():
+    """A steered control obeys the space's max_control_change like the random candidates:
+    every control of every edge differs from its parent's by at most the limit."""
+    robot = PointRobot(goal=(0.5, 0.3), goal_radius=0.05, obstacle=((0.8, 0.8), (0.9, 0.9)))
+    d = np.array([0.1, 0.1])
+    space = dataclasses.replace(
+        robot.planning_space,
+        max_control_change=d,
+        steer=lambda x, t, b, k: np.clip((t - x) / (0.1 * k), b[:, 0], b[:, 1]),
+    )
+    opts = RRTOptions(n_controls=1, goal_bias=1.0, max_iterations=20, plans_per_tree=1)
+    tree = grow_tree(robot, seed=0, space=space, options=opts)
+    assert tree.size > 3
+    # every edge's control from its end points (x += 0.1 u per step); the root's is the midpoint
+    k = space.steps_per_extension
+    u = np.zeros_like(tree.nodes)
+    for i in range(1, tree.size):
+        u[i] = (tree.nodes[i] - tree.nodes[tree.parents[i]]) / (0.1 * k)
+    for i in range(1, tree.size):
+        step = np.abs(u[i] - u[tree.parents[i]])
+        assert np.all(step <= d + TOL["float64_ref"]["atol"]), (i, step)
+    # the steering asked for full speed: the limit is what held it back
+    assert np.isclose(np.abs(u[1] - u[0]).max(), d.max())
 
 
 def test_steer_must_be_callable():

@@ -426,9 +426,16 @@ def linearize(
         A[0], rank[0] = (np.eye(p) if a_prior == "identity" else np.zeros((p, p))), 0
     deficient = [t for t in range(1, T) if rank[t] < p]
     if deficient:
+        low = int(rank[deficient].min())
+        q = B.shape[2]
+        why = (
+            f"expected: one control step excites at most q = {q} directions"
+            if low >= min(q, n_a_runs)
+            else f"fewer than the q = {q} directions a control step can excite: are controls at their bounds?"
+        )
         warnings.warn(
             f"linearize: X_t has rank < p = {p} at steps {deficient[:10]}{' ...' if len(deficient) > 10 else ''} "
-            f"(lowest rank {int(rank[deficient].min())}); A_t keeps the '{a_prior}' prior on the unexcited directions",
+            f"(lowest rank {low}; {why}); A_t keeps the '{a_prior}' prior on the unexcited directions",
             RankDeficiencyWarning,
             stacklevel=2,
         )

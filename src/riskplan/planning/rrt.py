@@ -534,6 +534,9 @@ def grow_tree(
             u_st = steer(X[near].copy(), x_s, bounds, k_steps)
             if u_st is not None:
                 u_st = as_array(u_st, "space.steer(...)", shape=(q,))
+                if space.max_control_change is not None:  # the space's rate limit holds too
+                    d = space.max_control_change
+                    u_st = np.clip(u_st, node_control[near] - d, node_control[near] + d)
                 U[-1] = np.clip(u_st, bounds[:, 0], bounds[:, 1])
         ends = np.full((n_ctrl, space.dim), np.nan)
         traj: list = [None] * n_ctrl

@@ -16,6 +16,18 @@ from tests.conftest import TOL
 from .toy import FORCE, LinearToy, toy_system
 
 
+class Without:
+    """``inner`` with the optional simulator hooks ``names`` hidden (as if not implemented)."""
+
+    def __init__(self, inner, *names):
+        self._inner, self._names = inner, names
+
+    def __getattr__(self, name):
+        if name in self.__dict__.get("_names", ()):
+            raise AttributeError(name)
+        return getattr(self.__dict__["_inner"], name)
+
+
 def _plan(sim, rng, T=5):
     u = rng.uniform(-1, 1, (T, sim.control_dim))
     return NominalPlan.from_rollout(sim, sim.initial_state(), u)
@@ -207,16 +219,7 @@ def test_manipulation_k_2q_and_2p_and_solver_start(tol):
     np.testing.assert_array_equal(lins[2 * q].B, lins[2 * p].B)
     np.testing.assert_array_equal(lins[2 * q].M, lins[2 * p].M)
 
-    class PlainSteps:  # the same simulator without step_near
-        def __init__(self, inner):
-            self._inner = inner
-
-        def __getattr__(self, name):
-            if name == "step_near":
-                raise AttributeError(name)
-            return getattr(self._inner, name)
-
-    plain = linearize(PlainSteps(sim), plan, draws, n_a_runs=2 * q, seed=1)
+    plain = linearize(Without(sim, "step_near"), plan, draws, n_a_runs=2 * q, seed=1)
     # each run's equilibrium within the solver's tolerance (newton_paths) of the other's:
     # B's forward differences then differ by at most 2 · 1e-8 / ε
     eps = 1e-3 * 2 * sim.config.f_max
@@ -267,18 +270,9 @@ def test_mesh_draws_enter_M_through_transfer_state(tol):
         sim.reduced(sim.step(moved, u[1], other)), sim.reduced(direct), **tol["newton_paths"]
     )
 
-    class NoTransfer:
-        def __init__(self, inner):
-            self._inner = inner
-
-        def __getattr__(self, name):
-            if name == "transfer_state":
-                raise AttributeError(name)
-            return getattr(self._inner, name)
-
     draws = [SimParams(n_elements=n) for n in (60, 400)]
     with_mesh = linearize(sim, plan, draws, seed=1)
-    without = linearize(NoTransfer(sim), plan, draws, seed=1)
+    without = linearize(Without(sim, "transfer_state"), plan, draws, seed=1)
     np.testing.assert_array_equal(without.M, 0.0)
     # oracle: M_t from rollouts of the plan's controls on each draw's own mesh
     runs = [rollout(sim, sim.initial_state(d), u, d) for d in draws]

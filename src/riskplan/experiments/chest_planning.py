@@ -87,23 +87,11 @@ def trajectories_plotly(
     mixture along each trajectory (``{name: (T, m)}``), mapped by ``to_world (N, 3) -> (N, 3)``."""
     import plotly.graph_objects as go
 
+    from riskplan.scenarios.chest import mesh_traces
+
     env = environment_world
-    data = []
-    for k, name in enumerate(env.names):
-        V, F = env.obstacle(k)
-        data.append(
-            go.Mesh3d(
-                x=V[:, 0],
-                y=V[:, 1],
-                z=V[:, 2],
-                i=F[:, 0],
-                j=F[:, 1],
-                k=F[:, 2],
-                name=name,
-                opacity=0.12 if name == "body_wall" else 0.5,
-                showlegend=True,
-            )
-        )
+    meshes = {name: env.obstacle(k) for k, name in enumerate(env.names)}
+    data = mesh_traces(meshes, wall_opacity=0.12, opacity=0.5)
     colours = {"nominal": "royalblue", "optimised": "darkorange", "least_risk": "seagreen"}
     for name, traj in trajectories.items():
         gm = model.predict(np.asarray(traj))

@@ -362,26 +362,32 @@ def chest_figure(chest: Chest, robot_points=None):
     return fig
 
 
+def mesh_traces(meshes, wall_opacity: float = 0.15, opacity: float = 0.6) -> list:
+    """Plotly ``Mesh3d`` traces of ``meshes`` (``{name: (vertices (n, 3), faces (m, 3))}``);
+    the translucent ``body_wall`` gets ``wall_opacity`` so the organs inside stay visible."""
+    import plotly.graph_objects as go
+
+    return [
+        go.Mesh3d(
+            x=V[:, 0],
+            y=V[:, 1],
+            z=V[:, 2],
+            i=F[:, 0],
+            j=F[:, 1],
+            k=F[:, 2],
+            name=name,
+            opacity=wall_opacity if name == "body_wall" else opacity,
+            showlegend=True,
+        )
+        for name, (V, F) in meshes.items()
+    ]
+
+
 def chest_plotly(chest: Chest, robot_points=None):
     """Interactive plotly figure of all obstacles (and optional robot points, world frame)."""
     import plotly.graph_objects as go
 
-    data = []
-    for name, m in chest.meshes.items():
-        V, F = m.vertices, m.faces
-        data.append(
-            go.Mesh3d(
-                x=V[:, 0],
-                y=V[:, 1],
-                z=V[:, 2],
-                i=F[:, 0],
-                j=F[:, 1],
-                k=F[:, 2],
-                name=name,
-                opacity=0.15 if name == "body_wall" else 0.6,
-                showlegend=True,
-            )
-        )
+    data = mesh_traces({name: (m.vertices, m.faces) for name, m in chest.meshes.items()})
     p = chest.insertion_point
     data.append(
         go.Scatter3d(

@@ -82,6 +82,14 @@ def _raise_first(a, bad, limit, name: str, op: str) -> None:
         )
 
 
+def check_count(value, name: str, minimum: int = 0) -> int:
+    """``value`` as an ``int`` if it is an integer (not a bool) ``>= minimum``, else
+    :class:`InvalidInputError` naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+        raise InvalidInputError(f"{name}: expected an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
 def as_generator(seed) -> np.random.Generator:
     """``seed`` may be ``None``, an int, a ``SeedSequence`` or a ``Generator``.
 

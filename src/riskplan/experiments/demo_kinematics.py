@@ -35,6 +35,21 @@ MAIN_TIME_BUDGET = 25.0
 SWEEP_TIME_BUDGET = 8.0
 
 
+def evaluate_for_report(model, test_data, seed: int):
+    """The Fig. 5 evaluation the demo and ``reproduce`` report: 2048 samples and 1024 Chamfer
+    points per configuration, on at most 60 test configurations."""
+    from riskplan.kinematics.evaluation import evaluate
+
+    return evaluate(
+        model,
+        test_data,
+        n_samples=2048,
+        chamfer_points=1024,
+        seed=seed,
+        max_configs=min(test_data.n_configs, 60),
+    )
+
+
 def _data_paths(ctx: dict, seed: int, workers) -> tuple[Path, Path] | None:
     train, test = ctx.get("train_path"), ctx.get("test_path")
     if train and test and Path(train).is_file() and Path(test).is_file():
@@ -59,7 +74,6 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     import torch
 
     from riskplan.kinematics.data import read_point_clouds
-    from riskplan.kinematics.evaluation import evaluate
     from riskplan.kinematics.plotting import (
         fig_nll_vs_components,
         fig_samples_vs_truth,
@@ -91,14 +105,7 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     t_train = time.perf_counter() - t0
     ctx["model"], ctx["model_path"] = model, model_path
 
-    ev = evaluate(
-        model,
-        test_data,
-        n_samples=2048,
-        chamfer_points=1024,
-        seed=seed,
-        max_configs=min(test_data.n_configs, 60),
-    )
+    ev = evaluate_for_report(model, test_data, seed)
     Report.text(
         sec,
         f"Trained a K={model.n_components} MDN on {train_data.n_configs} configurations x {train_data.n_points} points "

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from riskplan.errors import InvalidInputError
-from riskplan.experiments.demo_kinematics import TRAIN as DEMO_TRAIN
+from riskplan.experiments.demo_kinematics import TRAIN, evaluate_for_report
 
 log = logging.getLogger(__name__)
 
@@ -78,9 +78,6 @@ MDN_SCALES = {
         bo_iterations=50,
     ),
 }
-
-#: Training settings: the demo's (network size, batches, learning-rate schedule, early stop).
-TRAIN = DEMO_TRAIN
 
 
 def _timing(model, robot, n: int, seed: int) -> dict:
@@ -135,7 +132,6 @@ def run_mdn(
 
     from riskplan.datasets import generate_splits
     from riskplan.kinematics.data import read_point_clouds
-    from riskplan.kinematics.evaluation import evaluate
     from riskplan.kinematics.plotting import (
         fig_nll_vs_components,
         fig_samples_vs_truth,
@@ -166,14 +162,7 @@ def run_mdn(
     cfg = TrainConfig(n_components=scale.n_components, epochs=scale.epochs, seed=seed, **TRAIN)
     res = train(train_data, cfg, out=out / "model", max_seconds=scale.train_seconds or None)
     model = res.model
-    ev = evaluate(
-        model,
-        test_data,
-        n_samples=2048,
-        chamfer_points=1024,
-        seed=seed,
-        max_configs=min(test_data.n_configs, 60),
-    )
+    ev = evaluate_for_report(model, test_data, seed)
     import matplotlib
 
     matplotlib.use("Agg")

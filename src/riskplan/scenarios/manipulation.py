@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from riskplan import geometry2d as geo
-from riskplan._validation import as_array, as_generator
+from riskplan._validation import as_array, as_generator, check_count
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
 from riskplan.scenarios.base import (
     FEMScenario,
@@ -477,8 +477,7 @@ class ManipulationScenario(FEMScenario):
 
     def random_controls(self, n_steps: int, seed=None) -> np.ndarray:
         """``(n_steps, 6)`` smooth random forces: a random walk clipped to ``±0.6 f_max``."""
-        if isinstance(n_steps, bool) or not isinstance(n_steps, int | np.integer) or n_steps < 0:
-            raise InvalidInputError(f"n_steps: expected an integer >= 0, got {n_steps!r}")
+        n_steps = check_count(n_steps, "n_steps")
         gen = as_generator(seed)
         steps = gen.normal(0.0, 0.15 * self.config.f_max, (n_steps, self.control_dim))
         return np.clip(np.cumsum(steps, axis=0), -0.6 * self.config.f_max, 0.6 * self.config.f_max)

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from riskplan import geometry2d as geo
-from riskplan._validation import as_array
+from riskplan._validation import as_array, as_generator, check_count
 from riskplan.errors import InvalidInputError
 from riskplan.scenarios.base import (
     FEMScenario,
@@ -451,10 +451,7 @@ class NeedleScenario(FEMScenario):
     def random_controls(self, n_steps: int, seed=None) -> np.ndarray:
         """``(n_steps, 2)`` random controls: speed in ``[0.6, 1] v_max``, steering a
         smoothed random walk inside the bounds (for demos and tests)."""
-        from riskplan._validation import as_generator
-
-        if isinstance(n_steps, bool) or not isinstance(n_steps, int | np.integer) or n_steps < 0:
-            raise InvalidInputError(f"n_steps: expected an integer >= 0, got {n_steps!r}")
+        n_steps = check_count(n_steps, "n_steps")
         gen = as_generator(seed)
         v = gen.uniform(0.6, 1.0, n_steps) * self.config.v_max
         phi = np.clip(np.cumsum(gen.normal(0.0, 0.25, n_steps)) * 0.5, -1, 1) * self.config.phi_max

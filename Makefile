@@ -18,6 +18,8 @@ $(STAMP): pyproject.toml
 	# torch first, exactly this version: it is the one CPU build pip finds without CUDA packages.
 	$(PY) -m pip install -q torch==2.13.0
 	$(PY) -m pip install -q -e ".[all,ray,test]"
+	# compile the numba kernels once, here, so that no command or test compiles them
+	$(VENV)/bin/riskplan warm
 	touch $(STAMP)
 
 install: $(STAMP)

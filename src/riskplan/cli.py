@@ -109,6 +109,15 @@ def demo(
 
 
 @app.command()
+def warm() -> None:
+    """Compile the numba kernels into their on-disk cache (``make install`` runs this once)."""
+    from riskplan.kernels import warm as warm_kernels
+
+    times = warm_kernels(progress=lambda area: typer.echo(f"warming {area} kernels"))
+    typer.echo(", ".join(f"{a} {t:.1f} s" for a, t in times.items()))
+
+
+@app.command()
 def bench(
     area: str = typer.Argument(..., help=f"One of: {', '.join(BENCH_AREAS)}."),
     json_out: bool = typer.Option(False, "--json", help="Print one JSON object of figures."),

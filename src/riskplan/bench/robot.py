@@ -9,6 +9,12 @@ Figures (median wall time, paper robot, no gravity, 5 mm step):
 * ``displacement_single_ms`` — ``robot.solve_displacements`` for one configuration.
 * ``dataset_small_s`` — wall time of generating the ``small`` preset (train and test splits,
   ``riskplan.datasets.generate_splits``), serial backend (None with ``include_dataset=False``).
+* ``first_call_cold_s`` — a fresh Python process, from its start to its first
+  ``solve_displacements``, with an empty numba cache (``NUMBA_CACHE_DIR`` set to a new folder):
+  what the first command costs when nothing is compiled (None with ``include_first_call=False``).
+* ``first_call_installed_s`` — the same process with the package's own kernel cache, as
+  ``make install`` leaves it (it runs ``riskplan warm``); ``kernel_cache_complete`` says
+  whether every kernel was cached when it was measured (:func:`riskplan.kernels.cold`).
 
 Anchors: the compiled C++ peer (Kuntz-Lab/interactive-rate-tendons) takes 66-73 us per
 configuration on a 2-core machine; the MDN paper quotes 0.39 ms for its Cosserat model.
@@ -16,6 +22,9 @@ configuration on a 2-core machine; the MDN paper quotes 0.39 ms for its Cosserat
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -37,7 +46,40 @@ def _dataset_small_s() -> float:
         return time.perf_counter() - t0
 
 
-def run(quick: bool = False, *, include_dataset: bool = True) -> dict:
+_FIRST_CALL = (
+    "from riskplan.robots import load_robot; "
+    "load_robot('paper').solve_displacements([0.01, 0.0, 0.0, 0.0])"
+)
+
+
+def _first_call_s(cache_dir: str | None) -> float:
+    """Wall time of a fresh process that imports riskplan and solves one shape."""
+    env = dict(os.environ)
+    if cache_dir is not None:
+        env["NUMBA_CACHE_DIR"] = cache_dir
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-c", _FIRST_CALL], env=env, check=True)
+    return time.perf_counter() - t0
+
+
+def first_call_figures() -> dict:
+    """``first_call_cold_s``, ``first_call_installed_s`` and ``kernel_cache_complete``."""
+    from riskplan.kernels import cold
+
+    complete = not cold()
+    installed = _first_call_s(None)
+    with tempfile.TemporaryDirectory() as tmp:
+        cold_s = _first_call_s(tmp)
+    return {
+        "first_call_cold_s": cold_s,
+        "first_call_installed_s": installed,
+        "kernel_cache_complete": complete,
+    }
+
+
+def run(
+    quick: bool = False, *, include_dataset: bool = True, include_first_call: bool = True
+) -> dict:
     from riskplan.bench import median_time
     from riskplan.robots import cosserat, load_robot
     from riskplan.robots.robot import LOCAL_MAXIT, LOCAL_TOL
@@ -82,4 +124,7 @@ def run(quick: bool = False, *, include_dataset: bool = True) -> dict:
     }
     if include_dataset:
         out["dataset_small_s"] = _dataset_small_s()
+    out |= dict.fromkeys(("first_call_cold_s", "first_call_installed_s", "kernel_cache_complete"))
+    if include_first_call:
+        out |= first_call_figures()
     return out

@@ -1,0 +1,155 @@
+"""Compiled kernels: warm numba's on-disk cache once, so that no command compiles.
+
+riskplan's hot loops (the Cosserat solver in :mod:`riskplan.robots`, the collision kernels in
+:mod:`riskplan.collision._kernels`, the planar predicates in :mod:`riskplan.geometry2d`) are
+numba functions compiled with ``cache=True``: the first call in a fresh environment compiles
+them (tens of seconds of CPU for the robot solver), later processes load machine code from the
+cache beside each module (``__pycache__``, or ``NUMBA_CACHE_DIR`` when set).
+
+:func:`warm` makes those first calls on small inputs, through the same public functions the
+commands use, so every specialisation the commands need is compiled and cached.
+``make install`` (and so ``make demo`` and ``make test``) runs it once, as ``riskplan warm``;
+afterwards a fresh process reaches its first robot shape in about a second.
+:func:`kernel_dispatchers` lists every kernel and :func:`cold` the ones with nothing cached yet (a test checks that :func:`warm` leaves none).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+__all__ = ["KERNEL_MODULES", "cold", "kernel_dispatchers", "warm"]
+
+#: the modules that define numba kernels (``@njit(cache=True)``)
+KERNEL_MODULES = (
+    "riskplan.robots.linalg6",
+    "riskplan.robots.rod_tables",
+    "riskplan.robots.strains",
+    "riskplan.robots.tendon_lengths",
+    "riskplan.robots.integration",
+    "riskplan.robots.displacement",
+    "riskplan.robots.robot",
+    "riskplan.robots.batch_kernel",
+    "riskplan.collision._kernels",
+    "riskplan.geometry2d",
+)
+
+
+def kernel_dispatchers() -> dict[str, object]:
+    """``{"module.function": dispatcher}`` for every numba kernel in :data:`KERNEL_MODULES`
+    (imports them)."""
+    from numba.core.registry import CPUDispatcher
+
+    out = {}
+    for name in KERNEL_MODULES:
+        mod = importlib.import_module(name)
+        for attr, obj in vars(mod).items():
+            if isinstance(obj, CPUDispatcher) and obj.py_func.__module__ == name:
+                out[f"{name}.{attr}"] = obj
+    return out
+
+
+def cold() -> list[str]:
+    """Kernels with nothing in numba's cache yet (no index file where this process looks),
+    except those numba inlines into their callers (``inline="always"``: never cached alone)."""
+    return sorted(
+        name
+        for name, d in kernel_dispatchers().items()
+        if d.targetoptions.get("inline") != "always"
+        and not os.path.exists(d._cache._cache_file._index_path)
+    )
+
+
+def _robot() -> None:
+    from riskplan.robots import load_robot
+    from riskplan.robots.batch_kernel import solve_tensions_batch
+    from riskplan.robots.robot import BATCH_KERNEL_MIN
+
+    robot = load_robot("paper")
+    tau = np.linspace(0.0, 1.0, BATCH_KERNEL_MIN * robot.n_tendons).reshape(BATCH_KERNEL_MIN, -1)
+    robot.solve_tensions(tau[1])  # one configuration: the scalar kernel
+    robot.solve_tensions(tau[:2])  # a small batch: the per-configuration loop
+    robot.solve_tensions(tau)  # the SIMD batch kernel, serial
+    solve_tensions_batch(robot, tau, parallel=True)  # and its threaded variant
+    robot.with_gravity(True).solve_tensions(tau[1])  # shooting under external load
+    d = np.zeros((2, robot.n_tendons))
+    d[1, 0] = 0.01
+    robot.solve_displacements(d[1])
+    robot.solve_displacements(d)
+
+
+def _collision() -> None:
+    from riskplan.collision import Environment, probability_of_collision
+    from riskplan.collision._kernels import closest_points_brute
+    from riskplan.gaussian_mixture import NumpyMixture
+
+    # a unit cube as two obstacles' worth of triangles is enough to compile every kernel
+    v = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
+    f = np.array(
+        [[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+         [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]]
+    )  # fmt: skip
+    env = Environment(v, f)
+    gm = NumpyMixture.from_covariances([1.0], [[0.5, 0.5, 2.0]], [np.eye(3) * 0.04])
+    probability_of_collision(gm, env)
+    pts = np.array([[0.5, 0.5, 0.5], [2.0, 2.0, 2.0]])
+    env.contains(pts)
+    env.closest_points(pts)
+    env.segments_collide(pts[:1], pts[1:])
+    closest_points_brute(v, f, pts)
+
+
+def _geometry2d() -> None:
+    from riskplan import geometry2d as geo
+
+    sq = geo.rectangle_polygon([0.0, 0.0], [1.0, 1.0])
+    other = geo.rectangle_polygon([0.5, 0.5], [2.0, 2.0])
+    pts = np.array([[0.5, 0.5], [3.0, 3.0]])
+    geo.points_in_polygon(pts, sq)
+    geo.winding_numbers(geo.polygon_segments(sq), pts)
+    geo.segments_intersect(pts[:1], pts[1:], sq[:1], sq[2:3])
+    geo.segments_hit(geo.polygon_segments(sq), pts[:1], pts[1:])
+    geo.polygons_intersect(sq, other)
+    geo.check_simple_polygon(sq, "warm")
+    geo.point_polygon_distance(pts, sq)
+    nodes = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    tris = np.array([[0, 1, 2], [1, 3, 2]])
+    grid = geo.TriangleLocator(nodes, tris)
+    grid.locate(pts[0])
+    grid.locate_points(pts)
+
+
+#: (area, function) in the order :func:`warm` runs them
+AREAS: tuple[tuple[str, Callable[[], None]], ...] = (
+    ("robot", _robot),
+    ("collision", _collision),
+    ("geometry2d", _geometry2d),
+)
+
+
+def warm(progress: Callable[[str], None] | None = None) -> dict[str, float]:
+    """Compile (or load from the cache) every kernel the commands use.
+
+    Parameters
+    ----------
+    progress:
+        Called with each area's name before it runs (``"robot"``, ``"collision"``,
+        ``"geometry2d"``).
+
+    Returns
+    -------
+    dict
+        Wall time in seconds per area: compile time on a cold cache, load time on a warm one.
+    """
+    times = {}
+    for area, fn in AREAS:
+        if progress is not None:
+            progress(area)
+        t0 = time.perf_counter()
+        fn()
+        times[area] = time.perf_counter() - t0
+    return times

@@ -10,14 +10,14 @@ export OPENBLAS_NUM_THREADS ?= 1
 export RAY_AUTH_MODE ?= disabled
 export MPLBACKEND ?= Agg
 
-.PHONY: install demo test lint bench clean browser
+.PHONY: install demo test lint bench clean browser docs
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || python3 -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	# torch first, exactly this version: it is the one CPU build pip finds without CUDA packages.
 	$(PY) -m pip install -q torch==2.13.0
-	$(PY) -m pip install -q -e ".[all,ray,test]"
+	$(PY) -m pip install -q -e ".[all,ray,test,docs]"
 	# compile the numba kernels once, here, so that no command or test compiles them
 	$(VENV)/bin/riskplan warm
 	touch $(STAMP)
@@ -45,6 +45,11 @@ browser:
 		(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver) >/dev/null 2>&1 \
 			|| echo "could not install chromium: the browser tests will skip"; \
 	else echo "chromium not installed and not root: the browser tests will skip"; fi
+
+# The API reference from the docstrings (Sphinx + numpydoc), warnings as errors, no network.
+docs: $(STAMP)
+	$(VENV)/bin/sphinx-build -q -W --keep-going -b html docs/api build/api
+	@echo "open build/api/index.html"
 
 bench: $(STAMP)
 	for a in robot kinematics collision tissue; do $(VENV)/bin/riskplan bench $$a --json; done

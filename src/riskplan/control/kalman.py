@@ -8,7 +8,7 @@ Model (deviations from the nominal plan, paper eq. 4), ``t = 0 .. T-1``:
 
 so step ``t`` of the arrays holds the dynamics from ``t`` to ``t + 1`` and the measurement
 taken at ``t + 1`` (there is no measurement of ``x_0``; its estimate has covariance ``P0``).
-Filter, starting from ``x̂_0`` with covariance ``P_0``:
+Filter, starting from ``x̂_0`` with covariance ``P_0``::
 
     process update      x̂⁻_{t+1} = A_t x̂_t + B_t u_t,          P⁻_{t+1} = A_t P_t A_tᵀ + M_t
     gain                K_t = P⁻_{t+1} H_tᵀ (H_t P⁻_{t+1} H_tᵀ + N_t)⁻¹

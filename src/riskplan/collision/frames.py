@@ -223,14 +223,17 @@ def mesh_base_pose(path, base_pose: BasePose | None = None) -> BasePose:
                 f"{side}: 'frame' must be one of {FRAMES}, got {meta.get('frame')!r}"
             )
         if frame == "world":
-            pose = BasePose.from_json(side)
+            # a world-frame sidecar may leave the pose open (a mesh from a segmentation volume
+            # before the robot is placed): then the pose must be given
+            pose = BasePose.from_json(side) if "base_pose" not in meta else None
         else:
             pose = BasePose.identity()
     elif pose is not None and meta is not None and "base_position" in meta:
         log.info("%s: using the given base pose instead of the one in %s", path, side.name)
     if pose is None:
         raise InvalidInputError(
-            f"{path}: the mesh's frame is unknown (no sidecar {side.name}); give the robot base pose in the "
+            f"{path}: the robot base pose in the mesh's frame is unknown "
+            f"({'the sidecar ' + side.name + ' names none' if meta is not None else 'no sidecar ' + side.name}); give the robot base pose in the "
             "mesh's frame (--base-pose x,y,z,qw,qx,qy,qz or a JSON file), or --base-pose identity if the mesh "
             "is already in the robot base frame"
         )

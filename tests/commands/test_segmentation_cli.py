@@ -10,6 +10,7 @@ from typer.testing import CliRunner
 
 from riskplan.cli import app
 from riskplan.collision import Environment
+from tests.conftest import TOL
 
 sitk = pytest.importorskip("SimpleITK")
 pytest.importorskip("skimage")
@@ -65,3 +66,32 @@ def test_from_segmentation_bad_input_writes_nothing(labels_mm, tmp_path, args, m
     assert message in str(res.exception)
     assert str(labels_mm) in str(res.exception)
     assert not out.exists() and not (tmp_path / "bad.stl.json").exists()
+
+
+def test_from_segmentation_with_a_ros_order_base_pose(labels_mm, tmp_path):
+    """--base-pose in ROS quaternion order: the sidecar stores the pose, and the mesh loads in
+    the robot base frame as x_base = R^T (x - p)."""
+    from scipy.spatial.transform import Rotation
+
+    from riskplan.collision.frames import load_environment
+
+    out = tmp_path / "organ.stl"
+    q_xyzw = Rotation.from_euler("z", 90, degrees=True).as_quat()  # (x, y, z, w)
+    pose = "xyzw:-0.08,0.03,0.02," + ",".join(repr(float(v)) for v in q_xyzw)
+    res = runner.invoke(
+        app,
+        ["env", "from-segmentation", str(labels_mm), "--label", "2", "--scale", "0.001",
+         "--faces", "600", "--base-pose", pose, "--out", str(out)],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    meta = json.loads((tmp_path / "organ.stl.json").read_text())
+    assert meta["frame"] == "world"
+    np.testing.assert_allclose(
+        meta["base_rotation"], [[0, -1, 0], [1, 0, 0], [0, 0, 1]], **TOL["orthonormality"]
+    )
+    world = Environment.load(out)
+    base = load_environment(out)
+    R = np.array(meta["base_rotation"])
+    np.testing.assert_allclose(
+        base.vertices, (world.vertices - [-0.08, 0.03, 0.02]) @ R, **TOL["float64_exact"]
+    )

@@ -191,3 +191,16 @@ def test_cli_export_import(generated, tmp_path):
         ],
     )
     assert res.exit_code != 0 and "exists" in str(res.exception)
+
+
+def test_an_imported_set_trains(generated, tmp_path):
+    """Imported clouds go straight into `riskplan train` (two epochs of a small network)."""
+    man = export_dataset(generated, tmp_path / "x", fmt="ply")
+    data = import_dataset(man, tmp_path / "imported.h5")
+    res = runner.invoke(
+        app,
+        ["train", "--data", str(data), "--out", str(tmp_path / "model"), "--epochs", "2",
+         "-k", "2", "--hidden", "8", "--head-hidden", "", "--val-fraction", "0.2"],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "model" / "model.json").is_file()

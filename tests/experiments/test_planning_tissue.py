@@ -63,6 +63,10 @@ def test_write_outputs(tmp_path, near_needle, needle_result):  # noqa: F811
     exp = read_tissue_plan(files["selected_controls.csv"], files["selected_gains.npz"])
     assert np.array_equal(exp["controls"], sel.plan.controls)
     assert np.array_equal(exp["gains"]["L"], sel.controller.L)
+    # per-step risk: the per-step factors of LQG-MP's P(no collision) multiply to it
+    np.testing.assert_allclose(
+        np.prod(1.0 - exp["risk"]), sel.result.p_collision_free, **TOL["float64_exact"]
+    )
     np.testing.assert_allclose(
         exp["time_s"], near_needle.config.tau * np.arange(sel.plan.n_steps), **TOL["float64_exact"]
     )

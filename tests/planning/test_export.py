@@ -125,8 +125,10 @@ def test_tissue_controls_and_gains_round_trip(tmp_path, rng, dt):
         P=rng.normal(size=(T, p, p)),
         lin=lin,
     )
-    files = write_tissue_plan(tmp_path, plan, ctl, dt=dt)
+    risk = rng.uniform(0, 0.1, size=T)
+    files = write_tissue_plan(tmp_path, plan, ctl, dt=dt, risk=risk)
     back = read_tissue_plan(files["controls"], files["gains"])
+    np.testing.assert_array_equal(back["risk"], risk)
     np.testing.assert_array_equal(back["controls"], plan.controls)
     np.testing.assert_array_equal(back["reduced"], plan.reduced[:-1])
     if dt is None:

@@ -245,7 +245,9 @@ def write_outputs(
 
     # the needle steps by tau seconds; the manipulation scenario is quasi-static (no duration)
     dt = getattr(getattr(sim, "config", None), "tau", None)
-    exported = write_tissue_plan(out, sel.plan, c, dt=dt, stem="selected")
+    free = getattr(sel.result, "p_free_steps", None)
+    risk = None if free is None else 1.0 - np.asarray(free, dtype=np.float64)
+    exported = write_tissue_plan(out, sel.plan, c, dt=dt, risk=risk, stem="selected")
     files["selected_controls.csv"] = exported["controls"]
     files["selected_gains.npz"] = exported["gains"]
     best = sel.score(sel.best)

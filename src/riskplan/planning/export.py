@@ -15,7 +15,8 @@ and :func:`write_tendon_plan` writes it as
 :func:`read_tendon_plan` reads any of the three back (the YAML's times to the nanosecond).
 
 Tissue plans (simulator RRT + LQG): :func:`write_tissue_plan` writes the nominal controls as
-CSV (``step, time_s, u0.., x0..``; no ``time_s`` for quasi-static scenarios; with the nominal reduced state ``x*_t`` the control is applied
+CSV (``step, time_s, u0.., x0.., risk``; no ``time_s`` for quasi-static scenarios; risk is
+LQG-MP's per-step collision probability; with the nominal reduced state ``x*_t`` the control is applied
 in) and the LQG gains in NPZ (``L (T, q, p)`` feedback ``u_t = u*_t + L_t (x̂_t - x*_t)``,
 ``K (T, p, n)`` Kalman gains, and ``A, B, M, H, N``); :func:`read_tissue_plan` reads them back.
 
@@ -310,14 +311,16 @@ def _read_yaml(path: Path) -> TendonPlan:
 
 # ------------------------------------------------------------------------------ tissue
 def write_tissue_plan(
-    out_dir, plan, controller, *, dt: float | None, stem: str = "selected"
+    out_dir, plan, controller, *, dt: float | None, risk=None, stem: str = "selected"
 ) -> dict:
     """Write a tissue plan's nominal controls as ``<stem>_controls.csv`` and its LQG gains as
     ``<stem>_gains.npz`` (see the module doc); returns ``{kind: path}``.
 
     ``plan``: :class:`~riskplan.control.plan.NominalPlan`; ``controller``: its LQG controller
     (``L``, ``K``, ``P`` and ``lin`` with ``A, B, M, H, N``); ``dt``: the simulator's time step
-    (s), or ``None`` for a quasi-static scenario (its steps have no duration: no time column).
+    (s), or ``None`` for a quasi-static scenario (its steps have no duration: no time column);
+    ``risk (T,)``: per-step risk, written as a last column ``risk`` (LQG-MP: ``1 - p_free_steps``,
+    the probability of a collision on arriving at step ``t + 1`` having been free until ``t``).
     """
     from riskplan.io import atomic_path, write_text_atomic
 
@@ -327,15 +330,21 @@ def write_tissue_plan(
     X = np.asarray(plan.reduced, dtype=np.float64)
     T, q = U.shape
     p = X.shape[1]
+    if risk is not None:
+        risk = np.asarray(risk, dtype=np.float64)
+        if risk.shape != (T,) or not np.all(np.isfinite(risk)):
+            raise InvalidInputError(f"risk: expected {T} finite numbers, got shape {risk.shape}")
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     timed = ["time_s"] if dt is not None else []
-    w.writerow(["step", *timed] + [f"u{j}" for j in range(q)] + [f"x{j}" for j in range(p)])
+    risky = ["risk"] if risk is not None else []
+    w.writerow(["step", *timed] + [f"u{j}" for j in range(q)] + [f"x{j}" for j in range(p)] + risky)
     for t in range(T):
         w.writerow(
             [t, *([repr(t * float(dt))] if dt is not None else [])]
             + [repr(float(v)) for v in U[t]]
             + [repr(float(v)) for v in X[t]]
+            + ([repr(float(risk[t]))] if risk is not None else [])
         )
     out = Path(out_dir)
     files = {"controls": out / f"{stem}_controls.csv", "gains": out / f"{stem}_gains.npz"}
@@ -361,18 +370,21 @@ def write_tissue_plan(
 
 def read_tissue_plan(controls_csv, gains_npz=None) -> dict:
     """Read :func:`write_tissue_plan`'s files: ``{"time_s" (or None), "controls" (T, q),
-    "reduced" (T, p)}`` from the CSV, plus every gain array of the NPZ when given."""
+    "reduced" (T, p), "risk" (T,) (or None)}`` from the CSV, plus every gain array of the NPZ
+    when given."""
     path = Path(controls_csv)
     with open(path, newline="", encoding="utf-8") as fh:
         rows = list(csv.reader(fh))
     header = rows[0]
     body = np.array(rows[1:], dtype=np.float64).reshape(len(rows) - 1, len(header))
     q = sum(h.startswith("u") for h in header)
+    p = sum(h.startswith("x") for h in header)
     k = 2 if "time_s" in header else 1
     out = {
         "time_s": body[:, 1] if k == 2 else None,
         "controls": body[:, k : k + q],
-        "reduced": body[:, k + q :],
+        "reduced": body[:, k + q : k + q + p],
+        "risk": body[:, -1] if header[-1] == "risk" else None,
     }
     if gains_npz is not None:
         with np.load(gains_npz, allow_pickle=False) as z:

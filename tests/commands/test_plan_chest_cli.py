@@ -82,6 +82,9 @@ def test_plan_chest_tiny(tiny, tmp_path):
         "trace.png",
         "chest.html",
         "plan.json",
+        "nominal_plan.csv",
+        "nominal_plan.json",
+        "optimised_plan.joint_trajectory.yaml",
     ):
         assert (out / f).stat().st_size > 0, f
     plan = json.loads((out / "plan.json").read_text())
@@ -106,6 +109,12 @@ def test_plan_chest_tiny(tiny, tmp_path):
     assert csv[1].startswith("index,d1_m,d2_m,bound_eq9") and len(csv) == 2 + len(
         opt["configurations"]
     )
+    # the controller's files carry the same trajectory (a model without a robot: no tensions)
+    from riskplan.planning.export import read_tendon_plan
+
+    exported = read_tendon_plan(out / "optimised_plan.json")
+    assert exported.displacements.tolist() == opt["configurations"]
+    assert exported.risk.tolist() == opt["bounds_eq9"] and exported.tensions is None
     # --resume after completion returns the same optimised trajectory
     res2 = _run(args + ["--resume"])
     assert res2.exit_code == 0, res2.output

@@ -16,6 +16,7 @@ from riskplan.experiments.planning_tissue import (
 )
 from riskplan.planning.select import HonestyRow, select_plan
 from riskplan.scenarios.uncertainty import get_case
+from tests.conftest import TOL
 from tests.planning.conftest import SMALL_MESH, near_needle, needle_result  # noqa: F401 (fixtures)
 
 
@@ -34,7 +35,7 @@ def test_write_outputs(tmp_path, near_needle, needle_result):  # noqa: F811
     sel = select_plan(
         near_needle, plans[:2], case, n_samples=2, n_goal_samples=200, seed=0, backend="serial"
     )
-    row = HonestyRow(index=sel.best, rank=0, p_lqgmp=0.9, p_mc=0.8, low=0.7, high=0.95, n=100)
+    row = HonestyRow(index=sel.best, rank=1, p_lqgmp=0.9, p_mc=0.8, low=0.7, high=0.95, n=100)
     res = TissuePlanningResult(
         "needle", "actuation", 0, near_needle, plans[:2], trees, sel, [row], {"rrt": 1.0}
     )
@@ -44,6 +45,8 @@ def test_write_outputs(tmp_path, near_needle, needle_result):  # noqa: F811
         "candidates.json",
         "selected.npz",
         "selected.json",
+        "selected_controls.csv",
+        "selected_gains.npz",
         "candidates.png",
         "execution.gif",
     }
@@ -53,6 +56,20 @@ def test_write_outputs(tmp_path, near_needle, needle_result):  # noqa: F811
     meta = json.loads(files["selected.json"].read_text())
     assert meta["index"] == sel.best and meta["p_success"] == sel.score(sel.best).p_success
     assert meta["honesty_check"][0]["inside"] is True
+    # ranks are counted the same way in the table and the file: 1 = the selected plan
+    assert meta["honesty_check"][0]["rank"] == summary_rows(res)[0][1] == 1
+    from riskplan.planning.export import read_tissue_plan
+
+    exp = read_tissue_plan(files["selected_controls.csv"], files["selected_gains.npz"])
+    assert np.array_equal(exp["controls"], sel.plan.controls)
+    assert np.array_equal(exp["gains"]["L"], sel.controller.L)
+    # per-step risk: the per-step factors of LQG-MP's P(no collision) multiply to it
+    np.testing.assert_allclose(
+        np.prod(1.0 - exp["risk"]), sel.result.p_collision_free, **TOL["float64_exact"]
+    )
+    np.testing.assert_allclose(
+        exp["time_s"], near_needle.config.tau * np.arange(sel.plan.n_steps), **TOL["float64_exact"]
+    )
     cand = json.loads(files["candidates.json"].read_text())
     assert [s["index"] for s in cand["scores"]] == [0, 1] and len(cand["trees"]) == len(trees)
     with Image.open(files["execution.gif"]) as im:

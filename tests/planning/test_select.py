@@ -113,7 +113,7 @@ def test_honesty_check_rows(near_needle, needle_result, selection):
     rows = honesty_check(
         near_needle, plans, selection, CASE, others=1, n=60, seed=0, backend="serial"
     )
-    assert [r.rank for r in rows] == [0, len(plans) - 1]
+    assert [r.rank for r in rows] == [1, len(plans)]  # 1-based: 1 is the selected plan
     assert rows[0].index == selection.best
     for r in rows:
         assert r.n == 60 and 0.0 <= r.low <= r.p_mc <= r.high <= 1.0

@@ -9,7 +9,8 @@ so the same scene gives the same answer by every path (built-in chest, file + si
 explicit pose).
 
 Pose convention: ``x_world = position + rotation @ x_base``; the columns of ``rotation`` are
-the base x, y, z axes in the world frame. Quaternions are ``(w, x, y, z)``.
+the base x, y, z axes in the world frame. Quaternions are ``(w, x, y, z)`` (scalar first);
+on the command line ``xyzw:`` marks the ROS order ``(x, y, z, w)`` (:meth:`BasePose.parse`).
 """
 
 from __future__ import annotations
@@ -102,8 +103,14 @@ class BasePose:
     @classmethod
     def parse(cls, text: str) -> BasePose:
         """Command-line form: ``identity`` (the mesh is already in the base frame), a JSON file
-        (see :meth:`from_json`), or ``x,y,z,qw,qx,qy,qz`` (metres, quaternion; seven numbers
-        by the convention of :mod:`riskplan.parsing`)."""
+        (see :meth:`from_json`), or seven numbers (metres, quaternion; by the convention of
+        :mod:`riskplan.parsing`) in one of two explicit orders:
+
+        * ``x,y,z,qw,qx,qy,qz`` or ``wxyz:x,y,z,qw,qx,qy,qz`` -- scalar first (riskplan's order,
+          also Eigen's constructor and SciPy's ``scalar_first=True``);
+        * ``xyzw:x,y,z,qx,qy,qz,qw`` -- scalar last (ROS ``geometry_msgs/Quaternion``, SciPy's
+          default).
+        """
         if not isinstance(text, str) or not text.strip():
             raise InvalidInputError(
                 f"base pose: expected 'identity', a JSON file or x,y,z,qw,qx,qy,qz, got {text!r}"
@@ -111,8 +118,11 @@ class BasePose:
         text = text.strip()
         if text.lower() == "identity":
             return cls.identity()
+        order = None
+        if text[:5].lower() in ("wxyz:", "xyzw:"):
+            order, text = text[:4].lower(), text[5:].strip()
         p = Path(text)
-        if p.suffix.lower() == ".json" or p.is_file():
+        if order is None and (p.suffix.lower() == ".json" or p.is_file()):
             return cls.from_json(p)
         from riskplan.parsing import parse_numbers
 
@@ -120,9 +130,11 @@ class BasePose:
             v = parse_numbers(text, "base pose", count=7)
         except InvalidInputError as exc:
             raise InvalidInputError(
-                f"{exc}; expected 'identity', a JSON file or x,y,z,qw,qx,qy,qz"
+                f"{exc}; expected 'identity', a JSON file, x,y,z,qw,qx,qy,qz (or wxyz:...) or "
+                "xyzw:x,y,z,qx,qy,qz,qw (ROS order)"
             ) from None
-        return cls.from_quaternion(v[:3], v[3:])
+        q = v[3:] if order != "xyzw" else np.r_[v[6], v[3:6]]
+        return cls.from_quaternion(v[:3], q)
 
     def to_world(self, points_base) -> np.ndarray:
         """Base-frame points ``(..., 3)`` to world: ``p + R x``."""
@@ -223,14 +235,17 @@ def mesh_base_pose(path, base_pose: BasePose | None = None) -> BasePose:
                 f"{side}: 'frame' must be one of {FRAMES}, got {meta.get('frame')!r}"
             )
         if frame == "world":
-            pose = BasePose.from_json(side)
+            # a world-frame sidecar may leave the pose open (a mesh from a segmentation volume
+            # before the robot is placed): then the pose must be given
+            pose = BasePose.from_json(side) if "base_pose" not in meta else None
         else:
             pose = BasePose.identity()
     elif pose is not None and meta is not None and "base_position" in meta:
         log.info("%s: using the given base pose instead of the one in %s", path, side.name)
     if pose is None:
         raise InvalidInputError(
-            f"{path}: the mesh's frame is unknown (no sidecar {side.name}); give the robot base pose in the "
+            f"{path}: the robot base pose in the mesh's frame is unknown "
+            f"({'the sidecar ' + side.name + ' names none' if meta is not None else 'no sidecar ' + side.name}); give the robot base pose in the "
             "mesh's frame (--base-pose x,y,z,qw,qx,qy,qz or a JSON file), or --base-pose identity if the mesh "
             "is already in the robot base frame"
         )

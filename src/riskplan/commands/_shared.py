@@ -60,7 +60,8 @@ def base_pose_option():
     return typer.Option(
         None,
         "--base-pose",
-        help="Robot base in the mesh's frame: x,y,z,qw,qx,qy,qz (m, quaternion), a JSON file "
+        help="Robot base in the mesh's frame: x,y,z,qw,qx,qy,qz (m, quaternion scalar first; "
+        "or xyzw:x,y,z,qx,qy,qz,qw in ROS order), a JSON file "
         "with base_position/base_rotation, or 'identity' (mesh already in the base frame). "
         "Overrides the sidecar.",
     )

@@ -67,6 +67,72 @@ def register(app: typer.Typer) -> None:
             chest_plotly(chest).write_html(html, include_plotlyjs="cdn")
             typer.echo(f"html: {html}")
 
+    @env_app.command("from-segmentation")
+    def env_from_segmentation(
+        volume: Path = typer.Argument(
+            ..., help="Label map: .nrrd, .nhdr, .nii, .nii.gz, .mha or .mhd."
+        ),
+        label: int = typer.Option(..., "--label", help="The label to mesh."),
+        out: Path = typer.Option(
+            None, "--out", "-o", help="Mesh file to write (default VOLUME-labelN.stl)."
+        ),
+        faces: int = typer.Option(
+            5000, "--faces", min=0, help="Triangles after decimation (0: no decimation)."
+        ),
+        scale: float = typer.Option(
+            1.0,
+            "--scale",
+            help="Physical units of the volume to metres (0.001 for millimetres).",
+        ),
+        robot: str = typer.Option(
+            "paper", help="Robot name or file whose length judges the mesh's units."
+        ),
+        base_pose: str = typer.Option(
+            None,
+            "--base-pose",
+            help="Robot base in the volume's physical frame (as for `collision --base-pose`), or "
+            "'identity'; without it the sidecar leaves the pose to the planner's --base-pose.",
+        ),
+    ) -> None:
+        """Surface mesh of one label of a segmentation volume, in the volume's physical frame.
+
+        Marching cubes (scikit-image) on the label's mask, vertices mapped by the volume's
+        spacing, origin and direction (SimpleITK, LPS), decimated (MeshLab quadric collapse, topology kept) to
+        FACES triangles; a JSON sidecar OUT.json records the source, label, frame and base pose.
+        """
+        from riskplan.collision.frames import BasePose, sidecar_path
+        from riskplan.collision.segmentation import (
+            save_segmentation_environment,
+            segmentation_mesh,
+        )
+        from riskplan.errors import InvalidInputError
+        from riskplan.io import check_output_file
+        from riskplan.robots import load_robot
+
+        if out is None:
+            stem = volume.name.split(".")[0]
+            out = volume.with_name(f"{stem}-label{label}.stl")
+        if out.suffix.lower() not in (".stl", ".obj", ".ply", ".off"):
+            raise InvalidInputError(
+                f"--out: {out.name}: expected a mesh file ending in .stl, .obj, .ply or .off"
+            )
+        check_output_file(out, "--out")
+        pose = None
+        if base_pose is not None:
+            pose = (
+                "identity" if base_pose.strip().lower() == "identity" else BasePose.parse(base_pose)
+            )
+        length = load_robot(robot).params.backbone.length
+        V, F, info = segmentation_mesh(
+            volume, label, faces=faces or None, scale=scale, robot_length=length
+        )
+        save_segmentation_environment(V, F, out, info=info, base_pose=pose)
+        typer.echo(
+            f"label {label}: {info['marching_cubes_triangles']} -> {info['triangles']} triangles, "
+            f"volume {info['marching_cubes_volume_m3']:.4g} -> {info['volume_m3']:.4g} m^3 "
+            f"-> {out} (+ {sidecar_path(out).name})"
+        )
+
     @app.command("collision")
     def collision(
         env: str = typer.Option(

@@ -3,6 +3,8 @@
 * ``riskplan dataset generate --robot paper --preset small --out data.h5 [--split train|test|both]
   [--workers N] [--backend local|ray] [--seed S] [--overwrite]``
 * ``riskplan dataset info FILE [--json]``
+* ``riskplan dataset import MANIFEST.csv --out data.h5 [--robot R] [--points N] [--scale S]``
+* ``riskplan dataset export data.h5 --out DIR [--format npy|ply|pcd|csv]``
 """
 
 from __future__ import annotations
@@ -20,7 +22,9 @@ def register(app: typer.Typer) -> None:
     from riskplan.commands._shared import add_group
 
     sub = add_group(
-        app, "dataset", "Point-cloud data sets by the MDN paper's protocol (generate, inspect)."
+        app,
+        "dataset",
+        "Point-cloud data sets by the MDN paper's protocol (generate, inspect, import, export).",
     )
 
     @sub.command("generate")
@@ -115,3 +119,58 @@ def register(app: typer.Typer) -> None:
                 )
             t.add_row(k, str(v))
         Console().print(t)
+
+    @sub.command("import")
+    def import_(
+        manifest: Path = typer.Argument(
+            ...,
+            help="CSV: config_id, start_id, file, d0..d{m-1} and/or tension0.., [start0..], [tip_x,tip_y,tip_z].",
+        ),
+        out: Path = typer.Option(Path("data.h5"), "--out", "-o", help="Data set to write (HDF5)."),
+        robot: str = typer.Option(
+            None, help="Robot name or TOML file (default: robot.toml beside the manifest)."
+        ),
+        points: int = typer.Option(
+            None, "--points", min=1, help="Keep this many points of every cloud (seeded subset)."
+        ),
+        scale: float = typer.Option(
+            1.0, "--scale", help="Cloud coordinates to metres (0.001 for millimetres)."
+        ),
+        seed: int = typer.Option(0, min=0, help="Seed of the --points subsets."),
+        overwrite: bool = typer.Option(False, help="Replace an existing output file."),
+    ) -> None:
+        """Import measured point clouds (PLY, PCD, NPY, CSV) listed in a manifest as a data set.
+
+        Every file is read and checked (finite, units, within the robot's reach, counts, targets
+        within the limits) before the output is written; train and evaluate read the result.
+        """
+        from riskplan.datasets.exchange import import_dataset
+        from riskplan.datasets.storage import load_dataset
+
+        path = import_dataset(
+            manifest,
+            out,
+            robot=robot,
+            n_points=points,
+            scale=scale,
+            seed=seed,
+            overwrite=overwrite,
+        )
+        ds = load_dataset(path)
+        typer.echo(
+            f"imported {ds.n_configs} configurations x {ds.n_starts} clouds x {ds.n_points} points -> {path}"
+        )
+
+    @sub.command("export")
+    def export(
+        file: Path = typer.Argument(..., help="Data-set HDF5 file."),
+        out: Path = typer.Option(..., "--out", "-o", help="Folder to write."),
+        fmt: str = typer.Option("npy", "--format", help="Cloud files: npy, ply, pcd or csv."),
+        overwrite: bool = typer.Option(False, help="Replace an existing manifest in OUT."),
+    ) -> None:
+        """Write a data set as manifest.csv, robot.toml, dataset.json and one cloud file per
+        configuration and start (`dataset import` reads it back bit for bit)."""
+        from riskplan.datasets.exchange import export_dataset
+
+        man = export_dataset(file, out, fmt=fmt, overwrite=overwrite)
+        typer.echo(f"exported -> {man}")

@@ -5,6 +5,9 @@ Fig. 7 trace, and an interactive 3-D view of the mixtures along the trajectories
 
 * ``nominal.json`` / ``nominal.csv`` and ``optimised.json`` / ``optimised.csv`` — tendon
   displacements per configuration with its eq.-9 bound, and the trajectory's eq.-10 bound;
+* ``<name>_plan.csv`` / ``.json`` / ``.joint_trajectory.yaml`` for both — what a controller
+  reads: time, displacements, tensions, per-step risk, and a ROS 2 JointTrajectory
+  (:mod:`riskplan.planning.export`);
 * ``trace.json`` / ``trace.png`` — the best eq.-10 bound per iteration (Fig. 7) with the
   paper's start and end values for comparison;
 * ``chest.html`` — plotly: the obstacles and samples of the predicted mixtures along the
@@ -47,6 +50,20 @@ def trajectory_csv(trajectory, bounds, bound: float) -> str:
     for i, (row, p) in enumerate(zip(traj, bounds)):
         buf.write(",".join([str(i)] + [f"{v:.9g}" for v in row] + [f"{p:.8g}"]) + "\n")
     return buf.getvalue()
+
+
+def export_tendon_plans(out, trajectories: dict, robot) -> list[str]:
+    """The controller's files of each trajectory ``{name: (T x m, eq. 9 bounds, eq. 10 bound)}``:
+    ``<name>_plan.csv``, ``<name>_plan.json``, ``<name>_plan.joint_trajectory.yaml``
+    (:mod:`riskplan.planning.export`)."""
+    from riskplan.planning.export import tendon_plan, write_tendon_plan
+
+    files = []
+    for name, (traj, b, P) in trajectories.items():
+        plan = tendon_plan(robot, traj, b, trajectory_risk=P, name=name)
+        written = write_tendon_plan(plan, out, stem=f"{name}_plan")
+        files += [p.name for p in written.values()]
+    return files
 
 
 def trace_figure(trace, *, label: str = "riskplan (this run)", paper: dict | None = PAPER_FIG7):
@@ -155,6 +172,7 @@ def write_plan(
         write_json_atomic(out / f"{name}.json", trajectory_record(name, traj, b, P))
         write_text_atomic(out / f"{name}.csv", trajectory_csv(traj, b, P))
         files += [f"{name}.json", f"{name}.csv"]
+    files += export_tendon_plans(out, trajs, model.robot)
     write_json_atomic(
         out / "trace.json", {"trace": res.trace.tolist(), "paper": PAPER_FIG7, **res.to_json()}
     )

@@ -190,7 +190,10 @@ def write_outputs(
     * ``candidates.npz`` (:func:`_pack` layout) and ``candidates.json`` (LQG-MP scores);
     * ``selected.npz``: the chosen plan's ``controls (T, q)``, ``reduced (T+1, p)`` and gains
       ``L (T, q, p)``, ``K (T, p, m)``, ``P (T, p, p)``, ``A``, ``B``, ``M``, ``H``, ``N``;
-    * ``selected.json``: scenario, case, seed, index, probabilities, the honesty check, timings;
+    * ``selected_controls.csv`` and ``selected_gains.npz``: the controller's files
+      (:func:`riskplan.planning.export.write_tissue_plan`);
+    * ``selected.json``: scenario, case, seed, index (0-based candidate), probabilities, the
+      honesty check (ranks 1-based, 1 = selected, as in the table), timings;
     * ``candidates.png`` and ``execution.gif`` (one closed-loop run under a draw of the case).
     """
     from riskplan.io import write_json_atomic
@@ -238,6 +241,15 @@ def write_outputs(
         H=c.lin.H,
         N=c.lin.N,
     )
+    from riskplan.planning.export import write_tissue_plan
+
+    # the needle steps by tau seconds; the manipulation scenario is quasi-static (no duration)
+    dt = getattr(getattr(sim, "config", None), "tau", None)
+    free = getattr(sel.result, "p_free_steps", None)
+    risk = None if free is None else 1.0 - np.asarray(free, dtype=np.float64)
+    exported = write_tissue_plan(out, sel.plan, c, dt=dt, risk=risk, stem="selected")
+    files["selected_controls.csv"] = exported["controls"]
+    files["selected_gains.npz"] = exported["gains"]
     best = sel.score(sel.best)
     files["selected.json"] = out / "selected.json"
     write_json_atomic(
@@ -279,7 +291,7 @@ def summary_rows(result: TissuePlanningResult) -> list[list]:
     return [
         [
             r.index,
-            r.rank + 1,
+            r.rank,
             r.p_lqgmp,
             r.p_mc,
             f"[{r.low:.3f}, {r.high:.3f}]",

@@ -265,7 +265,11 @@ def common_draws(sim, distribution, n_samples: int, seed) -> list | None:
 class HonestyRow:
     """One candidate in the check: its LQG-MP ``p_lqgmp`` and the Monte Carlo success rate
     ``p_mc`` of ``n`` closed-loop executions with its 95 % interval ``[low, high]``, and
-    whether the estimate lies inside that interval."""
+    whether the estimate lies inside that interval.
+
+    ``index`` is the candidate's 0-based position in the candidate list (as in
+    ``candidates.npz``); ``rank`` its 1-based place in the LQG-MP ranking (1 = the selected
+    plan), the same count in tables and files."""
 
     index: int
     rank: int
@@ -332,7 +336,7 @@ def honesty_check(
         rows.append(
             HonestyRow(
                 index=score.index,
-                rank=rank,
+                rank=rank + 1,
                 p_lqgmp=score.p_success,
                 p_mc=est.probability,
                 low=est.low,

@@ -52,7 +52,15 @@ _BACKBONE_KEYS = {"E", "nu", "length", "length_discretization", "ro", "ri"}
 _TENDON_KEYS = {"C", "D", "max_tension", "min_length", "max_length"}
 _ROBOT_KEYS = {"radius", "enable_rotation", "enable_retraction"}
 #: top-level keys of the nested layout's problem part (tendon-effusion-config.toml)
-_NESTED_PROBLEM_KEYS = {"start", "goal", "min_tension_change", "max_tension"}
+_NESTED_PROBLEM_KEYS = {
+    "start",
+    "goal",
+    "min_tension_change",
+    "max_tension",
+    *(f"{end}_{var}" for end in ("start", "goal") for var in ("rotation", "retraction")),
+    "min_rotation_change",
+    "min_retraction_change",
+}
 
 
 def is_lab_layout(doc: dict) -> bool:

@@ -92,10 +92,11 @@ def displacement_limits(toml_text: str, displacements: np.ndarray) -> np.ndarray
             exc,
         )
         return np.stack([displacements.min(0), displacements.max(0)], axis=1)
-    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
+    # the configuration: tendon displacements, then base rotation/retraction where enabled
+    lim = np.asarray(robot.configuration_limits, dtype=np.float64)
     if lim.shape != (displacements.shape[1], 2):
         raise DataFormatError(
-            f"robot in the data set has {lim.shape[0]} tendons but displacements have {displacements.shape[1]} columns"
+            f"robot in the data set has {lim.shape[0]} configuration variables but displacements have {displacements.shape[1]} columns"
         )
     return lim
 

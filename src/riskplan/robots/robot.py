@@ -222,6 +222,18 @@ class TendonRobot:
         """Configuration size: tendons, then rotation (if enabled), then retraction (if enabled)."""
         return self.n_tendons + self.params.base_motion.n_extra
 
+    @property
+    def configuration_limits(self) -> np.ndarray:
+        """``(n_config, 2)`` ``[low, high]``: tendon displacements [m], then rotation [rad] and
+        retraction [m] where enabled (the lab's configuration order)."""
+        rows = [self.displacement_limits]
+        bm = self.base_motion
+        if bm.rotation:
+            rows.append(np.array([bm.rotation_limits]))
+        if bm.retraction:
+            rows.append(np.array([bm.retraction_limits]))
+        return np.concatenate(rows, axis=0)
+
     def split_configuration(self, q, *, validate: bool = True):
         """``(tendon_part (..., m), rotation (...) or None, retraction (...) or None)`` of
         configurations ``q (..., n_config)`` in the lab's order (tendons, rotation, retraction)."""

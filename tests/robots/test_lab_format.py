@@ -271,3 +271,11 @@ def test_native_unknown_key_names_the_closest():
         parse_robot_toml(NATIVE.replace("youngs_modulus", "young_modulus"))
     with pytest.raises(RobotDescriptionError, match="retraction_limits"):
         parse_robot_toml(NATIVE + "retraction_limits = [0.0, 0.2]\n")
+
+
+def test_params_with_base_motion_round_trip_through_riskplans_format(lab):
+    from riskplan.robots.params import params_to_toml
+
+    text = params_to_toml(lab.params)
+    assert "base_motion" in text and "collision_radius" in text
+    assert parse_robot_toml(text) == lab.params

@@ -87,3 +87,34 @@ def test_plan_chest_takes_start_and_goal_in_tensions(tmp_path):
         + ["--goal-tensions", "1,0,0,0", "--out", str(out)],
     )
     assert res.exit_code != 0 and "not both" in str(res.exception) and not out.exists()
+
+
+def test_predict_and_collision_take_tensions():
+    """--tensions gives the same result as --displacements converted through the robot."""
+    robot = load_robot("paper")
+    tau = np.array([[2.0, 0.0, 1.0, 0.5], [0.0, 3.0, 0.0, 0.0]])
+    d = robot.displacements_for_tensions(tau)
+    spec_t = ";".join(",".join(repr(float(v)) for v in row) for row in tau)
+    spec_d = ";".join(",".join(repr(float(v)) for v in row) for row in d)
+    a = runner.invoke(app, ["predict", "--model", "paper", "--tensions", spec_t, "--json"])
+    b = runner.invoke(app, ["predict", "--model", "paper", "--displacements", spec_d, "--json"])
+    assert a.exit_code == 0 and b.exit_code == 0, a.output + b.output
+    np.testing.assert_allclose(
+        json.loads(a.output)["means"], json.loads(b.output)["means"], **TOL["solver"]
+    )
+    a = runner.invoke(app, ["collision", "--tensions", spec_t, "--json", "--samples", "100"])
+    b = runner.invoke(app, ["collision", "--displacements", spec_d, "--json", "--samples", "100"])
+    assert a.exit_code == 0 and b.exit_code == 0, a.output + b.output
+    pa = [r["probability"] for r in json.loads(a.output)]
+    pb = [r["probability"] for r in json.loads(b.output)]
+    np.testing.assert_allclose(pa, pb, **TOL["solver"])
+    bad = runner.invoke(app, ["predict", "--model", "paper", "--tensions", "20,0,0,0"])
+    assert bad.exit_code != 0 and "max_tension" in str(bad.exception)
+
+
+def test_configuration_forms_convert_both_ways():
+    lab = load_robot(TASK)
+    q = np.array([[1.0, 0.5, 2.0, 0.3, 0.05], [0.0, 3.0, 0.2, -2.0, 0.11]])
+    qd = lab.configuration_to_displacements(q)
+    np.testing.assert_array_equal(qd[:, 3:], q[:, 3:])
+    np.testing.assert_allclose(lab.configuration_to_tensions(qd), q, **TOL["tension_solve"])

@@ -95,3 +95,21 @@ def configuration_from_options(robot, displacements, tensions, name: str):
             f"{robot.tension_limits.tolist()} N)"
         ) from None
     return robot.displacements_for_tensions(tau)
+
+
+def rows_from_tensions(robot, spec: str, name: str = "--tensions"):
+    """Configurations ``(N, n_config)`` in displacement form from ``spec``: rows of tensions
+    [N] (then rotation [rad] and retraction [m] where the robot has them), ``;`` between rows,
+    converted through the robot model (:meth:`TendonRobot.configuration_to_displacements`)."""
+    from riskplan.errors import InvalidInputError
+    from riskplan.parsing import parse_rows
+
+    if robot is None:
+        raise InvalidInputError(f"{name}: converting tensions needs a robot model; give --robot")
+    rows = parse_rows(spec, name)
+    try:
+        return robot.configuration_to_displacements(rows)
+    except InvalidInputError as exc:
+        raise InvalidInputError(
+            f"{name}: {exc} (robot {robot.name!r}: max_tension {robot.tension_limits.tolist()} N)"
+        ) from None

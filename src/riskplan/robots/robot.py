@@ -432,6 +432,29 @@ class TendonRobot:
             raise ConvergenceError(f"non-finite shape for tensions {tau.tolist()}")
         return self._to_world(P, Rs, tau, ())
 
+    def configuration_to_displacements(self, q, *, validate: bool = True) -> np.ndarray:
+        """A configuration in tension form ``(..., n_config)`` (tensions [N], then rotation and
+        retraction) in displacement form (tendon displacements [m] that hold the same shape at
+        that retraction, then rotation and retraction unchanged)."""
+        q = np.array(q, dtype=np.float64)
+        tau, _, ret = self.split_configuration(q, validate=validate)
+        out = q.copy()
+        out[..., : self.n_tendons] = self.displacements_for_tensions(
+            tau, retraction=ret, validate=validate
+        )
+        return out
+
+    def configuration_to_tensions(self, q, *, validate: bool = True) -> np.ndarray:
+        """The inverse of :meth:`configuration_to_displacements`: displacement form
+        ``(..., n_config)`` to tension form (tensions solved at the configuration's retraction)."""
+        q = np.array(q, dtype=np.float64)
+        d, _, ret = self.split_configuration(q, validate=validate)
+        out = q.copy()
+        out[..., : self.n_tendons] = self.tensions_for_displacements(
+            d, retraction=ret, validate=validate
+        )
+        return out
+
     # ------------------------------------------------------------ base rotation/retraction
     def check_base_motion(self, rotation, retraction, batch_shape) -> tuple:
         """``(rotation, retraction)`` broadcast to ``batch_shape`` (``None`` stays ``None``),

@@ -188,3 +188,17 @@ def test_voxel_environment_defaults_are_identity():
     np.testing.assert_array_equal(v.voxel_to_robot(pts), pts)
     with pytest.raises(InvalidInputError, match="no filename"):
         v.load()
+
+
+def test_planner_facing_limits_and_interpolation(problem):
+    lim = problem.configuration_limits
+    np.testing.assert_array_equal(lim[:3], [[0, 3.5]] * 3)
+    assert lim[3, 0] == -np.pi and lim[4, 1] < 0.12
+    a = np.array([0.0, 1.0, 2.0, 3.0, 0.1])
+    b = np.array([2.0, 1.0, 0.0, -3.0, 0.0])
+    mid = problem.interpolate(a, b, 0.5)
+    np.testing.assert_allclose(mid[[0, 1, 2, 4]], [1.0, 1.0, 1.0, 0.05], **TOL["float64_abs"])
+    # 3 rad to -3 rad is 0.28 rad the short way, through pi
+    np.testing.assert_allclose(abs(mid[3]), np.pi, **TOL["float64_abs"])
+    ends = problem.interpolate(a, b, np.array([0.0, 1.0]))
+    np.testing.assert_allclose(ends, np.stack([a, b]), **TOL["float64_abs"])

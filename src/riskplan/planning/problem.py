@@ -277,6 +277,21 @@ class Problem:
     def n_config(self) -> int:
         return int(self.robot.n_config)
 
+    @property
+    def configuration_limits(self) -> np.ndarray:
+        """``(n_config, 2)`` limits of tensions [0, max_tension] (N), then rotation and
+        retraction: the box a planner searches (the configuration is in tension form)."""
+        lim = np.array(self.robot.configuration_limits, dtype=np.float64)
+        m = self.robot.n_tendons
+        lim[:m, 0] = 0.0
+        lim[:m, 1] = self.robot.tension_limits
+        return lim
+
+    def interpolate(self, a, b, t) -> np.ndarray:
+        """Configurations along the straight motion from ``a`` to ``b``
+        (:meth:`TendonRobot.interpolate_configurations`; rotation the short way round)."""
+        return self.robot.interpolate_configurations(a, b, t)
+
     def split(self, q):
         """``(tensions, rotation, retraction)`` of a configuration (None where not enabled)."""
         return self.robot.split_configuration(q)

@@ -432,6 +432,22 @@ class TendonRobot:
             raise ConvergenceError(f"non-finite shape for tensions {tau.tolist()}")
         return self._to_world(P, Rs, tau, ())
 
+    def interpolate_configurations(self, a, b, t) -> np.ndarray:
+        """``(..., n_config)`` points ``a + t (b - a)`` of the straight configuration-space motion
+        from ``a`` to ``b`` (``t`` scalar or ``(...)``, in [0, 1]); a base rotation over a full
+        turn takes the short way round and is wrapped into ``[-pi, pi)`` (the lab's
+        ``VoxelEnvironment`` interpolation with ``util::canonical_angle``)."""
+        a = np.asarray(a, dtype=np.float64)
+        b = np.asarray(b, dtype=np.float64)
+        t = np.asarray(t, dtype=np.float64)[..., None]
+        out = a + t * (b - a)
+        bm = self.base_motion
+        if bm.rotation and bm.rotation_limits[1] - bm.rotation_limits[0] >= 2 * math.pi - 1e-12:
+            j = self.n_tendons
+            diff = np.mod(b[..., j] - a[..., j] + math.pi, 2 * math.pi) - math.pi
+            out[..., j] = np.mod(a[..., j] + t[..., 0] * diff + math.pi, 2 * math.pi) - math.pi
+        return out
+
     def configuration_to_displacements(self, q, *, validate: bool = True) -> np.ndarray:
         """A configuration in tension form ``(..., n_config)`` (tensions [N], then rotation and
         retraction) in displacement form (tendon displacements [m] that hold the same shape at

@@ -202,3 +202,32 @@ def test_planner_facing_limits_and_interpolation(problem):
     np.testing.assert_allclose(abs(mid[3]), np.pi, **TOL["float64_abs"])
     ends = problem.interpolate(a, b, np.array([0.0, 1.0]))
     np.testing.assert_allclose(ends, np.stack([a, b]), **TOL["float64_abs"])
+
+
+def test_riskplans_own_format_carries_a_problem(tmp_path):
+    """A riskplan robot file with [problem] and [environment]: displacements for the start,
+    tensions for the goal; the paper robot has no base motion, so none is asked for."""
+    from importlib import resources
+
+    from riskplan.robots import load_robot
+
+    paper = resources.files("riskplan").joinpath("data", "paper_robot.toml").read_text()
+    path = tmp_path / "paper_task.toml"
+    path.write_text(
+        paper
+        + "\n[problem]\nstart_displacements = [0.0, 0.0, 0.0, 0.0]\ngoal = [2.0, 0.0, 1.0, 0.0]\n"
+        + "[[environment.spheres]]\ncenter = [0.05, 0.0, 0.15]\nradius = 0.01\n"
+    )
+    pr = load_problem(path)
+    robot = load_robot("paper")
+    np.testing.assert_array_equal(pr.goal, [2.0, 0.0, 1.0, 0.0])
+    np.testing.assert_allclose(
+        pr.goal_displacements,
+        robot.displacements_for_tensions([2.0, 0.0, 1.0, 0.0]),
+        **TOL["float64_exact"],
+    )
+    np.testing.assert_allclose(pr.start, 0.0, **TOL["float64_abs"])
+    assert pr.spheres[0].center == (0.05, 0.0, 0.15) and pr.voxel_environment is None
+    np.testing.assert_allclose(
+        pr.shape(pr.goal).tip, robot.solve_tensions(pr.goal).tip, **TOL["float64_exact"]
+    )

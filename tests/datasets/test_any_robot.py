@@ -220,3 +220,8 @@ def test_mdn_takes_rotation_and_retraction_as_inputs(lab, tmp_path):
     np.testing.assert_array_equal(model.limits, lab.configuration_limits)
     with pytest.raises(InvalidInputError):
         model.predict(np.array([[0.0, 0.001, 0.0, 0.5, 0.2]]))
+
+
+def test_protocol_json_unknown_key_names_the_closest():
+    with pytest.raises(InvalidInputError, match="'grid_level' \\(did you mean 'grid_levels'\\?\\)"):
+        Protocol.from_json('{"grid_level": 5}')

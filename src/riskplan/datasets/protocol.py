@@ -163,7 +163,13 @@ class Protocol:
             raise InvalidInputError("protocol: expected a JSON object")
         unknown = set(d) - set(cls.__dataclass_fields__)
         if unknown:
-            raise InvalidInputError(f"protocol: unknown keys {sorted(unknown)}")
+            from riskplan.robots.params import suggest_key
+
+            known = set(cls.__dataclass_fields__)
+            raise InvalidInputError(
+                "protocol: unknown keys "
+                + ", ".join(f"'{k}'{suggest_key(k, known)}" for k in sorted(unknown))
+            )
         if "cameras" in d:
             d["cameras"] = tuple(d["cameras"])
         return cls(**d)

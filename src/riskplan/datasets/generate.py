@@ -263,7 +263,9 @@ def generate_dataset(
     Parameters
     ----------
     robot: a :class:`~riskplan.robots.TendonRobot` or a robot name/path for ``load_robot``.
-    preset: preset name (``"paper"``, ``"small"``, ``"tiny"``), a :class:`Protocol` or its JSON.
+    preset: preset name (``"paper"``, ``"small"``, ``"tiny"``; adapted to the robot by
+        :func:`~riskplan.datasets.protocol.protocol_for_robot`), a :class:`Protocol` or its JSON
+        (taken as given).
     out: output file. Work in progress lives in ``<out>.partial`` and is renamed onto ``out``
         when every configuration is done.
     split: ``"train"`` or ``"test"`` (disjoint sets of targets of the same protocol).

@@ -220,6 +220,24 @@ def test_mdn_takes_rotation_and_retraction_as_inputs(lab, tmp_path):
     np.testing.assert_array_equal(model.limits, lab.configuration_limits)
     with pytest.raises(InvalidInputError):
         model.predict(np.array([[0.0, 0.001, 0.0, 0.5, 0.2]]))
+    # the rotation is read as (cos, sin): -pi and pi are one input
+    assert model.net.angle_inputs == (3,)
+    q = np.array([[0.002, 0.001, 0.0, -np.pi, 0.06], [0.002, 0.001, 0.0, np.pi, 0.06]])
+    a = model.predict(q)
+    np.testing.assert_allclose(a.means[0], a.means[1], **TOL["float64_exact"])
+    # the fused NumPy path and the torch module agree with angle inputs
+    import torch
+
+    t = model.mixture(torch.as_tensor(q))
+    np.testing.assert_allclose(a.means, t.means.detach().numpy(), **TOL["float32_means"])
+    # saved and loaded with its angle input
+    from riskplan.kinematics import load_model
+    from riskplan.kinematics.model_io import save_model
+
+    save_model(model, tmp_path / "m")
+    back = load_model(tmp_path / "m")
+    assert back.net.angle_inputs == (3,)
+    np.testing.assert_array_equal(back.predict(q).means, a.means)
 
 
 def test_protocol_json_unknown_key_names_the_closest():

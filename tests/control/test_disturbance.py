@@ -356,3 +356,17 @@ def test_lqgmp_sampling_with_d_matches_executions():
         assert 0.0 <= r.p_success <= smp.p_success + 4.5 * se
     with pytest.raises(InvalidInputError, match="drift"):
         lqgmp(sim, plan, ctrl, drift=True)
+
+
+def test_plan_selection_passes_the_option(rng):
+    from riskplan.planning.select import select_plan
+
+    sim, plan, _ = _wall_toy(4)
+    other = NominalPlan.from_rollout(sim, sim.initial_state(), np.tile([-0.05, 0.1, 0.0], (4, 1)))
+    sel = select_plan(
+        sim, [plan, other], n_samples=8, n_goal_samples=200, backend="serial", disturbance=True
+    )
+    assert all(c.disturbance for c in sel.controllers)
+    assert sel.result.cov.shape == (5, 12, 12)
+    plain = select_plan(sim, [plan, other], n_samples=8, n_goal_samples=200, backend="serial")
+    assert not any(c.disturbance for c in plain.controllers)

@@ -73,9 +73,9 @@ the noise switched off). Then ``Σ_d = (1/n) Σ_i d_i d_iᵀ`` (second moment ab
 filter has to find) and the residual noise, what ``d`` cannot explain plus the per-step
 actuation noise,
 
-    M^r_t = (1/n) Σ_i (d_{i,t} − B_t d_i)(d_{i,t} − B_t d_i)ᵀ
+    M^r_t = (1/n) Σ_i (δ_{i,t} − B_t d_i)(δ_{i,t} − B_t d_i)ᵀ
 
-with ``d_{i,t}`` the full deviation (actuation noise included). Both are returned in
+with ``δ_{i,t}`` the full deviation (actuation noise included). Both are returned in
 ``Linearization.disturbance`` (:class:`Disturbance`); ``A``, ``B``, ``M`` stay the
 paper's, bit for bit, so one linearisation serves both controllers
 (:func:`~riskplan.control.lqg_controller` ``disturbance=True``).
@@ -369,7 +369,7 @@ def fit_disturbance(B, P, D, weights, rcond: float = 1e-8) -> Disturbance:
     ----------
     B : (T, p, q) control matrices along the plan.
     P : (T, n, p) persistent one-step deviations ``p_{i,t}`` of the ``n`` draws.
-    D : (T, n, p) full one-step deviations ``d_{i,t}`` (actuation noise included).
+    D : (T, n, p) full one-step deviations ``δ_{i,t}`` (actuation noise included).
     weights : (p,) state weights ``w`` of the fit.
     rcond : relative cut-off of the singular values of the stacked ``diag(w) B_t``; a
         direction of ``d`` that no ``B_t`` moves gets 0 (minimum-norm solution).
@@ -378,7 +378,7 @@ def fit_disturbance(B, P, D, weights, rcond: float = 1e-8) -> Disturbance:
     -------
     :class:`Disturbance` with ``d_i = argmin Σ_t ‖diag(w)(p_{i,t} − B_t d)‖²``,
     ``Σ_d = (1/n) Σ_i d_i d_iᵀ`` and ``M^r_t = (1/n) Σ_i r_{i,t} r_{i,t}ᵀ``,
-    ``r_{i,t} = d_{i,t} − B_t d_i``.
+    ``r_{i,t} = δ_{i,t} − B_t d_i``.
     """
     B = np.asarray(B, dtype=np.float64)
     P = np.asarray(P, dtype=np.float64)

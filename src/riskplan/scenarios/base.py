@@ -338,7 +338,9 @@ class Simulator(Protocol):
     points: :func:`riskplan.control.lqgmp.body_points`),
     ``a_prior`` (``"identity"`` or ``"zero"``: what :func:`riskplan.control.linearize` assumes
     for state directions its control perturbations cannot excite — a deviation that persists,
-    or one the next step forgets; default ``"identity"``), ``transfer_state(state, params)``
+    or one the next step forgets; default ``"identity"``; or a method
+    ``a_prior(y_next, params) -> (p, p)``, the exact structure of ``A_t`` at the plan's next
+    state), ``transfer_state(state, params)``
     (``state`` as a start on the mesh of ``params``, so that ``linearize`` can run
     mesh-size draws of ``M_t`` on their own meshes), ``step_near(state, u, params, near)``
     (``step`` with the solver started from ``near``).

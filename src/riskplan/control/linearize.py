@@ -222,20 +222,6 @@ def control_jacobian(
     return B
 
 
-def _fixed_prior(a_prior: str, p: int) -> np.ndarray:
-    return np.eye(p) if a_prior == "identity" else np.zeros((p, p))
-
-
-def _callable_prior(a_prior, plan: NominalPlan, t: int, p: int) -> np.ndarray:
-    """``a_prior(y*_{t+1}, params) (p, p)``: a simulator's own structure of ``A_t``."""
-    prior = np.asarray(a_prior(plan.states[t + 1], plan.params), dtype=np.float64)
-    if prior.shape != (p, p) or not np.all(np.isfinite(prior)):
-        raise InvalidInputError(
-            f"a_prior: expected a finite ({p}, {p}) matrix from the callable, got shape {prior.shape}"
-        )
-    return prior
-
-
 def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seeds, ts) -> list:
     """(A_t or None, B_t, M_t, rank_t) for each t in ``ts``."""
     bounds = np.asarray(sim.control_bounds, dtype=np.float64)
@@ -297,6 +283,20 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seed
             drift = D.mean(axis=0)
         out.append((A, B, M, drift, rank))
     return out
+
+
+def _fixed_prior(a_prior: str, p: int) -> np.ndarray:
+    return np.eye(p) if a_prior == "identity" else np.zeros((p, p))
+
+
+def _callable_prior(a_prior, plan: NominalPlan, t: int, p: int) -> np.ndarray:
+    """``a_prior(y*_{t+1}, params) (p, p)``: a simulator's own structure of ``A_t``."""
+    prior = np.asarray(a_prior(plan.states[t + 1], plan.params), dtype=np.float64)
+    if prior.shape != (p, p) or not np.all(np.isfinite(prior)):
+        raise InvalidInputError(
+            f"a_prior: expected a finite ({p}, {p}) matrix from the callable, got shape {prior.shape}"
+        )
+    return prior
 
 
 def _param_draws(sim, plan: NominalPlan, params_distribution, n_samples: int, seed) -> list:

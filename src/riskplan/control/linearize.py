@@ -184,6 +184,20 @@ def _mirror(u: np.ndarray, w: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     return np.clip(v, bounds[:, 0], bounds[:, 1])
 
 
+def _fixed_prior(a_prior: str, p: int) -> np.ndarray:
+    return np.eye(p) if a_prior == "identity" else np.zeros((p, p))
+
+
+def _callable_prior(a_prior, plan: NominalPlan, t: int, p: int) -> np.ndarray:
+    """``a_prior(y*_{t+1}, params) (p, p)``: a simulator's own structure of ``A_t``."""
+    prior = np.asarray(a_prior(plan.states[t + 1], plan.params), dtype=np.float64)
+    if prior.shape != (p, p) or not np.all(np.isfinite(prior)):
+        raise InvalidInputError(
+            f"a_prior: expected a finite ({p}, {p}) matrix from the callable, got shape {prior.shape}"
+        )
+    return prior
+
+
 def _stepper(sim):
     """``run(state, u, params, near)``: ``sim.step_near`` where the simulator has one (its
     solver starts from ``near``, a state expected close to the result), else ``sim.step``."""
@@ -283,20 +297,6 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seed
             drift = D.mean(axis=0)
         out.append((A, B, M, drift, rank))
     return out
-
-
-def _fixed_prior(a_prior: str, p: int) -> np.ndarray:
-    return np.eye(p) if a_prior == "identity" else np.zeros((p, p))
-
-
-def _callable_prior(a_prior, plan: NominalPlan, t: int, p: int) -> np.ndarray:
-    """``a_prior(y*_{t+1}, params) (p, p)``: a simulator's own structure of ``A_t``."""
-    prior = np.asarray(a_prior(plan.states[t + 1], plan.params), dtype=np.float64)
-    if prior.shape != (p, p) or not np.all(np.isfinite(prior)):
-        raise InvalidInputError(
-            f"a_prior: expected a finite ({p}, {p}) matrix from the callable, got shape {prior.shape}"
-        )
-    return prior
 
 
 def _param_draws(sim, plan: NominalPlan, params_distribution, n_samples: int, seed) -> list:

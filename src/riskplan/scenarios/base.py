@@ -79,7 +79,7 @@ class SimParams:
     force_scale:
         Interaction force scale (>= 0). Needle: the magnitude ``f_int`` of the force the
         robot exerts in its direction of motion (nominal 1). Manipulation: a gain on the
-        commanded manipulator forces (nominal 1).
+        commanded force increments (nominal 1).
     actuation_cov:
         ``None`` (no actuation noise) or an ``(m, m)`` covariance, stored as a tuple of
         tuples so the value stays hashable; the control actually applied at step ``t`` is

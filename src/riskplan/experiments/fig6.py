@@ -502,52 +502,6 @@ def run_scenario(
     }
 
 
-def _feedback_rates(name, scale, store, chosen, plans, sims, seed, pmap, report) -> dict:
-    """``{figure: paired summary}`` of :mod:`riskplan.experiments.feedback` for the conditions
-    of scenario ``name`` whose case ran: the ``ours`` plan of that case executed open and
-    closed loop on ``scale.n_feedback`` common draws, in stored batches (resumable)."""
-    from riskplan.experiments.feedback import CONDITIONS, feedback_batch, paired_summary
-    from riskplan.parallel import spawn_seeds
-
-    n, bs = int(scale.n_feedback), scale.batch_size
-    figs = [f for f, c in CONDITIONS.items() if c.scenario == name and (c.case, "ours") in chosen]
-    if n == 0 or not figs:
-        return {}
-    n_batches = -(-n // bs)
-    items = [(f, b) for f in figs for b in range(n_batches)]
-    key = {it: f"fig6.{name}.feedback.{it[0]}.b{it[1]:05d}" for it in items}
-    rows = {it: store.get(key[it]) for it in items}
-    todo = [it for it in items if rows[it] is None]
-    seeds = {f: spawn_seeds(_seed_for(seed, name, "feedback", f), n) for f in figs}
-    done = len(items) - len(todo)
-    report(f"{name}: open vs closed loop", done * bs, len(items) * bs)
-
-    def task(it):
-        f, b = it
-        case = CONDITIONS[f].case
-        s, j, sel = chosen[case, "ours"]
-        return (sims[case], plans[s][j], sel["controller"], f, seeds[f][b * bs : (b + 1) * bs])
-
-    for i, res in pmap(feedback_batch, [task(it) for it in todo]):
-        rows[todo[i]] = res
-        store.put(key[todo[i]], res)
-        done += 1
-        report(f"{name}: open vs closed loop", done * bs, len(items) * bs)
-    out = {}
-    for f in figs:
-        summary = paired_summary([r for b in range(n_batches) for r in rows[f, b]])
-        case = CONDITIONS[f].case
-        _set, j, sel = chosen[case, "ours"]
-        summary.update(
-            caption=CONDITIONS[f].caption,
-            case=case,
-            candidate=j,
-            controller_error=sel.get("error"),
-        )
-        out[f] = summary
-    return out
-
-
 def claims(cases: dict) -> dict:
     """The paper's Fig. 6 claims checked on measured rates (§V-A).
 
@@ -649,4 +603,50 @@ def single_executions(name: str, plans_and_controllers: dict, *, seed: int = 0) 
             "caption": caption,
             "sim": sim,
         }
+    return out
+
+
+def _feedback_rates(name, scale, store, chosen, plans, sims, seed, pmap, report) -> dict:
+    """``{figure: paired summary}`` of :mod:`riskplan.experiments.feedback` for the conditions
+    of scenario ``name`` whose case ran: the ``ours`` plan of that case executed open and
+    closed loop on ``scale.n_feedback`` common draws, in stored batches (resumable)."""
+    from riskplan.experiments.feedback import CONDITIONS, feedback_batch, paired_summary
+    from riskplan.parallel import spawn_seeds
+
+    n, bs = int(scale.n_feedback), scale.batch_size
+    figs = [f for f, c in CONDITIONS.items() if c.scenario == name and (c.case, "ours") in chosen]
+    if n == 0 or not figs:
+        return {}
+    n_batches = -(-n // bs)
+    items = [(f, b) for f in figs for b in range(n_batches)]
+    key = {it: f"fig6.{name}.feedback.{it[0]}.b{it[1]:05d}" for it in items}
+    rows = {it: store.get(key[it]) for it in items}
+    todo = [it for it in items if rows[it] is None]
+    seeds = {f: spawn_seeds(_seed_for(seed, name, "feedback", f), n) for f in figs}
+    done = len(items) - len(todo)
+    report(f"{name}: open vs closed loop", done * bs, len(items) * bs)
+
+    def task(it):
+        f, b = it
+        case = CONDITIONS[f].case
+        s, j, sel = chosen[case, "ours"]
+        return (sims[case], plans[s][j], sel["controller"], f, seeds[f][b * bs : (b + 1) * bs])
+
+    for i, res in pmap(feedback_batch, [task(it) for it in todo]):
+        rows[todo[i]] = res
+        store.put(key[todo[i]], res)
+        done += 1
+        report(f"{name}: open vs closed loop", done * bs, len(items) * bs)
+    out = {}
+    for f in figs:
+        summary = paired_summary([r for b in range(n_batches) for r in rows[f, b]])
+        case = CONDITIONS[f].case
+        _set, j, sel = chosen[case, "ours"]
+        summary.update(
+            caption=CONDITIONS[f].caption,
+            case=case,
+            candidate=j,
+            controller_error=sel.get("error"),
+        )
+        out[f] = summary
     return out

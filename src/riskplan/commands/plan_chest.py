@@ -47,7 +47,7 @@ def register(plan_app: typer.Typer) -> None:
         goal_tip: str = typer.Option(
             None,
             "--goal-tip",
-            help="Tip target X,Y,Z in the robot base frame (m). Default: the effusion-pocket target.",
+            help="Tip target X,Y,Z in the robot base frame (m). Default: the recess goal DEFAULT_GOAL (docs/validation.md).",
         ),
         goal: str = typer.Option(None, "--goal", help="Goal tendon displacements D1,...,Dm (m)."),
         start: str = typer.Option(

@@ -42,7 +42,7 @@ from riskplan.planning.prm import (
     goal_from_tip,
     interpolate_path,
 )
-from riskplan.planning.risk import ConfigurationBound, compare_paths, trajectory_risk
+from riskplan.planning.risk import RISKS, compare_paths, make_risk, trajectory_risk
 
 log = logging.getLogger(__name__)
 
@@ -96,6 +96,7 @@ def plan_chest(
     optimiser: OptimiserConfig | None = None,
     seed: int = 0,
     least_risk: bool = False,
+    risk: str = "eq9",
     checkpoint=None,
     resume: bool = False,
     roadmap_progress=None,
@@ -111,9 +112,14 @@ def plan_chest(
     when neither is given, :data:`DEFAULT_GOAL` (the :func:`recess_goal` rule, for the ``paper``
     robot in ``build_chest(0)``; other models with 4 tendons get it too, others need a goal). ``least_risk``: also search the roadmap
     for the least-risk path (edge cost ``-log(1 - p)``) and report both paths' bounds.
+    ``risk``: the per-configuration risk optimised, ``"eq9"`` (the paper's bound, the default)
+    or ``"cloud"`` (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact); combined
+    along the trajectory by eq. 10 either way.
     """
     optimiser = optimiser or OptimiserConfig()
     optimiser.validate()
+    if risk not in RISKS:
+        raise InvalidInputError(f"risk: expected one of {RISKS}, got {risk!r}")
     for name, v in (("step", step), ("resolution", resolution), ("tip_tolerance", tip_tolerance)):
         _finite_positive(v, name)
     if goal is not None and goal_tip is not None:
@@ -159,7 +165,7 @@ def plan_chest(
     if goal is None:
         goal_tip = as_array(goal_tip, "goal_tip", shape=(3,))
         goal = goal_from_tip(roadmap, model, goal_tip, tolerance=tip_tolerance, seed=seed)
-    bound = ConfigurationBound(model, environment)
+    bound = make_risk(risk, model, environment)
     t = time.perf_counter()
     paths = None
     if least_risk:
@@ -190,6 +196,7 @@ def plan_chest(
         "resolution": resolution,
         "seed": int(seed),
         "tip_tolerance": tip_tolerance,
+        "risk": risk,
         "neighbours": roadmap.n_neighbours,
         "optimiser": {
             k: getattr(optimiser, k)

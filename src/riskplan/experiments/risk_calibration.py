@@ -48,7 +48,7 @@ class RiskStudyScale:
     trajectories: int = 30
     executions: int = 200
     steps: int = 8
-    coherences: tuple = (0.0, 0.5, 0.9, 1.0)
+    coherences: tuple = (0.0, 0.15, 0.5, 0.9, 1.0)
     n_clouds: int = 128
     n_points: int = 512
     pool: int = 4000

@@ -74,7 +74,7 @@ def test_counterfactual_a_tip_on_the_floor_collides(scene):
     (the tip of the earlier default target) collides on the robot whatever its clearance elsewhere."""
     robot, env = scene
     lim = np.asarray(robot.displacement_limits)
-    q = np.random.default_rng(5).uniform(lim[:, 0], lim[:, 1], size=(2048, len(lim)))
+    q = np.random.default_rng(5).uniform(lim[:, 0], lim[:, 1], size=(1024, len(lim)))
     tip, c = body_clearance(robot, q, env)
     df = env.subset([RECESS_FLOOR]).signed_distance(tip)
     near = (df > 0) & (df < 0.005)

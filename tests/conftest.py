@@ -30,6 +30,7 @@ TOL = {
     "float64_abs": dict(rtol=0.0, atol=1e-12),  # exact result, absolute round-off
     "batch_vs_scalar": dict(rtol=1e-10, atol=1e-12),  # lockstep vs scalar robot kernel (m, 1)
     "quoted_5_digits": dict(rtol=0.0, atol=5e-5),  # against a value quoted to 5 digits
+    "quoted_10um": dict(rtol=0.0, atol=5e-6),  # against a length (m) quoted to 0.01 mm
     "float64_exact_small": dict(rtol=1e-12, atol=1e-15),  # round-off, values far below 1
     "float64_accumulated": dict(rtol=1e-9, atol=1e-12),  # long float64 paths in another order
     # discretisation and iteration errors of the robot model

@@ -129,6 +129,7 @@ def test_plan_chest_tiny(tiny, tmp_path):
         (["--radius", "nan"], InvalidInputError, "--radius"),
         (["--robot", "paper"], DataFormatError, "tendons"),
         (["--goal-tip", "0,0,0.9"], PlanningError, "unreachable"),
+        (["--risk", "eq11"], InvalidInputError, "risk"),
     ],
 )
 def test_plan_chest_errors(tiny, tmp_path, extra, error, match):
@@ -206,3 +207,18 @@ def test_plan_chest_reads_the_mesh_sidecar(tiny, tmp_path):
     nb = json.loads((tmp_path / "b" / "nominal.json").read_text())
     assert na["configurations"] == nb["configurations"]
     assert na["bound_eq10"] == pytest.approx(nb["bound_eq10"], **approx_tol("float64_exact_rel"))
+
+
+def test_plan_chest_with_the_cloud_risk(tiny, tmp_path):
+    """``--risk cloud`` optimises the body-contact risk; the plan records which risk it used."""
+    out = tmp_path / "out"
+    args = ["--model", str(tiny / "model"), "--env", str(tiny / "box.stl"), "--base-pose"]
+    args += ["1,2,3,1,0,0,0", "--goal", "0.03,0.03", "--milestones", "20", "--iterations", "2"]
+    args += ["--candidates", "16", "--executions", "0", "--risk", "cloud", "--out", str(out)]
+    res = _run(args)
+    assert res.exit_code == 0, res.output
+    assert "cloud risk" in res.output
+    plan = json.loads((out / "plan.json").read_text())
+    assert plan["settings"]["risk"] == "cloud"
+    nominal = json.loads((out / "nominal.json").read_text())
+    assert all(0.0 <= p <= 1.0 for p in nominal["bounds_eq9"])

@@ -78,6 +78,24 @@ def test_stored_bounds_match_an_independent_evaluation(fig7, tol):
         np.testing.assert_allclose(got, r[name]["bounds_eq9"], **tol["float32_ref"])
 
 
+def test_robot_executions_of_both_trajectories(fig7):
+    """Fig. 7 on the robot: both trajectories executed the same number of times, on the default
+    recess goal (free on the robot: its configuration collides in no more than 5 % of them)."""
+    from riskplan.planning.chest import DEFAULT_GOAL
+
+    _, r, _ = fig7
+    rows = {row["name"]: row for row in r["robot"]}
+    assert set(rows) == {"nominal", "optimised"}
+    np.testing.assert_array_equal(r["goal"], DEFAULT_GOAL)
+    for row in rows.values():
+        assert row["n_robot"] == SMALL.robot_executions
+        assert row["robot_disks_low"] <= row["robot_disks_mc"] <= row["robot_disks_high"]
+        assert row["robot_disks_per_config"][-1] <= 0.05
+        assert row["robot_disks_per_config"][0] <= 0.05
+        # the body of backbone and disks lies inside the 10 mm tube: never more collisions
+        assert row["robot_disks_hits"] <= row["robot_hits"]
+
+
 def test_rerun_reads_the_store_and_gives_identical_results(fig7, tmp_path, monkeypatch):
     import riskplan.planning.chest as chest
 

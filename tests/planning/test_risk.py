@@ -85,3 +85,36 @@ def test_lazy_search_equals_full_graph(roadmap, model, scene, tol):
     P_lazy = trajectory_bound(model.predict(interpolate_path(lazy)), scene)
     np.testing.assert_allclose(P_lazy, P_full, **tol["float64_ref"])
     assert lazy_bound.evaluations < bound.evaluations  # it priced fewer configurations
+
+
+def test_cloud_risk_bound_is_the_collision_module_and_deterministic(model, scene, rng):
+    """The planner's cloud risk is :func:`cloud_risk` per configuration with the same draws
+    (common random numbers): a deterministic function, one configuration at a time or batched."""
+    from riskplan.collision.body_risk import cloud_risk
+    from riskplan.planning.risk import CloudRiskBound
+
+    c = rng.uniform(-0.01, 0.04, size=(5, 2))
+    b = CloudRiskBound(model, scene, coherence=0.5, n_clouds=64, seed=3)
+    got = b(c)
+    assert b.evaluations == 5 and np.all((got >= 0) & (got <= 1))
+    np.testing.assert_array_equal(got, b(c[::-1])[::-1])
+    ref = [
+        cloud_risk(model.predict(x[None]), scene, n_clouds=64, coherence=0.5, seed=3)
+        .per_configuration[0]
+        .item()
+        for x in c
+    ]
+    np.testing.assert_array_equal(got, ref)
+
+
+def test_make_risk_names(model, scene):
+    from riskplan.errors import InvalidInputError
+    from riskplan.planning.risk import RISKS, CloudRiskBound, make_risk
+
+    assert RISKS == ("eq9", "cloud")
+    assert isinstance(make_risk("eq9", model, scene), ConfigurationBound)
+    assert isinstance(make_risk("cloud", model, scene), CloudRiskBound)
+    with pytest.raises(InvalidInputError, match="risk"):
+        make_risk("eq11", model, scene)
+    with pytest.raises(InvalidInputError, match="coherence"):
+        CloudRiskBound(model, scene, coherence=-0.1)

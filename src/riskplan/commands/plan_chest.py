@@ -23,7 +23,8 @@ def _check_finite(**values):
 
 
 def register(plan_app: typer.Typer) -> None:
-    """Add the ``chest`` command to the ``riskplan plan`` group."""
+    """Add the ``chest`` and ``chest-risk-study`` commands to the ``riskplan plan`` group."""
+    register_study(plan_app)
 
     @plan_app.command("chest")
     def chest(
@@ -47,7 +48,7 @@ def register(plan_app: typer.Typer) -> None:
         goal_tip: str = typer.Option(
             None,
             "--goal-tip",
-            help="Tip target X,Y,Z in the robot base frame (m). Default: the effusion-pocket target.",
+            help="Tip target X,Y,Z in the robot base frame (m). Default: the recess goal DEFAULT_GOAL (docs/validation.md).",
         ),
         goal: str = typer.Option(None, "--goal", help="Goal tendon displacements D1,...,Dm (m)."),
         start: str = typer.Option(
@@ -87,6 +88,12 @@ def register(plan_app: typer.Typer) -> None:
             False,
             "--least-risk",
             help="Also search the roadmap for the least-risk path (prices every edge).",
+        ),
+        risk: str = typer.Option(
+            "eq9",
+            "--risk",
+            help="Risk optimised per configuration: eq9 (the paper's bound) or cloud (body contact "
+            "from sampled body clouds, docs/validation.md); eq. 10 combines it along the path.",
         ),
         robot: str = typer.Option(
             None,
@@ -205,6 +212,7 @@ def register(plan_app: typer.Typer) -> None:
                 optimiser=cfg,
                 seed=seed,
                 least_risk=least_risk,
+                risk=risk,
                 checkpoint=out / "checkpoint.json",
                 resume=resume,
                 roadmap_progress=lambda d, n: bar.update(t_rm, completed=d, total=n),
@@ -254,7 +262,8 @@ def register(plan_app: typer.Typer) -> None:
                 f"shortest path bound {plan.paths['shortest']['bound']:.4f}, least-risk path bound {plan.paths['least_risk']['bound']:.4f}"
             )
         typer.echo(
-            f"eq. 10 bound: nominal {plan.nominal_bound:.4f} -> optimised {res.bound:.4f} "
+            f"{'eq. 10 bound' if risk == 'eq9' else 'cloud risk (eq. 10 product)'}: "
+            f"nominal {plan.nominal_bound:.4f} -> optimised {res.bound:.4f} "
             f"({100 * res.reduction:.1f} % lower, {len(res.trace) - 1} iterations, {res.evaluations} bound evaluations)"
         )
         if validation is not None:
@@ -264,3 +273,52 @@ def register(plan_app: typer.Typer) -> None:
             for line in endpoint_warnings(validation):
                 typer.echo(f"warning: {line}", err=True)
         typer.echo(f"wrote {out}")
+
+
+def register_study(plan_app: typer.Typer) -> None:
+    """Add ``chest-risk-study`` (does a risk from the learned model predict the robot?)."""
+
+    @plan_app.command("chest-risk-study")
+    def chest_risk_study(
+        out: Path = typer.Option(
+            ..., "--out", "-o", help="Output folder (continued if it exists)."
+        ),
+        scale: str = typer.Option("reduced", help="smoke | reduced | full (docs/validation.md)."),
+        seed: int = typer.Option(0, "--seed", min=0, help="Seed of the selection and executions."),
+    ) -> None:
+        """Calibration of eq. 9/10 and the cloud risk against collision rates on the robot."""
+        from dataclasses import asdict
+
+        from riskplan.commands._shared import progress_bar
+        from riskplan.errors import InvalidInputError
+        from riskplan.experiments.risk_calibration import RISK_STUDY_SCALES, run_risk_study
+        from riskplan.experiments.store import ResultStore
+
+        if scale not in RISK_STUDY_SCALES:
+            raise InvalidInputError(
+                f"--scale: expected one of {sorted(RISK_STUDY_SCALES)}, got {scale!r}"
+            )
+        sc = RISK_STUDY_SCALES[scale]
+        store = ResultStore(
+            out / "store", {"study": "chest-risk", "scale": asdict(sc), "seed": seed}
+        )
+        with progress_bar() as bar:
+            tasks: dict = {}
+
+            def progress(stage, done, total):
+                if stage not in tasks:
+                    tasks[stage] = bar.add_task(stage, total=total, status="")
+                bar.update(tasks[stage], completed=done, total=total)
+
+            r = run_risk_study(out, sc, store, seed=seed, progress=progress)
+        typer.echo(
+            f"measured rates in [5 %, 95 %]: {100 * r['share_measured_5_95']:.0f} % of items"
+        )
+        for name, m in r["metrics"].items():
+            a = m["all"]
+            mae = "n/a" if a["mae_mid"] is None else f"{100 * a['mae_mid']:.1f}"
+            typer.echo(
+                f"{name}: MAE on 5-95 % items {mae} points (n = {a['n_mid']}), "
+                f"MAE on all {100 * a['mae_all']:.1f}, Brier {a['brier']:.4f}"
+            )
+        typer.echo(f"wrote {out / 'risk_calibration.json'} and {out / 'risk_calibration.png'}")

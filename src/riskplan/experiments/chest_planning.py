@@ -237,9 +237,9 @@ def scan_goal_tips(
 ) -> list[dict]:
     """Nominal eq.-10 bound for each candidate goal tip ``(N, 3)`` (base frame) on one roadmap.
 
-    The record behind the default scene (issue part 3): which effusion-pocket targets the
-    model reaches and the bound of the PRM's shortest path to each. Unreachable targets get
-    ``bound = None``.
+    Which tip targets the model reaches (its predicted tip within ``tolerance``) and the bound
+    of the PRM's shortest path to each; unreachable targets get ``bound = None``. The default
+    goal is chosen on the robot instead (:func:`riskplan.planning.chest.recess_goal`).
     """
     from riskplan.errors import PlanningError
     from riskplan.planning.prm import (

@@ -2,8 +2,9 @@
 bound in the chest cavity (MDN paper section V, Figs. 6-7), at demo scale.
 
 Uses ``ctx["model"]`` (the small MDN of the kinematics stage; skipped without one) and
-``ctx["chest"]`` (the collision stage's chest; built if absent). Goal: the effusion-pocket
-target :data:`~riskplan.planning.chest.DEFAULT_GOAL_TIP`; a small demo model may not reach it
+``ctx["chest"]`` (the collision stage's chest; built if absent). Goal: the simulated tip
+of the recess goal, :data:`~riskplan.planning.chest.DEFAULT_GOAL_TIP` (a demo model has its own
+tip map, so the goal is searched by its tip); a small demo model may not reach it
 within the tolerance, then the valid roadmap milestone whose predicted tip is closest to it is
 the goal (the report says which). Budget: about 30 s on two cores (100 milestones, 10
 iterations); the full-size figures are in docs/results.md.
@@ -60,11 +61,11 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     target = np.asarray(DEFAULT_GOAL_TIP)
     try:
         goal = goal_from_tip(rm, model, target, seed=seed)
-        how = "its predicted tip is within 5 mm of the effusion-pocket target"
+        how = "its predicted tip is within 5 mm of the recess target"
     except PlanningError:
         d = np.linalg.norm(tip_positions(model, rm.vertices) - target, axis=-1)
         goal = rm.vertices[int(np.argmin(d))]
-        how = f"the demo model does not reach the effusion-pocket target; the milestone whose tip is closest ({d.min() * 1e3:.0f} mm) is the goal"
+        how = f"the demo model does not reach the recess target; the milestone whose tip is closest ({d.min() * 1e3:.0f} mm) is the goal"
     bound = ConfigurationBound(model, env)
     nominal = interpolate_path(rm.shortest_path(start, goal))
     P0, p0 = trajectory_risk(bound, nominal)

@@ -35,7 +35,7 @@ def nominal_problem(
 ):
     """``(model, environment (base frame), validity, bound, nominal (T, m), bounds (T,))`` of the default scene."""
     from riskplan.kinematics import load_model
-    from riskplan.planning.chest import DEFAULT_GOAL_TIP
+    from riskplan.planning.chest import DEFAULT_GOAL
     from riskplan.planning.prm import (
         MeanValidity,
         build_roadmap,
@@ -50,8 +50,10 @@ def nominal_problem(
     validity = MeanValidity(mdl, env)
     rm = build_roadmap(validity, n_milestones=n_milestones, seed=roadmap_seed)
     start = np.clip(np.zeros(mdl.n_tendons), mdl.limits[:, 0], mdl.limits[:, 1])
-    goal = goal_from_tip(
-        rm, mdl, DEFAULT_GOAL_TIP if goal_tip is None else goal_tip, seed=roadmap_seed
+    goal = (
+        np.asarray(DEFAULT_GOAL, dtype=np.float64)
+        if goal_tip is None
+        else goal_from_tip(rm, mdl, goal_tip, seed=roadmap_seed)
     )
     nominal = interpolate_path(rm.shortest_path(start, goal))
     bound = ConfigurationBound(mdl, env)

@@ -8,7 +8,10 @@ same as ``riskplan plan chest`` with its defaults) with the shipped model
 (``load_model("paper")``) in the procedural chest: the PRM's nominal trajectory, its eq.-10
 bound, ``MDNScale.bo_iterations`` iterations of Bayesian optimisation (paper: 50), and the
 paper's "about 15 % before, below 7 % after 50 iterations" checked from the numbers
-(:func:`fig7_claims`).
+(:func:`fig7_claims`); beside it, both trajectories executed ``MDNScale.robot_executions``
+times on the simulated robot (:func:`riskplan.planning.validate.validation_table`, the same
+executions for both: common random numbers), so the report shows what the bound's drop does on
+the robot.
 
 Numbers that depend on wall-clock time (training budgets, timings) are stored once in the
 :class:`~riskplan.experiments.store.ResultStore` when computed, so a rerun reports the
@@ -39,7 +42,8 @@ class MDNScale:
     ``sweep_epochs``: at most this many epochs; ``train_seconds`` / ``sweep_seconds``:
     wall-clock budgets (``0`` = none); ``timing_configs``: random configurations timed;
     ``bo_iterations`` / ``bo_candidates`` / ``milestones``: Fig. 7's Bayesian optimisation
-    iterations (paper: 50), candidates per iteration and PRM milestones."""
+    iterations (paper: 50), candidates per iteration and PRM milestones; ``robot_executions``:
+    executions of each Fig. 7 trajectory on the simulated robot (``0``: none)."""
 
     preset: str = "small"
     components: tuple = (1, 2, 3, 5)
@@ -52,6 +56,7 @@ class MDNScale:
     bo_iterations: int = 10
     bo_candidates: int = 256
     milestones: int = 300
+    robot_executions: int = 200
 
     def __post_init__(self):
         if not self.components or min(self.components) < 1:
@@ -59,9 +64,10 @@ class MDNScale:
                 f"components: expected positive integers, got {self.components!r}"
             )
         object.__setattr__(self, "components", tuple(int(k) for k in self.components))
-        for name in ("bo_iterations", "bo_candidates", "milestones"):
+        for name in ("bo_iterations", "bo_candidates", "milestones", "robot_executions"):
             v = getattr(self, name)
-            if isinstance(v, bool) or int(v) != v or v < (0 if name == "bo_iterations" else 1):
+            low = 0 if name in ("bo_iterations", "robot_executions") else 1
+            if isinstance(v, bool) or int(v) != v or v < low:
                 raise InvalidInputError(f"{name}: expected a non-negative integer, got {v!r}")
 
 
@@ -76,6 +82,7 @@ MDN_SCALES = {
         sweep_seconds=0.0,
         timing_configs=10_000,
         bo_iterations=50,
+        robot_executions=1000,
     ),
 }
 
@@ -349,8 +356,9 @@ def run_fig7(out, scale: MDNScale, store, *, seed: int = 0, progress=None) -> di
         n = int(scale.bo_iterations)
         report("mdn: Fig. 7 (BO)", 0, n)
         cpu0 = time.process_time()
+        plan_model = load_model(FIG7_MODEL)
         plan = plan_chest(
-            load_model(FIG7_MODEL),
+            plan_model,
             build_chest(FIG7_CHEST_SEED).base_environment,
             n_milestones=int(scale.milestones),
             optimiser=OptimiserConfig(iterations=n, n_candidates=int(scale.bo_candidates)),
@@ -358,6 +366,23 @@ def run_fig7(out, scale: MDNScale, store, *, seed: int = 0, progress=None) -> di
             optimise_progress=lambda i, total, b: report("mdn: Fig. 7 (BO)", i, total),
         )
         res = plan.optimised
+        robot_rows = None
+        if scale.robot_executions:
+            from riskplan.planning.validate import endpoint_warnings, validation_table
+
+            report("mdn: Fig. 7 (robot executions)", 0, 1)
+            robot_rows = validation_table(
+                plan_model,
+                {"nominal": plan.nominal, "optimised": res.trajectory},
+                build_chest(FIG7_CHEST_SEED).base_environment,
+                n_robot=int(scale.robot_executions),
+                n_mixture=100_000,
+                seed=seed,
+                backend="serial",
+            )
+            for line in endpoint_warnings(robot_rows):
+                log.warning("Fig. 7: %s", line)
+            report("mdn: Fig. 7 (robot executions)", 1, 1)
         found = {
             "model": FIG7_MODEL,
             "chest_seed": FIG7_CHEST_SEED,
@@ -375,6 +400,7 @@ def run_fig7(out, scale: MDNScale, store, *, seed: int = 0, progress=None) -> di
             "chosen": [int(c) for c in res.chosen],
             "accepted": [bool(a) for a in res.accepted],
             "evaluations": int(res.evaluations),
+            "robot": robot_rows,
             "seconds": {
                 **{k: float(v) for k, v in plan.timings.items()},
                 "cpu_s": time.process_time() - cpu0,

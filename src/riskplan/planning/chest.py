@@ -5,12 +5,14 @@ Frames: the learned model predicts mixtures in the robot *base* frame, so every 
 passed here is in the base frame (:attr:`riskplan.scenarios.chest.Chest.base_environment`, or
 a user mesh mapped with :func:`riskplan.collision.load_environment`). Goal tips are base-frame points.
 
-Default scene (issue part 3): start at zero displacement (the straight robot, free in the
-procedural chest) and a goal tip in the effusion pocket, :data:`DEFAULT_GOAL_TIP`: 5 cm
-caudal, 6 cm posterior and 17 cm medial of the port (base frame), i.e. in the posterior,
-dependent part of the pocket just above the diaphragm dome, where a pleural effusion pools
-(the posterior costophrenic recess). docs/planning.md lists the scan of pocket targets behind
-this choice and the bound it gives; the bound is whatever eq. 10 says.
+Default scene. Start: zero displacement (the straight robot, free in the procedural chest).
+Goal: :data:`DEFAULT_GOAL`, chosen on the robot model itself by :func:`recess_goal`
+(the rule: among the configurations whose simulated tip lies in the posterior costophrenic
+recess -- caudal and posterior of the port, within :data:`RECESS_DEPTH` of the diaphragm, where
+a pleural effusion pools -- the one whose body, backbone and disks as the cameras saw them,
+keeps the largest clearance from every obstacle). :data:`DEFAULT_GOAL_TIP` is that
+configuration's simulated tip. docs/validation.md records the search and the executions that
+show start and goal free on the robot; the eq.-10 bound is whatever eq. 10 says there.
 """
 
 from __future__ import annotations
@@ -40,12 +42,20 @@ from riskplan.planning.prm import (
     goal_from_tip,
     interpolate_path,
 )
-from riskplan.planning.risk import ConfigurationBound, compare_paths, trajectory_risk
+from riskplan.planning.risk import RISKS, compare_paths, make_risk, trajectory_risk
 
 log = logging.getLogger(__name__)
 
-# base frame: x cranial, y anterior (z cross x), z medial (insertion direction); metres
-DEFAULT_GOAL_TIP = (-0.05, -0.06, 0.17)
+# The tip must sit in the fluid that pools on the diaphragm: an effusion worth draining is a
+# layer of a few centimetres at the base (docs/validation.md: sensitivity to this depth)
+RECESS_DEPTH = 0.02
+#: the obstacle whose neighbourhood is the recess floor
+RECESS_FLOOR = "diaphragm"
+#: :func:`recess_goal` for the ``paper`` robot in ``build_chest(0)`` (seed 0), rounded to 0.01 mm;
+#: tendon displacements [m]
+DEFAULT_GOAL = (-0.00886, 0.0011, 0.00463, 0.0094)
+#: the simulated tip of :data:`DEFAULT_GOAL`, base frame (x cranial, y anterior, z medial) [m]
+DEFAULT_GOAL_TIP = (-0.02595, -0.01539, 0.19667)
 
 
 @dataclass
@@ -86,6 +96,7 @@ def plan_chest(
     optimiser: OptimiserConfig | None = None,
     seed: int = 0,
     least_risk: bool = False,
+    risk: str = "eq9",
     checkpoint=None,
     resume: bool = False,
     roadmap_progress=None,
@@ -96,12 +107,19 @@ def plan_chest(
 
     ``model``: an :class:`~riskplan.kinematics.MDNModel`; ``environment``: base-frame
     :class:`~riskplan.collision.Environment`; ``start``/``goal`` ``(m,)`` displacements (start
-    default: zeros clipped to the limits), or ``goal_tip (3,)`` base frame (default
-    :data:`DEFAULT_GOAL_TIP` when neither is given). ``least_risk``: also search the roadmap
+    default: zeros clipped to the limits), or ``goal_tip (3,)`` base frame (the valid
+    configuration whose predicted tip is closest, :func:`~riskplan.planning.prm.goal_from_tip`);
+    when neither is given, :data:`DEFAULT_GOAL` (the :func:`recess_goal` rule, for the ``paper``
+    robot in ``build_chest(0)``; other models with 4 tendons get it too, others need a goal). ``least_risk``: also search the roadmap
     for the least-risk path (edge cost ``-log(1 - p)``) and report both paths' bounds.
+    ``risk``: the per-configuration risk optimised, ``"eq9"`` (the paper's bound, the default)
+    or ``"cloud"`` (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact); combined
+    along the trajectory by eq. 10 either way.
     """
     optimiser = optimiser or OptimiserConfig()
     optimiser.validate()
+    if risk not in RISKS:
+        raise InvalidInputError(f"risk: expected one of {RISKS}, got {risk!r}")
     for name, v in (("step", step), ("resolution", resolution), ("tip_tolerance", tip_tolerance)):
         _finite_positive(v, name)
     if goal is not None and goal_tip is not None:
@@ -116,7 +134,11 @@ def plan_chest(
     if goal is not None:
         goal = as_array(goal, "goal", shape=(m,))
     elif goal_tip is None:
-        goal_tip = DEFAULT_GOAL_TIP
+        if m != len(DEFAULT_GOAL):
+            raise InvalidInputError(
+                f"goal: the default goal has {len(DEFAULT_GOAL)} tendons, the model {m}; give goal or goal_tip"
+            )
+        goal = np.asarray(DEFAULT_GOAL, dtype=np.float64)
     validity = MeanValidity(model, environment)
     for name, c in (("start", start), ("goal", goal)):
         if c is None:
@@ -143,7 +165,7 @@ def plan_chest(
     if goal is None:
         goal_tip = as_array(goal_tip, "goal_tip", shape=(3,))
         goal = goal_from_tip(roadmap, model, goal_tip, tolerance=tip_tolerance, seed=seed)
-    bound = ConfigurationBound(model, environment)
+    bound = make_risk(risk, model, environment)
     t = time.perf_counter()
     paths = None
     if least_risk:
@@ -174,6 +196,7 @@ def plan_chest(
         "resolution": resolution,
         "seed": int(seed),
         "tip_tolerance": tip_tolerance,
+        "risk": risk,
         "neighbours": roadmap.n_neighbours,
         "optimiser": {
             k: getattr(optimiser, k)
@@ -194,3 +217,110 @@ def plan_chest(
         timings,
         settings,
     )
+
+
+@dataclass(frozen=True)
+class RecessGoal:
+    """Result of :func:`recess_goal`.
+
+    Attributes
+    ----------
+    goal: ``(m,)`` tendon displacements [m].
+    tip: ``(3,)`` simulated tip, base frame [m].
+    clearance: smallest signed distance of the body (backbone tube + disks) to any obstacle [m].
+    floor_distance: distance of the tip to the recess floor obstacle [m].
+    evaluated: configurations solved; ``in_recess``: how many of the random draws had their
+        tip in the recess (and within the tension limits).
+    """
+
+    goal: np.ndarray
+    tip: np.ndarray
+    clearance: float
+    floor_distance: float
+    evaluated: int
+    in_recess: int
+
+
+def body_clearance(robot, configurations, environment) -> tuple[np.ndarray, np.ndarray]:
+    """Tip ``(N, 3)`` and body clearance ``(N,)`` [m] of ``robot`` at ``configurations (N, m)``
+    without transmission variation (the nominal Cosserat shape, base frame).
+
+    The body is the one the cameras saw and the MDN learned: the backbone tube of the backbone
+    radius plus the separator disks (:func:`~riskplan.planning.validate.disk_clearance`), the
+    ``body="disks"`` test of :func:`~riskplan.planning.validate.execute_on_robot`.
+    Inputs are trusted.
+    """
+    from riskplan.datasets.generate import to_base_frame
+    from riskplan.planning.validate import disk_clearance, tube_clearance
+    from riskplan.robots.geometry import BodyGeometry
+
+    geom = BodyGeometry.from_params(robot.params)
+    shape = robot.solve_displacements(np.asarray(configurations, dtype=np.float64), validate=False)
+    P, R = to_base_frame(robot, shape.positions, shape.rotations)
+    c = np.minimum(
+        tube_clearance(environment, P, geom.backbone_radius),
+        disk_clearance(environment, robot.s, P, R, geom),
+    )
+    return P[:, -1], c
+
+
+def recess_goal(
+    robot,
+    environment,
+    *,
+    floor: str = RECESS_FLOOR,
+    depth: float = RECESS_DEPTH,
+    n_samples: int = 4096,
+    refine: int = 128,
+    seed: int = 0,
+) -> RecessGoal:
+    """The default goal rule: reach the recess, with the most room.
+
+    Clinical intent: the tip in the posterior costophrenic recess, where a pleural effusion
+    pools -- caudal (base ``x < 0``) and posterior (base ``y < 0``) of the port and within
+    ``depth`` of the ``floor`` obstacle (the diaphragm) -- reached with clearance. Among the
+    configurations within the displacement and tension limits whose simulated tip lies there,
+    the one maximising the body's smallest clearance to every obstacle (:func:`body_clearance`):
+
+    .. math:: d^* = \\arg\\max_{d:\\ \\mathrm{tip}(d) \\in \\mathcal{R}} \\min_{x \\in \\mathrm{body}(d)} \\mathrm{sd}(x)
+
+    Search on the robot model itself (no learned model): ``n_samples`` seeded uniform draws,
+    then four rounds of ``refine`` Gaussian perturbations (4, 2, 1, 0.5 mm) around the best.
+    :class:`~riskplan.errors.PlanningError` if no draw reaches the recess.
+    """
+    from riskplan.errors import PlanningError
+
+    env = environment
+    if floor not in env.names:
+        raise InvalidInputError(f"floor: no obstacle named {floor!r} in {env.names}")
+    depth = _finite_positive(depth, "depth")
+    floor_env = env.subset([floor])
+    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
+    rng = np.random.default_rng(seed)
+
+    def score(q):
+        ok = (robot.tensions_for_displacements(q, validate=False) <= robot.tension_limits).all(-1)
+        q = q[ok]
+        tip, c = body_clearance(robot, q, env) if len(q) else (np.empty((0, 3)), np.empty(0))
+        df = floor_env.signed_distance(tip)
+        inside = (tip[:, 0] < 0) & (tip[:, 1] < 0) & (df > 0) & (df <= depth)
+        return q[inside], tip[inside], c[inside], df[inside]
+
+    q0 = lim[:, 0] + rng.random((int(n_samples), len(lim))) * (lim[:, 1] - lim[:, 0])
+    q, tip, c, df = score(q0)
+    evaluated, in_recess = len(q0), len(q)
+    if not len(q):
+        raise PlanningError(
+            f"no configuration of {n_samples} draws puts the tip within {depth * 1e3:.0f} mm of "
+            f"{floor!r}, caudal and posterior of the port"
+        )
+    b = int(np.argmax(c))
+    best = (q[b], tip[b], float(c[b]), float(df[b]))
+    for scale in (4e-3, 2e-3, 1e-3, 5e-4):
+        loc = np.clip(best[0] + scale * rng.standard_normal((int(refine), len(lim))), *lim.T)
+        evaluated += len(loc)
+        q, tip, c, df = score(loc)
+        if len(q) and c.max() > best[2]:
+            b = int(np.argmax(c))
+            best = (q[b], tip[b], float(c[b]), float(df[b]))
+    return RecessGoal(best[0], best[1], best[2], best[3], evaluated, in_recess)

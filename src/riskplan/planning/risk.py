@@ -48,6 +48,85 @@ class ConfigurationBound:
         return out
 
 
+#: share of a component's variance that moves the whole body (see :class:`CloudRiskBound`)
+DEFAULT_COHERENCE = 0.15
+
+
+class CloudRiskBound:
+    """Body-contact risk at configurations from the learned model: ``(N, m) -> (N,)``
+    (:func:`riskplan.collision.body_risk.cloud_risk`, beyond the paper).
+
+    The fraction of body clouds drawn from the predicted mixture (``n_points`` points, one
+    shared execution draw with share ``coherence`` of each component's variance) that touch an
+    obstacle. The draws are the same for every configuration (``seed``), so the risk is a
+    deterministic function of the configuration, as the optimisers need. Combined along a
+    trajectory by :func:`trajectory_risk` it is eq. 10's product, an upper bound of the
+    common-draw trajectory risk (one execution's draw is positively associated along a path).
+    ``evaluations`` counts configurations evaluated.
+
+    Default coherence :data:`DEFAULT_COHERENCE`: the share of the predicted tip component's
+    variance that the executions themselves produce on the ``paper`` robot (tip standard deviation
+    over 200 executions about 2.0 mm against the tip component's 5.2 mm, ratio of variances 0.13,
+    10-90 % range 0.09-0.18 over 40 configurations near contact; docs/validation.md).
+    """
+
+    def __init__(
+        self,
+        model,
+        environment,
+        *,
+        coherence: float | None = None,
+        n_points: int = 512,
+        n_clouds: int = 256,
+        seed: int = 0,
+    ):
+        from riskplan.errors import InvalidInputError
+
+        coherence = DEFAULT_COHERENCE if coherence is None else coherence
+        if not (np.isfinite(coherence) and 0.0 <= coherence <= 1.0):
+            raise InvalidInputError(f"coherence: expected a number in [0, 1], got {coherence!r}")
+        self.model = model
+        self.environment = environment
+        self.coherence = float(coherence)
+        self.n_points = int(n_points)
+        self.n_clouds = int(n_clouds)
+        self.seed = int(seed)
+        self.evaluations = 0
+
+    def __call__(self, configs) -> np.ndarray:
+        from riskplan.collision.body_risk import cloud_risk
+
+        c = np.atleast_2d(np.asarray(configs, dtype=np.float64))
+        out = np.empty(len(c))
+        for i, x in enumerate(c):
+            gm = self.model.predict(x[None])
+            out[i] = cloud_risk(
+                gm,
+                self.environment,
+                n_points=self.n_points,
+                n_clouds=self.n_clouds,
+                coherence=self.coherence,
+                seed=self.seed,
+            ).per_configuration[0]
+        self.evaluations += len(c)
+        return out
+
+
+#: risks the chest planner can optimise: the paper's eq. 9 and the body-contact cloud risk
+RISKS = ("eq9", "cloud")
+
+
+def make_risk(name: str, model, environment, **options):
+    """The configuration risk ``name`` (:data:`RISKS`) for ``model`` in ``environment``."""
+    from riskplan.errors import InvalidInputError
+
+    if name == "eq9":
+        return ConfigurationBound(model, environment)
+    if name == "cloud":
+        return CloudRiskBound(model, environment, **options)
+    raise InvalidInputError(f"risk: expected one of {RISKS}, got {name!r}")
+
+
 def trajectory_risk(bound, trajectory) -> tuple[float, np.ndarray]:
     """Eq. 10 of ``trajectory (T, m)`` and its per-configuration eq.-9 bounds ``(T,)``."""
     p = bound(trajectory)

@@ -1,0 +1,105 @@
+"""Body-contact cloud risk (collision/body_risk.py) against closed forms: independent points
+(ρ = 0) give 1 - (1 - p)^N, a rigid body of one point (ρ = 1) gives p, with p = 1 - Φ(b) for a
+Gaussian b standard deviations from a half-space; trajectories share one draw per cloud."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import norm
+
+from riskplan.collision import Environment
+from riskplan.collision.body_risk import allocate_points, cloud_risk
+from riskplan.errors import InvalidInputError
+from riskplan.gaussian_mixture import NumpyMixture
+from tests.collision.conftest import box_mesh
+
+SIGMA = 0.1
+B = 2.0  # the mean is B standard deviations from the box face x = 0
+
+
+@pytest.fixture(scope="module")
+def slab():
+    # a big box filling x > 0 near the origin: a half-space for the draws
+    return Environment.from_meshes([box_mesh([0.0, -5.0, -5.0], [5.0, 5.0, 5.0])])
+
+
+def one(mean_x=-B * SIGMA):
+    return NumpyMixture.from_covariances(
+        np.array([[1.0]]), np.array([[[mean_x, 0.0, 0.0]]]), np.eye(3)[None, None] * SIGMA**2
+    )
+
+
+def within(p_hat, p, n, z=4.5):
+    return abs(p_hat - p) <= z * np.sqrt(max(p * (1 - p), 1e-12) / n) + 1 / n
+
+
+@pytest.mark.parametrize("n_points", [1, 4, 16])
+def test_independent_points_closed_form(slab, n_points):
+    p = 1 - norm.cdf(B)
+    r = cloud_risk(one(), slab, n_points=n_points, n_clouds=4000, coherence=0.0, seed=1)
+    assert within(r.per_configuration[0], 1 - (1 - p) ** n_points, 4000)
+
+
+def test_rigid_body_is_one_point(slab):
+    """ρ = 1: every point of a cloud is the same draw, so N points collide as often as one."""
+    p = 1 - norm.cdf(B)
+    r = cloud_risk(one(), slab, n_points=64, n_clouds=4000, coherence=1.0, seed=2)
+    assert within(r.per_configuration[0], p, 4000)
+    # the counterfactual: independent points at the same marginal collide far more often
+    r0 = cloud_risk(one(), slab, n_points=64, n_clouds=4000, coherence=0.0, seed=2)
+    assert r0.per_configuration[0] > 10 * r.per_configuration[0]
+
+
+def test_risk_grows_with_independence(slab):
+    vals = [
+        cloud_risk(one(), slab, n_points=32, n_clouds=2000, coherence=c, seed=3).per_configuration[
+            0
+        ]
+        for c in (1.0, 0.9, 0.5, 0.0)
+    ]
+    assert vals == sorted(vals) and vals[-1] > vals[0]
+
+
+def test_trajectory_shares_the_draw(slab):
+    """Two identical configurations: with one shared draw per cloud the trajectory risk equals
+    the per-configuration risk exactly (ρ = 1), not eq. 10's 1 - (1 - p)^2."""
+    gm1 = one()
+    gm = NumpyMixture(
+        np.repeat(gm1.weights, 2, 0),
+        np.repeat(gm1.means, 2, 0),
+        np.repeat(gm1.precision_cholesky, 2, 0),
+    )
+    r = cloud_risk(gm, slab, n_points=8, n_clouds=3000, coherence=1.0, seed=4)
+    assert r.per_configuration[0] == r.per_configuration[1] == r.trajectory
+    assert r.hits.shape == (3000, 2)
+
+
+def test_far_component_is_free_and_seeded(slab):
+    far = cloud_risk(one(-20 * SIGMA), slab, n_clouds=200, seed=0)
+    assert far.per_configuration[0] == 0.0 and far.trajectory == 0.0
+    a = cloud_risk(one(), slab, n_clouds=300, seed=7).per_configuration
+    b = cloud_risk(one(), slab, n_clouds=300, seed=7).per_configuration
+    np.testing.assert_array_equal(a, b)
+
+
+def test_allocate_points():
+    w = np.array([[0.5, 0.3, 0.2], [0.34, 0.33, 0.33]])
+    c = allocate_points(w, 10)
+    np.testing.assert_array_equal(c.sum(-1), [10, 10])
+    np.testing.assert_array_equal(c[0], [5, 3, 2])
+    assert np.abs(c[1] - 10 * w[1]).max() < 1
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        ({"coherence": 1.5}, "coherence"),
+        ({"n_points": 0}, "n_points"),
+        ({"n_clouds": 2.5}, "n_clouds"),
+        ({"margin": float("nan")}, "margin"),
+    ],
+)
+def test_errors(slab, kw, match):
+    with pytest.raises(InvalidInputError, match=match):
+        cloud_risk(one(), slab, **kw)

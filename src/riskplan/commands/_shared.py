@@ -71,3 +71,46 @@ def workers_option(help: str = "Worker processes (0: one per core).", default: i
     """The ``--workers`` option of the commands that run a process pool (the library takes
     ``workers or None``: ``None`` is one per core)."""
     return typer.Option(default, "--workers", min=0, help=help)
+
+
+def configuration_from_options(robot, displacements, tensions, name: str):
+    """Tendon displacements ``(m,)`` from a command's ``--NAME`` (displacements, m) or
+    ``--NAME-tensions`` (N) option: tensions are converted through the robot model
+    (:meth:`~riskplan.robots.TendonRobot.displacements_for_tensions`, checked against
+    ``max_tension``). ``None`` when neither is given; both is an error."""
+    from riskplan.errors import InvalidInputError
+    from riskplan.parsing import parse_numbers
+
+    if displacements is not None and tensions is not None:
+        raise InvalidInputError(f"give one of --{name} and --{name}-tensions, not both")
+    if displacements is not None:
+        return parse_numbers(displacements, f"--{name}", count=robot.n_tendons)
+    if tensions is None:
+        return None
+    tau = parse_numbers(tensions, f"--{name}-tensions", count=robot.n_tendons)
+    try:
+        robot.check_tensions(tau)
+    except InvalidInputError as exc:
+        raise InvalidInputError(
+            f"--{name}-tensions: {exc} (tension limits [0, max_tension] of robot {robot.name!r}: "
+            f"{robot.tension_limits.tolist()} N)"
+        ) from None
+    return robot.displacements_for_tensions(tau)
+
+
+def rows_from_tensions(robot, spec: str, name: str = "--tensions"):
+    """Configurations ``(N, n_config)`` in displacement form from ``spec``: rows of tensions
+    [N] (then rotation [rad] and retraction [m] where the robot has them), ``;`` between rows,
+    converted through the robot model (:meth:`TendonRobot.configuration_to_displacements`)."""
+    from riskplan.errors import InvalidInputError
+    from riskplan.parsing import parse_rows
+
+    if robot is None:
+        raise InvalidInputError(f"{name}: converting tensions needs a robot model; give --robot")
+    rows = parse_rows(spec, name)
+    try:
+        return robot.configuration_to_displacements(rows)
+    except InvalidInputError as exc:
+        raise InvalidInputError(
+            f"{name}: {exc} (robot {robot.name!r}: max_tension {robot.tension_limits.tolist()} N)"
+        ) from None

@@ -147,6 +147,12 @@ def register(app: typer.Typer) -> None:
             "-d",
             help="Tendon displacements (m), comma-separated; ';' separates configurations.",
         ),
+        tensions: str = typer.Option(
+            None,
+            "--tensions",
+            help="Or tendon tensions (N), like --displacements; converted through the model's "
+            "robot (with --model) or --robot.",
+        ),
         model: Path = typer.Option(
             None,
             "--model",
@@ -177,7 +183,11 @@ def register(app: typer.Typer) -> None:
         from riskplan.errors import InvalidInputError
         from riskplan.parsing import parse_numbers, parse_rows
 
-        if arc is not None and (displacements is not None or model is not None):
+        if displacements is not None and tensions is not None:
+            raise InvalidInputError("give one of --displacements and --tensions, not both")
+        if arc is not None and (
+            displacements is not None or tensions is not None or model is not None
+        ):
             raise InvalidInputError(
                 "--arc describes the geometry itself; give either --arc or --displacements (with --model), not both"
             )
@@ -188,9 +198,21 @@ def register(app: typer.Typer) -> None:
             gm = backbone_mixture(arc_backbone(ka[0], ka[1])[None], 5)
             configs = [ka]
         else:
-            if displacements is None:
-                raise InvalidInputError("--displacements (or --arc) is required")
-            d = parse_rows(displacements, "--displacements")
+            if displacements is None and tensions is None:
+                raise InvalidInputError("--displacements (or --tensions, or --arc) is required")
+            if tensions is not None:
+                from riskplan.commands._shared import rows_from_tensions
+                from riskplan.robots import load_robot as _load_robot
+
+                if model is not None:
+                    from riskplan.kinematics import load_model as _load_model
+
+                    conv = _load_model(model).robot
+                else:
+                    conv = _load_robot(robot)
+                d = rows_from_tensions(conv, tensions)
+            else:
+                d = parse_rows(displacements, "--displacements")
             configs = d.tolist()
             if model is not None:
                 from riskplan.kinematics import load_model

@@ -1,7 +1,8 @@
 """`riskplan dataset ...` subcommands (heavy imports stay inside the commands).
 
 * ``riskplan dataset generate --robot paper --preset small --out data.h5 [--split train|test|both]
-  [--workers N] [--backend local|ray] [--seed S] [--overwrite]``
+  [--workers N] [--backend local|ray] [--seed S] [--overwrite]``; ``--preset`` also takes a
+  custom protocol as JSON (``'{"grid_levels": 5, "n_train": 100, "n_test": 20, "n_starts": 4}'``)
 * ``riskplan dataset info FILE [--json]``
 * ``riskplan dataset import MANIFEST.csv --out data.h5 [--robot R] [--points N] [--scale S]``
 * ``riskplan dataset export data.h5 --out DIR [--format npy|ply|pcd|csv]``
@@ -30,7 +31,15 @@ def register(app: typer.Typer) -> None:
     @sub.command("generate")
     def generate(
         robot: str = typer.Option("paper", help="Robot name (paper) or TOML file."),
-        preset: str = typer.Option("small", help="Protocol preset: paper, small or tiny."),
+        preset: str = typer.Option(
+            "small",
+            help="Protocol: a preset (paper, small, tiny; adapted to the robot's tendon count, "
+            "base rotation/retraction and tension limits, same number of configurations) or a "
+            "custom protocol as JSON, e.g. "
+            '\'{"grid_levels": 5, "n_train": 100, "n_test": 20, "n_starts": 4}\' '
+            "(fields: name, grid_levels, n_train, n_test, n_starts, n_points, path_steps, "
+            "split_seed, surface_spacing, limits; docs/datasets.md).",
+        ),
         out: Path = typer.Option(
             Path("data.h5"), "--out", "-o", help="Output HDF5 file (a stem for --split both)."
         ),
@@ -51,14 +60,23 @@ def register(app: typer.Typer) -> None:
         import time
 
         from riskplan.commands._shared import progress_bar, stop_interrupted
-        from riskplan.datasets import generate_dataset, get_protocol, split_paths
+        from riskplan.datasets import generate_dataset, split_paths
+        from riskplan.datasets.protocol import protocol_for_robot, protocol_limits
         from riskplan.errors import InvalidInputError
         from riskplan.robots import load_robot
 
         if split not in ("train", "test", "both"):
             raise InvalidInputError(f"split: expected train, test or both, got {split!r}")
-        protocol = get_protocol(preset)
         rob = load_robot(robot)
+        protocol = protocol_for_robot(preset, rob)
+        protocol_limits(protocol, rob)  # a custom protocol's limits must fit the robot
+        if protocol is not get_preset(preset):
+            typer.echo(
+                f"protocol {protocol.name} for robot {rob.name} ({rob.n_config} configuration "
+                f"variables): {protocol.grid_levels}-level grid, {protocol.n_train} + "
+                f"{protocol.n_test} targets"
+                + (f", limits {[list(r) for r in protocol.limits]}" if protocol.limits else "")
+            )
         outputs = split_paths(out) if split == "both" else {split: out}
         t0 = time.perf_counter()
         with progress_bar() as bar:
@@ -95,6 +113,11 @@ def register(app: typer.Typer) -> None:
             f"done in {time.perf_counter() - t0:.1f} s: "
             + ", ".join(str(p) for p in outputs.values())
         )
+
+    def get_preset(preset):
+        from riskplan.datasets import PRESETS
+
+        return PRESETS.get(preset)
 
     @sub.command("info")
     def info(

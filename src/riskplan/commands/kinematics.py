@@ -150,16 +150,26 @@ def register(app: typer.Typer) -> None:
             ..., "--model", "-m", help="Model folder, or a shipped model name ('paper')."
         ),
         displacements: str = typer.Option(
-            ...,
+            None,
             "--displacements",
             "-d",
             help="'d1,d2,...' (m); ';' between configurations; or a .csv/.txt/.json/.npy file.",
         ),
+        tensions: str = typer.Option(
+            None,
+            "--tensions",
+            "-t",
+            help="Or tendon tensions 't1,t2,...' (N; ';' between configurations), converted "
+            "to displacements through the model's robot.",
+        ),
         json_out: bool = typer.Option(False, "--json", help="Print the mixture as JSON."),
     ) -> None:
-        """Predict the Gaussian mixture of the robot's geometry for tendon displacements."""
+        """Predict the Gaussian mixture of the robot's geometry for tendon displacements (or tensions)."""
+        from riskplan.errors import InvalidInputError
         from riskplan.kinematics import load_model
 
+        if (displacements is None) == (tensions is None):
+            raise InvalidInputError("give exactly one of --displacements and --tensions")
         m = load_model(model)
         if m.metadata.get("finished") is False:
             typer.secho(
@@ -167,7 +177,13 @@ def register(app: typer.Typer) -> None:
                 fg="yellow",
                 err=True,
             )
-        d = _parse_displacements(displacements)
+        if tensions is not None:
+            from riskplan.commands._shared import rows_from_tensions
+
+            d = rows_from_tensions(m.robot, tensions)
+            d = d[0] if d.shape[0] == 1 else d
+        else:
+            d = _parse_displacements(displacements)
         gm = m.predict(d)
         obj = {
             "displacements": d.tolist(),

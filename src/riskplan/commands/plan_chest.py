@@ -53,6 +53,14 @@ def register(plan_app: typer.Typer) -> None:
         start: str = typer.Option(
             None, "--start", help="Start tendon displacements (default: zeros)."
         ),
+        goal_tensions: str = typer.Option(
+            None,
+            "--goal-tensions",
+            help="Goal as tendon tensions T1,...,Tm (N), converted to displacements through the robot model.",
+        ),
+        start_tensions: str = typer.Option(
+            None, "--start-tensions", help="Start as tendon tensions (N), like --goal-tensions."
+        ),
         tip_tolerance: float = typer.Option(
             0.005, "--tip-tolerance", help="Goal tip tolerance (m)."
         ),
@@ -135,8 +143,19 @@ def register(plan_app: typer.Typer) -> None:
                 )
         m = mdl.n_tendons
         goal_tip_xyz = None if goal_tip is None else parse_numbers(goal_tip, "--goal-tip", count=3)
-        goal_d = None if goal is None else parse_numbers(goal, "--goal", count=m)
-        start_d = None if start is None else parse_numbers(start, "--start", count=m)
+        if goal_tensions is None and start_tensions is None:
+            goal_d = None if goal is None else parse_numbers(goal, "--goal", count=m)
+            start_d = None if start is None else parse_numbers(start, "--start", count=m)
+        else:
+            from riskplan.commands._shared import configuration_from_options
+
+            conv = rob if rob is not None else mdl.robot
+            if conv is None:
+                raise InvalidInputError(
+                    "--start-tensions/--goal-tensions need a robot model: give --robot"
+                )
+            goal_d = configuration_from_options(conv, goal, goal_tensions, "goal")
+            start_d = configuration_from_options(conv, start, start_tensions, "start")
         if env is None:
             if base_pose is not None:
                 raise InvalidInputError(

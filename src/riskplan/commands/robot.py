@@ -3,6 +3,8 @@
 * ``riskplan robot shape --robot paper --displacements 0.01,0,0,0 [--json] [--plot FILE.png]``
 * ``riskplan robot shape --robot FILE.toml --tensions 1,0,0,0``
 * ``riskplan robot info --robot paper``
+* ``riskplan robot template [--out FILE.toml]``: a commented robot file to start from
+* ``--robot`` also reads the Kuntz lab's robot and task files (docs/robots.md)
 
 JSON output (``--json``) is strict JSON: non-finite numbers (an inextensible tendon's
 ``stiffness_n_per_m = inf``) are written as ``null``, never as ``Infinity`` / ``NaN``.
@@ -55,6 +57,12 @@ def register(app: typer.Typer) -> None:
         tensions: str = typer.Option(
             None, "--tensions", "-t", help="Tendon tensions (N), comma-separated, one per tendon."
         ),
+        rotation: float = typer.Option(
+            None, "--rotation", help="Base rotation (rad), robots whose file enables it."
+        ),
+        retraction: float = typer.Option(
+            None, "--retraction", help="Base retraction (m), robots whose file enables it."
+        ),
         gravity: bool = typer.Option(
             None, "--gravity/--no-gravity", help="Override the robot file's gravity setting."
         ),
@@ -79,11 +87,14 @@ def register(app: typer.Typer) -> None:
         r = load_robot(robot)
         if gravity is not None:
             r = r.with_gravity(gravity)
+        moved = {}
+        if rotation is not None or retraction is not None:
+            moved = {"rotation": rotation, "retraction": retraction}
         if displacements is not None:
             d = parse_numbers(displacements, "--displacements", count=r.n_tendons)
-            s = r.solve_displacements(d)
+            s = r.solve_displacements(d, **moved)
         else:
-            s = r.solve_tensions(parse_numbers(tensions, "--tensions", count=r.n_tendons))
+            s = r.solve_tensions(parse_numbers(tensions, "--tensions", count=r.n_tendons), **moved)
         if as_json:
             typer.echo(_dumps(s.to_json()))
         else:
@@ -132,6 +143,10 @@ def register(app: typer.Typer) -> None:
             "steps": b.n_steps,
             "disks": p.disks.count,
             "gravity": p.gravity.enabled,
+            "collision_radius_m": p.collision_radius,
+            "base_rotation": p.base_motion.rotation,
+            "base_retraction": p.base_motion.retraction,
+            "configuration_limits": r.configuration_limits.tolist(),
             "tendons": [
                 {
                     "name": t.name,
@@ -163,3 +178,47 @@ def register(app: typer.Typer) -> None:
         typer.echo(
             f"  hysteresis: {d['hysteresis']}; gravity {'on' if p.gravity.enabled else 'off'}"
         )
+        bm = p.base_motion
+        if bm.n_extra:
+            typer.echo(
+                "  base motion: "
+                + ", ".join(
+                    f"{k} in [{lo:.4g}, {hi:.4g}] {u}"
+                    for k, on, (lo, hi), u in (
+                        ("rotation", bm.rotation, bm.rotation_limits, "rad"),
+                        ("retraction", bm.retraction, bm.retraction_limits, "m"),
+                    )
+                    if on
+                )
+                + f"; configuration = {r.n_tendons} tensions or displacements"
+                + (", rotation" if bm.rotation else "")
+                + (", retraction" if bm.retraction else "")
+            )
+
+    @sub.command("template")
+    def template(
+        out: Path = typer.Option(
+            None, "--out", "-o", help="Write the file here (default: print it)."
+        ),
+        overwrite: bool = typer.Option(False, help="Replace an existing --out file."),
+    ) -> None:
+        """Write a commented robot file (riskplan's format, every key with its unit) to start from."""
+        from importlib import resources
+
+        text = (
+            resources.files("riskplan")
+            .joinpath("data", "robot_template.toml")
+            .read_text(encoding="utf-8")
+        )
+        if out is None:
+            typer.echo(text, nl=False)
+            return
+        from riskplan.errors import InvalidInputError
+        from riskplan.io import atomic_path, check_output_file
+
+        check_output_file(out, "--out")
+        if out.exists() and not overwrite:
+            raise InvalidInputError(f"--out: {str(out)!r} exists; pass --overwrite to replace it")
+        with atomic_path(out) as tmp:
+            Path(tmp).write_text(text, encoding="utf-8")
+        typer.echo(f"robot template: {out}")

@@ -32,8 +32,11 @@ from riskplan.datasets.protocol import (
     SPLITS,
     Protocol,
     _check_split,
-    get_protocol,
+    exposure_upper,
+    protocol_for_robot,
+    protocol_limits,
     random_starts,
+    scale_by_exposure,
     straight_path,
     target_configurations,
 )
@@ -70,24 +73,36 @@ def to_base_frame(robot, positions, rotations):
     return (positions - pb) @ Rb, np.einsum("ji,...jk->...ik", Rb, rotations)
 
 
-def arrive(robot, paths, seeds):
-    """Shapes on arrival after following commanded ``paths (S, T, m)`` through the hysteresis model.
+def arrive(robot, paths, seeds, upper=None):
+    """Shapes on arrival after following commanded ``paths (S, T, n_config)`` through the
+    hysteresis model.
 
     Each path starts at rest at its first point (no lag; :meth:`HysteresisModel.initial_state`)
     and draws its own run-to-run variation (play widths, zero offsets) from its entry of
-    ``seeds`` (one ``SeedSequence`` per path). Returns the effective displacements ``(S, m)``
-    and the :class:`~riskplan.robots.RodShape` batch ``(S,)`` (world frame).
+    ``seeds`` (one ``SeedSequence`` per path). The tendon columns go through the play
+    operator; base rotation and retraction (robots that have them) arrive as commanded: they
+    are driven by a stage, not through the tendons' friction. Returns the effective
+    configurations ``(S, n_config)`` and the :class:`~riskplan.robots.RodShape` batch ``(S,)``
+    (world frame). ``upper (m,)``: a cap on the effective tendon displacements
+    (:func:`~riskplan.datasets.protocol.exposure_upper`).
     """
     from riskplan.robots.hysteresis import HysteresisModel
 
+    m = robot.n_tendons
     model = HysteresisModel(robot)
     eff = np.stack(
         [
-            model.move(model.initial_state(p[0]), p, np.random.default_rng(sd))[1]
+            model.move(model.initial_state(p[0, :m]), p[:, :m], np.random.default_rng(sd))[1]
             for p, sd in zip(paths, seeds)
         ]
     )
-    return eff, robot.solve_displacements(eff)
+    if upper is not None:
+        eff = np.minimum(eff, upper)
+    if robot.n_config == m:
+        return eff, robot.solve_displacements(eff)
+    _, rot, ret = robot.split_configuration(paths[:, -1, :], validate=False)
+    shape = robot.solve_displacements(eff, rotation=rot, retraction=ret)
+    return np.concatenate([eff, paths[:, -1, m:]], axis=1), shape
 
 
 def simulate_target(
@@ -105,28 +120,38 @@ def simulate_target(
     ----------
     robot: :class:`~riskplan.robots.TendonRobot`.
     protocol: the protocol (starts, points, path steps, cameras, surface spacing).
-    target: ``(m,)`` target displacements (m), within the limits.
+    target: ``(n_config,)`` target configuration (tendon displacements [m], then rotation [rad]
+        and retraction [m] where the robot has them), within the protocol's limits.
     seed: int or ``SeedSequence`` of this target.
 
     Returns
     -------
-    dict with ``points (S, P, 3) float32`` (base frame, m), ``tips (S, 3)``, ``starts (S, m)``,
-    ``tensions (S, m)`` (N, on arrival)
+    dict with ``points (S, P, 3) float32`` (base frame, m), ``tips (S, 3)``,
+    ``starts (S, n_config)``, ``tensions (S, m)`` (N, on arrival)
     and, with ``return_shapes``, the arrival ``shape`` (RodShape batch, base frame).
     """
     from riskplan.robots.cameras import capture
     from riskplan.robots.geometry import BodyGeometry, sample_surface
 
     S = protocol.n_starts
-    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
-    target = as_array(target, "target", shape=(robot.n_tendons,))
+    lim = protocol_limits(protocol, robot)
+    target = as_array(target, "target", shape=(robot.n_config,))
     check_range(target, "target", low=lim[:, 0], high=lim[:, 1])
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     per_start = [c.spawn(3) for c in ss.spawn(S)]  # (start draw, hysteresis, camera) per start
     starts = np.stack([random_starts(lim, 1, np.random.default_rng(c[0]))[0] for c in per_start])
+    if protocol.scale_by_exposure:
+        starts = scale_by_exposure(starts, robot, lim)
     paths = np.stack([straight_path(st, target, protocol.path_steps) for st in starts])
-    _, shape = arrive(robot, paths, [c[1] for c in per_start])
+    upper = None
+    if protocol.scale_by_exposure and robot.base_motion.retraction:
+        upper = exposure_upper(robot, float(target[-1]), lim)
+    _, shape = arrive(robot, paths, [c[1] for c in per_start], upper)
     P, R = to_base_frame(robot, shape.positions, shape.rotations)
+    if shape.s.ndim > 1:  # per-start retraction: each arrival has its own stations and body
+        return _finish_retracted(
+            robot, protocol, shape, P, R, starts, per_start, return_shapes, paths[:, -1, -1]
+        )
     if robot_toml is not None:
         body = _body(robot_toml, protocol.surface_spacing)
     else:
@@ -141,6 +166,33 @@ def simulate_target(
     )
     out = {
         "points": clouds.astype(np.float32),
+        "tips": P[:, -1, :].copy(),
+        "starts": starts,
+        "tensions": np.asarray(shape.tensions, dtype=np.float64),
+    }
+    if return_shapes:
+        from riskplan.robots import RodShape
+
+        out["shape"] = RodShape(shape.s, P, R, shape.tensions)
+    return out
+
+
+def _finish_retracted(robot, protocol, shape, P, R, starts, per_start, return_shapes, retractions):
+    """:func:`simulate_target`'s clouds when the arrivals differ in retraction (exposed length):
+    one body surface per arrival (the disks still exposed), rendered one by one."""
+    from riskplan.robots.cameras import capture
+    from riskplan.robots.geometry import BodyGeometry, sample_surface
+
+    cams = protocol.camera_objects()
+    clouds = []
+    for j in range(len(starts)):
+        body = BodyGeometry.from_params(
+            robot.retracted(float(retractions[j])).params, spacing=protocol.surface_spacing
+        )
+        sp, sn = sample_surface(shape.s[j], P[j], R[j], body)
+        clouds.append(capture(sp, sn, cams, protocol.n_points, seed=per_start[j][2]))
+    out = {
+        "points": np.stack(clouds).astype(np.float32),
         "tips": P[:, -1, :].copy(),
         "starts": starts,
         "tensions": np.asarray(shape.tensions, dtype=np.float64),
@@ -211,7 +263,9 @@ def generate_dataset(
     Parameters
     ----------
     robot: a :class:`~riskplan.robots.TendonRobot` or a robot name/path for ``load_robot``.
-    preset: preset name (``"paper"``, ``"small"``, ``"tiny"``), a :class:`Protocol` or its JSON.
+    preset: preset name (``"paper"``, ``"small"``, ``"tiny"``; adapted to the robot by
+        :func:`~riskplan.datasets.protocol.protocol_for_robot`), a :class:`Protocol` or its JSON
+        (taken as given).
     out: output file. Work in progress lives in ``<out>.partial`` and is renamed onto ``out``
         when every configuration is done.
     split: ``"train"`` or ``"test"`` (disjoint sets of targets of the same protocol).
@@ -234,7 +288,7 @@ def generate_dataset(
         from riskplan.robots import load_robot
 
         robot = load_robot(robot)
-    protocol = get_protocol(preset)
+    protocol = protocol_for_robot(preset, robot)
     split = _check_split(split)
     if backend not in BACKENDS:
         raise InvalidInputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
@@ -292,7 +346,10 @@ def _generate_locked(
     part = storage.partial_path(out)
     robot_toml = robot.toml_text()
     protocol_json = protocol.to_json()
-    targets = target_configurations(protocol, robot.displacement_limits, split)
+    lim = protocol_limits(protocol, robot)
+    targets = target_configurations(protocol, lim, split)
+    if protocol.scale_by_exposure:
+        targets = scale_by_exposure(targets, robot, lim)
     C = len(targets)
     if C == 0:
         raise InvalidInputError(f"protocol: split {split!r} has no configurations")
@@ -340,6 +397,7 @@ def _generate_locked(
         f = storage.create_file(
             part,
             displacements=targets,
+            n_tendons=robot.n_tendons,
             n_starts=protocol.n_starts,
             n_points=protocol.n_points,
             robot_toml=robot_toml,
@@ -378,12 +436,35 @@ def _generate_locked(
         finished = bool(np.all(f["done"][...]))
         if finished:
             storage.mark_complete(f)
+            _report_over_max_tension(f, robot, out)
     finally:
         f.close()
     if finished:
         os.replace(part, out)
         return out
     return part
+
+
+def _report_over_max_tension(f, robot, out) -> None:
+    """Log how many arrivals exceed ``max_tension``, and in which targets (they are kept: they
+    lie inside the protocol's box; ``riskplan dataset info`` lists them too)."""
+    from riskplan.datasets.summary import over_max_tension
+
+    over = over_max_tension(f["tensions"][...], robot.tension_limits)
+    if over["arrivals"]:
+        t = over["targets"]
+        log.warning(
+            "%s: %d of %d arrivals (%.1f %%) need more than max_tension (per tendon %s), in %d "
+            "targets: %s%s (kept; `riskplan dataset info` lists them all)",
+            out,
+            over["arrivals"],
+            over["of"],
+            100 * over["fraction"],
+            over["per_tendon"],
+            len(t),
+            t[:20],
+            " ..." if len(t) > 20 else "",
+        )
 
 
 def generate_splits(

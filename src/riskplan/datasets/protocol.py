@@ -16,6 +16,32 @@ with the fixed ``split_seed``, a random subset of 2,530 grid points, of which 2,
 training and 253 (10 %) to the test split. The split depends on ``split_seed`` only, never on
 the generation seed, so the training and test files of one protocol never share a target.
 
+Other robots
+------------
+The presets are written for the paper's 4-tendon robot. For any other robot,
+:func:`protocol_for_robot` keeps a preset's budget of target configurations (``n_train``,
+``n_test``, starts, points) and chooses the grid to fit: the fewest levels ``L >= 2`` with
+``L^d >= levels^4`` points, ``d`` the robot's configuration size (tendons, plus base rotation
+and retraction where the robot has them), so a 3-tendon robot gets a 16-level grid for
+``paper`` (4,096 points) and 5 levels for ``small``. The grid's box is the robot's
+configuration limits with each tendon's upper displacement clipped to the displacement at
+which that tendon alone reaches ``max_tension`` (``Protocol.limits``): displacement limits
+wider than the tension limits allow would fill the data set with arrivals the robot may not
+reach. The paper robot's protocols are unchanged by both rules.
+
+A robot with base retraction exposes less of itself the more it retracts, and a tendon of a
+shorter robot shortens less at the same tension (the lab's 0.12 m robot: 26.7 mm at 3.5 N fully
+exposed, 0.2 mm at 0.119 m retraction); with inextensible tendons a displacement beyond that
+cannot be reached at any tension. Its presets therefore set ``scale_by_exposure``: each
+configuration's tendon displacements are drawn in the box at zero retraction and mapped
+linearly onto the box at its own retraction, ``d' = lo + (d - lo) (h(rho) - lo) / (h(0) - lo)``
+with ``h(rho)`` the displacement at which the tendon alone carries ``max_tension`` at
+retraction ``rho`` (:func:`scale_by_exposure`). A base rotation over a full turn is periodic:
+the grid's rotation levels stop one step short of ``lo + 2 pi`` (and so do the starts). The play operator's effective displacement on
+arrival is capped at ``h(rho)`` too (:func:`exposure_upper`): the play (0.5 mm by default) is
+wider than the whole box near full retraction (0.2 mm), and an inextensible tendon cannot be
+shortened without bound.
+
 Starts
 ------
 The paper does not say how many starts were drawn per target. We take 8 for ``paper``:
@@ -57,6 +83,13 @@ class Protocol:
     split_seed: seed of the grid subset and the train/test split.
     surface_spacing: distance between surface samples rendered by the cameras (m).
     cameras: camera parameters (``PinholeCamera.to_dict()``), base frame.
+    limits: ``((low, high), ...)`` per configuration variable (tendon displacements [m], then
+        rotation [rad] and retraction [m] where enabled) of the grid and the random starts;
+        ``None``: the robot's configuration limits (left out of the JSON when ``None``, so
+        protocols without it keep their JSON text).
+    scale_by_exposure: map the tendon displacements of each configuration onto the box at its
+        retraction (robots with base retraction; :func:`scale_by_exposure`; left out of the JSON
+        when False).
     """
 
     name: str = "custom"
@@ -69,6 +102,8 @@ class Protocol:
     split_seed: int = 0
     surface_spacing: float = 0.0005
     cameras: tuple = field(default_factory=_default_cameras)
+    limits: tuple | None = None
+    scale_by_exposure: bool = False
 
     def __post_init__(self):
         for name in ("grid_levels", "n_starts", "n_points", "path_steps"):
@@ -89,6 +124,15 @@ class Protocol:
             )
         if len(self.cameras) < 1:
             raise InvalidInputError("protocol.cameras: expected at least one camera")
+        if self.limits is not None:
+            lim = np.asarray(self.limits, dtype=np.float64)
+            if lim.ndim != 2 or lim.shape[1] != 2 or not np.all(np.isfinite(lim)):
+                raise InvalidInputError(
+                    f"protocol.limits: expected [[low, high], ...] per configuration variable, got {self.limits!r}"
+                )
+            if np.any(lim[:, 1] < lim[:, 0]):
+                raise InvalidInputError(f"protocol.limits: low > high in {lim.tolist()}")
+            object.__setattr__(self, "limits", tuple(tuple(float(v) for v in r) for r in lim))
 
     def n_configs(self, split: str) -> int:
         return {"train": self.n_train, "test": self.n_test}[_check_split(split)]
@@ -101,6 +145,12 @@ class Protocol:
     def to_json(self) -> str:
         d = asdict(self)
         d["cameras"] = [dict(c) for c in self.cameras]
+        if not self.scale_by_exposure:
+            del d["scale_by_exposure"]
+        if self.limits is None:
+            del d["limits"]
+        else:
+            d["limits"] = [list(r) for r in self.limits]
         return json.dumps(d, sort_keys=True)
 
     @classmethod
@@ -113,10 +163,22 @@ class Protocol:
             raise InvalidInputError("protocol: expected a JSON object")
         unknown = set(d) - set(cls.__dataclass_fields__)
         if unknown:
-            raise InvalidInputError(f"protocol: unknown keys {sorted(unknown)}")
+            from riskplan.robots.params import suggest_key
+
+            known = set(cls.__dataclass_fields__)
+            raise InvalidInputError(
+                "protocol: unknown keys "
+                + ", ".join(f"'{k}'{suggest_key(k, known)}" for k in sorted(unknown))
+            )
         if "cameras" in d:
             d["cameras"] = tuple(d["cameras"])
         return cls(**d)
+
+    def example_json(self) -> str:
+        """A compact JSON text of this protocol without the cameras (they default), for help texts."""
+        d = json.loads(self.to_json())
+        del d["cameras"]
+        return json.dumps(d, sort_keys=False)
 
     def replace(self, **changes) -> Protocol:
         return replace(self, **changes)
@@ -153,6 +215,105 @@ def get_protocol(preset_or_protocol) -> Protocol:
     )
 
 
+#: configuration size the presets were written for (the paper's 4-tendon robot)
+PRESET_DIMENSIONS = 4
+
+
+def grid_levels_for(levels: int, dimensions: int) -> int:
+    """The fewest levels ``L >= 2`` with ``L^dimensions >= levels^PRESET_DIMENSIONS`` (integer
+    arithmetic): a grid of at least as many points as the preset's 4-D one."""
+    want = int(levels) ** PRESET_DIMENSIONS
+    L = 2
+    while L**dimensions < want:
+        L += 1
+    return L
+
+
+def tension_feasible_limits(robot) -> np.ndarray:
+    """``(n_config, 2)`` configuration limits with each tendon's upper displacement clipped to
+    ``d_i(max_tension_i e_i)``: the displacement at which tendon ``i`` alone carries its
+    ``max_tension`` (others slack, no retraction)."""
+    lim = np.array(robot.configuration_limits, dtype=np.float64)
+    m = robot.n_tendons
+    d = robot.displacements_for_tensions(np.diag(robot.tension_limits))  # (m, m)
+    lim[:m, 1] = np.minimum(lim[:m, 1], np.diag(d))
+    lim[:m, 1] = np.maximum(lim[:m, 1], lim[:m, 0])
+    return lim
+
+
+def protocol_for_robot(preset_or_protocol, robot) -> Protocol:
+    """The protocol a generation for ``robot`` uses.
+
+    A preset *name* adapts to the robot (module docs, "Other robots"): same budget of
+    configurations, grid levels chosen to fit the robot's configuration size, box clipped to
+    the tension limits. A :class:`Protocol` or its JSON is taken as given (a custom protocol is
+    the user's choice; :func:`target_configurations` checks it fits).
+    """
+    p = get_protocol(preset_or_protocol)
+    if not (isinstance(preset_or_protocol, str) and preset_or_protocol in PRESETS):
+        return p
+    d = robot.n_config
+    levels = p.grid_levels if d == PRESET_DIMENSIONS else grid_levels_for(p.grid_levels, d)
+    lim = tension_feasible_limits(robot)
+    bm = robot.base_motion
+    if bm.rotation:
+        # a full turn is periodic: -pi and pi are one angle, so the grid stops a step short
+        row = robot.n_tendons
+        lo, hi = lim[row]
+        if hi - lo >= 2 * np.pi - 1e-9:
+            lim[row, 1] = lo + 2 * np.pi * (levels - 1) / levels
+    full = np.asarray(robot.configuration_limits, dtype=np.float64)
+    limits = None if np.array_equal(lim, full) else tuple(map(tuple, lim.tolist()))
+    scale = bool(robot.base_motion.retraction)
+    if levels == p.grid_levels and limits is None and not scale:
+        return p
+    return p.replace(grid_levels=levels, limits=limits, scale_by_exposure=scale)
+
+
+def scale_by_exposure(configs, robot, limits) -> np.ndarray:
+    """Configurations ``(N, n_config)`` with their tendon displacements mapped onto the box at
+    their own retraction (module docs, "Other robots"); unchanged for robots without retraction.
+
+    ``d' = lo + (d - lo) (h(rho) - lo) / (h(0) - lo)``, ``h(rho) = min(high, d_i(max_tension_i
+    e_i; rho))`` per tendon, ``lo``/``high`` the tendon rows of ``limits (n_config, 2)``.
+    """
+    q = np.array(configs, dtype=np.float64)
+    if not robot.base_motion.retraction or q.size == 0:
+        return q
+    m = robot.n_tendons
+    lim = np.asarray(limits, dtype=np.float64)
+    lo, hi0 = lim[:m, 0], lim[:m, 1]
+    width0 = np.where(hi0 > lo, hi0 - lo, 1.0)
+    ret = q[:, -1]
+    for rho in np.unique(ret):
+        h = exposure_upper(robot, float(rho), limits)
+        idx = ret == rho
+        q[idx, :m] = lo + (q[idx, :m] - lo) * (h - lo) / width0
+    return q
+
+
+def exposure_upper(robot, retraction: float, limits) -> np.ndarray:
+    """``(m,)`` ``h(rho) = max(low, min(high, d_i(max_tension_i e_i; rho)))``: the upper end of
+    each tendon's displacement box at retraction ``rho`` (``limits (n_config, 2)``)."""
+    m = robot.n_tendons
+    lim = np.asarray(limits, dtype=np.float64)
+    d = robot.retracted(float(retraction)).displacements_for_tensions(np.diag(robot.tension_limits))
+    return np.maximum(lim[:m, 0], np.minimum(lim[:m, 1], np.diag(d)))
+
+
+def protocol_limits(protocol: Protocol, robot) -> np.ndarray:
+    """``(n_config, 2)`` box of the grid and the starts: ``protocol.limits`` or the robot's."""
+    lim = np.asarray(
+        protocol.limits if protocol.limits is not None else robot.configuration_limits,
+        dtype=np.float64,
+    )
+    if lim.shape != (robot.n_config, 2):
+        raise InvalidInputError(
+            f"protocol.limits: {lim.shape[0]} rows for a robot with {robot.n_config} configuration variables"
+        )
+    return lim
+
+
 def _check_split(split: str) -> str:
     if split not in SPLITS:
         raise InvalidInputError(f"split: expected one of {SPLITS}, got {split!r}")
@@ -182,8 +343,14 @@ def target_configurations(protocol: Protocol, limits, split: str) -> np.ndarray:
     g = grid(limits, protocol.grid_levels)
     need = protocol.n_train + protocol.n_test
     if need > len(g):
+        d = g.shape[1]
+        L = 2
+        while L**d < need:
+            L += 1
         raise InvalidInputError(
-            f"protocol: n_train + n_test = {need} exceeds the {len(g)} points of a {protocol.grid_levels}-level grid"
+            f"protocol: n_train + n_test = {need} exceeds the {len(g)} points of a "
+            f"{protocol.grid_levels}-level grid in {d} dimensions; use grid_levels >= {L} "
+            "(or a preset name, which adapts to the robot)"
         )
     perm = np.random.default_rng(protocol.split_seed).permutation(len(g))
     idx = perm[: protocol.n_train] if split == "train" else perm[protocol.n_train : need]

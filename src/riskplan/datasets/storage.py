@@ -100,16 +100,23 @@ def create_file(
     displacements,
     n_starts: int,
     n_points: int,
+    n_tendons: int | None = None,
     robot_toml: str,
     robot_name: str,
     protocol_json: str,
     split: str,
     seed: int,
 ):
-    """Create a data-set file with every data set allocated (``done`` all False); returns the open h5py File."""
+    """Create a data-set file with every data set allocated (``done`` all False); returns the open h5py File.
+
+    ``displacements (C, n_config)``: the target configurations (tendon displacements, then base
+    rotation and retraction for robots that have them); ``n_tendons`` (default: all columns)
+    the width of ``tensions``.
+    """
     import h5py
 
     C, m = displacements.shape
+    mt = m if n_tendons is None else int(n_tendons)
     f = h5py.File(path, "w")
     try:
         f.attrs["format"] = FORMAT
@@ -127,7 +134,7 @@ def create_file(
         f.create_dataset("points", data=np.zeros((C, n_starts, n_points, 3), dtype=np.float32))
         f.create_dataset("tips", data=np.zeros((C, n_starts, 3), dtype=np.float64))
         f.create_dataset("starts", data=np.zeros((C, n_starts, m), dtype=np.float64))
-        f.create_dataset("tensions", data=np.zeros((C, n_starts, m), dtype=np.float64))
+        f.create_dataset("tensions", data=np.zeros((C, n_starts, mt), dtype=np.float64))
         f.create_dataset("done", data=np.zeros(C, dtype=bool))
         f.create_dataset(HASHES, data=np.zeros((C, 32), dtype=np.uint8))
         f["points"].attrs["units"] = "m"
@@ -192,7 +199,14 @@ def check_header(f, path) -> dict:
             f"data set {str(path)!r}: points has shape {ps}, expected (C={C}, S, P, 3)"
         )
     S = ps[1]
-    shapes = [("tips", (C, S, 3)), ("starts", (C, S, m)), ("tensions", (C, S, m)), ("done", (C,))]
+    # tensions hold the tendons only: fewer columns than the configuration of a robot with base
+    # rotation/retraction
+    mt = (
+        f["tensions"].shape[-1]
+        if f["tensions"].ndim == 3 and 1 <= f["tensions"].shape[-1] <= m
+        else m
+    )
+    shapes = [("tips", (C, S, 3)), ("starts", (C, S, m)), ("tensions", (C, S, mt)), ("done", (C,))]
     if HASHES in f:
         shapes.append((HASHES, (C, 32)))
     for key, want in shapes:

@@ -8,7 +8,36 @@ import numpy as np
 from riskplan.datasets.storage import load_dataset
 from riskplan.errors import RiskplanError
 
-__all__ = ["summarize"]
+__all__ = ["over_max_tension", "summarize"]
+
+
+def over_max_tension(tensions, tension_limits, done=None) -> dict:
+    """Arrivals whose tendon tensions exceed ``max_tension``: counts and indices.
+
+    Parameters
+    ----------
+    tensions: ``(C, S, m)`` arrival tensions [N]; tension_limits: ``(m,)`` [N];
+    done: ``(C,)`` bool, the targets to count (default all).
+
+    Returns
+    -------
+    ``{"arrivals": n, "of": N, "fraction": n / N, "targets": [i, ...] (targets with at least
+    one such arrival, ascending), "per_tendon": [n_j, ...] (arrivals over the limit of
+    tendon j)}``.
+    """
+    tau = np.asarray(tensions, dtype=np.float64)
+    C = tau.shape[0]
+    idx = np.arange(C) if done is None else np.flatnonzero(np.asarray(done, dtype=bool))
+    over = tau[idx] > np.asarray(tension_limits, dtype=np.float64) * (1 + 1e-9)  # (c, S, m)
+    arrivals = over.any(-1)  # (c, S)
+    total = int(arrivals.size)
+    return {
+        "arrivals": int(arrivals.sum()),
+        "of": total,
+        "fraction": float(arrivals.sum() / total) if total else 0.0,
+        "targets": [int(i) for i in idx[arrivals.any(-1)]],
+        "per_tendon": over.sum(axis=(0, 1)).astype(int).tolist(),
+    }
 
 
 def summarize(path) -> dict:
@@ -55,9 +84,11 @@ def summarize(path) -> dict:
             },
         )
         try:
-            tmax = np.asarray(ds.robot.tension_limits, dtype=np.float64)
-            over = np.any(ds.tensions[done] > tmax * (1 + 1e-9), axis=-1)
-            summary["arrivals_over_max_tension"] = float(over.mean())
+            over = over_max_tension(ds.tensions, ds.robot.tension_limits, done)
+            summary["arrivals_over_max_tension"] = over["fraction"]
+            summary["arrivals_over_max_tension_count"] = f"{over['arrivals']} of {over['of']}"
+            summary["arrivals_over_max_tension_per_tendon"] = over["per_tendon"]
+            summary["targets_over_max_tension"] = over["targets"]
         except RiskplanError as exc:
             # a robot file this version cannot rebuild must not stop the summary
             summary["arrivals_over_max_tension"] = f"unknown ({exc})"

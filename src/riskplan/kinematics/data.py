@@ -79,6 +79,24 @@ def content_hash(displacements: np.ndarray, points: np.ndarray) -> str:
     return h.hexdigest()
 
 
+def angle_columns(toml_text: str) -> tuple[int, ...]:
+    """Input columns that are angles: a base rotation over a full turn (column ``m``, after
+    the tendons); ``()`` for other robots or a description that cannot be rebuilt."""
+    import math
+
+    from riskplan.errors import RobotDescriptionError
+    from riskplan.robots import robot_from_toml
+
+    try:
+        robot = robot_from_toml(toml_text)
+    except RobotDescriptionError:
+        return ()
+    bm = robot.base_motion
+    if bm.rotation and bm.rotation_limits[1] - bm.rotation_limits[0] >= 2 * math.pi - 1e-12:
+        return (robot.n_tendons,)
+    return ()
+
+
 def displacement_limits(toml_text: str, displacements: np.ndarray) -> np.ndarray:
     """``(m, 2)`` limits of the robot in ``toml_text``; the data range if it cannot be rebuilt."""
     from riskplan.errors import RobotDescriptionError
@@ -92,10 +110,11 @@ def displacement_limits(toml_text: str, displacements: np.ndarray) -> np.ndarray
             exc,
         )
         return np.stack([displacements.min(0), displacements.max(0)], axis=1)
-    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
+    # the configuration: tendon displacements, then base rotation/retraction where enabled
+    lim = np.asarray(robot.configuration_limits, dtype=np.float64)
     if lim.shape != (displacements.shape[1], 2):
         raise DataFormatError(
-            f"robot in the data set has {lim.shape[0]} tendons but displacements have {displacements.shape[1]} columns"
+            f"robot in the data set has {lim.shape[0]} configuration variables but displacements have {displacements.shape[1]} columns"
         )
     return lim
 

@@ -75,8 +75,16 @@ class MDN(nn.Module):
         hidden=(64, 64),
         head_hidden=(32,),
         activation: str = "silu",
+        angle_inputs=(),
     ):
         super().__init__()
+        angle_inputs = tuple(int(a) for a in angle_inputs)
+        if any(not 0 <= a < n_inputs for a in angle_inputs) or len(set(angle_inputs)) != len(
+            angle_inputs
+        ):
+            raise InvalidInputError(
+                f"angle_inputs: expected distinct input indices in [0, {n_inputs}), got {angle_inputs}"
+            )
         if n_inputs < 1 or n_components < 1 or dim < 1:
             raise InvalidInputError(
                 f"MDN: need n_inputs, n_components, dim >= 1, got {n_inputs}, {n_components}, {dim}"
@@ -92,8 +100,12 @@ class MDN(nn.Module):
             )
         self.n_inputs, self.n_components, self.dim = n_inputs, n_components, dim
         self.hidden, self.head_hidden, self.activation = hidden, head_hidden, activation
+        #: inputs that are angles (a base rotation over a full turn): the network reads
+        #: (cos a, sin a) in their place, so a and a + 2 pi are one input (the normalisation
+        #: leaves them as they are, Normalisation.fit(angle_columns=...))
+        self.angle_inputs = angle_inputs
         trunk: list[nn.Module] = []
-        n = n_inputs
+        n = n_inputs + len(angle_inputs)
         for w in hidden:
             trunk += [nn.Linear(n, w), _act_module(activation)]
             n = w
@@ -116,7 +128,7 @@ class MDN(nn.Module):
                 head[-1].bias.zero_()
 
     def architecture(self) -> dict:
-        return {
+        arch = {
             "n_inputs": self.n_inputs,
             "n_components": self.n_components,
             "dim": self.dim,
@@ -124,10 +136,24 @@ class MDN(nn.Module):
             "head_hidden": list(self.head_hidden),
             "activation": self.activation,
         }
+        if self.angle_inputs:  # left out otherwise: earlier models' files stay as they were
+            arch["angle_inputs"] = list(self.angle_inputs)
+        return arch
+
+    def features(self, x: torch.Tensor) -> torch.Tensor:
+        """``(..., n_inputs + len(angle_inputs))``: ``x`` with each angle input ``a`` replaced
+        by ``cos a`` and ``sin a`` appended (``x`` itself without angle inputs)."""
+        if not self.angle_inputs:
+            return x
+        idx = list(self.angle_inputs)
+        ang = x[..., idx]
+        f = x.clone()
+        f[..., idx] = torch.cos(ang)
+        return torch.cat([f, torch.sin(ang)], dim=-1)
 
     def raw(self, x: torch.Tensor):
         """Head outputs ``(logits (..., K), means (..., K*d), u_raw (..., K*T))``."""
-        h = self.trunk(x)
+        h = self.trunk(self.features(x))
         return self.weight_head(h), self.mean_head(h), self.chol_head(h)
 
     def forward(self, x: torch.Tensor):
@@ -200,11 +226,14 @@ class Normalisation:
     output_scale: np.ndarray
 
     @classmethod
-    def fit(cls, displacements: np.ndarray, points: np.ndarray) -> Normalisation:
-        """Inputs: mean/std per tendon; points: mean/std per axis over all points."""
+    def fit(cls, displacements: np.ndarray, points: np.ndarray, angle_columns=()) -> Normalisation:
+        """Inputs: mean/std per tendon (identity for ``angle_columns``: the network takes their
+        cos and sin); points: mean/std per axis over all points."""
         im = displacements.mean(0)
         isd = displacements.std(0)
         isd = np.where(isd > 0, isd, 1.0)
+        for a in angle_columns:
+            im[a], isd[a] = 0.0, 1.0
         flat = points.reshape(-1, points.shape[-1])  # no float64 copy of a large cloud array
         oc = flat.mean(0, dtype=np.float64)
         osd = flat.std(0, dtype=np.float64)
@@ -379,10 +408,15 @@ class _FusedNumpyMDN:
             )
 
         trunk = [lin(m) for m in net.trunk if isinstance(m, nn.Linear)]
-        # fold (x - mean) / scale into the first layer: W' = W / scale, b' = b - (mean/scale) W
+        # fold (x - mean) / scale into the first layer: W' = W / scale, b' = b - (mean/scale) W;
+        # angle inputs (identity normalisation) enter as cos in place and sin appended
+        self.angle_inputs = list(net.angle_inputs)
+        n_a = len(self.angle_inputs)
         W0, b0 = trunk[0]
-        W0s = W0 / norm.input_scale[:, None]
-        trunk[0] = (W0s, b0 - (norm.input_mean[:, None] * W0s).sum(0))
+        scale = np.concatenate([norm.input_scale, np.ones(n_a)])
+        mean = np.concatenate([norm.input_mean, np.zeros(n_a)])
+        W0s = W0 / scale[:, None]
+        trunk[0] = (W0s, b0 - (mean[:, None] * W0s).sum(0))
         heads = [
             [lin(m) for m in h if isinstance(m, nn.Linear)]
             for h in (net.weight_head, net.mean_head, net.chol_head)
@@ -439,6 +473,10 @@ class _FusedNumpyMDN:
 
     def __call__(self, x: np.ndarray):
         batch = x.shape[:-1]
+        if self.angle_inputs:
+            ang = x[..., self.angle_inputs]
+            x = np.concatenate([x, np.sin(ang)], axis=-1)
+            x[..., self.angle_inputs] = np.cos(ang)
         h = x.reshape(-1, x.shape[-1]).astype(self.dtype)
         n_layers = len(self.layers)
         for i, (W, b) in enumerate(self.layers):

@@ -199,6 +199,7 @@ def load_model(path, robot=None) -> MDNModel:
             tuple(arch["hidden"]),
             tuple(arch["head_hidden"]),
             arch.get("activation", "silu"),
+            tuple(arch.get("angle_inputs", ())),
         )
         net = net.to(getattr(torch, arch.get("dtype", "float32")))
         net.load_state_dict(state)

@@ -278,7 +278,10 @@ def train(
         _refuse_existing_run(out, config)
 
     train_idx, val_idx = split_indices(data.n_configs, config.val_fraction, config.seed)
-    norm = Normalisation.fit(data.displacements[train_idx], data.points[train_idx])
+    from riskplan.kinematics.data import angle_columns
+
+    angles = angle_columns(data.robot_toml)  # a base rotation enters as (cos, sin)
+    norm = Normalisation.fit(data.displacements[train_idx], data.points[train_idx], angles)
 
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)
@@ -289,6 +292,7 @@ def train(
             config.hidden,
             config.head_hidden,
             config.activation,
+            angles,
         ).to(dtype)
     opt = torch.optim.Adam(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     sched = torch.optim.lr_scheduler.ReduceLROnPlateau(

@@ -19,6 +19,7 @@ from riskplan.errors import RobotDescriptionError
 
 __all__ = [
     "Backbone",
+    "BaseMotion",
     "BasePose",
     "Disks",
     "Gravity",
@@ -30,6 +31,7 @@ __all__ = [
     "quaternion_to_matrix",
     "read_robot_text",
     "rpy_to_matrix",
+    "suggest_key",
 ]
 
 
@@ -129,6 +131,34 @@ class BasePose:
 
 
 @dataclass(frozen=True)
+class BaseMotion:
+    """Base rotation and retraction as configuration variables (the Kuntz lab's
+    ``enable_rotation`` / ``enable_retraction``).
+
+    Not a rigid placement (that is :class:`BasePose`): *retraction* ``rho`` (m) pulls the robot
+    back through its base, so only the arc ``s in [rho, L]`` is exposed, starting at the base
+    origin along +z; the tendon routing is evaluated at the absolute arc length, and the tendons
+    still end at the tip. *Rotation* ``phi`` (rad) turns the whole exposed shape about the base z
+    axis: ``x -> Rz(phi) x``. This is the lab's ``TendonRobot::shape(tau, rotation, retraction)``
+    (Kuntz-Lab/interactive-rate-tendons, ``tension_shape(tau, s_start)`` then ``rotate_z``).
+
+    ``rotation_limits`` (rad) and ``retraction_limits`` (m) bound the inputs; the lab samples
+    rotations in ``[-pi, pi]`` and retractions in ``[0, L]``; we keep at least one integration
+    step exposed (``retraction <= L - step``).
+    """
+
+    rotation: bool = False
+    retraction: bool = False
+    rotation_limits: tuple[float, float] = (-math.pi, math.pi)
+    retraction_limits: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def n_extra(self) -> int:
+        """Configuration variables beyond the tendons (0, 1 or 2)."""
+        return int(self.rotation) + int(self.retraction)
+
+
+@dataclass(frozen=True)
 class HysteresisParams:
     """Play (backlash) operator per tendon plus per-run variation (see robots.hysteresis)."""
 
@@ -146,6 +176,9 @@ class RobotParams:
     gravity: Gravity = field(default_factory=Gravity)
     base: BasePose = field(default_factory=BasePose)
     hysteresis: HysteresisParams = field(default_factory=HysteresisParams)
+    base_motion: BaseMotion = field(default_factory=BaseMotion)
+    #: radius of the robot body for collision checks (m); None: the backbone's outer radius
+    collision_radius: float | None = None
 
 
 # Bounds on the work a robot file may ask for. Every shape solve integrates n_steps = length / step
@@ -253,11 +286,29 @@ def _table(doc: dict, key: str, *, required=True) -> dict:
     return t
 
 
-def _check_unknown(table: dict, allowed: set[str], path: str) -> None:
+def suggest_key(key: str, known) -> str:
+    """``" (did you mean 'x'?)"`` naming the known key closest to ``key``, or ``""``.
+
+    Closeness is :func:`difflib.get_close_matches` on the lower-cased names (cut-off 0.6),
+    falling back to a known key that contains ``key`` or is contained in it.
+    """
+    import difflib
+
+    known = sorted(known)
+    lower = {k.lower(): k for k in known}
+    hits = difflib.get_close_matches(key.lower(), list(lower), n=1, cutoff=0.6)
+    if not hits:
+        hits = [k for k in lower if key.lower() in k or (k in key.lower() and len(k) > 2)]
+    return f" (did you mean '{lower[hits[0]]}'?)" if hits else ""
+
+
+def _check_unknown(table: dict, allowed: set[str], path: str, *, what="robot description") -> None:
     for k in table:
         if k not in allowed:
             full = f"{path}.{k}" if path else k
-            raise RobotDescriptionError(f"robot description: unknown key '{full}'", key=full)
+            raise RobotDescriptionError(
+                f"{what}: unknown key '{full}'{suggest_key(k, allowed)}", key=full
+            )
 
 
 def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
@@ -274,9 +325,37 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise RobotDescriptionError(f"robot description: not valid TOML ({exc})", key=None) from exc
-    _check_unknown(
-        doc, {"name", "backbone", "disks", "tendons", "gravity", "base", "hysteresis"}, ""
-    )
+    from riskplan.robots import lab_format
+
+    if lab_format.is_lab_layout(doc):
+        return lab_format.parse_lab_document(doc, default_name=default_name)
+    return parse_robot_document(doc, default_name=default_name)
+
+
+#: top-level tables of a problem file that a robot reader skips (riskplan.planning.problem reads them)
+PROBLEM_TABLES = frozenset({"problem", "environment", "voxel_environment"})
+NATIVE_KEYS = frozenset(
+    {
+        "name",
+        "backbone",
+        "disks",
+        "tendons",
+        "gravity",
+        "base",
+        "hysteresis",
+        "base_motion",
+        "collision_radius",
+    }
+)
+
+
+def parse_robot_document(doc: dict, *, default_name: str = "robot") -> RobotParams:
+    """Validate a parsed riskplan robot document (the dict of a TOML file, docs/robots.md).
+
+    The tables of a problem file (``[problem]``, ``[environment]``, ``[voxel_environment]``)
+    are skipped. Raises :class:`RobotDescriptionError` naming the offending key.
+    """
+    _check_unknown(doc, NATIVE_KEYS | PROBLEM_TABLES, "")
     name = doc.get("name", default_name)
     if not isinstance(name, str) or not name:
         raise RobotDescriptionError(
@@ -465,7 +544,40 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
         _num(h, "play_variation", "hysteresis", default=0.2, nonneg=True),
         _num(h, "offset_std", "hysteresis", default=0.0001, nonneg=True),
     )
-    return RobotParams(name, backbone, disks, tuple(tendons), gravity, base, hyst)
+    bm = _table(doc, "base_motion", required=False)
+    _check_unknown(
+        bm, {"rotation", "retraction", "rotation_limits", "retraction_limits"}, "base_motion"
+    )
+    flags = {}
+    for key in ("rotation", "retraction"):
+        flags[key] = bm.get(key, False)
+        if not isinstance(flags[key], bool):
+            raise RobotDescriptionError(
+                f"robot description: 'base_motion.{key}' must be true or false",
+                key=f"base_motion.{key}",
+            )
+    rot_lim = _vec(bm, "rotation_limits", "base_motion", 2, default=(-math.pi, math.pi))
+    ret_lim = _vec(bm, "retraction_limits", "base_motion", 2, default=(0.0, length - step))
+    if not rot_lim[0] < rot_lim[1]:
+        raise RobotDescriptionError(
+            f"robot description: 'base_motion.rotation_limits' needs low < high, got {rot_lim}",
+            key="base_motion.rotation_limits",
+        )
+    if not (0.0 <= ret_lim[0] < ret_lim[1] <= length - step + 1e-12):
+        raise RobotDescriptionError(
+            f"robot description: 'base_motion.retraction_limits' must satisfy 0 <= low < high <= "
+            f"length - step = {length - step:g} m (at least one integration step stays exposed), got {ret_lim}",
+            key="base_motion.retraction_limits",
+        )
+    motion = BaseMotion(
+        flags["rotation"], flags["retraction"], (rot_lim[0], rot_lim[1]), (ret_lim[0], ret_lim[1])
+    )
+    collision_radius = None
+    if "collision_radius" in doc:
+        collision_radius = _num(doc, "collision_radius", "", positive=True)
+    return RobotParams(
+        name, backbone, disks, tuple(tendons), gravity, base, hyst, motion, collision_radius
+    )
 
 
 def read_robot_text(path: str | Path) -> str:
@@ -531,6 +643,19 @@ def params_to_dict(p: RobotParams) -> dict:
             "play_variation": p.hysteresis.play_variation,
             "offset_std": p.hysteresis.offset_std,
         },
+        **(
+            {
+                "base_motion": {
+                    "rotation": p.base_motion.rotation,
+                    "retraction": p.base_motion.retraction,
+                    "rotation_limits": list(p.base_motion.rotation_limits),
+                    "retraction_limits": list(p.base_motion.retraction_limits),
+                }
+            }
+            if p.base_motion.n_extra
+            else {}
+        ),
+        **({"collision_radius": p.collision_radius} if p.collision_radius is not None else {}),
     }
 
 

@@ -19,7 +19,9 @@ from riskplan._validation import as_array, check_range
 from riskplan.errors import ConvergenceError, InvalidInputError, RobotDescriptionError
 from riskplan.robots import cosserat
 from riskplan.robots.params import (
+    BaseMotion,
     BasePose,
+    Disks,
     Gravity,
     RobotParams,
     params_to_toml,
@@ -51,7 +53,8 @@ class RodShape:
 
     Attributes
     ----------
-    s : (n,) arc length of the stations [m]
+    s : (n,) arc length of the stations [m], from the exposed base; ``(..., n)`` for a batch
+        solved with per-configuration ``retraction`` (each exposed length has its own stations)
     positions : (..., n, 3) backbone points [m]
     rotations : (..., n, 3, 3) body frames; columns are the body axes (z = backbone tangent
         direction of the unsheared rod)
@@ -75,7 +78,8 @@ class RodShape:
     def __getitem__(self, idx) -> RodShape:
         if not self.batch_shape:
             raise InvalidInputError("RodShape: a single shape cannot be indexed")
-        return RodShape(self.s, self.positions[idx], self.rotations[idx], self.tensions[idx])
+        s = self.s if self.s.ndim == 1 else self.s[idx]
+        return RodShape(s, self.positions[idx], self.rotations[idx], self.tensions[idx])
 
     def to_json(self) -> dict:
         """``{"tip", "backbone", "tensions"}`` of a single shape (plain lists)."""
@@ -100,6 +104,29 @@ def in_limits(values, low, high):
         if not (x >= low[k % m] and x <= high[k % m]):  # NaN fails both comparisons
             return False
     return True
+
+
+def shift_polynomial(coefficients, offset: float) -> tuple[float, ...]:
+    """Coefficients of ``q(x) = p(x + offset)`` for ``p(x) = sum_k c_k x^k`` (ascending powers).
+
+    A retracted robot's routing ``theta(s)``, ``r(s)`` at absolute arc length ``s = s' + rho``
+    is the same-degree polynomial of the exposed arc length ``s'``.
+    """
+    P = np.polynomial.Polynomial(np.asarray(coefficients, dtype=np.float64))
+    q = P(np.polynomial.Polynomial([float(offset), 1.0])).coef
+    out = np.zeros(len(coefficients))
+    out[: len(q)] = q
+    return tuple(float(v) for v in out)
+
+
+def rotation_z(angle) -> np.ndarray:
+    """``(..., 3, 3)`` rotations about z by ``angle (...)`` [rad] (right-handed)."""
+    a = np.asarray(angle, dtype=np.float64)
+    c, s_ = np.cos(a), np.sin(a)
+    out = np.zeros(a.shape + (3, 3))
+    out[..., 0, 0], out[..., 0, 1], out[..., 1, 0], out[..., 1, 1] = c, -s_, s_, c
+    out[..., 2, 2] = 1.0
+    return out
 
 
 def _poly_table(polys) -> np.ndarray:
@@ -184,6 +211,43 @@ class TendonRobot:
     def tension_limits(self) -> np.ndarray:
         """``(m,)`` maximum tension per tendon [N]."""
         return self._tmax.copy()
+
+    @property
+    def base_motion(self) -> BaseMotion:
+        """Which base variables (rotation, retraction) the configuration holds, and their limits."""
+        return self.params.base_motion
+
+    @property
+    def n_config(self) -> int:
+        """Configuration size: tendons, then rotation (if enabled), then retraction (if enabled)."""
+        return self.n_tendons + self.params.base_motion.n_extra
+
+    @property
+    def configuration_limits(self) -> np.ndarray:
+        """``(n_config, 2)`` ``[low, high]``: tendon displacements [m], then rotation [rad] and
+        retraction [m] where enabled (the lab's configuration order)."""
+        rows = [self.displacement_limits]
+        bm = self.base_motion
+        if bm.rotation:
+            rows.append(np.array([bm.rotation_limits]))
+        if bm.retraction:
+            rows.append(np.array([bm.retraction_limits]))
+        return np.concatenate(rows, axis=0)
+
+    def split_configuration(self, q, *, validate: bool = True):
+        """``(tendon_part (..., m), rotation (...) or None, retraction (...) or None)`` of
+        configurations ``q (..., n_config)`` in the lab's order (tendons, rotation, retraction)."""
+        q = as_array(q, "configuration", min_ndim=1) if validate else np.asarray(q, dtype=float)
+        if q.shape[-1] != self.n_config:
+            raise InvalidInputError(
+                f"configuration: expected last dimension {self.n_config} ({self.n_tendons} tendons"
+                f"{' + rotation' if self.base_motion.rotation else ''}"
+                f"{' + retraction' if self.base_motion.retraction else ''}), got shape {q.shape}"
+            )
+        m = self.n_tendons
+        rot = q[..., m] if self.base_motion.rotation else None
+        ret = q[..., -1] if self.base_motion.retraction else None
+        return q[..., :m], rot, ret
 
     @property
     def tendon_rest_lengths(self) -> np.ndarray:
@@ -301,14 +365,23 @@ class TendonRobot:
         return np.ascontiguousarray(a.reshape(-1, self.n_tendons)), a.shape[:-1]
 
     # ---------------------------------------------------------------------- solving
-    def solve_tensions(self, tensions, *, validate: bool = True) -> RodShape:
+    def solve_tensions(
+        self, tensions, *, rotation=None, retraction=None, validate: bool = True
+    ) -> RodShape:
         """Shape for tendon tensions ``(..., m)`` [N], ``0 <= tension <= max_tension``.
+
+        ``rotation`` [rad] and ``retraction`` [m] (scalars or ``(...)``, robots whose file
+        enables them; see :class:`~riskplan.robots.params.BaseMotion`): the exposed arc
+        ``[retraction, L]`` is solved as a robot of its own (:meth:`retracted`), then turned
+        about the base z axis by ``rotation``.
 
         Without gravity: local strain solves of eqs. (2)-(3) and one RK4 pass
         (:func:`cosserat.shape_free`; batches of ``BATCH_KERNEL_MIN`` or more go through the
         SIMD kernel of :mod:`riskplan.robots.batch_kernel`, same results); with gravity: shooting on the base moment
         (:func:`cosserat.shape_loaded`). Raises :class:`ConvergenceError` if a solve fails.
         """
+        if rotation is not None or retraction is not None:
+            return self._solve_moved(True, tensions, rotation, retraction, validate)
         tau = self.check_tensions(tensions) if validate else np.asarray(tensions, dtype=float)
         if tau.ndim == 1 and not self.loaded:
             return self._solve_single_free(tau)
@@ -358,6 +431,162 @@ class TendonRobot:
         if not math.isfinite(P[-1, 0] + P[-1, 1] + P[-1, 2]):
             raise ConvergenceError(f"non-finite shape for tensions {tau.tolist()}")
         return self._to_world(P, Rs, tau, ())
+
+    def interpolate_configurations(self, a, b, t) -> np.ndarray:
+        """``(..., n_config)`` points ``a + t (b - a)`` of the straight configuration-space motion
+        from ``a`` to ``b`` (``t`` scalar or ``(...)``, in [0, 1]); a base rotation over a full
+        turn takes the short way round and is wrapped into ``[-pi, pi)`` (the lab's
+        ``VoxelEnvironment`` interpolation with ``util::canonical_angle``)."""
+        a = np.asarray(a, dtype=np.float64)
+        b = np.asarray(b, dtype=np.float64)
+        t = np.asarray(t, dtype=np.float64)[..., None]
+        out = a + t * (b - a)
+        bm = self.base_motion
+        if bm.rotation and bm.rotation_limits[1] - bm.rotation_limits[0] >= 2 * math.pi - 1e-12:
+            j = self.n_tendons
+            diff = np.mod(b[..., j] - a[..., j] + math.pi, 2 * math.pi) - math.pi
+            out[..., j] = np.mod(a[..., j] + t[..., 0] * diff + math.pi, 2 * math.pi) - math.pi
+        return out
+
+    def configuration_to_displacements(self, q, *, validate: bool = True) -> np.ndarray:
+        """A configuration in tension form ``(..., n_config)`` (tensions [N], then rotation and
+        retraction) in displacement form (tendon displacements [m] that hold the same shape at
+        that retraction, then rotation and retraction unchanged)."""
+        q = np.array(q, dtype=np.float64)
+        tau, _, ret = self.split_configuration(q, validate=validate)
+        out = q.copy()
+        out[..., : self.n_tendons] = self.displacements_for_tensions(
+            tau, retraction=ret, validate=validate
+        )
+        return out
+
+    def configuration_to_tensions(self, q, *, validate: bool = True) -> np.ndarray:
+        """The inverse of :meth:`configuration_to_displacements`: displacement form
+        ``(..., n_config)`` to tension form (tensions solved at the configuration's retraction)."""
+        q = np.array(q, dtype=np.float64)
+        d, _, ret = self.split_configuration(q, validate=validate)
+        out = q.copy()
+        out[..., : self.n_tendons] = self.tensions_for_displacements(
+            d, retraction=ret, validate=validate
+        )
+        return out
+
+    # ------------------------------------------------------------ base rotation/retraction
+    def check_base_motion(self, rotation, retraction, batch_shape) -> tuple:
+        """``(rotation, retraction)`` broadcast to ``batch_shape`` (``None`` stays ``None``),
+        checked against the robot's :class:`BaseMotion` (enabled, within limits)."""
+        bm = self.base_motion
+        out = []
+        for name, value, enabled, lim, unit in (
+            ("rotation", rotation, bm.rotation, bm.rotation_limits, "rad"),
+            ("retraction", retraction, bm.retraction, bm.retraction_limits, "m"),
+        ):
+            if value is None:
+                out.append(None)
+                continue
+            if not enabled:
+                raise InvalidInputError(
+                    f"{name}: robot {self.name!r} has no base {name} (its file does not enable it)"
+                )
+            arr = as_array(value, name)
+            try:
+                arr = np.broadcast_to(arr, batch_shape)
+            except ValueError:
+                raise InvalidInputError(
+                    f"{name}: expected a scalar or shape {batch_shape}, got {arr.shape}"
+                ) from None
+            check_range(arr, f"{name} [{unit}]", low=lim[0], high=lim[1])
+            out.append(np.ascontiguousarray(arr, dtype=np.float64))
+        return tuple(out)
+
+    def retracted(self, retraction: float) -> TendonRobot:
+        """The exposed part of this robot retracted by ``retraction`` [m], as a robot of its own.
+
+        Length ``L - retraction``, routing polynomials shifted to the exposed arc length
+        (:func:`shift_polynomial`), disks beyond the retraction kept (shifted), the same number
+        of integration steps as the whole robot (so shapes of different retractions stack),
+        identity base pose and no base motion. Cached per value.
+        """
+        rho = float(retraction)
+        cache = self.__dict__.setdefault("_retracted", {})
+        if rho in cache:
+            return cache[rho]
+        p = self.params
+        bb = p.backbone
+        L = bb.length - rho
+        if rho == 0.0:
+            sub_bb = bb
+        else:
+            sub_bb = replace(bb, length=L, step=L / bb.n_steps)
+        tendons = tuple(
+            replace(t, theta=shift_polynomial(t.theta, rho), radius=shift_polynomial(t.radius, rho))
+            for t in p.tendons
+        )
+        kept = tuple(x - rho for x in p.disks.positions if x > rho)
+        disks = Disks(len(kept), p.disks.radius, p.disks.thickness, p.disks.density, kept)
+        sub = TendonRobot(
+            replace(
+                p,
+                backbone=sub_bb,
+                disks=disks,
+                tendons=tendons,
+                base=BasePose(),
+                base_motion=BaseMotion(),
+            )
+        )
+        if len(cache) >= 256:  # bounded: data sets draw many retractions
+            cache.pop(next(iter(cache)))
+        cache[rho] = sub
+        return sub
+
+    def _per_retraction(self, method: str, values, retraction, validate: bool) -> np.ndarray:
+        """``method`` of :meth:`retracted` robots, grouped by retraction value."""
+        by_disp = method == "tensions_for_displacements"
+        check = self.check_displacements if by_disp else self.check_tensions
+        arr = check(values) if validate else np.asarray(values, dtype=float)
+        _, ret = self.check_base_motion(None, retraction, arr.shape[:-1])
+        flat = arr.reshape(-1, self.n_tendons)
+        rflat = ret.reshape(-1)
+        out = np.empty_like(flat)
+        for rho in np.unique(rflat):
+            idx = np.flatnonzero(rflat == rho)
+            out[idx] = getattr(self.retracted(rho), method)(flat[idx], validate=False)
+        return out.reshape(arr.shape)
+
+    def _solve_moved(self, by_tension: bool, values, rotation, retraction, validate) -> RodShape:
+        """Shapes with base rotation and/or retraction (see :meth:`solve_tensions`)."""
+        if self.loaded:
+            raise InvalidInputError(
+                "base rotation/retraction with gravity is not modelled (the exposed part's "
+                "load would depend on the retracted part); switch gravity off"
+            )
+        check = self.check_tensions if by_tension else self.check_displacements
+        arr = check(values) if validate else np.asarray(values, dtype=float)
+        batch = arr.shape[:-1]
+        rot, ret = self.check_base_motion(rotation, retraction, batch)
+        flat = np.ascontiguousarray(arr.reshape(-1, self.n_tendons))
+        B, n, m = flat.shape[0], self._n + 1, self.n_tendons
+        rflat = np.zeros(B) if ret is None else ret.reshape(-1)
+        P = np.empty((B, n, 3))
+        Rs = np.empty((B, n, 3, 3))
+        tau = np.empty((B, m))
+        S = np.empty((B, n))
+        for rho in np.unique(rflat):
+            idx = np.flatnonzero(rflat == rho)
+            sub = self.retracted(rho)
+            solve = sub.solve_tensions if by_tension else sub.solve_displacements
+            shape = solve(flat[idx], validate=False)
+            P[idx], Rs[idx], tau[idx] = shape.positions, shape.rotations, shape.tensions
+            S[idx] = shape.s
+        if rot is not None:
+            Rz = rotation_z(rot.reshape(-1))
+            P = np.einsum("bij,bnj->bni", Rz, P)
+            Rs = np.einsum("bij,bnjk->bnik", Rz, Rs)
+        shape = self._to_world(P, Rs, tau, batch)
+        # without retraction every row holds the whole robot's stations
+        s = S.reshape(batch + (n,)) if (ret is not None and batch) else S[0].copy()
+        s.flags.writeable = False
+        return RodShape(s, shape.positions, shape.rotations, shape.tensions)
 
     def local_failure_error(self, tau) -> ConvergenceError:
         """The error for a failed local strain solve (eqs. 2-3) of the unloaded rod, naming the
@@ -432,8 +661,14 @@ class TendonRobot:
             iterations=SHOOT_MAXIT,
         )
 
-    def solve_displacements(self, displacements, *, validate: bool = True) -> RodShape:
+    def solve_displacements(
+        self, displacements, *, rotation=None, retraction=None, validate: bool = True
+    ) -> RodShape:
         """Shape for tendon displacements ``(..., m)`` [m] (positive pulls the tendon in).
+
+        ``rotation``/``retraction`` as in :meth:`solve_tensions`; displacements are then
+        measured from the unloaded robot at the same retraction (the lab's
+        ``calc_dl(home_shape(retraction).L_i, shape.L_i)``).
 
         Tensions solve the complementarity problem (compliant tendons, slack allowed)::
 
@@ -443,6 +678,8 @@ class TendonRobot:
         tensions above ``max_tension`` are returned with a logged warning (the limit bounds
         tension *input*). Raises :class:`ConvergenceError` with the residual on failure.
         """
+        if rotation is not None or retraction is not None:
+            return self._solve_moved(False, displacements, rotation, retraction, validate)
         flat, batch = self._batch_input(displacements, self.check_displacements, validate)
         tau = self.tensions_for_displacements(flat, validate=False)
         over = tau > self._tmax * (1 + 1e-9)
@@ -460,8 +697,15 @@ class TendonRobot:
             tau.reshape(batch + (self.n_tendons,)),
         )
 
-    def tensions_for_displacements(self, displacements, *, validate: bool = True) -> np.ndarray:
-        """Tensions ``(..., m)`` [N] that realise tendon displacements ``(..., m)`` (see :meth:`solve_displacements`)."""
+    def tensions_for_displacements(
+        self, displacements, *, retraction=None, validate: bool = True
+    ) -> np.ndarray:
+        """Tensions ``(..., m)`` [N] that realise tendon displacements ``(..., m)`` (see
+        :meth:`solve_displacements`; with ``retraction`` [m], of the robot retracted by it)."""
+        if retraction is not None:
+            return self._per_retraction(
+                "tensions_for_displacements", displacements, retraction, validate
+            )
         flat, batch = self._batch_input(displacements, self.check_displacements, validate)
         B, m = flat.shape
         if self.loaded:
@@ -519,8 +763,15 @@ class TendonRobot:
                     raise self.local_failure_error(flat[b])
         return out.reshape(batch + (m,))
 
-    def displacements_for_tensions(self, tensions, *, validate: bool = True) -> np.ndarray:
-        """Actuator displacements ``d = l0 - l(tau) + tau / k`` ``(..., m)`` [m] that hold taut tendons at ``tensions``."""
+    def displacements_for_tensions(
+        self, tensions, *, retraction=None, validate: bool = True
+    ) -> np.ndarray:
+        """Actuator displacements ``d = l0 - l(tau) + tau / k`` ``(..., m)`` [m] that hold taut
+        tendons at ``tensions`` (with ``retraction`` [m], of the robot retracted by it)."""
+        if retraction is not None:
+            return self._per_retraction(
+                "displacements_for_tensions", tensions, retraction, validate
+            )
         tau = self.check_tensions(tensions) if validate else np.asarray(tensions, dtype=float)
         return self._l0 - self.tendon_lengths(tau, validate=False) + tau * self._kinv
 

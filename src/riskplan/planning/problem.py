@@ -1,0 +1,538 @@
+"""A planning problem read from a file: robot, start and goal, environment.
+
+Reads the Kuntz lab's problem files unchanged (Kuntz-Lab/Tendon_Robot_Learning, e.g.
+``resources/collapse-segmentation/tasks/task-0001.toml``; the C++ reader is
+``motion_planning::Problem::from_toml`` in Kuntz-Lab/interactive-rate-tendons) and riskplan's
+own robot files with the same tables:
+
+* the robot: any layout :func:`riskplan.robots.load_robot` reads (same file);
+* ``[problem]``: ``start``/``goal`` tendon **tensions** (N), or riskplan's
+  ``start_displacements``/``goal_displacements`` (m); ``start_rotation``/``goal_rotation`` (rad)
+  and ``start_retraction``/``goal_retraction`` (m) where the robot enables them;
+  ``min_tension_change`` (N), ``min_rotation_change`` (rad), ``min_retraction_change`` (m) —
+  the lab planner's resolution of a configuration-space motion; the lab's
+  ``sample_like_sphere`` flag is read and kept. The lab's nested layout keeps ``start``,
+  ``goal``, ``min_tension_change`` at the top level (read the same way);
+* ``[environment]``: ``[[environment.meshes]] filename`` (relative to the problem file),
+  ``[[environment.spheres]] center, radius`` (m), ``[[environment.points]] point`` (m);
+* ``[voxel_environment]``: the lab's voxel obstacles (:class:`VoxelEnvironment`).
+
+Configurations follow the lab's order: tendons, then rotation, then retraction
+(:meth:`riskplan.robots.TendonRobot.split_configuration`). Start and goal are converted
+between tensions and displacements through the robot model (at their own retraction).
+Everything is checked when the file is read, before anything is computed or written;
+errors name the file and the field (``task.toml: problem.goal[2] = 4.1 N is above
+max_tension 3.5 N``).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from riskplan.errors import InvalidInputError, RobotDescriptionError
+
+__all__ = [
+    "Problem",
+    "Sphere",
+    "VoxelEnvironment",
+    "VoxelGrid",
+    "load_problem",
+    "read_voxel_octree",
+]
+
+_PROBLEM_KEYS = {
+    "start",
+    "goal",
+    "start_displacements",
+    "goal_displacements",
+    "start_rotation",
+    "goal_rotation",
+    "start_retraction",
+    "goal_retraction",
+    "min_tension_change",
+    "min_rotation_change",
+    "min_retraction_change",
+    "sample_like_sphere",
+}
+_ENV_KEYS = {"meshes", "spheres", "points"}
+_VOXEL_KEYS = {"filename", "interior_filename", "scaling", "translation", "rotation_quat"}
+
+
+class ProblemFileError(RobotDescriptionError):
+    """A problem file is malformed; the message names the file and ``key`` the field."""
+
+
+def _err(path, key: str, message: str) -> ProblemFileError:
+    where = f"{path}: " if path is not None else ""
+    return ProblemFileError(f"{where}{key}: {message}", key=key)
+
+
+def _unknown(table: dict, allowed: set, prefix: str, path) -> None:
+    from riskplan.robots.params import suggest_key
+
+    for k in table:
+        if k not in allowed:
+            raise _err(path, f"{prefix}{k}", f"unknown key{suggest_key(k, allowed)}")
+
+
+def _number(table: dict, key: str, prefix: str, path, *, default=None, nonneg=False) -> float:
+    if key not in table:
+        if default is None:
+            raise _err(path, f"{prefix}{key}", "missing")
+        return float(default)
+    v = table[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise _err(path, f"{prefix}{key}", f"expected a finite number, got {v!r}")
+    if nonneg and v < 0:
+        raise _err(path, f"{prefix}{key}", f"expected >= 0, got {v!r}")
+    return float(v)
+
+
+def _vector(table: dict, key: str, prefix: str, path, n: int | None) -> np.ndarray:
+    v = table[key]
+    if not isinstance(v, list) or not all(
+        isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v
+    ):
+        raise _err(path, f"{prefix}{key}", f"expected a list of finite numbers, got {v!r}")
+    if n is not None and len(v) != n:
+        raise _err(path, f"{prefix}{key}", f"expected {n} entries, got {len(v)}")
+    return np.array(v, dtype=np.float64)
+
+
+# ------------------------------------------------------------------------------ voxels
+@dataclass(frozen=True, eq=False)
+class VoxelGrid:
+    """Occupied cells of the lab's ``VoxelOctree`` (a regular grid stored in 4×4×4 blocks).
+
+    Attributes
+    ----------
+    limits: ``(3, 2)`` lower and upper corner of the grid per axis (m, voxel frame).
+    dimension: cells per axis ``N``.
+    occupied: ``(K, 3)`` integer indices ``(ix, iy, iz)`` of the occupied cells.
+    """
+
+    limits: np.ndarray
+    dimension: int
+    occupied: np.ndarray
+
+    @property
+    def spacing(self) -> np.ndarray:
+        """``(3,)`` cell size (m)."""
+        return (self.limits[:, 1] - self.limits[:, 0]) / self.dimension
+
+    def centers(self) -> np.ndarray:
+        """``(K, 3)`` centres of the occupied cells, voxel frame (m)."""
+        return self.limits[:, 0] + (self.occupied + 0.5) * self.spacing
+
+
+def read_voxel_octree(path) -> VoxelGrid:
+    """Read the lab's ``VoxelOctree`` file (``.msgpack`` or ``.json``; ``.toml`` is not read).
+
+    Format (``collision::VoxelOctree::to_toml`` and its msgpack/JSON twins): ``{"VoxelOctree":
+    {"dimension": N, "xlimits": [lo, hi], "ylimits", "zlimits", "data": [[bx, by, bz, bits],
+    ...]}}``; block ``(bx, by, bz)`` covers cells ``4 b + (0..3)`` and cell ``(x, y, z)`` of a
+    block is occupied when bit ``16 x + 4 y + z`` of ``bits`` is set (``VoxelOctree::bitmask``).
+    """
+    p = Path(path)
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise InvalidInputError(f"voxel file {str(p)!r}: cannot read ({exc})") from exc
+    if p.suffix == ".msgpack":
+        try:
+            import msgpack
+        except ImportError as exc:  # pragma: no cover - an optional extra
+            raise InvalidInputError(
+                f"voxel file {str(p)!r}: reading .msgpack needs the 'msgpack' package "
+                "(pip install 'riskplan[mesh]'), or give the .json form"
+            ) from exc
+        try:
+            doc = msgpack.unpackb(raw, strict_map_key=False)
+        except Exception as exc:
+            raise InvalidInputError(f"voxel file {str(p)!r}: not valid msgpack ({exc})") from exc
+    elif p.suffix == ".json":
+        import json
+
+        try:
+            doc = json.loads(raw)
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise InvalidInputError(f"voxel file {str(p)!r}: not valid JSON ({exc})") from exc
+    else:
+        raise InvalidInputError(
+            f"voxel file {str(p)!r}: expected .msgpack or .json, got {p.suffix!r}"
+        )
+    try:
+        t = doc["VoxelOctree"]
+        N = int(t["dimension"])
+        limits = np.array([t["xlimits"], t["ylimits"], t["zlimits"]], dtype=np.float64)
+        data = np.array(t["data"], dtype=object).reshape(-1, 4)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InvalidInputError(f"voxel file {str(p)!r}: not a VoxelOctree ({exc})") from exc
+    if N <= 0 or N % 4 or limits.shape != (3, 2) or np.any(limits[:, 1] <= limits[:, 0]):
+        raise InvalidInputError(f"voxel file {str(p)!r}: bad dimension {N} or limits")
+    blocks = data[:, :3].astype(np.int64)
+    bits = np.array([int(b) for b in data[:, 3]], dtype=np.uint64)
+    k = np.arange(64, dtype=np.uint64)
+    on = ((bits[:, None] >> k[None, :]) & np.uint64(1)).astype(bool)  # (B, 64)
+    b_idx, bit = np.nonzero(on)
+    local = np.stack([bit // 16, (bit // 4) % 4, bit % 4], axis=-1)
+    occupied = 4 * blocks[b_idx] + local
+    if occupied.size and (occupied.min() < 0 or occupied.max() >= N):
+        raise InvalidInputError(f"voxel file {str(p)!r}: blocks outside the {N}^3 grid")
+    return VoxelGrid(limits, N, occupied)
+
+
+@dataclass(frozen=True, eq=False)
+class VoxelEnvironment:
+    """The lab's ``[voxel_environment]``: a voxel obstacle file and its frames.
+
+    Conventions, established from the lab's code (``motion_planning::VoxelEnvironment`` in
+    Kuntz-Lab/interactive-rate-tendons) and checked on its data (tests/planning/test_problem.py):
+
+    * ``rotation_quat`` is **scalar first** ``(w, x, y, z)`` (``Eigen::Quaterniond(w, x, y, z)``);
+      its matrix ``R`` takes robot-frame points into the voxel frame, ``x_voxel = R x_robot``
+      (``rotate_point``), so ``x_robot = Rᵀ x_voxel``.
+    * ``scaling`` and ``translation`` take the segmentation image's physical frame (mm) to the
+      voxel frame (m): ``x_voxel = scaling (x_image + translation)``
+      (``translate_and_scale_image``). The voxel file itself is already in the voxel frame.
+    """
+
+    filename: Path | None
+    scaling: float = 1.0
+    translation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotation_quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    interior_filename: Path | None = None
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """``(3, 3)`` ``R`` with ``x_voxel = R x_robot``."""
+        from riskplan.robots.params import quaternion_to_matrix
+
+        return quaternion_to_matrix(self.rotation_quat)
+
+    def image_to_voxel(self, points) -> np.ndarray:
+        """``(..., 3)`` segmentation-image points (its physical units) to the voxel frame (m)."""
+        return self.scaling * (np.asarray(points, dtype=np.float64) + np.asarray(self.translation))
+
+    def voxel_to_robot(self, points) -> np.ndarray:
+        """``(..., 3)`` voxel-frame points to the robot (base) frame: ``Rᵀ x``."""
+        return np.asarray(points, dtype=np.float64) @ self.rotation
+
+    def robot_to_voxel(self, points) -> np.ndarray:
+        """``(..., 3)`` robot-frame points to the voxel frame: ``R x``."""
+        return np.asarray(points, dtype=np.float64) @ self.rotation.T
+
+    def load(self) -> VoxelGrid:
+        """The voxel file's occupied cells (:func:`read_voxel_octree`)."""
+        if self.filename is None:
+            raise InvalidInputError("voxel_environment: no filename")
+        return read_voxel_octree(self.filename)
+
+    def obstacle_centers(self) -> np.ndarray:
+        """``(K, 3)`` centres of the occupied cells in the robot frame (m)."""
+        return self.voxel_to_robot(self.load().centers())
+
+
+@dataclass(frozen=True)
+class Sphere:
+    """A spherical obstacle: ``center (3,)`` (m, robot frame) and ``radius`` (m)."""
+
+    center: tuple[float, float, float]
+    radius: float
+
+
+# ----------------------------------------------------------------------------- problem
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """A planning problem: a robot, start and goal configurations, and an environment.
+
+    ``start``/``goal`` are ``(n_config,)`` configurations in the lab's order (tendon tensions
+    [N], rotation [rad] if enabled, retraction [m] if enabled); ``start_displacements`` /
+    ``goal_displacements`` the tendon displacements [m] that hold the same shapes
+    (:meth:`TendonRobot.displacements_for_tensions` at their retraction). Meshes are absolute
+    paths (a file's relative names resolved against the file's folder).
+    """
+
+    robot: object
+    start: np.ndarray
+    goal: np.ndarray
+    start_displacements: np.ndarray
+    goal_displacements: np.ndarray
+    min_tension_change: float | None = None
+    min_rotation_change: float | None = None
+    min_retraction_change: float | None = None
+    meshes: tuple[Path, ...] = ()
+    spheres: tuple[Sphere, ...] = ()
+    points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    voxel_environment: VoxelEnvironment | None = None
+    sample_like_sphere: bool | None = None
+    path: Path | None = None
+
+    @property
+    def n_config(self) -> int:
+        return int(self.robot.n_config)
+
+    @property
+    def configuration_limits(self) -> np.ndarray:
+        """``(n_config, 2)`` limits of tensions [0, max_tension] (N), then rotation and
+        retraction: the box a planner searches (the configuration is in tension form)."""
+        lim = np.array(self.robot.configuration_limits, dtype=np.float64)
+        m = self.robot.n_tendons
+        lim[:m, 0] = 0.0
+        lim[:m, 1] = self.robot.tension_limits
+        return lim
+
+    def interpolate(self, a, b, t) -> np.ndarray:
+        """Configurations along the straight motion from ``a`` to ``b``
+        (:meth:`TendonRobot.interpolate_configurations`; rotation the short way round)."""
+        return self.robot.interpolate_configurations(a, b, t)
+
+    def split(self, q):
+        """``(tensions, rotation, retraction)`` of a configuration (None where not enabled)."""
+        return self.robot.split_configuration(q)
+
+    def shape(self, q):
+        """The robot's :class:`~riskplan.robots.RodShape` at configuration ``q (..., n_config)``."""
+        tau, rot, ret = self.split(q)
+        if rot is None and ret is None:
+            return self.robot.solve_tensions(tau)
+        return self.robot.solve_tensions(tau, rotation=rot, retraction=ret)
+
+    def load_meshes(self, *, check_units: bool = True):
+        """The environment meshes as one ``trimesh.Trimesh`` (robot frame, m), or None.
+
+        With ``check_units``, a mesh whose bounding box is more than 100 times the robot's
+        length is refused: its units are most likely millimetres where metres are expected.
+        """
+        if not self.meshes:
+            return None
+        import trimesh
+
+        parts = []
+        L = self.robot.params.backbone.length
+        for k, mp in enumerate(self.meshes):
+            try:
+                mesh = trimesh.load_mesh(mp, force="mesh")
+            except Exception as exc:
+                raise _err(
+                    self.path, f"environment.meshes[{k}].filename", f"cannot read {mp} ({exc})"
+                ) from exc
+            size = float(np.linalg.norm(mesh.extents)) if len(mesh.vertices) else 0.0
+            if check_units and size > 100 * L:
+                raise _err(
+                    self.path,
+                    f"environment.meshes[{k}].filename",
+                    f"{mp.name} spans {size:.4g} units, {size / L:.0f} times the robot's length "
+                    f"{L} m: its units look like millimetres where metres are expected "
+                    "(scale it by 0.001)",
+                )
+            parts.append(mesh)
+        return trimesh.util.concatenate(parts) if len(parts) > 1 else parts[0]
+
+
+def load_problem(path, *, robot=None) -> Problem:
+    """Read a problem file (the lab's layouts or riskplan's, see the module docs).
+
+    ``robot``: a :class:`~riskplan.robots.TendonRobot` to use instead of the file's own robot
+    (a file that holds only ``[problem]``/``[environment]``). Raises :class:`ProblemFileError`
+    (an :class:`InvalidInputError`) naming the file and the field.
+    """
+    from riskplan.robots import TendonRobot, load_robot
+    from riskplan.robots.params import read_robot_text
+
+    p = Path(path)
+    text = read_robot_text(p)
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ProblemFileError(f"{p}: not valid TOML ({exc})") from exc
+    if robot is None:
+        try:
+            robot = load_robot(p)
+        except RobotDescriptionError as exc:
+            raise ProblemFileError(f"{p}: {exc}", key=exc.key) from None
+    elif not isinstance(robot, TendonRobot):
+        robot = load_robot(robot)
+    if "problem" in doc:
+        prob = doc["problem"]
+        if not isinstance(prob, dict):
+            raise _err(p, "problem", "must be a table")
+        prefix = "problem."
+    else:  # the nested layout keeps the problem at the top level
+        prob = {k: doc[k] for k in _PROBLEM_KEYS if k in doc}
+        prefix = ""
+    if prefix:
+        _unknown(prob, _PROBLEM_KEYS, prefix, p)
+    configs = {}
+    disp = {}
+    m = robot.n_tendons
+    bm = robot.base_motion
+    for end in ("start", "goal"):
+        given = [k for k in (end, f"{end}_displacements") if k in prob]
+        if len(given) != 1:
+            raise _err(
+                p,
+                f"{prefix}{end}",
+                f"give exactly one of '{end}' (tensions, N) and '{end}_displacements' (m)"
+                + (", got both" if len(given) == 2 else ""),
+            )
+        vec = _vector(prob, given[0], prefix, p, m)
+        extra = []
+        for var, enabled, lim, unit in (
+            ("rotation", bm.rotation, bm.rotation_limits, "rad"),
+            ("retraction", bm.retraction, bm.retraction_limits, "m"),
+        ):
+            key = f"{end}_{var}"
+            if not enabled:
+                if key in prob and float(prob[key]) != 0.0:
+                    raise _err(p, f"{prefix}{key}", f"the robot has no base {var}")
+                continue
+            if key not in prob:
+                raise _err(p, f"{prefix}{key}", f"required: the robot enables base {var}")
+            v = _number(prob, key, prefix, p)
+            if not lim[0] <= v <= lim[1]:
+                raise _err(
+                    p,
+                    f"{prefix}{key}",
+                    f"{v} {unit} is outside the limits [{lim[0]:g}, {lim[1]:g}]",
+                )
+            extra.append(v)
+        ret = extra[-1] if bm.retraction else None
+        if given[0] == end:
+            tmax = robot.tension_limits
+            for j in range(m):
+                if not 0.0 <= vec[j] <= tmax[j]:
+                    raise _err(
+                        p,
+                        f"{prefix}{end}[{j}]",
+                        f"{vec[j]} N is outside the tension limits [0, {tmax[j]:g}] N "
+                        f"(max_tension of tendon {j})",
+                    )
+            tau = vec
+            d = robot.displacements_for_tensions(tau, retraction=ret)
+        else:
+            lim = robot.displacement_limits
+            for j in range(m):
+                if not lim[j, 0] <= vec[j] <= lim[j, 1]:
+                    raise _err(
+                        p,
+                        f"{prefix}{end}_displacements[{j}]",
+                        f"{vec[j]} m is outside the displacement limits [{lim[j, 0]:g}, {lim[j, 1]:g}] m",
+                    )
+            d = vec
+            tau = robot.tensions_for_displacements(d, retraction=ret)
+            over = np.flatnonzero(tau > robot.tension_limits * (1 + 1e-9))
+            if over.size:
+                j = int(over[0])
+                raise _err(
+                    p,
+                    f"{prefix}{end}_displacements[{j}]",
+                    f"needs {tau[j]:.4g} N on tendon {j}, above its max_tension "
+                    f"{robot.tension_limits[j]:g} N",
+                )
+        configs[end] = np.concatenate([tau, extra])
+        disp[end] = d
+    changes = {
+        k: (_number(prob, k, prefix, p, nonneg=True) if k in prob else None)
+        for k in ("min_tension_change", "min_rotation_change", "min_retraction_change")
+    }
+    sample_like_sphere = prob.get("sample_like_sphere")
+    if sample_like_sphere is not None and not isinstance(sample_like_sphere, bool):
+        raise _err(p, f"{prefix}sample_like_sphere", "must be true or false")
+
+    env = doc.get("environment", {})
+    if not isinstance(env, dict):
+        raise _err(p, "environment", "must be a table")
+    _unknown(env, _ENV_KEYS, "environment.", p)
+    meshes = []
+    for k, t in enumerate(env.get("meshes", [])):
+        key = f"environment.meshes[{k}]"
+        if not isinstance(t, dict):
+            raise _err(p, key, "must be a table")
+        _unknown(t, {"filename"}, f"{key}.", p)
+        if not isinstance(t.get("filename"), str):
+            raise _err(p, f"{key}.filename", "expected a file name (string)")
+        mp = Path(t["filename"])
+        mp = mp if mp.is_absolute() else (p.parent / mp)
+        if not mp.is_file():
+            raise _err(p, f"{key}.filename", f"no such file: {mp}")
+        meshes.append(mp.resolve())
+    spheres = []
+    for k, t in enumerate(env.get("spheres", [])):
+        key = f"environment.spheres[{k}]"
+        if isinstance(t, dict) and isinstance(t.get("sphere"), dict):
+            t = t["sphere"]  # the lab accepts the sphere's own table inside
+        if not isinstance(t, dict):
+            raise _err(p, key, "must be a table")
+        _unknown(t, {"center", "radius"}, f"{key}.", p)
+        if "center" not in t:
+            raise _err(p, f"{key}.center", "missing")
+        c = _vector(t, "center", f"{key}.", p, 3)
+        r = _number(t, "radius", f"{key}.", p)
+        if not r > 0:
+            raise _err(p, f"{key}.radius", f"expected > 0, got {r}")
+        spheres.append(Sphere(tuple(float(v) for v in c), r))
+    pts = []
+    for k, t in enumerate(env.get("points", [])):
+        key = f"environment.points[{k}]"
+        if not isinstance(t, dict) or "point" not in t:
+            raise _err(p, key, "expected a table with 'point'")
+        _unknown(t, {"point"}, f"{key}.", p)
+        pts.append(_vector(t, "point", f"{key}.", p, 3))
+
+    voxel = None
+    if "voxel_environment" in doc:
+        v = doc["voxel_environment"]
+        if not isinstance(v, dict):
+            raise _err(p, "voxel_environment", "must be a table")
+        _unknown(v, _VOXEL_KEYS, "voxel_environment.", p)
+        files = {}
+        for k in ("filename", "interior_filename"):
+            if k in v:
+                if not isinstance(v[k], str):
+                    raise _err(p, f"voxel_environment.{k}", "expected a file name (string)")
+                f = Path(v[k])
+                files[k] = (f if f.is_absolute() else (p.parent / f)).resolve()
+        if "filename" not in files:
+            raise _err(
+                p, "voxel_environment.filename", "missing (voxels stored inline are not read)"
+            )
+        q = (
+            _vector(v, "rotation_quat", "voxel_environment.", p, 4)
+            if "rotation_quat" in v
+            else None
+        )
+        if q is not None and np.linalg.norm(q) < 1e-12:
+            raise _err(p, "voxel_environment.rotation_quat", "must be non-zero")
+        tr = _vector(v, "translation", "voxel_environment.", p, 3) if "translation" in v else None
+        scaling = _number(v, "scaling", "voxel_environment.", p, default=1.0)
+        if not scaling > 0:
+            raise _err(p, "voxel_environment.scaling", f"expected > 0, got {scaling}")
+        voxel = VoxelEnvironment(
+            files["filename"],
+            scaling,
+            tuple(float(x) for x in (tr if tr is not None else (0.0, 0.0, 0.0))),
+            tuple(float(x) for x in (q if q is not None else (1.0, 0.0, 0.0, 0.0))),
+            files.get("interior_filename"),
+        )
+    return Problem(
+        robot=robot,
+        start=configs["start"],
+        goal=configs["goal"],
+        start_displacements=disp["start"],
+        goal_displacements=disp["goal"],
+        min_tension_change=changes["min_tension_change"],
+        min_rotation_change=changes["min_rotation_change"],
+        min_retraction_change=changes["min_retraction_change"],
+        meshes=tuple(meshes),
+        spheres=tuple(spheres),
+        points=np.array(pts, dtype=np.float64).reshape(-1, 3),
+        voxel_environment=voxel,
+        sample_like_sphere=sample_like_sphere,
+        path=p.resolve(),
+    )

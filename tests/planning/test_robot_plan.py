@@ -210,3 +210,35 @@ def test_a_motion_whose_means_cross_a_wall_is_invalid():
     assert v(np.array([[0.2], [0.8]])).all()  # either side of a wall is free
     ok = v.motions(np.array([[0.2], [0.2], [0.8]]), np.array([[0.4], [0.8], [0.6]]), 0.05)
     np.testing.assert_array_equal(ok, [True, False, True])
+
+
+def test_a_killed_build_continues_where_it_stopped(built, tmp_path):
+    """A build killed after training (no test split, no build.json): the next call generates
+    only what is missing, trains nothing, and gives the same model."""
+    import torch
+
+    from riskplan.kinematics.model_cache import ensure_model
+
+    _, cache, build_json, _ = built
+    folder = build_json.parent
+    robot = load_problem(TASK).robot
+    before = ensure_model(robot, preset="tiny", cache=cache)
+    assert before.cached
+    copy = tmp_path / "cache"
+    shutil.copytree(folder.parent, copy / folder.parent.name)
+    killed = copy / folder.parent.name / folder.name
+    for name in ("build.json", "evaluation.json", "data_test.h5", "model/trained.json"):
+        (killed / name).unlink()
+    train_stamp = (killed / "data_train.h5").stat().st_mtime_ns
+    weights_stamp = (killed / "model" / "weights.pt").stat().st_mtime_ns
+    stages = []
+    after = ensure_model(
+        robot, preset="tiny", cache=copy, progress=lambda s, d, n: stages.append(s)
+    )
+    assert not after.cached and (killed / "build.json").is_file()
+    assert (killed / "data_train.h5").stat().st_mtime_ns == train_stamp  # kept
+    assert (killed / "model" / "weights.pt").stat().st_mtime_ns == weights_stamp  # not retrained
+    assert (killed / "data_test.h5").is_file()
+    for a, b in zip(before.model.net.parameters(), after.model.net.parameters()):
+        assert torch.equal(a, b)
+    assert after.evaluation["test_nll"] == before.evaluation["test_nll"]

@@ -18,7 +18,7 @@ def register(plan_app: typer.Typer) -> None:
         problem: Path = typer.Option(
             None,
             "--problem",
-            help="Problem file (the Kuntz lab's task TOML or riskplan's): robot, [problem] start/goal, [environment].",
+            help="Problem file (the Kuntz lab's task TOML or riskplan's): the robot, its problem table (start, goal) and its environment table (meshes, spheres).",
         ),
         robot: str = typer.Option(
             None, "--robot", help="Robot (name or TOML), with --env and --start/--goal."

@@ -115,6 +115,15 @@ class ModelBuild:
         return np.clip(box, lim[:, :1], lim[:, 1:])
 
 
+def _finished_model(model_dir: Path) -> bool:
+    """Whether ``model_dir`` holds the final model of a training run (``"finished": true``)."""
+    meta = model_dir / "model.json"
+    try:
+        return json.loads(meta.read_text(encoding="utf-8")).get("finished") is True
+    except (OSError, ValueError):
+        return False
+
+
 def _default_train_config():
     from riskplan.kinematics.training import TrainConfig
 
@@ -204,6 +213,9 @@ def ensure_model(
 
     t = time.perf_counter()
     trained = model_dir / "trained.json"
+    if not trained.is_file() and _finished_model(model_dir):
+        # killed after training saved its final model: nothing left to train
+        write_json_atomic(trained, {"data_hash": read_point_clouds(paths["train"]).content_hash})
     if not trained.is_file():
         data = read_point_clouds(paths["train"])
         resume = (model_dir / "checkpoint.pt").is_file()

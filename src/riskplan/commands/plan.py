@@ -8,14 +8,16 @@ import importlib
 
 import typer
 
-PLANNERS = ("plan_chest", "plan_tissue")
+PLANNERS = ("plan_chest", "plan_robot", "plan_tissue")
 
 
 def register(app: typer.Typer) -> None:
     from riskplan.commands._shared import add_group
 
     plan_app = add_group(
-        app, "plan", "Plan motions under uncertainty (chest cavity, deformable tissue)."
+        app,
+        "plan",
+        "Plan motions under uncertainty (chest cavity, any robot in any anatomy, deformable tissue).",
     )
     for name in PLANNERS:
         importlib.import_module(f"riskplan.commands.{name}").register(plan_app)

@@ -30,22 +30,40 @@ import numpy as np
 PAPER_FIG7 = {"nominal": 0.15, "optimised": 0.07, "iterations": 50}
 
 
-def trajectory_record(name: str, trajectory, bounds, bound: float) -> dict:
-    return {
+def configuration_columns(n: int, robot=None) -> list[str]:
+    """Column names of ``n`` model inputs: ``d1_m .. dm_m``, then ``rotation_rad`` and
+    ``retraction_m`` where the robot has them."""
+    m = n if robot is None else robot.n_tendons
+    cols = [f"d{j + 1}_m" for j in range(m)]
+    if robot is not None and robot.base_motion.rotation:
+        cols.append("rotation_rad")
+    if robot is not None and robot.base_motion.retraction:
+        cols.append("retraction_m")
+    return cols if len(cols) == n else [f"d{j + 1}_m" for j in range(n)]
+
+
+def trajectory_record(name: str, trajectory, bounds, bound: float, robot=None) -> dict:
+    traj = np.asarray(trajectory)
+    cols = configuration_columns(traj.shape[1], robot)
+    rec = {
         "name": name,
         "bound_eq10": float(bound),
-        "configurations": np.asarray(trajectory).tolist(),
+        "configurations": traj.tolist(),
         "bounds_eq9": np.asarray(bounds).tolist(),
         "units": "m (tendon displacements)",
     }
+    if len(cols) > sum(c.startswith("d") for c in cols):
+        rec["columns"] = cols
+        rec["units"] = "m (tendon displacements), rad (base rotation), m (base retraction)"
+    return rec
 
 
-def trajectory_csv(trajectory, bounds, bound: float) -> str:
+def trajectory_csv(trajectory, bounds, bound: float, robot=None) -> str:
     traj = np.asarray(trajectory)
     buf = io.StringIO()
     buf.write(f"# eq. 10 trajectory bound: {bound:.8g}\n")
     buf.write(
-        ",".join(["index"] + [f"d{j + 1}_m" for j in range(traj.shape[1])] + ["bound_eq9"]) + "\n"
+        ",".join(["index"] + configuration_columns(traj.shape[1], robot) + ["bound_eq9"]) + "\n"
     )
     for i, (row, p) in enumerate(zip(traj, bounds)):
         buf.write(",".join([str(i)] + [f"{v:.9g}" for v in row] + [f"{p:.8g}"]) + "\n")
@@ -56,18 +74,35 @@ def export_tendon_plans(out, trajectories: dict, robot) -> list[str]:
     """The controller's files of each trajectory ``{name: (T x m, eq. 9 bounds, eq. 10 bound)}``:
     ``<name>_plan.csv``, ``<name>_plan.json``, ``<name>_plan.joint_trajectory.yaml``
     (:mod:`riskplan.planning.export`)."""
-    from riskplan.planning.export import tendon_plan, write_tendon_plan
+    from riskplan.planning.export import TendonPlan, plan_times, tendon_plan, write_tendon_plan
 
     files = []
     for name, (traj, b, P) in trajectories.items():
-        plan = tendon_plan(robot, traj, b, trajectory_risk=P, name=name)
+        traj = np.asarray(traj, dtype=np.float64)
+        if robot is not None and traj.shape[1] == robot.n_config > robot.n_tendons:
+            # base motion: the tendon columns, tensions at each configuration's retraction
+            # (the base columns are in <name>.csv/json)
+            d, _, ret = robot.split_configuration(traj)
+            plan = TendonPlan(
+                times=plan_times(d),
+                displacements=d,
+                tensions=robot.tensions_for_displacements(d, retraction=ret),
+                risk=b,
+                tendon_names=tuple(t.name for t in robot.params.tendons),
+                trajectory_risk=P,
+                name=name,
+                tendon_speed=0.005,
+            )
+        else:
+            plan = tendon_plan(robot, traj, b, trajectory_risk=P, name=name)
         written = write_tendon_plan(plan, out, stem=f"{name}_plan")
         files += [p.name for p in written.values()]
     return files
 
 
 def trace_figure(trace, *, label: str = "riskplan (this run)", paper: dict | None = PAPER_FIG7):
-    """Fig. 7: best eq.-10 bound vs iteration, next to the paper's start/end values."""
+    """Fig. 7: best eq.-10 bound vs iteration, next to the paper's start/end values
+    (``paper=None``: without them, for a scene that is not the paper's)."""
     import matplotlib.pyplot as plt
 
     tr = np.asarray(trace)
@@ -149,8 +184,15 @@ def write_plan(
     to_world,
     validation: dict | None = None,
     extra: dict | None = None,
+    scene: str = "chest",
+    paper: dict | None = PAPER_FIG7,
 ):
-    """Write the files listed in the module docstring for a :class:`~riskplan.planning.chest.ChestPlan`."""
+    """Write the files listed in the module docstring for a :class:`~riskplan.planning.chest.ChestPlan`
+    (a :class:`~riskplan.planning.robot_plan.RobotPlan`).
+
+    ``scene`` names the 3-D view (``<scene>.html``); ``paper``: the paper's Fig. 7 values drawn
+    beside the trace and stored in ``trace.json`` (``None`` for a scene that is not the paper's).
+    """
     from pathlib import Path
 
     import matplotlib
@@ -169,24 +211,28 @@ def write_plan(
     }
     files = []
     for name, (traj, b, P) in trajs.items():
-        write_json_atomic(out / f"{name}.json", trajectory_record(name, traj, b, P))
-        write_text_atomic(out / f"{name}.csv", trajectory_csv(traj, b, P))
+        write_json_atomic(out / f"{name}.json", trajectory_record(name, traj, b, P, model.robot))
+        write_text_atomic(out / f"{name}.csv", trajectory_csv(traj, b, P, model.robot))
         files += [f"{name}.json", f"{name}.csv"]
     files += export_tendon_plans(out, trajs, model.robot)
-    write_json_atomic(
-        out / "trace.json", {"trace": res.trace.tolist(), "paper": PAPER_FIG7, **res.to_json()}
-    )
-    fig = trace_figure(res.trace)
+    trace = {"trace": res.trace.tolist(), **({"paper": paper} if paper else {}), **res.to_json()}
+    write_json_atomic(out / "trace.json", trace)
+    fig = trace_figure(res.trace, paper=paper)
     with atomic_path(out / "trace.png", suffix=".png") as tmp:
         fig.savefig(tmp, dpi=120)
     plt.close(fig)
     show = {"nominal": plan.nominal, "optimised": res.trajectory}
     if plan.paths is not None:
         show["least_risk"] = plan.paths["least_risk"]["trajectory"]
-    html = trajectories_plotly(environment_world, model, show, to_world)
-    with atomic_path(out / "chest.html", suffix=".html") as tmp:
+    title = (
+        "chest cavity: mixtures along the trajectories"
+        if scene == "chest"
+        else f"{scene}: mixtures along the trajectories"
+    )
+    html = trajectories_plotly(environment_world, model, show, to_world, title=title)
+    with atomic_path(out / f"{scene}.html", suffix=".html") as tmp:
         html.write_html(str(tmp), include_plotlyjs="cdn")
-    files += ["trace.json", "trace.png", "chest.html"]
+    files += ["trace.json", "trace.png", f"{scene}.html"]
     summary = {
         "nominal_bound": plan.nominal_bound,
         "optimised_bound": res.bound,
@@ -205,7 +251,7 @@ def write_plan(
         "trajectory_length": len(plan.nominal),
         "timings_s": plan.timings,
         "settings": plan.settings,
-        "frames": "trajectories in tendon-displacement space; mixtures and goal tip in the robot base frame; chest.html in the world frame",
+        "frames": f"trajectories in tendon-displacement space (with base rotation/retraction where the robot has them); mixtures and goal tip in the robot base frame; {scene}.html in the world frame",
     }
     if plan.paths is not None:
         summary["paths"] = {

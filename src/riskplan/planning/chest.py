@@ -19,30 +19,19 @@ from __future__ import annotations
 
 import logging
 import math
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from riskplan._validation import as_array
 from riskplan.errors import InvalidInputError
-from riskplan.planning.bo import (
-    OptimisationResult,
-    OptimiserConfig,
-    optimise_trajectory,
-)
+from riskplan.planning.bo import OptimiserConfig
 from riskplan.planning.prm import (
     DEFAULT_MILESTONES,
     DEFAULT_RESOLUTION,
     DEFAULT_STEP,
     DEFAULT_TIP_TOLERANCE,
-    MeanValidity,
-    Roadmap,
-    build_roadmap,
-    goal_from_tip,
-    interpolate_path,
 )
-from riskplan.planning.risk import RISKS, compare_paths, make_risk, trajectory_risk
+from riskplan.planning.robot_plan import RobotPlan, plan_robot
 
 log = logging.getLogger(__name__)
 
@@ -58,28 +47,8 @@ DEFAULT_GOAL = (-0.00886, 0.0011, 0.00463, 0.0094)
 DEFAULT_GOAL_TIP = (-0.02595, -0.01539, 0.19667)
 
 
-@dataclass
-class ChestPlan:
-    """Everything :func:`plan_chest` computed (arrays in displacement space, metres)."""
-
-    roadmap: Roadmap
-    start: np.ndarray
-    goal: np.ndarray
-    goal_tip: np.ndarray | None
-    path: np.ndarray
-    nominal: np.ndarray
-    nominal_bounds: np.ndarray
-    nominal_bound: float
-    optimised: OptimisationResult
-    paths: dict | None = None
-    timings: dict = field(default_factory=dict)
-    settings: dict = field(default_factory=dict)
-
-
-def _finite_positive(v, name):
-    if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-        raise InvalidInputError(f"{name}: expected a finite number > 0, got {v!r}")
-    return float(v)
+#: what :func:`plan_chest` returns: the scene-agnostic planner's result
+ChestPlan = RobotPlan
 
 
 def plan_chest(
@@ -110,113 +79,49 @@ def plan_chest(
     default: zeros clipped to the limits), or ``goal_tip (3,)`` base frame (the valid
     configuration whose predicted tip is closest, :func:`~riskplan.planning.prm.goal_from_tip`);
     when neither is given, :data:`DEFAULT_GOAL` (the :func:`recess_goal` rule, for the ``paper``
-    robot in ``build_chest(0)``; other models with 4 tendons get it too, others need a goal). ``least_risk``: also search the roadmap
-    for the least-risk path (edge cost ``-log(1 - p)``) and report both paths' bounds.
-    ``risk``: the per-configuration risk optimised, ``"eq9"`` (the paper's bound, the default)
-    or ``"cloud"`` (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact); combined
-    along the trajectory by eq. 10 either way.
+    robot in ``build_chest(0)``; other models with 4 tendons get it too, others need a goal).
+    ``least_risk``: also search the roadmap for the least-risk path (edge cost
+    ``-log(1 - p)``) and report both paths' bounds. ``risk``: the per-configuration risk
+    optimised, ``"eq9"`` (the paper's bound, the default) or ``"cloud"``
+    (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact); combined along the
+    trajectory by eq. 10 either way.
+    The chest's use of :func:`riskplan.planning.robot_plan.plan_robot` (the paper robot has
+    no base motion: planning coordinates are the displacements).
     """
-    optimiser = optimiser or OptimiserConfig()
-    optimiser.validate()
-    if risk not in RISKS:
-        raise InvalidInputError(f"risk: expected one of {RISKS}, got {risk!r}")
-    for name, v in (("step", step), ("resolution", resolution), ("tip_tolerance", tip_tolerance)):
-        _finite_positive(v, name)
-    if goal is not None and goal_tip is not None:
-        raise InvalidInputError(
-            "give either goal (displacements) or goal_tip (a tip target), not both"
-        )
-    lim = np.asarray(model.limits, dtype=np.float64)
-    m = lim.shape[0]
-    if start is None:
-        start = np.clip(np.zeros(m), lim[:, 0], lim[:, 1])
-    start = as_array(start, "start", shape=(m,))
-    if goal is not None:
-        goal = as_array(goal, "goal", shape=(m,))
-    elif goal_tip is None:
+    if goal is None and goal_tip is None:
+        m = len(model.limits)
         if m != len(DEFAULT_GOAL):
             raise InvalidInputError(
-                f"goal: the default goal has {len(DEFAULT_GOAL)} tendons, the model {m}; give goal or goal_tip"
+                f"goal: the default goal has {len(DEFAULT_GOAL)} tendons, the model {m}; "
+                "give goal or goal_tip"
             )
         goal = np.asarray(DEFAULT_GOAL, dtype=np.float64)
-    validity = MeanValidity(model, environment)
-    for name, c in (("start", start), ("goal", goal)):
-        if c is None:
-            continue
-        if not validity.within_limits(c[None])[0]:
-            raise InvalidInputError(
-                f"{name}: {c.tolist()} is outside the displacement limits {lim.tolist()}"
-            )
-        if not validity(c[None])[0]:
-            raise InvalidInputError(
-                f"{name}: configuration {c.tolist()} is invalid (a component mean of its predicted mixture lies inside an obstacle)"
-            )
-
-    timings = {}
-    t = time.perf_counter()
-    roadmap = build_roadmap(
-        validity,
+    return plan_robot(
+        model,
+        environment,
+        start=start,
+        goal=goal,
+        goal_tip=goal_tip,
+        tip_tolerance=tip_tolerance,
         n_milestones=n_milestones,
-        seed=seed,
+        step=step,
         resolution=resolution,
-        progress=roadmap_progress,
-    )
-    timings["roadmap_s"] = time.perf_counter() - t
-    if goal is None:
-        goal_tip = as_array(goal_tip, "goal_tip", shape=(3,))
-        goal = goal_from_tip(roadmap, model, goal_tip, tolerance=tip_tolerance, seed=seed)
-    bound = make_risk(risk, model, environment)
-    t = time.perf_counter()
-    paths = None
-    if least_risk:
-        paths = compare_paths(roadmap, bound, start, goal, step=step, progress=risk_progress)
-        path = paths["shortest"]["path"]
-    else:
-        path = roadmap.shortest_path(start, goal)
-    nominal = interpolate_path(path, step)
-    nominal_bound, nominal_bounds = trajectory_risk(bound, nominal)
-    timings["query_s"] = time.perf_counter() - t
-    t = time.perf_counter()
-    res = optimise_trajectory(
-        nominal,
-        bound,
-        validity,
-        lim,
-        config=optimiser,
+        optimiser=optimiser,
         seed=seed,
-        bounds=nominal_bounds,
+        least_risk=least_risk,
+        risk=risk,
         checkpoint=checkpoint,
         resume=resume,
-        progress=optimise_progress,
+        roadmap_progress=roadmap_progress,
+        optimise_progress=optimise_progress,
+        risk_progress=risk_progress,
     )
-    timings["optimise_s"] = time.perf_counter() - t
-    settings = {
-        "n_milestones": int(n_milestones),
-        "step": step,
-        "resolution": resolution,
-        "seed": int(seed),
-        "tip_tolerance": tip_tolerance,
-        "risk": risk,
-        "neighbours": roadmap.n_neighbours,
-        "optimiser": {
-            k: getattr(optimiser, k)
-            for k in ("iterations", "n_candidates", "radius", "method", "resolution")
-        },
-    }
-    return ChestPlan(
-        roadmap,
-        start,
-        goal,
-        None if goal_tip is None else np.asarray(goal_tip, dtype=np.float64),
-        path,
-        nominal,
-        nominal_bounds,
-        nominal_bound,
-        res,
-        paths,
-        timings,
-        settings,
-    )
+
+
+def _finite_positive(v, name):
+    if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+        raise InvalidInputError(f"{name}: expected a finite number > 0, got {v!r}")
+    return float(v)
 
 
 @dataclass(frozen=True)

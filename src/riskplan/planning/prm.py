@@ -116,7 +116,24 @@ class MeanValidity:
         t = np.concatenate([np.linspace(0.0, 1.0, k) for k in counts])
         pts = a[owner] + t[:, None] * (b - a)[owner]
         ok = self(pts)
+        if getattr(self.environment, "crossing_check", False):
+            ok &= self._no_crossing(pts, owner)
         return np.logical_and.reduceat(ok, np.concatenate([[0], np.cumsum(counts)[:-1]]))
+
+    def _no_crossing(self, pts, owner) -> np.ndarray:
+        """For surfaces that need not be closed (walls): ``(P,)`` False where a component mean
+        crosses a surface on its way from the previous configuration of the same motion."""
+        ok = np.ones(len(pts), dtype=bool)
+        inside = self.within_limits(pts)
+        same = np.flatnonzero((owner[1:] == owner[:-1]) & inside[1:] & inside[:-1]) + 1
+        if same.size:
+            sel = np.unique(np.concatenate([same - 1, same]))  # within the limits
+            pos = np.full(len(pts), -1)
+            pos[sel] = np.arange(len(sel))
+            mu = self.means(pts[sel])  # (len(sel), K, 3)
+            hit = self.environment.segments_collide(mu[pos[same - 1]], mu[pos[same]]).any(-1)
+            ok[same[hit]] = False
+        return ok
 
 
 def interpolate_path(path, step: float = DEFAULT_STEP) -> np.ndarray:

@@ -1,0 +1,211 @@
+"""``riskplan plan robot``: the MDN paper's planner (roadmap, nominal trajectory, Bayesian
+optimisation of P(collision)) for any robot in any anatomy, from a problem file or from a
+robot, a mesh and a start and goal; builds and caches the robot's model when none is given."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+
+def register(plan_app: typer.Typer) -> None:
+    """Add the ``robot`` command to the ``riskplan plan`` group."""
+
+    @plan_app.command("robot")
+    def robot_cmd(
+        out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
+        problem: Path = typer.Option(
+            None,
+            "--problem",
+            help="Problem file (the Kuntz lab's task TOML or riskplan's): the robot, its problem table (start, goal) and its environment table (meshes, spheres).",
+        ),
+        robot: str = typer.Option(
+            None, "--robot", help="Robot (name or TOML), with --env and --start/--goal."
+        ),
+        env: Path = typer.Option(
+            None, "--env", help="Anatomy mesh (STL/OBJ/PLY) in the robot base frame (m)."
+        ),
+        start: str = typer.Option(
+            None,
+            "--start",
+            help="Start: tendon tensions T1,...,Tm (N), then rotation (rad) and retraction (m) where the robot has them.",
+        ),
+        goal: str = typer.Option(None, "--goal", help="Goal, like --start."),
+        goal_tip: str = typer.Option(
+            None, "--goal-tip", help="Goal as a tip target X,Y,Z (m, base frame) instead of --goal."
+        ),
+        model: str = typer.Option(
+            None,
+            "--model",
+            help="A model folder from `riskplan train` (default: the robot's cached model, built if absent).",
+        ),
+        preset: str = typer.Option(
+            "small", "--preset", help="Data-set preset of a model built here (tiny, small, paper)."
+        ),
+        cache: Path = typer.Option(
+            None,
+            "--cache",
+            help="Model cache folder (default $RISKPLAN_CACHE/models or ~/.cache/riskplan/models).",
+        ),
+        milestones: int = typer.Option(300, "--milestones", min=2, help="PRM milestones."),
+        iterations: int = typer.Option(
+            50, "--iterations", min=0, help="Optimisation iterations (one bound evaluation each)."
+        ),
+        candidates: int = typer.Option(
+            256, "--candidates", min=1, help="Candidates drawn per iteration."
+        ),
+        step: float = typer.Option(
+            0.0025, "--step", help="Largest step between trajectory configurations (m)."
+        ),
+        resolution: float = typer.Option(
+            0.001, "--resolution", help="Motion check resolution (m)."
+        ),
+        tip_tolerance: float = typer.Option(
+            0.005, "--tip-tolerance", help="Goal tip tolerance (m)."
+        ),
+        workers: int = typer.Option(
+            1, "--workers", min=0, help="Data-set generation workers (0: one per core)."
+        ),
+        seed: int = typer.Option(0, "--seed", min=0, help="Seed of the model build and the plan."),
+        resume: bool = typer.Option(
+            False, "--resume", help="Continue an interrupted optimisation from OUT/checkpoint.json."
+        ),
+    ) -> None:
+        """Plan for any robot in any anatomy (MDN paper section V): the model, the roadmap, the
+        nominal trajectory, its P(collision) bound lowered by Bayesian optimisation; the plan
+        exported (CSV, JSON, ROS 2 JointTrajectory) and checked on the robot model."""
+        import math
+
+        import torch
+
+        from riskplan.commands._shared import progress_bar
+        from riskplan.errors import InvalidInputError
+        from riskplan.parsing import parse_numbers
+        from riskplan.planning.bo import OptimiserConfig
+        from riskplan.planning.robot_plan import (
+            problem_configurations,
+            problem_environment,
+            problem_from_options,
+        )
+
+        torch.set_num_threads(1)
+        for name, v in (
+            ("step", step),
+            ("resolution", resolution),
+            ("tip-tolerance", tip_tolerance),
+        ):
+            if not (math.isfinite(v) and v > 0):
+                raise InvalidInputError(f"--{name}: expected a finite number > 0, got {v}")
+        # every input is checked before any work: the problem, the scene, start and goal
+        if problem is not None:
+            if robot is not None or env is not None or start is not None or goal is not None:
+                raise InvalidInputError(
+                    "--problem holds the robot, environment, start and goal: do not combine it with --robot/--env/--start/--goal"
+                )
+            if goal_tip is not None:
+                raise InvalidInputError("--goal-tip: the problem file gives the goal")
+            from riskplan.planning.problem import load_problem
+
+            prob = load_problem(problem)
+        else:
+            missing = [
+                n for n, v in (("--robot", robot), ("--env", env), ("--start", start)) if v is None
+            ]
+            if goal is None and goal_tip is None:
+                missing.append("--goal or --goal-tip")
+            if missing:
+                raise InvalidInputError(
+                    f"give --problem FILE, or --robot, --env, --start and --goal: missing {', '.join(missing)}"
+                )
+            if goal is not None and goal_tip is not None:
+                raise InvalidInputError("give --goal or --goal-tip, not both")
+            prob = problem_from_options(robot, env, start, goal)
+        environment = problem_environment(prob)
+        s_cfg, g_cfg = problem_configurations(prob)
+        tip = None if goal_tip is None else parse_numbers(goal_tip, "--goal-tip", count=3)
+        if tip is not None:
+            g_cfg = None
+        cfg = OptimiserConfig(iterations=iterations, n_candidates=candidates, resolution=resolution)
+        cfg.validate()
+        rob = prob.robot
+
+        from riskplan.kinematics.model_cache import ensure_model, robot_hash
+
+        with progress_bar() as bar:
+            if model is not None:
+                from riskplan.kinematics import load_model
+
+                mdl = load_model(model)
+                if mdl.robot is None or robot_hash(mdl.robot) != robot_hash(rob):
+                    raise InvalidInputError(
+                        f"--model {model!r} was trained for robot {mdl.robot_name!r}, not the problem's robot {rob.name!r} (their parameters differ)"
+                    )
+                box, build = None, None
+            else:
+                tasks = {}
+
+                def on_build(stage, done, total):
+                    if stage not in tasks:
+                        tasks[stage] = bar.add_task(f"model: {stage}", total=total, status="")
+                    bar.update(tasks[stage], completed=done, total=total)
+
+                build = ensure_model(
+                    rob,
+                    preset=preset,
+                    cache=cache,
+                    seed=seed,
+                    workers=workers or None,
+                    backend="serial" if workers == 1 else "local",
+                    progress=on_build,
+                )
+                mdl, box = build.model, build.box
+            from riskplan.planning.robot_plan import plan_robot
+
+            out.mkdir(parents=True, exist_ok=True)
+            t_rm = bar.add_task("roadmap", total=milestones, status="")
+            t_bo = bar.add_task("optimisation (bo)", total=iterations, status="")
+            plan = plan_robot(
+                mdl,
+                environment,
+                start=s_cfg,
+                goal=g_cfg,
+                goal_tip=tip,
+                box=box,
+                tip_tolerance=tip_tolerance,
+                n_milestones=milestones,
+                step=step,
+                resolution=resolution,
+                optimiser=cfg,
+                seed=seed,
+                checkpoint=out / "checkpoint.json",
+                resume=resume,
+                roadmap_progress=lambda d, n: bar.update(t_rm, completed=d, total=n),
+                optimise_progress=lambda i, n, b: bar.update(
+                    t_bo, completed=i, total=n, status=f"bound {b:.4f}"
+                ),
+            )
+        from riskplan.experiments.robot_planning import write_robot_plan
+
+        summary = write_robot_plan(
+            out, plan, model=mdl, environment=environment, problem=prob, build=build
+        )
+        res = plan.optimised
+        typer.echo(
+            f"model: {'cached ' if build is not None and build.cached else ''}"
+            + (str(build.path) if build is not None else model)
+        )
+        typer.echo(
+            f"roadmap: {plan.roadmap.describe()}; trajectory of {len(plan.nominal)} configurations"
+        )
+        typer.echo(
+            f"eq. 10 bound: nominal {plan.nominal_bound:.4f} -> optimised {res.bound:.4f} "
+            f"({100 * res.reduction:.1f} % lower, {len(res.trace) - 1} iterations)"
+        )
+        chk = summary["robot_model_check"]
+        for name, c in chk.items():
+            typer.echo(
+                f"check on the robot model, {name}: {c['colliding']} of {c['configurations']} configurations collide, "
+                f"{c['above_max_tension']} need more than max_tension"
+            )
+        typer.echo(f"wrote {out}")

@@ -1,0 +1,466 @@
+"""The MDN paper's planner (section V) for any robot in any scene: roadmap, nominal trajectory,
+Bayesian optimisation of its eq.-10 bound.
+
+:func:`plan_robot` is the scene-agnostic pipeline; :func:`riskplan.planning.chest.plan_chest`
+is the chest cavity's use of it (its default goal tip and outputs).
+
+Configuration space
+-------------------
+The learned model's inputs: tendon displacements (m), then base rotation (rad) and retraction
+(m) where the robot has them (:meth:`riskplan.robots.TendonRobot.split_configuration`). The
+roadmap, the motion checks (``resolution``), the trajectory step (``step``) and the optimiser's
+neighbourhoods measure distances in *planning coordinates* ``y = w * x``, one weight per
+input (:func:`configuration_weights`): 1 for a tendon displacement and for retraction (a
+retraction of 1 mm moves the tip by 1 mm), the robot's length ``L`` (m/rad) for rotation (a
+rotation by ``theta`` moves a point of the robot at most ``L theta``, its largest distance
+from the axis). So the 1 mm motion resolution bounds how far the base motions move the robot
+between checked configurations, as it bounds a tendon's travel; without the weight a full-turn
+rotation (6.3 rad) would count as 6.3 m of motion. A robot without base motion has all weights
+1 and plans exactly as before. Rotation is planned within its limits as an interval (a motion
+does not wrap through ``+-pi``).
+
+The box searched is the box the model was trained on (``box``: the data-set protocol's
+limits, :attr:`riskplan.datasets.protocol.Protocol.limits`) when given, else the model's
+limits: outside the training data the MDN extrapolates.
+
+Scenes
+------
+``environment``: an :class:`~riskplan.collision.Environment` of closed obstacles in the robot
+base frame (the paper's condition: every component mean outside every obstacle), or a
+:class:`WallEnvironment`: surfaces that need not be closed (an anatomy surface with an opening
+for the robot, as in the Kuntz lab's task files), obstacles to be crossed rather than entered.
+There a motion is valid when, in addition, no component mean crosses a surface between two
+checked configurations; eq. 9 is the same Patil construction against the nearest surfaces.
+:func:`problem_environment` builds the scene of a :class:`~riskplan.planning.problem.Problem`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from riskplan._validation import as_array
+from riskplan.collision import Environment
+from riskplan.errors import InvalidInputError
+from riskplan.planning.bo import OptimisationResult, OptimiserConfig, optimise_trajectory
+from riskplan.planning.prm import (
+    DEFAULT_MILESTONES,
+    DEFAULT_RESOLUTION,
+    DEFAULT_STEP,
+    DEFAULT_TIP_TOLERANCE,
+    MeanValidity,
+    Roadmap,
+    build_roadmap,
+    goal_from_tip,
+    interpolate_path,
+)
+from riskplan.planning.risk import RISKS, compare_paths, make_risk, trajectory_risk
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "RobotPlan",
+    "ScaledModel",
+    "WallEnvironment",
+    "configuration_weights",
+    "plan_robot",
+    "problem_configurations",
+    "problem_environment",
+    "problem_from_options",
+]
+
+
+@dataclass
+class RobotPlan:
+    """Everything :func:`plan_robot` computed. Configurations are model inputs ``(T, n)``
+    (tendon displacements [m], then rotation [rad] and retraction [m] where enabled); the
+    roadmap is in planning coordinates (``weights * x``)."""
+
+    roadmap: Roadmap
+    start: np.ndarray
+    goal: np.ndarray
+    goal_tip: np.ndarray | None
+    path: np.ndarray
+    nominal: np.ndarray
+    nominal_bounds: np.ndarray
+    nominal_bound: float
+    optimised: OptimisationResult
+    paths: dict | None = None
+    timings: dict = field(default_factory=dict)
+    settings: dict = field(default_factory=dict)
+    weights: np.ndarray | None = None
+
+
+class ScaledModel:
+    """The model seen in planning coordinates ``y = weights * x``: ``predict(y)`` is
+    ``model.predict(y / weights)``, ``limits`` the box scaled by ``weights``."""
+
+    def __init__(self, model, weights, box=None):
+        self.model = model
+        self.weights = np.asarray(weights, dtype=np.float64)
+        box = np.asarray(model.limits if box is None else box, dtype=np.float64)
+        self.box = box
+        self.limits = box * self.weights[:, None]
+        self.n_tendons = model.n_tendons
+        self.robot = getattr(model, "robot", None)
+
+    def to_model(self, y) -> np.ndarray:
+        return np.asarray(y, dtype=np.float64) / self.weights
+
+    def to_planning(self, x) -> np.ndarray:
+        return np.asarray(x, dtype=np.float64) * self.weights
+
+    def predict(self, y, *args, **kwargs):
+        # exact at the box's faces: y / w * w may differ from x by an ulp
+        x = np.clip(self.to_model(y), self.box[:, 0], self.box[:, 1])
+        return self.model.predict(x, *args, **kwargs)
+
+
+def configuration_weights(robot, n_inputs: int) -> np.ndarray:
+    """``(n_inputs,)`` planning weights (module docs): 1 per tendon and for retraction, the
+    robot's length (m/rad) for rotation. All ones for a robot without base motion or
+    ``robot=None``."""
+    w = np.ones(int(n_inputs))
+    if robot is None:
+        return w
+    bm = getattr(robot, "base_motion", None)
+    if bm is not None and bm.rotation and n_inputs > robot.n_tendons:
+        w[robot.n_tendons] = float(robot.params.backbone.length)
+    return w
+
+
+class WallEnvironment(Environment):
+    """Surfaces as walls: meshes that need not be closed (module docs, "Scenes").
+
+    ``solid``: an :class:`Environment` of closed obstacles among them (spheres, closed meshes)
+    whose inside counts as in collision; ``contains`` is its containment (False everywhere
+    without one: a surface has no inside). ``crossing_check``: motions are checked for component
+    means crossing a surface (:meth:`MeanValidity.motions`).
+    """
+
+    crossing_check = True
+
+    def __init__(self, vertices, faces, face_obstacle=None, names=None, *, solid=None):
+        super().__init__(vertices, faces, face_obstacle, names, validate=False)
+        V = self.vertices
+        if not np.all(np.isfinite(V)):
+            raise InvalidInputError("vertices: contain NaN or inf")
+        self.solid = solid
+
+    def winding_number(self, points) -> np.ndarray:
+        P = np.asarray(points, dtype=np.float64)
+        if self.solid is None:
+            return np.zeros(P.shape[:-1], dtype=np.int64)
+        return self.solid.winding_number(P)
+
+    def contains(self, points) -> np.ndarray:
+        return self.winding_number(points) > 0
+
+
+def _icosphere(center, radius):
+    import trimesh
+
+    m = trimesh.creation.icosphere(subdivisions=3, radius=float(radius))
+    m.apply_translation(np.asarray(center, dtype=np.float64))
+    return m
+
+
+def problem_environment(problem, *, check_units: bool = True):
+    """The planner's scene of a :class:`~riskplan.planning.problem.Problem` (robot frame).
+
+    Meshes (``[environment.meshes]``, units checked against the robot's length) and spheres
+    (``[environment.spheres]``, as closed icospheres). All closed: an :class:`Environment` of
+    solid obstacles. Any mesh open (the lab's anatomy has an opening where the robot enters): a
+    :class:`WallEnvironment` of all surfaces, the closed ones solid. ``[[environment.points]]``
+    and ``[voxel_environment]`` are not used by the planner (points have no volume; the voxels
+    describe the same anatomy as the mesh); a problem with neither meshes nor spheres is
+    refused. Raises :class:`InvalidInputError` naming the file and field.
+    """
+    import trimesh
+
+    from riskplan.collision.geometry import check_closed_mesh
+
+    where = f"{problem.path}: " if problem.path is not None else ""
+    if not problem.meshes and not problem.spheres:
+        raise InvalidInputError(
+            f"{where}environment: no meshes or spheres; the planner needs obstacle surfaces "
+            "([[environment.meshes]] filename or [[environment.spheres]])"
+        )
+    parts, names = [], []
+    if problem.meshes:
+        problem.load_meshes(check_units=check_units)  # the units check, naming the field
+        for mp in problem.meshes:
+            m = trimesh.load_mesh(mp, force="mesh", process=True)
+            parts.append(m)
+            names.append(mp.stem)
+    for k, s in enumerate(problem.spheres):
+        parts.append(_icosphere(s.center, s.radius))
+        names.append(f"sphere{k}")
+    closed = []
+    for m in parts:
+        try:
+            check_closed_mesh(np.asarray(m.vertices), np.asarray(m.faces), "mesh")
+            closed.append(True)
+        except InvalidInputError:
+            closed.append(False)
+    if all(closed):
+        return Environment.from_meshes(parts, names=names)
+    solid_parts = [(m, n) for m, n, c in zip(parts, names, closed) if c]
+    solid = (
+        Environment.from_meshes([m for m, _ in solid_parts], names=[n for _, n in solid_parts])
+        if solid_parts
+        else None
+    )
+    V, F, owner, off = [], [], [], 0
+    for i, m in enumerate(parts):
+        V.append(np.asarray(m.vertices, dtype=np.float64))
+        F.append(np.asarray(m.faces, dtype=np.int64) + off)
+        owner.append(np.full(len(m.faces), i))
+        off += len(m.vertices)
+    log.info("open surfaces in the scene (%s): planning with walls", names)
+    return WallEnvironment(np.vstack(V), np.vstack(F), np.concatenate(owner), names, solid=solid)
+
+
+def problem_configurations(problem) -> tuple[np.ndarray, np.ndarray]:
+    """Start and goal of ``problem`` as model inputs ``(n_config,)``: tendon displacements
+    (converted from the file's tensions through the robot model), then rotation and retraction."""
+    m = problem.robot.n_tendons
+    return tuple(
+        np.concatenate([np.asarray(d, dtype=np.float64), np.asarray(q[m:], dtype=np.float64)])
+        for d, q in (
+            (problem.start_displacements, problem.start),
+            (problem.goal_displacements, problem.goal),
+        )
+    )
+
+
+def problem_from_options(robot, env, start, goal):
+    """A :class:`~riskplan.planning.problem.Problem` from a robot (name, file or
+    :class:`~riskplan.robots.TendonRobot`), a mesh file (robot base frame, m) and start/goal in
+    tension form, each ``"T1,...,Tm[,rotation][,retraction]"`` or an ``(n_config,)`` array
+    (``goal`` may be ``None`` for a tip target). Checked like a problem file: tension,
+    rotation and retraction limits, the mesh present; errors name the option."""
+    from pathlib import Path
+
+    from riskplan.parsing import parse_numbers
+    from riskplan.planning.problem import Problem
+    from riskplan.robots import TendonRobot, load_robot
+
+    rob = robot if isinstance(robot, TendonRobot) else load_robot(robot)
+    mesh = Path(env)
+    if not mesh.is_file():
+        raise InvalidInputError(f"--env: no such file: {mesh}")
+    q = {}
+    for name, spec in (("start", start), ("goal", goal)):
+        if spec is None:
+            continue
+        v = (
+            parse_numbers(spec, f"--{name}", count=rob.n_config)
+            if isinstance(spec, str)
+            else as_array(spec, name, shape=(rob.n_config,))
+        )
+        try:
+            d = rob.configuration_to_displacements(v)
+        except InvalidInputError as exc:
+            raise InvalidInputError(
+                f"--{name}: {exc} (robot {rob.name!r}: max_tension {rob.tension_limits.tolist()} N)"
+            ) from None
+        q[name] = (np.asarray(v, dtype=np.float64), d[: rob.n_tendons])
+    if "goal" not in q:  # a tip target: the goal configuration is found by the planner
+        q["goal"] = q["start"]
+    return Problem(
+        robot=rob,
+        start=q["start"][0],
+        goal=q["goal"][0],
+        start_displacements=q["start"][1],
+        goal_displacements=q["goal"][1],
+        meshes=(mesh.resolve(),),
+    )
+
+
+def _finite_positive(v, name):
+    if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+        raise InvalidInputError(f"{name}: expected a finite number > 0, got {v!r}")
+    return float(v)
+
+
+def plan_robot(
+    model,
+    environment,
+    *,
+    start=None,
+    goal=None,
+    goal_tip=None,
+    box=None,
+    weights=None,
+    tip_tolerance: float = DEFAULT_TIP_TOLERANCE,
+    n_milestones: int = DEFAULT_MILESTONES,
+    step: float = DEFAULT_STEP,
+    resolution: float = DEFAULT_RESOLUTION,
+    optimiser: OptimiserConfig | None = None,
+    seed: int = 0,
+    least_risk: bool = False,
+    risk: str = "eq9",
+    checkpoint=None,
+    resume: bool = False,
+    roadmap_progress=None,
+    optimise_progress=None,
+    risk_progress=None,
+) -> RobotPlan:
+    """Plan a nominal trajectory with a PRM and lower its eq.-10 bound (MDN paper section V).
+
+    Parameters
+    ----------
+    model: an :class:`~riskplan.kinematics.MDNModel` (inputs ``(n,)``, see the module docs).
+    environment: an :class:`~riskplan.collision.Environment` or :class:`WallEnvironment`,
+        robot base frame.
+    start, goal: ``(n,)`` model inputs; start default: zeros clipped to the box. Exactly one
+        of ``goal`` and ``goal_tip`` (a ``(3,)`` base-frame tip target, reached within
+        ``tip_tolerance``).
+    box: ``(n, 2)`` box to search (default the model's limits), within the model's limits.
+    weights: ``(n,)`` planning weights (default :func:`configuration_weights` of the model's
+        robot).
+    step, resolution: trajectory step and motion-check spacing, planning coordinates.
+    least_risk: also search the roadmap for the least-risk path (edge cost ``-log(1 - p)``).
+    risk: the per-configuration risk optimised, ``"eq9"`` (the paper's bound, the default) or
+        ``"cloud"`` (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact); combined
+        along the trajectory by eq. 10 either way.
+
+    Eq. 9 per configuration ``p_t``, eq. 10 ``P = 1 - prod_t (1 - p_t)``. Raises
+    :class:`InvalidInputError` for malformed or invalid inputs before any work,
+    :class:`~riskplan.errors.PlanningError` when no path or goal is found.
+    """
+    optimiser = optimiser or OptimiserConfig()
+    optimiser.validate()
+    if risk not in RISKS:
+        raise InvalidInputError(f"risk: expected one of {RISKS}, got {risk!r}")
+    for name, v in (("step", step), ("resolution", resolution), ("tip_tolerance", tip_tolerance)):
+        _finite_positive(v, name)
+    if goal is not None and goal_tip is not None:
+        raise InvalidInputError(
+            "give either goal (displacements) or goal_tip (a tip target), not both"
+        )
+    if goal is None and goal_tip is None:
+        raise InvalidInputError("give a goal (configuration) or a goal_tip (tip target)")
+    full = np.asarray(model.limits, dtype=np.float64)
+    n = full.shape[0]
+    box = full if box is None else as_array(box, "box", shape=(n, 2))
+    if (
+        np.any(box[:, 0] > box[:, 1])
+        or np.any(box[:, 0] < full[:, 0] - 1e-12)
+        or np.any(box[:, 1] > full[:, 1] + 1e-12)
+    ):
+        raise InvalidInputError(
+            f"box: {box.tolist()} must be ordered and within the model's limits {full.tolist()}"
+        )
+    box = np.clip(box, full[:, :1], full[:, 1:])
+    if weights is None:
+        weights = configuration_weights(getattr(model, "robot", None), n)
+    weights = as_array(weights, "weights", shape=(n,))
+    if np.any(weights <= 0):
+        raise InvalidInputError(f"weights: expected > 0, got {weights.tolist()}")
+    scaled = ScaledModel(model, weights, box)
+    if start is None:
+        start = np.clip(np.zeros(n), box[:, 0], box[:, 1])
+    start = as_array(start, "start", shape=(n,))
+    if goal is not None:
+        goal = as_array(goal, "goal", shape=(n,))
+    validity = MeanValidity(scaled, environment)
+    for name, c in (("start", start), ("goal", goal)):
+        if c is None:
+            continue
+        if not np.all((c >= box[:, 0]) & (c <= box[:, 1])):
+            raise InvalidInputError(
+                f"{name}: {c.tolist()} is outside the displacement limits {box.tolist()}"
+            )
+        if not validity(scaled.to_planning(c)[None])[0]:
+            raise InvalidInputError(
+                f"{name}: configuration {c.tolist()} is invalid (a component mean of its predicted mixture lies inside an obstacle)"
+            )
+
+    timings = {}
+    t = time.perf_counter()
+    roadmap = build_roadmap(
+        validity,
+        n_milestones=n_milestones,
+        seed=seed,
+        resolution=resolution,
+        progress=roadmap_progress,
+    )
+    timings["roadmap_s"] = time.perf_counter() - t
+    ys = scaled.to_planning(start)
+    if goal is None:
+        goal_tip = as_array(goal_tip, "goal_tip", shape=(3,))
+        yg = goal_from_tip(roadmap, scaled, goal_tip, tolerance=tip_tolerance, seed=seed)
+        goal = scaled.to_model(yg)
+    else:
+        yg = scaled.to_planning(goal)
+    bound = make_risk(risk, scaled, environment)
+    t = time.perf_counter()
+    paths = None
+    if least_risk:
+        paths = compare_paths(roadmap, bound, ys, yg, step=step, progress=risk_progress)
+        path = paths["shortest"]["path"]
+    else:
+        path = roadmap.shortest_path(ys, yg)
+    nominal = interpolate_path(path, step)
+    nominal_bound, nominal_bounds = trajectory_risk(bound, nominal)
+    timings["query_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    # a configuration's eq.-9 bound may be exactly 1 (a mean touching a surface): the optimiser's
+    # log1p(-p) is then -inf, exactly what eq. 10 needs, not an error
+    with np.errstate(divide="ignore"):
+        res = optimise_trajectory(
+            nominal,
+            bound,
+            validity,
+            scaled.limits,
+            config=optimiser,
+            seed=seed,
+            bounds=nominal_bounds,
+            checkpoint=checkpoint,
+            resume=resume,
+            progress=optimise_progress,
+        )
+    timings["optimise_s"] = time.perf_counter() - t
+    res = dataclasses.replace(res, trajectory=scaled.to_model(res.trajectory))
+    if paths is not None:
+        for v in paths.values():
+            v["path"] = scaled.to_model(v["path"])
+            v["trajectory"] = scaled.to_model(v["trajectory"])
+    settings = {
+        "n_milestones": int(n_milestones),
+        "step": step,
+        "resolution": resolution,
+        "seed": int(seed),
+        "tip_tolerance": tip_tolerance,
+        "risk": risk,
+        "neighbours": roadmap.n_neighbours,
+        "optimiser": {
+            k: getattr(optimiser, k)
+            for k in ("iterations", "n_candidates", "radius", "method", "resolution")
+        },
+    }
+    if np.any(weights != 1.0):
+        settings["weights"] = weights.tolist()
+        settings["box"] = box.tolist()
+    return RobotPlan(
+        roadmap,
+        start,
+        goal,
+        None if goal_tip is None else np.asarray(goal_tip, dtype=np.float64),
+        scaled.to_model(path),
+        scaled.to_model(nominal),
+        nominal_bounds,
+        nominal_bound,
+        res,
+        paths,
+        timings,
+        settings,
+        weights,
+    )

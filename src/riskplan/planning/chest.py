@@ -31,6 +31,7 @@ from riskplan.planning.prm import (
     DEFAULT_STEP,
     DEFAULT_TIP_TOLERANCE,
 )
+from riskplan.planning.risk import RISKS
 from riskplan.planning.robot_plan import RobotPlan, plan_robot
 
 log = logging.getLogger(__name__)
@@ -88,6 +89,8 @@ def plan_chest(
     The chest's use of :func:`riskplan.planning.robot_plan.plan_robot` (the paper robot has
     no base motion: planning coordinates are the displacements).
     """
+    if risk not in RISKS:  # before the goal: a bad option is named first
+        raise InvalidInputError(f"risk: expected one of {RISKS}, got {risk!r}")
     if goal is None and goal_tip is None:
         m = len(model.limits)
         if m != len(DEFAULT_GOAL):

@@ -7,11 +7,12 @@ Depends only on the :class:`~riskplan.scenarios.base.Simulator` protocol, NumPy/
 """
 
 from riskplan.control.kalman import kalman_gains
-from riskplan.control.linearize import Linearization, linearize
+from riskplan.control.linearize import Disturbance, Linearization, linearize
 from riskplan.control.lqg import (
     Execution,
     LQGController,
     SuccessEstimate,
+    augmented_model,
     bryson_weights,
     execute,
     lqg_controller,
@@ -22,12 +23,14 @@ from riskplan.control.lqr import lqr_gains
 from riskplan.control.plan import NominalPlan
 
 __all__ = [
+    "Disturbance",
     "Execution",
     "LQGController",
     "LQGMPResult",
     "Linearization",
     "NominalPlan",
     "SuccessEstimate",
+    "augmented_model",
     "bryson_weights",
     "execute",
     "kalman_gains",

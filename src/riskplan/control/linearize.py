@@ -56,6 +56,30 @@ Estimation, per step ``t`` (each run restarts the simulator from a stored plan s
 * ``H_t``, ``N_t``: ``sim.observation_matrix`` and ``sim.sensing_cov`` (constant), or the
   ``H``/``N`` arguments.
 
+Persistent disturbance (beyond the paper; ``disturbance=True``). The draws ``s_i ~ S`` of
+material, mesh and interaction force hold for a whole execution, but ``M_t`` treats their
+effect as fresh noise at every step. With ``disturbance=True`` each draw's one-step
+deviations along the plan are also explained by one constant input disturbance
+``d_i (q,)``, ``x̄_{t+1} = A_t x̄_t + B_t (ū_t + d)``, fitted by weighted least squares
+over all steps (``w = 1 / sim.state_scale`` where the simulator declares it, else 1):
+
+    d_i = argmin_d Σ_t ‖diag(w) (p_{i,t} − B_t d)‖²
+
+where ``p_{i,t}`` is the deviation of draw ``i`` *without* its actuation noise (the
+persistent part; a draw whose only difference from the plan's parameters is actuation noise
+has ``p_{i,t} = 0`` without a run, any other draw with actuation noise is run once more with
+the noise switched off). Then ``Σ_d = (1/n) Σ_i d_i d_iᵀ`` (second moment about zero, as
+``M_t``: the plan is made with the expected parameters, so a mean offset is an offset the
+filter has to find) and the residual noise, what ``d`` cannot explain plus the per-step
+actuation noise,
+
+    M^r_t = (1/n) Σ_i (d_{i,t} − B_t d_i)(d_{i,t} − B_t d_i)ᵀ
+
+with ``d_{i,t}`` the full deviation (actuation noise included). Both are returned in
+``Linearization.disturbance`` (:class:`Disturbance`); ``A``, ``B``, ``M`` stay the
+paper's, bit for bit, so one linearisation serves both controllers
+(:func:`~riskplan.control.lqg_controller` ``disturbance=True``).
+
 Simulators with a ``step_near(state, control, params, near)`` method (the manipulation
 scenario: a quasi-static solve whose answer depends only on the applied forces) get the
 nominal state the run is expected to land near (``y*_t`` for the first A-run step,
@@ -80,9 +104,11 @@ from riskplan.control.plan import NominalPlan
 from riskplan.errors import InvalidInputError, SimulationError
 
 __all__ = [
+    "Disturbance",
     "Linearization",
     "RankDeficiencyWarning",
     "control_jacobian",
+    "fit_disturbance",
     "linearize",
     "observation_model",
 ]
@@ -92,6 +118,32 @@ A_PRIORS = ("identity", "zero")
 
 class RankDeficiencyWarning(RuntimeWarning):
     """The deviations ``X_t`` of the A-estimation runs do not span the reduced state space."""
+
+
+@dataclass(frozen=True, eq=False)
+class Disturbance:
+    """The persistent part of the parameter uncertainty as a constant input disturbance
+    (module docstring, ``disturbance=True``).
+
+    Attributes
+    ----------
+    cov : (q, q) ``Σ_d = (1/n) Σ_i d_i d_iᵀ``, the prior of ``d`` (second moment about zero).
+    M : (T, p, p) the residual process noise ``M^r_t`` (what ``B_t d_i`` does not explain,
+        plus the per-step actuation noise).
+    fits : (n, q) the fitted ``d_i``, one row per parameter draw.
+    weights : (p,) the state weights ``w`` of the least-squares fit.
+    """
+
+    cov: np.ndarray
+    M: np.ndarray
+    fits: np.ndarray
+    weights: np.ndarray
+
+    def __post_init__(self):
+        for name in ("cov", "M", "fits", "weights"):
+            arr = np.array(getattr(self, name), dtype=np.float64, copy=True)
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,6 +166,8 @@ class Linearization:
     control_scale : (q,) or None, acceptable deviation of each control component (the
         half-range of ``sim.control_bounds``). Both set the default Bryson weights of
         :func:`~riskplan.control.lqg_controller`.
+    disturbance : :class:`Disturbance` or None, the constant-disturbance model of the
+        parameter draws (``linearize(..., disturbance=True)``; beyond the paper).
     """
 
     A: np.ndarray
@@ -125,8 +179,13 @@ class Linearization:
     drift: np.ndarray | None = None
     state_scale: np.ndarray | None = None
     control_scale: np.ndarray | None = None
+    disturbance: Disturbance | None = None
 
     def __post_init__(self):
+        if self.disturbance is not None and not isinstance(self.disturbance, Disturbance):
+            raise InvalidInputError(
+                f"disturbance: expected a Disturbance or None, got {type(self.disturbance).__name__}"
+            )
         if self.drift is None:
             object.__setattr__(self, "drift", np.zeros(self.A.shape[:2]))
         _, p, q = np.shape(self.B)
@@ -220,8 +279,29 @@ def control_jacobian(
     return B
 
 
-def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seeds, ts) -> list:
-    """(A_t or None, B_t, M_t, rank_t) for each t in ``ts``."""
+def _persistent(params, plan_params):
+    """``params`` without its actuation noise, or ``None`` if that is the plan's own
+    parameters (then the persistent deviation is zero without a run)."""
+    quiet = params.replace(actuation_cov=None, actuation_seed=plan_params.actuation_seed)
+    return None if quiet == plan_params else quiet
+
+
+def _draw_step(sim, run, plan: NominalPlan, t: int, s_i) -> np.ndarray:
+    """Reduced state after ``u*_t`` from ``y*_t`` under the draw ``s_i``; a draw on another
+    mesh (only with ``sim.transfer_state``) runs on its own mesh."""
+    y_t = plan.states[t]
+    if s_i.n_elements != plan.params.n_elements:
+        y_i = sim.transfer_state(y_t, s_i)
+        return sim.reduced(run(y_i, plan.controls[t], s_i, None))
+    return sim.reduced(run(y_t, plan.controls[t], s_i, plan.states[t + 1]))
+
+
+def _steps(
+    sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seeds, ts, disturbance=False
+) -> list:
+    """(A_t or None, B_t, M_t, drift_t, rank_t, D_t, P_t) for each t in ``ts``; ``D_t (n, p)``
+    the draws' deviations and ``P_t (n, p)`` those without actuation noise (both ``None``
+    unless ``disturbance``)."""
     bounds = np.asarray(sim.control_bounds, dtype=np.float64)
     params = plan.params
     p = plan.reduced.shape[1]
@@ -261,20 +341,59 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seed
         )
         M = np.zeros((p, p))
         drift = np.zeros(p)
+        D = Pd = None
         if draws:
             D = np.empty((len(draws), p))
             for i, s_i in enumerate(draws):
-                if s_i.n_elements != params.n_elements:  # only with sim.transfer_state
-                    y_i = sim.transfer_state(y_t, s_i)
-                    D[i] = sim.reduced(run(y_i, u_t, s_i, None))
-                else:
-                    D[i] = sim.reduced(run(y_t, u_t, s_i, plan.states[t + 1]))
+                D[i] = _draw_step(sim, run, plan, t, s_i)
             _finite(D, t + 1, "parameter draws")
             D -= x_next
             M = D.T @ D / len(draws)
             drift = D.mean(axis=0)
-        out.append((A, B, M, drift, rank))
+            if disturbance:
+                Pd = D.copy()
+                for i, s_i in enumerate(draws):
+                    if s_i.actuation_cov is None:
+                        continue  # no per-step part: the persistent deviation is D[i]
+                    quiet = _persistent(s_i, params)
+                    Pd[i] = 0.0 if quiet is None else _draw_step(sim, run, plan, t, quiet) - x_next
+                _finite(Pd, t + 1, "parameter draws without actuation noise")
+        out.append((A, B, M, drift, rank, D, Pd))
     return out
+
+
+def fit_disturbance(B, P, D, weights, rcond: float = 1e-8) -> Disturbance:
+    """Least-squares constant input disturbance of each parameter draw (module docstring).
+
+    Parameters
+    ----------
+    B : (T, p, q) control matrices along the plan.
+    P : (T, n, p) persistent one-step deviations ``p_{i,t}`` of the ``n`` draws.
+    D : (T, n, p) full one-step deviations ``d_{i,t}`` (actuation noise included).
+    weights : (p,) state weights ``w`` of the fit.
+    rcond : relative cut-off of the singular values of the stacked ``diag(w) B_t``; a
+        direction of ``d`` that no ``B_t`` moves gets 0 (minimum-norm solution).
+
+    Returns
+    -------
+    :class:`Disturbance` with ``d_i = argmin Σ_t ‖diag(w)(p_{i,t} − B_t d)‖²``,
+    ``Σ_d = (1/n) Σ_i d_i d_iᵀ`` and ``M^r_t = (1/n) Σ_i r_{i,t} r_{i,t}ᵀ``,
+    ``r_{i,t} = d_{i,t} − B_t d_i``.
+    """
+    B = np.asarray(B, dtype=np.float64)
+    P = np.asarray(P, dtype=np.float64)
+    D = np.asarray(D, dtype=np.float64)
+    w = np.asarray(weights, dtype=np.float64)
+    T, p, q = B.shape
+    n = P.shape[1]
+    G = (w[None, :, None] * B).reshape(T * p, q)
+    Y = (w[None, None, :] * P).transpose(0, 2, 1).reshape(T * p, n)
+    fits = np.linalg.lstsq(G, Y, rcond=rcond)[0].T  # (n, q)
+    R = D - np.einsum("tpq,nq->tnp", B, fits)
+    M = np.einsum("tni,tnj->tij", R, R) / n
+    return Disturbance(
+        cov=fits.T @ fits / n, M=0.5 * (M + np.swapaxes(M, 1, 2)), fits=fits, weights=w
+    )
 
 
 def _param_draws(sim, plan: NominalPlan, params_distribution, n_samples: int, seed) -> list:
@@ -316,6 +435,7 @@ def linearize(
     seed=None,
     backend: str = "serial",
     workers: int | None = None,
+    disturbance: bool = False,
 ) -> Linearization:
     """Linearise ``sim`` along ``plan`` (paper IV-B; see the module docstring for the method).
 
@@ -344,11 +464,16 @@ def linearize(
     H, N : observation model override, ``(m, p)`` and ``(m, m)``.
     seed : seeds the perturbations and the parameter draws.
     backend, workers : :func:`riskplan.parallel.map_tasks` over chunks of steps.
+    disturbance : also fit each draw's effect as a constant input disturbance (beyond the
+        paper, module docstring): ``Linearization.disturbance`` holds ``Σ_d (q, q)``, the
+        residual process noise ``M^r (T, p, p)`` and the fits ``(n, q)``. ``A``, ``B``,
+        ``M`` are unchanged. Needs parameter draws (``n_samples >= 1`` and a distribution);
+        without them ``Σ_d = 0`` and ``M^r = M = 0``.
 
     Returns
     -------
     :class:`Linearization` with ``A (T, p, p)``, ``B (T, p, q)``, ``M (T, p, p)``,
-    ``H (T, m, p)``, ``N (T, m, m)``. Raises :class:`~riskplan.errors.SimulationError` naming
+    ``H (T, m, p)``, ``N (T, m, m)`` (and ``disturbance`` with ``disturbance=True``). Raises :class:`~riskplan.errors.SimulationError` naming
     the step when the simulator returns a non-finite state.
     """
     from riskplan.parallel import map_tasks, spawn_seeds
@@ -403,7 +528,17 @@ def linearize(
     n_chunks = 1 if backend == "serial" else max(1, min(T, 4 * (workers or 2)))
     chunks = [ts[k::n_chunks] for k in range(n_chunks)]
     fn = partial(
-        _run_chunk, sim, plan, draws, W_factor, eps, a_prior, float(rcond), n_a_runs, step_seeds
+        _run_chunk,
+        sim,
+        plan,
+        draws,
+        W_factor,
+        eps,
+        a_prior,
+        float(rcond),
+        n_a_runs,
+        step_seeds,
+        bool(disturbance),
     )
     results = map_tasks(fn, chunks, backend=backend, workers=workers, chunksize=1)
     per_t = {}
@@ -416,7 +551,7 @@ def linearize(
     rank = np.empty(T, dtype=int)
     drift = np.empty((T, p))
     for t in range(T):
-        a, b, m_, dr, r = per_t[t]
+        a, b, m_, dr, r = per_t[t][:5]
         if a is not None:
             A[t] = a
         B[t], M[t], drift[t], rank[t] = b, m_, dr, r
@@ -441,6 +576,21 @@ def linearize(
         )
     m = H0.shape[0]
     scale = getattr(sim, "state_scale", None)
+    dist = None
+    if disturbance:
+        weights = np.ones(p) if scale is None else 1.0 / np.asarray(scale, dtype=np.float64)
+        if draws:
+            dist = fit_disturbance(
+                B,
+                np.stack([per_t[t][6] for t in range(T)]),
+                np.stack([per_t[t][5] for t in range(T)]),
+                weights,
+                rcond=float(rcond),
+            )
+        else:
+            dist = Disturbance(
+                cov=np.zeros((q, q)), M=np.zeros((T, p, p)), fits=np.zeros((0, q)), weights=weights
+            )
     return Linearization(
         A=A,
         B=B,
@@ -451,10 +601,21 @@ def linearize(
         drift=drift,
         state_scale=None if scale is None else np.array(scale, dtype=np.float64),
         control_scale=0.5 * (bounds[:, 1] - bounds[:, 0]),
+        disturbance=dist,
     )
 
 
-def _run_chunk(sim, plan, draws, W_factor, eps, a_prior, rcond, K, step_seeds, ts):
+def _run_chunk(sim, plan, draws, W_factor, eps, a_prior, rcond, K, step_seeds, disturbance, ts):
     return _steps(
-        sim, plan, draws, W_factor, eps, a_prior, rcond, K, [step_seeds[t] for t in ts], ts
+        sim,
+        plan,
+        draws,
+        W_factor,
+        eps,
+        a_prior,
+        rcond,
+        K,
+        [step_seeds[t] for t in ts],
+        ts,
+        disturbance,
     )

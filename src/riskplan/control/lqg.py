@@ -13,6 +13,10 @@ starting from the simulator's start state under the drawn parameters ``s`` and `
     x̂⁻        = A_t x̂_t + B_t (u_t − u*_t)
     x̂_{t+1}   = x̂⁻ + K_t (z_{t+1} − h(x*_{t+1}) − H_t x̂⁻)
 
+With the persistent-disturbance model (``lqg_controller(lin, disturbance=True)``, beyond the
+paper) the estimate is ``(x̂_t, d̂_t)``, the feedback ``u_t = clip(u*_t + L_t x̂_t − d̂_t)``
+and the filter runs on the augmented model (:func:`augmented_model`).
+
 The run fails at the first state in collision (``sim.in_collision``) or when the simulator
 raises (a solve that does not converge counts as a failure, recorded). Success (paper V-A:
 "the goal region is reached and obstacles are avoided"), by ``goal_at``:
@@ -50,6 +54,7 @@ __all__ = [
     "Execution",
     "LQGController",
     "SuccessEstimate",
+    "augmented_model",
     "bryson_weights",
     "execute",
     "lqg_controller",
@@ -57,13 +62,44 @@ __all__ = [
 ]
 
 
+def augmented_model(lin: Linearization):
+    """The linear model of the state ``(x̄_t, d)`` with a constant input disturbance
+    ``d (q,)`` (beyond the paper; needs ``lin.disturbance``,
+    ``linearize(..., disturbance=True)``):
+
+        [x̄_{t+1}; d] = [[A_t, B_t], [0, I]] [x̄_t; d] + [B_t; 0] ū_t + [m^r_t; 0],   m^r_t ~ N(0, M^r_t)
+        z̄_{t+1}      = [H_t, 0] [x̄_{t+1}; d] + n_t
+
+    Returns ``(A (T, p+q, p+q), B (T, p+q, q), H (T, m, p+q), M (T, p+q, p+q), N (T, m, m))``
+    with ``M = diag(M^r_t, 0)``: ``d`` does not change during an execution.
+    """
+    if lin.disturbance is None:
+        raise InvalidInputError("lin: has no disturbance model; linearize it with disturbance=True")
+    T, p, q = lin.B.shape
+    m = lin.H.shape[1]
+    n = p + q
+    A = np.zeros((T, n, n))
+    A[:, :p, :p] = lin.A
+    A[:, :p, p:] = lin.B
+    A[:, p:, p:] = np.eye(q)
+    B = np.zeros((T, n, q))
+    B[:, :p] = lin.B
+    H = np.zeros((T, m, n))
+    H[:, :, :p] = lin.H
+    M = np.zeros((T, n, n))
+    M[:, :p, :p] = lin.disturbance.M
+    return A, B, H, M, np.asarray(lin.N)
+
+
 @dataclass(frozen=True, eq=False)
 class LQGController:
     """Gains of the LQG controller of one plan.
 
-    ``L (T, q, p)`` feedback (``u_t = u*_t + L_t x̂_t``), ``K (T, p, m)`` Kalman gains,
-    ``P (T, p, p)`` posterior estimate covariances (``P[t]`` of ``x̂_{t+1}``), ``P0 (p, p)``,
-    and the :class:`Linearization` they were computed from.
+    ``L (T, q, n)`` feedback (``u_t = u*_t + L_t ξ̂_t``), ``K (T, n, m)`` Kalman gains,
+    ``P (T, n, n)`` posterior estimate covariances (``P[t]`` of ``ξ̂_{t+1}``), ``P0 (n, n)``,
+    and the :class:`Linearization` they were computed from. The estimated state ``ξ̂`` is
+    ``x̂`` (``n = p``, the paper's) or, with ``disturbance=True``, ``(x̂, d̂)``
+    (``n = p + q``, :func:`augmented_model`).
     """
 
     L: np.ndarray
@@ -71,10 +107,19 @@ class LQGController:
     P: np.ndarray
     P0: np.ndarray
     lin: Linearization
+    disturbance: bool = False
 
     @property
     def n_steps(self) -> int:
         return int(self.L.shape[0])
+
+    def model(self):
+        """``(A, B, H, M, N)`` of the model the filter and LQG-MP use: the linearisation's
+        (paper) or :func:`augmented_model` (``disturbance=True``)."""
+        if self.disturbance:
+            return augmented_model(self.lin)
+        lin = self.lin
+        return lin.A, lin.B, lin.H, lin.M, lin.N
 
 
 def bryson_weights(state_scale, control_scale) -> tuple[np.ndarray, np.ndarray]:
@@ -91,7 +136,9 @@ def bryson_weights(state_scale, control_scale) -> tuple[np.ndarray, np.ndarray]:
     return np.diag(1.0 / xs**2), np.diag(1.0 / us**2)
 
 
-def lqg_controller(lin: Linearization, Q=None, R=None, Q_final=None, P0=None) -> LQGController:
+def lqg_controller(
+    lin: Linearization, Q=None, R=None, Q_final=None, P0=None, *, disturbance: bool = False
+) -> LQGController:
     """LQR + Kalman gains for ``lin`` (``A (T, p, p)``, ``B (T, p, q)``, ...).
 
     Defaults (explicit ``Q``/``R`` override them): Bryson's rule (:func:`bryson_weights`),
@@ -100,9 +147,25 @@ def lqg_controller(lin: Linearization, Q=None, R=None, Q_final=None, P0=None) ->
     ``sim.state_scale`` and the control half-ranges); a component without a declared
     scale gets weight 1 (``Q = I``/``R = I``, the identity costs of van den Berg, Abbeel &
     Goldberg, IJRR 2011, section VII). ``Q_final = Q``, ``P0 = 0`` (the start state is known).
+
+    ``disturbance=True`` (beyond the paper; needs ``linearize(..., disturbance=True)``):
+    the state is ``(x̄, d)`` with the constant input disturbance ``d ~ N(0, Σ_d)``
+    (:func:`augmented_model`). ``d`` cannot be steered, so the LQR cost is put on what the
+    plant receives, ``v_t = ū_t + d``:
+
+        J = Σ_{t<T} (x̄_tᵀ Q x̄_t + v_tᵀ R v_t) + x̄_Tᵀ Q_final x̄_T,   x̄_{t+1} = A_t x̄_t + B_t v_t
+
+    which is the plain LQR in ``(x̄, v)``: ``v_t = L_t x̄_t``, so ``ū_t = L_t x̄_t − d`` and
+    the augmented gain is ``[L_t, −I]`` (the plain gain plus a feed-forward cancelling
+    ``B_t d``). The Kalman filter estimates ``(x̄, d)`` on the augmented model from
+    ``P0 = diag(P0, Σ_d)`` with the residual process noise ``M^r_t``.
     """
     if not isinstance(lin, Linearization):
         raise InvalidInputError(f"lin: expected a Linearization, got {type(lin).__name__}")
+    if disturbance and lin.disturbance is None:
+        raise InvalidInputError(
+            "disturbance=True: lin has no disturbance model; linearize it with disturbance=True"
+        )
     _T, p, q = lin.B.shape
     if Q is None:
         Q = np.eye(p) if lin.state_scale is None else bryson_weights(lin.state_scale, np.ones(1))[0]
@@ -115,8 +178,15 @@ def lqg_controller(lin: Linearization, Q=None, R=None, Q_final=None, P0=None) ->
     Q_final = Q if Q_final is None else Q_final
     P0 = np.zeros((p, p)) if P0 is None else as_array(P0, "P0", shape=(p, p))
     L = lqr_gains(lin.A, lin.B, Q, R, Q_final)
-    K, P = kalman_gains(lin.A, lin.H, lin.M, lin.N, P0)
-    return LQGController(L=L, K=K, P=P, P0=P0, lin=lin)
+    if not disturbance:
+        K, P = kalman_gains(lin.A, lin.H, lin.M, lin.N, P0)
+        return LQGController(L=L, K=K, P=P, P0=P0, lin=lin)
+    T = L.shape[0]
+    L = np.concatenate([L, np.broadcast_to(-np.eye(q), (T, q, q))], axis=2)
+    A, _B, H, M, N = augmented_model(lin)
+    P0 = np.block([[P0, np.zeros((p, q))], [np.zeros((q, p)), lin.disturbance.cov]])
+    K, P = kalman_gains(A, H, M, N, P0)
+    return LQGController(L=L, K=K, P=P, P0=P0, lin=lin, disturbance=True)
 
 
 @dataclass(frozen=True, eq=False)
@@ -125,7 +195,8 @@ class Execution:
     ``x (k, p)`` their reduced states, ``estimates (k, p)`` the filter's ``x*_t + x̂_t``,
     ``controls (k − 1, q)`` applied (before actuation noise); ``collided``, ``reached_goal``,
     ``success``; ``failed_step`` the step that collided or whose solve failed (``None``
-    otherwise) and ``error`` the solver's message if one failed."""
+    otherwise) and ``error`` the solver's message if one failed; ``disturbance (k, q)`` the
+    filter's ``d̂_t`` with a disturbance-state controller (``None`` otherwise)."""
 
     states: tuple
     x: np.ndarray
@@ -135,6 +206,7 @@ class Execution:
     reached_goal: bool
     failed_step: int | None = None
     error: str | None = None
+    disturbance: np.ndarray | None = None
 
     @property
     def success(self) -> bool:
@@ -183,11 +255,14 @@ def execute(
     states = [y]
     xs = [np.asarray(sim.reduced(y), dtype=np.float64)]
     est = [plan.reduced[0].copy()]
+    dist = [np.zeros(sim.control_dim)]
     us = []
     xhat = np.zeros(p)
+    augmented = closed and controller.disturbance
     if closed:
-        lin = controller.lin
-        L, K, A, B, H = controller.L, controller.K, lin.A, lin.B, lin.H
+        L, K = controller.L, controller.K
+        A, B, H = controller.model()[:3]
+        xhat = np.zeros(A.shape[1])
         z_nominal = [_observe_nominal(sim, plan.reduced[t + 1]) for t in range(T)]
     collided = False
     failed = None
@@ -214,7 +289,9 @@ def execute(
             zbar = z - z_nominal[t]
             xp = A[t] @ xhat + B[t] @ (u - plan.controls[t])
             xhat = xp + K[t] @ (zbar - H[t] @ xp)
-        est.append(plan.reduced[t + 1] + xhat)
+        est.append(plan.reduced[t + 1] + xhat[:p])
+        if augmented:
+            dist.append(xhat[p:].copy())
         if sim.in_collision(y):
             collided, failed = True, t + 1
             break
@@ -237,6 +314,7 @@ def execute(
         reached_goal=reached,
         failed_step=failed,
         error=error,
+        disturbance=np.stack(dist) if augmented else None,
     )
 
 

@@ -58,6 +58,14 @@ Beyond the paper, ``drift=True`` carries the mean ``d̄_t`` of the one-step devi
 ``M_t − d̄_t d̄_tᵀ``. The paper's zero-mean model misses systematic shifts, e.g. actuation
 noise clipped at a control bound (a needle planned at ``v_max`` lags on average).
 
+Beyond the paper, a controller with the persistent-disturbance state
+(``lqg_controller(lin, disturbance=True)``) propagates the same recursion on its augmented
+model (:func:`riskplan.control.lqg.augmented_model`): ``ξ_t = (x̄_t, d, x̂_t, d̂_t)`` of
+dimension ``2(p + q)``, ``A_t, B_t, H_t, M_t`` replaced by the augmented ones, ``L_t`` by
+``[L_t, −I]`` and ``Σ_0 = diag(P0, Σ_d, 0, 0)``: the true ``d ~ N(0, Σ_d)`` is drawn once and
+kept, the estimate starts at zero. Collision and goal are read from ``x̄_t = ξ_t[:p]`` as
+before; every method (sigma, truncation, sampling) works unchanged on it.
+
 ``P(goal)``: ``n_goal_samples`` draws of ``x_T`` (the final, truncated distribution in the
 truncation variant), counting those whose goal point lies in the deformed goal polygon
 ``sim.goal(y*_T)``. ``P(success) = P(no collision) · P(goal)`` (paper IV-D).
@@ -230,11 +238,18 @@ def polygon_environment(polygons):
 def joint_covariances(
     ctrl: LQGController, drift: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``F (T, 2p, 2p)``, the noise term ``G diag(M, N) Gᵀ (T, 2p, 2p)`` and the mean input
-    ``G (d̄, 0) (T, 2p)`` of the recursion (zero unless ``drift``; then ``M − d̄ d̄ᵀ``
-    replaces the second moment ``M``)."""
+    """``F (T, 2n, 2n)``, the noise term ``G diag(M, N) Gᵀ (T, 2n, 2n)`` and the mean input
+    ``G (d̄, 0) (T, 2n)`` of the recursion (zero unless ``drift``; then ``M − d̄ d̄ᵀ``
+    replaces the second moment ``M``), for the controller's model
+    (:meth:`~riskplan.control.lqg.LQGController.model`: ``n = p``, or ``p + q`` with the
+    disturbance state)."""
     lin = ctrl.lin
-    A, B, H, M, N, L, K = lin.A, lin.B, lin.H, lin.M, lin.N, ctrl.L, ctrl.K
+    if drift and ctrl.disturbance:
+        raise InvalidInputError(
+            "drift=True: not defined for a disturbance-state controller (its d carries the persistent shift)"
+        )
+    A, B, H, M, N = ctrl.model()
+    L, K = ctrl.L, ctrl.K
     d = lin.drift if drift else np.zeros(A.shape[:2])
     if drift:
         M = M - d[:, :, None] * d[:, None, :]
@@ -364,14 +379,14 @@ def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed
 
     gen = as_generator(seed)
     T = plan.n_steps
-    p = plan.reduced.shape[1]
+    nz = F.shape[1] // 2
     n = int(n)
-    xi = np.zeros((n, 2 * p))
-    xi[:, :p] = gen.standard_normal((n, p)) @ _factor(controller.P0).T
+    xi = np.zeros((n, 2 * nz))
+    xi[:, :nz] = gen.standard_normal((n, nz)) @ _factor(controller.P0).T
     alive = np.ones(n, dtype=bool)
     free = np.ones(T)
     for t in range(T):
-        xi = xi @ F[t].T + dm[t] + gen.standard_normal((n, 2 * p)) @ _factor(Qn[t]).T
+        xi = xi @ F[t].T + dm[t] + gen.standard_normal((n, 2 * nz)) @ _factor(Qn[t]).T
         polys = sim.obstacles(plan.states[t + 1])
         if not len(polys):
             continue
@@ -461,13 +476,14 @@ def lqgmp(
     T = plan.n_steps
     p = plan.reduced.shape[1]
     F, Qn, dm = joint_covariances(controller, drift)
-    mean = np.zeros((T + 1, 2 * p))
-    cov = np.zeros((T + 1, 2 * p, 2 * p))
-    cov[0, :p, :p] = controller.P0
+    nz = F.shape[1] // 2  # p, or p + q with the disturbance state
+    mean = np.zeros((T + 1, 2 * nz))
+    cov = np.zeros((T + 1, 2 * nz, 2 * nz))
+    cov[0, :nz, :nz] = controller.P0
     free = np.ones(T)
     truncating = method == "truncation"
     fast = None
-    mu = np.zeros(2 * p)
+    mu = np.zeros(2 * nz)
     S = cov[0].copy()
     if not truncating:
         for t in range(T):
@@ -491,7 +507,7 @@ def lqgmp(
             )
         fast = _sigma_free(sim, plan, mean, cov, col, p)
         S = cov[0].copy()
-        mu = np.zeros(2 * p)
+        mu = np.zeros(2 * nz)
     for t in range(T if truncating or fast is None else 0):
         mu = F[t] @ mu + dm[t]
         S = F[t] @ S @ F[t].T + Qn[t]
@@ -523,7 +539,7 @@ def lqgmp(
                 fr = free_region(pj, U, env, cutoff=cutoff)
                 p_t += float(fr.bound_terms.sum())
                 for nrm, off in zip(fr.normals, fr.offsets):
-                    c = np.zeros(2 * p)
+                    c = np.zeros(2 * nz)
                     for i in np.flatnonzero(W[j]):
                         c[col[i]] += W[j, i] * nrm
                     mu, S = _truncate(mu, S, c, off - float(nrm @ base[j]))

@@ -108,6 +108,7 @@ def evaluate_plan(
     Q=None,
     R=None,
     seed=None,
+    disturbance: bool = False,
 ):
     """Linearise ``plan``, build its LQG controller and its LQG-MP estimate.
 
@@ -117,7 +118,9 @@ def evaluate_plan(
     step of :func:`~riskplan.control.linearize` (``None``: its default ``2 min(p, q)``;
     ``2 * sim.state_dim`` is the paper's); ``Q``, ``R``: LQR costs (default: Bryson's rule from the simulator's scales, see
     :func:`~riskplan.control.lqg.lqg_controller`);
-    ``seed``: linearisation perturbations and goal samples.
+    ``seed``: linearisation perturbations and goal samples; ``disturbance``: the
+    persistent-disturbance state (beyond the paper, :func:`~riskplan.control.lqg_controller`)
+    instead of the paper's LQG.
     """
     from riskplan.control import linearize
     from riskplan.control.lqg import lqg_controller
@@ -125,8 +128,16 @@ def evaluate_plan(
     from riskplan.parallel import spawn_seeds
 
     s_lin, s_mp = spawn_seeds(seed, 2)
-    lin = linearize(sim, plan, distribution, n_samples=n_samples, n_a_runs=n_a_runs, seed=s_lin)
-    controller = lqg_controller(lin, Q=Q, R=R)
+    lin = linearize(
+        sim,
+        plan,
+        distribution,
+        n_samples=n_samples,
+        n_a_runs=n_a_runs,
+        seed=s_lin,
+        disturbance=disturbance,
+    )
+    controller = lqg_controller(lin, Q=Q, R=R, disturbance=disturbance)
     result = lqgmp(sim, plan, controller, method=method, n_goal_samples=n_goal_samples, seed=s_mp)
     return controller, result
 
@@ -179,6 +190,7 @@ def select_plan(
     backend: str = "local",
     workers: int | None = None,
     on_result=None,
+    disturbance: bool = False,
 ) -> Selection:
     """Evaluate every candidate with LQG-MP and select the most likely to succeed (paper IV-D).
 
@@ -186,8 +198,9 @@ def select_plan(
     ``"sigma"`` (the paper's; a conservative bound, far below the model's probability for
     plans passing close to obstacles), ``"truncation"`` (Patil 2012) or ``"sampling"``
     (trajectories of the linear model), see :mod:`riskplan.control.lqgmp`; ``n_a_runs``:
-    A-runs per step of the linearisation (:func:`evaluate_plan`); ``on_result(i, score)`` is
-    called as plans finish.
+    A-runs per step of the linearisation (:func:`evaluate_plan`); ``disturbance``: select
+    with the persistent-disturbance controller (beyond the paper; default the paper's LQG);
+    ``on_result(i, score)`` is called as plans finish.
     Raises :class:`~riskplan.errors.PlanningError` if no candidate could be evaluated.
     """
     from riskplan.errors import PlanningError
@@ -204,6 +217,7 @@ def select_plan(
         n_a_runs=n_a_runs,
         Q=Q,
         R=R,
+        disturbance=disturbance,
     )
     seeds = spawn_seeds(seed, len(plans))
     items = list(zip(range(len(plans)), plans, seeds))

@@ -41,11 +41,15 @@ from riskplan.errors import (
 log = logging.getLogger(__name__)
 
 __all__ = [
+    "SATURATED",
+    "Calibration",
     "HonestyRow",
     "PlanScore",
     "Selection",
+    "calibration_metrics",
     "common_draws",
     "evaluate_plan",
+    "evenly_spaced_ranks",
     "honesty_check",
     "select_plan",
 ]
@@ -357,3 +361,92 @@ def honesty_check(
         if on_row is not None:
             on_row(rows[-1])
     return rows
+
+
+# ---- calibration of a predicted P(success) against measured rates (beyond the paper) -----
+
+#: A set of measured rates all at or above this says nothing about calibration: every
+#: estimator that predicts "near 1" scores well on it (issue: a saturated set).
+SATURATED = 0.98
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """How well predicted probabilities match measured rates over ``n_plans`` (plan, case)
+    pairs (:func:`calibration_metrics`).
+
+    ``mae``: mean absolute error ``(1/n) Σ |p̂_i − r_i|``; ``spearman``: Spearman's rank
+    correlation of ``p̂`` and ``r`` (``None`` where undefined: fewer than 3 pairs or a
+    constant side); ``measured_spread``: ``max r − min r``; ``measured_min``,
+    ``measured_max``; ``informative``: the set can judge calibration — the rank correlation
+    is defined and not every measured rate is ``≥`` :data:`SATURATED`; ``meets_goal``:
+    informative, ``mae ≤ mae_goal`` and ``spearman ≥ spearman_goal``.
+    """
+
+    mae: float
+    spearman: float | None
+    n_plans: int
+    measured_spread: float
+    measured_min: float
+    measured_max: float
+    informative: bool
+    meets_goal: bool
+
+    def as_dict(self) -> dict:
+        """The fields as a JSON-serialisable dict."""
+        from dataclasses import asdict
+
+        return asdict(self)
+
+
+def calibration_metrics(
+    predicted, measured, *, mae_goal: float = 0.05, spearman_goal: float = 0.8
+) -> Calibration:
+    """Calibration of predicted probabilities ``predicted (n,)`` against measured success
+    rates ``measured (n,)`` (both in [0, 1]): mean absolute error, Spearman's rank
+    correlation (:func:`scipy.stats.spearmanr`, ties by average rank) and the spread of the
+    measured rates. Raises :class:`~riskplan.errors.InvalidInputError` for mismatched
+    shapes, an empty set, or values outside [0, 1].
+    """
+    import warnings
+
+    from scipy.stats import spearmanr
+
+    p = np.asarray(predicted, dtype=np.float64)
+    r = np.asarray(measured, dtype=np.float64)
+    if p.ndim != 1 or r.shape != p.shape or p.size == 0:
+        raise InvalidInputError(
+            f"predicted, measured: expected two equal non-empty 1-D arrays, got shapes {p.shape} and {r.shape}"
+        )
+    for name, v in (("predicted", p), ("measured", r)):
+        if not np.all(np.isfinite(v)) or v.min() < 0.0 or v.max() > 1.0:
+            raise InvalidInputError(f"{name}: expected probabilities in [0, 1]")
+    mae = float(np.abs(p - r).mean())
+    rho = None
+    if p.size >= 3 and np.ptp(p) > 0 and np.ptp(r) > 0:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # ConstantInputWarning is excluded above
+            rho = float(spearmanr(p, r).statistic)
+        if not np.isfinite(rho):
+            rho = None
+    informative = rho is not None and bool(r.min() < SATURATED)
+    return Calibration(
+        mae=mae,
+        spearman=rho,
+        n_plans=int(p.size),
+        measured_spread=float(r.max() - r.min()),
+        measured_min=float(r.min()),
+        measured_max=float(r.max()),
+        informative=informative,
+        meets_goal=bool(informative and mae <= mae_goal and rho >= spearman_goal),
+    )
+
+
+def evenly_spaced_ranks(n: int, k: int) -> list[int]:
+    """``min(k, n)`` distinct ranks ``0 … n − 1`` evenly spaced over the ranking (the first
+    and the last included): ``round(linspace(0, n − 1, k))``; all ranks when ``k ≥ n``."""
+    if int(n) != n or n < 1 or int(k) != k or k < 1:
+        raise InvalidInputError(f"n, k: expected positive integers, got {n!r}, {k!r}")
+    if k >= n:
+        return list(range(int(n)))
+    return sorted(set(np.linspace(0, n - 1, int(k)).round().astype(int).tolist()))

@@ -192,6 +192,96 @@ def _fig7_section(rep: Report, out: Path, r: dict) -> None:
     )
 
 
+def _calibration_section(rep: Report, cal: dict) -> None:
+    """LQG-MP's predicted P(success) against measured closed-loop success
+    (:mod:`riskplan.experiments.calibration`): plot, metrics per estimator, every row."""
+    from riskplan.experiments.calibration import (
+        CONTROLLER_OF,
+        ESTIMATOR_LABELS,
+        ESTIMATORS,
+        calibration_figure,
+    )
+
+    name = cal["scenario"]
+    sec = rep.section(f"LQG-MP calibration: {name} (beyond the paper)")
+    size = cal["scale"]
+    Report.text(
+        sec,
+        f"Rule (fixed in advance): {cal['rule']}. Cases: {', '.join(cal['cases'])}. "
+        f"{size['n_executions']} closed-loop executions per plan, case and controller on common draws; "
+        "sigma, truncation and sampling predict the paper's LQG controller, 'with disturbance state' "
+        "predicts the disturbance-state controller and is compared with its own executions. "
+        "Candidates whose linearisation failed: "
+        + ", ".join(f"{c}: {k}" for c, k in cal["failed"].items())
+        + ".",
+    )
+    if not cal["rows"]:
+        Report.text(sec, "No candidate could be measured.")
+        return
+    rep.figure(
+        sec,
+        calibration_figure(cal),
+        f"calibration_{name}",
+        f"{name}: predicted vs measured P(success), 95 % Wilson intervals; the dashed line is the diagonal.",
+    )
+    rows = []
+    for e in ESTIMATORS:
+        m = cal[e]
+        rows.append(
+            [
+                ESTIMATOR_LABELS[e],
+                f"{m['mae']:.3f}",
+                "undefined" if m["spearman"] is None else f"{m['spearman']:.2f}",
+                m["n_plans"],
+                f"{m['measured_spread']:.3f} ({m['measured_min']:.3f} – {m['measured_max']:.3f})",
+                "yes" if m["informative"] else "no",
+                "yes" if m["meets_goal"] else "no",
+            ]
+        )
+    Report.table(
+        sec,
+        [
+            "estimator",
+            "mean abs. error",
+            "Spearman ρ",
+            "(case, plan) pairs",
+            "measured spread (min – max)",
+            "informative",
+            "mae ≤ 0.05 and ρ ≥ 0.8",
+        ],
+        rows,
+        caption="best estimator meeting the goal: "
+        + (ESTIMATOR_LABELS[cal["best"]] if cal["best"] else "none"),
+    )
+    detail = []
+    for r in cal["rows"]:
+        lqg, dist = r["measured"]["lqg"], r["measured"]["dist"]
+        detail.append(
+            [r["case"], f"{r['rank']} (#{r['candidate']})"]
+            + [f"{r['predicted'][e]:.3f}" for e in ESTIMATORS if CONTROLLER_OF[e] == "lqg"]
+            + [
+                f"{lqg['rate']:.3f} [{lqg['low']:.3f}, {lqg['high']:.3f}]",
+                f"{r['predicted']['disturbance']:.3f}",
+                f"{dist['rate']:.3f} [{dist['low']:.3f}, {dist['high']:.3f}]",
+            ]
+        )
+    Report.table(
+        sec,
+        [
+            "case",
+            "σ rank (candidate)",
+            "sigma",
+            "truncation",
+            "sampling",
+            "measured LQG [95 %]",
+            "with disturbance state",
+            "measured, disturbance controller [95 %]",
+        ],
+        detail,
+        caption="every measured (case, plan): predicted P(success) beside the measured rate",
+    )
+
+
 def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> Path:
     """Write ``out/report.html`` from ``results`` (see :func:`riskplan.experiments.reproduce.reproduce`).
     Each part is rendered when present (``results["mdn"]`` may hold Fig. 7 only)."""
@@ -221,6 +311,8 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
     )
 
     for name, sc in results.get("deformable", {}).items():
+        if "cases" not in sc:
+            continue  # this run measured the calibration only
         sec = rep.section(f"Deformable-planning paper, Fig. 6: {name}")
         size = sc["scale"]
         sets = "; ".join(
@@ -321,6 +413,10 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
             caption="the paper's claims; it does not say whether its percentages are points or relative, so both readings",
         )
         _single_runs(rep, sec, name, store, sc, seed)
+
+    for sc in results.get("deformable", {}).values():
+        if "calibration" in sc:
+            _calibration_section(rep, sc["calibration"])
 
     if "sweep" in results.get("mdn", {}):
         r = results["mdn"]

@@ -143,6 +143,7 @@ def test_claims_both_readings():
     }
     c = claims(cases)
     assert c["ours_highest"] == {"a": True, "b": False}
+    assert c["ours_tied"] == {"a": False, "b": False}
     assert c["ours_separated"] == {"a": True, "b": False}
     # averages: rrt 0.3, without selection 0.5, ours 0.55
     assert c["no_select_vs_rrt"]["points"] == pytest.approx(20.0, **approx_tol("float64_exact"))
@@ -153,6 +154,27 @@ def test_claims_both_readings():
     assert c["no_select_vs_ours"]["relative"] == pytest.approx(
         100 * (0.5 / 0.55 - 1), **approx_tol("float64_exact")
     )
+
+
+def test_ties_are_not_highest():
+    """All three methods at the same rate: a tie, not "ours highest" (the smoke report once
+    said "yes" for three manipulation methods tied at 36.7 %)."""
+    from riskplan.experiments.fig6 import highest_verdict
+
+    def v(rate):
+        return {"rate": rate, "low": rate - 0.1, "high": rate + 0.1}
+
+    tie = {"rrt": v(11 / 30), "lqgmp_only": None, "ours_no_select": v(11 / 30), "ours": v(11 / 30)}
+    up = {"rrt": v(0.2), "lqgmp_only": None, "ours_no_select": v(0.3), "ours": v(0.4)}
+    down = {"rrt": v(0.5), "lqgmp_only": None, "ours_no_select": v(0.3), "ours": v(0.4)}
+    c = claims({"mesh": tie, "force": up})
+    assert c["ours_highest"] == {"mesh": False, "force": True}
+    assert c["ours_tied"] == {"mesh": True, "force": False}
+    assert not c["ours_highest_all"]
+    assert highest_verdict(c) == "no (tied for highest in mesh)"
+    c = claims({"mesh": tie, "force": down})
+    assert highest_verdict(c) == "no (tied for highest in mesh; below another method in force)"
+    assert highest_verdict(claims({"force": up})) == "yes"
 
 
 @pytest.mark.parametrize(

@@ -34,8 +34,10 @@ seed ``i`` of the case (:func:`riskplan.parallel.spawn_seeds`); the four methods
 these seeds (common random numbers: a difference between methods is not draw luck).
 
 Success: no collision at any state and the final state in the (deformed) goal
-(:func:`riskplan.control.lqg.execute`). A solver failure of the true simulator counts as
-a failure and is counted separately. Intervals: 95 % Wilson
+(:func:`riskplan.control.lqg.execute`). Every failed execution is counted under its
+outcome: collision, missed goal, left the tissue (the needle's material point outside the
+body), or solver failure of the true simulator (with its reason), never silently as a
+collision or a success. Intervals: 95 % Wilson
 (:func:`riskplan.collision.binomial_interval`).
 
 Work units and resumability: plans, per-(candidate, case) controllers and LQG-MP values,
@@ -70,6 +72,7 @@ __all__ = [
     "claims",
     "evaluate_candidate",
     "execute_batch",
+    "highest_verdict",
     "run_scenario",
     "single_executions",
 ]
@@ -260,8 +263,11 @@ def evaluate_candidate(args):
     }
 
 
-def execute_batch(args) -> list[list[int]]:
-    """``args = (sim, plan, controller or None, seeds)``: one batch of executions: ``[[success, collided, reached_goal, solver_failed], ...]``."""
+def execute_batch(args) -> list[list]:
+    """``args = (sim, plan, controller or None, seeds)``: one batch of executions:
+    ``[[success, collided, reached_goal, solver_failed, left_tissue, reason], ...]`` (flags
+    0/1; ``reason`` the solver's message for a solver failure, else ``None``;
+    :func:`riskplan.control.lqg.execute`)."""
     from riskplan.control.lqg import execute
 
     sim, plan, controller, seeds = args
@@ -271,9 +277,29 @@ def execute_batch(args) -> list[list[int]]:
         params = sim.distribution.sample(gen)
         ex = execute(sim, plan, controller, params, seed=gen, keep_states=False)
         out.append(
-            [int(ex.success), int(ex.collided), int(ex.reached_goal), int(ex.error is not None)]
+            [
+                int(ex.success),
+                int(ex.collided),
+                int(ex.reached_goal),
+                int(ex.outcome == "solver_failure"),
+                int(ex.left_tissue),
+                ex.error if ex.outcome == "solver_failure" else None,
+            ]
         )
     return out
+
+
+def _outcome_counts(rows: list) -> tuple[np.ndarray, dict]:
+    """Flags ``(n, 5)`` int and the solver-failure reasons with their counts, from the rows
+    of :func:`execute_batch`."""
+    f = np.array([r[:5] for r in rows], dtype=np.int64).reshape(-1, 5)
+    reasons: dict = {}
+    for r in rows:
+        if r[3] and r[5] is not None:
+            # the step index varies; the reason is what follows it
+            key = str(r[5]).split(": ", 1)[-1]
+            reasons[key] = reasons.get(key, 0) + 1
+    return f, reasons
 
 
 def _seed_for(seed: int, *labels) -> int:
@@ -321,12 +347,16 @@ def run_scenario(
     Returns
     -------
     JSON-serialisable dict: ``cases[case][method]`` with ``successes``, ``n``, ``rate``,
-    ``low``, ``high`` (95 % Wilson), ``collided``, ``missed_goal``, ``solver_failed``,
+    ``low``, ``high`` (95 % Wilson), the outcomes ``collided``, ``missed_goal``,
+    ``solver_failed`` (with ``solver_failure_reasons``: reason -> count), ``left_tissue``
+    (:data:`riskplan.control.lqg.OUTCOMES`; they add up to ``n`` with the successes),
     ``predicted`` (LQG-MP ``P(success)`` of the executed plan, ``None`` open loop),
-    ``candidate``; ``selection[case][set]`` the LQG-MP values of every candidate.
+    ``candidate``, and for the selecting methods ``n_tied`` (candidates sharing the best
+    LQG-MP value) with ``tie`` (the sentence saying so, ``None`` when decided); ``selection[case][set]`` the LQG-MP values of every candidate.
     """
     from riskplan.parallel import BACKENDS, imap_tasks, spawn_seeds
     from riskplan.planning.rrt import rrt_plans
+    from riskplan.planning.select import tie_note
     from riskplan.scenarios.registry import SCENARIO_NAMES, make_scenario
 
     if name not in SCENARIO_NAMES:
@@ -399,6 +429,7 @@ def run_scenario(
 
     # 3. which plan and controller each method executes
     chosen: dict = {}
+    ties: dict = {}
     for c in cases:
         for m in METHODS:
             if m in na:
@@ -410,8 +441,9 @@ def run_scenario(
             else:
                 s = "static" if m == "lqgmp_only" else "deforming"
                 ps = [selection[c, s, j]["p_success"] for j in range(len(plans[s]))]
-                j = int(np.argmax(ps))  # first of the best on ties
+                j = int(np.argmax(ps))  # first of the best on ties (reported: "tie")
                 chosen[c, m] = (s, j, selection[c, s, j])
+                ties[c, m] = int(np.sum(np.asarray(ps) == ps[j]))
 
     # 4. executions in batches
     n, bs = scale.n_executions, scale.batch_size
@@ -444,9 +476,7 @@ def run_scenario(
             if m in na:
                 out_cases[c][m] = None
                 continue
-            f = np.array(
-                [row for b in range(n_batches) for row in flags[c, m, b]], dtype=np.int64
-            ).reshape(-1, 4)
+            f, reasons = _outcome_counts([row for b in range(n_batches) for row in flags[c, m, b]])
             k = int(f[:, 0].sum())
             lo, hi = _wilson(k, len(f))
             s, j, sel = chosen[c, m]
@@ -457,12 +487,20 @@ def run_scenario(
                 "low": lo,
                 "high": hi,
                 "collided": int(f[:, 1].sum()),
-                "missed_goal": int(((f[:, 1] == 0) & (f[:, 2] == 0) & (f[:, 3] == 0)).sum()),
+                "missed_goal": int(
+                    ((f[:, 0] == 0) & (f[:, 1] == 0) & (f[:, 3] == 0) & (f[:, 4] == 0)).sum()
+                ),
                 "solver_failed": int(f[:, 3].sum()),
+                "left_tissue": int(f[:, 4].sum()),
+                "solver_failure_reasons": reasons,
                 "predicted": None if m == "rrt" else sel["p_success"],
                 "controller_error": None if m == "rrt" else sel.get("error"),
                 "candidate_set": s,
                 "candidate": j,
+                "n_tied": ties.get((c, m)),
+                "tie": None
+                if (c, m) not in ties
+                else tie_note(ties[c, m], len(plans[s]), sel["p_success"]),
             }
     sel_out = {
         c: {
@@ -489,19 +527,23 @@ def run_scenario(
 def claims(cases: dict) -> dict:
     """The paper's Fig. 6 claims checked on measured rates (§V-A).
 
-    * ``ours_highest[case]``: ours has the highest rate of the applicable methods (ties
-      count as highest), and ``ours_separated[case]`` whether its Wilson interval lies
+    * ``ours_highest[case]``: ours has a strictly higher rate than every other applicable
+      method; ``ours_tied[case]``: ours shares the highest rate with at least one other
+      method (a tie is reported as a tie, not as "highest"); ``ours_highest_all``: strictly
+      highest in every case; ``ours_separated[case]`` whether its Wilson interval lies
       above every other method's.
     * "without LQG-MP: 34 % better than RRT with deformations and 17 % worse than the
       complete method, averaged over cases": the paper does not say whether percent points
       or relative change; both readings, on the rates averaged over the cases:
       ``points = 100 (r̄_a − r̄_b)`` and ``relative = 100 (r̄_a / r̄_b − 1)``.
     """
-    highest, separated = {}, {}
+    highest, tied, separated = {}, {}, {}
     for c, ms in cases.items():
         ours = ms["ours"]
         others = [v for m, v in ms.items() if m != "ours" and v is not None]
-        highest[c] = all(ours["rate"] >= o["rate"] for o in others)
+        best_other = max((o["rate"] for o in others), default=-1.0)
+        highest[c] = ours["rate"] > best_other
+        tied[c] = ours["rate"] == best_other
         separated[c] = all(ours["low"] > o["high"] for o in others)
 
     def mean_rate(m):
@@ -514,6 +556,7 @@ def claims(cases: dict) -> dict:
 
     return {
         "ours_highest": highest,
+        "ours_tied": tied,
         "ours_highest_all": all(highest.values()),
         "ours_separated": separated,
         "mean_rate": {"rrt": r_rrt, "ours_no_select": r_ns, "ours": r_ours},
@@ -528,6 +571,23 @@ def claims(cases: dict) -> dict:
             "paper": -17.0,
         },
     }
+
+
+def highest_verdict(cl: dict) -> str:
+    """ "ours highest in every case": yes only when strictly highest in every case; ties
+    are named as ties (``cl`` from :func:`claims`)."""
+    strict = cl["ours_highest"]
+    ties = cl.get("ours_tied", {})
+    if cl["ours_highest_all"]:
+        return "yes"
+    parts = []
+    tied = [c for c, t in ties.items() if t]
+    lower = [c for c, ok in strict.items() if not ok and not ties.get(c)]
+    if tied:
+        parts.append("tied for highest in " + ", ".join(tied))
+    if lower:
+        parts.append("below another method in " + ", ".join(lower))
+    return "no (" + "; ".join(parts) + ")"
 
 
 # ---- Figs. 4, 5 and 7(c-f): single executions with and without feedback -----------------

@@ -57,11 +57,22 @@ def test_reference_run_is_consistent(reference):
         assert 0 <= v["successes"] <= v["n"]
         assert v["low"] <= v["rate"] <= v["high"]
         # every failure is classified exactly once
-        assert v["collided"] + v["missed_goal"] + v["solver_failed"] == v["n"] - v["successes"]
-        assert (v["predicted"] is None) == (m == "rrt")
-    # methods 1 and 3 execute the same plan (candidate 0 of the deforming set)
-    assert case["rrt"]["candidate"] == case["ours_no_select"]["candidate"] == 0
+        failures = v["collided"] + v["missed_goal"] + v["solver_failed"] + v["left_tissue"]
+        assert failures == v["n"] - v["successes"]
+        assert (v["predicted"] is None) == (m in ("rrt", "rrt_margins"))
+    # RRT with deformations runs the plain RRT's first plan; its margins reading and ours
+    # without selection execute the same plan (candidate 0 of the deforming set)
+    assert case["rrt"]["candidate_set"] == "plain" and case["rrt"]["candidate"] == 0
+    assert case["rrt_margins"]["candidate"] == case["ours_no_select"]["candidate"] == 0
+    assert case["rrt_margins"]["candidate_set"] == case["ours_no_select"]["candidate_set"]
+    assert case["ours_no_select"]["candidate_set"] == "deforming"
     assert case["lqgmp_only"]["candidate_set"] == "static"
+    assert set(r["selection"]["material-high"]) == {"deforming", "static"}
+    # the mechanism pairs the same plan open and closed loop, run by run
+    mech = r["mechanism"]["material-high"]
+    assert mech["open"] == case["rrt_margins"]["successes"]
+    assert mech["closed"] == case["ours_no_select"]["successes"]
+    assert mech["both"] + mech["neither"] + mech["only_open"] + mech["only_closed"] == mech["n"]
     # "ours" is the LQG-MP argmax over the deforming candidates
     ps = [s["p_success"] for s in r["selection"]["material-high"]["deforming"]]
     assert case["ours"]["candidate"] == int(np.argmax(ps))

@@ -288,6 +288,26 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
         ]
         if tie_lines:
             Report.text(sec, "Selection ties — " + "; ".join(tie_lines) + ".")
+        mech = sc.get("mechanism") or {}
+        if mech:
+            Report.table(
+                sec,
+                ["case", "open loop", "closed loop", "both", "only open", "only closed", "neither"],
+                [
+                    [
+                        c,
+                        f"{v['open']}/{v['n']}",
+                        f"{v['closed']}/{v['n']}",
+                        v["both"],
+                        v["only_open"],
+                        v["only_closed"],
+                        v["neither"],
+                    ]
+                    for c, v in mech.items()
+                ],
+                caption="mechanism: candidate 0 of our RRT executed without and with LQG feedback "
+                "on the same draws (success counts; 'only closed': runs feedback rescued)",
+            )
         cl = sc["claims"]
         Report.table(
             sec,

@@ -48,6 +48,7 @@ def register(app: typer.Typer) -> None:
         Rerunning the same command continues from OUT/store and gives the same results.json.
         """
         from riskplan.commands._shared import progress_bar
+        from riskplan.experiments.fig6 import highest_verdict
         from riskplan.experiments.reproduce import reproduce as run
 
         with progress_bar() as bar:
@@ -92,7 +93,7 @@ def register(app: typer.Typer) -> None:
             typer.echo(
                 f"{name}: mean success rrt {100 * cl['mean_rate']['rrt']:.1f} %, without selection "
                 f"{100 * cl['mean_rate']['ours_no_select']:.1f} %, ours {100 * cl['mean_rate']['ours']:.1f} %; "
-                f"ours highest in every case: {'yes' if cl['ours_highest_all'] else 'no'}"
+                f"ours highest in every case: {highest_verdict(cl)}"
             )
         f7 = results.get("mdn", {}).get("fig7")
         if f7 is not None:

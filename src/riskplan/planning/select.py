@@ -52,6 +52,7 @@ __all__ = [
     "evenly_spaced_ranks",
     "honesty_check",
     "select_plan",
+    "tie_note",
 ]
 
 _FAILURES = (ConvergenceError, ElementInversionError, SimulationError, np.linalg.LinAlgError)
@@ -81,7 +82,10 @@ class Selection:
     ``controller``: its :class:`~riskplan.control.lqg.LQGController` (``L (T, q, p)``,
     ``K (T, p, m)``, ``P (T, p, p)`` and the linearisation ``A, B, M, H, N``);
     ``result``: its :class:`~riskplan.control.lqgmp.LQGMPResult`; ``controllers``: the
-    controller of every candidate (``None`` where evaluation failed), for later checks.
+    controller of every candidate (``None`` where evaluation failed), for later checks;
+    ``n_tied``: how many evaluated candidates share the best ``p_success`` (1: the
+    selection is decided; more: a tie LQG-MP cannot break, resolved by the lowest index,
+    which :attr:`tie_note` says in words).
     """
 
     ranking: list
@@ -91,6 +95,13 @@ class Selection:
     result: object
     controllers: list = field(default_factory=list)
     method: str = "sigma"
+    n_tied: int = 1
+
+    @property
+    def tie_note(self) -> str | None:
+        """``None`` when one candidate is best; otherwise a sentence saying the selection
+        is a tie (e.g. all candidates at ``P(success) = 1.000``)."""
+        return tie_note(self.n_tied, len(self.ranking), self.score(self.best).p_success)
 
     def score(self, index: int) -> PlanScore:
         """The score of candidate ``index``."""
@@ -253,6 +264,9 @@ def select_plan(
             f"plan selection: none of the {len(plans)} candidates could be linearised ({scores[0].error})"
         )
     best = ok[0].index
+    n_tied = sum(1 for s in ok if s.p_success == ok[0].p_success)
+    if n_tied > 1:
+        log.info(tie_note(n_tied, len(plans), ok[0].p_success))
     return Selection(
         ranking=ranking,
         best=best,
@@ -261,6 +275,19 @@ def select_plan(
         result=out[best][2],
         controllers=[o[1] for o in out],
         method=method,
+        n_tied=n_tied,
+    )
+
+
+def tie_note(n_tied: int, n_candidates: int, p_best: float) -> str | None:
+    """The sentence that reports a tie for the best LQG-MP score (``None`` if ``n_tied``
+    is 1): the selection cannot tell those candidates apart, and takes the first."""
+    if n_tied <= 1:
+        return None
+    who = "all" if n_tied == n_candidates else f"{n_tied} of"
+    return (
+        f"tie: {who} {n_candidates} candidates share the best LQG-MP P(success) = "
+        f"{p_best:.3f}; the selection cannot break it and takes the first of them"
     )
 
 

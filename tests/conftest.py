@@ -52,6 +52,10 @@ TOL = {
     "fd_jacobian": dict(rtol=1e-6, atol=1e-8),  # h = 1e-7 .. 1e-6 of a residual
     "fd_tangent": dict(rtol=1e-6, atol=1e-6),  # FEM tangent (atol times max |K|)
     "fd_law": dict(rtol=1e-7, atol=1e-7),  # material law derivatives, h = 1e-6
+    "fd_force_jacobian": dict(rtol=0.0, atol=1e-6),  # central differences h = 1e-4 of Newton solves
+    "fd_forward_force": dict(rtol=0.0, atol=1e-3),  # forward differences h = 1e-4 of a step
+    "linearize_second_order": dict(rtol=0.0, atol=1e-2),  # A_t fit, perturbations 1 % of range
+    "feedback_null": dict(rtol=0.0, atol=1e-4),  # feedback through A_t's second-order fit residue
     # FEM
     "linear_fem": dict(rtol=0.0, atol=1e-10),  # patch tests, residuals, reactions
     "nonlinear_patch": dict(rtol=0.0, atol=1e-9),  # nonlinear patch test under tractions

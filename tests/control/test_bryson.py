@@ -148,6 +148,8 @@ def test_scenarios_declare_state_scales(tol):
     )
     manip = ManipulationScenario()
     assert manip.state_scale.shape == (manip.state_dim,)
+    n = 2 + 2 * manip.config.n_boundary
     assert manip.state_scale[0] == manip.config.goal_radius and np.all(
-        manip.state_scale[2:] == 4 * manip.config.goal_radius
+        manip.state_scale[2:n] == 4 * manip.config.goal_radius
     )
+    assert np.all(manip.state_scale[n:] == manip.config.f_max)  # the applied forces

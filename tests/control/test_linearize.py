@@ -198,10 +198,11 @@ def test_k_2q_gives_the_same_A_as_2p_on_a_linear_system(rng):
 
 @pytest.mark.filterwarnings("ignore::riskplan.control.linearize.RankDeficiencyWarning")
 def test_manipulation_k_2q_and_2p_and_solver_start(tol):
-    # quasi-static manipulation: the new equilibrium depends only on the current forces, so
-    # A_t maps the deviations the previous control excites (the columns of B_{t-1}) to zero;
-    # K = 2q and K = 2p both find that, and B, M do not depend on K. Starting the solves
-    # near the plan's states (step_near) changes B and M by no more than the solver tolerance.
+    # forces in the state: A_t = [[0, J], [0, I]] (the simulator's prior, exact), corrected
+    # by the runs on the q first-order directions only, so K = 2q and K = 2p agree with the
+    # exact structure to second order in the perturbation; B and M do not depend on K.
+    # Starting the solves near the plan's states (step_near) changes B and M by no more than
+    # the solver tolerance.
     from riskplan.scenarios.manipulation import ManipulationScenario
     from riskplan.scenarios.uncertainty import get_case
 
@@ -214,17 +215,18 @@ def test_manipulation_k_2q_and_2p_and_solver_start(tol):
     q, p = sim.control_dim, sim.state_dim
     lins = {K: linearize(sim, plan, draws, n_a_runs=K, seed=1) for K in (2 * q, 2 * p)}
     for K, lin in lins.items():
+        assert (lin.rank[1:] == q).all()
         for t in range(1, plan.n_steps):
-            B_prev = lin.B[t - 1]
-            # second order in the perturbation (1 % of the force range)
-            assert np.linalg.norm(lin.A[t] @ B_prev) <= 1e-2 * np.linalg.norm(B_prev), K
+            exact = sim.a_prior(plan.states[t + 1], plan.params)
+            # second order in the perturbation (1 % of the increment range)
+            assert np.abs(lin.A[t] - exact).max() <= 1e-2 * np.abs(exact).max(), K
     np.testing.assert_array_equal(lins[2 * q].B, lins[2 * p].B)
     np.testing.assert_array_equal(lins[2 * q].M, lins[2 * p].M)
 
     plain = linearize(Without(sim, "step_near"), plan, draws, n_a_runs=2 * q, seed=1)
     # each run's equilibrium within the solver's tolerance (newton_paths) of the other's:
     # B's forward differences then differ by at most 2 · 1e-8 / ε
-    eps = 1e-3 * 2 * sim.config.f_max
+    eps = 1e-3 * 2 * sim.config.df_max
     atol_B = 2 * TOL["newton_paths"]["atol"] / eps
     np.testing.assert_allclose(lins[2 * q].B, plain.B, rtol=0.0, atol=atol_B)
     np.testing.assert_allclose(lins[2 * q].M, plain.M, **TOL["solver_start_M"])
@@ -232,24 +234,36 @@ def test_manipulation_k_2q_and_2p_and_solver_start(tol):
 
 @pytest.mark.filterwarnings("ignore::riskplan.control.linearize.RankDeficiencyWarning")
 def test_simulator_declared_prior_is_the_default():
-    # ManipulationScenario is quasi-static and declares a_prior = "zero": with K = 2q the
-    # unexcited directions get A = 0 (what K = 2p finds from data), not the identity; an
-    # explicit a_prior still wins, and the needle (no declaration) keeps the identity prior.
+    # ManipulationScenario declares its exact A structure as a method (a_prior(y, params));
+    # linearize uses it by default, an explicit a_prior still wins. With the identity prior
+    # the unexcited position directions would persist (wrong: the next equilibrium forgets
+    # them); with the declared one they map to (near) zero, and the LQR gains are non-zero
+    # (forces persist, so feedback has something to act on).
+    from riskplan.control import lqg_controller
     from riskplan.scenarios.manipulation import ManipulationScenario
 
     sim = ManipulationScenario()
-    assert sim.a_prior == "zero"
+    assert callable(sim.a_prior)
     u = sim.random_controls(3, seed=2)
     plan = NominalPlan.from_rollout(sim, sim.initial_state(), u)
     default = linearize(sim, plan, [], seed=1)
-    zero = linearize(sim, plan, [], a_prior="zero", seed=1)
+    declared = linearize(sim, plan, [], a_prior=sim.a_prior, seed=1)
     ident = linearize(sim, plan, [], a_prior="identity", seed=1)
-    np.testing.assert_array_equal(default.A, zero.A)
-    p = sim.state_dim
+    np.testing.assert_array_equal(default.A, declared.A)
+    n = 2 * sim.n_points
     for t in range(1, plan.n_steps):
-        # identity prior: 1 on the p - rank unexcited directions; zero prior: (near) nothing
-        assert np.trace(ident.A[t]) > 0.5 * (p - ident.rank[t])
-        assert np.linalg.norm(zero.A[t], 2) < 0.1 * np.linalg.norm(zero.B[t], 2)
+        assert np.trace(ident.A[t][:n, :n]) > 0.5 * (
+            sim.state_dim - ident.rank[t] - sim.control_dim
+        )
+        # second order in the perturbation (1 % of the increment range)
+        np.testing.assert_allclose(default.A[t][:, :n], 0.0, **TOL["linearize_second_order"])
+        np.testing.assert_allclose(
+            default.A[t][n:, n:], np.eye(sim.control_dim), **TOL["linearize_second_order"]
+        )
+    L = lqg_controller(default).L
+    assert np.all(np.abs(L).max(axis=(1, 2)) > 0.1)
+    with pytest.raises(InvalidInputError, match="a_prior"):
+        linearize(sim, plan, [], a_prior=lambda y, params: np.eye(3), seed=1)
 
 
 @pytest.mark.filterwarnings("ignore::riskplan.control.linearize.RankDeficiencyWarning")

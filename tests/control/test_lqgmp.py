@@ -188,7 +188,7 @@ def test_manipulation_points_and_methods():
 
     sim = ManipulationScenario()
     col, goal = point_indices(sim)
-    assert col.shape == (12, 2) and tuple(goal) == (0, 1) and col.max() == sim.state_dim - 1
+    assert col.shape == (12, 2) and tuple(goal) == (0, 1) and col.max() == 2 * sim.n_points - 1
     plan = NominalPlan.from_rollout(
         sim, sim.initial_state(), np.tile([0.2, 0.0, 0.0, -0.2, 0.1, 0.0], (3, 1))
     )
@@ -198,7 +198,9 @@ def test_manipulation_points_and_methods():
     ctrl = lqg_controller(lin)
     for m in ("sigma", "truncation", "sampling"):
         r = lqgmp(sim, plan, ctrl, method=m, n_goal_samples=200, seed=0)
-        assert r.cov.shape == (4, 52, 52) and 0.0 <= r.p_success <= 1.0
+        assert (
+            r.cov.shape == (4, 2 * sim.state_dim, 2 * sim.state_dim) and 0.0 <= r.p_success <= 1.0
+        )
         assert r.p_goal == 0.0  # three small pushes do not bring the target into the goal disk
 
 

@@ -11,7 +11,14 @@ import pytest
 
 from riskplan.control import NominalPlan
 from riskplan.errors import InvalidInputError, PlanningError
-from riskplan.planning.rrt import PlanningSpace, RRTOptions, grow_tree, planning_space, rrt_plans
+from riskplan.planning.rrt import (
+    PlanningSpace,
+    RRTOptions,
+    grow_tree,
+    planning_space,
+    rrt_plans,
+    sampling_bounds,
+)
 from riskplan.scenarios.manipulation import ManipulationScenario
 from tests.conftest import TOL
 from tests.planning.conftest import SMALL_MESH, PointRobot
@@ -98,10 +105,14 @@ def test_manipulation_plan(tmp_path):
     assert len(tree.plans) == 1
     plan = tree.plans[0]
     _check_plan(sim, plan, params)
-    # consecutive controls respect the scenario's rate limit
-    space = planning_space(sim)
-    steps = np.abs(np.diff(np.vstack([np.zeros(6), plan.controls]), axis=0))
-    assert np.all(steps <= space.max_control_change + TOL["float64_abs"]["atol"])
+    # the controls are force increments inside the sampling bounds (the rate limit), and
+    # the forces of the states are their running sum
+    bounds = sampling_bounds(sim, RRTOptions())
+    assert np.all(np.abs(plan.controls) <= bounds[:, 1] + TOL["float64_abs"]["atol"])
+    f = np.zeros(sim.control_dim)
+    for du in plan.controls:
+        f = np.clip(f + du, -sim.config.f_max, sim.config.f_max)
+    np.testing.assert_allclose(plan.states[-1].forces.ravel(), f, **TOL["float64_exact"])
 
 
 def test_no_plan_raises_planning_error_with_tree_size_and_distance():
@@ -201,9 +212,9 @@ def test_manipulation_sampling_bounds_keep_two_sigma():
     from riskplan.planning.rrt import sampling_bounds
 
     sim = ManipulationScenario()
-    f = sim.config.f_max
+    f = sim.config.df_max
     b = sampling_bounds(sim, RRTOptions())
-    # actuation noise 0.1 f_max per component: margin 0.2 f_max
+    # actuation noise 0.1 df_max per increment component: margin 0.2 df_max
     np.testing.assert_allclose(
         b, np.tile([-0.8 * f, 0.8 * f], (sim.control_dim, 1)), **TOL["round_off"]
     )

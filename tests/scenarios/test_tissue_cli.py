@@ -80,7 +80,7 @@ def test_simulate_manipulation_random_json(tmp_path):
     )
     assert r.exit_code == 0, r.output
     summary = json.loads((out / "summary.json").read_text())
-    assert len(summary["final_reduced_state"]) == 26 and summary["steps"] == 3
+    assert len(summary["final_reduced_state"]) == 32 and summary["steps"] == 3
 
 
 def test_simulate_rejects_bad_input(tmp_path):

@@ -12,9 +12,10 @@ nominal parameters, meshes of 175 elements (the planning mesh) and 1000 elements
   :meth:`NeedleScenario.in_collision`, which reads the deformed obstacles' material points
   (``needle_step_and_collision_us_N``; :func:`linear_step_ms`);
 * manipulation (V-B, neo-Hookean): :meth:`ManipulationScenario.step` from the equilibrium
-  under forces 0.5 to a small force change (warm-started Newton; ``manipulation_step_ms_N``)
-  and :meth:`ManipulationScenario.reduced`, the target and boundary points
-  (``manipulation_reduced_us_N``); step and ``reduced`` together: :func:`nonlinear_step_ms`.
+  under forces 0.5 (reached in two increments of 0.25) by a small force increment
+  (warm-started Newton; ``manipulation_step_ms_N``) and :meth:`ManipulationScenario.reduced`,
+  the target, boundary points and forces (``manipulation_reduced_us_N``); step and
+  ``reduced`` together: :func:`nonlinear_step_ms`.
 
 :func:`run` (``riskplan bench tissue``) reports ``linear_step_ms_N`` and
 ``nonlinear_step_ms_N``, the step plus reading the points; :func:`step_costs` (``riskplan
@@ -44,14 +45,16 @@ def needle_setup(n_elements: int):
 
 def manipulation_setup(n_elements: int):
     """``(scenario, params, state, control)`` of the manipulation step timed here: the state
-    is the equilibrium under forces 0.5, the control a small change of them."""
+    is the equilibrium under forces 0.5, the control a small increment of them."""
     from riskplan.scenarios.base import SimParams
     from riskplan.scenarios.manipulation import ManipulationScenario
 
     sim = ManipulationScenario()
     params = SimParams(n_elements=n_elements)
-    state = sim.step(sim.initial_state(params), np.full(6, 0.5), params)
-    control = np.full(6, 0.5) + 0.05 * np.array([1.0, -1.0, 0.5, 0.2, -0.3, 0.1])
+    state = sim.initial_state(params)
+    for _ in range(2):
+        state = sim.step(state, np.full(6, 0.25), params)
+    control = 0.05 * np.array([1.0, -1.0, 0.5, 0.2, -0.3, 0.1])
     return sim, params, state, control
 
 

@@ -22,7 +22,12 @@ Estimation, per step ``t`` (each run restarts the simulator from a stored plan s
   dropped). With ``a_prior="zero"`` this is the paper's ``A_t = X_{t+1} X_t⁺``; the default
   ``a_prior="identity"`` differs from it only where ``X_t`` is rank deficient: directions
   the runs cannot excite keep ``A = I`` (the deviation persists, as the lateral offset of a
-  car does) instead of being mapped to zero. A rank-deficient ``X_t`` is reported once
+  car does) instead of being mapped to zero. A simulator that knows the structure of its
+  ``A_t`` declares it as a callable prior evaluated at ``y*_{t+1}`` (the manipulation:
+  ``[[0, J], [0, I]]``, positions following the applied forces); the runs then correct it
+  on the ``q`` leading singular directions of ``X_t`` only (the first-order subspace, see
+  ``K`` below: beyond it ``X_t`` holds second-order parts, and their pseudo-inverse would
+  overwrite the exact prior with curvature divided by tiny singular values). A rank-deficient ``X_t`` is reported once
   per call with a :class:`RankDeficiencyWarning` naming the steps.
   ``w_k`` components that would leave the control bounds are mirrored (``−w``) and then
   clipped. Step ``t = 0`` has no earlier control to perturb; the start state is known
@@ -35,14 +40,11 @@ Estimation, per step ``t`` (each run restarts the simulator from a stored plan s
   ``K``, and the fit ``A_t`` acts on the same ``q``-dimensional subspace (the prior fills
   the rest) for every ``K > q``; more runs only average the second-order (curvature) part
   of the deviations. ``K = 2q`` keeps twice the runs the subspace needs. Checked on a
-  linear system (the same ``A_t`` for ``K = 2q`` and ``2p``, to rounding) and on the
-  manipulation scenario (``p = 26``, ``q = 6``): ``B_t`` and ``M_t`` do not use the
-  A-runs; both ``K = 12`` and ``K = 52`` give ``A_t B_{t-1} ≈ 0`` (the new equilibrium
-  forgets the previous force); they differ off that subspace (with 52 runs the
-  second-order part lifts ``X_t`` to full numerical rank and ``A_t ≈ 0``; with 12 the
-  prior stays on 14 directions), and the LQG-MP ``P(success)`` of the two differs by less
-  than that of ``K = 52`` under another seed (docs/planning.md).
-  ``n_a_runs=2 * sim.state_dim`` restores the paper's.
+  linear system (the same ``A_t`` for ``K = 2q`` and ``2p``, to rounding). On the
+  manipulation scenario (``p = 32``, ``q = 6``) the runs excite the six directions
+  ``[J_t; I] w`` and the simulator's prior supplies the other 26 (tests check ``A_t``
+  against finite differences of the step). ``n_a_runs=2 * sim.state_dim`` restores the
+  paper's.
 * ``B_t``: ``q`` runs from ``y*_t`` with ``u*_t + ε_j e_j``; column ``j`` is
   ``(x^j_{t+1} − x*_{t+1}) / ε_j`` (forward difference; ``ε_j → −ε_j`` at an upper bound).
   Default ``ε_j = 10⁻³ (high_j − low_j)``.
@@ -241,6 +243,20 @@ def _mirror(u: np.ndarray, w: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     return np.clip(v, bounds[:, 0], bounds[:, 1])
 
 
+def _fixed_prior(a_prior: str, p: int) -> np.ndarray:
+    return np.eye(p) if a_prior == "identity" else np.zeros((p, p))
+
+
+def _callable_prior(a_prior, plan: NominalPlan, t: int, p: int) -> np.ndarray:
+    """``a_prior(y*_{t+1}, params) (p, p)``: a simulator's own structure of ``A_t``."""
+    prior = np.asarray(a_prior(plan.states[t + 1], plan.params), dtype=np.float64)
+    if prior.shape != (p, p) or not np.all(np.isfinite(prior)):
+        raise InvalidInputError(
+            f"a_prior: expected a finite ({p}, {p}) matrix from the callable, got shape {prior.shape}"
+        )
+    return prior
+
+
 def _stepper(sim):
     """``run(state, u, params, near)``: ``sim.step_near`` where the simulator has one (its
     solver starts from ``near``, a state expected close to the result), else ``sim.step``."""
@@ -305,10 +321,11 @@ def _steps(
     bounds = np.asarray(sim.control_bounds, dtype=np.float64)
     params = plan.params
     p = plan.reduced.shape[1]
-    prior = np.eye(p) if a_prior == "identity" else np.zeros((p, p))
+    fixed = None if callable(a_prior) else _fixed_prior(a_prior, p)
     run = _stepper(sim)
     out = []
     for t, seed in zip(ts, seeds):
+        prior = fixed if fixed is not None else _callable_prior(a_prior, plan, t, p)
         y_t = plan.states[t]
         u_t = plan.controls[t]
         x_next = plan.reduced[t + 1]
@@ -330,6 +347,11 @@ def _steps(
             X1 -= x_next[:, None]
             U, s, Vt = np.linalg.svd(X0, full_matrices=False)
             keep = s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
+            if fixed is None:
+                # a declared (exact) prior: fit only the q first-order directions; beyond
+                # them X_t holds second-order parts, whose pseudo-inverse would replace the
+                # exact prior by a fit of curvature divided by tiny singular values
+                keep[W_factor.shape[0] :] = False
             rank = int(keep.sum())
             if rank == 0:
                 A = prior.copy()
@@ -455,11 +477,13 @@ def linearize(
         keeps the information of the paper's ``K = 2p`` at a fraction of the cost for
         ``p >> q`` (manipulation: p = 26, q = 6; module docstring). ``2 * sim.state_dim``
         is the paper's choice.
-    a_prior : ``"identity"`` or ``"zero"`` (the paper's plain pseudo-inverse); ``None``
-        (default): the simulator's own ``a_prior`` attribute if it declares one, else
-        ``"identity"``. A quasi-static simulator, whose next state does not depend on the
-        previous one (:class:`~riskplan.scenarios.manipulation.ManipulationScenario`),
-        declares ``"zero"``: its exact ``A`` is 0 in every direction, excited or not.
+    a_prior : ``"identity"``, ``"zero"`` (the paper's plain pseudo-inverse) or a callable
+        ``a_prior(y*_{t+1}, params) -> (p, p)``, the simulator's exact structure of ``A_t``
+        at the plan's next state; ``None`` (default): the simulator's own ``a_prior``
+        attribute or method if it declares one, else ``"identity"``.
+        :class:`~riskplan.scenarios.manipulation.ManipulationScenario` declares a method:
+        ``A = [[0, J], [0, I]]`` (positions follow the applied forces, force deviations
+        persist), so the directions the runs cannot excite get their exact value.
     rcond : relative cut-off of the singular values of ``X_t``.
     H, N : observation model override, ``(m, p)`` and ``(m, m)``.
     seed : seeds the perturbations and the parameter draws.
@@ -482,8 +506,10 @@ def linearize(
         raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
     if a_prior is None:
         a_prior = getattr(sim, "a_prior", "identity")
-    if a_prior not in A_PRIORS:
-        raise InvalidInputError(f"a_prior: expected one of {A_PRIORS}, got {a_prior!r}")
+    if not callable(a_prior) and a_prior not in A_PRIORS:
+        raise InvalidInputError(
+            f"a_prior: expected one of {A_PRIORS} or a callable, got {a_prior!r}"
+        )
     if not (0.0 <= float(rcond) < 1.0):
         raise InvalidInputError(f"rcond: expected a number in [0, 1), got {rcond!r}")
     p, q = sim.state_dim, sim.control_dim
@@ -558,8 +584,12 @@ def linearize(
     if T >= 2:
         A[0], rank[0] = A[1], rank[1]
     else:
-        A[0], rank[0] = (np.eye(p) if a_prior == "identity" else np.zeros((p, p))), 0
+        A[0], rank[0] = (
+            _callable_prior(a_prior, plan, 0, p) if callable(a_prior) else _fixed_prior(a_prior, p),
+            0,
+        )
     deficient = [t for t in range(1, T) if rank[t] < p]
+    prior_name = "simulator's" if callable(a_prior) else a_prior
     if deficient:
         low = int(rank[deficient].min())
         q = B.shape[2]
@@ -570,7 +600,7 @@ def linearize(
         )
         warnings.warn(
             f"linearize: X_t has rank < p = {p} at steps {deficient[:10]}{' ...' if len(deficient) > 10 else ''} "
-            f"(lowest rank {low}; {why}); A_t keeps the '{a_prior}' prior on the unexcited directions",
+            f"(lowest rank {low}; {why}); A_t keeps the {prior_name!r} prior on the unexcited directions",
             RankDeficiencyWarning,
             stacklevel=2,
         )

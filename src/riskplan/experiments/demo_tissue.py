@@ -93,31 +93,38 @@ def greedy_manipulation_controls(
     sim, params, n_steps: int, max_move: float = 0.025, eps: float = 0.02
 ) -> np.ndarray:
     """Resolved-rate steering on the simulator: estimate the 2×6 Jacobian of the target
-    position w.r.t. the forces by forward differences
-    (:func:`riskplan.control.linearize.control_jacobian`), take the minimum-norm force change
-    that moves the target up to ``max_move`` towards the goal, halve it while the object
-    would touch the obstacle; stop once the target is in the goal."""
+    position w.r.t. the force increments by forward differences
+    (:func:`riskplan.control.linearize.control_jacobian`), take the minimum-norm increment
+    (within its bounds) that moves the target up to ``max_move`` towards the goal, halve it
+    while the object would touch the obstacle; stop once the target is in the goal.
+    Returns the increments ``(T, 6)``."""
     from riskplan.control.linearize import control_jacobian
     from riskplan.errors import ConvergenceError, ElementInversionError
 
     f_max = sim.config.f_max
     bounds = sim.control_bounds
     state = sim.initial_state(params)
-    u = np.zeros(sim.control_dim)
+    zero = np.zeros(sim.control_dim)
     goal = np.asarray(sim.config.goal_center)
     out = []
     for _ in range(n_steps):
         x0 = sim.target(state)
-        # the target is x[:2]; the library's B_t machinery (paper IV-B) differentiates the step
+        # the target is x[:2]; the library's B_t machinery (paper IV-B) differentiates the
+        # step (a zero increment keeps the current equilibrium)
         J = control_jacobian(
-            sim, state, u, params, np.full(sim.control_dim, eps * f_max), x_next=sim.reduced(state)
+            sim,
+            state,
+            zero,
+            params,
+            np.full(sim.control_dim, eps * f_max),
+            x_next=sim.reduced(state),
         )[:2]
         d = goal - x0
         d *= min(1.0, max_move / max(np.linalg.norm(d), 1e-12))
         step = np.linalg.lstsq(J, d, rcond=None)[0]
         nxt = None
         for _ in range(6):
-            cand = np.clip(u + step, bounds[:, 0], bounds[:, 1])
+            cand = np.clip(step, bounds[:, 0], bounds[:, 1])
             try:
                 trial = sim.step(state, cand, params)
             except (ConvergenceError, ElementInversionError):
@@ -129,8 +136,8 @@ def greedy_manipulation_controls(
             step *= 0.5
         if nxt is None:
             break
-        u, state = nxt
-        out.append(u)
+        du, state = nxt
+        out.append(du)
         if sim.in_goal(state):
             break
     return np.array(out) if out else np.zeros((1, sim.control_dim))
@@ -268,7 +275,7 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     def manip_text(p0, states):
         return (
             f"Neo-Hookean object (E = 50, ν = 0.4, {manip.mesh_data(p0.n_elements).mesh.n_elements} triangles), bottom-right "
-            f"edge fixed, three manipulators (red) pushing with forces |F_i| ≤ {manip.config.f_max} per component spread over "
+            f"edge fixed, three manipulators (red) pushing with forces |F_i| ≤ {manip.config.f_max} per component (changed by at most {manip.config.df_max} per step) spread over "
             f"boundary patches; the target (blue) should reach the goal (green) while the object avoids the obstacle (grey). "
             f"Only the black boundary points are sensed. Controls: resolved-rate steering with finite-difference Jacobians on the simulator ({len(um)} steps). "
             f"Final target-goal distance {manip.goal_distance(states[-1]):.3f}, "

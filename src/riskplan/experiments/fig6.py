@@ -121,7 +121,9 @@ class ScenarioScale:
     case (paper: 1000); ``batch_size``: executions per stored work unit; ``lin_samples``:
     parameter draws for ``M_t``; ``goal_samples``: LQG-MP draws for ``P(goal)``;
     ``plans_per_tree`` / ``max_iterations`` / ``n_controls``: the RRT budget
-    (:class:`riskplan.planning.rrt.RRTOptions`).
+    (:class:`riskplan.planning.rrt.RRTOptions`); ``n_feedback``: executions of each
+    open-vs-closed condition of :mod:`riskplan.experiments.feedback` (Fig. 7(c-f) as
+    rates; 0: not run).
     """
 
     n_candidates: int
@@ -132,6 +134,7 @@ class ScenarioScale:
     plans_per_tree: int = 5
     max_iterations: int = 4000
     n_controls: int = 6
+    n_feedback: int = 0
 
     def __post_init__(self):
         for name in (
@@ -146,6 +149,10 @@ class ScenarioScale:
             v = getattr(self, name)
             if int(v) != v or v < 1:
                 raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
+        if int(self.n_feedback) != self.n_feedback or self.n_feedback < 0:
+            raise InvalidInputError(
+                f"n_feedback: expected an integer >= 0, got {self.n_feedback!r}"
+            )
         if int(self.lin_samples) != self.lin_samples or self.lin_samples < 2:
             raise InvalidInputError(
                 f"lin_samples: expected an integer >= 2, got {self.lin_samples!r}"
@@ -180,6 +187,7 @@ SCALES: dict[str, dict[str, ScenarioScale]] = {
             lin_samples=4,
             goal_samples=300,
             plans_per_tree=2,
+            n_feedback=10,
         ),
     },
     "paper": {
@@ -187,7 +195,11 @@ SCALES: dict[str, dict[str, ScenarioScale]] = {
             n_candidates=100, n_executions=1000, batch_size=50, plans_per_tree=10
         ),
         "manipulation": ScenarioScale(
-            n_candidates=100, n_executions=1000, batch_size=20, plans_per_tree=10
+            n_candidates=100,
+            n_executions=1000,
+            batch_size=20,
+            plans_per_tree=10,
+            n_feedback=200,
         ),
     },
 }
@@ -501,6 +513,9 @@ def run_scenario(
         done += 1
         report(f"{name}: executions", done * bs, len(batch_items) * bs)
 
+    # 4b. Fig. 7(c-f) as rates: the ``ours`` plan open vs closed loop on common draws
+    feedback = _feedback_rates(name, scale, store, chosen, plans, sims, seed, pmap, report)
+
     # 5. numbers
     out_cases: dict = {}
     for c in cases:
@@ -563,6 +578,7 @@ def run_scenario(
         "plan_steps": {s: [int(p.n_steps) for p in ps] for s, ps in plans.items()},
         "cases": out_cases,
         "selection": sel_out,
+        "feedback": feedback,
         "claims": claims(out_cases),
         "mechanism": mechanism,
     }
@@ -605,6 +621,52 @@ def open_closed_rates(sim, plan, controller, params_list, seeds) -> dict:
     )
     for kind in ("open", "closed"):
         out[f"{kind}_outcomes"] = {o: res[kind].count(o) for o in OUTCOMES}
+    return out
+
+
+def _feedback_rates(name, scale, store, chosen, plans, sims, seed, pmap, report) -> dict:
+    """``{figure: paired summary}`` of :mod:`riskplan.experiments.feedback` for the conditions
+    of scenario ``name`` whose case ran: the ``ours`` plan of that case executed open and
+    closed loop on ``scale.n_feedback`` common draws, in stored batches (resumable)."""
+    from riskplan.experiments.feedback import CONDITIONS, feedback_batch, paired_summary
+    from riskplan.parallel import spawn_seeds
+
+    n, bs = int(scale.n_feedback), scale.batch_size
+    figs = [f for f, c in CONDITIONS.items() if c.scenario == name and (c.case, "ours") in chosen]
+    if n == 0 or not figs:
+        return {}
+    n_batches = -(-n // bs)
+    items = [(f, b) for f in figs for b in range(n_batches)]
+    key = {it: f"fig6.{name}.feedback.{it[0]}.b{it[1]:05d}" for it in items}
+    rows = {it: store.get(key[it]) for it in items}
+    todo = [it for it in items if rows[it] is None]
+    seeds = {f: spawn_seeds(_seed_for(seed, name, "feedback", f), n) for f in figs}
+    done = len(items) - len(todo)
+    report(f"{name}: open vs closed loop", done * bs, len(items) * bs)
+
+    def task(it):
+        f, b = it
+        case = CONDITIONS[f].case
+        s, j, sel = chosen[case, "ours"]
+        return (sims[case], plans[s][j], sel["controller"], f, seeds[f][b * bs : (b + 1) * bs])
+
+    for i, res in pmap(feedback_batch, [task(it) for it in todo]):
+        rows[todo[i]] = res
+        store.put(key[todo[i]], res)
+        done += 1
+        report(f"{name}: open vs closed loop", done * bs, len(items) * bs)
+    out = {}
+    for f in figs:
+        summary = paired_summary([r for b in range(n_batches) for r in rows[f, b]])
+        case = CONDITIONS[f].case
+        _set, j, sel = chosen[case, "ours"]
+        summary.update(
+            caption=CONDITIONS[f].caption,
+            case=case,
+            candidate=j,
+            controller_error=sel.get("error"),
+        )
+        out[f] = summary
     return out
 
 

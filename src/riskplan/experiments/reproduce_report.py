@@ -83,6 +83,43 @@ def _fig6_plotly(sc: dict):
     return fig
 
 
+def _feedback_table(sec, sc: dict) -> None:
+    """Fig. 7(c-f) as rates: the selected plan open vs closed loop on the same draws
+    (:mod:`riskplan.experiments.feedback`), with the pairs that show the feedback's part."""
+    fb = sc.get("feedback") or {}
+    if not fb:
+        return
+    rows = []
+    for s in fb.values():
+        o, c, pr = s["open"], s["closed"], s["pairs"]
+        rows.append(
+            [
+                s["caption"],
+                f"{100 * o['rate']:.1f} [{100 * o['low']:.1f}, {100 * o['high']:.1f}]",
+                f"{100 * c['rate']:.1f} [{100 * c['low']:.1f}, {100 * c['high']:.1f}]",
+                f"{pr['closed_only']} / {pr['open_only']} / {pr['both']} / {pr['neither']}",
+                f"{o['collided']} / {c['collided']}",
+                f"{o['solver_failed']} / {c['solver_failed']}",
+                f"{o['n']}",
+            ]
+        )
+    Report.table(
+        sec,
+        [
+            "condition",
+            "open loop [%] (95 % Wilson)",
+            "closed loop [%]",
+            "only closed / only open / both / neither succeed",
+            "collided open / closed",
+            "solver failed open / closed",
+            "executions",
+        ],
+        rows,
+        caption="the selected plan of the condition's case without and with LQG feedback on the same "
+        "parameter draws and sensing noise (the paper's Fig. 7(c-f) shows one pair each)",
+    )
+
+
 def _single_runs(report: Report, sec, name: str, store, sc: dict, seed: int) -> None:
     import matplotlib.pyplot as plt
 
@@ -438,6 +475,7 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
             ],
             caption="the paper's claims; it does not say whether its percentages are points or relative, so both readings",
         )
+        _feedback_table(sec, sc)
         _single_runs(rep, sec, name, store, sc, seed)
 
     for sc in results.get("deformable", {}).values():

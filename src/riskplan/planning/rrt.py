@@ -45,7 +45,8 @@ Choices the paper leaves open (documented in docs/planning.md):
 
 * steps per extension: the paper does not say. Needle: 3 steps of τ = 0.1 (at most
   0.15 length units, about the goal disk's diameter); manipulation: 1
-  step, with controls within ``0.25 f_max`` of the parent's, because a quasi-static
+  step of force increments uniform in their bounds (``±df_max = ±0.25 f_max``, narrowed
+  by the control margin): the increment bound is the rate limit, because a quasi-static
   step jumps to the equilibrium of the new forces and larger force jumps would skip the
   intermediate configurations that the collision check and the linearisation never see.
 * metric: needle ``(x, y)`` plus ``r_min · θ`` (a heading error of 1 rad counts like the
@@ -251,7 +252,6 @@ def _manipulation_space(sim) -> PlanningSpace:
         periodic=np.zeros(p, dtype=bool),
         goal=goal,
         steps_per_extension=1,
-        max_control_change=np.full(sim.control_dim, 0.25 * cfg.f_max),
     )
 
 
@@ -382,7 +382,7 @@ class TreeResult:
 def actuation_std(sim) -> np.ndarray | None:
     """``(q,)`` standard deviations of ``sim``'s actuation noise, or ``None`` if unknown.
 
-    ``sim.actuation_cov()`` (the manipulation scenario: ``0.1 f_max``) if it has one, else
+    ``sim.actuation_cov()`` (the manipulation scenario: ``0.1 df_max``) if it has one, else
     for the needle :data:`riskplan.scenarios.uncertainty.NEEDLE_ACTUATION_STD`
     (``0.05``, 5°)."""
     cov = getattr(sim, "actuation_cov", None)

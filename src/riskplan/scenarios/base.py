@@ -79,7 +79,7 @@ class SimParams:
     force_scale:
         Interaction force scale (>= 0). Needle: the magnitude ``f_int`` of the force the
         robot exerts in its direction of motion (nominal 1). Manipulation: a gain on the
-        commanded manipulator forces (nominal 1).
+        commanded force increments (nominal 1).
     actuation_cov:
         ``None`` (no actuation noise) or an ``(m, m)`` covariance, stored as a tuple of
         tuples so the value stays hashable; the control actually applied at step ``t`` is
@@ -338,7 +338,9 @@ class Simulator(Protocol):
     points: :func:`riskplan.control.lqgmp.body_points`),
     ``a_prior`` (``"identity"`` or ``"zero"``: what :func:`riskplan.control.linearize` assumes
     for state directions its control perturbations cannot excite — a deviation that persists,
-    or one the next step forgets; default ``"identity"``), ``transfer_state(state, params)``
+    or one the next step forgets; default ``"identity"``; or a method
+    ``a_prior(y_next, params) -> (p, p)``, the exact structure of ``A_t`` at the plan's next
+    state), ``transfer_state(state, params)``
     (``state`` as a start on the mesh of ``params``, so that ``linearize`` can run
     mesh-size draws of ``M_t`` on their own meshes), ``step_near(state, u, params, near)``
     (``step`` with the solver started from ``near``).

@@ -4,23 +4,48 @@ target point into a goal region while the object avoids a static obstacle.
 
 Object: a unit square with its bottom-right corner cut off; the cut edge (the
 "bottom-right edge") is fixed. Three manipulators hold the object at boundary material
-points and push/pull it with force vectors ``F_k`` (the controls,
-``u = (F_1x, F_1y, F_2x, F_2y, F_3x, F_3y)``, each component in ``[−f_max, f_max]``),
-each spread over a boundary patch of radius ``patch_radius`` with a smooth bump so no
-element inverts under the load (:func:`riskplan.deformable.patch_weights`). The forces are
-dead loads (fixed direction in the world frame) scaled by ``params.force_scale``.
+points and push/pull it with force vectors ``F_k`` (``F = (F_1x, F_1y, F_2x, F_2y, F_3x,
+F_3y)``), each spread over a boundary patch of radius ``patch_radius`` with a smooth bump
+so no element inverts under the load (:func:`riskplan.deformable.patch_weights`). The
+forces are dead loads (fixed direction in the world frame).
+
+Controls are force *increments* and the applied forces are part of the state (the
+paper's simulator state y_t holds "deformations, dynamics parameters, friction states",
+§III): the control ``Δu (6,)``, each component in ``[−df_max, df_max]``, changes the
+applied forces by
+
+    F_{t+1} = clip(F_t + s_f (Δu_t + w_t), −f_max, f_max)
+
+(``s_f = params.force_scale``, an actuator gain; ``w_t`` the actuation noise; the clip is
+the manipulators' saturation, so the force bound ``f_max`` holds whatever the controls).
+The object then settles in the quasi-static equilibrium under ``F_{t+1}``.
+
+Why increments (and not a damped dynamic FEM): with absolute forces as controls every step
+is a memoryless equilibrium (``x_{t+1}`` a function of ``u_t`` only), so the linearisation's
+``A_t`` is 0, the LQR gains are 0 and LQG executes the plan open loop. Holding the forces
+in the state gives the deviation model memory with the exact structure
+
+    x̄_{t+1} = A_t x̄_t + B_t ū_t,   A_t = [[0, J_{t+1}], [0, I]],   B_t = s_f [[J_{t+1}], [I]]
+
+(``J_{t+1} = ∂P/∂F`` at the new equilibrium, :meth:`ManipulationScenario.force_jacobian`):
+a force deviation persists until the controller removes it, and the positions follow the
+forces. A dynamic FEM would add memory through velocities as well, but the paper's object
+is manipulated slowly (no inertia in its model of §V-B), its time step and damping would
+be new parameters the paper does not give, and each step would cost several implicit
+solves; the increments need neither.
 
 Physics: compressible neo-Hookean FEM (geometrically nonlinear, paper V-B), quasi-static:
-each step solves ``f_int(u_{t+1}) = f_ext(u_t_control)`` by Newton's method with a line
-search, warm-started from the previous displacement and load-stepped from the previous
-load. Because the material is elastic and the loading quasi-static, the equilibrium
-after a step depends on the current forces; the previous state enters through the warm
-start and the load path (a different equilibrium branch would be reached only through a
-buckling instability, which these loads do not reach).
+each step solves ``f_int(u_{t+1}) = W F_{t+1}`` by Newton's method with a line search,
+warm-started from the previous displacement and load-stepped from the previous load.
+Because the material is elastic and the loading quasi-static, the equilibrium depends on
+the applied forces only; the previous state enters through the warm start and the load
+path (a different equilibrium branch would be reached only through a buckling
+instability, which these loads do not reach).
 
-Reduced state ``x = (p_target, P_boundary)`` (paper V-B): the target's position followed
-by ``n_boundary`` boundary material points, ``(2 + 2 n_boundary,)``. Sensing: only the
-boundary points, ``z = P_boundary + n``, ``n ~ N(0, σ² I)``. Failure: any part of the
+Reduced state ``x = (p_target, P_boundary, F)`` (paper V-B, plus the applied forces): the
+target's position, ``n_boundary`` boundary material points and the six force components,
+``(2 + 2 n_boundary + 6,)``. Sensing: only the boundary points, ``z = P_boundary + n``,
+``n ~ N(0, σ² I)`` (the forces are estimated by the filter). Failure: any part of the
 deformed object touches the obstacle (boundary edges crossing the obstacle's, or one
 inside the other).
 """
@@ -61,7 +86,12 @@ class ManipulationConfig:
     forces act at; ``target (2,)``: internal target point; ``goal_center``/``goal_radius``:
     goal disk for the target (static, in the world frame); ``obstacle (k, 2)``: static
     polygon the object must not touch; ``n_boundary``: sensed boundary points, spread
-    evenly by arc length over the free boundary; ``f_max``: force bound per component.
+    evenly by arc length over the free boundary; ``f_max``: bound of each applied force
+    component (the manipulators saturate there); ``df_max``: bound of each force
+    increment per step (the control), a quarter of ``f_max`` so that swinging a force from
+    zero to its bound takes at least four steps (the rate limit the RRT used when controls
+    were absolute forces: a quasi-static step jumps to the new equilibrium, and a larger
+    jump would skip configurations the collision check never sees).
     """
 
     outline: np.ndarray = field(default_factory=_default_outline)
@@ -76,6 +106,7 @@ class ManipulationConfig:
     patch_radius: float = 0.1
     n_boundary: int = 12
     f_max: float = 1.5
+    df_max: float = 0.375
     sensing_std: float = 0.005
     plane: str = "strain"
     load_steps: int = 1
@@ -99,7 +130,7 @@ class ManipulationConfig:
         )
         as_array(self.target, "target", shape=(2,))
         as_array(self.goal_center, "goal_center", shape=(2,))
-        for name in ("goal_radius", "patch_radius", "f_max", "sensing_std"):
+        for name in ("goal_radius", "patch_radius", "f_max", "df_max", "sensing_std"):
             v = float(getattr(self, name))
             if not math.isfinite(v) or v <= 0:
                 raise InvalidInputError(f"{name}: must be finite and > 0, got {v!r}")
@@ -137,7 +168,8 @@ class ManipulationConfig:
 @dataclass(frozen=True, eq=False)
 class ManipulationState(SimState):
     """Full state: FEM displacement, step index, mesh size and the applied forces
-    ``forces (3, 2)`` (after scaling and actuation noise) that it balances."""
+    ``forces (3, 2)`` (the sum of the scaled, noisy, saturated increments so far) that the
+    displacement balances; the forces are part of the reduced state too."""
 
     forces: np.ndarray = field(default_factory=lambda: np.zeros((3, 2)))
 
@@ -237,19 +269,15 @@ class ManipulationScenario(FEMScenario):
     """The internal-point manipulation scenario as a
     :class:`~riskplan.scenarios.base.Simulator`.
 
-    Dimensions: controls q = 2 × (number of manipulators) = 6; reduced state
-    p = 2 + 2 n_boundary (26 by default); measurements 2 n_boundary. ``cache_size``: FEM
-    models kept (one per distinct ``(E, ν, n_elements)``; the plan selection cycles through
-    the nominal model and its 16 parameter draws, which a cache of 16 would evict one by one).
+    Dimensions: controls q = 2 × (number of manipulators) = 6 force increments; reduced
+    state p = 2 + 2 n_boundary + q (32 by default: target, boundary points, applied
+    forces); measurements 2 n_boundary. ``cache_size``: FEM models kept (one per distinct
+    ``(E, ν, n_elements)``; the plan selection cycles through the nominal model and its 16
+    parameter draws, which a cache of 16 would evict one by one).
     """
 
     name = "manipulation"
     state_type = ManipulationState
-    #: Quasi-static: each step solves for the equilibrium under the current forces from any
-    #: start (tested in tests/scenarios/test_manipulation.py), so a deviation of the state is
-    #: forgotten by the next step and the exact ``A_t`` is 0 — also in the directions the
-    #: linearisation's control perturbations do not excite (``riskplan.control.linearize``).
-    a_prior = "zero"
 
     def __init__(
         self, config: ManipulationConfig | None = None, distribution=None, cache_size: int = 32
@@ -258,13 +286,14 @@ class ManipulationScenario(FEMScenario):
         cfg = self.config
         m = len(cfg.manipulators)
         self.control_dim = 2 * m
-        self.state_dim = 2 + 2 * cfg.n_boundary
+        self.n_points = 1 + cfg.n_boundary
+        self.state_dim = 2 * self.n_points + self.control_dim
         self.obs_dim = 2 * cfg.n_boundary
-        b = np.tile(np.array([[-cfg.f_max, cfg.f_max]]), (self.control_dim, 1))
+        b = np.tile(np.array([[-cfg.df_max, cfg.df_max]]), (self.control_dim, 1))
         b.setflags(write=False)
         self._bounds = b
         H = np.zeros((self.obs_dim, self.state_dim))
-        H[:, 2:] = np.eye(self.obs_dim)
+        H[:, 2 : 2 * self.n_points] = np.eye(self.obs_dim)
         H.setflags(write=False)
         self.observation_matrix = H
         cov = cfg.sensing_std**2 * np.eye(self.obs_dim)
@@ -275,6 +304,8 @@ class ManipulationScenario(FEMScenario):
         # (collision_outline), the goal on the target
         self.collision_point_indices = tuple((2 + 2 * i, 3 + 2 * i) for i in range(cfg.n_boundary))
         self.goal_point_indices = (0, 1)
+        #: slice of x holding the applied forces
+        self.force_slice = slice(2 * self.n_points, self.state_dim)
 
     @property
     def state_scale(self) -> np.ndarray:
@@ -282,23 +313,87 @@ class ManipulationScenario(FEMScenario):
         LQR's default Bryson weights (:func:`riskplan.control.lqg_controller`): the goal
         radius for the target (placing it is the objective), four goal radii for each
         boundary point (the outline matters only through obstacle contact, so its twelve
-        points together weigh less than the target)."""
+        points together weigh less than the target), and ``f_max`` for each applied force
+        (a force matters only through the positions it produces, which are weighted
+        already; the whole force range keeps the controller from pulling a force back to
+        the plan's against the target)."""
         r = self.config.goal_radius
-        return np.concatenate([[r, r], np.full(self.state_dim - 2, 4.0 * r)])
+        return np.concatenate(
+            [
+                [r, r],
+                np.full(2 * self.config.n_boundary, 4.0 * r),
+                np.full(self.control_dim, self.config.f_max),
+            ]
+        )
 
     # ---- protocol ------------------------------------------------------------------
     @property
     def control_bounds(self) -> np.ndarray:
-        """``(6, 2)``: ``[−f_max, f_max]`` for every force component."""
+        """``(6, 2)``: ``[−df_max, df_max]`` for every force increment."""
         return self._bounds
 
     def actuation_cov(self) -> tuple:
-        """Default actuation noise for this scenario: ``(0.1 f_max)²`` per component."""
-        s2 = (0.1 * self.config.f_max) ** 2
+        """Default actuation noise for this scenario: ``(0.1 df_max)²`` per increment
+        component (10 % of the half-range of each control, the rule of
+        :mod:`riskplan.scenarios.uncertainty`). It is added to every increment, so the
+        applied forces carry a random walk of it."""
+        s2 = (0.1 * self.config.df_max) ** 2
         return tuple(
             tuple(s2 if i == j else 0.0 for j in range(self.control_dim))
             for i in range(self.control_dim)
         )
+
+    def a_prior(self, state: ManipulationState, params: SimParams | None = None) -> np.ndarray:
+        """``(p, p)`` the exact structure of ``A_t`` at the new state ``state = y*_{t+1}``
+        (module docstring), the prior :func:`riskplan.control.linearize` corrects with its
+        control-perturbation runs:
+
+            A = [[0, J], [0, I]],   J = ∂(p_target, P_boundary)/∂F  (:meth:`force_jacobian`)
+
+        A deviation of the positions alone is forgotten (the next equilibrium depends on
+        the forces only); a deviation of the forces persists and moves the positions by
+        ``J``. Saturated forces are not special-cased (as the linear model ignores control
+        clipping)."""
+        q, n = self.control_dim, 2 * self.n_points
+        A = np.zeros((self.state_dim, self.state_dim))
+        A[:n, n:] = self.force_jacobian(state, params)
+        A[n:, n:] = np.eye(q)
+        return A
+
+    def force_jacobian(self, state: ManipulationState, params: SimParams | None = None):
+        """``J (2 + 2 n_boundary, 6)``: derivative of the target and boundary positions with
+        respect to the applied forces at the equilibrium ``state``, from the tangent
+        stiffness ``K_T`` of the neo-Hookean model (implicit function theorem on
+        ``f_int(u) = W F``):
+
+            ∂u/∂F = K_T(u)⁻¹ W,   J = Π ∂u/∂F
+
+        with ``W`` the patch weights and ``Π`` the interpolation at the material points."""
+        from scipy.sparse.linalg import splu
+
+        params = params or self.nominal_params
+        self._check_state(state, params)
+        d = self.mesh_data(params.n_elements)
+        model = self.model(params)
+        K = model.tangent(state.displacement).tocsc()
+        n_nodes = d.mesh.n_nodes
+        q = self.control_dim
+        # nodal force of force component (k, c): W[:, k] on the c-components of the nodes
+        rhs = np.zeros((2 * n_nodes, q))
+        for k in range(q // 2):
+            for c in range(2):
+                rhs[c::2, 2 * k + c] = d.W[:, k]
+        free = model.free_dofs
+        du = np.zeros((2 * n_nodes, q))
+        du[free] = splu(K).solve(np.ascontiguousarray(rhs[free]))
+        du = du.reshape(n_nodes, 2, q)
+        interp = d.interp
+        # positions of [target, boundary points] (the first n_points interpolated points)
+        np_ = self.n_points
+        w = interp.weights[:np_]  # (P, 3)
+        idx = interp.node_index[:np_]  # (P, 3)
+        J = np.einsum("pa,pacq->pcq", w, du[idx])  # (P, 2, q)
+        return J.reshape(2 * np_, q)
 
     def _make_mesh_data(self, n_elements: int) -> _MeshData:
         return _MeshData(self.config, n_elements)
@@ -322,20 +417,30 @@ class ManipulationScenario(FEMScenario):
             forces=np.zeros((len(self.config.manipulators), 2)),
         )
 
-    def transfer_state(self, state: ManipulationState, params: SimParams) -> ManipulationState:
-        """``state`` as a start on the mesh of ``params`` (another ``n_elements``).
+    #: load steps of a solve from the undeformed body to the full forces when one step
+    #: fails (transfer_state)
+    TRANSFER_LOAD_STEPS = 4
 
-        Exact for this quasi-static scenario: the next step's equilibrium does not depend on
-        the state it starts from (tested), so the undeformed body of the other mesh at the
-        same step index is as good a start as any. :func:`riskplan.control.linearize` uses it
-        to run the mesh-size draws of ``M_t`` on their own meshes.
+    def transfer_state(self, state: ManipulationState, params: SimParams) -> ManipulationState:
+        """``state`` as a start on the mesh (and material) of ``params``: the same step index
+        and applied forces, in equilibrium on that mesh.
+
+        Exact: the equilibrium depends only on the applied forces (module docstring), so
+        the body of the other mesh under the same forces is the state an execution on that
+        mesh would be in. Solved from the undeformed body in one load step, or in
+        :attr:`TRANSFER_LOAD_STEPS` if that fails. :func:`riskplan.control.linearize` uses
+        it to run the mesh-size draws of ``M_t`` on their own meshes.
         """
         out = self.initial_state(params)
+        forces = np.asarray(state.forces, dtype=np.float64)
+        disp = out.displacement
+        if np.any(forces):
+            try:
+                disp = self._solve(forces, disp, params, state.t, 1)
+            except (ConvergenceError, ElementInversionError):
+                disp = self._solve(forces, disp, params, state.t, self.TRANSFER_LOAD_STEPS)
         return ManipulationState(
-            t=state.t,
-            displacement=out.displacement,
-            n_elements=out.n_elements,
-            forces=out.forces,
+            t=state.t, displacement=disp, n_elements=out.n_elements, forces=forces
         )
 
     def nodal_forces(self, state: ManipulationState) -> np.ndarray:
@@ -346,9 +451,10 @@ class ManipulationScenario(FEMScenario):
     def step(
         self, state: ManipulationState, control, params: SimParams | None = None
     ) -> ManipulationState:
-        """``y_{t+1} = g(y_t, u_t, s)`` (paper eq. 1): quasi-static neo-Hookean equilibrium
-        under the manipulator forces ``control (6,)`` (× ``force_scale``, plus actuation
-        noise if ``params`` has some), warm-started from ``state``.
+        """``y_{t+1} = g(y_t, u_t, s)`` (paper eq. 1): the applied forces change by the
+        increments ``control (6,)`` (× ``force_scale``, plus actuation noise if ``params``
+        has some, saturated at ``±f_max``), then the quasi-static neo-Hookean equilibrium
+        under the new forces, warm-started from ``state``.
 
         Raises :class:`InvalidInputError` for a control outside the bounds or NaN,
         :class:`ElementInversionError` / :class:`ConvergenceError` (message says which
@@ -381,40 +487,55 @@ class ManipulationScenario(FEMScenario):
         except (ConvergenceError, ElementInversionError):
             return self._step(state, control, params, None)
 
-    def _step(self, state, control, params, u0) -> ManipulationState:
-        params = params or self.nominal_params
-        self._check_state(state, params)
-        u = check_control(control, self._bounds)
-        u = apply_actuation_noise(u, params, state.t, self._bounds)
-        forces = params.force_scale * u.reshape(-1, 2)
+    def next_forces(self, state: ManipulationState, control, params: SimParams) -> np.ndarray:
+        """``(3, 2)`` the forces applied after ``control`` from ``state`` (module docstring):
+        ``clip(F_t + s_f (Δu + w_t), −f_max, f_max)``; ``control`` is trusted (checked by
+        :meth:`step`)."""
+        u = apply_actuation_noise(control, params, state.t, self._bounds)
+        f_max = self.config.f_max
+        return np.clip(state.forces + params.force_scale * u.reshape(-1, 2), -f_max, f_max)
+
+    def _solve(self, forces, u0, params, t, load_steps) -> np.ndarray:
         f = self.mesh_data(params.n_elements).W @ forces
         try:
-            disp, _info = self.model(params).solve_with_info(
-                f,
-                state.displacement if u0 is None else u0,
-                load_steps=self.config.load_steps,
-            )
+            disp, _info = self.model(params).solve_with_info(f, u0, load_steps=load_steps)
         except ElementInversionError as exc:
             raise ElementInversionError(
-                f"manipulation step t={state.t} -> {state.t + 1} with forces {forces.round(4).tolist()}: {exc}",
+                f"manipulation step t={t} -> {t + 1} with forces {forces.round(4).tolist()}: {exc}",
                 elements=exc.elements,
                 min_jacobian=exc.min_jacobian,
             ) from exc
         except ConvergenceError as exc:
             raise ConvergenceError(
-                f"manipulation step t={state.t} -> {state.t + 1} with forces {forces.round(4).tolist()}: {exc}",
+                f"manipulation step t={t} -> {t + 1} with forces {forces.round(4).tolist()}: {exc}",
                 residual=exc.residual,
                 iterations=exc.iterations,
             ) from exc
         if not np.all(np.isfinite(disp)):  # pragma: no cover - the solver raises first
-            raise ConvergenceError(f"manipulation step t={state.t}: non-finite displacement")
+            raise ConvergenceError(f"manipulation step t={t}: non-finite displacement")
+        return disp
+
+    def _step(self, state, control, params, u0) -> ManipulationState:
+        params = params or self.nominal_params
+        self._check_state(state, params)
+        u = check_control(control, self._bounds)
+        forces = self.next_forces(state, u, params)
+        disp = self._solve(
+            forces,
+            state.displacement if u0 is None else u0,
+            params,
+            state.t,
+            self.config.load_steps,
+        )
         return ManipulationState(
             t=state.t + 1, displacement=disp, n_elements=state.n_elements, forces=forces
         )
 
     def reduced(self, state: ManipulationState) -> np.ndarray:
-        """``x = (p_target, P_boundary)`` ``(2 + 2 n_boundary,)`` (paper V-B)."""
-        return self._points(state)[: 1 + self.config.n_boundary].reshape(-1)
+        """``x = (p_target, P_boundary, F)`` ``(2 + 2 n_boundary + 6,)`` (paper V-B, plus the
+        applied forces)."""
+        pts = self._points(state)[: self.n_points].reshape(-1)
+        return np.concatenate([pts, np.asarray(state.forces, dtype=np.float64).reshape(-1)])
 
     def observe(self, x, noise=None, rng=None) -> np.ndarray:
         """``z = H x + n`` (paper eq. 3): the boundary points only."""
@@ -476,8 +597,15 @@ class ManipulationScenario(FEMScenario):
         return np.array([self.target(s) for s in states])
 
     def random_controls(self, n_steps: int, seed=None) -> np.ndarray:
-        """``(n_steps, 6)`` smooth random forces: a random walk clipped to ``±0.6 f_max``."""
+        """``(n_steps, 6)`` random force increments whose applied forces (their cumulative
+        sum) are a random walk with steps ``N(0, (0.15 f_max)²)`` clipped to ``±df_max``,
+        the walk kept within ``±0.6 f_max``."""
         n_steps = check_count(n_steps, "n_steps")
         gen = as_generator(seed)
-        steps = gen.normal(0.0, 0.15 * self.config.f_max, (n_steps, self.control_dim))
-        return np.clip(np.cumsum(steps, axis=0), -0.6 * self.config.f_max, 0.6 * self.config.f_max)
+        cfg = self.config
+        steps = np.clip(
+            gen.normal(0.0, 0.15 * cfg.f_max, (n_steps, self.control_dim)), -cfg.df_max, cfg.df_max
+        )
+        walk = np.clip(np.cumsum(steps, axis=0), -0.6 * cfg.f_max, 0.6 * cfg.f_max)
+        du = np.diff(walk, axis=0, prepend=np.zeros((1, self.control_dim)))
+        return np.clip(du, -cfg.df_max, cfg.df_max)  # rounding of the difference

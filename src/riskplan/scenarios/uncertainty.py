@@ -23,7 +23,7 @@ Reading of the paper's numbers (written down because the paper does not say):
   expected mesh contains 175 elements"; the mean of U{50..1000} is 525, so we read 175 as
   the mesh the planner uses (``planning_params.n_elements``), not as the mean.
 * Interaction force: ``f_int ~ U[0, 2]`` (``force_scale``); for the manipulation scenario
-  the same draw scales the commanded manipulator forces.
+  the same draw scales the commanded force increments.
 """
 
 from __future__ import annotations

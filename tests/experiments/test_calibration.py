@@ -88,6 +88,9 @@ def test_key_numbers(reference):
         assert row["measured"][k]["successes"] == hits
         assert row["measured"][k]["n"] == 6
         assert row["measured"][k]["low"] <= row["measured"][k]["rate"] <= row["measured"][k]["high"]
+    assert row["a_norm_max"] == pytest.approx(
+        max(np.linalg.norm(a, 2) for a in est["lqg"].lin.A), **approx_tol("float64_exact")
+    )
     # step 3 recomputes σ from the same seed: identical to the ranking's value
     assert row["predicted"]["sigma"] == sig[row["candidate"]]["p"]["sigma"]
 

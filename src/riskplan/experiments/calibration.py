@@ -238,7 +238,8 @@ def run_calibration(
     Returns a JSON-serialisable dict: ``{estimator: {mae, spearman, n_plans,
     measured_spread, measured_min, measured_max, informative, meets_goal, by_case}}`` for
     every estimator of :data:`ESTIMATORS`, plus ``rows`` (one per measured (case, plan):
-    ``case``, ``candidate``, ``rank``, ``predicted[estimator]``, ``measured[controller]``
+    ``case``, ``candidate``, ``rank``, ``n_steps``, ``a_norm_max`` (``max_t ‖A_t‖₂`` of the
+    paper's controller's linearisation), ``predicted[estimator]``, ``measured[controller]``
     with ``successes``, ``n``, ``rate``, ``low``, ``high``, ``outcomes``), ``cases``,
     ``rule``, ``scale``, ``n_usable[case]``, ``failed[case]`` (candidates whose
     linearisation failed) and ``best`` (the estimator of lowest mae among those meeting
@@ -405,6 +406,9 @@ def run_calibration(
                     "candidate": int(j),
                     "rank": int(r),
                     "n_steps": int(plans[j].n_steps),
+                    # the size of the fitted A_t: a linear model far from ‖A‖ ≈ 1 is what the
+                    # estimators evaluate, so a large value explains a large error
+                    "a_norm_max": float(np.linalg.norm(est["lqg"].lin.A, ord=2, axis=(1, 2)).max()),
                     "predicted": dict(est["p"]),
                     "measured": measured,
                 }

@@ -292,7 +292,7 @@ def _calibration_section(rep: Report, cal: dict) -> None:
     for r in cal["rows"]:
         lqg, dist = r["measured"]["lqg"], r["measured"]["dist"]
         detail.append(
-            [r["case"], f"{r['rank']} (#{r['candidate']})"]
+            [r["case"], f"{r['rank']} (#{r['candidate']})", f"{r['a_norm_max']:.3g}"]
             + [f"{r['predicted'][e]:.3f}" for e in ESTIMATORS if CONTROLLER_OF[e] == "lqg"]
             + [
                 f"{lqg['rate']:.3f} [{lqg['low']:.3f}, {lqg['high']:.3f}]",
@@ -305,6 +305,7 @@ def _calibration_section(rep: Report, cal: dict) -> None:
         [
             "case",
             "σ rank (candidate)",
+            "max ‖A_t‖₂",
             "sigma",
             "truncation",
             "sampling",

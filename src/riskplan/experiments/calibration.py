@@ -487,7 +487,7 @@ def calibration_figure(cal: dict):
         ax.set_aspect("equal")
         ax.set_xlabel("predicted P(success)")
     axes[0].set_ylabel("measured closed-loop success")
-    axes[0].legend(fontsize=7, loc="upper left")
+    axes[0].legend(fontsize=7, loc="lower right")
     fig.suptitle(f"{cal['scenario']}: LQG-MP calibration", fontsize=10)
     fig.tight_layout()
     return fig

@@ -77,6 +77,54 @@ def test_collision_stops_the_run(rng):
     assert ex.collided and ex.failed_step == 3 and not ex.success and len(ex.x) == 4
 
 
+def test_outcomes_carry_their_reasons(rng):
+    """Each run ends in one outcome with its reason: a solver that fails or returns a
+    non-finite state is a solver failure (never a collision or a success), leaving the
+    body (``inside``) is its own failure, and the counts add up in the Monte Carlo."""
+    from riskplan.control.lqg import OUTCOMES
+    from riskplan.errors import ElementInversionError
+
+    sim, plan = _setup(rng)
+    base = execute(sim, plan, None, plan.params)
+    assert base.outcome == "success" and base.reason is None
+    x3 = plan.reduced[3]
+    sim._obstacles = [square(x3[0], x3[1], 1e-3)]
+    hit = execute(sim, plan, None, plan.params)
+    assert hit.outcome == "collision" and "step 3" in hit.reason
+    sim._obstacles = []
+
+    class Inverting(LinearToy):
+        def step(self, state, control, params=None):
+            if state.t == 2:
+                raise ElementInversionError("element 7 inverted (det F = -0.1)")
+            return super().step(state, control, params)
+
+    def Diverging(A, B, distribution):
+        return LinearToy(A, B, distribution=distribution, nan_at=4)
+
+    class Leaving(LinearToy):
+        def inside(self, state):
+            return state.t < 5
+
+    for cls, outcome, words, step in (
+        (Inverting, "solver_failure", "element 7 inverted", 2),
+        (Diverging, "solver_failure", "non-finite", 3),
+        (Leaving, "left_tissue", "left the body at step 5", 5),
+    ):
+        other = cls(sim.A_true, sim.B_true, distribution=sim.distribution)
+        other._goal = sim._goal
+        ex = execute(other, plan, None, plan.params)
+        assert ex.outcome == outcome and words in ex.reason and ex.failed_step == step
+        assert not ex.success and not ex.collided
+        mc = monte_carlo_success(other, plan, None, other.distribution, n=4, seed=0)
+        assert mc.outcomes[outcome] == 4 and mc.successes == 0 and not mc.collided.any()
+        assert sum(mc.outcomes.values()) == 4 and set(mc.outcomes) == set(OUTCOMES)
+        assert len(mc.solver_errors) == (4 if outcome == "solver_failure" else 0)
+    sim._goal = square(100.0, 100.0, 1e-3)
+    miss = execute(sim, plan, None, plan.params)
+    assert miss.outcome == "missed_goal" and miss.reason == "not in the goal at the end"
+
+
 def test_goal_at_any_stops_at_the_first_goal_state(rng):
     # the goal sits around x*_3: the plan passes through it and leaves
     sim, plan = _setup(rng)

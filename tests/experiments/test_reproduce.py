@@ -57,11 +57,22 @@ def test_reference_run_is_consistent(reference):
         assert 0 <= v["successes"] <= v["n"]
         assert v["low"] <= v["rate"] <= v["high"]
         # every failure is classified exactly once
-        assert v["collided"] + v["missed_goal"] + v["solver_failed"] == v["n"] - v["successes"]
-        assert (v["predicted"] is None) == (m == "rrt")
-    # methods 1 and 3 execute the same plan (candidate 0 of the deforming set)
-    assert case["rrt"]["candidate"] == case["ours_no_select"]["candidate"] == 0
+        failures = v["collided"] + v["missed_goal"] + v["solver_failed"] + v["left_tissue"]
+        assert failures == v["n"] - v["successes"]
+        assert (v["predicted"] is None) == (m in ("rrt", "rrt_margins"))
+    # RRT with deformations runs the plain RRT's first plan; its margins reading and ours
+    # without selection execute the same plan (candidate 0 of the deforming set)
+    assert case["rrt"]["candidate_set"] == "plain" and case["rrt"]["candidate"] == 0
+    assert case["rrt_margins"]["candidate"] == case["ours_no_select"]["candidate"] == 0
+    assert case["rrt_margins"]["candidate_set"] == case["ours_no_select"]["candidate_set"]
+    assert case["ours_no_select"]["candidate_set"] == "deforming"
     assert case["lqgmp_only"]["candidate_set"] == "static"
+    assert set(r["selection"]["material-high"]) == {"deforming", "static"}
+    # the mechanism pairs the same plan open and closed loop, run by run
+    mech = r["mechanism"]["material-high"]
+    assert mech["open"] == case["rrt_margins"]["successes"]
+    assert mech["closed"] == case["ours_no_select"]["successes"]
+    assert mech["both"] + mech["neither"] + mech["only_open"] + mech["only_closed"] == mech["n"]
     # "ours" is the LQG-MP argmax over the deforming candidates
     ps = [s["p_success"] for s in r["selection"]["material-high"]["deforming"]]
     assert case["ours"]["candidate"] == int(np.argmax(ps))
@@ -143,6 +154,7 @@ def test_claims_both_readings():
     }
     c = claims(cases)
     assert c["ours_highest"] == {"a": True, "b": False}
+    assert c["ours_tied"] == {"a": False, "b": False}
     assert c["ours_separated"] == {"a": True, "b": False}
     # averages: rrt 0.3, without selection 0.5, ours 0.55
     assert c["no_select_vs_rrt"]["points"] == pytest.approx(20.0, **approx_tol("float64_exact"))
@@ -153,6 +165,27 @@ def test_claims_both_readings():
     assert c["no_select_vs_ours"]["relative"] == pytest.approx(
         100 * (0.5 / 0.55 - 1), **approx_tol("float64_exact")
     )
+
+
+def test_ties_are_not_highest():
+    """All three methods at the same rate: a tie, not "ours highest" (the smoke report once
+    said "yes" for three manipulation methods tied at 36.7 %)."""
+    from riskplan.experiments.fig6 import highest_verdict
+
+    def v(rate):
+        return {"rate": rate, "low": rate - 0.1, "high": rate + 0.1}
+
+    tie = {"rrt": v(11 / 30), "lqgmp_only": None, "ours_no_select": v(11 / 30), "ours": v(11 / 30)}
+    up = {"rrt": v(0.2), "lqgmp_only": None, "ours_no_select": v(0.3), "ours": v(0.4)}
+    down = {"rrt": v(0.5), "lqgmp_only": None, "ours_no_select": v(0.3), "ours": v(0.4)}
+    c = claims({"mesh": tie, "force": up})
+    assert c["ours_highest"] == {"mesh": False, "force": True}
+    assert c["ours_tied"] == {"mesh": True, "force": False}
+    assert not c["ours_highest_all"]
+    assert highest_verdict(c) == "no (tied for highest in mesh)"
+    c = claims({"mesh": tie, "force": down})
+    assert highest_verdict(c) == "no (tied for highest in mesh; below another method in force)"
+    assert highest_verdict(claims({"force": up})) == "yes"
 
 
 @pytest.mark.parametrize(

@@ -47,7 +47,8 @@ def _in_tight_goal(sim, st, depth=RRTOptions().goal_depth):
 
 def test_needle_plans_replay_collision_free_in_goal(near_needle, needle_result):
     plans, trees = needle_result
-    assert len(plans) == 4 and len(trees) == 2
+    # two plans per tree: at least two trees (more if a tree's budget found fewer)
+    assert len(plans) == 4 and 2 <= len(trees) <= 4
     for plan in plans:
         _check_plan(near_needle, plan, SMALL_MESH)
         assert plan.params == SMALL_MESH
@@ -233,7 +234,9 @@ def test_point_robot_tight_goal(point_robot):
 def test_zero_margins_reproduce_previous_plans(near_needle, point_robot):
     """goal_depth = control_margin = 0 with goal_entry = goal_steer = False reproduce, bit
     for bit, plans stored from the tree before the margins, the goal-entry ranking and the
-    goal steering existed."""
+    goal steering existed (the point robot's). The needle's stored plans were regenerated
+    with these options when its model changed (the tissue now carries the robot, so its
+    states differ): for the needle this is a regression check of the zero-margin tree."""
     from pathlib import Path
 
     ref = np.load(Path(__file__).parent / "data" / "rrt_plans_v1.npz")

@@ -136,12 +136,61 @@ def test_car_steer_target_behind_turns_hardest_at_full_speed():
     np.testing.assert_array_equal(u, [0.4, STEER_BOUNDS[1, 0]])
 
 
-def test_step_matches_car_kinematics(needle, tol):
+def test_material_pose_follows_car_kinematics(needle, tol):
+    """The car moves in the tissue's material frame: the material pose is the paper's car
+    step, whatever the tissue does."""
     s0 = needle.initial_state()
     s1 = needle.step(s0, [0.35, -0.4])
-    np.testing.assert_allclose(s1.pose, car_step(s0.pose, 0.35, -0.4), **tol["float64_exact"])
+    np.testing.assert_allclose(
+        s1.material, car_step(s0.material, 0.35, -0.4), **tol["float64_exact"]
+    )
     np.testing.assert_allclose(needle.reduced(s1), s1.pose, **tol["float64_exact"])
     assert s1.t == 1 and s0.t == 0
+    np.testing.assert_array_equal(s0.pose, s0.material)  # undeformed start
+
+
+def test_world_pose_against_independent_interpolation(needle, tol):
+    """World pose = X + u(X) with u interpolated by scikit-fem's own probes, and heading of
+    F t with F t = t + (u(X + h t) − u(X − h t)) / 2h (central difference of the P1
+    interpolant along t, exact inside one element)."""
+    import skfem
+
+    p = SimParams(youngs_modulus=45.0, poissons_ratio=0.35)
+    s = needle.step(needle.initial_state(p, pose=(0.42, 0.37, 0.6)), [0.4, 0.3], p)
+    mesh = needle.mesh_data(175).mesh
+    basis = skfem.Basis(mesh.to_skfem(), skfem.ElementTriP1())
+    X, th = s.material[:2], s.material[2]
+    t = np.array([math.cos(th), math.sin(th)])
+    h = 1e-6
+    pts = np.stack([X, X + h * t, X - h * t])
+    P = basis.probes(pts.T)
+    u = np.stack([P @ s.displacement[:, 0], P @ s.displacement[:, 1]], axis=1)
+    np.testing.assert_allclose(s.pose[:2], X + u[0], **tol["float64_ref"])
+    ft = t + (u[1] - u[2]) / (2 * h)
+    np.testing.assert_allclose(
+        s.pose[2], th + math.atan2(t[0] * ft[1] - t[1] * ft[0], t @ ft), **tol["fd_jacobian"]
+    )
+    assert np.linalg.norm(s.pose[:2] - X) > 1e-3  # the tissue did carry the robot
+
+
+def test_tissue_carries_the_robot_stiffer_moves_it_less(needle, tol):
+    """Same controls under E = 50 and E = 150: identical material paths, world positions
+    displaced by the tissue, three times less in the stiffer tissue (linear elasticity:
+    u ∝ 1/E); no interaction force: the world pose is the car's."""
+    u = _controls(8, 3)
+    soft, stiff = SimParams(youngs_modulus=50.0), SimParams(youngs_modulus=150.0)
+    a = rollout(needle, needle.initial_state(soft), u, soft)
+    b = rollout(needle, needle.initial_state(stiff), u, stiff)
+    for sa, sb in zip(a[1:], b[1:]):
+        np.testing.assert_array_equal(sa.material, sb.material)
+        da, db = sa.pose[:2] - sa.material[:2], sb.pose[:2] - sb.material[:2]
+        assert np.linalg.norm(da) > 5e-3
+        np.testing.assert_allclose(db, da / 3.0, **tol["float64_ref"])
+    assert np.abs(a[-1].pose - b[-1].pose).max() > 5e-3  # the pose depends on the tissue
+    free = SimParams(force_scale=0.0)
+    c = rollout(needle, needle.initial_state(free), u, free)
+    np.testing.assert_array_equal(c[-1].pose, c[-1].material)
+    np.testing.assert_array_equal(c[-1].material, a[-1].material)
 
 
 def _controls(n, seed=0):
@@ -196,13 +245,13 @@ def test_force_direction_and_support_reactions(needle, tol):
     p = SimParams(force_scale=1.5)
     s = needle.step(needle.initial_state(p, pose=(0.5, 0.5, 0.0)), [0.5, 0.9], p)
     reactions = needle.model(p).model.reactions(s.displacement)
-    th = s.pose[2]
+    th = s.material[2]
     np.testing.assert_allclose(
         reactions.sum(0), -1.5 * np.array([math.cos(th), math.sin(th)]), **tol["fem_reactions"]
     )
     # the tissue near the robot moves along the push
     d = needle.mesh_data(175)
-    elem, lam = d.locator.locate(s.pose[:2])
+    elem, lam = d.locator.locate(s.material[:2])
     u_tip = lam @ s.displacement[d.mesh.triangles[elem]]
     assert u_tip @ np.array([math.cos(th), math.sin(th)]) > 0
 
@@ -254,6 +303,7 @@ def test_robot_outside_tissue_pushes_nothing(needle):
     s1 = needle.step(s, [0.5, 0.0])
     assert not needle.inside(s1)
     assert np.all(s1.displacement == 0.0) and np.all(np.isfinite(s1.pose))
+    np.testing.assert_array_equal(s1.pose, s1.material)  # out of the tissue nothing carries it
 
 
 def test_collision_and_goal_predicates(needle):
@@ -320,3 +370,19 @@ def test_mesh_case_states_are_consistent(needle):
         s = rollout(needle, needle.initial_state(p), _controls(5, n), p)[-1]
         assert s.displacement.shape == (needle.mesh_data(n).mesh.n_nodes, 2)
         assert np.all(np.isfinite(s.displacement))
+
+
+def test_transfer_state_moves_the_push_to_another_mesh(needle, tol):
+    """The same material pose on another mesh: its displacement is that mesh's response to
+    the same push, and stepping on goes as from a start at that material pose."""
+    p, q = SimParams(), SimParams(n_elements=300)
+    s = rollout(needle, needle.initial_state(p), _controls(4, 7), p)[-1]
+    moved = needle.transfer_state(s, q)
+    assert moved.n_elements == 300 and moved.t == s.t
+    np.testing.assert_array_equal(moved.material, s.material)
+    ref = needle.step(needle.initial_state(q, pose=s.material), [0.0, 0.0], q)
+    np.testing.assert_allclose(moved.displacement, ref.displacement, **tol["float64_exact"])
+    np.testing.assert_allclose(moved.pose, ref.pose, **tol["float64_exact"])
+    assert np.abs(moved.pose - s.pose).max() > 0.0  # the offset under the load is mesh-dependent
+    start = needle.transfer_state(needle.initial_state(p), q)
+    np.testing.assert_array_equal(start.pose, start.material)

@@ -43,6 +43,22 @@ def test_simulate_needle_from_csv(tmp_path):
     assert (out / "needle.gif").is_file() and len(list((out / "frames").glob("*.png"))) == 4
 
 
+def test_simulate_needle_that_leaves_the_tissue_fails_with_that_reason(tmp_path):
+    """Straight on from x = 0.05 for 30 steps of 0.04: the needle leaves the unit square
+    (x > 1) at step 24; the summary says so instead of reporting no failure."""
+    ctrl = tmp_path / "u.csv"
+    ctrl.write_text("v,phi\n" + "0.4,0.0\n" * 30)
+    out = tmp_path / "out"
+    args = ["tissue", "simulate", "--scenario", "needle", "--controls", str(ctrl)]
+    r = runner.invoke(app, [*args, "--out", str(out), "--max-frames", "2"])
+    assert r.exit_code == 0, r.output
+    summary = json.loads((out / "summary.json").read_text())
+    # material x after k steps: 0.05 + 0.04 k, above 1 first at k = 24 (0.97 at 23)
+    assert summary["left_tissue_step"] == 24
+    assert summary["outcome"] == "left_tissue" and "left the tissue at step 24" in summary["reason"]
+    assert "FAILED" in r.output
+
+
 def test_simulate_manipulation_random_json(tmp_path):
     out = tmp_path / "m"
     r = runner.invoke(

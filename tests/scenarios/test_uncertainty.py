@@ -117,3 +117,21 @@ def test_every_case_drives_both_scenarios(name, needle, manip):
         manip, manip.initial_state(dm), np.tile([0.2, 0.2, 0.0, 0.3, -0.2, 0.1], (2, 1)), dm
     )[-1]
     assert np.all(np.isfinite(s.displacement))
+
+
+def test_with_actuation_adds_noise_to_every_draw():
+    """The other reading of the paper's cases: the material draw is unchanged (same
+    generator stream first), and each draw carries the actuation covariance and its own
+    noise seed; plans still assume no noise."""
+    from riskplan.scenarios.uncertainty import WithActuation, get_case, needle_actuation_cov
+
+    inner = get_case("material-high")
+    dist = WithActuation(inner=inner)
+    a, b = dist.sample(5), inner.sample(5)
+    assert a.youngs_modulus == b.youngs_modulus and a.poissons_ratio == b.poissons_ratio
+    assert a.actuation_cov == needle_actuation_cov() and b.actuation_cov is None
+    draws = dist.sample_many(20, 1)
+    assert len({d.actuation_seed for d in draws}) == 20
+    assert dist.planning_params == inner.planning_params and dist.name == "material-high+actuation"
+    with pytest.raises(InvalidInputError, match="inner"):
+        WithActuation(inner="material-high")

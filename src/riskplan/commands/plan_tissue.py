@@ -127,6 +127,8 @@ def register(plan_app: typer.Typer) -> None:
             f"selection {result.timings['selection']:.1f} s; selected #{sel.best} ({sel.plan.n_steps} steps): "
             f"LQG-MP P(success) = {best.p_success:.3f} (no collision {best.p_collision_free:.3f}, goal {best.p_goal:.3f})"
         )
+        if sel.tie_note:
+            console.print(sel.tie_note)
         if result.honesty:
             table = Table(title=f"LQG-MP estimate vs {check_runs} closed-loop executions ({case})")
             for h in HONESTY_HEADER:

@@ -25,6 +25,17 @@ def register(app: typer.Typer) -> None:
         ),
         workers: int = workers_option(),
         seed: int = typer.Option(0, min=0, help="Master seed."),
+        stage: list[str] = typer.Option(
+            ["figures"],
+            "--stage",
+            help="figures (the papers' figures) | calibration (LQG-MP predicted vs measured "
+            "success; deformable paper). Repeat to run both.",
+        ),
+        calibration_scale: str = typer.Option(
+            None,
+            "--calibration-scale",
+            help="smoke | reduced | full (default: smoke with --scale smoke, full with --scale paper).",
+        ),
         out: Path = typer.Option(
             Path("reproduce-out"),
             "--out",
@@ -37,6 +48,7 @@ def register(app: typer.Typer) -> None:
         Rerunning the same command continues from OUT/store and gives the same results.json.
         """
         from riskplan.commands._shared import progress_bar
+        from riskplan.experiments.fig6 import highest_verdict
         from riskplan.experiments.reproduce import reproduce as run
 
         with progress_bar() as bar:
@@ -56,13 +68,32 @@ def register(app: typer.Typer) -> None:
                 workers=workers or None,
                 seed=seed,
                 progress=progress,
+                stages=tuple(stage),
+                calibration_scale=calibration_scale,
             )
         for name, sc in results.get("deformable", {}).items():
+            cal = sc.get("calibration")
+            if cal is not None and cal.get("rows"):
+                typer.echo(
+                    f"{name} calibration ({len(cal['rows'])} plan-case pairs): "
+                    + "; ".join(
+                        f"{e} mae {cal[e]['mae']:.3f} rho "
+                        + (
+                            "undefined"
+                            if cal[e]["spearman"] is None
+                            else f"{cal[e]['spearman']:.2f}"
+                        )
+                        for e in ("sigma", "truncation", "sampling", "disturbance")
+                    )
+                    + f"; measured spread {cal['sigma']['measured_spread']:.3f}"
+                )
+            if "claims" not in sc:
+                continue
             cl = sc["claims"]
             typer.echo(
                 f"{name}: mean success rrt {100 * cl['mean_rate']['rrt']:.1f} %, without selection "
                 f"{100 * cl['mean_rate']['ours_no_select']:.1f} %, ours {100 * cl['mean_rate']['ours']:.1f} %; "
-                f"ours highest in every case: {'yes' if cl['ours_highest_all'] else 'no'}"
+                f"ours highest in every case: {highest_verdict(cl)}"
             )
         f7 = results.get("mdn", {}).get("fig7")
         if f7 is not None:

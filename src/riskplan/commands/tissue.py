@@ -100,6 +100,20 @@ def register(app: typer.Typer) -> None:
             frames = save_frames(sim, states, out / "frames", max_frames=max_frames)
             gif = save_gif(sim, states, out / f"{scenario}.gif", max_frames=max_frames)
         collided = [s.t for s in states if sim.in_collision(s)]
+        inside = getattr(sim, "inside", None)
+        left = next((s.t for s in states if inside is not None and not inside(s)), None)
+        # the first failure decides the outcome; states after it are still drawn
+        events = [(t, "collision") for t in collided[:1]] + (
+            [(left, "left_tissue")] if left is not None else []
+        )
+        if events:
+            t_fail, outcome = min(events)
+            reason = (
+                f"{'left the tissue' if outcome == 'left_tissue' else 'collision'} at step {t_fail}"
+            )
+        else:
+            outcome = "reached_goal" if sim.in_goal(states[-1]) else "missed_goal"
+            reason = None
         summary = {
             "scenario": scenario,
             "case": case,
@@ -117,11 +131,15 @@ def register(app: typer.Typer) -> None:
             "final_goal_distance": sim.goal_distance(states[-1]),
             "reached_goal": bool(sim.in_goal(states[-1])),
             "collision_steps": collided,
+            "left_tissue_step": left,
+            "outcome": outcome,
+            "reason": reason,
             "gif": gif.name,
             "frames": [p.name for p in frames],
         }
         write_json_atomic(out / "summary.json", summary)
         typer.echo(
             f"{scenario} ({case}): {len(u)} steps, final goal distance {summary['final_goal_distance']:.4f}, "
-            f"{'collision at steps ' + str(collided[:5]) if collided else 'no collision'}; wrote {out / gif.name}"
+            f"{'collision at steps ' + str(collided[:5]) if collided else 'no collision'}"
+            f"{'; FAILED: ' + reason if reason else ''}; wrote {out / gif.name}"
         )

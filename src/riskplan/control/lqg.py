@@ -17,9 +17,19 @@ With the persistent-disturbance model (``lqg_controller(lin, disturbance=True)``
 paper) the estimate is ``(x̂_t, d̂_t)``, the feedback ``u_t = clip(u*_t + L_t x̂_t − d̂_t)``
 and the filter runs on the augmented model (:func:`augmented_model`).
 
-The run fails at the first state in collision (``sim.in_collision``) or when the simulator
-raises (a solve that does not converge counts as a failure, recorded). Success (paper V-A:
-"the goal region is reached and obstacles are avoided"), by ``goal_at``:
+Every execution ends with one outcome (:data:`OUTCOMES`) and, for a failure, its reason:
+
+* ``"solver_failure"``: the simulator's solve failed at a step (it did not converge, an
+  element inverted, or the state it returned is not finite) — the drawn parameters made
+  the model unusable there; never counted as a collision or a success;
+* ``"left_tissue"``: the robot left the body it moves in (simulators with an
+  ``inside(state)`` predicate, e.g. the needle's material point outside the tissue);
+* ``"collision"``: a state in collision (``sim.in_collision``);
+* ``"missed_goal"``: none of the above, and the goal test below fails;
+* ``"success"``.
+
+The run stops at the first failure, checked in that order at each state. Success (paper
+V-A: "the goal region is reached and obstacles are avoided"), by ``goal_at``:
 
 * ``"final"`` (default): no state ``y_1 .. y_T`` collides and ``y_T`` is in the (deformed)
   goal (``sim.in_goal``) — the event whose probability LQG-MP estimates from the final
@@ -51,6 +61,7 @@ from riskplan.errors import (
 )
 
 __all__ = [
+    "OUTCOMES",
     "Execution",
     "LQGController",
     "SuccessEstimate",
@@ -189,14 +200,20 @@ def lqg_controller(
     return LQGController(L=L, K=K, P=P, P0=P0, lin=lin, disturbance=True)
 
 
+#: The outcomes of an execution (module docstring), in the order they are checked.
+OUTCOMES = ("success", "solver_failure", "left_tissue", "collision", "missed_goal")
+
+
 @dataclass(frozen=True, eq=False)
 class Execution:
     """One execution. ``states``: simulator states ``y_0 ..`` up to the last one reached;
     ``x (k, p)`` their reduced states, ``estimates (k, p)`` the filter's ``x*_t + x̂_t``,
     ``controls (k − 1, q)`` applied (before actuation noise); ``collided``, ``reached_goal``,
-    ``success``; ``failed_step`` the step that collided or whose solve failed (``None``
-    otherwise) and ``error`` the solver's message if one failed; ``disturbance (k, q)`` the
-    filter's ``d̂_t`` with a disturbance-state controller (``None`` otherwise)."""
+    ``success``; ``failed_step`` the step that collided, left the body or whose solve
+    failed (``None`` otherwise), ``error`` the solver's message if one failed, ``outcome``
+    one of :data:`OUTCOMES` and ``reason`` a sentence saying why a run failed (``None``
+    on success); ``disturbance (k, q)`` the filter's ``d̂_t`` with a disturbance-state
+    controller (``None`` otherwise)."""
 
     states: tuple
     x: np.ndarray
@@ -206,11 +223,17 @@ class Execution:
     reached_goal: bool
     failed_step: int | None = None
     error: str | None = None
+    outcome: str = "success"
+    reason: str | None = None
     disturbance: np.ndarray | None = None
 
     @property
     def success(self) -> bool:
-        return (not self.collided) and self.reached_goal and self.error is None
+        return self.outcome == "success"
+
+    @property
+    def left_tissue(self) -> bool:
+        return self.outcome == "left_tissue"
 
 
 def _observe_nominal(sim, x: np.ndarray) -> np.ndarray:
@@ -239,8 +262,10 @@ def execute(
     ``goal_at`` ``"final"`` or ``"any"`` is when the goal counts).
 
     ``controller=None`` executes open loop (``u_t = u*_t``, no filter). ``seed`` seeds the
-    sensing noise. Raises :class:`~riskplan.errors.SimulationError` naming the step if the
-    simulator returns a non-finite state.
+    sensing noise. A solve that fails (:class:`~riskplan.errors.ConvergenceError`,
+    :class:`~riskplan.errors.ElementInversionError`,
+    :class:`~riskplan.errors.SimulationError`) or returns a non-finite state ends the run
+    with the outcome ``"solver_failure"`` and a reason naming the step.
     """
     _check_goal_at(goal_at)
     gen = as_generator(seed)
@@ -267,6 +292,8 @@ def execute(
     collided = False
     failed = None
     error = None
+    outcome = None
+    inside = getattr(sim, "inside", None)
     for t in range(T):
         if closed:
             u = np.minimum(np.maximum(plan.controls[t] + L[t] @ xhat, lo), hi)
@@ -274,12 +301,13 @@ def execute(
             u = plan.controls[t]
         try:
             y = sim.step(y, u, params)
-        except (ConvergenceError, ElementInversionError) as exc:
-            failed, error = t, str(exc)
+        except (ConvergenceError, ElementInversionError, SimulationError) as exc:
+            failed, error, outcome = t, f"step {t}: {exc}", "solver_failure"
             break
         x = np.asarray(sim.reduced(y), dtype=np.float64)
         if not np.all(np.isfinite(x)):
-            raise SimulationError(f"execute: non-finite reduced state after step {t}")
+            failed, error, outcome = t, f"step {t}: non-finite reduced state", "solver_failure"
+            break
         us.append(u)
         if keep_states:
             states.append(y)
@@ -292,17 +320,24 @@ def execute(
         est.append(plan.reduced[t + 1] + xhat[:p])
         if augmented:
             dist.append(xhat[p:].copy())
+        if inside is not None and not inside(y):
+            failed, outcome = t + 1, "left_tissue"
+            break
         if sim.in_collision(y):
-            collided, failed = True, t + 1
+            collided, failed, outcome = True, t + 1, "collision"
             break
         if goal_at == "any" and sim.in_goal(y):
             break
-    reached = (
-        (not collided)
-        and error is None
-        and (goal_at == "any" or len(xs) == T + 1)
-        and bool(sim.in_goal(y))
-    )
+    reached = outcome is None and (goal_at == "any" or len(xs) == T + 1) and bool(sim.in_goal(y))
+    if outcome is None:
+        outcome = "success" if reached else "missed_goal"
+    reason = {
+        "success": None,
+        "solver_failure": error,
+        "left_tissue": f"left the body at step {failed}",
+        "collision": f"collision at step {failed}",
+        "missed_goal": "not in the goal at the end" if goal_at == "final" else "never in the goal",
+    }[outcome]
     if not keep_states:
         states = [states[0], y]
     return Execution(
@@ -314,6 +349,8 @@ def execute(
         reached_goal=reached,
         failed_step=failed,
         error=error,
+        outcome=outcome,
+        reason=reason,
         disturbance=np.stack(dist) if augmented else None,
     )
 
@@ -321,8 +358,10 @@ def execute(
 @dataclass(frozen=True, eq=False)
 class SuccessEstimate:
     """Monte Carlo success rate: ``successes`` of ``n`` runs, ``probability``, the 95 %
-    Wilson interval ``[low, high]``, and per-run flags ``success``, ``collided``,
-    ``reached_goal``, ``solver_failed`` (``(n,)`` bool)."""
+    Wilson interval ``[low, high]``, per-run flags ``success``, ``collided``,
+    ``reached_goal``, ``solver_failed``, ``left_tissue`` (``(n,)`` bool), ``outcomes`` the
+    count of each of :data:`OUTCOMES`, and ``solver_errors`` the reasons of the solver
+    failures (one per failed run, in run order)."""
 
     successes: int
     n: int
@@ -333,6 +372,9 @@ class SuccessEstimate:
     collided: np.ndarray
     reached_goal: np.ndarray
     solver_failed: np.ndarray
+    left_tissue: np.ndarray | None = None
+    outcomes: dict | None = None
+    solver_errors: tuple = ()
 
 
 def _draw(distribution, sim, gen):
@@ -347,7 +389,7 @@ def _run_batch(sim, plan, controller, distribution, goal_at, seeds):
         gen = np.random.default_rng(s)
         params = _draw(distribution, sim, gen)
         ex = execute(sim, plan, controller, params, seed=gen, keep_states=False, goal_at=goal_at)
-        out.append((ex.success, ex.collided, ex.reached_goal, ex.error is not None))
+        out.append((ex.outcome, ex.reached_goal, ex.error))
     return out
 
 
@@ -391,10 +433,11 @@ def monte_carlo_success(
         workers=workers,
         chunksize=1,
     )
-    flags = np.empty((n, 4), dtype=bool)
+    rows = [None] * n
     for k, res in enumerate(results):
-        flags[k::n_chunks] = np.array(res, dtype=bool).reshape(-1, 4)
-    hits = int(flags[:, 0].sum())
+        rows[k::n_chunks] = res
+    outcome = np.array([r[0] for r in rows])
+    hits = int((outcome == "success").sum())
     lo, hi = binomial_interval(hits, n, confidence=confidence)
     return SuccessEstimate(
         successes=hits,
@@ -402,8 +445,11 @@ def monte_carlo_success(
         probability=hits / n,
         low=float(lo),
         high=float(hi),
-        success=flags[:, 0],
-        collided=flags[:, 1],
-        reached_goal=flags[:, 2],
-        solver_failed=flags[:, 3],
+        success=outcome == "success",
+        collided=outcome == "collision",
+        reached_goal=np.array([bool(r[1]) for r in rows]),
+        solver_failed=outcome == "solver_failure",
+        left_tissue=outcome == "left_tissue",
+        outcomes={o: int((outcome == o).sum()) for o in OUTCOMES},
+        solver_errors=tuple(r[2] for r in rows if r[0] == "solver_failure"),
     )

@@ -1,25 +1,35 @@
 """The evaluation of the deformable-planning paper (Patil, van den Berg & Alterovitz, RSS 2011,
-section V, Fig. 6): four methods × five uncertainty cases × ``n`` simulated executions, for
+section V, Fig. 6): the paper's four methods (and one more reading of a baseline) × five
+uncertainty cases × ``n`` simulated executions, for
 the needle (§V-A) and the manipulation (§V-B) scenario.
 
-Methods (the paper's §V-A comparison; choices it leaves open are stated here):
+Methods (the paper's §V-A comparison; choices it leaves open are stated here). The
+baselines use the **plain simulator RRT** the paper describes (§IV-A: the tree ends a plan
+at its first state in the goal region, controls from the whole bounds): our RRT's
+robustness margins (``goal_depth``: goal nodes within half the goal radius;
+``control_margin``: controls 2σ of the actuation noise inside the bounds; see
+:class:`riskplan.planning.rrt.RRTOptions`) are switched off for them and kept for ours.
+The kinodynamic RRT's goal steering and goal-entry ranking (search, not margins) stay on
+for all.
 
-1. ``rrt`` — **RRT with deformations**: a simulator-RRT plan made in the deforming tissue
-   with the expected parameters (:func:`riskplan.planning.rrt.rrt_plans`), executed open
-   loop (``u_t = u*_t``). The plan is candidate 0, the first the RRT returns (the paper
-   says "a RRT plan").
-2. ``lqgmp_only`` — **LQG-MP only**: candidates planned in a *static* tissue, i.e. with the
-   interaction force switched off (``force_scale = 0``, which the paper itself calls "no
-   deformations" in case 5). Each is linearised on that static model (A, B) with the
-   process noise M estimated from draws ``s ~ S`` of the case *with* deformation
-   (so deformation enters as noise), and the candidate with the highest LQG-MP
-   probability of success is executed with its LQG controller. Not applicable to the
-   manipulation scenario: there the deformation *is* the motion (without force the
+1. ``rrt`` — **RRT with deformations**: a plain simulator-RRT plan made in the deforming
+   tissue with the expected parameters (:func:`riskplan.planning.rrt.rrt_plans`),
+   executed open loop (``u_t = u*_t``). The plan is candidate 0, the first the RRT
+   returns (the paper says "a RRT plan").
+   ``rrt_margins`` — the same baseline on candidate 0 of *our* RRT (with margins), open
+   loop: the other reading of the baseline, shown beside it.
+2. ``lqgmp_only`` — **LQG-MP only**: plain-RRT candidates planned in a *static* tissue,
+   i.e. with the interaction force switched off (``force_scale = 0``, which the paper
+   itself calls "no deformations" in case 5). Each is linearised on that static model
+   (A, B) with the process noise M estimated from draws ``s ~ S`` of the case *with*
+   deformation (so deformation enters as noise), and the candidate with the highest
+   LQG-MP probability of success is executed with its LQG controller. Not applicable to
+   the manipulation scenario: there the deformation *is* the motion (without force the
    target never moves, so a static model has no plan to the goal); the paper defines this
    baseline for the needle only (§V-A). Reported as ``None`` with the reason.
-3. ``ours_no_select`` — **ours without the LQG-MP step**: candidate 0 of the deforming
-   candidates (the plan of method 1) with its LQG controller; the only difference to
-   method 1 is feedback, the only difference to method 4 is the selection.
+3. ``ours_no_select`` — **ours without the LQG-MP step**: candidate 0 of our deforming
+   candidates (the plan of ``rrt_margins``) with its LQG controller; the only difference
+   to ``rrt_margins`` is feedback, the only difference to method 4 is the selection.
 4. ``ours`` — the candidate of highest LQG-MP ``P(success)``
    (:func:`riskplan.control.lqgmp.lqgmp`) with its LQG controller.
 
@@ -34,8 +44,10 @@ seed ``i`` of the case (:func:`riskplan.parallel.spawn_seeds`); the four methods
 these seeds (common random numbers: a difference between methods is not draw luck).
 
 Success: no collision at any state and the final state in the (deformed) goal
-(:func:`riskplan.control.lqg.execute`). A solver failure of the true simulator counts as
-a failure and is counted separately. Intervals: 95 % Wilson
+(:func:`riskplan.control.lqg.execute`). Every failed execution is counted under its
+outcome: collision, missed goal, left the tissue (the needle's material point outside the
+body), or solver failure of the true simulator (with its reason), never silently as a
+collision or a success. Intervals: 95 % Wilson
 (:func:`riskplan.collision.binomial_interval`).
 
 Work units and resumability: plans, per-(candidate, case) controllers and LQG-MP values,
@@ -46,6 +58,7 @@ continues where the last one stopped and gives the same numbers.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import logging
 import pickle
@@ -70,17 +83,26 @@ __all__ = [
     "claims",
     "evaluate_candidate",
     "execute_batch",
+    "highest_verdict",
+    "open_closed_rates",
+    "paired_outcomes",
     "run_scenario",
     "single_executions",
 ]
 
-METHODS = ("rrt", "lqgmp_only", "ours_no_select", "ours")
+METHODS = ("rrt", "rrt_margins", "lqgmp_only", "ours_no_select", "ours")
 METHOD_LABELS = {
-    "rrt": "RRT with deformations (open loop)",
+    "rrt": "RRT with deformations (plain RRT, open loop)",
+    "rrt_margins": "RRT with deformations, our RRT's margins (open loop)",
     "lqgmp_only": "LQG-MP only (static plans)",
     "ours_no_select": "ours without LQG-MP selection",
     "ours": "ours",
 }
+#: Methods executed without feedback.
+OPEN_LOOP = ("rrt", "rrt_margins")
+#: Candidate sets that are linearised and ranked by LQG-MP.
+SELECTED_SETS = ("deforming", "static")
+
 #: The paper's five uncertainty cases (riskplan.scenarios.uncertainty.CASE_NAMES minus nominal).
 EVAL_CASES = ("material-low", "material-high", "actuation", "mesh", "force")
 
@@ -272,8 +294,11 @@ def evaluate_candidate(args):
     }
 
 
-def execute_batch(args) -> list[list[int]]:
-    """``args = (sim, plan, controller or None, seeds)``: one batch of executions: ``[[success, collided, reached_goal, solver_failed], ...]``."""
+def execute_batch(args) -> list[list]:
+    """``args = (sim, plan, controller or None, seeds)``: one batch of executions:
+    ``[[success, collided, reached_goal, solver_failed, left_tissue, reason], ...]`` (flags
+    0/1; ``reason`` the solver's message for a solver failure, else ``None``;
+    :func:`riskplan.control.lqg.execute`)."""
     from riskplan.control.lqg import execute
 
     sim, plan, controller, seeds = args
@@ -283,9 +308,29 @@ def execute_batch(args) -> list[list[int]]:
         params = sim.distribution.sample(gen)
         ex = execute(sim, plan, controller, params, seed=gen, keep_states=False)
         out.append(
-            [int(ex.success), int(ex.collided), int(ex.reached_goal), int(ex.error is not None)]
+            [
+                int(ex.success),
+                int(ex.collided),
+                int(ex.reached_goal),
+                int(ex.outcome == "solver_failure"),
+                int(ex.left_tissue),
+                ex.error if ex.outcome == "solver_failure" else None,
+            ]
         )
     return out
+
+
+def _outcome_counts(rows: list) -> tuple[np.ndarray, dict]:
+    """Flags ``(n, 5)`` int and the solver-failure reasons with their counts, from the rows
+    of :func:`execute_batch`."""
+    f = np.array([r[:5] for r in rows], dtype=np.int64).reshape(-1, 5)
+    reasons: dict = {}
+    for r in rows:
+        if r[3] and r[5] is not None:
+            # the step index varies; the reason is what follows it
+            key = str(r[5]).split(": ", 1)[-1]
+            reasons[key] = reasons.get(key, 0) + 1
+    return f, reasons
 
 
 def _seed_for(seed: int, *labels) -> int:
@@ -315,6 +360,7 @@ def run_scenario(
     progress=None,
     cases=EVAL_CASES,
     pool=None,
+    make_sim=None,
 ) -> dict:
     """The Fig. 6 evaluation of scenario ``name`` (``"needle"`` or ``"manipulation"``).
 
@@ -329,16 +375,25 @@ def run_scenario(
     pool : a :class:`riskplan.parallel.TaskPool` to run the selection and execution tasks on
         (the RRT candidates use the enclosing ``with TaskPool`` block's pool); ``None``: as
         :func:`riskplan.parallel.imap_tasks` decides.
+    make_sim : ``make_sim(name, case) -> simulator`` with its distribution S (default
+        :func:`riskplan.scenarios.registry.make_scenario`); for variants of the cases
+        (sensitivity studies, :mod:`riskplan.experiments.needle_study`).
 
     Returns
     -------
-    JSON-serialisable dict: ``cases[case][method]`` with ``successes``, ``n``, ``rate``,
-    ``low``, ``high`` (95 % Wilson), ``collided``, ``missed_goal``, ``solver_failed``,
+    JSON-serialisable dict: ``mechanism[case]``: :func:`paired_outcomes` of
+    ``rrt_margins`` (open loop) against ``ours_no_select`` (the same plan closed loop) on the
+    same draws; ``cases[case][method]`` with ``successes``, ``n``, ``rate``,
+    ``low``, ``high`` (95 % Wilson), the outcomes ``collided``, ``missed_goal``,
+    ``solver_failed`` (with ``solver_failure_reasons``: reason -> count), ``left_tissue``
+    (:data:`riskplan.control.lqg.OUTCOMES`; they add up to ``n`` with the successes),
     ``predicted`` (LQG-MP ``P(success)`` of the executed plan, ``None`` open loop),
-    ``candidate``; ``selection[case][set]`` the LQG-MP values of every candidate.
+    ``candidate``, and for the selecting methods ``n_tied`` (candidates sharing the best
+    LQG-MP value) with ``tie`` (the sentence saying so, ``None`` when decided); ``selection[case][set]`` the LQG-MP values of every candidate.
     """
     from riskplan.parallel import BACKENDS, imap_tasks, spawn_seeds
     from riskplan.planning.rrt import rrt_plans
+    from riskplan.planning.select import tie_note
     from riskplan.scenarios.registry import SCENARIO_NAMES, make_scenario
 
     if name not in SCENARIO_NAMES:
@@ -360,23 +415,27 @@ def run_scenario(
     )
     na = NOT_APPLICABLE.get(name, {})
 
-    # 1. candidate plans: deforming tissue, and (needle) static tissue
-    base = make_scenario(name, "nominal")
-    sets = {"deforming": base.nominal_params}
+    # 1. candidate plans: deforming tissue with our RRT's margins (ours), the plain RRT in
+    # the deforming tissue (RRT with deformations) and (needle) in a static tissue (LQG-MP only)
+    make = make_sim or make_scenario
+    base = make(name, "nominal")
+    plain = dataclasses.replace(scale.rrt_options(), goal_depth=0.0, control_margin=0.0)
+    sets = {"deforming": (base.nominal_params, scale.rrt_options())}
+    sets["plain"] = (base.nominal_params, plain)
     if "lqgmp_only" not in na:
-        sets["static"] = base.nominal_params.replace(force_scale=0.0)
+        sets["static"] = (base.nominal_params.replace(force_scale=0.0), plain)
     plans: dict[str, list] = {}
-    for k, (set_name, params) in enumerate(sets.items()):
+    for k, (set_name, (params, options)) in enumerate(sets.items()):
         key = f"fig6.{name}.plans.{set_name}"
         report(f"{name}: RRT candidates ({set_name})", k, len(sets))
 
-        def compute(params=params, set_name=set_name):
+        def compute(params=params, set_name=set_name, options=options):
             ps, _ = rrt_plans(
                 base,
                 scale.n_candidates,
                 seed=_seed_for(seed, name, "rrt", set_name),
                 params=params,
-                options=scale.rrt_options(),
+                options=options,
                 backend=backend,
                 workers=workers,
             )
@@ -386,8 +445,9 @@ def run_scenario(
         report(f"{name}: RRT candidates ({set_name})", k + 1, len(sets))
 
     # 2. per case and candidate: linearisation, LQG controller, LQG-MP
-    sims = {c: make_scenario(name, c) for c in cases}
-    sel_items = [(c, s, j) for c in cases for s in plans for j in range(len(plans[s]))]
+    sims = {c: make(name, c) for c in cases}
+    selected_sets = [s for s in plans if s in SELECTED_SETS]
+    sel_items = [(c, s, j) for c in cases for s in selected_sets for j in range(len(plans[s]))]
     sel_key = {it: f"fig6.{name}.select.{it[0]}.{it[1]}.{it[2]:03d}" for it in sel_items}
     selection: dict = {it: blobs.get(sel_key[it]) for it in sel_items}
     todo = [it for it in sel_items if selection[it] is None]
@@ -411,19 +471,23 @@ def run_scenario(
 
     # 3. which plan and controller each method executes
     chosen: dict = {}
+    ties: dict = {}
     for c in cases:
         for m in METHODS:
             if m in na:
                 continue
             if m == "rrt":
+                chosen[c, m] = ("plain", 0, None)
+            elif m == "rrt_margins":
                 chosen[c, m] = ("deforming", 0, None)
             elif m == "ours_no_select":
                 chosen[c, m] = ("deforming", 0, selection[c, "deforming", 0])
             else:
                 s = "static" if m == "lqgmp_only" else "deforming"
                 ps = [selection[c, s, j]["p_success"] for j in range(len(plans[s]))]
-                j = int(np.argmax(ps))  # first of the best on ties
+                j = int(np.argmax(ps))  # first of the best on ties (reported: "tie")
                 chosen[c, m] = (s, j, selection[c, s, j])
+                ties[c, m] = int(np.sum(np.asarray(ps) == ps[j]))
 
     # 4. executions in batches
     n, bs = scale.n_executions, scale.batch_size
@@ -439,7 +503,8 @@ def run_scenario(
     def task(it):
         c, m, b = it
         s, j, sel = chosen[c, m]
-        ctrl = None if m == "rrt" else sel["controller"]  # None also if its linearisation failed
+        # None also if its linearisation failed
+        ctrl = None if m in OPEN_LOOP else sel["controller"]
         return (sims[c], plans[s][j], ctrl, case_seeds[c][b * bs : (b + 1) * bs])
 
     for i, res in pmap(execute_batch, [task(it) for it in todo]):
@@ -459,9 +524,7 @@ def run_scenario(
             if m in na:
                 out_cases[c][m] = None
                 continue
-            f = np.array(
-                [row for b in range(n_batches) for row in flags[c, m, b]], dtype=np.int64
-            ).reshape(-1, 4)
+            f, reasons = _outcome_counts([row for b in range(n_batches) for row in flags[c, m, b]])
             k = int(f[:, 0].sum())
             lo, hi = _wilson(k, len(f))
             s, j, sel = chosen[c, m]
@@ -472,20 +535,38 @@ def run_scenario(
                 "low": lo,
                 "high": hi,
                 "collided": int(f[:, 1].sum()),
-                "missed_goal": int(((f[:, 1] == 0) & (f[:, 2] == 0) & (f[:, 3] == 0)).sum()),
+                "missed_goal": int(
+                    ((f[:, 0] == 0) & (f[:, 1] == 0) & (f[:, 3] == 0) & (f[:, 4] == 0)).sum()
+                ),
                 "solver_failed": int(f[:, 3].sum()),
-                "predicted": None if m == "rrt" else sel["p_success"],
-                "controller_error": None if m == "rrt" else sel.get("error"),
+                "left_tissue": int(f[:, 4].sum()),
+                "solver_failure_reasons": reasons,
+                "predicted": None if m in OPEN_LOOP else sel["p_success"],
+                "controller_error": None if m in OPEN_LOOP else sel.get("error"),
                 "candidate_set": s,
                 "candidate": j,
+                "n_tied": ties.get((c, m)),
+                "tie": None
+                if (c, m) not in ties
+                else tie_note(ties[c, m], len(plans[s]), sel["p_success"]),
             }
+    # the mechanism: the same plan open and closed loop on the same draws
+    mechanism = {}
+    for c in cases:
+        if (c, "rrt_margins") not in chosen or (c, "ours_no_select") not in chosen:
+            continue
+        rows = {
+            m: _outcome_counts([row for b in range(n_batches) for row in flags[c, m, b]])[0]
+            for m in ("rrt_margins", "ours_no_select")
+        }
+        mechanism[c] = paired_outcomes(rows["rrt_margins"][:, 0], rows["ours_no_select"][:, 0])
     sel_out = {
         c: {
             s: [
                 {k: v for k, v in selection[c, s, j].items() if k != "controller"}
                 for j in range(len(plans[s]))
             ]
-            for s in plans
+            for s in selected_sets
         }
         for c in cases
     }
@@ -499,25 +580,70 @@ def run_scenario(
         "selection": sel_out,
         "feedback": feedback,
         "claims": claims(out_cases),
+        "mechanism": mechanism,
     }
+
+
+def paired_outcomes(open_ok, closed_ok) -> dict:
+    """Open against closed loop on the same draws (``(n,)`` success flags each): how many
+    runs ``both`` succeed, ``neither``, ``only_open``, ``only_closed`` (feedback rescued
+    them), and the rates. Feedback that changes nothing leaves ``only_*`` at 0."""
+    a = np.asarray(open_ok, dtype=bool)
+    b = np.asarray(closed_ok, dtype=bool)
+    n = int(a.size)
+    return {
+        "n": n,
+        "open": int(a.sum()),
+        "closed": int(b.sum()),
+        "both": int((a & b).sum()),
+        "neither": int((~a & ~b).sum()),
+        "only_open": int((a & ~b).sum()),
+        "only_closed": int((~a & b).sum()),
+        "open_rate": float(a.mean()) if n else float("nan"),
+        "closed_rate": float(b.mean()) if n else float("nan"),
+    }
+
+
+def open_closed_rates(sim, plan, controller, params_list, seeds) -> dict:
+    """Executions of ``plan`` without and with ``controller`` on the same draws: run ``i``
+    uses ``params_list[i]`` and sensing seed ``seeds[i]`` in both. Returns
+    :func:`paired_outcomes` plus the outcome counts of each loop (``open_outcomes``,
+    ``closed_outcomes``; :data:`riskplan.control.lqg.OUTCOMES`)."""
+    from riskplan.control.lqg import OUTCOMES, execute
+
+    res = {"open": [], "closed": []}
+    for params, sd in zip(params_list, seeds):
+        for kind, ctrl in (("open", None), ("closed", controller)):
+            ex = execute(sim, plan, ctrl, params, seed=np.random.default_rng(sd), keep_states=False)
+            res[kind].append(ex.outcome)
+    out = paired_outcomes(
+        [o == "success" for o in res["open"]], [o == "success" for o in res["closed"]]
+    )
+    for kind in ("open", "closed"):
+        out[f"{kind}_outcomes"] = {o: res[kind].count(o) for o in OUTCOMES}
+    return out
 
 
 def claims(cases: dict) -> dict:
     """The paper's Fig. 6 claims checked on measured rates (§V-A).
 
-    * ``ours_highest[case]``: ours has the highest rate of the applicable methods (ties
-      count as highest), and ``ours_separated[case]`` whether its Wilson interval lies
+    * ``ours_highest[case]``: ours has a strictly higher rate than every other applicable
+      method; ``ours_tied[case]``: ours shares the highest rate with at least one other
+      method (a tie is reported as a tie, not as "highest"); ``ours_highest_all``: strictly
+      highest in every case; ``ours_separated[case]`` whether its Wilson interval lies
       above every other method's.
     * "without LQG-MP: 34 % better than RRT with deformations and 17 % worse than the
       complete method, averaged over cases": the paper does not say whether percent points
       or relative change; both readings, on the rates averaged over the cases:
       ``points = 100 (r̄_a − r̄_b)`` and ``relative = 100 (r̄_a / r̄_b − 1)``.
     """
-    highest, separated = {}, {}
+    highest, tied, separated = {}, {}, {}
     for c, ms in cases.items():
         ours = ms["ours"]
         others = [v for m, v in ms.items() if m != "ours" and v is not None]
-        highest[c] = all(ours["rate"] >= o["rate"] for o in others)
+        best_other = max((o["rate"] for o in others), default=-1.0)
+        highest[c] = ours["rate"] > best_other
+        tied[c] = ours["rate"] == best_other
         separated[c] = all(ours["low"] > o["high"] for o in others)
 
     def mean_rate(m):
@@ -530,6 +656,7 @@ def claims(cases: dict) -> dict:
 
     return {
         "ours_highest": highest,
+        "ours_tied": tied,
         "ours_highest_all": all(highest.values()),
         "ours_separated": separated,
         "mean_rate": {"rrt": r_rrt, "ours_no_select": r_ns, "ours": r_ours},
@@ -544,6 +671,23 @@ def claims(cases: dict) -> dict:
             "paper": -17.0,
         },
     }
+
+
+def highest_verdict(cl: dict) -> str:
+    """ "ours highest in every case": yes only when strictly highest in every case; ties
+    are named as ties (``cl`` from :func:`claims`)."""
+    strict = cl["ours_highest"]
+    ties = cl.get("ours_tied", {})
+    if cl["ours_highest_all"]:
+        return "yes"
+    parts = []
+    tied = [c for c, t in ties.items() if t]
+    lower = [c for c, ok in strict.items() if not ok and not ties.get(c)]
+    if tied:
+        parts.append("tied for highest in " + ", ".join(tied))
+    if lower:
+        parts.append("below another method in " + ", ".join(lower))
+    return "no (" + "; ".join(parts) + ")"
 
 
 # ---- Figs. 4, 5 and 7(c-f): single executions with and without feedback -----------------

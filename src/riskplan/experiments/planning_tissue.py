@@ -264,6 +264,8 @@ def write_outputs(
             "p_collision_free": best.p_collision_free,
             "p_goal": best.p_goal,
             "method": sel.method,
+            "n_tied": sel.n_tied,
+            "tie": sel.tie_note,
             "honesty_check": [dict(asdict(r), inside=r.inside) for r in result.honesty],
             "timings_s": result.timings,
             "n_candidates": len(result.plans),

@@ -32,10 +32,16 @@ from riskplan.errors import InvalidInputError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PAPERS", "SCALE_NAMES", "reproduce", "resolve_scale"]
+__all__ = ["PAPERS", "SCALE_NAMES", "STAGES", "reproduce", "resolve_scale"]
 
 PAPERS = ("mdn", "deformable", "all")
 SCALE_NAMES = ("smoke", "paper")
+#: ``figures``: the papers' figures and claims; ``calibration``: LQG-MP's predicted
+#: P(success) against measured closed-loop success (:mod:`riskplan.experiments.calibration`,
+#: deformable paper only, its own sizes: ``calibration_scale``).
+STAGES = ("figures", "calibration")
+#: the calibration sizes a named scale uses unless ``calibration_scale`` names others
+_CALIBRATION_FOR = {"smoke": "smoke", "paper": "full"}
 SCENARIOS = ("needle", "manipulation")
 
 
@@ -85,6 +91,8 @@ def reproduce(
     workers: int | None = None,
     seed: int = 0,
     progress=None,
+    stages=("figures",),
+    calibration_scale: str | None = None,
 ) -> dict:
     """Run (or continue) the reproduction and write ``out/results.json`` and ``out/report.html``.
 
@@ -96,6 +104,13 @@ def reproduce(
     backend, ray_address, workers : :mod:`riskplan.parallel` (results do not depend on them).
     seed : master seed.
     progress : optional ``progress(stage, done, total)`` callback.
+    stages : which of :data:`STAGES` run (default the figures only). The stage list is not
+        part of the store's configuration, so stages can run one after another into the
+        same ``out`` (each resumes its own records); ``results.json`` holds what this call ran.
+    calibration_scale : sizes of the calibration stage
+        (:data:`riskplan.experiments.calibration.CALIBRATION_SCALES`: ``smoke``,
+        ``reduced``, ``full``); ``None``: ``smoke`` for scale ``smoke``, ``full`` for
+        ``paper`` (a dict scale names its own under ``"calibration"``, or gets ``smoke``).
 
     Returns the results dict (what ``results.json`` holds). Raises
     :class:`~riskplan.errors.InvalidInputError` for bad arguments,
@@ -103,12 +118,24 @@ def reproduce(
     :class:`~riskplan.errors.DataFormatError` for a corrupted or foreign results store.
     """
     import riskplan
+    from riskplan.experiments.calibration import CALIBRATION_SCALES
     from riskplan.experiments.store import ResultStore
     from riskplan.io import write_json_atomic
     from riskplan.parallel import TaskPool
 
     _check(paper, backend, workers, ray_address)
+    stages = (stages,) if isinstance(stages, str) else tuple(stages)
+    if not stages or any(s not in STAGES for s in stages):
+        raise InvalidInputError(f"stages: expected names from {', '.join(STAGES)}, got {stages!r}")
     scale_name, scales = resolve_scale(scale)
+    calib = scales.pop("calibration", None)
+    if calibration_scale is not None or calib is None:
+        cname = calibration_scale or _CALIBRATION_FOR.get(scale_name, "smoke")
+        if cname not in CALIBRATION_SCALES:
+            raise InvalidInputError(
+                f"calibration_scale: expected one of {', '.join(CALIBRATION_SCALES)}, got {cname!r}"
+            )
+        calib = CALIBRATION_SCALES[cname]
     seed = int(seed)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -116,14 +143,16 @@ def reproduce(
         "paper": paper,
         "scale": scale_name,
         "sizes": {k: asdict(v) for k, v in scales.items()},
+        "calibration_sizes": {k: asdict(v) for k, v in calib.items()},
         "seed": seed,
         "version": riskplan.__version__,
     }
     store = ResultStore(out / "store", config)
     results: dict = {"config": config}
+    figures = "figures" in stages
     timings: dict = {"backend": backend, "workers": workers}
     with TaskPool(backend, workers, ray_address) as pool:  # one pool for every stage
-        if paper in ("deformable", "all"):
+        if figures and paper in ("deformable", "all"):
             from riskplan.experiments.fig6 import run_scenario
 
             results["deformable"] = {}
@@ -141,7 +170,7 @@ def reproduce(
                     pool=pool,
                 )
                 timings[f"deformable_{name}_s"] = time.perf_counter() - t0
-        if paper in ("mdn", "all"):
+        if figures and paper in ("mdn", "all"):
             from riskplan.experiments.reproduce_mdn import run_fig7, run_mdn
 
             t0 = time.perf_counter()
@@ -163,6 +192,24 @@ def reproduce(
             timings["mdn_fig7_s"] = time.perf_counter() - t0
             first = store.get("mdn.fig7")["seconds"]  # as first computed (a rerun reads them)
             timings["mdn_fig7_first_run"] = first
+        if paper in ("deformable", "all") and "calibration" in stages:
+            from riskplan.experiments.calibration import run_calibration
+
+            results.setdefault("deformable", {})
+            for name in SCENARIOS:
+                t0 = time.perf_counter()
+                results["deformable"].setdefault(name, {})["calibration"] = run_calibration(
+                    name,
+                    calib[name],
+                    store,
+                    seed=seed,
+                    backend=backend,
+                    workers=workers,
+                    ray_address=ray_address,
+                    progress=progress,
+                    pool=pool,
+                )
+                timings[f"calibration_{name}_s"] = time.perf_counter() - t0
         timings["process_pools_started"] = pool.pools_started
     write_json_atomic(out / "results.json", results, sort_keys=True)
     write_json_atomic(out / "timings.json", timings, sort_keys=True)

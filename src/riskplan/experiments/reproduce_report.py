@@ -143,9 +143,7 @@ def _single_runs(report: Report, sec, name: str, store, sc: dict, seed: int) -> 
         fig, axes = plt.subplots(1, 2, figsize=(8, 4))
         for ax, kind in zip(axes, ("open", "closed")):
             ex = r["open" if kind == "open" else "closed"]
-            verdict = (
-                "success" if ex.success else ("collision" if ex.collided else "missed the goal")
-            )
+            verdict = "success" if ex.success else ex.reason
             draw_frame(
                 ax,
                 r["sim"],
@@ -265,6 +263,97 @@ def _fig7_section(rep: Report, out: Path, r: dict) -> None:
         )
 
 
+def _calibration_section(rep: Report, cal: dict) -> None:
+    """LQG-MP's predicted P(success) against measured closed-loop success
+    (:mod:`riskplan.experiments.calibration`): plot, metrics per estimator, every row."""
+    from riskplan.experiments.calibration import (
+        CONTROLLER_OF,
+        ESTIMATOR_LABELS,
+        ESTIMATORS,
+        calibration_figure,
+    )
+
+    name = cal["scenario"]
+    sec = rep.section(f"LQG-MP calibration: {name} (beyond the paper)")
+    size = cal["scale"]
+    Report.text(
+        sec,
+        f"Rule (fixed in advance): {cal['rule']}. Cases: {', '.join(cal['cases'])}. "
+        f"{size['n_executions']} closed-loop executions per plan, case and controller on common draws; "
+        "sigma, truncation and sampling predict the paper's LQG controller, 'with disturbance state' "
+        "predicts the disturbance-state controller and is compared with its own executions. "
+        "Candidates whose linearisation failed: "
+        + ", ".join(f"{c}: {k}" for c, k in cal["failed"].items())
+        + ".",
+    )
+    if not cal["rows"]:
+        Report.text(sec, "No candidate could be measured.")
+        return
+    rep.figure(
+        sec,
+        calibration_figure(cal),
+        f"calibration_{name}",
+        f"{name}: predicted vs measured P(success), 95 % Wilson intervals; the dashed line is the diagonal.",
+    )
+    rows = []
+    for e in ESTIMATORS:
+        m = cal[e]
+        rows.append(
+            [
+                ESTIMATOR_LABELS[e],
+                f"{m['mae']:.3f}",
+                "undefined" if m["spearman"] is None else f"{m['spearman']:.2f}",
+                m["n_plans"],
+                f"{m['measured_spread']:.3f} ({m['measured_min']:.3f} – {m['measured_max']:.3f})",
+                "yes" if m["informative"] else "no",
+                "yes" if m["meets_goal"] else "no",
+            ]
+        )
+    Report.table(
+        sec,
+        [
+            "estimator",
+            "mean abs. error",
+            "Spearman ρ",
+            "(case, plan) pairs",
+            "measured spread (min – max)",
+            "informative",
+            "mae ≤ 0.05 and ρ ≥ 0.8",
+        ],
+        rows,
+        caption="best estimator meeting the goal: "
+        + (ESTIMATOR_LABELS[cal["best"]] if cal["best"] else "none"),
+    )
+    detail = []
+    for r in cal["rows"]:
+        lqg, dist = r["measured"]["lqg"], r["measured"]["dist"]
+        detail.append(
+            [r["case"], f"{r['rank']} (#{r['candidate']})", f"{r['a_norm_max']:.3g}"]
+            + [f"{r['predicted'][e]:.3f}" for e in ESTIMATORS if CONTROLLER_OF[e] == "lqg"]
+            + [
+                f"{lqg['rate']:.3f} [{lqg['low']:.3f}, {lqg['high']:.3f}]",
+                f"{r['predicted']['disturbance']:.3f}",
+                f"{dist['rate']:.3f} [{dist['low']:.3f}, {dist['high']:.3f}]",
+            ]
+        )
+    Report.table(
+        sec,
+        [
+            "case",
+            "σ rank (candidate)",
+            "max ‖A_t‖₂",
+            "sigma",
+            "truncation",
+            "sampling",
+            "measured LQG [95 %]",
+            "with disturbance state",
+            "measured, disturbance controller [95 %]",
+        ],
+        detail,
+        caption="every measured (case, plan): predicted P(success) beside the measured rate",
+    )
+
+
 def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> Path:
     """Write ``out/report.html`` from ``results`` (see :func:`riskplan.experiments.reproduce.reproduce`).
     Each part is rendered when present (``results["mdn"]`` may hold Fig. 7 only)."""
@@ -272,7 +361,7 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
 
     matplotlib.use("Agg")
 
-    from riskplan.experiments.fig6 import METHOD_LABELS, METHODS
+    from riskplan.experiments.fig6 import METHOD_LABELS, METHODS, highest_verdict
     from riskplan.experiments.paper_values import DEFORMABLE, MDN
 
     out = Path(out)
@@ -294,6 +383,8 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
     )
 
     for name, sc in results.get("deformable", {}).items():
+        if "cases" not in sc:
+            continue  # this run measured the calibration only
         sec = rep.section(f"Deformable-planning paper, Fig. 6: {name}")
         size = sc["scale"]
         sets = "; ".join(
@@ -333,7 +424,11 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
                         f"{100 * v['rate']:.1f}",
                         f"[{100 * v['low']:.1f}, {100 * v['high']:.1f}]",
                         "-" if v["predicted"] is None else f"{100 * v['predicted']:.1f}",
-                        f"{v['collided']} / {v['missed_goal']} / {v['solver_failed']}",
+                        f"{v['collided']} / {v['missed_goal']} / {v.get('left_tissue', 0)}"
+                        f" / {v['solver_failed']}"
+                        + "".join(
+                            f" ({k}: {n})" for k, n in v.get("solver_failure_reasons", {}).items()
+                        ),
                         f"{v['candidate_set']} #{v['candidate']}",
                     ]
                 )
@@ -345,12 +440,40 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
                 "success [%]",
                 "95 % Wilson",
                 "LQG-MP predicted [%]",
-                "collided / missed goal / solver failed",
+                "collided / missed goal / left tissue / solver failed (reason)",
                 "plan",
             ],
             rows,
             caption="measured success rate beside LQG-MP's predicted P(success) of the executed plan",
         )
+        tie_lines = [
+            f"{c}, {METHOD_LABELS[m]}: {ms[m]['tie']}"
+            for c, ms in sc["cases"].items()
+            for m in METHODS
+            if ms[m] is not None and ms[m].get("tie")
+        ]
+        if tie_lines:
+            Report.text(sec, "Selection ties — " + "; ".join(tie_lines) + ".")
+        mech = sc.get("mechanism") or {}
+        if mech:
+            Report.table(
+                sec,
+                ["case", "open loop", "closed loop", "both", "only open", "only closed", "neither"],
+                [
+                    [
+                        c,
+                        f"{v['open']}/{v['n']}",
+                        f"{v['closed']}/{v['n']}",
+                        v["both"],
+                        v["only_open"],
+                        v["only_closed"],
+                        v["neither"],
+                    ]
+                    for c, v in mech.items()
+                ],
+                caption="mechanism: candidate 0 of our RRT executed without and with LQG feedback "
+                "on the same draws (success counts; 'only closed': runs feedback rescued)",
+            )
         cl = sc["claims"]
         Report.table(
             sec,
@@ -359,11 +482,7 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
                 [
                     "ours highest in every case",
                     "yes",
-                    "yes"
-                    if cl["ours_highest_all"]
-                    else "no ("
-                    + ", ".join(c for c, ok in cl["ours_highest"].items() if not ok)
-                    + ")",
+                    highest_verdict(cl),
                 ],
                 [
                     "ours' interval above all others",
@@ -395,6 +514,10 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
         )
         _feedback_table(sec, sc)
         _single_runs(rep, sec, name, store, sc, seed)
+
+    for sc in results.get("deformable", {}).values():
+        if "calibration" in sc:
+            _calibration_section(rep, sc["calibration"])
 
     if "sweep" in results.get("mdn", {}):
         r = results["mdn"]

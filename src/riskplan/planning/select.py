@@ -41,13 +41,18 @@ from riskplan.errors import (
 log = logging.getLogger(__name__)
 
 __all__ = [
+    "SATURATED",
+    "Calibration",
     "HonestyRow",
     "PlanScore",
     "Selection",
+    "calibration_metrics",
     "common_draws",
     "evaluate_plan",
+    "evenly_spaced_ranks",
     "honesty_check",
     "select_plan",
+    "tie_note",
 ]
 
 _FAILURES = (ConvergenceError, ElementInversionError, SimulationError, np.linalg.LinAlgError)
@@ -77,7 +82,10 @@ class Selection:
     ``controller``: its :class:`~riskplan.control.lqg.LQGController` (``L (T, q, p)``,
     ``K (T, p, m)``, ``P (T, p, p)`` and the linearisation ``A, B, M, H, N``);
     ``result``: its :class:`~riskplan.control.lqgmp.LQGMPResult`; ``controllers``: the
-    controller of every candidate (``None`` where evaluation failed), for later checks.
+    controller of every candidate (``None`` where evaluation failed), for later checks;
+    ``n_tied``: how many evaluated candidates share the best ``p_success`` (1: the
+    selection is decided; more: a tie LQG-MP cannot break, resolved by the lowest index,
+    which :attr:`tie_note` says in words).
     """
 
     ranking: list
@@ -87,6 +95,13 @@ class Selection:
     result: object
     controllers: list = field(default_factory=list)
     method: str = "sigma"
+    n_tied: int = 1
+
+    @property
+    def tie_note(self) -> str | None:
+        """``None`` when one candidate is best; otherwise a sentence saying the selection
+        is a tie (e.g. all candidates at ``P(success) = 1.000``)."""
+        return tie_note(self.n_tied, len(self.ranking), self.score(self.best).p_success)
 
     def score(self, index: int) -> PlanScore:
         """The score of candidate ``index``."""
@@ -249,6 +264,9 @@ def select_plan(
             f"plan selection: none of the {len(plans)} candidates could be linearised ({scores[0].error})"
         )
     best = ok[0].index
+    n_tied = sum(1 for s in ok if s.p_success == ok[0].p_success)
+    if n_tied > 1:
+        log.info(tie_note(n_tied, len(plans), ok[0].p_success))
     return Selection(
         ranking=ranking,
         best=best,
@@ -257,6 +275,19 @@ def select_plan(
         result=out[best][2],
         controllers=[o[1] for o in out],
         method=method,
+        n_tied=n_tied,
+    )
+
+
+def tie_note(n_tied: int, n_candidates: int, p_best: float) -> str | None:
+    """The sentence that reports a tie for the best LQG-MP score (``None`` if ``n_tied``
+    is 1): the selection cannot tell those candidates apart, and takes the first."""
+    if n_tied <= 1:
+        return None
+    who = "all" if n_tied == n_candidates else f"{n_tied} of"
+    return (
+        f"tie: {who} {n_candidates} candidates share the best LQG-MP P(success) = "
+        f"{p_best:.3f}; the selection cannot break it and takes the first of them"
     )
 
 
@@ -361,3 +392,92 @@ def honesty_check(
         if on_row is not None:
             on_row(rows[-1])
     return rows
+
+
+# ---- calibration of a predicted P(success) against measured rates (beyond the paper) -----
+
+#: A set of measured rates all at or above this says nothing about calibration: every
+#: estimator that predicts "near 1" scores well on it (issue: a saturated set).
+SATURATED = 0.98
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """How well predicted probabilities match measured rates over ``n_plans`` (plan, case)
+    pairs (:func:`calibration_metrics`).
+
+    ``mae``: mean absolute error ``(1/n) Σ |p̂_i − r_i|``; ``spearman``: Spearman's rank
+    correlation of ``p̂`` and ``r`` (``None`` where undefined: fewer than 3 pairs or a
+    constant side); ``measured_spread``: ``max r − min r``; ``measured_min``,
+    ``measured_max``; ``informative``: the set can judge calibration — the rank correlation
+    is defined and not every measured rate is ``≥`` :data:`SATURATED`; ``meets_goal``:
+    informative, ``mae ≤ mae_goal`` and ``spearman ≥ spearman_goal``.
+    """
+
+    mae: float
+    spearman: float | None
+    n_plans: int
+    measured_spread: float
+    measured_min: float
+    measured_max: float
+    informative: bool
+    meets_goal: bool
+
+    def as_dict(self) -> dict:
+        """The fields as a JSON-serialisable dict."""
+        from dataclasses import asdict
+
+        return asdict(self)
+
+
+def calibration_metrics(
+    predicted, measured, *, mae_goal: float = 0.05, spearman_goal: float = 0.8
+) -> Calibration:
+    """Calibration of predicted probabilities ``predicted (n,)`` against measured success
+    rates ``measured (n,)`` (both in [0, 1]): mean absolute error, Spearman's rank
+    correlation (:func:`scipy.stats.spearmanr`, ties by average rank) and the spread of the
+    measured rates. Raises :class:`~riskplan.errors.InvalidInputError` for mismatched
+    shapes, an empty set, or values outside [0, 1].
+    """
+    import warnings
+
+    from scipy.stats import spearmanr
+
+    p = np.asarray(predicted, dtype=np.float64)
+    r = np.asarray(measured, dtype=np.float64)
+    if p.ndim != 1 or r.shape != p.shape or p.size == 0:
+        raise InvalidInputError(
+            f"predicted, measured: expected two equal non-empty 1-D arrays, got shapes {p.shape} and {r.shape}"
+        )
+    for name, v in (("predicted", p), ("measured", r)):
+        if not np.all(np.isfinite(v)) or v.min() < 0.0 or v.max() > 1.0:
+            raise InvalidInputError(f"{name}: expected probabilities in [0, 1]")
+    mae = float(np.abs(p - r).mean())
+    rho = None
+    if p.size >= 3 and np.ptp(p) > 0 and np.ptp(r) > 0:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # ConstantInputWarning is excluded above
+            rho = float(spearmanr(p, r).statistic)
+        if not np.isfinite(rho):
+            rho = None
+    informative = rho is not None and bool(r.min() < SATURATED)
+    return Calibration(
+        mae=mae,
+        spearman=rho,
+        n_plans=int(p.size),
+        measured_spread=float(r.max() - r.min()),
+        measured_min=float(r.min()),
+        measured_max=float(r.max()),
+        informative=informative,
+        meets_goal=bool(informative and mae <= mae_goal and rho >= spearman_goal),
+    )
+
+
+def evenly_spaced_ranks(n: int, k: int) -> list[int]:
+    """``min(k, n)`` distinct ranks ``0 … n − 1`` evenly spaced over the ranking (the first
+    and the last included): ``round(linspace(0, n − 1, k))``; all ranks when ``k ≥ n``."""
+    if int(n) != n or n < 1 or int(k) != k or k < 1:
+        raise InvalidInputError(f"n, k: expected positive integers, got {n!r}, {k!r}")
+    if k >= n:
+        return list(range(int(n)))
+    return sorted(set(np.linspace(0, n - 1, int(k)).round().astype(int).tolist()))

@@ -1,35 +1,53 @@
 """Scenario 1 of the deformable-planning paper (Patil, van den Berg & Alterovitz, RSS 2011,
 section V-A): a car without reverse — a planar model of a bevel-tip steerable needle —
-moving through a deformable unit square fixed at its four corners.
+moving through a deformable unit square fixed at its four corners. The paper: "the robot
+traverses the deformable plane and pushes its surface forward"; the robot rides on the
+tissue, so where the tissue goes, the robot goes.
 
-Robot (paper V-A, Euler update with time step τ):
+Robot (paper V-A, Euler update with time step τ), **in the tissue's material frame**: the
+material pose ``(X, Y, Θ)`` (reference coordinates of the material point the tip is at,
+heading measured in the reference configuration) follows the paper's car,
 
-    x_{t+1} = x_t + τ v_t cos θ_t
-    y_{t+1} = y_t + τ v_t sin θ_t
-    θ_{t+1} = θ_t + τ v_t tan φ_t / (r_min tan φ_max)
+    X_{t+1} = X_t + τ v_t cos Θ_t
+    Y_{t+1} = Y_t + τ v_t sin Θ_t
+    Θ_{t+1} = Θ_t + τ v_t tan φ_t / (r_min tan φ_max)
 
 with ``v ∈ [0, v_max]``, ``φ ∈ [−φ_max, φ_max]``, ``v_max = 0.5``, ``φ_max = π/3``,
-``τ = 0.1``, ``r_min = 0.25``; at ``|φ| = φ_max`` the curvature is ``1/r_min``.
+``τ = 0.1``, ``r_min = 0.25``; at ``|φ| = φ_max`` the curvature is ``1/r_min``. The tip
+cuts its way through the material, so its kinematics hold relative to the material.
 
 Tissue: isotropic linear elasticity (plane stress, unit thickness) on a triangle mesh of
 the unit square with the four corner nodes fixed. After each step the robot pushes the
-tissue with a force of magnitude ``f_int = params.force_scale`` (nominal 1) in its
-direction of motion, ``f = f_int (cos θ, sin θ)``, applied as a point load at the
-material point under the robot; the quasi-static displacement is ``u = K⁻¹ f``.
-Obstacles and the goal region are embedded in the tissue: they are polygons of material
-points whose current positions are ``X + u(X)`` (barycentric interpolation of ``u``).
+tissue with a force of magnitude ``f_int = params.force_scale`` (nominal 1) along its
+direction of motion, ``f = f_int (cos Θ, sin Θ)``, applied as a point load at the
+material point ``X`` under the robot (consistent nodal forces ``λ_a(X) f``); the
+quasi-static displacement is ``u = K⁻¹ f``.
+
+World pose (what is sensed and what meets the deformed obstacles and goal):
+
+    x = X + u(X)                      (P1 interpolation of the nodal displacement)
+    θ = Θ + ∠((cos Θ, sin Θ), F t)    F = I + ∇u (constant in the element holding X),
+                                      t = (cos Θ, sin Θ)
+
+i.e. the heading is the direction of the material tangent pushed forward by the local
+deformation gradient. Obstacles and the goal region are embedded in the tissue: polygons
+of material points whose current positions are ``X + u(X)``.
 
 Modelling choices the paper leaves open (documented in docs/scenarios.md):
 
-* the load acts at the reference point equal to the robot position (with small-strain
-  linear elasticity the difference from the current configuration is second order);
+* the load and its direction are those of the reference configuration (small-strain
+  linear elasticity: loads act on the reference body; the rotation between ``t`` and
+  ``F t`` is second order in the load and is measured in docs/scenarios.md);
 * the force is applied whatever the speed (the needle pushes whenever it is in the
   tissue; this keeps ``g`` smooth in ``v`` for numerical linearisation), and is zero
-  once the robot has left the tissue;
-* the robot's kinematics are not changed by the tissue (the paper's update equations);
-  the tissue changes where obstacles and the goal are.
+  once the robot has left the tissue (material point outside the reference square; world
+  pose = material pose there);
+* the tissue has no memory: the displacement is the response to the current push only.
 
-Reduced state ``x = (x, y, θ)``; sensing ``z = (x, y) + n``, ``n ~ N(0, σ² I)``.
+Full state: material pose, displacement, step index; the world pose is a function of them
+(kept in the state so that it is computed once). Reduced state ``x = (x, y, θ)``, the
+**world** pose (what LQG-MP checks against the deformed obstacles); sensing
+``z = (x, y) + n``, ``n ~ N(0, σ² I)`` (the world position, as the paper senses the robot).
 """
 
 from __future__ import annotations
@@ -52,7 +70,14 @@ from riskplan.scenarios.base import (
     gaussian_noise,
 )
 
-__all__ = ["NeedleConfig", "NeedleScenario", "NeedleState", "car_steer", "car_step"]
+__all__ = [
+    "NeedleConfig",
+    "NeedleScenario",
+    "NeedleState",
+    "car_steer",
+    "car_step",
+    "world_pose",
+]
 
 
 def car_step(pose, v, phi, *, tau: float = 0.1, r_min: float = 0.25, phi_max: float = math.pi / 3):
@@ -128,26 +153,67 @@ def car_steer(
     return np.array([v, min(max(phi, phi_lo), phi_hi)])
 
 
+def world_pose(material, u_element, lam, grad) -> np.ndarray:
+    """The world pose ``(3,)`` of a material pose ``material (3,)`` = (X, Y, Θ) in a P1
+    element with nodal displacements ``u_element (3, 2)``, barycentric weights ``lam (3,)``
+    of ``X`` and shape-function gradients ``grad (3, 2)`` (``∇_X N_a``):
+
+    .. math::
+
+        x = X + \\sum_a \\lambda_a u_a, \\qquad
+        F = I + \\sum_a u_a \\otimes \\nabla N_a, \\qquad
+        \\theta = \\Theta + \\operatorname{atan2}(t \\times F t,\\; t \\cdot F t),
+        \\quad t = (\\cos\\Theta, \\sin\\Theta).
+
+    The heading is unwrapped about ``Θ`` (continuous along a path). No validation.
+    """
+    # plain floats: 3 x 2 numpy operations cost more than the arithmetic (planners' hot path)
+    X, Y, th = np.asarray(material, dtype=np.float64).tolist()
+    c, s = math.cos(th), math.sin(th)
+    (u0x, u0y), (u1x, u1y), (u2x, u2y) = u_element.tolist()
+    l0, l1, l2 = lam.tolist()
+    (g0x, g0y), (g1x, g1y), (g2x, g2y) = grad.tolist()
+    # directional derivative of u along t: (∇u) t = Σ_a u_a (∇N_a · t)
+    d0, d1, d2 = g0x * c + g0y * s, g1x * c + g1y * s, g2x * c + g2y * s
+    ftx = c + u0x * d0 + u1x * d1 + u2x * d2
+    fty = s + u0y * d0 + u1y * d1 + u2y * d2
+    dth = math.atan2(c * fty - s * ftx, c * ftx + s * fty)
+    return np.array(
+        [X + l0 * u0x + l1 * u1x + l2 * u2x, Y + l0 * u0y + l1 * u1y + l2 * u2y, th + dth]
+    )
+
+
 @dataclass(frozen=True, eq=False)
 class NeedleState(SimState):
-    """Full state of the needle scenario: ``pose (3,)`` = (x, y, θ) plus the tissue
-    displacement ``(n_nodes, 2)`` of the current push, the step index and the mesh size."""
+    """Full state of the needle scenario.
+
+    ``material (3,)`` = (X, Y, Θ): the robot's pose in the tissue's material frame (what the
+    car kinematics move); ``displacement (n_nodes, 2)``: the tissue's response to the
+    current push; ``pose (3,)`` = (x, y, θ): the world pose, ``X + u(X)`` and the heading
+    of ``F t`` (a function of the other two, stored so it is computed once); the step index
+    and the mesh size."""
 
     pose: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    material: np.ndarray | None = None
 
     def __post_init__(self):
         super().__post_init__()
         object.__setattr__(self, "pose", frozen_array(self.pose))
+        mat = self.pose if self.material is None else self.material
+        object.__setattr__(self, "material", frozen_array(mat))
 
     @classmethod
-    def _owned(cls, t: int, displacement: np.ndarray, n_elements: int, pose: np.ndarray):
+    def _owned(cls, t: int, displacement: np.ndarray, n_elements: int, pose: np.ndarray, material):
         """The state of :meth:`NeedleScenario.step` without the defensive copies:
-        ``displacement (n_nodes, 2)`` and ``pose (3,)`` must be new C-contiguous float64
-        arrays that nothing else holds (they are made read-only here)."""
+        ``displacement (n_nodes, 2)``, ``pose (3,)`` and ``material (3,)`` must be new
+        C-contiguous float64 arrays that nothing else holds (made read-only here)."""
         displacement.setflags(write=False)
         pose.setflags(write=False)
+        material.setflags(write=False)
         out = object.__new__(cls)
-        out.__dict__.update(t=t, displacement=displacement, n_elements=n_elements, pose=pose)
+        out.__dict__.update(
+            t=t, displacement=displacement, n_elements=n_elements, pose=pose, material=material
+        )
         return out
 
 
@@ -226,6 +292,8 @@ class _MeshData:
             mesh, Material(50.0, 0.4, plane=cfg.plane), mesh.vertex_nodes
         )
         self.locator = mesh.locator
+        #: ``(n_elements, 3, 2)`` ∇_X of the P1 shape functions (the deformation gradient)
+        self.shape_gradients = mesh.shape_gradients
         pts = np.concatenate(
             [*cfg.obstacles, cfg.goal_polygon, np.asarray(cfg.goal_center, dtype=np.float64)[None]]
         )
@@ -339,47 +407,74 @@ class NeedleScenario(FEMScenario):
         return _NeedleModel(self.mesh_data(params.n_elements), params, self.config.plane)
 
     def initial_state(self, params: SimParams | None = None, pose=None) -> NeedleState:
-        """Robot at ``config.start`` (or ``pose (3,)``), undeformed tissue, ``t = 0``."""
+        """Robot at ``config.start`` (or the material pose ``pose (3,)``), undeformed
+        tissue (world pose = material pose), ``t = 0``."""
         params = params or self.nominal_params
         d = self.mesh_data(params.n_elements)
         p = self.config.start if pose is None else pose
         p = as_array(p, "pose", shape=(3,))
         return NeedleState(
-            t=0, displacement=np.zeros((d.mesh.n_nodes, 2)), n_elements=params.n_elements, pose=p
+            t=0,
+            displacement=np.zeros((d.mesh.n_nodes, 2)),
+            n_elements=params.n_elements,
+            pose=p,
+            material=p,
         )
 
     def step(self, state: NeedleState, control, params: SimParams | None = None) -> NeedleState:
-        """``y_{t+1} = g(y_t, u_t, s)`` (paper eq. 1 with the V-A car and a linear FEM).
+        """``y_{t+1} = g(y_t, u_t, s)`` (paper eq. 1 with the V-A car in the material frame
+        and a linear FEM; module docstring).
 
         ``control (2,)`` = (v, φ) inside :attr:`control_bounds` (else
         :class:`InvalidInputError`). With actuation noise in ``params`` the applied
-        control is ``clip(u + w_t)``. The tissue displacement is the quasi-static
-        response to ``f_int (cos θ_{t+1}, sin θ_{t+1})`` at the new robot position.
+        control is ``clip(u + w_t)``. The material pose follows the car; the tissue
+        displacement is the quasi-static response to ``f_int (cos Θ_{t+1}, sin Θ_{t+1})``
+        at the new material point, and the world pose follows that displacement.
         """
         params = params or self.nominal_params
         self._check_state(state, params)
         u = check_control(control, self._bounds)
         u = apply_actuation_noise(u, params, state.t, self._bounds)
         cfg = self.config
-        pose = car_step(state.pose, u[0], u[1], tau=cfg.tau, r_min=cfg.r_min, phi_max=cfg.phi_max)
-        disp = self._tissue_response(pose, params)
-        # pose and disp are new arrays: no defensive copies (a hot path of the planners)
-        return NeedleState._owned(state.t + 1, disp, state.n_elements, pose)
+        mat = car_step(
+            state.material, u[0], u[1], tau=cfg.tau, r_min=cfg.r_min, phi_max=cfg.phi_max
+        )
+        disp, pose = self._tissue_response(mat, params)
+        # new arrays: no defensive copies (a hot path of the planners)
+        return NeedleState._owned(state.t + 1, disp, state.n_elements, pose, mat)
 
-    def _tissue_response(self, pose: np.ndarray, params: SimParams) -> np.ndarray:
-        """A new ``(n_nodes, 2)`` array: the displacement of the push at ``pose``."""
+    def _tissue_response(self, mat: np.ndarray, params: SimParams):
+        """New arrays ``(displacement (n_nodes, 2), world pose (3,))`` of the push at the
+        material pose ``mat (3,)``."""
         m = self.model(params)
         d = m.data
-        if params.force_scale == 0.0:
-            return np.zeros((d.mesh.n_nodes, 2))
-        elem, lam = d.locator.locate(pose)  # reads pose[0], pose[1]
-        if elem < 0:  # the robot has left the tissue: nothing to push
-            return np.zeros((d.mesh.n_nodes, 2))
-        th = float(pose[2])
+        elem = -1
+        if params.force_scale != 0.0:
+            elem, lam = d.locator.locate(mat)  # reads mat[0], mat[1]
+        if elem < 0:  # no push, or the robot has left the tissue: nothing moves it
+            return np.zeros((d.mesh.n_nodes, 2)), mat.copy()
+        th = float(mat[2])
+        c, s = math.cos(th), math.sin(th)
         vals = np.empty(6)
-        vals[:3] = lam * (params.force_scale * math.cos(th))
-        vals[3:] = lam * (params.force_scale * math.sin(th))
-        return m.response(m.element_dofs[elem], vals)
+        vals[:3] = lam * (params.force_scale * c)
+        vals[3:] = lam * (params.force_scale * s)
+        disp = m.response(m.element_dofs[elem], vals)
+        return disp, world_pose(mat, disp[d.mesh.triangles[elem]], lam, d.shape_gradients[elem])
+
+    def transfer_state(self, state: NeedleState, params: SimParams) -> NeedleState:
+        """``state`` on the mesh of ``params``: the same material pose and step index, the
+        displacement and world pose of its push recomputed there (undeformed at ``t = 0``).
+        Lets :func:`riskplan.control.linearize` run mesh-size draws of ``M_t`` on their own
+        meshes (the robot's world offset under the load depends on the mesh)."""
+        if not isinstance(state, NeedleState):
+            raise InvalidInputError(f"state: expected a NeedleState, got {type(state).__name__}")
+        d = self.mesh_data(params.n_elements)
+        mat = np.array(state.material)
+        if state.t == 0:
+            disp, pose = np.zeros((d.mesh.n_nodes, 2)), mat.copy()
+        else:
+            disp, pose = self._tissue_response(mat, params)
+        return NeedleState._owned(state.t, disp, params.n_elements, pose, mat)
 
     def nodal_forces(self, state: NeedleState, params: SimParams | None = None) -> np.ndarray:
         """The consistent nodal forces ``(n_nodes, 2)`` the robot applies in ``state``
@@ -390,14 +485,15 @@ class NeedleScenario(FEMScenario):
         f = np.zeros((d.mesh.n_nodes, 2))
         if state.t == 0:
             return f  # the initial state is undeformed: the robot has not pushed yet
-        elem, lam = d.locator.locate(state.pose[:2])
+        elem, lam = d.locator.locate(state.material[:2])
         if elem >= 0 and params.force_scale > 0:
-            dirn = params.force_scale * np.array([math.cos(state.pose[2]), math.sin(state.pose[2])])
+            th = state.material[2]
+            dirn = params.force_scale * np.array([math.cos(th), math.sin(th)])
             f[d.mesh.triangles[elem]] += lam[:, None] * dirn[None]
         return f
 
     def reduced(self, state: NeedleState) -> np.ndarray:
-        """``x = (x, y, θ)`` (a copy)."""
+        """``x = (x, y, θ)``, the world pose (a copy)."""
         return np.array(state.pose)
 
     def observe(self, x, noise=None, rng=None) -> np.ndarray:
@@ -422,12 +518,13 @@ class NeedleScenario(FEMScenario):
         return self._points(state)[self._data(state).goal_center_index]
 
     def inside(self, state: NeedleState) -> bool:
-        """Whether the robot is in the tissue (the reference square)."""
-        x, y = state.pose[0], state.pose[1]
+        """Whether the robot is in the tissue: its material point lies in the reference
+        square."""
+        x, y = state.material[0], state.material[1]
         return bool(0.0 <= x <= self.config.width and 0.0 <= y <= self.config.height)
 
     def in_collision(self, state: NeedleState) -> bool:
-        """Robot position inside a deformed obstacle."""
+        """Robot's world position inside a deformed obstacle."""
         p = state.pose[None, :2]
         x, y = float(p[0, 0]), float(p[0, 1])
         for poly in self.obstacles(state):
@@ -437,15 +534,15 @@ class NeedleScenario(FEMScenario):
         return False
 
     def in_goal(self, state: NeedleState) -> bool:
-        """Robot position inside the deformed goal polygon."""
+        """Robot's world position inside the deformed goal polygon."""
         return bool(geo.points_in_polygon(state.pose[None, :2], self.goal(state))[0])
 
     def goal_distance(self, state: NeedleState) -> float:
-        """Distance from the robot to the (deformed) goal centre."""
+        """Distance from the robot's world position to the (deformed) goal centre."""
         return float(np.linalg.norm(state.pose[:2] - self.goal_center(state)))
 
     def path(self, states) -> np.ndarray:
-        """Robot positions ``(T, 2)`` along a list of states."""
+        """Robot world positions ``(T, 2)`` along a list of states."""
         return np.array([s.pose[:2] for s in states])
 
     def random_controls(self, n_steps: int, seed=None) -> np.ndarray:

@@ -45,6 +45,7 @@ __all__ = [
     "MeshUncertainty",
     "Nominal",
     "ParamDistribution",
+    "WithActuation",
     "get_case",
     "needle_actuation_cov",
 ]
@@ -239,6 +240,41 @@ class InteractionForceUncertainty(ParamDistribution):
 
     def _draw(self, gen):
         return self.base.replace(force_scale=float(gen.uniform(self.low, self.high)))
+
+
+@dataclass(frozen=True)
+class WithActuation(ParamDistribution):
+    """Another case's distribution with actuation noise added to every draw: the reading
+    of the paper in which actuation noise acts in all five cases, not only in case 3.
+
+    A draw is ``inner``'s draw with ``actuation_cov = cov`` and a fresh
+    ``actuation_seed``; the planning parameters are ``inner``'s (plans assume no noise).
+    """
+
+    inner: ParamDistribution = field(default_factory=ParamDistribution)
+    cov: tuple[tuple[float, ...], ...] = field(default_factory=needle_actuation_cov)
+    name: str = ""
+
+    def __post_init__(self):
+        if not isinstance(self.inner, ParamDistribution):
+            raise InvalidInputError(
+                f"inner: expected a ParamDistribution, got {type(self.inner).__name__}"
+            )
+        cov = as_array(self.cov, "cov", min_ndim=2)
+        if cov.ndim != 2 or cov.shape[0] != cov.shape[1]:
+            raise InvalidInputError(f"cov: expected an (m, m) matrix, got {cov.shape}")
+        object.__setattr__(self, "cov", tuple(tuple(float(v) for v in r) for r in cov))
+        object.__setattr__(self, "base", self.inner.base)
+        if not self.name:
+            object.__setattr__(self, "name", f"{self.inner.name}+actuation")
+
+    @property
+    def planning_params(self) -> SimParams:
+        return self.inner.planning_params
+
+    def _draw(self, gen):
+        p = self.inner._draw(gen)
+        return p.replace(actuation_cov=self.cov, actuation_seed=int(gen.integers(0, 2**63 - 1)))
 
 
 def get_case(name: str, base: SimParams | None = None, actuation_cov=None) -> ParamDistribution:

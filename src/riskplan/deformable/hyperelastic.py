@@ -84,6 +84,15 @@ _PATTERNS: OrderedDict = OrderedDict()
 _PATTERN_CACHE = 8
 
 
+def _norm(x: np.ndarray) -> float:
+    """Euclidean norm that does not overflow for finite entries up to ``1e308`` (scaled by the
+    largest magnitude first); ``inf`` or ``nan`` only when an entry is."""
+    m = float(np.max(np.abs(x), initial=0.0))  # nan if an entry is
+    if m == 0.0 or not np.isfinite(m):
+        return m
+    return m * float(np.linalg.norm(x / m))
+
+
 def _tangent_pattern(triangles: np.ndarray, free_dofs: np.ndarray, n_dofs: int) -> TangentPattern:
     key = (triangles.shape, triangles.tobytes(), free_dofs.tobytes(), int(n_dofs))
     pattern = _PATTERNS.get(key)
@@ -132,6 +141,12 @@ class HyperelasticModel:
         self.material = material
         self.law = law
         self.rtol, self.atol, self.max_iter = float(rtol), float(atol), int(max_iter)
+        # rtol >= 1 would accept the unloaded start under any load (zero iterations, u = 0)
+        if not (0.0 < self.rtol < 1.0) or not (0.0 <= self.atol < np.inf) or self.max_iter < 1:
+            raise InvalidInputError(
+                f"rtol, atol, max_iter: expected 0 < rtol < 1, finite atol >= 0, max_iter >= 1; "
+                f"got {rtol!r}, {atol!r}, {max_iter!r}"
+            )
         self.fixed_nodes = fixed_node_array(fixed_nodes, mesh.n_nodes)
         if self.fixed_nodes.size < 2:
             raise InvalidInputError(
@@ -290,8 +305,16 @@ class HyperelasticModel:
         tol = self.rtol * fscale + self.atol
         f_free = f[free]
         r = st.fint[free] - f_free
-        rn = float(np.linalg.norm(r))
+        rn = _norm(r)
         for it in range(self.max_iter + 1):
+            if not np.isfinite(rn):
+                # an overflowed residual would pass any tolerance test as "not above" only by
+                # accident; it is never an equilibrium
+                raise ConvergenceError(
+                    f"Newton: non-finite residual ({rn}) after {it} iteration(s)",
+                    residual=rn,
+                    iterations=it,
+                )
             if rn <= tol:
                 return st, it, rn
             if it == self.max_iter:
@@ -318,7 +341,7 @@ class HyperelasticModel:
                     alpha *= 0.5
                     continue
                 r1 = st1.fint[free] - f_free
-                rn1 = float(np.linalg.norm(r1))
+                rn1 = _norm(r1)
                 # Armijo on Π, or (near the solution, where Π is flat to round-off)
                 # a decrease of the residual norm
                 if st1.energy - float(f @ trial) <= pi0 + 1e-4 * alpha * slope or rn1 < 0.5 * rn:
@@ -401,9 +424,12 @@ class HyperelasticModel:
             f0[self.fixed_dofs] = 0.0
         ub0 = u[self.fixed_dofs].copy()
         moving = bool(np.any(ub != ub0))
-        fscale = max(
-            float(np.linalg.norm(f[self.free_dofs])), float(np.linalg.norm(f0[self.free_dofs]))
-        )
+        fscale = max(_norm(f[self.free_dofs]), _norm(f0[self.free_dofs]))
+        if not np.isfinite(fscale):  # finite entries, but the tolerance would overflow
+            raise InvalidInputError(
+                f"nodal_forces: the load's norm overflows float64 ({fscale}); no equilibrium "
+                "can be computed or checked at this scale"
+            )
         if moving:
             # forces of the order the prescribed motion produces: linear response to it
             probe = np.zeros(self._n)
@@ -439,6 +465,12 @@ class HyperelasticModel:
             cur, u, s = st_new, st_new.u, s1
             if it <= 4:  # an easy increment: let the next one grow back towards 1/load_steps
                 ds = min(2.0 * ds, 1.0 / int(load_steps))
+        if not (np.isfinite(rn) and np.all(np.isfinite(u))):  # never hand back a silent failure
+            raise ConvergenceError(
+                f"nonlinear solve ended on a non-finite state (residual {rn})",
+                residual=rn,
+                iterations=iters,
+            )
         # a copy: ``u`` may be a cached start's (private) array
         return u.reshape(-1, 2).copy(), SolveInfo(
             iterations=iters, load_steps=steps, residual=rn, min_jacobian=float(cur.J.min())

@@ -64,6 +64,12 @@ def check_output_file(path, name: str = "out") -> Path:
     return path
 
 
+def canonical_json(obj) -> str:
+    """Deterministic JSON text of ``obj`` (sorted keys, no spaces, non-finite numbers refused):
+    the text content hashes are computed on."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
 def write_text_atomic(path, text: str) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(text)

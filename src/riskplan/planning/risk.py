@@ -20,7 +20,7 @@ import logging
 import numpy as np
 
 from riskplan.collision import mixture_bound, trajectory_probability
-from riskplan.planning.prm import DEFAULT_STEP, Roadmap, interpolate_path
+from riskplan.planning.prm import DEFAULT_STEP, Roadmap, check_step, interpolate_path
 
 log = logging.getLogger(__name__)
 
@@ -66,7 +66,7 @@ class RiskSegmentCost:
 
     def __init__(self, bound, step: float = DEFAULT_STEP):
         self.bound = bound
-        self.step = float(step)
+        self.step = check_step(step)
         self._cache: dict[bytes, float] = {}
 
     def costs(self, configs) -> np.ndarray:
@@ -83,7 +83,10 @@ class RiskSegmentCost:
     def __call__(self, a, b) -> np.ndarray:
         a = np.atleast_2d(a)
         b = np.atleast_2d(b)
-        interiors = [interpolate_path(np.stack([x, y]), self.step)[1:-1] for x, y in zip(a, b)]
+        interiors = [
+            interpolate_path(np.stack([x, y]), self.step, validate=False)[1:-1]
+            for x, y in zip(a, b)
+        ]
         counts = np.array([len(x) for x in interiors])
         flat = np.concatenate(interiors + [np.empty((0, a.shape[1]))])
         # Sum over the non-empty groups only: their starts are strictly increasing and inside

@@ -16,7 +16,7 @@ from riskplan import errors
         (errors.SimulationError, RuntimeError),
         (errors.NumericalError, ArithmeticError),
         (errors.BudgetError, ValueError),
-        (errors.OutputLockedError, RuntimeError),
+        (errors.OutputLockedError, ValueError),
     ],
 )
 def test_hierarchy(cls, builtin):

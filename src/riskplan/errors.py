@@ -29,8 +29,8 @@ class                          builtin base                raised when
                                                            float64's range (names the step)
 ``BudgetError``                ``InvalidInputError``       a request exceeds a work budget
                                                            (names the estimate and the option)
-``OutputLockedError``          ``RuntimeError``            another process is writing the same
-                                                           output directory
+``OutputLockedError``          ``ValueError``              another process is writing the same
+                                                           output (choose another ``--out``)
 =============================  ==========================  =====================================
 """
 
@@ -134,8 +134,9 @@ class BudgetError(InvalidInputError):
     names the estimate, the ceiling and the option that sets it (see :mod:`riskplan.budget`)."""
 
 
-class OutputLockedError(RiskplanError, RuntimeError):
-    """Another process holds the lock of an output directory (one writer per directory)."""
+class OutputLockedError(InvalidInputError):
+    """Another live process holds the lock of an output (one writer per output folder or
+    file); the message names its process id."""
 
 
 def require(module: str, extra: str):

@@ -334,3 +334,11 @@ def test_linear_solve_overflow_raises(manip):
     lin = LinearElasticModel(mesh, Material(1e-300, 0.4), fixed)
     with pytest.raises(ConvergenceError, match="overflows"):
         lin.solve(f * 1e10)
+
+
+def test_load_steps_over_the_time_budget_refused_up_front(manip):
+    from riskplan.errors import BudgetError
+
+    mesh, mat, fixed, f = manip
+    with pytest.raises(BudgetError, match="load_steps"):
+        NeoHookeanModel(mesh, mat, fixed).solve(f, load_steps=10**9)

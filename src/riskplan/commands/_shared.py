@@ -15,6 +15,8 @@ options to its library function (different functions that take like-named argume
 
 from __future__ import annotations
 
+import contextlib
+
 import typer
 
 
@@ -38,6 +40,21 @@ def progress_bar(transient: bool = False):
         TimeRemainingColumn(),
         transient=transient,
     )
+
+
+@contextlib.contextmanager
+def output_folder(out, name: str = "--out"):
+    """Write into the folder ``out``, alone: it must not be a file (checked first), and its
+    lock (``OUT.lock`` beside it, :func:`riskplan.io.output_lock`) is held while the block
+    runs, so a second command writing the same folder stops at once with
+    :class:`~riskplan.errors.OutputLockedError` instead of overwriting the first one's files.
+    Yields ``out`` (created)."""
+    from riskplan.io import check_output_folder, output_lock
+
+    out = check_output_folder(out, name)
+    with output_lock(out, "output folder"):
+        out.mkdir(parents=True, exist_ok=True)
+        yield out
 
 
 def stop_interrupted(bar, how_to_resume: str):

@@ -102,12 +102,22 @@ def reproduce(
     :class:`~riskplan.errors.BackendUnavailableError` for an unreachable Ray address and
     :class:`~riskplan.errors.DataFormatError` for a corrupted or foreign results store.
     """
+    from riskplan.io import check_output_folder, output_lock
+
+    _check(paper, backend, workers, ray_address)
+    out = check_output_folder(out, "out")
+    # one writer per output folder: a second run into it stops at once (the store's own
+    # checks keep records consistent, the lock keeps results.json and the report one run's)
+    with output_lock(out, "output folder"):
+        return _reproduce(out, paper, scale, backend, ray_address, workers, seed, progress)
+
+
+def _reproduce(out, paper, scale, backend, ray_address, workers, seed, progress) -> dict:
     import riskplan
     from riskplan.experiments.store import ResultStore
     from riskplan.io import write_json_atomic
     from riskplan.parallel import TaskPool
 
-    _check(paper, backend, workers, ray_address)
     scale_name, scales = resolve_scale(scale)
     seed = int(seed)
     out = Path(out)

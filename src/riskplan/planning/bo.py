@@ -160,12 +160,16 @@ def check_trajectory_limits(trajectory, limits) -> tuple[np.ndarray, np.ndarray]
     return traj, lim
 
 
-def check_optimiser_budget(config: OptimiserConfig, T: int, m: int) -> None:
+def check_optimiser_budget(config: OptimiserConfig, T: int, limits) -> None:
     """The optimiser's work against the budget (:mod:`riskplan.budget`): the candidates of one
-    iteration (a few ``(n_candidates, m)`` arrays) and the GP of the last iteration, whose
-    kernel matrix over ``T + iterations`` configurations is held in memory."""
+    iteration (a few ``(n_candidates, m)`` arrays), the GP of the last iteration, whose kernel
+    matrix over ``T + iterations`` configurations is held in memory, and the motion checks of
+    a block of 16 candidates, each motion about the candidate box's diagonal
+    (``2 radius`` of the limits' span) long, at ``resolution``."""
     from riskplan.budget import check_budget
 
+    lim = np.asarray(limits, dtype=np.float64)
+    m = lim.shape[0]
     check_budget(
         f"{config.n_candidates} candidates per iteration",
         "candidates",
@@ -177,13 +181,18 @@ def check_optimiser_budget(config: OptimiserConfig, T: int, m: int) -> None:
         "iterations",
         nbytes=8.0 * 3 * n * n,
     )
+    reach = 2.0 * config.radius * float(np.linalg.norm(lim[:, 1] - lim[:, 0]))
+    states = 16 * 2 * (reach / config.resolution + 1)
     check_budget(
-        f"motion checks at resolution {config.resolution:g}",
+        f"motion checks at resolution {config.resolution:g} ({states:.3g} states per block)",
         "resolution",
-        # a candidate's two motions span at most the box diagonal in displacement units
-        # (checked in blocks of 16 candidates); the limits' span is at most ~1 m for a robot
-        nbytes=8.0 * 16 * 2 * m * (1.0 / config.resolution),
+        nbytes=states * MOTION_STATE_BYTES * m,
     )
+
+
+#: memory of one configuration in a batched motion check, per tendon (the configuration and
+#: the predicted mixture's arrays are larger; this is the least)
+MOTION_STATE_BYTES = 8.0
 
 
 def _digest(state: dict) -> str:
@@ -398,7 +407,7 @@ def optimise_trajectory(
         from riskplan.io import check_output_file
 
         check_output_file(checkpoint, "checkpoint")  # before any work: not a folder
-    check_optimiser_budget(config, T, m)
+    check_optimiser_budget(config, T, lim)
     span = lim[:, 1] - lim[:, 0]
     fp = _fingerprint(traj, lim, config, seed)
     t0 = time.perf_counter()

@@ -228,3 +228,24 @@ def test_version():
 
     res = runner.invoke(app, ["--version"])
     assert res.exit_code == 0 and res.output.strip() == f"riskplan {__version__}"
+
+
+def test_budget_can_be_raised(monkeypatch):
+    """The ceilings are the user's: --max-memory / --max-hours (or the environment) let
+    through what the defaults refuse."""
+    from riskplan import budget
+    from riskplan.errors import BudgetError
+
+    monkeypatch.delenv(budget.MEMORY_ENV, raising=False)
+    monkeypatch.delenv(budget.TIME_ENV, raising=False)
+    with pytest.raises(BudgetError, match="--max-memory"):
+        budget.check_budget("a request", "--x", nbytes=100 * 2**30)
+    with pytest.raises(BudgetError, match="--max-hours"):
+        budget.check_budget("a request", "--x", seconds=48 * 3600)
+    monkeypatch.setenv(budget.MEMORY_ENV, "1")  # registered for restoring; the CLI sets it
+    monkeypatch.setenv(budget.TIME_ENV, "1")
+    res = runner.invoke(app, ["--max-memory", "1T", "--max-hours", "72", "robot", "info"])
+    assert res.exit_code == 0, res.output
+    budget.check_budget("a request", "--x", nbytes=100 * 2**30, seconds=48 * 3600)
+    res = runner.invoke(app, ["--max-memory", "lots", "robot", "info"])
+    assert "--max-memory" in str(res.exception)

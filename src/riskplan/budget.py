@@ -5,7 +5,7 @@ code that knows its cost, and checked here, once, against two ceilings:
 
 * **memory**: the bytes the request would hold at once (its arrays, its stored results).
   Ceiling: ``RISKPLAN_MAX_MEMORY`` (``"64G"``, ``"512M"``, bytes), default the smaller of
-  16 GiB and the machine's physical memory.
+  16 GiB and half the machine's physical memory.
 * **time**: a *lower bound* on the seconds the request needs (units of work times the least
   time one unit has been measured to take on a fast machine), so a refusal never rests on a
   pessimistic guess. Ceiling: ``RISKPLAN_MAX_HOURS``, default 24 hours.
@@ -74,7 +74,8 @@ def memory_ceiling() -> int:
     if text:
         return parse_bytes(text)
     phys = _physical_memory()
-    return min(DEFAULT_MEMORY, phys) if phys else DEFAULT_MEMORY
+    # half: the request is not alone (the interpreter, its libraries, other processes)
+    return min(DEFAULT_MEMORY, phys // 2) if phys else DEFAULT_MEMORY
 
 
 def time_ceiling() -> float:

@@ -35,8 +35,8 @@ def lqr_recursion(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, Q_
     for t in range(T - 1, -1, -1):
         St = S[t + 1]
         At, Bt = A[t], B[t]
-        SB = St @ Bt
         with np.errstate(over="ignore", invalid="ignore"):
+            SB = St @ Bt
             try:
                 L[t] = -np.linalg.solve(Bt.T @ SB + R[t], SB.T @ At)
             except np.linalg.LinAlgError as exc:  # a singular matrix after an overflow

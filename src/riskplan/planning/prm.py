@@ -153,13 +153,20 @@ def interpolate_path(path, step: float = DEFAULT_STEP, *, validate: bool = True)
         step = check_step(step)
         with np.errstate(over="ignore"):
             n = float(np.sum(np.ceil(np.linalg.norm(np.diff(p, axis=0), axis=-1) / step))) + 1
-        check_budget(f"a trajectory of {n:.3g} configurations", "step", nbytes=n * p.shape[1] * 8.0)
+        check_budget(
+            f"a trajectory of {n:.3g} configurations",
+            "step",
+            # the pieces, their products and the concatenated result
+            nbytes=3.0 * n * p.shape[1] * 8.0,
+        )
     p = np.asarray(path, dtype=np.float64)
     out = [p[:1]]
     for a, b in itertools.pairwise(p):
         k = max(1, math.ceil(float(np.linalg.norm(b - a)) / step - 1e-12))
         t = np.arange(1, k + 1) / k
-        out.append(a + t[:, None] * (b - a))
+        seg = a + t[:, None] * (b - a)
+        seg[-1] = b  # the vertex itself (a + (b - a) can differ from b by a rounding)
+        out.append(seg)
     return np.concatenate(out)
 
 

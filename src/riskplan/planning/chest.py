@@ -110,6 +110,9 @@ def plan_chest(
         )
     lim = np.asarray(model.limits, dtype=np.float64)
     m = lim.shape[0]
+    check_chest_budget(
+        lim, n_milestones=n_milestones, step=step, resolution=resolution, optimiser=optimiser
+    )
     if start is None:
         start = np.clip(np.zeros(m), lim[:, 0], lim[:, 1])
     start = as_array(start, "start", shape=(m,))

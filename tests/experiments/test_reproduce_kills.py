@@ -5,8 +5,9 @@ is bounded by epochs here, so everything else is deterministic).
 
 The driver is :mod:`tests.experiments.kill_rerun` (a subprocess that kills itself where told).
 ``make test`` runs one kill, inside MDN training (the stage that could not be continued); the
-full matrix, every stage boundary and inside every long stage of both papers (about 20
-minutes on two cores), is marked ``kill_matrix`` and runs with::
+full matrix, every stage boundary and inside every long stage of both papers (20 kills, each
+a killed run and its rerun of a few seconds of work plus process start-up; 10 to 50 minutes
+on two shared cores, by load), is marked ``kill_matrix`` and runs with::
 
     RISKPLAN_KILL_MATRIX=1 python -m pytest -m kill_matrix tests/experiments/test_reproduce_kills.py
 """
@@ -105,7 +106,7 @@ def test_killed_during_training_continues_to_the_same_results(
 
 @pytest.mark.kill_matrix
 @pytest.mark.skipif(
-    not os.environ.get("RISKPLAN_KILL_MATRIX"), reason="set RISKPLAN_KILL_MATRIX=1 (~20 min)"
+    not os.environ.get("RISKPLAN_KILL_MATRIX"), reason="set RISKPLAN_KILL_MATRIX=1 (10-50 min)"
 )
 @pytest.mark.parametrize("paper, where, n", FULL, ids=lambda v: str(v).replace(" ", "_"))
 def test_kill_matrix(references, tmp_path, paper, where, n):

@@ -8,6 +8,7 @@ never another exception, never NaN.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
@@ -69,3 +70,15 @@ def assert_finite(*arrays) -> None:
 def assert_probability(p) -> None:
     p = np.asarray(p, dtype=np.float64)
     assert np.all(np.isfinite(p)) and np.all((p >= 0.0) & (p <= 1.0)), p
+
+
+@pytest.fixture(autouse=True, scope="module")
+def small_budget():
+    """Arbitrary sizes must meet the work budget, not the machine's memory: a 32 MiB ceiling
+    for the property tests of a module (a request just under the default would allocate
+    gigabytes in a test)."""
+    from riskplan.budget import MEMORY_ENV
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv(MEMORY_ENV, "32M")
+        yield

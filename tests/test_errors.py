@@ -14,6 +14,9 @@ from riskplan import errors
         (errors.MissingDependencyError, ImportError),
         (errors.PlanningError, RuntimeError),
         (errors.SimulationError, RuntimeError),
+        (errors.NumericalError, ArithmeticError),
+        (errors.BudgetError, ValueError),
+        (errors.OutputLockedError, ValueError),
     ],
 )
 def test_hierarchy(cls, builtin):

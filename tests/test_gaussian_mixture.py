@@ -217,3 +217,24 @@ def test_far_points_and_zero_weights():
     # a zero-weight component is ignored, not NaN
     gm = NumpyMixture([0.0, 1.0], [[5.0], [0.0]], [[[1.0]], [[1.0]]])
     np.testing.assert_array_equal(gm.log_prob([[0.0]]), [-0.5 * np.log(2 * np.pi)])
+
+
+def test_sample_over_the_memory_budget_refused_up_front():
+    from riskplan.errors import BudgetError
+    from riskplan.gaussian_mixture import NumpyMixture
+
+    m = NumpyMixture(np.ones(1), np.zeros((1, 3)), np.eye(3)[None])
+    with pytest.raises(BudgetError, match="memory"):
+        m.sample(10**12)
+
+
+def test_covariance_overflow_is_a_named_error():
+    """A precision factor of 1e-200 has a covariance beyond float64: a NumericalError, not inf."""
+    from riskplan.errors import NumericalError
+    from riskplan.gaussian_mixture import NumpyMixture
+
+    m = NumpyMixture(np.ones(1), np.zeros((1, 3)), 1e-200 * np.eye(3)[None])
+    for get in (lambda: m.covariance(), lambda: m.covariances):
+        with pytest.raises(NumericalError, match="precision"):
+            get()
+    assert np.isfinite(m.log_prob(np.zeros((1, 3)))).all()

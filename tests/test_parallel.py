@@ -215,3 +215,23 @@ def test_task_pool_on_ray_initialises_once():
         assert ray.is_initialized()
     assert ray.is_initialized() == was_running
     assert a == b == [task(s) for s in seeds]
+
+
+def test_workers_capped_at_the_cores_unless_a_cluster(caplog):
+    """``workers=100000`` on a few cores starts at most one process per core (and says so);
+    a Ray cluster address is not bounded by this machine."""
+    import logging
+
+    from riskplan.parallel import TaskPool, default_workers, effective_workers
+
+    cores = default_workers()
+    with caplog.at_level(logging.WARNING, logger="riskplan.parallel"):
+        assert effective_workers("local", 100_000) == cores
+    assert "100000 requested" in caplog.text
+    assert effective_workers("local", 1) == 1
+    assert effective_workers("ray", 100_000) == cores  # a local Ray instance on this machine
+    assert effective_workers("ray", 100_000, "10.0.0.1:6379") == 100_000
+    with TaskPool("local", workers=100_000) as pool:
+        assert pool.workers == cores
+        assert pool.accepts("local", 100_000, None)  # calls asking for the same run on it
+        assert pool.map(abs, [-1, -2, 3]) == [1, 2, 3]

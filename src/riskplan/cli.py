@@ -67,8 +67,31 @@ def _main(
         is_eager=True,
         help="Print the version and exit.",
     ),
+    max_memory: str = typer.Option(
+        None,
+        "--max-memory",
+        help="Work budget: memory one request may hold (e.g. 64G; default the smaller of 16G "
+        "and the machine's memory). Requests over it are refused before any work.",
+    ),
+    max_hours: float = typer.Option(
+        None,
+        "--max-hours",
+        help="Work budget: hours one request may need at least (default 24). Requests over it "
+        "are refused before any work.",
+    ),
 ) -> None:
     _setup_threads()
+    from riskplan import budget
+
+    # the environment carries the ceilings to worker processes too
+    if max_memory is not None:
+        os.environ[budget.MEMORY_ENV] = str(budget.parse_bytes(max_memory, "--max-memory"))
+    if max_hours is not None:
+        if not (max_hours > 0 and max_hours < float("inf")):
+            from riskplan.errors import InvalidInputError
+
+            raise InvalidInputError(f"--max-hours: expected a positive number, got {max_hours}")
+        os.environ[budget.TIME_ENV] = repr(float(max_hours))
     logging.basicConfig(
         level=logging.INFO if verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
@@ -84,10 +107,10 @@ def demo(
     workers: int = workers_option(),
 ) -> None:
     """Run the main job on embedded defaults and write OUT/report.html."""
-    from riskplan.commands._shared import progress_bar
+    from riskplan.commands._shared import output_folder, progress_bar
     from riskplan.experiments.demo import run_demo
 
-    with progress_bar() as bar:
+    with output_folder(out), progress_bar() as bar:
         task = bar.add_task("demo", total=None, status="starting")
 
         def progress(done, total, stage, seconds):

@@ -25,6 +25,12 @@ class                          builtin base                raised when
                                                            (names the step)
 ``BackendUnavailableError``    ``ConnectionError``         a parallel backend cannot be reached
                                                            (e.g. no Ray head at the address)
+``NumericalError``             ``ArithmeticError``         a computation on finite input left
+                                                           float64's range (names the step)
+``BudgetError``                ``InvalidInputError``       a request exceeds a work budget
+                                                           (names the estimate and the option)
+``OutputLockedError``          ``ValueError``              another process is writing the same
+                                                           output (choose another ``--out``)
 =============================  ==========================  =====================================
 """
 
@@ -106,6 +112,31 @@ class SimulationError(RiskplanError, RuntimeError):
 
 class BackendUnavailableError(RiskplanError, ConnectionError):
     """A parallel backend cannot be used: e.g. no Ray head answers at the given address."""
+
+
+class NumericalError(RiskplanError, ArithmeticError):
+    """A computation on finite input overflowed float64 or produced NaN (e.g. a Riccati
+    recursion with an unstable, huge ``A``).
+
+    Attributes
+    ----------
+    step:
+        Where it happened (the step of a recursion), ``None`` if not applicable.
+    """
+
+    def __init__(self, message: str, step: int | None = None):
+        super().__init__(message)
+        self.step = step
+
+
+class BudgetError(InvalidInputError):
+    """A request would exceed a work budget (memory, or a count of work units); the message
+    names the estimate, the ceiling and the option that sets it (see :mod:`riskplan.budget`)."""
+
+
+class OutputLockedError(InvalidInputError):
+    """Another live process holds the lock of an output (one writer per output folder or
+    file); the message names its process id."""
 
 
 def require(module: str, extra: str):

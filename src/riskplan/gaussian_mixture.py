@@ -236,7 +236,10 @@ class NumpyMixture(MixtureBatch):
     def covariances(self) -> np.ndarray:
         """``Sigma_k = U_k^{-1} U_k^{-T}``, shape ``(..., K, d, d)``."""
         a = self.covariance_factors
-        return a @ np.swapaxes(a, -1, -2)
+        with np.errstate(over="ignore", invalid="ignore"):
+            cov = a @ np.swapaxes(a, -1, -2)
+        _check_covariance(cov)
+        return cov
 
     @property
     def precisions(self) -> np.ndarray:
@@ -254,7 +257,10 @@ class NumpyMixture(MixtureBatch):
         ``sum_k w_k (Sigma_k + (mu_k - mu)(mu_k - mu)^T)`` with ``mu`` the mixture mean."""
         dev = self.means - self.mean()[..., None, :]
         spread = self.covariances + dev[..., :, None] * dev[..., None, :]
-        return np.einsum("...k,...kij->...ij", self.weights, spread)
+        with np.errstate(over="ignore", invalid="ignore"):
+            cov = np.einsum("...k,...kij->...ij", self.weights, spread)
+        _check_covariance(cov)
+        return cov
 
     # -------------------------------------------------------------- densities
     def _check_points(self, points) -> np.ndarray:
@@ -309,6 +315,15 @@ class NumpyMixture(MixtureBatch):
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise InvalidInputError(f"n: expected an integer >= 0, got {n!r}")
         K, d = self.n_components, self.dim
+        from riskplan.budget import check_budget
+
+        batch = int(np.prod(self.batch_shape, dtype=np.float64))
+        # the (..., n, d) result and the standard normal draws it is made from
+        check_budget(
+            f"{n} samples of {batch} mixture(s) in {d}-D",
+            "n",
+            nbytes=2.0 * 8 * batch * float(n) * d,
+        )
         x = draw_components(
             as_generator(seed),
             self.weights.reshape(-1, K),
@@ -327,6 +342,19 @@ class NumpyMixture(MixtureBatch):
         return (
             f"NumpyMixture(batch_shape={tuple(self.batch_shape)}, K={self.n_components}, "
             f"d={self.dim})"
+        )
+
+
+def _check_covariance(cov: np.ndarray) -> None:
+    """Raise :class:`NumericalError` when a covariance overflows float64 (a precision factor
+    near 1e-160 or below); the precision-only computations (densities, bounds) still work."""
+    if not np.all(np.isfinite(cov)):
+        from riskplan.errors import NumericalError
+
+        raise NumericalError(
+            "covariance: overflows float64 (precision_cholesky is too close to singular); "
+            "use the precision-only path (log_prob, collision bounds, sample), which never "
+            "forms the covariance"
         )
 
 

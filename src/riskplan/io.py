@@ -64,6 +64,12 @@ def check_output_file(path, name: str = "out") -> Path:
     return path
 
 
+def canonical_json(obj) -> str:
+    """Deterministic JSON text of ``obj`` (sorted keys, no spaces, non-finite numbers refused):
+    the text content hashes are computed on."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
 def write_text_atomic(path, text: str) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
@@ -89,10 +95,10 @@ def output_lock(path, what: str = "output"):
     """Hold ``<path>.lock`` while writing ``path``: a second writer gets a clear error.
 
     The lock file holds the owner's process id; a lock left by a process that no longer
-    exists (killed) is taken over. Raises :class:`~riskplan.errors.InvalidInputError` naming
-    the running process otherwise.
+    exists (killed) is taken over. Raises :class:`~riskplan.errors.OutputLockedError` (an
+    ``InvalidInputError``) naming the running process otherwise.
     """
-    from riskplan.errors import InvalidInputError
+    from riskplan.errors import InvalidInputError, OutputLockedError
 
     path = Path(path)
     lock = path.with_name(path.name + ".lock")
@@ -106,7 +112,7 @@ def output_lock(path, what: str = "output"):
             except (OSError, ValueError):
                 pid = 0
             if pid and pid != os.getpid() and _pid_alive(pid):
-                raise InvalidInputError(
+                raise OutputLockedError(
                     f"{what} {str(path)!r} is being written by another process (pid {pid}, lock {lock.name}); "
                     "wait for it to finish or choose another output"
                 ) from None

@@ -68,6 +68,31 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+_CAPPED: set = set()
+
+
+def effective_workers(backend: str, workers: int | None, ray_address: str | None = None) -> int:
+    """The worker count a pool runs with: ``workers`` (``None``: one per core), capped at the
+    cores available unless the work goes to a Ray cluster (``backend="ray"`` with an
+    address), whose size this machine does not bound. More processes than cores only
+    contend (20 processes on 2 cores ran a reproduction 10x slower); the cap is logged."""
+    n = int(workers or default_workers())
+    cores = default_workers()
+    if n > cores and not (backend == "ray" and ray_address):
+        if (n, cores) in _CAPPED:
+            return cores
+        _CAPPED.add((n, cores))  # said once per process, not for every stage's pool
+        log.warning(
+            "workers: %d requested, %d cores available; using %d (more processes than cores only "
+            "contend; a Ray cluster (--backend ray --address) is not capped)",
+            n,
+            cores,
+            cores,
+        )
+        n = cores
+    return n
+
+
 def _run_chunk(fn: Callable, chunk: Sequence[tuple[int, Any]]) -> list[tuple[int, Any]]:
     return [(i, fn(item)) for i, item in chunk]
 
@@ -177,7 +202,8 @@ class TaskPool:
             raise InvalidInputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
         _check_workers(workers)
         self.backend = backend
-        self.workers = int(workers or default_workers())
+        self.workers = effective_workers(backend, workers, ray_address)
+        self._requested = None if workers is None else int(workers)
         self.ray_address = ray_address
         self.pools_started = 0  #: local process pools started so far (diagnostics)
         self._executor = None
@@ -221,7 +247,7 @@ class TaskPool:
         return (
             not self._closed
             and backend == self.backend
-            and (workers is None or int(workers) == self.workers)
+            and (workers is None or int(workers) in (self.workers, self._requested))
             and (ray_address is None or ray_address == self.ray_address)
         )
 

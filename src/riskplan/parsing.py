@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import json
 import math
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -164,7 +166,7 @@ def read_table(path, name: str, *, key: str | None = None) -> np.ndarray:
             with np.load(path, allow_pickle=False) as npz:
                 files = list(npz.files)
                 rows = npz[key] if key in files else None
-        except (OSError, ValueError, EOFError) as exc:
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
             raise DataFormatError(
                 f"{name}: cannot read {path.name} as a .npz file ({exc})"
             ) from exc

@@ -174,3 +174,22 @@ def test_load_errors(tmp_path):
     tri.export(tmp_path / "open.stl")
     with pytest.raises(InvalidInputError, match="not closed"):
         Environment.load(tmp_path / "open.stl")
+
+
+def test_non_finite_vertex_is_named(tmp_path):
+    """A mesh with a NaN vertex names it, instead of reading as "not closed (watertight)"."""
+    from riskplan.collision import Environment
+
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    Environment.from_meshes([(v, f)])  # the tetrahedron itself is fine
+    v[2, 1] = np.nan
+    with pytest.raises(InvalidInputError, match="vertex 2 is not finite"):
+        Environment.from_meshes([(v, f)])
+    obj = tmp_path / "tet.obj"
+    obj.write_text(
+        "".join(f"v {a} {b} {c}\n" for a, b, c in v)
+        + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in f)
+    )
+    with pytest.raises(InvalidInputError, match="vertex 2 is not finite"):
+        Environment.load(obj)

@@ -73,3 +73,25 @@ def test_bad_input(kw, match):
     args.update(kw)
     with pytest.raises(InvalidInputError, match=match):
         kalman_gains(**args)
+
+
+def test_overflowing_recursion_names_the_step():
+    """A = 1e200 I (finite) overflows the covariance recursion at its first step: a
+    NumericalError, never all-NaN gains."""
+    from riskplan.errors import NumericalError
+
+    T, n = 50, 2
+    eye = np.eye(n)
+    with pytest.raises(NumericalError, match="step 0") as exc:
+        kalman_gains(np.broadcast_to(1e200 * eye, (T, n, n)), eye, eye, eye, eye)
+    assert exc.value.step == 0
+    # an unobserved component growing by 1e100 per step overflows later: the step named is
+    # the first bad one (the horizon just before it is finite)
+    A = np.broadcast_to(1e50 * eye, (T, n, n))
+    H, N = eye[:1], np.eye(1)
+    with pytest.raises(NumericalError) as exc:
+        kalman_gains(A, H, eye, N, eye)
+    t = exc.value.step
+    assert t > 0
+    K, P = kalman_gains(A[:t], H, eye, N, eye)
+    assert np.isfinite(K).all() and np.isfinite(P).all()

@@ -428,3 +428,45 @@ def test_outline_sigma_vectorised_equals_loop(monkeypatch):
     loop = lqgmp(sim, plan, ctrl, n_goal_samples=10)
     assert np.all((fast.p_free_steps > 0) & (fast.p_free_steps < 1))
     np.testing.assert_allclose(loop.p_free_steps, fast.p_free_steps, **TOL["float64_accumulated"])
+
+
+def test_overflow_propagates_from_the_gains_and_the_propagation(rng):
+    """LQG-MP and execution get their gains from lqg_controller, which raises the recursion's
+    NumericalError; finite gains whose closed loop overflows the covariance propagation raise
+    one too (naming the step), never a NaN probability."""
+    from riskplan.control.lqg import LQGController
+    from riskplan.errors import NumericalError
+
+    T = 4
+    sim, plan = _toy(rng, T)
+    lin = _exact(sim, T)
+    huge = Linearization(
+        A=np.broadcast_to(1e200 * np.eye(3), (T, 3, 3)),
+        B=lin.B,
+        M=lin.M,
+        H=lin.H,
+        N=lin.N,
+        rank=lin.rank,
+    )
+    with pytest.raises(NumericalError, match="step"):
+        lqg_controller(huge)
+    # zero gains, A = 1e120 I: the covariance reaches 1e240·M at step 1, overflows at step 2
+    big = Linearization(
+        A=np.broadcast_to(1e120 * np.eye(3), (T, 3, 3)),
+        B=lin.B,
+        M=lin.M,
+        H=lin.H,
+        N=lin.N,
+        rank=lin.rank,
+    )
+    ctrl = LQGController(
+        L=np.zeros((T, 3, 3)),
+        K=np.zeros((T, 3, 2)),
+        P=np.zeros((T, 3, 3)),
+        P0=np.zeros((3, 3)),
+        lin=big,
+    )
+    for method in ("sigma", "truncation"):
+        with pytest.raises(NumericalError) as exc:
+            lqgmp(sim, plan, ctrl, method=method, n_goal_samples=10)
+        assert exc.value.step == 2

@@ -91,3 +91,16 @@ def test_nonsymmetric_rejected():
         lqr_gains(
             np.ones((2, 2, 2)), np.ones((2, 2, 1)), [[1.0, 0.5], [0.0, 1.0]], [[1.0]], np.eye(2)
         )
+
+
+def test_overflowing_recursion_names_the_step():
+    """A = 1e200 I (finite) overflows the Riccati recursion: a NumericalError naming the step,
+    never partly-NaN gains."""
+    from riskplan.errors import NumericalError
+
+    T, n = 50, 2
+    eye = np.eye(n)
+    A = np.broadcast_to(1e200 * eye, (T, n, n))
+    with pytest.raises(NumericalError, match="step 49") as exc:
+        lqr_gains(A, np.broadcast_to(eye, (T, n, n)), eye, eye, eye)
+    assert exc.value.step == T - 1  # the first step the backward recursion computes

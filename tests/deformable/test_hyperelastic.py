@@ -310,3 +310,35 @@ def test_neohookean_convergence_rate_manufactured():
         hs.append(np.sqrt(mesh.area / n))
     rate = np.polyfit(np.log(hs), np.log(errs), 1)[0]
     assert 1.8 <= rate <= 2.3, (rate, errs)
+
+
+@pytest.mark.parametrize("scale", [1e10, 1e100, 1e200, 1e300])
+def test_huge_loads_raise_named_errors(manip, scale):
+    """Finite loads whose norm (or residual) overflows never come back as u = 0 with an
+    infinite residual: a named error, at every scale."""
+    mesh, mat, fixed, f = manip
+    nh = NeoHookeanModel(mesh, mat, fixed, max_iter=8)
+    with pytest.raises((ConvergenceError, ElementInversionError, InvalidInputError)):
+        nh.solve_with_info(f / np.abs(f).max() * scale, max_halvings=1)
+
+
+def test_tolerance_that_accepts_any_start_is_rejected(manip):
+    mesh, mat, fixed, _ = manip
+    for kw in (dict(rtol=1.0), dict(rtol=0.0), dict(atol=np.inf), dict(max_iter=0)):
+        with pytest.raises(InvalidInputError, match="rtol"):
+            NeoHookeanModel(mesh, mat, fixed, **kw)
+
+
+def test_linear_solve_overflow_raises(manip):
+    mesh, _, fixed, f = manip
+    lin = LinearElasticModel(mesh, Material(1e-300, 0.4), fixed)
+    with pytest.raises(ConvergenceError, match="overflows"):
+        lin.solve(f * 1e10)
+
+
+def test_load_steps_over_the_time_budget_refused_up_front(manip):
+    from riskplan.errors import BudgetError
+
+    mesh, mat, fixed, f = manip
+    with pytest.raises(BudgetError, match="load_steps"):
+        NeoHookeanModel(mesh, mat, fixed).solve(f, load_steps=10**9)

@@ -140,3 +140,24 @@ def test_options_checked(model, scene):
         build_roadmap(v, n_milestones=10, resolution=float("nan"))
     with pytest.raises(InvalidInputError, match="n_milestones"):
         build_roadmap(v, n_milestones=1)
+
+
+@pytest.mark.parametrize("step", [0, -1, float("nan"), float("inf"), 1e-320, True, "0.01"])
+def test_interpolate_path_bad_step(step):
+    with pytest.raises(InvalidInputError, match="step"):
+        interpolate_path(np.array([[0.0, 0.0], [0.01, 0.02]]), step)
+
+
+@pytest.mark.parametrize(
+    "path", [np.array([0.0, 0.01]), np.zeros((0, 2)), np.array([[0.0, np.nan], [0.0, 0.0]])]
+)
+def test_interpolate_path_bad_path(path):
+    with pytest.raises(InvalidInputError, match="path"):
+        interpolate_path(path, 0.001)
+
+
+def test_interpolate_path_over_budget_refused():
+    from riskplan.errors import BudgetError
+
+    with pytest.raises(BudgetError, match="step"):
+        interpolate_path(np.array([[0.0, 0.0], [0.01, 0.02]]), 1e-12)

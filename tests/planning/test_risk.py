@@ -118,3 +118,17 @@ def test_make_risk_names(model, scene):
         make_risk("eq11", model, scene)
     with pytest.raises(InvalidInputError, match="coherence"):
         CloudRiskBound(model, scene, coherence=-0.1)
+
+
+def test_segment_cost_short_last_segment(tol):
+    """A batch whose last segment is shorter than ``step`` (no interior) is priced, not an
+    IndexError (a 15 mm-range robot's roadmap has such edges); an empty group elsewhere adds 0."""
+    cost = RiskSegmentCost(lambda x: np.full(len(x), 0.01), step=0.0025)
+    a = np.zeros((3, 3))
+    b = np.array([[0.01, 0, 0], [0.001, 0, 0], [0.0, 0.0, 0.001]])
+    out = cost(a, b)
+    c = risk_cost(0.01)
+    # 0.01 m at 2.5 mm: 4 pieces, 3 interior configurations; the short ones have none
+    np.testing.assert_allclose(out, [3 * c + c, c, c], **tol["float64_exact"])
+    mid = cost(a[[1, 0, 2]], b[[1, 0, 2]])
+    np.testing.assert_allclose(mid, out[[1, 0, 2]], **tol["float64_exact"])

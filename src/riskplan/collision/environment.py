@@ -43,6 +43,16 @@ from riskplan.geometry2d import (
 log = logging.getLogger(__name__)
 
 
+def _check_finite_vertices(V: np.ndarray, name: str) -> None:
+    """Name the first vertex with a NaN or infinite coordinate."""
+    bad = ~np.isfinite(V).all(axis=-1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise InvalidInputError(
+            f"{name}: vertex {i} is not finite (NaN or inf: {V[i].tolist()}); {int(bad.sum())} such vertices"
+        )
+
+
 class Environment:
     """Solid obstacles in ``d = 2`` or ``3`` dimensions.
 
@@ -134,6 +144,7 @@ class Environment:
                 raise InvalidInputError(
                     f"meshes[{i}] ({names[i]!r}): vertices must have shape (V, 3), got {V.shape}"
                 )
+            _check_finite_vertices(V, f"meshes[{i}] ({names[i]!r})")
             if F.ndim != 2 or F.shape[1] != 3:
                 raise InvalidInputError(
                     f"meshes[{i}] ({names[i]!r}): faces must have shape (F, 3) triangles, got {F.shape}"
@@ -212,9 +223,14 @@ class Environment:
             if not p.exists():
                 raise InvalidInputError(f"mesh file not found: {p}")
             try:
-                m = trimesh.load(p, force="mesh", process=True)
+                # unprocessed first: processing drops faces with non-finite vertices, which
+                # would then read as a hole ("not closed") instead of naming the vertex
+                m = trimesh.load(p, force="mesh", process=False)
             except Exception as exc:  # trimesh raises many types for unreadable files
                 raise InvalidInputError(f"{p}: cannot read mesh ({exc})") from exc
+            if hasattr(m, "vertices"):
+                _check_finite_vertices(np.asarray(m.vertices, dtype=np.float64), str(p))
+                m.process()
             if len(m.faces) == 0:
                 raise InvalidInputError(f"{p}: mesh has no faces")
             parts = m.split(only_watertight=False) if split else [m]

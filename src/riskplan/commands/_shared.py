@@ -15,11 +15,26 @@ options to its library function (different functions that take like-named argume
 
 from __future__ import annotations
 
+import contextlib
+
 import typer
 
+#: seconds between two plain progress lines of one task (when stdout is not a terminal)
+PLAIN_EVERY_S = 10.0
 
-def progress_bar(transient: bool = False):
-    """A rich ``Progress`` bar with count, elapsed and remaining time; use as a context manager."""
+
+def progress_bar(transient: bool = False, *, plain: bool | None = None):
+    """A rich ``Progress`` bar with count, elapsed and remaining time; use as a context manager.
+
+    When stdout is not a terminal (``riskplan reproduce ... > log``), or with ``plain=True``,
+    nothing is drawn; plain lines ``HH:MM:SS task: done/total status`` are printed instead,
+    when a task starts, at most every :data:`PLAIN_EVERY_S` seconds while it runs, and when it
+    reaches its total. At a normal end every bar ends at its total: a task that finished
+    before the count it announced (a search that stopped once it found the goal) gets its
+    count as total.
+    """
+    import sys
+
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -29,7 +44,60 @@ def progress_bar(transient: bool = False):
         TimeRemainingColumn,
     )
 
-    return Progress(
+    if plain is None:
+        plain = not sys.stdout.isatty()
+
+    class _Progress(Progress):
+        def __init__(self, *columns, **kwargs):
+            super().__init__(*columns, disable=plain, **kwargs)
+            self._printed: dict = {}
+
+        def add_task(self, *args, **kwargs):
+            task_id = super().add_task(*args, **kwargs)
+            self._line(task_id)
+            return task_id
+
+        def update(self, task_id, **kwargs):
+            super().update(task_id, **kwargs)
+            self._line(task_id)
+
+        def advance(self, task_id, advance: float = 1) -> None:
+            super().advance(task_id, advance)
+            self._line(task_id)
+
+        def _line(self, task_id) -> None:
+            if not plain:
+                return
+            import time
+
+            task = self._tasks[task_id]
+            if not task.visible:
+                return
+            now = time.monotonic()
+            done = task.total is not None and task.completed >= task.total
+            key = (task.completed, task.total, done)
+            last = self._printed.get(task_id)
+            if last is not None and (
+                last[1] == key or (not done and now - last[0] < PLAIN_EVERY_S)
+            ):
+                return
+            self._printed[task_id] = (now, key)
+            total = "?" if task.total is None else f"{task.total:g}"
+            status = task.fields.get("status", "")
+            print(
+                f"{time.strftime('%H:%M:%S')} {task.description}: {task.completed:g}/{total}"
+                + (f" {status}" if status else ""),
+                flush=True,
+            )
+
+        def __exit__(self, exc_type, exc, tb):
+            if exc_type is None:
+                for task in list(self._tasks.values()):
+                    if task.visible and (task.total is None or task.completed < task.total):
+                        self.update(task.id, total=task.completed)
+            return super().__exit__(exc_type, exc, tb)
+
+    return _Progress(
         TextColumn("[bold]{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
@@ -38,6 +106,21 @@ def progress_bar(transient: bool = False):
         TimeRemainingColumn(),
         transient=transient,
     )
+
+
+@contextlib.contextmanager
+def output_folder(out, name: str = "--out"):
+    """Write into the folder ``out``, alone: it must not be a file (checked first), and its
+    lock (``OUT.lock`` beside it, :func:`riskplan.io.output_lock`) is held while the block
+    runs, so a second command writing the same folder stops at once with
+    :class:`~riskplan.errors.OutputLockedError` instead of overwriting the first one's files.
+    Yields ``out`` (created)."""
+    from riskplan.io import check_output_folder, output_lock
+
+    out = check_output_folder(out, name)
+    with output_lock(out, "output folder"):
+        out.mkdir(parents=True, exist_ok=True)
+        yield out
 
 
 def stop_interrupted(bar, how_to_resume: str):

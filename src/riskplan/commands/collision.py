@@ -39,7 +39,7 @@ def register(app: typer.Typer) -> None:
         """
         from riskplan.collision.frames import sidecar_path
         from riskplan.errors import InvalidInputError
-        from riskplan.io import check_output_file
+        from riskplan.io import check_output_file, output_lock
         from riskplan.scenarios.chest import build_chest, chest_figure, chest_plotly
 
         if out.suffix.lower() not in (".stl", ".obj", ".ply", ".off"):
@@ -50,8 +50,9 @@ def register(app: typer.Typer) -> None:
             if p is not None:
                 check_output_file(p, name)
 
-        chest = build_chest(seed, subdivisions=subdivisions)
-        chest.save(out)
+        with output_lock(out, "mesh file"):  # one writer: the mesh and its sidecar agree
+            chest = build_chest(seed, subdivisions=subdivisions)
+            chest.save(out)
         meta = sidecar_path(out)
         typer.echo(
             f"chest: {chest.n_triangles} triangles, {chest.environment.n_obstacles} obstacles -> {out} (+ {meta.name})"

@@ -97,13 +97,13 @@ def register(app: typer.Typer) -> None:
         cfg = _config(locals(), n_components=components, early_stop_patience=patience)
         import torch
 
-        from riskplan.commands._shared import progress_bar, stop_interrupted
+        from riskplan.commands._shared import output_folder, progress_bar, stop_interrupted
         from riskplan.kinematics.data import read_point_clouds
         from riskplan.kinematics.training import train as run_train
 
         torch.set_num_threads(1)
         ds = read_point_clouds(data)
-        with progress_bar() as bar:
+        with output_folder(out), progress_bar() as bar:
             task = bar.add_task("training", total=cfg.epochs, status="")
             state = {"best": float("inf")}
 
@@ -235,14 +235,15 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Train one model per K and plot test NLL vs K (the paper's Fig. 4)."""
         cfg = _config(locals(), early_stop_patience=patience)
-        from riskplan.commands._shared import progress_bar
-        from riskplan.io import write_json_atomic
+        from riskplan.commands._shared import output_folder, progress_bar
+        from riskplan.io import check_output_folder, write_json_atomic
         from riskplan.kinematics.plotting import fig_nll_vs_components
         from riskplan.kinematics.sweep import parse_components
         from riskplan.kinematics.sweep import sweep as run_sweep
 
         ks = parse_components(components)
-        with progress_bar() as bar:
+        check_output_folder(out, "--out")
+        with output_folder(out), progress_bar() as bar:
             task = bar.add_task("K sweep", total=len(ks), status="")
 
             def on_result(i, r):
@@ -261,12 +262,12 @@ def register(app: typer.Typer) -> None:
                 nll_tolerance=nll_tolerance,
                 on_result=on_result,
             )
-        write_json_atomic(out / "sweep.json", res.to_json())
-        import matplotlib.pyplot as plt
+            write_json_atomic(out / "sweep.json", res.to_json())
+            import matplotlib.pyplot as plt
 
-        fig = fig_nll_vs_components(res)
-        fig.savefig(out / "fig4_nll_vs_k.png", dpi=120, bbox_inches="tight")
-        plt.close(fig)
+            fig = fig_nll_vs_components(res)
+            fig.savefig(out / "fig4_nll_vs_k.png", dpi=120, bbox_inches="tight")
+            plt.close(fig)
         for e in res.entries:
             flag = f"  collapsed components {e.collapsed}" if e.collapsed else ""
             flag += f"  FAILED: {e.error}" if e.error else ""
@@ -299,6 +300,7 @@ def register(app: typer.Typer) -> None:
         """Test NLL, Chamfer distance, HDR calibration and the paper's Fig. 5."""
         import torch
 
+        from riskplan.commands._shared import output_folder
         from riskplan.io import check_output_folder, write_json_atomic
         from riskplan.kinematics import load_model
         from riskplan.kinematics.data import read_point_clouds
@@ -309,30 +311,30 @@ def register(app: typer.Typer) -> None:
         torch.set_num_threads(1)
         m = load_model(model)
         ds = read_point_clouds(data)
-        ev = run_eval(
-            m,
-            ds,
-            n_samples=samples,
-            chamfer_points=chamfer_points,
-            seed=seed,
-            max_configs=max_configs or None,
-        )
-        out.mkdir(parents=True, exist_ok=True)
-        obj = {
-            **ev.to_json(),
-            "model": str(model),
-            "data": str(data),
-            "n_components": m.n_components,
-        }
-        write_json_atomic(out / "evaluation.json", obj)
-        import matplotlib.pyplot as plt
+        with output_folder(out):
+            ev = run_eval(
+                m,
+                ds,
+                n_samples=samples,
+                chamfer_points=chamfer_points,
+                seed=seed,
+                max_configs=max_configs or None,
+            )
+            obj = {
+                **ev.to_json(),
+                "model": str(model),
+                "data": str(data),
+                "n_components": m.n_components,
+            }
+            write_json_atomic(out / "evaluation.json", obj)
+            import matplotlib.pyplot as plt
 
-        fig = fig_samples_vs_truth(m, ds, n_configs=figure_configs, seed=seed)
-        fig.savefig(out / "fig5_samples_vs_truth.png", dpi=110, bbox_inches="tight")
-        plt.close(fig)
-        plotly_samples_vs_truth(m, ds, n_configs=figure_configs, seed=seed).write_html(
-            out / "fig5_samples_vs_truth.html", include_plotlyjs=True
-        )
+            fig = fig_samples_vs_truth(m, ds, n_configs=figure_configs, seed=seed)
+            fig.savefig(out / "fig5_samples_vs_truth.png", dpi=110, bbox_inches="tight")
+            plt.close(fig)
+            plotly_samples_vs_truth(m, ds, n_configs=figure_configs, seed=seed).write_html(
+                out / "fig5_samples_vs_truth.html", include_plotlyjs=True
+            )
         typer.echo(f"test NLL {ev.nll:.4f} nats/point; Chamfer {ev.chamfer * 1e3:.3f} mm")
         typer.echo(
             "HDR calibration: " + ", ".join(f"{a:g} -> {c:.3f}" for a, c in ev.calibration.items())

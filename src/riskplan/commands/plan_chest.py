@@ -129,15 +129,18 @@ def register(plan_app: typer.Typer) -> None:
         import torch
 
         from riskplan.collision import Environment
-        from riskplan.commands._shared import progress_bar
+        from riskplan.commands._shared import output_folder, progress_bar
         from riskplan.errors import DataFormatError, InvalidInputError
+        from riskplan.io import check_output_folder
         from riskplan.kinematics import load_model
         from riskplan.parsing import parse_numbers
         from riskplan.planning.bo import OptimiserConfig
         from riskplan.planning.chest import plan_chest
+        from riskplan.planning.robot_plan import check_plan_budget
 
         torch.set_num_threads(1)
         _check_finite(tip_tolerance=tip_tolerance, radius=radius, step=step, resolution=resolution)
+        check_output_folder(out, "--out")
         mdl = load_model(model)
         rob = None
         if robot is not None:
@@ -194,8 +197,18 @@ def register(plan_app: typer.Typer) -> None:
             resolution=resolution,
         )
         cfg.validate()
-        out.mkdir(parents=True, exist_ok=True)
-        with progress_bar() as bar:
+        for name, v in (("step", step), ("resolution", resolution)):
+            if v <= 0:
+                raise InvalidInputError(f"--{name}: expected a number > 0, got {v}")
+        check_plan_budget(
+            mdl.limits,
+            n_milestones=milestones,
+            step=step,
+            resolution=resolution,
+            optimiser=cfg,
+            executions=executions,
+        )
+        with output_folder(out), progress_bar() as bar:
             t_rm = bar.add_task("roadmap", total=milestones, status="")
             t_rk = bar.add_task("risk roadmap", total=1, status="", visible=least_risk)
             t_bo = bar.add_task(f"optimisation ({method})", total=iterations, status="")
@@ -242,17 +255,17 @@ def register(plan_app: typer.Typer) -> None:
                     workers=workers,
                 )
                 bar.update(t_va, total=1, completed=1)
-        from riskplan.experiments.chest_planning import write_plan
+            from riskplan.experiments.chest_planning import write_plan
 
-        write_plan(
-            out,
-            plan,
-            model=mdl,
-            environment_world=env_world,
-            to_world=to_world,
-            validation=validation,
-            extra={"model": model, **scene},
-        )
+            write_plan(
+                out,
+                plan,
+                model=mdl,
+                environment_world=env_world,
+                to_world=to_world,
+                validation=validation,
+                extra={"model": model, **scene},
+            )
         res = plan.optimised
         typer.echo(
             f"roadmap: {plan.roadmap.describe()}; trajectory of {len(plan.nominal)} configurations"

@@ -49,15 +49,19 @@ def register(plan_app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
+        from riskplan.commands._shared import output_folder
+        from riskplan.control.lqgmp import METHODS
         from riskplan.errors import InvalidInputError
         from riskplan.experiments.planning_tissue import (
             HONESTY_HEADER,
+            check_tissue_budget,
             plan_tissue,
             summary_rows,
             write_outputs,
         )
+        from riskplan.io import check_output_folder
         from riskplan.planning.rrt import RRTOptions
-        from riskplan.scenarios.registry import SCENARIO_NAMES
+        from riskplan.scenarios.registry import SCENARIO_NAMES, make_scenario
         from riskplan.scenarios.uncertainty import CASE_NAMES
 
         if scenario not in SCENARIO_NAMES:
@@ -70,10 +74,21 @@ def register(plan_app: typer.Typer) -> None:
             )
         if plans < 1:
             raise InvalidInputError(f"--plans: expected >= 1, got {plans}")
+        if method not in METHODS:
+            raise InvalidInputError(
+                f"--method: expected one of {', '.join(METHODS)}, got {method!r}"
+            )
+        check_output_folder(out, "--out")
+        check_tissue_budget(
+            make_scenario(scenario, case),
+            n_plans=plans,
+            check_runs=check_runs,
+            check_others=check_others,
+        )
         options = RRTOptions()
         n_trees = -(-plans // options.plans_per_tree)
         console = Console(stderr=True)
-        with progress_bar() as bar:
+        with output_folder(out), progress_bar() as bar:
             t_rrt = bar.add_task("RRT trees", total=n_trees, status="")
             t_sel = bar.add_task("LQG-MP selection", total=plans, status="", start=False)
             found = [0]
@@ -119,7 +134,7 @@ def register(plan_app: typer.Typer) -> None:
                 on_check=on_check,
             )
             bar.update(t_sel, total=len(result.plans))
-        files = write_outputs(result, out, gif=gif, gif_seed=seed)
+            files = write_outputs(result, out, gif=gif, gif_seed=seed)
         sel = result.selection
         best = sel.score(sel.best)
         console.print(

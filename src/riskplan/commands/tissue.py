@@ -61,7 +61,7 @@ def register(app: typer.Typer) -> None:
         """Run one simulation and write PNG frames, an animated GIF and summary.json."""
         import numpy as np
 
-        from riskplan.commands._shared import progress_bar
+        from riskplan.commands._shared import output_folder, progress_bar
         from riskplan.errors import InvalidInputError
         from riskplan.io import check_output_folder, write_json_atomic
         from riskplan.scenarios.base import rollout
@@ -80,6 +80,16 @@ def register(app: typer.Typer) -> None:
         params = sim.sample_params(seed)
         if controls == "random":
             n = steps or (30 if scenario == "needle" else 20)
+            from riskplan.budget import check_budget
+
+            # every state of the rollout is kept (for the frames): the mesh displacement,
+            # 2 float64 per node, and the step's controls
+            nodes = sim.mesh_data(params.n_elements).mesh.n_nodes
+            check_budget(
+                f"{n} simulator steps (states kept for the frames)",
+                "--steps",
+                nbytes=float(n) * 8.0 * (2 * nodes + sim.control_dim),
+            )
             u = sim.random_controls(n, seed)
         else:
             u = read_controls(controls, sim.control_dim, sim.control_bounds)
@@ -89,8 +99,7 @@ def register(app: typer.Typer) -> None:
                         f"--steps: {steps} exceeds the {len(u)} rows of {controls}"
                     )
                 u = u[:steps]
-        out.mkdir(parents=True, exist_ok=True)
-        with progress_bar() as bar:
+        with output_folder(out), progress_bar() as bar:
             task = bar.add_task(f"simulate {scenario}", total=len(u), status="")
 
             def on_step(state):
@@ -99,45 +108,43 @@ def register(app: typer.Typer) -> None:
             states = rollout(sim, sim.initial_state(params), u, params, on_step=on_step)
             frames = save_frames(sim, states, out / "frames", max_frames=max_frames)
             gif = save_gif(sim, states, out / f"{scenario}.gif", max_frames=max_frames)
-        collided = [s.t for s in states if sim.in_collision(s)]
-        inside = getattr(sim, "inside", None)
-        left = next((s.t for s in states if inside is not None and not inside(s)), None)
-        # the first failure decides the outcome; states after it are still drawn
-        events = [(t, "collision") for t in collided[:1]] + (
-            [(left, "left_tissue")] if left is not None else []
-        )
-        if events:
-            t_fail, outcome = min(events)
-            reason = (
-                f"{'left the tissue' if outcome == 'left_tissue' else 'collision'} at step {t_fail}"
+            collided = [s.t for s in states if sim.in_collision(s)]
+            inside = getattr(sim, "inside", None)
+            left = next((s.t for s in states if inside is not None and not inside(s)), None)
+            # the first failure decides the outcome; states after it are still drawn
+            events = [(t, "collision") for t in collided[:1]] + (
+                [(left, "left_tissue")] if left is not None else []
             )
-        else:
-            outcome = "reached_goal" if sim.in_goal(states[-1]) else "missed_goal"
-            reason = None
-        summary = {
-            "scenario": scenario,
-            "case": case,
-            "seed": seed,
-            "steps": len(u),
-            "params": {
-                "youngs_modulus": params.youngs_modulus,
-                "poissons_ratio": params.poissons_ratio,
-                "n_elements": params.n_elements,
-                "force_scale": params.force_scale,
-                "actuation_cov": params.actuation_cov,
-            },
-            "mesh_elements": int(sim.mesh_data(params.n_elements).mesh.n_elements),
-            "final_reduced_state": np.asarray(sim.reduced(states[-1])).tolist(),
-            "final_goal_distance": sim.goal_distance(states[-1]),
-            "reached_goal": bool(sim.in_goal(states[-1])),
-            "collision_steps": collided,
-            "left_tissue_step": left,
-            "outcome": outcome,
-            "reason": reason,
-            "gif": gif.name,
-            "frames": [p.name for p in frames],
-        }
-        write_json_atomic(out / "summary.json", summary)
+            if events:
+                t_fail, outcome = min(events)
+                reason = f"{'left the tissue' if outcome == 'left_tissue' else 'collision'} at step {t_fail}"
+            else:
+                outcome = "reached_goal" if sim.in_goal(states[-1]) else "missed_goal"
+                reason = None
+            summary = {
+                "scenario": scenario,
+                "case": case,
+                "seed": seed,
+                "steps": len(u),
+                "params": {
+                    "youngs_modulus": params.youngs_modulus,
+                    "poissons_ratio": params.poissons_ratio,
+                    "n_elements": params.n_elements,
+                    "force_scale": params.force_scale,
+                    "actuation_cov": params.actuation_cov,
+                },
+                "mesh_elements": int(sim.mesh_data(params.n_elements).mesh.n_elements),
+                "final_reduced_state": np.asarray(sim.reduced(states[-1])).tolist(),
+                "final_goal_distance": sim.goal_distance(states[-1]),
+                "reached_goal": bool(sim.in_goal(states[-1])),
+                "collision_steps": collided,
+                "left_tissue_step": left,
+                "outcome": outcome,
+                "reason": reason,
+                "gif": gif.name,
+                "frames": [p.name for p in frames],
+            }
+            write_json_atomic(out / "summary.json", summary)
         typer.echo(
             f"{scenario} ({case}): {len(u)} steps, final goal distance {summary['final_goal_distance']:.4f}, "
             f"{'collision at steps ' + str(collided[:5]) if collided else 'no collision'}"

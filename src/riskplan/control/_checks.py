@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from riskplan._validation import as_array
-from riskplan.errors import InvalidInputError
+from riskplan.errors import InvalidInputError, NumericalError
 
 
 def per_step(value, name: str, T: int, shape: tuple[int, int]) -> np.ndarray:
@@ -46,3 +46,12 @@ def dynamics(A, B=None) -> tuple[np.ndarray, np.ndarray | None]:
     if B.ndim != 3 or B.shape[:2] != A.shape[:2]:
         raise InvalidInputError(f"B: expected shape ({A.shape[0]}, {A.shape[1]}, q), got {B.shape}")
     return A, B
+
+
+def raise_overflow(what: str, step: int, cause: Exception | None = None):
+    """Raise :class:`NumericalError` for a recursion that left float64's range at ``step``."""
+    raise NumericalError(
+        f"{what} overflowed float64 at step {step} (non-finite gain or covariance); the "
+        "matrices are finite but too large or too unstable over this horizon",
+        step=step,
+    ) from cause

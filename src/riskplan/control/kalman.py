@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from riskplan._validation import as_array
-from riskplan.control._checks import check_psd, dynamics, per_step
+from riskplan.control._checks import check_psd, dynamics, per_step, raise_overflow
 from riskplan.errors import InvalidInputError
 
 __all__ = ["kalman_gains", "kalman_recursion"]
@@ -42,12 +42,18 @@ def kalman_recursion(A: np.ndarray, H: np.ndarray, M: np.ndarray, N: np.ndarray,
     I = np.eye(p)
     Pt = P0
     for t in range(T):
-        Pp = A[t] @ Pt @ A[t].T + M[t]
-        Ht = H[t]
-        S = Ht @ Pp @ Ht.T + N[t]
-        Kt = np.linalg.solve(S, Ht @ Pp).T  # S symmetric: (S^-1 H P⁻)ᵀ = P⁻ Hᵀ S^-1
-        Pn = (I - Kt @ Ht) @ Pp
-        Pt = 0.5 * (Pn + Pn.T)
+        with np.errstate(over="ignore", invalid="ignore"):
+            Pp = A[t] @ Pt @ A[t].T + M[t]
+            Ht = H[t]
+            S = Ht @ Pp @ Ht.T + N[t]
+            try:
+                Kt = np.linalg.solve(S, Ht @ Pp).T  # S symmetric: (S^-1 H P⁻)ᵀ = P⁻ Hᵀ S^-1
+            except np.linalg.LinAlgError as exc:  # a singular matrix after an overflow
+                raise_overflow("Kalman covariance recursion", t, exc)
+            Pn = (I - Kt @ Ht) @ Pp
+            Pt = 0.5 * (Pn + Pn.T)
+        if not (np.isfinite(Kt).all() and np.isfinite(Pt).all()):
+            raise_overflow("Kalman covariance recursion", t)
         K[t] = Kt
         P[t] = Pt
     return K, P
@@ -65,7 +71,8 @@ def kalman_gains(A, H, M, N, P0) -> tuple[np.ndarray, np.ndarray]:
     P0 : (p, p) covariance of the initial estimate, symmetric positive semi-definite.
 
     Returns ``(K, P)``: ``K[t]`` corrects the estimate of ``x_{t+1}`` with ``z_{t+1}``,
-    ``P[t] = Cov(x_{t+1} − x̂_{t+1})``.
+    ``P[t] = Cov(x_{t+1} − x̂_{t+1})``. Raises :class:`~riskplan.errors.NumericalError`
+    naming the step where the recursion overflows float64 on finite input.
     """
     A, _ = dynamics(A)
     T, p, _ = A.shape

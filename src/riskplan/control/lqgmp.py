@@ -367,6 +367,21 @@ def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
     return np.where(hit, 0.0, free)
 
 
+def _check_propagation(mean: np.ndarray, cov: np.ndarray, first: int = 0) -> None:
+    """Raise :class:`NumericalError` naming the first step whose propagated mean or covariance
+    (states ``first, first + 1, ..``) left float64's range (finite gains of a very unstable
+    model can still overflow it)."""
+    ok = np.isfinite(mean).all(axis=-1) & np.isfinite(cov).all(axis=(-2, -1))
+    if not ok.all():
+        from riskplan.errors import NumericalError
+
+        t = first + int(np.flatnonzero(~ok)[0])
+        raise NumericalError(
+            f"LQG-MP covariance propagation overflowed float64 at step {t - 1} (state {t})",
+            step=t - 1,
+        )
+
+
 def _factor(S: np.ndarray) -> np.ndarray:
     """``V`` with ``V Vᵀ = S`` for a symmetric positive semi-definite ``S`` (eigen-factor)."""
     w, v = np.linalg.eigh(0.5 * (S + S.T))
@@ -490,6 +505,7 @@ def lqgmp(
             mean[t + 1] = mu = F[t] @ mu + dm[t]
             S = F[t] @ S @ F[t].T + Qn[t]
             cov[t + 1] = S = 0.5 * (S + S.T)
+        _check_propagation(mean, cov)
         if method == "sampling":
             return _sampled(
                 sim,
@@ -512,6 +528,7 @@ def lqgmp(
         mu = F[t] @ mu + dm[t]
         S = F[t] @ S @ F[t].T + Qn[t]
         S = 0.5 * (S + S.T)
+        _check_propagation(mu[None], S[None], t + 1)  # before any geometry sees it
         y = plan.states[t + 1]
         polys = sim.obstacles(y)
         if not len(polys):
@@ -556,6 +573,7 @@ def lqgmp(
                     c_min = min(c_min, float(d.min()))
             free[t] = 1.0 if math.isinf(c_min) else -math.expm1(-0.5 * c_min * c_min)
         mean[t + 1], cov[t + 1] = mu, S
+    _check_propagation(mean, cov)
     if not truncating and fast is not None:
         free = fast
     p_free = float(np.prod(free))

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from riskplan.control._checks import check_psd, dynamics, per_step
+from riskplan.control._checks import check_psd, dynamics, per_step, raise_overflow
 
 __all__ = ["lqr_gains", "lqr_recursion"]
 
@@ -35,10 +35,16 @@ def lqr_recursion(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, Q_
     for t in range(T - 1, -1, -1):
         St = S[t + 1]
         At, Bt = A[t], B[t]
-        SB = St @ Bt
-        L[t] = -np.linalg.solve(Bt.T @ SB + R[t], SB.T @ At)
-        Sn = Q[t] + At.T @ St @ (At + Bt @ L[t])
-        S[t] = 0.5 * (Sn + Sn.T)
+        with np.errstate(over="ignore", invalid="ignore"):
+            SB = St @ Bt
+            try:
+                L[t] = -np.linalg.solve(Bt.T @ SB + R[t], SB.T @ At)
+            except np.linalg.LinAlgError as exc:  # a singular matrix after an overflow
+                raise_overflow("LQR Riccati recursion", t, exc)
+            Sn = Q[t] + At.T @ St @ (At + Bt @ L[t])
+            S[t] = 0.5 * (Sn + Sn.T)
+        if not (np.isfinite(L[t]).all() and np.isfinite(S[t]).all()):
+            raise_overflow("LQR Riccati recursion", t)
     return L, S
 
 
@@ -54,7 +60,9 @@ def lqr_gains(A, B, Q, R, Q_final) -> np.ndarray:
     Q_final : (p, p) final state cost on ``x_T``, symmetric positive semi-definite.
 
     Raises :class:`~riskplan.errors.InvalidInputError` for mismatched shapes, non-finite
-    values or costs that are not symmetric positive (semi-)definite.
+    values or costs that are not symmetric positive (semi-)definite, and
+    :class:`~riskplan.errors.NumericalError` naming the step where the recursion overflows
+    float64 on finite input (e.g. a huge unstable ``A``).
     """
     A, B = dynamics(A, B)
     T, p, q = B.shape

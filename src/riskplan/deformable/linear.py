@@ -21,7 +21,7 @@ from riskplan.deformable.assembly import assemble_stiffness_parts, fixed_node_ar
 from riskplan.deformable.banded import banded_cholesky
 from riskplan.deformable.material import Material
 from riskplan.deformable.mesh import TissueMesh
-from riskplan.errors import InvalidInputError
+from riskplan.errors import ConvergenceError, InvalidInputError
 from riskplan.threads import one_blas_thread
 
 #: Free-DOF count up to which the reduced stiffness is inverted densely (a dense
@@ -145,6 +145,13 @@ class LinearElasticModel:
             u[self.fixed_dofs] = ub
             rhs = rhs - self._K_fc @ ub
         u[self.free_dofs] = self.solve_free(rhs)
+        if not np.all(np.isfinite(u)):  # finite loads whose response overflows float64
+            raise ConvergenceError(
+                "linear solve: the displacement overflows float64 (loads too large for this "
+                "model); no finite equilibrium",
+                residual=float("inf"),
+                iterations=0,
+            )
         return u.reshape(-1, 2)
 
     def residual(self, u, nodal_forces) -> np.ndarray:

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from riskplan.errors import InvalidInputError
+
 log = logging.getLogger(__name__)
 
 __all__ = [
@@ -70,11 +72,20 @@ def plan_tissue(
     and ``check_others`` more (``check_runs = 0`` skips the check). ``on_tree(i, tree)``,
     ``on_plan(i, score)``, ``on_check(row)`` report progress.
     """
+    from riskplan._validation import check_count
+    from riskplan.control.lqgmp import METHODS
     from riskplan.planning.rrt import RRTOptions, rrt_plans
     from riskplan.planning.select import honesty_check, select_plan
     from riskplan.scenarios.registry import make_scenario
 
+    # every argument checked before the trees grow (a bad method used to fail after them)
+    if method not in METHODS:
+        raise InvalidInputError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    n_plans = check_count(n_plans, "n_plans", 1)
+    check_runs = check_count(check_runs, "check_runs", 0)
+    check_others = check_count(check_others, "check_others", 0)
     sim = make_scenario(scenario, case)
+    check_tissue_budget(sim, n_plans=n_plans, check_runs=check_runs, check_others=check_others)
     options = rrt_options or RRTOptions()
     timings = {}
     t0 = time.perf_counter()
@@ -112,6 +123,31 @@ def plan_tissue(
         )
         timings["check"] = time.perf_counter() - t0
     return TissuePlanningResult(scenario, case, seed, sim, plans, trees, selection, rows, timings)
+
+
+#: least time of one simulator step (s): a tenth of the measured 16.5 µs of a needle step on
+#: the 175-element mesh (README, `riskplan tissue step-cost`, 2-core AMD EPYC, shared); the
+#: manipulation step is 50 times slower
+STEP_S = 1.65e-6
+
+
+def check_tissue_budget(sim, *, n_plans: int, check_runs: int, check_others: int) -> None:
+    """Refuse a run whose work exceeds the budget (:mod:`riskplan.budget`) before any work:
+    the candidates (``--plans``: each keeps at least two simulator states, the mesh
+    displacement at 2 float64 per node) and the Monte Carlo check (``--check-runs``
+    executions of each checked plan, each at least one simulator step)."""
+    from riskplan.budget import check_budget
+
+    nodes = sim.mesh_data(sim.nominal_params.n_elements).mesh.n_nodes
+    check_budget(
+        f"{n_plans} candidate plans", "--plans", nbytes=float(n_plans) * 2 * 2 * 8.0 * nodes
+    )
+    n_checked = min(n_plans, 1 + check_others)
+    check_budget(
+        f"{check_runs} closed-loop executions of {n_checked} plans",
+        "--check-runs",
+        seconds=float(check_runs) * n_checked * STEP_S,
+    )
 
 
 # ---- figures ----------------------------------------------------------------------------

@@ -117,16 +117,31 @@ def reproduce(
     :class:`~riskplan.errors.BackendUnavailableError` for an unreachable Ray address and
     :class:`~riskplan.errors.DataFormatError` for a corrupted or foreign results store.
     """
+    from riskplan.io import check_output_folder, output_lock
+
+    _check(paper, backend, workers, ray_address)
+    stages = (stages,) if isinstance(stages, str) else tuple(stages)
+    if not stages or any(s not in STAGES for s in stages):
+        raise InvalidInputError(f"stages: expected names from {', '.join(STAGES)}, got {stages!r}")
+    out = check_output_folder(out, "out")
+    # one writer per output folder: a second run into it stops at once (the store's own
+    # checks keep records consistent, the lock keeps results.json and the report one run's)
+    with output_lock(out, "output folder"):
+        return _reproduce(
+            out, paper, scale, backend, ray_address, workers, seed, progress, stages,
+            calibration_scale,
+        )  # fmt: skip
+
+
+def _reproduce(
+    out, paper, scale, backend, ray_address, workers, seed, progress, stages, calibration_scale
+) -> dict:
     import riskplan
     from riskplan.experiments.calibration import CALIBRATION_SCALES
     from riskplan.experiments.store import ResultStore
     from riskplan.io import write_json_atomic
     from riskplan.parallel import TaskPool
 
-    _check(paper, backend, workers, ray_address)
-    stages = (stages,) if isinstance(stages, str) else tuple(stages)
-    if not stages or any(s not in STAGES for s in stages):
-        raise InvalidInputError(f"stages: expected names from {', '.join(STAGES)}, got {stages!r}")
     scale_name, scales = resolve_scale(scale)
     calib = scales.pop("calibration", None)
     if calibration_scale is not None or calib is None:

@@ -138,6 +138,7 @@ def run_mdn(
     import torch
 
     from riskplan.datasets import generate_splits
+    from riskplan.kinematics import load_model
     from riskplan.kinematics.data import read_point_clouds
     from riskplan.kinematics.plotting import (
         fig_nll_vs_components,
@@ -145,7 +146,7 @@ def run_mdn(
         plotly_samples_vs_truth,
     )
     from riskplan.kinematics.sweep import sweep
-    from riskplan.kinematics.training import TrainConfig, train
+    from riskplan.kinematics.training import CHECKPOINT_NAME, TrainConfig, train
     from riskplan.robots import load_robot
 
     torch.set_num_threads(1)
@@ -167,8 +168,25 @@ def run_mdn(
     train_data, test_data = read_point_clouds(paths["train"]), read_point_clouds(paths["test"])
     report("mdn: train (Fig. 5)", 1, steps)
     cfg = TrainConfig(n_components=scale.n_components, epochs=scale.epochs, seed=seed, **TRAIN)
-    res = train(train_data, cfg, out=out / "model", max_seconds=scale.train_seconds or None)
-    model = res.model
+    model_dir = out / "model"
+    trained = store.get("mdn.model")
+    if trained is not None:  # finished in an earlier (interrupted) run: its saved model
+        model = load_model(model_dir)
+        n_epochs = int(trained["epochs"])
+    else:
+        # a run killed during training left its checkpoint: continue it (a rerun of the same
+        # command must finish, not ask for --resume); otherwise start afresh
+        resume = (model_dir / CHECKPOINT_NAME).is_file()
+        res = train(
+            train_data,
+            cfg,
+            out=model_dir,
+            resume=resume,
+            overwrite=not resume,
+            max_seconds=scale.train_seconds or None,
+        )
+        model, n_epochs = res.model, len(res.history)
+        store.put("mdn.model", {"epochs": n_epochs, "best_epoch": int(res.best_epoch)})
     ev = evaluate_for_report(model, test_data, seed)
     import matplotlib
 
@@ -202,7 +220,7 @@ def run_mdn(
     result = {
         "train_configs": int(train_data.n_configs),
         "test_configs": int(test_data.n_configs),
-        "epochs": len(res.history),
+        "epochs": n_epochs,
         "test_nll": float(ev.nll),
         "chamfer_mm": float(ev.chamfer * 1e3),
         "calibration": {str(k): float(v) for k, v in ev.calibration.items()},

@@ -27,17 +27,12 @@ from pathlib import Path
 from typing import Any
 
 from riskplan.errors import DataFormatError, InvalidInputError
-from riskplan.io import write_text_atomic
+from riskplan.io import canonical_json, write_text_atomic
 
 __all__ = ["ResultStore", "canonical_json", "fingerprint"]
 
 _KEY = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.=-]{0,200}$")
 FORMAT = "riskplan-results/1"
-
-
-def canonical_json(obj: Any) -> str:
-    """Deterministic JSON text of ``obj`` (sorted keys, no spaces, non-finite numbers refused)."""
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
 def fingerprint(config: dict) -> str:

@@ -50,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from riskplan._validation import as_array, check_range
 from riskplan.collision import trajectory_probability
 from riskplan.errors import DataFormatError, InvalidInputError
 from riskplan.planning.prm import DEFAULT_RESOLUTION
@@ -59,6 +60,8 @@ log = logging.getLogger(__name__)
 METHODS = ("bo", "random", "trust_region")
 CHECKPOINT_FORMAT = "riskplan-trajectory-optimisation"
 TR_SUCCESS, TR_FAILURE, TR_MIN, TR_MAX = 3, 4, 1 / 32, 0.4
+# configurations may leave the limits by this fraction of the range (interpolation round-off)
+LIMIT_SLACK = 1e-9
 
 
 @dataclass(frozen=True)
@@ -135,6 +138,185 @@ def _fingerprint(
     return h.hexdigest()
 
 
+def check_trajectory_limits(trajectory, limits) -> tuple[np.ndarray, np.ndarray]:
+    """``trajectory (T >= 2, m)`` and ``limits (m, 2)`` checked: finite, ``lo < hi`` per
+    tendon, every configuration inside the limits (to round-off). Returns float64 copies."""
+    lim = as_array(limits, "limits", min_ndim=2)
+    if lim.ndim != 2 or lim.shape[1] != 2 or lim.shape[0] < 1:
+        raise InvalidInputError(f"limits: expected shape (m, 2), got {lim.shape}")
+    if not np.all(lim[:, 1] > lim[:, 0]):
+        i = int(np.flatnonzero(~(lim[:, 1] > lim[:, 0]))[0])
+        raise InvalidInputError(
+            f"limits: row {i} is {lim[i].tolist()}; expected low < high for every tendon"
+        )
+    traj = np.array(as_array(trajectory, "trajectory", min_ndim=2), dtype=np.float64)
+    if traj.ndim != 2 or traj.shape[1] != lim.shape[0] or len(traj) < 2:
+        raise InvalidInputError(
+            f"trajectory: expected shape (T >= 2, {lim.shape[0]}), got {traj.shape}"
+        )
+    # interpolated trajectories may cross a limit by a rounding of the span
+    slack = LIMIT_SLACK * (lim[:, 1] - lim[:, 0])
+    check_range(traj, "trajectory", lim[:, 0] - slack, lim[:, 1] + slack)
+    return traj, lim
+
+
+def check_optimiser_budget(config: OptimiserConfig, T: int, limits) -> None:
+    """The optimiser's work against the budget (:mod:`riskplan.budget`): the candidates of one
+    iteration (a few ``(n_candidates, m)`` arrays), the GP of the last iteration, whose kernel
+    matrix over ``T + iterations`` configurations is held in memory, and the motion checks of
+    a block of 16 candidates, each motion about the candidate box's diagonal
+    (``2 radius`` of the limits' span) long, at ``resolution``."""
+    from riskplan.budget import check_budget
+
+    lim = np.asarray(limits, dtype=np.float64)
+    m = lim.shape[0]
+    check_budget(
+        f"{config.n_candidates} candidates per iteration",
+        "candidates",
+        nbytes=8.0 * 4 * config.n_candidates * m,
+    )
+    n = float(T) + float(config.iterations)
+    check_budget(
+        f"{config.iterations} iterations (a GP over up to {n:.3g} configurations)",
+        "iterations",
+        nbytes=8.0 * 3 * n * n,
+    )
+    reach = 2.0 * config.radius * float(np.linalg.norm(lim[:, 1] - lim[:, 0]))
+    states = 16 * 2 * (reach / config.resolution + 1)
+    check_budget(
+        f"motion checks at resolution {config.resolution:g} ({states:.3g} states per block)",
+        "resolution",
+        nbytes=states * MOTION_STATE_BYTES * m,
+    )
+
+
+#: memory of one configuration in a batched motion check, per tendon (the configuration and
+#: the predicted mixture's arrays are larger; this is the least)
+MOTION_STATE_BYTES = 8.0
+
+
+def _digest(state: dict) -> str:
+    """SHA-256 of a checkpoint's content (canonical JSON, the result store's rule)."""
+    from riskplan.io import canonical_json
+
+    return hashlib.sha256(canonical_json(state).encode()).hexdigest()
+
+
+def _bad(path, what: str):
+    return DataFormatError(
+        f"checkpoint {path}: {what}; delete it or rerun without --resume to start over"
+    )
+
+
+def read_checkpoint(path, fp: str, traj: np.ndarray, lim: np.ndarray, config) -> dict:
+    """The state saved in ``path``, after checking everything read back.
+
+    The content hash must match (an edited or damaged file is refused), the fingerprint must be
+    this run's (trajectory, limits, settings, seed), and every number must be in range:
+    probabilities in [0, 1], counts consistent with the iteration, configurations inside the
+    limits with the start and goal unchanged, the trace non-increasing and ending at eq. 10 of
+    the saved bounds. Any failure is a :class:`~riskplan.errors.DataFormatError`.
+    """
+    T, m = traj.shape
+    try:
+        state = json.loads(Path(path).read_bytes().decode("utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        raise _bad(path, f"unreadable ({type(exc).__name__}: {exc})") from exc
+    if not isinstance(state, dict):
+        raise _bad(path, f"expected a JSON object, got {type(state).__name__}")
+    if state.get("format") != CHECKPOINT_FORMAT:
+        raise _bad(path, "not a trajectory optimisation checkpoint")
+    digest = state.pop("sha256", None)
+    try:
+        ok = digest == _digest(state)
+    except (TypeError, ValueError):  # non-finite numbers or unserialisable content
+        ok = False
+    if not ok:
+        raise _bad(path, "content hash mismatch (edited, truncated or damaged)")
+    if state.get("fingerprint") != fp:
+        raise DataFormatError(
+            f"checkpoint {path}: written for another trajectory, seed or settings; "
+            "rerun without --resume (or with the original options)"
+        )
+
+    def integer(key, lo, hi=None):
+        v = state.get(key)
+        if isinstance(v, bool) or not isinstance(v, int) or v < lo or (hi is not None and v > hi):
+            raise _bad(path, f"{key!r} = {v!r} is not an integer in [{lo}, {hi}]")
+        return v
+
+    def number(key, lo, hi):
+        v = state.get(key)
+        if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
+            raise _bad(path, f"{key!r} = {v!r} is not a number in [{lo}, {hi}]")
+        return float(v)
+
+    def array(key, shape, lo=None, hi=None, dtype=np.float64):
+        v = state.get(key)
+        try:
+            a = np.asarray(v, dtype=dtype)
+        except (TypeError, ValueError) as exc:
+            raise _bad(path, f"{key!r} is not a numeric array") from exc
+        if a.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, a.shape)):
+            raise _bad(path, f"{key!r} has shape {a.shape}, expected {shape}")
+        if isinstance(v, list) and dtype is not bool and _has_bools(v):
+            raise _bad(path, f"{key!r} holds true/false where numbers belong")
+        if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+            raise _bad(path, f"{key!r} holds non-finite numbers")
+        if lo is not None and a.size and not (np.all(a >= lo) and np.all(a <= hi)):
+            raise _bad(path, f"{key!r} leaves its range [{lo}, {hi}]")
+        return a
+
+    it = integer("iteration", 0, int(config.iterations))
+    slack = LIMIT_SLACK * (lim[:, 1] - lim[:, 0])
+    lo, hi = lim[:, 0] - slack, lim[:, 1] + slack
+    cur = array("trajectory", (T, m), lo, hi)
+    if not (np.array_equal(cur[0], traj[0]) and np.array_equal(cur[-1], traj[-1])):
+        raise _bad(path, "the start or goal configuration moved")
+    p = array("bounds", (T,), 0.0, 1.0)
+    initial = number("initial_bound", 0.0, 1.0)
+    trace = array("trace", (it + 1,), 0.0, 1.0)
+    if trace[0] != initial or np.any(np.diff(trace) > 0):
+        raise _bad(path, "the trace does not start at the initial bound or increases")
+    if trace[-1] != float(trajectory_probability(p)):
+        raise _bad(path, "the trace does not end at eq. 10 of the saved bounds")
+    chosen = array("chosen", (it,), -1, T - 2, dtype=np.int64)
+    if np.any(chosen == 0) or (isinstance(state["chosen"], list) and _has_bools(state["chosen"])):
+        raise _bad(path, "'chosen' names the start configuration or holds true/false")
+    acc = state.get("accepted")
+    if not isinstance(acc, list) or len(acc) != it or not all(isinstance(a, bool) for a in acc):
+        raise _bad(path, f"'accepted' is not a list of {it} true/false values")
+    if any(a and c < 0 for a, c in zip(acc, chosen.tolist())):
+        raise _bad(path, "an iteration accepted a move it did not make")
+    n_moves = int(np.sum(chosen >= 0))
+    X = array("X", (T + n_moves, m), lo, hi)
+    array("p", (T + n_moves,), 0.0, 1.0)
+    if not np.array_equal(X[:T], traj):
+        raise _bad(path, "'X' does not start with the input trajectory")
+    integer("evaluations", n_moves, T + n_moves)
+    number("radius", TR_MIN if config.method == "trust_region" else 0.0, max(TR_MAX, config.radius))
+    integer("succ", 0, TR_SUCCESS)
+    integer("fail", 0, TR_FAILURE)
+    number("seconds", 0.0, math.inf)
+    gp = state.get("gp")
+    if gp is not None and not (
+        isinstance(gp, dict)
+        and all(isinstance(k, str) and _finite_numbers(v) for k, v in gp.items())
+    ):
+        raise _bad(path, "'gp' is not a table of finite hyperparameters")
+    return state
+
+
+def _has_bools(v) -> bool:
+    return any(_has_bools(x) if isinstance(x, list) else isinstance(x, bool) for x in v)
+
+
+def _finite_numbers(v) -> bool:
+    if isinstance(v, list):
+        return all(_finite_numbers(x) for x in v)
+    return not isinstance(v, bool) and isinstance(v, int | float) and math.isfinite(v)
+
+
 def _acquisition(
     X: np.ndarray,
     y: np.ndarray,
@@ -177,7 +359,10 @@ def _acquisition(
     hyper = {
         k: v.tolist()
         for k, v in gp.state_dict().items()
-        if k.startswith(("likelihood.", "mean_module.", "covar_module.")) and "prior" not in k
+        # learned values only: priors and constraint bounds (one is +inf) are the model's own
+        if k.startswith(("likelihood.", "mean_module.", "covar_module."))
+        and "prior" not in k
+        and "constraint" not in k
     }
     return values, hyper
 
@@ -207,32 +392,29 @@ def optimise_trajectory(
     """
     from riskplan.io import write_json_atomic
 
+    if config is not None and not isinstance(config, OptimiserConfig):
+        raise InvalidInputError(f"config: expected an OptimiserConfig, got {type(config).__name__}")
     config = config or OptimiserConfig()
     config.validate()
-    lim = np.asarray(limits, dtype=np.float64)
-    traj = np.array(trajectory, dtype=np.float64)
-    if traj.ndim != 2 or traj.shape[1] != lim.shape[0] or len(traj) < 2:
-        raise InvalidInputError(
-            f"trajectory: expected shape (T >= 2, {lim.shape[0]}), got {traj.shape}"
-        )
-    if not np.all(np.isfinite(traj)):
-        raise InvalidInputError("trajectory: contains NaN or inf")
+    traj, lim = check_trajectory_limits(trajectory, limits)
     T, m = traj.shape
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise InvalidInputError(f"seed: expected an integer >= 0, got {seed!r}")
+    if bounds is not None:
+        bounds = as_array(bounds, "bounds", shape=(T,))
+        check_range(bounds, "bounds", 0.0, 1.0)
+    if checkpoint is not None:
+        from riskplan.io import check_output_file
+
+        check_output_file(checkpoint, "checkpoint")  # before any work: not a folder
+    check_optimiser_budget(config, T, lim)
     span = lim[:, 1] - lim[:, 0]
     fp = _fingerprint(traj, lim, config, seed)
     t0 = time.perf_counter()
 
     state = None
     if resume and checkpoint is not None and Path(checkpoint).is_file():
-        try:
-            state = json.loads(Path(checkpoint).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise DataFormatError(f"checkpoint {checkpoint}: unreadable ({exc})") from exc
-        if state.get("format") != CHECKPOINT_FORMAT or state.get("fingerprint") != fp:
-            raise DataFormatError(
-                f"checkpoint {checkpoint}: written for another trajectory, seed or settings; "
-                "rerun without --resume (or with the original options)"
-            )
+        state = read_checkpoint(checkpoint, fp, traj, lim, config)
     if state is None:
         p0 = np.asarray(bound(traj) if bounds is None else bounds, dtype=np.float64)
         state = {
@@ -336,6 +518,8 @@ def optimise_trajectory(
         state["chosen"].append(chosen)
         state["accepted"].append(accepted)
         if checkpoint is not None:
+            state.pop("sha256", None)
+            state["sha256"] = _digest(state)
             write_json_atomic(checkpoint, state, indent=None)
         if progress is not None:
             progress(it + 1, int(config.iterations), state["trace"][-1])

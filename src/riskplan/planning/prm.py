@@ -136,17 +136,54 @@ class MeanValidity:
         return ok
 
 
-def interpolate_path(path, step: float = DEFAULT_STEP) -> np.ndarray:
+def check_step(step, name: str = "step") -> float:
+    """``step`` as a float, finite and > 0 (a normal number: a subnormal step overflows the
+    piece counts), else :class:`~riskplan.errors.InvalidInputError` naming ``name``."""
+    from riskplan.errors import InvalidInputError
+
+    if isinstance(step, bool) or not isinstance(step, int | float | np.integer | np.floating):
+        raise InvalidInputError(f"{name}: expected a number, got {step!r}")
+    s = float(step)
+    if not (math.isfinite(s) and s >= np.finfo(np.float64).tiny):
+        raise InvalidInputError(f"{name}: expected a finite number > 0, got {step!r}")
+    return s
+
+
+def interpolate_path(path, step: float = DEFAULT_STEP, *, validate: bool = True) -> np.ndarray:
     """Split each segment of ``path (P, m)`` into ``ceil(length / step)`` equal pieces; ``(T, m)``.
 
     The path's vertices are kept; consecutive configurations are at most ``step`` apart.
+    ``path`` must be finite with ``P >= 1`` rows, ``step`` finite and > 0, and the trajectory
+    within the work budget (:mod:`riskplan.budget`), else
+    :class:`~riskplan.errors.InvalidInputError` (``BudgetError``); ``validate=False`` skips
+    the checks (internal callers with checked arguments).
     """
+    if validate:
+        from riskplan._validation import as_array
+        from riskplan.budget import check_budget
+
+        p = as_array(path, "path", min_ndim=2)
+        if p.ndim != 2 or p.shape[0] < 1 or p.shape[1] < 1:
+            from riskplan.errors import InvalidInputError
+
+            raise InvalidInputError(f"path: expected shape (P >= 1, m >= 1), got {p.shape}")
+        step = check_step(step)
+        with np.errstate(over="ignore"):
+            n = float(np.sum(np.ceil(np.linalg.norm(np.diff(p, axis=0), axis=-1) / step))) + 1
+        check_budget(
+            f"a trajectory of {n:.3g} configurations",
+            "step",
+            # the pieces, their products and the concatenated result
+            nbytes=3.0 * n * p.shape[1] * 8.0,
+        )
     p = np.asarray(path, dtype=np.float64)
     out = [p[:1]]
     for a, b in itertools.pairwise(p):
         k = max(1, math.ceil(float(np.linalg.norm(b - a)) / step - 1e-12))
         t = np.arange(1, k + 1) / k
-        out.append(a + t[:, None] * (b - a))
+        seg = a + t[:, None] * (b - a)
+        seg[-1] = b  # the vertex itself (a + (b - a) can differ from b by a rounding)
+        out.append(seg)
     return np.concatenate(out)
 
 

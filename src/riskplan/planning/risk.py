@@ -20,7 +20,7 @@ import logging
 import numpy as np
 
 from riskplan.collision import mixture_bound, trajectory_probability
-from riskplan.planning.prm import DEFAULT_STEP, Roadmap, interpolate_path
+from riskplan.planning.prm import DEFAULT_STEP, Roadmap, check_step, interpolate_path
 
 log = logging.getLogger(__name__)
 
@@ -145,7 +145,7 @@ class RiskSegmentCost:
 
     def __init__(self, bound, step: float = DEFAULT_STEP):
         self.bound = bound
-        self.step = float(step)
+        self.step = check_step(step)
         self._cache: dict[bytes, float] = {}
 
     def costs(self, configs) -> np.ndarray:
@@ -162,15 +162,20 @@ class RiskSegmentCost:
     def __call__(self, a, b) -> np.ndarray:
         a = np.atleast_2d(a)
         b = np.atleast_2d(b)
-        interiors = [interpolate_path(np.stack([x, y]), self.step)[1:-1] for x, y in zip(a, b)]
+        interiors = [
+            interpolate_path(np.stack([x, y]), self.step, validate=False)[1:-1]
+            for x, y in zip(a, b)
+        ]
         counts = np.array([len(x) for x in interiors])
         flat = np.concatenate(interiors + [np.empty((0, a.shape[1]))])
-        inner = (
-            np.add.reduceat(self.costs(flat), np.r_[0, np.cumsum(counts)[:-1]])
-            if len(flat)
-            else np.zeros(len(a))
-        )
-        inner = np.where(counts > 0, inner, 0.0)  # reduceat copies the next value for empty groups
+        # Sum over the non-empty groups only: their starts are strictly increasing and inside
+        # ``flat``. (add.reduceat raises IndexError for a trailing empty group, whose start
+        # equals len(flat), and copies the next value for an empty group elsewhere.)
+        starts = np.cumsum(counts) - counts
+        inner = np.zeros(len(a))
+        full = counts > 0
+        if full.any():
+            inner[full] = np.add.reduceat(self.costs(flat), starts[full])
         return inner + 0.5 * (self.costs(a) + self.costs(b))
 
 

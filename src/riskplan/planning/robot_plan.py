@@ -67,6 +67,7 @@ __all__ = [
     "RobotPlan",
     "ScaledModel",
     "WallEnvironment",
+    "check_plan_budget",
     "configuration_weights",
     "plan_robot",
     "problem_configurations",
@@ -289,6 +290,62 @@ def _finite_positive(v, name):
     return float(v)
 
 
+#: least memory of one roadmap milestone (bytes): its coordinates, about k = 10 edges read back
+#: from OMPL (two int64 each, shared by two milestones), the search's adjacency lists and its
+#: distance, predecessor and settled arrays; OMPL's own copy of the graph comes on top
+MILESTONE_BYTES = 250.0
+#: least time of one configuration of one robot execution in the validation (s): a tenth of
+#: the measured 0.39 ms of a Cosserat solve (docs/reproduce.md, 2-core AMD EPYC, shared)
+ROBOT_CONFIG_S = 0.039e-3
+
+
+def check_plan_budget(
+    limits,
+    *,
+    n_milestones: int,
+    step: float,
+    resolution: float,
+    optimiser: OptimiserConfig,
+    executions: int = 0,
+) -> None:
+    """Refuse a plan whose work exceeds the budget (:mod:`riskplan.budget`), before any
+    work, naming the option: the roadmap (``--milestones``; its motion checks at
+    ``--resolution``, a motion about the typical neighbour distance ``diag / n^(1/m)`` long),
+    the trajectory (``--step``; estimated for a path across the displacement box's diagonal),
+    the optimiser (:func:`~riskplan.planning.bo.check_optimiser_budget`) and the validation
+    (``--executions`` of the nominal and the optimised trajectory on the robot)."""
+    from riskplan.budget import check_budget
+    from riskplan.planning.bo import MOTION_STATE_BYTES, check_optimiser_budget
+
+    lim = np.asarray(limits, dtype=np.float64)
+    m = lim.shape[0]
+    diag = float(np.linalg.norm(lim[:, 1] - lim[:, 0]))
+    n = float(n_milestones)
+    check_budget(
+        f"a roadmap of {n_milestones} milestones", "--milestones", nbytes=n * MILESTONE_BYTES
+    )
+    neighbour = diag / max(n, 1.0) ** (1.0 / m)
+    states = neighbour / resolution + 1
+    check_budget(
+        f"motion checks at resolution {resolution:g} ({states:.3g} states per motion)",
+        "--resolution",
+        nbytes=states * MOTION_STATE_BYTES * m,
+    )
+    T = diag / step + 2
+    check_budget(
+        f"a trajectory of about {T:.3g} configurations at step {step:g}",
+        "--step",
+        nbytes=T * 8.0 * m * 4,  # the trajectory, its bounds, the optimiser's copies
+    )
+    check_optimiser_budget(optimiser, int(min(T, 2**62)), lim)
+    if executions:
+        check_budget(
+            f"{executions} robot executions of 2 trajectories of about {T:.3g} configurations",
+            "--executions",
+            seconds=2.0 * float(executions) * T * ROBOT_CONFIG_S,
+        )
+
+
 def plan_robot(
     model,
     environment,
@@ -364,6 +421,13 @@ def plan_robot(
     weights = as_array(weights, "weights", shape=(n,))
     if np.any(weights <= 0):
         raise InvalidInputError(f"weights: expected > 0, got {weights.tolist()}")
+    check_plan_budget(
+        box * weights[:, None],
+        n_milestones=n_milestones,
+        step=step,
+        resolution=resolution,
+        optimiser=optimiser,
+    )
     scaled = ScaledModel(model, weights, box)
     if start is None:
         start = np.clip(np.zeros(n), box[:, 0], box[:, 1])

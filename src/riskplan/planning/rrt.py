@@ -72,7 +72,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskplan._validation import as_array, as_generator
+from riskplan._validation import as_array, as_generator, check_count
 from riskplan.errors import (
     ConvergenceError,
     ElementInversionError,
@@ -332,9 +332,11 @@ class RRTOptions:
 
     def __post_init__(self):
         for name in ("n_controls", "max_iterations", "plans_per_tree"):
+            check_count(getattr(self, name), name, 1)  # junk types: named, not a TypeError
+        for name in ("goal_bias", "goal_depth", "control_margin"):
             v = getattr(self, name)
-            if int(v) != v or v < 1:
-                raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
+            if isinstance(v, bool) or not isinstance(v, int | float | np.integer | np.floating):
+                raise InvalidInputError(f"{name}: expected a number, got {v!r}")
         if not 0.0 <= self.goal_bias <= 1.0:
             raise InvalidInputError(
                 f"goal_bias: expected a value in [0, 1], got {self.goal_bias!r}"
@@ -685,10 +687,10 @@ def rrt_plans(
     from riskplan.parallel import map_tasks, spawn_seeds
 
     _check_sim(sim)
-    if int(n_plans) != n_plans or n_plans < 1:
-        raise InvalidInputError(f"n_plans: expected an integer >= 1, got {n_plans!r}")
-    if int(max_rounds) != max_rounds or max_rounds < 1:
-        raise InvalidInputError(f"max_rounds: expected an integer >= 1, got {max_rounds!r}")
+    n_plans = check_count(n_plans, "n_plans", 1)  # None, text, 1.5: named, not a TypeError
+    max_rounds = check_count(max_rounds, "max_rounds", 1)
+    if options is not None and not isinstance(options, RRTOptions):
+        raise InvalidInputError(f"options: expected an RRTOptions, got {type(options).__name__}")
     params = sim.nominal_params if params is None else params
     space = planning_space(sim) if space is None else space
     options = options or RRTOptions()

@@ -42,7 +42,10 @@ Estimation, per step ``t`` (each run restarts the simulator from a stored plan s
   second-order part lifts ``X_t`` to full numerical rank and ``A_t ≈ 0``; with 12 the
   prior stays on 14 directions), and the LQG-MP ``P(success)`` of the two differs by less
   than that of ``K = 52`` under another seed (docs/planning.md).
-  ``n_a_runs=2 * sim.state_dim`` restores the paper's.
+  ``n_a_runs=2 * sim.state_dim`` restores the paper's. A simulator may declare
+  ``a_max_rank`` (an int): at most that many singular directions of ``X_t`` are fitted
+  (the needle: 2, its control dimension; the deviations beyond the first-order span are
+  second order, and inverting their tiny singular values gave LQR gains of 10⁵).
 * ``B_t``: ``q`` runs from ``y*_t`` with ``u*_t + ε_j e_j``; column ``j`` is
   ``(x^j_{t+1} − x*_{t+1}) / ε_j`` (forward difference; ``ε_j → −ε_j`` at an upper bound).
   Default ``ε_j = 10⁻³ (high_j − low_j)``.
@@ -226,6 +229,7 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seed
     params = plan.params
     p = plan.reduced.shape[1]
     prior = np.eye(p) if a_prior == "identity" else np.zeros((p, p))
+    max_rank = getattr(sim, "a_max_rank", None)
     run = _stepper(sim)
     out = []
     for t, seed in zip(ts, seeds):
@@ -250,6 +254,8 @@ def _steps(sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seed
             X1 -= x_next[:, None]
             U, s, Vt = np.linalg.svd(X0, full_matrices=False)
             keep = s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
+            if max_rank is not None:
+                keep[max_rank:] = False  # singular values are sorted: keep the largest
             rank = int(keep.sum())
             if rank == 0:
                 A = prior.copy()

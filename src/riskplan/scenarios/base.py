@@ -323,25 +323,26 @@ class FEMScenario:
 class Simulator(Protocol):
     """What a planner, a linearisation and a Monte Carlo harness need from a scenario.
 
-    Dimensions: ``control_dim`` = q (controls u), ``state_dim`` = p (reduced state x),
-    ``obs_dim`` (measurements z).
+        Dimensions: ``control_dim`` = q (controls u), ``state_dim`` = p (reduced state x),
+        ``obs_dim`` (measurements z).
 
-    Optional members the control stage uses when present (:mod:`riskplan.control`):
-    ``observation_matrix (m, p)`` and ``sensing_cov (m, m)`` (the linear observation model),
-    ``collision_point_indices`` (``k`` pairs of indices of x that are 2-D points checked
-    against obstacles; default ``((0, 1),)``), ``goal_point_indices`` (the pair checked
-    against the goal; default ``(0, 1)``), ``obstacles(state)`` / ``goal(state)`` (deformed
-    polygons), ``in_collision(state)`` / ``in_goal(state)``, ``state_scale (p,)`` (acceptable
-    deviation of each component of x, the scale of the LQR's default Bryson weights),
-    ``collision_outline(state)`` (the body's outline in ``state`` as points that move with
-    interpolated deviations of the collision points, checked by LQG-MP instead of the bare
-    points: :func:`riskplan.control.lqgmp.body_points`),
-    ``a_prior`` (``"identity"`` or ``"zero"``: what :func:`riskplan.control.linearize` assumes
-    for state directions its control perturbations cannot excite — a deviation that persists,
-    or one the next step forgets; default ``"identity"``), ``transfer_state(state, params)``
-    (``state`` as a start on the mesh of ``params``, so that ``linearize`` can run
-    mesh-size draws of ``M_t`` on their own meshes), ``step_near(state, u, params, near)``
-    (``step`` with the solver started from ``near``).
+        Optional members the control stage uses when present (:mod:`riskplan.control`):
+        ``observation_matrix (m, p)`` and ``sensing_cov (m, m)`` (the linear observation model),
+        ``collision_point_indices`` (``k`` pairs of indices of x that are 2-D points checked
+        against obstacles; default ``((0, 1),)``), ``goal_point_indices`` (the pair checked
+        against the goal; default ``(0, 1)``), ``obstacles(state)`` / ``goal(state)`` (deformed
+        polygons), ``in_collision(state)`` / ``in_goal(state)``, ``state_scale (p,)`` (acceptable
+        deviation of each component of x, the scale of the LQR's default Bryson weights),
+        ``collision_outline(state)`` (the body's outline in ``state`` as points that move with
+        interpolated deviations of the collision points, checked by LQG-MP instead of the bare
+        points: :func:`riskplan.control.lqgmp.body_points`),
+        ``a_prior`` (``"identity"`` or ``"zero"``: what :func:`riskplan.control.linearize` assumes
+        for state directions its control perturbations cannot excite — a deviation that persists,
+        or one the next step forgets; default ``"identity"``), ``a_max_rank`` (at most that many
+    directions of the A-runs' deviations are fitted), ``transfer_state(state, params)``
+        (``state`` as a start on the mesh of ``params``, so that ``linearize`` can run
+        mesh-size draws of ``M_t`` on their own meshes), ``step_near(state, u, params, near)``
+        (``step`` with the solver started from ``near``).
     """
 
     control_dim: int

@@ -98,3 +98,30 @@ def test_deformation_sizes_follow_the_force(arc):
     assert nom["robot"][0] > 1e-3 and nom["goal_centre"][0] > 0.0
     for key in ("robot", "goal_centre", "obstacles"):
         assert force[key][0] <= force[key][1] <= 2 * nom[key][1] + TOL["float64_abs"]["atol"]
+
+
+def test_sensitivity_at_a_tiny_scale(tmp_path):
+    """Every variant runs and the table has a rate per method and factor; the actuation
+    variants reuse the ×1 candidates and change only case 3; a rerun reads the stores."""
+    from riskplan.experiments.fig6 import METHODS, ScenarioScale
+    from riskplan.experiments.needle_study import sensitivity
+
+    tiny = ScenarioScale(
+        n_candidates=1,
+        n_executions=2,
+        batch_size=2,
+        lin_samples=2,
+        goal_samples=50,
+        plans_per_tree=1,
+    )
+    r = sensitivity(tiny, tmp_path, factors=(0.5, 1.0), backend="serial")
+    for kind in ("actuation", "force"):
+        assert set(r[kind]) == {0.5, 1.0}
+        for f in (0.5, 1.0):
+            assert set(r[kind][f]) == set(METHODS)
+            assert all(v is None or 0.0 <= v <= 1.0 for v in r[kind][f].values())
+    base, act = r["runs"]["act1_force1"], r["runs"]["act0.5_force1"]
+    assert set(act["cases"]) == {"actuation"} and act["plan_steps"] == base["plan_steps"]
+    assert set(r["actuation_everywhere"]) == set(METHODS)
+    again = sensitivity(tiny, tmp_path, factors=(0.5, 1.0), backend="serial")
+    assert again["force"] == r["force"]

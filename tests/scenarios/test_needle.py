@@ -150,9 +150,9 @@ def test_material_pose_follows_car_kinematics(needle, tol):
 
 
 def test_world_pose_against_independent_interpolation(needle, tol):
-    """World pose = X + u(X) with u interpolated by scikit-fem's own probes, and heading of
-    F t with F t = t + (u(X + h t) − u(X − h t)) / 2h (central difference of the P1
-    interpolant along t, exact inside one element)."""
+    """World position = X + u(X) with u interpolated by scikit-fem's own probes; world_pose's
+    heading of F t against F t = t + (u(X + h t) − u(X − h t)) / 2h (central difference of
+    the P1 interpolant along t, exact inside one element)."""
     import skfem
 
     p = SimParams(youngs_modulus=45.0, poissons_ratio=0.35)
@@ -166,9 +166,17 @@ def test_world_pose_against_independent_interpolation(needle, tol):
     P = basis.probes(pts.T)
     u = np.stack([P @ s.displacement[:, 0], P @ s.displacement[:, 1]], axis=1)
     np.testing.assert_allclose(s.pose[:2], X + u[0], **tol["float64_ref"])
+    assert s.pose[2] == th  # the world heading is the material heading (module docstring)
+    # world_pose's deformed heading (direction of F t), measured in docs/scenarios.md
+    from riskplan.scenarios.needle import world_pose
+
+    d = needle.mesh_data(175)
+    elem, lam = d.locator.locate(X)
+    w = world_pose(s.material, s.displacement[d.mesh.triangles[elem]], lam, d.shape_gradients[elem])
+    np.testing.assert_allclose(w[:2], s.pose[:2], **tol["float64_ref"])
     ft = t + (u[1] - u[2]) / (2 * h)
     np.testing.assert_allclose(
-        s.pose[2], th + math.atan2(t[0] * ft[1] - t[1] * ft[0], t @ ft), **tol["fd_jacobian"]
+        w[2], th + math.atan2(t[0] * ft[1] - t[1] * ft[0], t @ ft), **tol["fd_jacobian"]
     )
     assert np.linalg.norm(s.pose[:2] - X) > 1e-3  # the tissue did carry the robot
 

@@ -44,7 +44,10 @@ Estimation, per step ``t`` (each run restarts the simulator from a stored plan s
   manipulation scenario (``p = 32``, ``q = 6``) the runs excite the six directions
   ``[J_t; I] w`` and the simulator's prior supplies the other 26 (tests check ``A_t``
   against finite differences of the step). ``n_a_runs=2 * sim.state_dim`` restores the
-  paper's.
+  paper's. A simulator may declare ``a_max_rank`` (an int): at most that many singular
+  directions of ``X_t`` are fitted (the needle: 2, its control dimension; the deviations beyond
+  the first-order span are second order, and inverting their tiny singular values gave LQR
+  gains of 10⁵).
 * ``B_t``: ``q`` runs from ``y*_t`` with ``u*_t + ε_j e_j``; column ``j`` is
   ``(x^j_{t+1} − x*_{t+1}) / ε_j`` (forward difference; ``ε_j → −ε_j`` at an upper bound).
   Default ``ε_j = 10⁻³ (high_j − low_j)``.
@@ -322,6 +325,7 @@ def _steps(
     params = plan.params
     p = plan.reduced.shape[1]
     fixed = None if callable(a_prior) else _fixed_prior(a_prior, p)
+    max_rank = getattr(sim, "a_max_rank", None)
     run = _stepper(sim)
     out = []
     for t, seed in zip(ts, seeds):
@@ -352,6 +356,8 @@ def _steps(
                 # them X_t holds second-order parts, whose pseudo-inverse would replace the
                 # exact prior by a fit of curvature divided by tiny singular values
                 keep[W_factor.shape[0] :] = False
+            if max_rank is not None:
+                keep[max_rank:] = False  # singular values are sorted: keep the largest
             rank = int(keep.sum())
             if rank == 0:
                 A = prior.copy()

@@ -355,8 +355,13 @@ def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
     starts = np.stack([e[0] for e in E])[:, None]  # (T, 1, E, 2)
     ends = np.stack([e[1] for e in E])[:, None]
     pts, covs = _mix(col, W, base, mean[1:, :p], cov[1:])
-    ok = np.linalg.eigvalsh(covs).min(axis=-1) > 1e-24
-    covs = np.where(ok[..., None, None], covs, np.eye(2))
+    ev = np.linalg.eigvalsh(covs)
+    ok = ev[..., -1] > 1e-24
+    # a covariance of rank 1 (e.g. the needle under material draws: the tissue's offset of
+    # the robot only scales with 1/E) has no Cholesky factor; only such a near-singular one
+    # gets a jitter of 1e-9 of its largest variance (its spread direction keeps its distances)
+    jitter = np.where(ev[..., 0] <= 1e-12 * ev[..., -1], 1e-9 * ev[..., -1], 0.0)
+    covs = np.where(ok[..., None, None], covs + jitter[..., None, None] * np.eye(2), np.eye(2))
     c, inside = sigma_distances(starts, ends, pts, covs)
     c = np.where(ok, c, np.inf)
     cmin = c.min(axis=1)

@@ -172,6 +172,7 @@ def sensitivity(
     root,
     *,
     factors=(0.5, 1.0, 2.0),
+    other_reading: bool = True,
     seed: int = 0,
     backend: str = "local",
     workers: int | None = None,
@@ -179,40 +180,85 @@ def sensitivity(
 ) -> dict:
     """Fig. 6 of the needle for each actuation-noise scale and each interaction-force scale
     in ``factors`` (one at a time, the other at 1), at ``scale``
-    (:class:`~riskplan.experiments.fig6.ScenarioScale`), each in its own resumable store
-    under ``root``. Returns ``{"actuation": {f: {method: mean rate}}, "force": {...}}``
-    (rates averaged over the five cases; ``None`` where a method does not apply)."""
+    (:class:`~riskplan.experiments.fig6.ScenarioScale`), each variant in its own resumable
+    store under ``root``.
+
+    Under our reading of the cases actuation noise acts in case 3 only, so an actuation
+    variant changes only that case (the plans are made without noise and are the same):
+    it runs the ``actuation`` case alone on the ×1 run's candidates and takes the other
+    four cases from the ×1 run. A
+    force variant changes the plans and every case, and runs all five. ``other_reading``:
+    also run the four other cases with actuation noise in every draw (the other reading).
+
+    Returns ``{"actuation": {f: {method: mean rate}}, "force": {...}, "runs": {tag:
+    run_scenario result}}`` (rates averaged over the five cases; ``None`` where a method
+    does not apply) and, with ``other_reading``, ``"actuation_everywhere": {method: mean
+    rate}`` over the five cases (case 3 from the ×1 run).
+    """
     from pathlib import Path
 
-    from riskplan.experiments.fig6 import METHODS, run_scenario
-    from riskplan.experiments.store import ResultStore
+    from riskplan.experiments.fig6 import EVAL_CASES, METHODS, run_scenario
 
     root = Path(root)
-    out: dict = {"actuation": {}, "force": {}}
     runs: dict = {}
-    for kind in ("actuation", "force"):
-        for f in factors:
-            key = (1.0, 1.0) if f == 1.0 else ((f, 1.0) if kind == "actuation" else (1.0, f))
-            if key not in runs:
-                tag = f"act{key[0]:g}_force{key[1]:g}"
-                store = ResultStore(
-                    root / tag, {"study": "needle-sensitivity", "variant": tag, "seed": seed}
-                )
-                runs[key] = run_scenario(
-                    "needle",
-                    scale,
-                    store,
-                    seed=seed,
-                    backend=backend,
-                    workers=workers,
-                    progress=progress,
-                    make_sim=needle_variant(actuation_scale=key[0], force_scale=key[1]),
-                )
-            cases = runs[key]["cases"]
-            out[kind][f] = {
-                m: None
-                if any(v[m] is None for v in cases.values())
-                else float(np.mean([v[m]["rate"] for v in cases.values()]))
-                for m in METHODS
-            }
+
+    from dataclasses import asdict
+
+    from riskplan.experiments.fig6 import BlobStore
+    from riskplan.experiments.store import ResultStore
+
+    def store_of(tag):
+        config = {
+            "study": "needle-sensitivity",
+            "variant": tag,
+            "seed": seed,
+            "scale": asdict(scale),
+        }
+        return ResultStore(root / tag, config)
+
+    def run(tag, cases, plans_from=None, **variant):
+        if tag not in runs:
+            store = store_of(tag)
+            if plans_from is not None:
+                # the same planning parameters: the same candidates (no noise in planning)
+                src, dst = BlobStore(store_of(plans_from)), BlobStore(store)
+                for s in ("deforming", "plain", "static"):
+                    key = f"fig6.needle.plans.{s}"
+                    if dst.get(key) is None:
+                        dst.put(key, src.get(key))
+            runs[tag] = run_scenario(
+                "needle",
+                scale,
+                store,
+                seed=seed,
+                backend=backend,
+                workers=workers,
+                progress=progress,
+                cases=cases,
+                make_sim=needle_variant(**variant),
+            )
+        return runs[tag]["cases"]
+
+    def mean(cases: dict) -> dict:
+        return {
+            m: None
+            if any(cases[c][m] is None for c in EVAL_CASES)
+            else float(np.mean([cases[c][m]["rate"] for c in EVAL_CASES]))
+            for m in METHODS
+        }
+
+    base = run("act1_force1", EVAL_CASES)
+    out: dict = {"actuation": {}, "force": {}}
+    for f in factors:
+        if f == 1.0:
+            out["actuation"][f] = out["force"][f] = mean(base)
+            continue
+        act = run(f"act{f:g}_force1", ("actuation",), "act1_force1", actuation_scale=f)
+        out["actuation"][f] = mean({**base, **act})
+        out["force"][f] = mean(run(f"act1_force{f:g}", EVAL_CASES, force_scale=f))
+    if other_reading:
+        others = tuple(c for c in EVAL_CASES if c != "actuation")
+        every = run("actuation_everywhere", others, "act1_force1", actuation_everywhere=True)
+        out["actuation_everywhere"] = mean({**base, **every})
+    out["runs"] = runs
     return out

@@ -323,8 +323,8 @@ class FEMScenario:
 class Simulator(Protocol):
     """What a planner, a linearisation and a Monte Carlo harness need from a scenario.
 
-    Dimensions: ``control_dim`` = q (controls u), ``state_dim`` = p (reduced state x),
-    ``obs_dim`` (measurements z).
+        Dimensions: ``control_dim`` = q (controls u), ``state_dim`` = p (reduced state x),
+        ``obs_dim`` (measurements z).
 
     Optional members the control stage uses when present (:mod:`riskplan.control`):
     ``observation_matrix (m, p)`` and ``sensing_cov (m, m)`` (the linear observation model),
@@ -340,7 +340,8 @@ class Simulator(Protocol):
     for state directions its control perturbations cannot excite — a deviation that persists,
     or one the next step forgets; default ``"identity"``; or a method
     ``a_prior(y_next, params) -> (p, p)``, the exact structure of ``A_t`` at the plan's next
-    state), ``transfer_state(state, params)``
+    state), ``a_max_rank`` (at most that many directions of the A-runs' deviations are
+    fitted), ``transfer_state(state, params)``
     (``state`` as a start on the mesh of ``params``, so that ``linearize`` can run
     mesh-size draws of ``M_t`` on their own meshes), ``step_near(state, u, params, near)``
     (``step`` with the solver started from ``near``).

@@ -6,7 +6,7 @@ tissue, so where the tissue goes, the robot goes.
 
 Robot (paper V-A, Euler update with time step τ), **in the tissue's material frame**: the
 material pose ``(X, Y, Θ)`` (reference coordinates of the material point the tip is at,
-heading measured in the reference configuration) follows the paper's car,
+heading measured in the reference configuration) follows the paper's car::
 
     X_{t+1} = X_t + τ v_t cos Θ_t
     Y_{t+1} = Y_t + τ v_t sin Θ_t
@@ -23,7 +23,7 @@ direction of motion, ``f = f_int (cos Θ, sin Θ)``, applied as a point load at 
 material point ``X`` under the robot (consistent nodal forces ``λ_a(X) f``); the
 quasi-static displacement is ``u = K⁻¹ f``.
 
-World pose (what is sensed and what meets the deformed obstacles and goal):
+World pose (what is sensed and what meets the deformed obstacles and goal)::
 
     x = X + u(X)                      (P1 interpolation of the nodal displacement)
     θ = Θ

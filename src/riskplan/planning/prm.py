@@ -144,8 +144,10 @@ def check_step(step, name: str = "step") -> float:
     if isinstance(step, bool) or not isinstance(step, int | float | np.integer | np.floating):
         raise InvalidInputError(f"{name}: expected a number, got {step!r}")
     s = float(step)
-    if not (math.isfinite(s) and s >= np.finfo(np.float64).tiny):
+    if not (math.isfinite(s) and s > 0):
         raise InvalidInputError(f"{name}: expected a finite number > 0, got {step!r}")
+    if s < np.finfo(np.float64).tiny:
+        raise InvalidInputError(f"{name}: {step!r} is subnormal; expected a normal float > 0")
     return s
 
 

@@ -77,6 +77,7 @@ TOL = {
     "closest_point": dict(rtol=1e-7, atol=1e-7),  # accelerated vs brute-force closest points
     "orthonormality": dict(rtol=1e-7, atol=1e-6),  # R^T R = I from arbitrary parsed quaternions
     "chord_length": dict(rtol=1e-3, atol=0.0),  # 40 chords of an arc vs its length
+    "rounded_constants": dict(rtol=0.0, atol=1e-4),  # a file's 5-digit angles (2.0944 for 2 pi/3)
     "cutoff_tail": dict(rtol=1e-8, atol=1e-15),  # bound with the chi cut-off vs without
     "extruded_2d": dict(rtol=1e-9, atol=1e-14),  # 2-D bound vs the extruded 3-D scene's
     "scipy_reference": dict(rtol=1e-8, atol=1e-12),  # same formula as scipy's implementation

@@ -13,7 +13,8 @@ layouts, and its planning problems (``[problem]``, ``[environment]``,
 
 Key by key (docs/robots.md has the table with units): ``E`` -> ``youngs_modulus``, ``nu`` ->
 ``poisson_ratio``, ``length``, ``length_discretization`` -> ``step``, ``ro``/``ri`` ->
-``outer_radius``/``inner_radius``; a tendon's ``C`` (angle polynomial, rad) -> ``theta``,
+``outer_radius``/``inner_radius``; a tendon's ``C`` (angle polynomial, rad) -> ``theta = pi/2 - C``
+(the lab measures the angle from the body y axis towards x, :func:`lab_angle_to_theta`),
 ``D`` (distance polynomial, m) -> ``radius``, ``[min_length, max_length]`` (length change
 ``home - current``, m, positive = pulled in) -> ``displacement_limits``, ``max_tension`` (N);
 ``tendon_robot.radius`` -> ``collision_radius``; ``enable_rotation`` / ``enable_retraction``
@@ -27,6 +28,8 @@ key for an unknown one.
 
 from __future__ import annotations
 
+import math
+
 from riskplan.errors import RobotDescriptionError
 from riskplan.robots.params import (
     PROBLEM_TABLES,
@@ -39,6 +42,7 @@ __all__ = [
     "BACKBONE_DEFAULTS",
     "TENDON_DEFAULTS",
     "is_lab_layout",
+    "lab_angle_to_theta",
     "lab_robot_table",
     "parse_lab_document",
 ]
@@ -61,6 +65,22 @@ _NESTED_PROBLEM_KEYS = {
     "min_rotation_change",
     "min_retraction_change",
 }
+
+
+def lab_angle_to_theta(c):
+    """riskplan's routing angle polynomial from the lab's ``C``: ``theta(s) = pi/2 - C(s)``.
+
+    The lab places tendon i at ``D(s) (sin C(s), cos C(s), 0)`` in the body frame
+    (``tendon::get_r_info`` in Kuntz-Lab/interactive-rate-tendons), riskplan at
+    ``r(s) (cos theta(s), sin theta(s), 0)``; ``(sin C, cos C) = (cos(pi/2 - C), sin(pi/2 - C))``.
+    Coefficients ``[c0, c1, ...]`` become ``[pi/2 - c0, -c1, ...]``. A value that is not a list
+    of numbers is passed through unchanged for the parser to refuse with the key's name.
+    """
+    if not isinstance(c, list) or not c:
+        return c
+    if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in c):
+        return c
+    return [math.pi / 2 - float(c[0])] + [-float(v) for v in c[1:]]
 
 
 def is_lab_layout(doc: dict) -> bool:
@@ -134,6 +154,8 @@ def parse_lab_document(doc: dict, *, default_name: str = "robot") -> RobotParams
             rename[f"tendons[{i}].{nat}"] = f"{path}.{lab}"
             if lab in td:
                 nt[nat] = td[lab]
+        if "theta" in nt:
+            nt["theta"] = lab_angle_to_theta(nt["theta"])
         rename[f"tendons[{i}].displacement_limits"] = f"{path}.min_length"
         nt["displacement_limits"] = [td["min_length"], td["max_length"]]
         for lab in ("min_length", "max_length"):

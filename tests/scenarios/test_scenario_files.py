@@ -202,3 +202,43 @@ def test_manipulation_file_material_and_noise_reach_the_scenario(tmp_path):
     assert sim.nominal_params.youngs_modulus == 80.0
     assert np.allclose(np.diag(sim.distribution.variance), 1e-4, **TOL_EXACT)
     assert geo.polygon_area(sim.config.outline) > 0
+
+
+def test_cli_simulate_and_plan_take_a_scenario_file(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from riskplan.cli import app
+
+    runner = CliRunner()
+    scene = _write(tmp_path, SMALL)
+    out = tmp_path / "sim"
+    r = runner.invoke(
+        app,
+        [
+            "tissue",
+            "simulate",
+            "--scenario",
+            str(scene),
+            "--out",
+            str(out),
+            "--steps",
+            "4",
+            "--max-frames",
+            "2",
+        ],
+    )
+    assert r.exit_code == 0, r.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["steps"] == 4 and (out / "needle.gif").is_file()
+    # a bad file fails before anything is written
+    bad = tmp_path / "typo.toml"
+    bad.write_text(SMALL.replace("r_min", "rmin"))
+    for cmd in (["tissue", "simulate"], ["plan", "tissue", "--plans", "2"]):
+        out = tmp_path / f"out_{cmd[0]}"
+        r = runner.invoke(app, [*cmd, "--scenario", str(bad), "--out", str(out)])
+        assert isinstance(r.exception, InvalidInputError)
+        msg = str(r.exception)
+        assert "unknown key 'robot.rmin' (did you mean 'r_min'?)" in msg and str(bad) in msg
+        assert not out.exists()

@@ -242,3 +242,20 @@ def test_cli_simulate_and_plan_take_a_scenario_file(tmp_path):
         msg = str(r.exception)
         assert "unknown key 'robot.rmin' (did you mean 'r_min'?)" in msg and str(bad) in msg
         assert not out.exists()
+
+
+def test_material_cases_centre_on_the_files_material(tmp_path):
+    """A file's nominal E = 80: the material cases draw around 80 with the paper's relative
+    spread (variance 75 (80/50)^2), not around the paper's 50; the paper's scene keeps
+    N(50, 75) exactly."""
+    paper = make_scenario("needle", "material-high").distribution
+    assert (paper.youngs_mean, paper.youngs_var, paper.poisson_mean) == (50.0, 75.0, 0.4)
+    text = (
+        shipped_path("needle").read_text().replace("youngs_modulus = 50.0", "youngs_modulus = 80.0")
+    )
+    dist = make_scenario(str(_write(tmp_path, text)), "material-high").distribution
+    assert dist.youngs_mean == 80.0 and dist.planning_params.youngs_modulus == 80.0
+    assert np.isclose(dist.youngs_var, 75.0 * (80.0 / 50.0) ** 2, **TOL_EXACT)
+    draws = np.array([p.youngs_modulus for p in dist.sample_many(400, seed=1)])
+    # sample mean within 4 standard errors of 80
+    assert abs(draws.mean() - 80.0) < 4.0 * math.sqrt(dist.youngs_var / len(draws))

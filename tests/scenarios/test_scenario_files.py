@@ -259,3 +259,42 @@ def test_material_cases_centre_on_the_files_material(tmp_path):
     draws = np.array([p.youngs_modulus for p in dist.sample_many(400, seed=1)])
     # sample mean within 4 standard errors of 80
     assert abs(draws.mean() - 80.0) < 4.0 * math.sqrt(dist.youngs_var / len(draws))
+
+
+def _obj(path, verts, faces):
+    lines = [f"v {x} {y} {z}" for x, y, z in verts] + [
+        f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces
+    ]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_manipulation_tissue_from_a_mesh_file(tmp_path):
+    """A planar OBJ of the paper's object (fan triangles listed clockwise, with an interior
+    vertex): its boundary loop is the paper's outline, counter-clockwise, and the fixed
+    edge given by its two vertices is the paper's."""
+    pytest.importorskip("trimesh")
+    outline = [[0.0, 0.0], [0.7, 0.0], [1.0, 0.3], [1.0, 1.0], [0.0, 1.0]]
+    verts = [(x, y, 0.2) for x, y in outline] + [(0.5, 0.5, 0.2)]
+    faces = [(5, (i + 1) % 5, i) for i in range(5)]  # clockwise
+    _obj(tmp_path / "object.obj", verts, faces)
+    text = shipped_path("manipulation").read_text()
+    text = text.replace(
+        "outline = [[0.0, 0.0], [0.7, 0.0], [1.0, 0.3], [1.0, 1.0], [0.0, 1.0]]",
+        'mesh = "object.obj"',
+    ).replace("fixed_edge = 1", "fixed = [[1.0, 0.3], [0.7, 0.0]]")
+    kind, cfg = read_scenario_config(_write(tmp_path, text))
+    paper = ManipulationConfig()
+    assert kind == "manipulation" and len(cfg.outline) == 5
+    assert np.isclose(geo.polygon_area(cfg.outline), geo.polygon_area(paper.outline), **TOL_EXACT)
+    assert {tuple(p) for p in cfg.outline.tolist()} == {tuple(p) for p in outline}
+    seg = {tuple(p) for p in cfg.fixed_segment.tolist()}
+    assert seg == {tuple(p) for p in paper.fixed_segment.tolist()}
+    # not planar: rejected, naming the field
+    _obj(tmp_path / "object.obj", [*verts[:5], (0.5, 0.5, 0.4)], faces)
+    with pytest.raises(InvalidInputError, match=r"tissue.mesh: object.obj is not planar"):
+        read_scenario_config(tmp_path / "bad.toml")
+    # a fixed 'edge' that is not one
+    bad = text.replace("fixed = [[1.0, 0.3], [0.7, 0.0]]", "fixed = [[1.0, 0.3], [0.0, 0.0]]")
+    _obj(tmp_path / "object.obj", verts, faces)
+    with pytest.raises(InvalidInputError, match=r"tissue.fixed: the two vertices must be"):
+        read_scenario_config(_write(tmp_path, bad))

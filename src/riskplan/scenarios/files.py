@@ -46,7 +46,7 @@ _NEEDLE_TISSUE = {"width", "height"}
 _NEEDLE_ROBOT = {"start", "tau", "r_min"}
 _NEEDLE_CONTROLS = {"v_max", "phi_max"}
 _NEEDLE_NOISE = {"sensing_std", "actuation_std"}
-_MANIP_TISSUE = {"outline", "fixed_edge", "target"}
+_MANIP_TISSUE = {"outline", "mesh", "fixed_edge", "fixed", "target"}
 _MANIP_MANIP = {"points", "patch_radius"}
 _MANIP_CONTROLS = {"f_max", "df_max"}
 _MANIP_NOISE = {"sensing_std", "actuation_std", "n_boundary"}
@@ -300,21 +300,101 @@ def _segment_distance(p: np.ndarray, outline: np.ndarray) -> float:
     return float(np.sqrt(((p - (a + t[:, None] * ab)) ** 2).sum(1)).min())
 
 
+def _mesh_outline(r: _Reader, name) -> np.ndarray:
+    """The outline ``(n, 2)`` of a planar triangle mesh file (``tissue.mesh``, relative to
+    the scenario file; any format trimesh reads: OBJ, STL, PLY, OFF): the loop of its
+    boundary edges (edges of one triangle), counter-clockwise, starting at the vertex the
+    file lists first among them, in *L* like the other lengths. The mesh must lie in a
+    plane ``z = const`` and have one boundary loop (no holes). The scenario meshes this
+    outline at its own element count (the mesh uncertainty case varies it), so the file
+    gives the shape, not the elements."""
+    from riskplan.errors import require
+
+    if not isinstance(name, str):
+        r.fail("tissue.mesh", f"expected a file name, got {name!r}")
+    path = (r.path.parent / name).resolve()
+    if not path.is_file():
+        r.fail("tissue.mesh", f"no such file {str(path)!r}")
+    trimesh = require("trimesh", "mesh")
+    try:
+        mesh = trimesh.load(str(path), force="mesh", process=False)
+    except Exception as exc:  # a reader's own error types differ per format
+        r.fail("tissue.mesh", f"cannot read {path.name}: {exc}")
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    f = np.asarray(mesh.faces, dtype=np.int64)
+    if len(f) == 0:
+        r.fail("tissue.mesh", f"{path.name} has no triangles")
+    if v.shape[1] == 3:
+        z = v[:, 2]
+        if float(np.ptp(z)) > 1e-9 * max(float(np.ptp(v[:, :2], axis=0).max()), 1e-300):
+            r.fail("tissue.mesh", f"{path.name} is not planar (z varies by {float(np.ptp(z))})")
+    edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    key = np.sort(edges, axis=1)
+    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    boundary = edges[counts[inv.ravel()] == 1]
+    nxt = {}
+    for a, b in boundary.tolist():
+        if a in nxt:
+            r.fail("tissue.mesh", f"{path.name}: the boundary is not a single simple loop")
+        nxt[a] = b
+    start = int(boundary[0, 0])
+    loop = [start]
+    while nxt.get(loop[-1], start) != start:
+        loop.append(nxt[loop[-1]])
+        if len(loop) > len(boundary):
+            r.fail("tissue.mesh", f"{path.name}: the boundary is not a single simple loop")
+    if len(loop) != len(boundary):
+        r.fail(
+            "tissue.mesh",
+            f"{path.name}: the boundary has {len(boundary)} edges but its "
+            f"first loop {len(loop)} (holes or several pieces are not supported)",
+        )
+    outline = v[loop, :2] * r.length
+    if geo.polygon_area(outline) < 0:
+        outline = outline[::-1].copy()
+    return outline
+
+
 def _manipulation_config(r: _Reader):
     from riskplan.scenarios.manipulation import ManipulationConfig
 
     r.check_keys(r.data, _TOP_MANIP | {"solver"}, "")
     t = r.table("tissue", _MANIP_TISSUE)
-    outline = r.points(r.get(t, "tissue", "outline", required=True), "tissue.outline")
+    if ("outline" in t) == ("mesh" in t):
+        r.fail("tissue", "expected exactly one of outline, mesh")
+    if "mesh" in t:
+        outline = _mesh_outline(r, t["mesh"])
+    else:
+        outline = r.points(t["outline"], "tissue.outline")
     if len(outline) < 3:
         r.fail("tissue.outline", "need at least 3 vertices")
     if geo.polygon_area(outline) <= 0:
         r.fail("tissue.outline", "must be counter-clockwise with a positive area")
-    fixed = r.integer(r.get(t, "tissue", "fixed_edge", required=True), "tissue.fixed_edge", 0)
-    if fixed >= len(outline):
+    if ("fixed_edge" in t) == ("fixed" in t):
         r.fail(
-            "tissue.fixed_edge", f"expected an edge index in [0, {len(outline) - 1}], got {fixed}"
+            "tissue", "expected exactly one of fixed_edge (an index), fixed (two outline vertices)"
         )
+    if "fixed_edge" in t:
+        fixed = r.integer(t["fixed_edge"], "tissue.fixed_edge", 0)
+        if fixed >= len(outline):
+            r.fail(
+                "tissue.fixed_edge",
+                f"expected an edge index in [0, {len(outline) - 1}], got {fixed}",
+            )
+    else:
+        ends = r.points(t["fixed"], "tissue.fixed", 2)
+        scale = float(np.max(outline.max(0) - outline.min(0)))
+        near = [int(np.argmin(((outline - e) ** 2).sum(1))) for e in ends]
+        if any(np.linalg.norm(outline[k] - e) > 1e-9 * scale for k, e in zip(near, ends)):
+            r.fail("tissue.fixed", "both ends must be vertices of the outline")
+        a, b = near
+        n = len(outline)
+        if (a + 1) % n == b:
+            fixed = a
+        elif (b + 1) % n == a:
+            fixed = b
+        else:
+            r.fail("tissue.fixed", "the two vertices must be the ends of one outline edge")
     target = r.point(r.get(t, "tissue", "target", required=True), "tissue.target")
     if not geo.points_in_polygon(np.array([target]), outline)[0]:
         r.fail("tissue.target", "lies outside the tissue outline")

@@ -31,7 +31,11 @@ def register(app: typer.Typer) -> None:
 
     @sub.command("simulate")
     def simulate(
-        scenario: str = typer.Option("needle", "--scenario", help="needle | manipulation"),
+        scenario: str = typer.Option(
+            "needle",
+            "--scenario",
+            help="needle | manipulation | a scenario file (.toml, docs/scenarios.md)",
+        ),
         controls: str = typer.Option(
             "random",
             "--controls",
@@ -69,6 +73,7 @@ def register(app: typer.Typer) -> None:
         from riskplan.scenarios.plotting import save_frames, save_gif
         from riskplan.scenarios.registry import make_scenario
 
+        # a scenario file is read and checked here, before any work
         sim = make_scenario(scenario, case)
         if steps is not None and steps < 1:
             raise InvalidInputError(f"--steps: expected >= 1, got {steps}")
@@ -79,7 +84,7 @@ def register(app: typer.Typer) -> None:
         check_output_folder(out, "--out")
         params = sim.sample_params(seed)
         if controls == "random":
-            n = steps or (30 if scenario == "needle" else 20)
+            n = steps or (30 if sim.name == "needle" else 20)
             from riskplan.budget import check_budget
 
             # every state of the rollout is kept (for the frames): the mesh displacement,
@@ -100,14 +105,14 @@ def register(app: typer.Typer) -> None:
                     )
                 u = u[:steps]
         with output_folder(out), progress_bar() as bar:
-            task = bar.add_task(f"simulate {scenario}", total=len(u), status="")
+            task = bar.add_task(f"simulate {sim.name}", total=len(u), status="")
 
             def on_step(state):
                 bar.update(task, advance=1, status=f"goal dist {sim.goal_distance(state):.3f}")
 
             states = rollout(sim, sim.initial_state(params), u, params, on_step=on_step)
             frames = save_frames(sim, states, out / "frames", max_frames=max_frames)
-            gif = save_gif(sim, states, out / f"{scenario}.gif", max_frames=max_frames)
+            gif = save_gif(sim, states, out / f"{sim.name}.gif", max_frames=max_frames)
             collided = [s.t for s in states if sim.in_collision(s)]
             inside = getattr(sim, "inside", None)
             left = next((s.t for s in states if inside is not None and not inside(s)), None)

@@ -384,18 +384,12 @@ class TreeResult:
 def actuation_std(sim) -> np.ndarray | None:
     """``(q,)`` standard deviations of ``sim``'s actuation noise, or ``None`` if unknown.
 
-    ``sim.actuation_cov()`` (the manipulation scenario: ``0.1 df_max``) if it has one, else
-    for the needle :data:`riskplan.scenarios.uncertainty.NEEDLE_ACTUATION_STD`
-    (``0.05``, 5°)."""
+    ``sim.actuation_cov()`` if it has one: the manipulation scenario's ``0.1 df_max``, the
+    needle's ``config.actuation_std`` (``(0.1 v_max, 5° · φ_max / 60°)`` unless set: the
+    paper's ``(0.05, 5°)``, scaled with the control bounds)."""
     cov = getattr(sim, "actuation_cov", None)
     if callable(cov):
         return np.sqrt(np.diag(np.asarray(cov(), dtype=np.float64)))
-    from riskplan.scenarios.needle import NeedleScenario
-
-    if isinstance(sim, NeedleScenario):
-        from riskplan.scenarios.uncertainty import NEEDLE_ACTUATION_STD
-
-        return np.asarray(NEEDLE_ACTUATION_STD, dtype=np.float64)
     return None
 
 

@@ -91,7 +91,12 @@ class ManipulationConfig:
     increment per step (the control), a quarter of ``f_max`` so that swinging a force from
     zero to its bound takes at least four steps (the rate limit the RRT used when controls
     were absolute forces: a quasi-static step jumps to the new equilibrium, and a larger
-    jump would skip configurations the collision check never sees).
+    jump would skip configurations the collision check never sees);
+    ``sensing_std``: standard deviation of each boundary-point measurement, by default
+    ``0.005 · (largest extent of the outline)`` (0.005 on the paper's unit object);
+    ``actuation_std``: standard deviation of each force increment's actuation noise, by
+    default ``0.1 df_max`` (:meth:`ManipulationScenario.actuation_cov`);
+    ``youngs_modulus``/``poissons_ratio``: the nominal material.
     """
 
     outline: np.ndarray = field(default_factory=_default_outline)
@@ -107,14 +112,32 @@ class ManipulationConfig:
     n_boundary: int = 12
     f_max: float = 1.5
     df_max: float = 0.375
-    sensing_std: float = 0.005
+    sensing_std: float | None = None
     plane: str = "strain"
     load_steps: int = 1
+    actuation_std: float | None = None
+    youngs_modulus: float = 50.0
+    poissons_ratio: float = 0.4
 
     def __post_init__(self):
         outline = as_array(self.outline, "outline", shape=(None, 2))
         if len(outline) < 3:
             raise InvalidInputError("outline: need at least 3 vertices")
+        if self.sensing_std is None:
+            extent = float(np.max(outline.max(0) - outline.min(0)))
+            object.__setattr__(self, "sensing_std", 0.005 * extent)
+        if self.actuation_std is not None:
+            a = float(self.actuation_std)
+            if not (math.isfinite(a) and a >= 0.0):
+                raise InvalidInputError(f"actuation_std: must be finite and >= 0, got {a!r}")
+        if not (0.0 < float(self.youngs_modulus) < math.inf):
+            raise InvalidInputError(
+                f"youngs_modulus: must be finite and > 0, got {self.youngs_modulus!r}"
+            )
+        if not -1.0 < float(self.poissons_ratio) < 0.5:
+            raise InvalidInputError(
+                f"poissons_ratio: must lie in (-1, 0.5), got {self.poissons_ratio!r}"
+            )
         object.__setattr__(self, "outline", frozen_array(outline))
         if not 0 <= int(self.fixed_edge) < len(outline):
             raise InvalidInputError(
@@ -332,12 +355,24 @@ class ManipulationScenario(FEMScenario):
         """``(6, 2)``: ``[−df_max, df_max]`` for every force increment."""
         return self._bounds
 
+    @property
+    def nominal_params(self) -> SimParams:
+        """The distribution's planning parameters, or (without one) the nominal
+        :class:`SimParams` with the config's material."""
+        if self.distribution is not None:
+            return self.distribution.planning_params
+        return SimParams(
+            youngs_modulus=self.config.youngs_modulus, poissons_ratio=self.config.poissons_ratio
+        )
+
     def actuation_cov(self) -> tuple:
         """Default actuation noise for this scenario: ``(0.1 df_max)²`` per increment
         component (10 % of the half-range of each control, the rule of
         :mod:`riskplan.scenarios.uncertainty`). It is added to every increment, so the
-        applied forces carry a random walk of it."""
-        s2 = (0.1 * self.config.df_max) ** 2
+        applied forces carry a random walk of it. ``config.actuation_std``, when set,
+        replaces ``0.1 df_max``."""
+        a = self.config.actuation_std
+        s2 = (0.1 * self.config.df_max) ** 2 if a is None else float(a) ** 2
         return tuple(
             tuple(s2 if i == j else 0.0 for j in range(self.control_dim))
             for i in range(self.control_dim)

@@ -235,7 +235,21 @@ class NeedleConfig:
 
     ``obstacles``: polygons ``(k, 2)`` of material points (reference configuration);
     ``goal_center``/``goal_radius``: the goal disk (a 24-gon of material points);
-    ``sensing_std``: standard deviation of each position measurement.
+    ``sensing_std``: standard deviation of each position measurement;
+    ``actuation_std (2,)``: standard deviations of the actuation noise on ``(v, φ)``;
+    ``youngs_modulus``/``poissons_ratio``: the nominal material (the planning parameters'
+    E and ν when the scenario has no distribution).
+
+    Noise that scales with the scene: left ``None``, the noise levels follow the paper's
+    values scaled to this scene (docs/scenarios.md, "Scenario files")::
+
+        actuation_std = (0.1 v_max, 5° · φ_max / 60°)
+        sensing_std   = 0.01 · max(width, height)
+
+    On the paper's scene (v_max = 0.5, φ_max = π/3, unit square) these are exactly
+    ``(0.05, 5°)`` and ``0.01``; on a scene of 0.08 × 0.06 with v_max = 0.04 the speed
+    noise is 0.004 (a fixed 0.05 would exceed the speed range, and the RRT's 2σ control
+    margin would leave no speed to sample).
     """
 
     width: float = 1.0
@@ -248,10 +262,33 @@ class NeedleConfig:
     phi_max: float = math.pi / 3
     tau: float = 0.1
     r_min: float = 0.25
-    sensing_std: float = 0.01
+    sensing_std: float | None = None
     plane: str = "stress"
+    actuation_std: tuple[float, float] | None = None
+    youngs_modulus: float = 50.0
+    poissons_ratio: float = 0.4
 
     def __post_init__(self):
+        if self.sensing_std is None:
+            object.__setattr__(
+                self, "sensing_std", 0.01 * max(float(self.width), float(self.height))
+            )
+        if self.actuation_std is None:
+            # the paper's (0.05, 5°) at v_max = 0.5, φ_max = π/3 (the ratio is exactly 1 there)
+            std = (0.1 * float(self.v_max), math.radians(5.0) * (self.phi_max / (math.pi / 3)))
+            object.__setattr__(self, "actuation_std", std)
+        std = as_array(self.actuation_std, "actuation_std", shape=(2,))
+        if not (np.all(np.isfinite(std)) and np.all(std >= 0.0)):
+            raise InvalidInputError(f"actuation_std: must be finite and >= 0, got {std.tolist()}")
+        object.__setattr__(self, "actuation_std", (float(std[0]), float(std[1])))
+        if not (0.0 < float(self.youngs_modulus) < math.inf):
+            raise InvalidInputError(
+                f"youngs_modulus: must be finite and > 0, got {self.youngs_modulus!r}"
+            )
+        if not -1.0 < float(self.poissons_ratio) < 0.5:
+            raise InvalidInputError(
+                f"poissons_ratio: must lie in (-1, 0.5), got {self.poissons_ratio!r}"
+            )
         for name in (
             "width",
             "height",
@@ -407,6 +444,22 @@ class NeedleScenario(FEMScenario):
     def control_bounds(self) -> np.ndarray:
         """``[[0, v_max], [−φ_max, φ_max]]``."""
         return self._bounds
+
+    @property
+    def nominal_params(self) -> SimParams:
+        """The distribution's planning parameters, or (without one) the nominal
+        :class:`SimParams` with the config's material."""
+        if self.distribution is not None:
+            return self.distribution.planning_params
+        return SimParams(
+            youngs_modulus=self.config.youngs_modulus, poissons_ratio=self.config.poissons_ratio
+        )
+
+    def actuation_cov(self) -> tuple:
+        """The actuation covariance ``diag(σ_v², σ_φ²)`` of ``config.actuation_std`` (the
+        paper scene: ``diag(0.05², (5°)²)``, :func:`riskplan.scenarios.uncertainty.needle_actuation_cov`)."""
+        sv, sp = self.config.actuation_std
+        return ((sv * sv, 0.0), (0.0, sp * sp))
 
     def _make_mesh_data(self, n_elements: int) -> _MeshData:
         return _MeshData(self.config, n_elements)

@@ -20,10 +20,20 @@ def _triangles(sim, state):
     return sim.mesh_data(state.n_elements).mesh.triangles
 
 
+def _scene_size(sim) -> float:
+    """The scene's largest extent (1 for the paper's scenes): the scale of margins and
+    arrows, so a scenario file's scene in millimetres or metres draws alike."""
+    cfg = sim.config
+    if sim.name == "needle":
+        return max(float(cfg.width), float(cfg.height))
+    return float((cfg.outline.max(0) - cfg.outline.min(0)).max())
+
+
 def _limits(sim):
     cfg = sim.config
     if sim.name == "needle":
-        return (-0.05, cfg.width + 0.05), (-0.05, cfg.height + 0.05)
+        m = 0.05 * _scene_size(sim)
+        return (-m, cfg.width + m), (-m, cfg.height + m)
     pts = np.concatenate([cfg.outline, cfg.obstacle, cfg.goal_polygon])
     lo, hi = pts.min(0), pts.max(0)
     pad = 0.25 * float((hi - lo).max())
@@ -66,7 +76,15 @@ def draw_frame(
         ax.plot(path[:, 0], path[:, 1], "-", color="tab:red", lw=1.5)
         x, y, th = st.pose
         ax.plot([x], [y], "o", color="tab:red", ms=5)
-        ax.arrow(x, y, 0.05 * np.cos(th), 0.05 * np.sin(th), width=0.004, color="tab:red")
+        size = _scene_size(sim)
+        ax.arrow(
+            x,
+            y,
+            0.05 * size * np.cos(th),
+            0.05 * size * np.sin(th),
+            width=0.004 * size,
+            color="tab:red",
+        )
     else:
         path = sim.path(states[: k + 1])
         ax.plot(path[:, 0], path[:, 1], "-", color="tab:blue", lw=1.5)
@@ -80,10 +98,17 @@ def draw_frame(
         mp = traces[-1]
         ax.plot(mp[:, 0], mp[:, 1], "o", color="tab:red", ms=6)
         if np.any(st.forces):
-            scale = 0.1 / max(sim.config.f_max, 1e-12)
+            size = _scene_size(sim)
+            scale = 0.1 * size / max(sim.config.f_max, 1e-12)
             for p, f in zip(mp, st.forces):
                 ax.arrow(
-                    p[0], p[1], scale * f[0], scale * f[1], width=0.004, color="tab:red", alpha=0.8
+                    p[0],
+                    p[1],
+                    scale * f[0],
+                    scale * f[1],
+                    width=0.004 * size,
+                    color="tab:red",
+                    alpha=0.8,
                 )
     xl, yl = _limits(sim)
     ax.set_xlim(*xl)

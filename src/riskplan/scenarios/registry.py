@@ -6,32 +6,55 @@ imports the scenarios back.
 
 from __future__ import annotations
 
+from os import PathLike
+from pathlib import Path
+
 from riskplan.errors import InvalidInputError
 
-__all__ = ["SCENARIO_NAMES", "make_scenario"]
+__all__ = ["SCENARIO_NAMES", "make_scenario", "scenario_from_config"]
 
 #: Names accepted by :func:`make_scenario` (and the CLI ``--scenario`` option).
 SCENARIO_NAMES = ("needle", "manipulation")
 
 
 def make_scenario(name: str, case: str = "nominal"):
-    """The scenario ``name`` (:data:`SCENARIO_NAMES`) with the parameter distribution of
-    uncertainty ``case`` (:data:`riskplan.scenarios.uncertainty.CASE_NAMES`) as its S;
-    the manipulation scenario gets its own actuation covariance."""
+    """The scenario ``name`` (:data:`SCENARIO_NAMES`, or the path of a scenario file,
+    :mod:`riskplan.scenarios.files`) with the parameter distribution of uncertainty
+    ``case`` (:data:`riskplan.scenarios.uncertainty.CASE_NAMES`) as its S; each scenario
+    gets its own actuation covariance (``sim.actuation_cov()``)."""
+    if name == "needle":
+        from riskplan.scenarios.needle import NeedleConfig
+
+        return scenario_from_config("needle", NeedleConfig(), case)
+    if name == "manipulation":
+        from riskplan.scenarios.manipulation import ManipulationConfig
+
+        return scenario_from_config("manipulation", ManipulationConfig(), case)
+    if isinstance(name, str | PathLike) and (str(name).endswith(".toml") or Path(name).is_file()):
+        from riskplan.scenarios.files import load_scenario_file
+
+        return load_scenario_file(name, case)
+    raise InvalidInputError(
+        f"scenario: expected one of {', '.join(SCENARIO_NAMES)} or a scenario file (.toml), "
+        f"got {name!r}"
+    )
+
+
+def scenario_from_config(kind: str, config, case: str = "nominal"):
+    """The scenario of ``kind`` (``"needle"`` or ``"manipulation"``) built on ``config``,
+    with the distribution of ``case`` around its nominal parameters and its own actuation
+    covariance."""
     from riskplan.scenarios.uncertainty import get_case
 
-    if name == "needle":
+    if kind == "needle":
         from riskplan.scenarios.needle import NeedleScenario
 
-        sim = NeedleScenario()
-        sim.distribution = get_case(case, sim.nominal_params)
-    elif name == "manipulation":
+        sim = NeedleScenario(config)
+    elif kind == "manipulation":
         from riskplan.scenarios.manipulation import ManipulationScenario
 
-        sim = ManipulationScenario()
-        sim.distribution = get_case(case, sim.nominal_params, actuation_cov=sim.actuation_cov())
+        sim = ManipulationScenario(config)
     else:
-        raise InvalidInputError(
-            f"scenario: expected one of {', '.join(SCENARIO_NAMES)}, got {name!r}"
-        )
+        raise InvalidInputError(f"kind: expected one of {', '.join(SCENARIO_NAMES)}, got {kind!r}")
+    sim.distribution = get_case(case, sim.nominal_params, actuation_cov=sim.actuation_cov())
     return sim

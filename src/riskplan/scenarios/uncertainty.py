@@ -148,14 +148,28 @@ class MaterialUncertainty(ParamDistribution):
 
     @classmethod
     def low(cls, base: SimParams | None = None) -> MaterialUncertainty:
-        """Paper case 1: E ~ N(50, 5), ν ~ N(0.4, 1e-4)."""
-        return cls(base=base or SimParams(), name="material-low", youngs_var=5.0, poisson_var=1e-4)
+        """Paper case 1: E ~ N(50, 5), ν ~ N(0.4, 1e-4); around another nominal
+        material ``base`` (a scenario file's): E ~ N(E₀, 5 (E₀/50)²) (the same relative
+        spread), ν ~ N(ν₀, 1e-4)."""
+        return cls._around(base, "material-low", 5.0, 1e-4)
 
     @classmethod
     def high(cls, base: SimParams | None = None) -> MaterialUncertainty:
-        """Paper case 2: E ~ N(50, 75), ν ~ N(0.4, 4e-4)."""
+        """Paper case 2: E ~ N(50, 75), ν ~ N(0.4, 4e-4); around another nominal
+        material as :meth:`low` (variance 75 (E₀/50)²)."""
+        return cls._around(base, "material-high", 75.0, 4e-4)
+
+    @classmethod
+    def _around(cls, base, name, youngs_var, poisson_var) -> MaterialUncertainty:
+        base = base or SimParams()
+        r = base.youngs_modulus / 50.0  # exactly 1 for the paper's material
         return cls(
-            base=base or SimParams(), name="material-high", youngs_var=75.0, poisson_var=4e-4
+            base=base,
+            name=name,
+            youngs_mean=base.youngs_modulus,
+            youngs_var=youngs_var * (r * r),
+            poisson_mean=base.poissons_ratio,
+            poisson_var=poisson_var,
         )
 
 

@@ -49,6 +49,7 @@ from functools import partial
 
 import numpy as np
 
+from riskplan._validation import check_count
 from riskplan.errors import (
     ConvergenceError,
     ElementInversionError,
@@ -119,13 +120,8 @@ class CalibrationScale:
             "max_iterations",
             "n_controls",
         ):
-            v = getattr(self, name)
-            if int(v) != v or v < 1:
-                raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
-        if int(self.lin_samples) != self.lin_samples or self.lin_samples < 2:
-            raise InvalidInputError(
-                f"lin_samples: expected an integer >= 2, got {self.lin_samples!r}"
-            )
+            check_count(getattr(self, name), name, 1)
+        check_count(self.lin_samples, "lin_samples", 2)
         object.__setattr__(self, "cases", tuple(self.cases))
 
 

@@ -69,6 +69,7 @@ from pathlib import Path
 
 import numpy as np
 
+from riskplan._validation import check_count
 from riskplan.errors import DataFormatError, InvalidInputError
 
 log = logging.getLogger(__name__)
@@ -146,17 +147,9 @@ class ScenarioScale:
             "n_controls",
             "goal_samples",
         ):
-            v = getattr(self, name)
-            if int(v) != v or v < 1:
-                raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
-        if int(self.n_feedback) != self.n_feedback or self.n_feedback < 0:
-            raise InvalidInputError(
-                f"n_feedback: expected an integer >= 0, got {self.n_feedback!r}"
-            )
-        if int(self.lin_samples) != self.lin_samples or self.lin_samples < 2:
-            raise InvalidInputError(
-                f"lin_samples: expected an integer >= 2, got {self.lin_samples!r}"
-            )
+            check_count(getattr(self, name), name, 1)
+        check_count(self.n_feedback, "n_feedback", 0)
+        check_count(self.lin_samples, "lin_samples", 2)
 
     def rrt_options(self):
         from riskplan.planning.rrt import RRTOptions

@@ -256,11 +256,17 @@ class FEMScenario:
 
     @property
     def nominal_params(self) -> SimParams:
-        """The planning parameters of ``distribution`` (E = 50, nu = 0.4, 175 elements, f_int = 1,
-        no actuation noise when there is none)."""
+        """The planning parameters of ``distribution``, or (without one) the nominal
+        :class:`SimParams` with the config's material (``youngs_modulus``, ``poissons_ratio``;
+        the paper's E = 50, nu = 0.4 for a config without them), 175 elements, f_int = 1,
+        no actuation noise."""
         if self.distribution is not None:
             return self.distribution.planning_params
-        return SimParams()
+        cfg = self.config
+        return SimParams(
+            youngs_modulus=getattr(cfg, "youngs_modulus", SimParams.youngs_modulus),
+            poissons_ratio=getattr(cfg, "poissons_ratio", SimParams.poissons_ratio),
+        )
 
     def sample_params(self, seed=None) -> SimParams:
         """One draw from ``distribution`` (the nominal parameters if there is none)."""

@@ -355,16 +355,6 @@ class ManipulationScenario(FEMScenario):
         """``(6, 2)``: ``[−df_max, df_max]`` for every force increment."""
         return self._bounds
 
-    @property
-    def nominal_params(self) -> SimParams:
-        """The distribution's planning parameters, or (without one) the nominal
-        :class:`SimParams` with the config's material."""
-        if self.distribution is not None:
-            return self.distribution.planning_params
-        return SimParams(
-            youngs_modulus=self.config.youngs_modulus, poissons_ratio=self.config.poissons_ratio
-        )
-
     def actuation_cov(self) -> tuple:
         """Default actuation noise for this scenario: ``(0.1 df_max)²`` per increment
         component (10 % of the half-range of each control, the rule of

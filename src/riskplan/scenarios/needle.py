@@ -445,16 +445,6 @@ class NeedleScenario(FEMScenario):
         """``[[0, v_max], [−φ_max, φ_max]]``."""
         return self._bounds
 
-    @property
-    def nominal_params(self) -> SimParams:
-        """The distribution's planning parameters, or (without one) the nominal
-        :class:`SimParams` with the config's material."""
-        if self.distribution is not None:
-            return self.distribution.planning_params
-        return SimParams(
-            youngs_modulus=self.config.youngs_modulus, poissons_ratio=self.config.poissons_ratio
-        )
-
     def actuation_cov(self) -> tuple:
         """The actuation covariance ``diag(σ_v², σ_φ²)`` of ``config.actuation_std`` (the
         paper scene: ``diag(0.05², (5°)²)``, :func:`riskplan.scenarios.uncertainty.needle_actuation_cov`)."""

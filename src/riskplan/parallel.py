@@ -157,14 +157,9 @@ def _terminate_pool(pool) -> None:
 
 def _limit_threads() -> None:
     # Worker processes share few cores: one BLAS/torch thread each avoids oversubscription.
-    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
-        os.environ.setdefault(var, "1")
-    try:
-        import torch
+    from riskplan.threads import limit_process_threads
 
-        torch.set_num_threads(1)
-    except ImportError:  # pragma: no cover
-        pass
+    limit_process_threads(1)
 
 
 def _check_workers(workers) -> None:

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from riskplan.experiments.report import Report
+from riskplan.threads import one_torch_thread
 
 log = logging.getLogger(__name__)
 
@@ -70,8 +71,8 @@ def _data_paths(ctx: dict, seed: int, workers) -> tuple[Path, Path] | None:
     return Path(paths["train"]), Path(paths["test"])
 
 
+@one_torch_thread
 def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
-    import torch
 
     from riskplan.kinematics.data import read_point_clouds
     from riskplan.kinematics.plotting import (
@@ -82,7 +83,6 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     from riskplan.kinematics.sweep import sweep
     from riskplan.kinematics.training import TrainConfig, train
 
-    torch.set_num_threads(1)
     sec = report.section("Learned kinematics: mixture density network (MDN paper, Figs. 4-5)")
     paths = _data_paths(ctx, seed, workers)
     if paths is None:

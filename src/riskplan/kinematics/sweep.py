@@ -24,6 +24,7 @@ import numpy as np
 
 from riskplan.errors import InvalidInputError
 from riskplan.kinematics.training import TrainConfig
+from riskplan.threads import one_torch_thread
 
 log = logging.getLogger(__name__)
 
@@ -116,11 +117,10 @@ def recommend(components, test_nll, collapsed, nll_tolerance: float = DEFAULT_NL
     return min(cand)
 
 
+@one_torch_thread
 def _sweep_one(task: tuple) -> dict:
     """Train and score one ``K`` (module level so process pools can run it)."""
     import time
-
-    import torch
 
     from riskplan.errors import ConvergenceError
     from riskplan.kinematics.data import read_point_clouds
@@ -128,7 +128,6 @@ def _sweep_one(task: tuple) -> dict:
     from riskplan.kinematics.training import train
 
     train_path, test_path, K, cfg_json, out_dir, threshold, max_seconds = task
-    torch.set_num_threads(1)
     t0 = time.perf_counter()
     cfg = TrainConfig.from_json({**cfg_json, "n_components": K})
     train_data = read_point_clouds(train_path)

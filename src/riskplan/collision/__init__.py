@@ -21,7 +21,7 @@ import numpy as np
 
 from riskplan.collision.environment import Environment
 from riskplan.collision.frames import (
-    BasePose,
+    BasePose,  # noqa: F401 - riskplan.robots.BasePose, importable here too (documented there)
     environment_in_base_frame,
     load_environment,
     mesh_base_pose,
@@ -95,7 +95,6 @@ __all__ = [
     "COMBINES",
     "DEFAULT_CUTOFF",
     "METHODS",
-    "BasePose",
     "Environment",
     "FreeRegion",
     "MonteCarloEstimate",

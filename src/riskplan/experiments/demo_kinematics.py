@@ -135,7 +135,7 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
         list(SWEEP_COMPONENTS),
         sweep_cfg,
         out=out / "sweep",
-        workers=workers or 2,
+        workers=workers,
         max_seconds_per_k=SWEEP_TIME_BUDGET,
     )
     report.figure(

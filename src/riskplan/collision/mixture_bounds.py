@@ -1,4 +1,4 @@
-"""Collision probability bounds of Gaussian mixtures (MDN paper section V, eq. 9).
+r"""Collision probability bounds of Gaussian mixtures (MDN paper section V, eq. 9).
 
 Mixtures are :class:`~riskplan.gaussian_mixture.NumpyMixture` batches; a torch
 :class:`riskplan.kinematics.GaussianMixture` is accepted too and converted by its
@@ -7,7 +7,11 @@ Mixtures are :class:`~riskplan.gaussian_mixture.NumpyMixture` batches; a torch
 Two quantities, side by side:
 
 ``combine="weighted"`` (the paper's eq. 9)
-    ``P <= sum_i w_i sum_j (1 - Phi(b_ij))``. This bounds the probability that ONE point drawn
+    .. math::
+
+        p(x \notin X_f) \le \sum_{i=1}^{N} w_i \sum_{j=1}^{K_i} \left(1 - \Phi(b_{ij})\right)
+
+    This bounds the probability that ONE point drawn
     from the geometry distribution (pick component ``i`` with probability ``w_i``, then a point
     from it) lies outside free space. It is not the probability that any part of the robot
     collides: a robot whose mixture puts weight 0.2 on a tip component that surely collides gets

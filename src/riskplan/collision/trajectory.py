@@ -1,7 +1,12 @@
-"""Collision probability along a trajectory (MDN paper section V, eq. 10).
+r"""Collision probability along a trajectory (MDN paper section V, eq. 10).
 
-``combine="independent"`` (eq. 10): ``1 - prod_t (1 - p_t)``. This treats the per-state
-events as independent; it is what the paper optimises.
+``combine="independent"`` (eq. 10):
+
+.. math::
+
+    p(\exists x \in \tau : x \notin X_f) \le 1 - \prod_{x \in \tau} \left(1 - p(x \notin X_f)\right).
+
+This treats the per-state events as independent; it is what the paper optimises.
 ``combine="union"``: ``min(1, sum_t p_t)`` (Boole), an upper bound whatever the dependence
 between states; it is never smaller than the eq. 10 value.
 """

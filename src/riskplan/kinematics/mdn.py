@@ -1,4 +1,4 @@
-"""The mixture density network (MDN paper, section III, Fig. 2) and the trained model.
+r"""The mixture density network (MDN paper, section III, Fig. 2) and the trained model.
 
 Network: normalised tendon displacements ``(..., m)`` → shared fully connected trunk →
 three separate fully connected heads producing, for each of ``K`` components,
@@ -10,7 +10,22 @@ three separate fully connected heads producing, for each of ``K`` components,
   (eq. 3) is positive definite for any network output.
 
 The loss is the mean negative log-likelihood of a configuration's ground-truth points
-(the loss after eq. 7), with ``log |Sigma^{-1}|^{1/2} = sum_j log diag(Ubar)_j`` (eqs. 4-6).
+(the loss after eq. 7), with ``log |Sigma^{-1}|^{1/2} = sum_j log diag(Ubar)_j`` (eqs. 4-6):
+
+.. math::
+
+    (\bar U_k)_{jl} = \begin{cases} (U_k)_{jl}, & j < l \\ \exp (U_k)_{jj}, & j = l
+    \\ 0, & j > l \end{cases} \qquad \text{(eq. 2)}
+
+    \mathrm{MDN}_\theta(y) = \{ w_{k|\theta}, \mu_{k|\theta}, U_{k|\theta} \}_{k=1}^K
+    \qquad \text{(eq. 7)}
+
+    \mathcal{L}(\theta) = \mathbb{E}_{x, y} \left[ -\log \sum_{k=1}^K w_{k|\theta}
+    \exp\left( \sum_{j} \log (\bar U_{k|\theta})_{jj} - \frac{1}{2} \| \bar U_{k|\theta}
+    (x - \mu_{k|\theta}) \|^2 \right) \right] + \frac{d}{2} \log 2\pi.
+
+(The paper writes ``diag(U)`` in the loss's exponent; with eq. 2 that is
+``log diag(Ubar)``.)
 
 The network works in normalised coordinates: inputs ``(d - input_mean) / input_scale``
 and points ``(x - output_centre) / output_scale`` (per axis). :class:`MDNModel` maps the

@@ -103,7 +103,7 @@ def near_needle():
 @pytest.fixture(scope="session")
 def needle_result(near_needle):
     """Four candidate plans (two trees) on the coarse mesh, and the trees."""
-    from riskplan.planning.rrt import RRTOptions, rrt_plans
+    from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
 
     options = RRTOptions(plans_per_tree=2, max_iterations=1200)
     return rrt_plans(near_needle, 4, seed=3, params=SMALL_MESH, options=options, backend="serial")
@@ -129,7 +129,7 @@ class PointRobot:
     obs_dim = 2
 
     def __init__(self, goal=(0.8, 0.8), goal_radius=0.08, obstacle=((0.35, 0.35), (0.6, 0.6))):
-        from riskplan.planning.rrt import PlanningSpace
+        from riskplan.tissue_planning.rrt import PlanningSpace
 
         self._bounds = np.array([[-1.0, 1.0], [-1.0, 1.0]])
         self.goal_center = np.asarray(goal, float)

@@ -23,6 +23,7 @@ PACKAGES = (
     "deformable",
     "scenarios",
     "control",
+    "tissue_planning",
 )
 PENDING = Path(__file__).with_name("numpydoc_pending.txt")
 

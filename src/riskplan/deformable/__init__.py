@@ -23,8 +23,8 @@ from riskplan.deformable.loads import (
     point_load,
     traction_load,
 )
-from riskplan.deformable.locate import Interpolator, contains, locate
 from riskplan.deformable.material import Material
+from riskplan.deformable.material_points import Interpolator, contains, locate
 from riskplan.deformable.mesh import TissueMesh, mesh_polygon, rectangle
 
 __all__ = [

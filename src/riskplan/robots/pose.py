@@ -149,7 +149,7 @@ class BasePose:
     @classmethod
     def from_json(cls, path) -> BasePose:
         """From a JSON file with ``base_position`` (3,) and ``base_rotation`` (3, 3), e.g. the
-        sidecar :func:`riskplan.collision.frames.save_environment` writes.
+        sidecar :func:`riskplan.collision.mesh_files.save_environment` writes.
 
         Parameters
         ----------

@@ -120,10 +120,11 @@ def element_stiffness(
 
 
 class TetPattern:
-    """Index maps from the ``T·144`` element-matrix entries to the reduced CSC matrix over
-    ``free_dofs`` and to the upper band of its reverse Cuthill-McKee permuted form (the layout
-    of ``scipy.linalg.cholesky_banded``); built once per mesh and support set, so an
-    assembly is two ``bincount`` calls.
+    """Index maps from the ``T·144`` element-matrix entries to the CSC matrix over all DOFs,
+    its reduced part over ``free_dofs``, and the upper band of the reduced matrix in reverse
+    Cuthill-McKee order (the layout of ``scipy.linalg.cholesky_banded``); built once per
+    mesh and support set from the node adjacency (``T·16`` node pairs, each a 3×3 block), so
+    an assembly is one ``bincount`` and two gathers.
 
     Attributes: ``element_dofs (T, 12)``, ``band_perm (n_free,)``, ``bandwidth``.
     """
@@ -132,26 +133,46 @@ class TetPattern:
         from scipy import sparse
         from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-        dofs = (3 * tets[:, :, None] + np.arange(3)[None, None, :]).reshape(-1, 12)
-        self.element_dofs = dofs
+        T = len(tets)
+        N = n_dofs // 3
+        self.element_dofs = (3 * tets[:, :, None] + np.arange(3)[None, None, :]).reshape(-1, 12)
         self.n_dofs = n_dofs
+        # node pairs (a, b) of every element, keyed column-major: b (column) then a (row)
+        na = np.repeat(tets, 4, axis=1).ravel()  # (T·16,) row node of (a, b)
+        nb = np.tile(tets, (1, 4)).ravel()  # column node
+        uniq, pair = np.unique(nb * N + na, return_inverse=True)
+        col_node = uniq // N
+        ptr = np.searchsorted(col_node, np.arange(N + 1))  # node-pair pointer per column node
+        m = np.diff(ptr)  # pairs per column node
+        # full CSC slot of entry (t, a, i, b, k): 9 ptr[b] + 3 m_b k + 3 j + i, j = pair - ptr[b]
+        pair = pair.reshape(T, 4, 4)
+        nbn = tets[:, None, :]  # (T, 1, 4): node of b
+        base = 9 * ptr[nbn] + 3 * (pair - ptr[nbn])  # (T, 4a, 4b)
+        i = np.arange(3)[None, None, :, None, None]
+        k = np.arange(3)[None, None, None, None, :]
+        slot = base[:, :, None, :, None] + i + 3 * m[nbn][:, :, None, :, None] * k
+        self._slot = slot.reshape(-1)  # order (t, a, i, b, k) = element-matrix order
+        nnz = 9 * len(uniq)
+        self._nnz_full = nnz
+        # row and column DOF of every full slot
+        rows = np.empty(nnz, dtype=np.int64)
+        cols = np.empty(nnz, dtype=np.int64)
+        rows[self._slot] = self.element_dofs[:, :, None].repeat(12, 2).reshape(-1)
+        cols[self._slot] = self.element_dofs[:, None, :].repeat(12, 1).reshape(-1)
+        self._full_indices = rows.astype(np.int32)
+        self._full_indptr = np.concatenate([[0], np.cumsum(np.repeat(3 * m, 3))]).astype(np.int32)
         nf = len(free_dofs)
         red = np.full(n_dofs, -1, dtype=np.int64)
         red[free_dofs] = np.arange(nf)
-        r = red[np.repeat(dofs, 12, axis=1)].ravel()
-        c = red[np.tile(dofs, (1, 12))].ravel()
+        r, c = red[rows], red[cols]
         keep = (r >= 0) & (c >= 0)
-        r, c = r[keep], c[keep]
-        key = c * nf + r
-        uniq, slot = np.unique(key, return_inverse=True)
         self._keep = np.flatnonzero(keep)
-        self._slot = slot.ravel()
-        self._nnz = len(uniq)
+        r, c = r[keep], c[keep]
         self._shape = (nf, nf)
-        self._indices = (uniq % nf).astype(np.int32)
-        self._indptr = np.searchsorted(uniq // nf, np.arange(nf + 1)).astype(np.int32)
+        self._indices = r.astype(np.int32)
+        self._indptr = np.searchsorted(c, np.arange(nf + 1)).astype(np.int32)
         pattern = sparse.csc_matrix(
-            (np.ones(self._nnz), self._indices, self._indptr), shape=self._shape
+            (np.ones(len(r)), self._indices, self._indptr), shape=self._shape
         )
         perm = reverse_cuthill_mckee(pattern.tocsr(), symmetric_mode=True)
         pos = np.empty(nf, dtype=np.int64)
@@ -161,29 +182,34 @@ class TetPattern:
         bw = int(np.max(pc[upper] - pr[upper])) if np.any(upper) else 0
         self.band_perm = perm
         self.bandwidth = bw
-        self._band_sel = self._keep[upper]
+        self._band_sel = np.flatnonzero(upper)
         self._band_slot = (bw + pr[upper] - pc[upper]) * nf + pc[upper]
         self._band_size = (bw + 1) * nf
+
+    def _full_data(self, Ke_flat: np.ndarray) -> np.ndarray:
+        return np.bincount(self._slot, Ke_flat, minlength=self._nnz_full)
 
     def csc(self, Ke_flat: np.ndarray):
         """Reduced ``(n_free, n_free)`` CSC matrix from element matrices ``(T·144,)``."""
         from scipy import sparse
 
-        data = np.bincount(self._slot, Ke_flat[self._keep], minlength=self._nnz)
+        data = self._full_data(Ke_flat)[self._keep]
         return sparse.csc_matrix((data, self._indices, self._indptr), shape=self._shape)
 
     def banded(self, Ke_flat: np.ndarray) -> np.ndarray:
         """Upper band ``(bandwidth + 1, n_free)`` of the RCM-permuted reduced matrix."""
-        ab = np.bincount(self._band_slot, Ke_flat[self._band_sel], minlength=self._band_size)
+        ab = np.zeros(self._band_size)
+        ab[self._band_slot] = self._full_data(Ke_flat)[self._keep][self._band_sel]
         return ab.reshape(self.bandwidth + 1, -1)
 
     def full_csr(self, Ke: np.ndarray):
-        """The ``(3N, 3N)`` CSR matrix over all DOFs from element matrices ``(T, 12, 12)``."""
+        """The ``(3N, 3N)`` matrix over all DOFs (CSR) from element matrices ``(T, 12, 12)``."""
         from scipy import sparse
 
-        r = np.repeat(self.element_dofs, 12, axis=1).ravel()
-        c = np.tile(self.element_dofs, (1, 12)).ravel()
-        return sparse.csr_matrix((Ke.ravel(), (r, c)), shape=(self.n_dofs, self.n_dofs))
+        data = self._full_data(np.ascontiguousarray(Ke).reshape(-1))
+        return sparse.csc_matrix(
+            (data, self._full_indices, self._full_indptr), shape=(self.n_dofs, self.n_dofs)
+        ).tocsr()
 
 
 def _pattern(tets: np.ndarray, free_dofs: np.ndarray, n_dofs: int) -> TetPattern:

@@ -186,3 +186,60 @@ def test_nonconvergence_raises_and_keeps_state(block):
     with pytest.raises(ConvergenceError):
         t.solve(f)
     assert t.snapshot().identical(before)
+
+
+def test_fill_closed_surface_and_embedded_regions():
+    trimesh = pytest.importorskip("trimesh")
+    from riskplan.deformable import sphere_points, tet_fill_surface
+
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    m = tet_fill_surface(ball, n_elements=3000)
+    assert abs(m.n_elements - 3000) <= 0.1 * 3000
+    # the staircase lies within one lattice cell of the surface: the volume within the
+    # shell of that thickness around the surface's own volume
+    h = (6.0 * m.volume / m.n_elements) ** (1.0 / 3.0)
+    assert abs(m.volume - ball.volume) <= ball.area * h
+    assert np.all(ball.contains(m.centroids))
+    t = TetTissue(m, MAT, m.nodes_in_box([-2, -2, -2], [2, 2, -0.6]))
+    target = sphere_points([0.0, 0.0, 0.3], 0.1, 32)
+    ip = t.interpolator(target, "target")
+    u = t.solve(t.point_forces(target[:1], [[0.0, 0.0, 1.0]]))
+    np.testing.assert_allclose(ip.positions(u), t.positions(target), **TOL["float64_exact"])
+    with pytest.raises(InvalidInputError, match="obstacle: 1 point"):
+        t.interpolator([[0.0, 0.0, 0.0], [0.0, 0.0, 1.5]], "obstacle")
+    open_surface = trimesh.Trimesh(ball.vertices, ball.faces[:-10])
+    with pytest.raises(InvalidInputError, match="watertight"):
+        tet_fill_surface(open_surface, 1000)
+
+
+@pytest.mark.parametrize("n", [200, 500, 1000, 2500, 5000])
+def test_element_count_variation(n):
+    """The mesh case: a requested count gives the nearest Kuhn-split grid (6 nx ny nz)."""
+    m = tet_block((1.0, 1.0, 1.0), n_elements=n)
+    assert m.n_elements % 6 == 0
+    assert abs(m.n_elements - n) <= 0.12 * n
+    assert m.qualities.min() > 0.4  # the Kuhn split of near-cubic cells
+
+
+def test_mesh_case_converges_at_a_material_point():
+    """The same point load on meshes of 500 .. 5000 elements moves a material point by
+    amounts that settle as the mesh refines (what the mesh-count case varies)."""
+    p, target = [[0.5, 0.5, 0.9]], [[0.5, 0.5, 0.6]]
+    d = []
+    for n in (500, 1500, 5000):
+        m = tet_block(n_elements=n)
+        t = TetTissue(m, MAT, m.face_nodes("z-"))
+        d.append(t.displacement_at(target, t.solve(t.point_forces(p, [[0.1, 0.0, 0.0]])))[0, 0])
+    assert d[0] > 0 and abs(d[2] - d[1]) < abs(d[1] - d[0])
+
+
+def test_tissue_pickles_and_solves_the_same(block):
+    import pickle
+
+    t = TetTissue(block, MAT, block.face_nodes("z-"), law="neo-hookean")
+    f = t.point_forces([[0.5, 0.5, 1.5]], [[0.0, 0.3, 0.0]])
+    t.solve(f)
+    t2 = pickle.loads(pickle.dumps(t))
+    assert t2.snapshot().identical(t.snapshot())
+    g = 1.5 * f
+    assert t2.solve(g).tobytes() == t.solve(g).tobytes()

@@ -29,7 +29,7 @@ from riskplan.deformable.locate import Interpolator, contains, locate
 from riskplan.deformable.material import Material
 from riskplan.deformable.mesh import TissueMesh, mesh_polygon, rectangle
 from riskplan.deformable.tetmesh import TetMesh, tet_block, tet_fill_surface
-from riskplan.deformable.tissue3d import TetTissue, TissueState3D
+from riskplan.deformable.tissue3d import TetTissue, TissueState3D, sphere_points
 
 __all__ = [
     "HyperelasticModel",
@@ -52,6 +52,7 @@ __all__ = [
     "patch_weights",
     "point_load",
     "rectangle",
+    "sphere_points",
     "tet_block",
     "tet_fill_surface",
     "traction_load",

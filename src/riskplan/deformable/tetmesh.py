@@ -354,15 +354,42 @@ def _load_surface(surface):
     return mesh
 
 
+def _largest_component(tets: np.ndarray) -> np.ndarray:
+    """The tetrahedra of the largest face-connected set (a lattice clipped by a surface can
+    leave pieces joined to the body by an edge or a node only, which would hinge freely)."""
+    from scipy import sparse
+    from scipy.sparse.csgraph import connected_components
+
+    T = len(tets)
+    faces = np.sort(
+        np.concatenate(
+            [tets[:, [1, 2, 3]], tets[:, [0, 2, 3]], tets[:, [0, 1, 3]], tets[:, [0, 1, 2]]]
+        ),
+        axis=1,
+    )
+    owner = np.tile(np.arange(T), 4)
+    _, inv = np.unique(faces, axis=0, return_inverse=True)
+    inv = inv.ravel()
+    order = np.argsort(inv, kind="stable")
+    same = inv[order][1:] == inv[order][:-1]  # interior faces: two owners in a row
+    a, b = owner[order][:-1][same], owner[order][1:][same]
+    graph = sparse.coo_matrix((np.ones(len(a)), (a, b)), shape=(T, T))
+    n, label = connected_components(graph, directed=False)
+    if n == 1:
+        return tets
+    return tets[label == np.bincount(label).argmax()]
+
+
 def tet_fill_surface(surface, n_elements: int = 5000, *, max_iter: int = 12) -> TetMesh:
     """Tetrahedral mesh of the inside of a closed triangle surface (``trimesh.Trimesh`` or
     a file trimesh reads, e.g. an organ's STL) with about ``n_elements`` tetrahedra.
 
     Method: the Kuhn-split tensor lattice of the surface's bounding box (cubic cells of
     side ``h``), keeping the tetrahedra whose centroid lies inside the surface
-    (``trimesh`` ``contains``); ``h`` is bisected so the kept count comes close to the
-    request (within a few percent; the count moves in steps of the lattice). The boundary
-    is a staircase within one cell ``h`` of the surface. Raises :class:`InvalidInputError`
+    (``trimesh`` ``contains``), then the largest face-connected set of them; ``h`` is
+    bisected so the kept count comes close to the request (within a few percent; the count
+    moves in steps of the lattice). The boundary is a staircase within one cell ``h`` of the
+    surface. Raises :class:`InvalidInputError`
     for an open surface or a request too small to leave any element.
     """
     n = _count(n_elements)
@@ -403,6 +430,7 @@ def tet_fill_surface(surface, n_elements: int = 5000, *, max_iter: int = 12) -> 
             f"n_elements: {n} leaves no tetrahedron inside the surface; request more"
         )
     _, p, t = best
+    t = _largest_component(t)
     used = np.unique(t)
     remap = np.full(len(p), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))

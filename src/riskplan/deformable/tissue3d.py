@@ -279,19 +279,19 @@ def find_points(mesh: TetMesh, points: np.ndarray, k: int = LOCATE_CANDIDATES):
     return elem, lam
 
 
-def locate3d(mesh: TetMesh, points) -> Interpolator:
+def locate3d(mesh: TetMesh, points, name: str = "points") -> Interpolator:
     """An :class:`~riskplan.deformable.locate.Interpolator` for material points ``(P, 3)``
-    (or one ``(3,)``) of ``mesh``; raises :class:`InvalidInputError` naming the points
-    outside the tissue."""
-    pts = as_array(points, "points", last_dim=3)
+    (or one ``(3,)``) of ``mesh``; raises :class:`InvalidInputError` naming the set
+    (``name``: "target", "obstacle 2", ...) and the points outside the tissue."""
+    pts = as_array(points, name, last_dim=3)
     if pts.ndim > 2:
-        raise InvalidInputError(f"points: expected shape (P, 3) or (3,), got {pts.shape}")
+        raise InvalidInputError(f"{name}: expected shape (P, 3) or (3,), got {pts.shape}")
     pts = np.ascontiguousarray(pts.reshape(-1, 3))
     elem, lam = find_points(mesh, pts)
     outside = np.flatnonzero(elem < 0)
     if outside.size:
         raise InvalidInputError(
-            f"points: {outside.size} point(s) lie outside the tissue, e.g. index "
+            f"{name}: {outside.size} point(s) lie outside the tissue, e.g. index "
             f"{outside[:5].tolist()} at {pts[outside[:3]].tolist()}"
         )
     idx = mesh.tets[elem]
@@ -300,6 +300,25 @@ def locate3d(mesh: TetMesh, points) -> Interpolator:
     return Interpolator(
         points=pts, elements=elem, node_index=idx, weights=lam, n_nodes=mesh.n_nodes
     )
+
+
+def sphere_points(center, radius: float, n_points: int = 64) -> np.ndarray:
+    """Material points ``(n_points + 1, 3)`` of a spherical region (an embedded obstacle or
+    target): its centre and ``n_points`` points on its surface (Fibonacci lattice, nearly
+    uniform). Locate them with :meth:`TetTissue.interpolator`; their deformed positions
+    follow the tissue."""
+    c = as_array(center, "center", shape=(3,))
+    r = float(radius)
+    if not (np.isfinite(r) and r > 0):
+        raise InvalidInputError(f"radius: expected a finite radius > 0, got {radius!r}")
+    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or n_points < 4:
+        raise InvalidInputError(f"n_points: expected an int >= 4, got {n_points!r}")
+    k = np.arange(n_points) + 0.5
+    z = 1.0 - 2.0 * k / n_points
+    phi = np.pi * (1.0 + 5.0**0.5) * k
+    rho = np.sqrt(1.0 - z * z)
+    surf = np.stack([rho * np.cos(phi), rho * np.sin(phi), z], axis=1)
+    return np.vstack([c, c + r * surf])
 
 
 # --------------------------------------------------------------------------------------
@@ -534,10 +553,11 @@ class TetTissue:
         """``(P,)`` bool: which reference points lie in the tissue."""
         return self.locate(points)[0] >= 0
 
-    def interpolator(self, points) -> Interpolator:
-        """Barycentric interpolation at material points ``(P, 3)``; raises
-        :class:`InvalidInputError` for points outside the tissue."""
-        return locate3d(self.mesh, points)
+    def interpolator(self, points, name: str = "points") -> Interpolator:
+        """Barycentric interpolation at material points ``(P, 3)`` (an embedded target or
+        obstacle: :func:`sphere_points`); raises :class:`InvalidInputError` naming ``name``
+        for points outside the tissue."""
+        return locate3d(self.mesh, points, name)
 
     def displacement_at(self, points, u=None) -> np.ndarray:
         """Displacement ``(P, 3)`` of material points ``(P, 3)`` (P1 interpolant

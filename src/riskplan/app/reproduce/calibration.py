@@ -139,11 +139,11 @@ CASE_VARIANTS = {"actuation-x2": ("actuation", {"actuation_scale": 2.0})}
 def case_scenario(name: str, case: str):
     """The scenario ``name`` under ``case``: one of the paper's
     (:func:`riskplan.scenarios.registry.make_scenario`) or a :data:`CASE_VARIANTS` entry
-    (:func:`riskplan.experiments.needle_study.needle_variant`, needle only)."""
+    (:func:`riskplan.app.reproduce.needle_study.needle_variant`, needle only)."""
     from riskplan.scenarios.registry import make_scenario
 
     if case in CASE_VARIANTS:
-        from riskplan.experiments.needle_study import needle_variant
+        from riskplan.app.reproduce.needle_study import needle_variant
 
         inner, kw = CASE_VARIANTS[case]
         return needle_variant(**kw)(name, inner)

@@ -358,7 +358,19 @@ class MDNModel:
 
     # ------------------------------------------------------------- predict
     def mixture(self, displacements: torch.Tensor) -> GaussianMixture:
-        """Differentiable torch path (no input validation): ``(..., m)`` tensor → mixture in metres."""
+        """Differentiable torch path (no input validation) from displacements to the mixture in
+        metres.
+
+        Parameters
+        ----------
+        displacements : torch.Tensor
+            ``(..., m)`` tendon displacements [m].
+
+        Returns
+        -------
+        GaussianMixture
+            Batch shape ``(...)``, in the base frame, metres.
+        """
         p = next(self.net.parameters())
         n = self.normalisation
         x = (
@@ -370,15 +382,30 @@ class MDNModel:
         return GaussianMixture(torch.exp(log_w), c + s * mu, u / s, validate=False)
 
     def predict(self, displacements, dtype: torch.dtype = torch.float64) -> GaussianMixture:
-        """Gaussian mixture of the robot's geometry for displacements ``(..., m)`` [m].
+        """Gaussian mixture of the robot's geometry for tendon displacements (MDN paper eq. 7).
 
-        Returns a :class:`GaussianMixture` with batch shape ``(...)``, ``K`` components,
-        ``d = 3``, base frame, metres. Raises :class:`InvalidInputError` for a wrong number
-        of tendons, NaN/inf, or displacements outside the robot's limits.
+        Evaluated with fused NumPy matrix products (in the network's precision, the softmax and
+        eq. 2 in float64) rather than the torch module: for one configuration this avoids
+        torch's per-operation overhead.
 
-        Evaluated with fused NumPy matrix products (in the network's precision, the
-        softmax and eq. 2 in float64) rather than the torch module: for one
-        configuration this avoids torch's per-operation overhead.
+        Parameters
+        ----------
+        displacements : array_like
+            ``(..., m)`` [m], within the robot's limits.
+        dtype : torch.dtype
+            Of the returned mixture.
+
+        Returns
+        -------
+        GaussianMixture
+            Batch shape ``(...)``, ``K`` components, ``d = 3``, base frame, metres.
+
+        Raises
+        ------
+        InvalidInputError
+            A wrong number of tendons, NaN/inf, or displacements outside the robot's limits.
+        DataFormatError
+            The weights predict NaN or inf (corrupted or unstable).
         """
         d = self.check_displacements(displacements)
         arrays = self._forward_numpy(d)

@@ -387,6 +387,20 @@ class TendonRobot:
         (:func:`cosserat.shape_free`; batches of ``BATCH_KERNEL_MIN`` or more go through the
         SIMD kernel of :mod:`riskplan.robots.batch_kernel`, same results); with gravity: shooting on the base moment
         (:func:`cosserat.shape_loaded`). Raises :class:`ConvergenceError` if a solve fails.
+
+        Parameters
+        ----------
+        tensions : array_like
+            ``(..., m)`` tendon tensions [N].
+        rotation, retraction : float or array_like, optional
+            Base rotation [rad] and retraction [m] (scalars or ``(...)``).
+        validate : bool
+            Check the arguments (``False`` for internal callers with checked arguments).
+
+        Returns
+        -------
+        RodShape
+            Backbone positions and frames of batch shape ``(...)``.
         """
         if rotation is not None or retraction is not None:
             return self._solve_moved(True, tensions, rotation, retraction, validate)
@@ -685,6 +699,20 @@ class TendonRobot:
         (:func:`cosserat.solve_displacement_tensions`). ``RodShape.tensions`` holds them. Solved
         tensions above ``max_tension`` are returned with a logged warning (the limit bounds
         tension *input*). Raises :class:`ConvergenceError` with the residual on failure.
+
+        Parameters
+        ----------
+        displacements : array_like
+            ``(..., m)`` tendon displacements [m].
+        rotation, retraction : float or array_like, optional
+            As in :meth:`solve_tensions`.
+        validate : bool
+            Check the arguments.
+
+        Returns
+        -------
+        RodShape
+            Backbone of batch shape ``(...)``, with the solved ``tensions``.
         """
         if rotation is not None or retraction is not None:
             return self._solve_moved(False, displacements, rotation, retraction, validate)
@@ -753,7 +781,20 @@ class TendonRobot:
         return tau.reshape(batch + (m,))
 
     def tendon_lengths(self, tensions, *, validate: bool = True) -> np.ndarray:
-        """Tendon path lengths ``l_i = int |v + u x r_i + r_i'| ds`` ``(..., m)`` [m] for tensions ``(..., m)``."""
+        """Tendon path lengths ``l_i = int |v + u x r_i + r_i'| ds`` ``(..., m)`` [m] for tensions ``(..., m)``.
+
+        Parameters
+        ----------
+        tensions : array_like
+            ``(..., m)`` [N].
+        validate : bool
+            Check the arguments.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(..., m)`` path lengths [m].
+        """
         flat, batch = self._batch_input(tensions, self.check_tensions, validate)
         m = self.n_tendons
         out = np.empty(flat.shape)

@@ -462,10 +462,29 @@ def _report_over_max_tension(f, robot, out) -> None:
 def generate_splits(
     robot, preset, stem, *, seed: int = 0, splits=("train", "test"), **kwargs
 ) -> dict[str, Path]:
-    """Generate several splits: ``<stem>_train.h5`` and ``<stem>_test.h5`` (:func:`split_paths`).
+    """Generate several splits, ``<stem>_train.h5`` and ``<stem>_test.h5`` (:func:`split_paths`).
 
     Each split uses the same ``seed``; the per-target seeds also depend on the split.
-    Returns ``{split: path}``.
+
+    Parameters
+    ----------
+    robot : str, os.PathLike or TendonRobot
+        As in :func:`generate_dataset`.
+    preset : str or Protocol
+        The data-collection protocol.
+    stem : str or os.PathLike
+        File stem (a trailing ``.h5`` is dropped).
+    seed : int
+        Root seed.
+    splits : tuple of str
+        The splits to write.
+    **kwargs
+        Passed to :func:`generate_dataset`.
+
+    Returns
+    -------
+    dict
+        ``{split: path}``.
     """
     return {
         sp: generate_dataset(robot, preset, path, split=sp, seed=seed, **kwargs)
@@ -474,8 +493,20 @@ def generate_splits(
 
 
 def split_paths(stem, splits=("train", "test")) -> dict[str, Path]:
-    """The file of each split: ``data.h5`` (or ``data``) -> ``{"train": data_train.h5,
-    "test": data_test.h5}``."""
+    """The file of each split: ``data.h5`` (or ``data``) -> ``data_train.h5``, ``data_test.h5``.
+
+    Parameters
+    ----------
+    stem : str or os.PathLike
+        File stem (a trailing ``.h5`` is dropped).
+    splits : tuple of str
+        The splits.
+
+    Returns
+    -------
+    dict
+        ``{split: pathlib.Path}``.
+    """
     stem = Path(stem)
     if stem.suffix == ".h5":
         stem = stem.with_suffix("")

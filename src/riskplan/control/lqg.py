@@ -54,6 +54,7 @@ from riskplan.control.kalman import kalman_gains
 from riskplan.control.linearize import Linearization
 from riskplan.control.lqr import lqr_gains
 from riskplan.control.plan import NominalPlan
+from riskplan.control.ukf import execution_ukf
 from riskplan.errors import (
     ConvergenceError,
     ElementInversionError,
@@ -333,6 +334,7 @@ def execute(
     seed=None,
     keep_states: bool = True,
     goal_at: str = "final",
+    estimator: str = "kalman",
 ) -> Execution:
     """Run ``plan`` on ``sim`` under the true parameters ``params`` (module docstring).
 
@@ -358,6 +360,8 @@ def execute(
         Keep every simulator state in the result (``False`` saves memory).
     goal_at : {"final", "any"}
         When the goal counts: at the plan's last step, or at any step.
+    estimator : {"kalman", "ukf"}
+        The filter: the precomputed Kalman gains, or :func:`~riskplan.control.ukf.execution_ukf`.
 
     Returns
     -------
@@ -365,6 +369,8 @@ def execute(
         States, estimates, applied controls and the outcome.
     """
     _check_goal_at(goal_at)
+    if estimator not in ("kalman", "ukf"):
+        raise InvalidInputError(f"estimator: expected 'kalman' or 'ukf', got {estimator!r}")
     gen = as_generator(seed)
     T = plan.n_steps
     bounds = np.asarray(sim.control_bounds, dtype=np.float64)
@@ -385,6 +391,7 @@ def execute(
         L, K = controller.L, controller.K
         A, B, H = controller.model()[:3]
         xhat = np.zeros(A.shape[1])
+        ukf = execution_ukf(sim, plan, controller) if estimator == "ukf" else None
         # a simulator whose measurement needs the full state (``measure(state, noise,
         # rng)``: the needle in its material frame) is sensed through it
         measure = getattr(sim, "measure", None)
@@ -425,9 +432,12 @@ def execute(
                 z = np.asarray(measure(y, rng=gen), dtype=np.float64)
             else:
                 z = np.asarray(sim.observe(x, rng=gen), dtype=np.float64)
-            zbar = z - z_nominal[t]
-            xp = A[t] @ xhat + B[t] @ (u - plan.controls[t])
-            xhat = xp + K[t] @ (zbar - H[t] @ xp)
+            zbar, ubar = z - z_nominal[t], u - plan.controls[t]
+            if ukf is not None:
+                xhat = ukf(t, xhat, ubar, zbar)
+            else:
+                xp = A[t] @ xhat + B[t] @ ubar
+                xhat = xp + K[t] @ (zbar - H[t] @ xp)
         est.append(plan.reduced[t + 1] + xhat[:p])
         if augmented:
             dist.append(xhat[p : p + sim.control_dim].copy())

@@ -21,19 +21,55 @@ from riskplan.errors import InvalidInputError
 log = logging.getLogger(__name__)
 
 __all__ = [
+    "SELECTIONS",
     "TissuePlanningResult",
     "candidates_figure",
     "execution_gif",
     "plan_tissue",
+    "selection_setup",
     "write_outputs",
 ]
+
+
+#: How ``plan tissue`` selects (``selection=``): ``"paper"`` is the paper's σ-distance on
+#: the world-frame LQG; ``"calibrated"`` (the default outside the paper reproduction) is,
+#: per scenario, the estimator and controller whose predicted P(success) matched measured
+#: closed-loop success best in the calibration study (docs/control.md, "Calibration";
+#: ``frame``: the needle's reduced-state frame, :meth:`NeedleScenario.with_frame`).
+SELECTIONS = {
+    "paper": {
+        "needle": {"frame": None, "method": "sigma", "disturbance": False},
+        "manipulation": {"frame": None, "method": "sigma", "disturbance": False},
+    },
+    "calibrated": {
+        "needle": {"frame": "material", "method": "sampling", "disturbance": True},
+        "manipulation": {"frame": None, "method": "sampling", "disturbance": True},
+    },
+}
+
+
+def selection_setup(sim, plans, selection: str):
+    """``(sim, plans, method, disturbance)`` of a :data:`SELECTIONS` entry for ``sim``
+    (``sim.name``; a scenario file's kind): the simulator and plans in the entry's frame
+    (:meth:`~riskplan.control.NominalPlan.reframed`), its LQG-MP method and controller."""
+    if selection not in SELECTIONS:
+        raise InvalidInputError(
+            f"selection: expected one of {', '.join(SELECTIONS)}, got {selection!r}"
+        )
+    entry = SELECTIONS[selection].get(getattr(sim, "name", ""), SELECTIONS["paper"]["needle"])
+    if entry["frame"] is not None and callable(getattr(sim, "with_frame", None)):
+        sim = sim.with_frame(entry["frame"])
+        plans = [p.reframed(sim) for p in plans]
+    return sim, plans, entry["method"], entry["disturbance"]
 
 
 @dataclass
 class TissuePlanningResult:
     """Everything one run produces: the scenario (``sim``, with the case's distribution),
     ``plans``, ``trees``, the :class:`~riskplan.planning.select.Selection`, the honesty rows
-    and wall-clock ``timings`` (seconds: ``rrt``, ``selection``, ``check``)."""
+    and wall-clock ``timings`` (seconds: ``rrt``, ``selection``, ``check``);
+    ``selection_mode`` (:data:`SELECTIONS`) and ``frame`` (the needle's reduced-state frame
+    of the selection; ``selection.plan`` and its controller are in it)."""
 
     scenario: str
     case: str
@@ -44,6 +80,8 @@ class TissuePlanningResult:
     selection: object
     honesty: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
+    selection_mode: str = "paper"
+    frame: str | None = None
 
 
 def plan_tissue(
@@ -55,13 +93,14 @@ def plan_tissue(
     workers: int | None = None,
     backend: str = "local",
     rrt_options=None,
-    method: str = "sigma",
+    method: str | None = None,
     n_samples: int = 16,
     check_runs: int = 1000,
     check_others: int = 2,
     on_tree=None,
     on_plan=None,
     on_check=None,
+    selection: str = "calibrated",
 ) -> TissuePlanningResult:
     """Run the method on one scenario (``"needle"`` or ``"manipulation"``) and uncertainty
     ``case`` (:data:`riskplan.scenarios.uncertainty.CASE_NAMES`).
@@ -70,7 +109,8 @@ def plan_tissue(
     :func:`~riskplan.planning.select.select_plan` (``method``, ``n_samples`` parameter draws
     per step for ``M_t``), then ``check_runs`` closed-loop executions for the selected plan
     and ``check_others`` more (``check_runs = 0`` skips the check). ``on_tree(i, tree)``,
-    ``on_plan(i, score)``, ``on_check(row)`` report progress.
+    ``on_plan(i, score)``, ``on_check(row)`` report progress. ``selection``: ``"calibrated"``
+    (default) or ``"paper"`` (:data:`SELECTIONS`); ``method`` overrides its LQG-MP method.
     """
     from riskplan._validation import check_count
     from riskplan.control.lqgmp import METHODS
@@ -79,8 +119,12 @@ def plan_tissue(
     from riskplan.scenarios.registry import make_scenario
 
     # every argument checked before the trees grow (a bad method used to fail after them)
-    if method not in METHODS:
+    if method is not None and method not in METHODS:
         raise InvalidInputError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    if selection not in SELECTIONS:
+        raise InvalidInputError(
+            f"selection: expected one of {', '.join(SELECTIONS)}, got {selection!r}"
+        )
     n_plans = check_count(n_plans, "n_plans", 1)
     check_runs = check_count(check_runs, "check_runs", 0)
     check_others = check_count(check_others, "check_others", 0)
@@ -94,11 +138,14 @@ def plan_tissue(
     )
     timings["rrt"] = time.perf_counter() - t0
     t0 = time.perf_counter()
+    ssim, splans, smethod, dist = selection_setup(sim, plans, selection)
+    mode = selection
     selection = select_plan(
-        sim,
-        plans,
+        ssim,
+        splans,
         sim.distribution,
-        method=method,
+        method=smethod if method is None else method,
+        disturbance=dist,
         n_samples=n_samples,
         seed=seed + 1,
         backend=backend,
@@ -110,8 +157,8 @@ def plan_tissue(
     if check_runs:
         t0 = time.perf_counter()
         rows = honesty_check(
-            sim,
-            plans,
+            ssim,
+            splans,
             selection,
             sim.distribution,
             others=check_others,
@@ -122,7 +169,19 @@ def plan_tissue(
             on_row=on_check,
         )
         timings["check"] = time.perf_counter() - t0
-    return TissuePlanningResult(scenario, case, seed, sim, plans, trees, selection, rows, timings)
+    return TissuePlanningResult(
+        scenario,
+        case,
+        seed,
+        sim,
+        plans,
+        trees,
+        selection,
+        rows,
+        timings,
+        selection_mode=mode,
+        frame=getattr(ssim, "frame", None) if ssim is not sim else None,
+    )
 
 
 #: least time of one simulator step (s): a tenth of the measured 16.5 µs of a needle step on
@@ -300,6 +359,8 @@ def write_outputs(
             "p_collision_free": best.p_collision_free,
             "p_goal": best.p_goal,
             "method": sel.method,
+            "selection": result.selection_mode,
+            "frame": result.frame,
             "n_tied": sel.n_tied,
             "tie": sel.tie_note,
             "honesty_check": [dict(asdict(r), inside=r.inside) for r in result.honesty],

@@ -186,7 +186,7 @@ def test_fit_measurement_bias_recovers_a_known_direction(rng):
 
 
 def test_plan_tissue_selection_setup(pushed):
-    from riskplan.experiments.planning_tissue import SELECTIONS, selection_setup
+    from riskplan.tissue_planning.plan import SELECTIONS, selection_setup
 
     sim, plan, _, pm = pushed
     s, ps, method, dist = selection_setup(sim, [plan], "calibrated")

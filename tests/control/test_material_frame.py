@@ -189,12 +189,14 @@ def test_plan_tissue_selection_setup(pushed):
     from riskplan.tissue_planning.plan import SELECTIONS, selection_setup
 
     sim, plan, _, pm = pushed
-    s, ps, method, dist = selection_setup(sim, [plan], "calibrated")
-    entry = SELECTIONS["calibrated"]["needle"]
+    s, ps, method, dist = selection_setup(sim, [plan], "material")
+    entry = SELECTIONS["material"]["needle"]
     assert s.frame == entry["frame"] and (method, dist) == (entry["method"], entry["disturbance"])
     np.testing.assert_array_equal(ps[0].reduced, pm.reduced)
     assert ps[0].states is plan.states
     s, ps, method, dist = selection_setup(sim, [plan], "paper")
     assert s is sim and ps[0] is plan and (method, dist) == ("sigma", False)
+    s, ps, method, dist = selection_setup(sim, [plan], "calibrated")
+    assert s is sim and ps[0] is plan and method == SELECTIONS["calibrated"]["needle"]["method"]
     with pytest.raises(InvalidInputError, match="selection"):
         selection_setup(sim, [plan], "best")

@@ -42,8 +42,9 @@ def register(plan_app: typer.Typer) -> None:
         selection: str = typer.Option(
             "calibrated",
             "--selection",
-            help="calibrated (default: per scenario the estimator and controller that matched "
-            "measured success best, docs/control.md) | paper (sigma on the world-frame LQG)",
+            help="calibrated (default: per scenario the estimator that matched measured success "
+            "best, docs/control.md) | material (needle: material frame with the bias state) | "
+            "paper (sigma on the world-frame LQG)",
         ),
         check_runs: int = typer.Option(
             1000, "--check-runs", min=0, help="closed-loop executions per checked plan (0: skip)"

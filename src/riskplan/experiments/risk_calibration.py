@@ -48,20 +48,33 @@ class RiskStudyScale:
     trajectories: int = 30
     executions: int = 200
     steps: int = 8
-    coherences: tuple = (0.0, 0.15, 0.5, 0.9, 1.0)
+    coherences: tuple = (0.5,)
     n_clouds: int = 128
+    draws: int = 256
+    extents: tuple = (2.0,)
     n_points: int = 512
     pool: int = 4000
     band: float = 0.002
 
     def __post_init__(self):
-        for name in ("configurations", "trajectories", "executions", "steps", "n_clouds", "pool"):
+        for name in (
+            "configurations",
+            "trajectories",
+            "executions",
+            "steps",
+            "n_clouds",
+            "pool",
+            "draws",
+        ):
             v = getattr(self, name)
             if isinstance(v, bool) or int(v) != v or v < 1:
                 raise InvalidInputError(f"{name}: expected a positive integer, got {v!r}")
         if not all(0.0 <= float(c) <= 1.0 for c in self.coherences) or not self.coherences:
             raise InvalidInputError(f"coherences: expected values in [0, 1], got {self.coherences}")
         object.__setattr__(self, "coherences", tuple(float(c) for c in self.coherences))
+        if not self.extents or not all(float(c) > 0 for c in self.extents):
+            raise InvalidInputError(f"extents: expected values > 0, got {self.extents}")
+        object.__setattr__(self, "extents", tuple(float(c) for c in self.extents))
 
 
 RISK_STUDY_SCALES = {
@@ -73,8 +86,11 @@ RISK_STUDY_SCALES = {
         coherences=(0.5,),
         n_clouds=32,
         pool=600,
+        draws=32,
     ),
-    "reduced": RiskStudyScale(configurations=60, trajectories=12),
+    "reduced": RiskStudyScale(
+        configurations=60, trajectories=12, coherences=(0.0, 0.15, 0.5, 0.9, 1.0)
+    ),
     "full": RiskStudyScale(),
 }
 
@@ -145,6 +161,7 @@ def run_risk_study(out, scale: RiskStudyScale, store, *, seed: int = 0, progress
     from riskplan.gaussian_mixture import as_numpy_mixture
     from riskplan.io import write_json_atomic
     from riskplan.kinematics import load_model
+    from riskplan.planning.risk import SampledBodyRisk
     from riskplan.robots import load_robot
     from riskplan.scenarios.chest import build_chest
 
@@ -203,6 +220,14 @@ def run_risk_study(out, scale: RiskStudyScale, store, *, seed: int = 0, progress
 
         risks[f"cloud ρ={rho:g}"] = tuple(store.get_or_compute(f"risk.cloud.{rho:g}", compute))
         report("risk study: cloud risks", scale.coherences.index(rho) + 1, len(scale.coherences))
+    for c in scale.extents:
+
+        def compute(c=c):
+            risk = SampledBodyRisk(model, env, n_draws=scale.draws, extent=c, seed=seed)
+            return [risk(Q).tolist(), [risk.trajectory(t) for t in trajs]]
+
+        risks[f"bodies c={c:g}"] = tuple(store.get_or_compute(f"risk.bodies.{c:g}", compute))
+        report("risk study: sampled-body risks", scale.extents.index(c) + 1, len(scale.extents))
     measured = np.r_[r_conf, r_traj]
     metrics = {
         name: {

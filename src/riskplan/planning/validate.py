@@ -76,6 +76,8 @@ __all__ = [
     "default_radius",
     "disk_clearance",
     "execute_on_robot",
+    "execution_displacements",
+    "execution_draws",
     "mixture_monte_carlo",
     "simulate_executions",
     "tube_clearance",
@@ -182,19 +184,12 @@ def default_radius(robot) -> float:
     return float(BodyGeometry.from_params(robot.params).disk_radius)
 
 
-def simulate_executions(robot, trajectory, seeds, *, return_frames: bool = False):
-    """Backbones of the robot along ``trajectory (T, m)`` for runs seeded by ``seeds`` (length ``B``).
-
-    Protocol in the module docstring. Returns backbone positions ``(B, T, n, 3)`` in the
-    robot's base frame [m], and with ``return_frames`` also the body frames ``(B, T, n, 3, 3)``.
-    Inputs are trusted (validated by :func:`execute_on_robot`).
-    """
-    from riskplan.datasets.generate import to_base_frame
+def execution_draws(robot, seeds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-run ``(start, play, offset)``, each ``(B, m)``, of the runs seeded by ``seeds``
+    (length ``B``; module docstring, steps 1-2). Inputs are trusted."""
     from riskplan.datasets.protocol import random_starts
-    from riskplan.robots.hysteresis import HysteresisModel, play_operator
+    from riskplan.robots.hysteresis import HysteresisModel
 
-    traj = np.asarray(trajectory, dtype=np.float64)
-    T, m = traj.shape
     lim = np.asarray(robot.displacement_limits, dtype=np.float64)
     model = HysteresisModel(robot)
     starts, plays, offsets = [], [], []
@@ -204,13 +199,39 @@ def simulate_executions(robot, trajectory, seeds, *, return_frames: bool = False
         play, offset = model.sample_run(np.random.default_rng(c_run))
         plays.append(play)
         offsets.append(offset)
-    e = np.stack(starts)  # at rest at the start: engaged = start
-    play, offset = np.stack(plays), np.stack(offsets)
+    return np.stack(starts), np.stack(plays), np.stack(offsets)
+
+
+def execution_displacements(robot, trajectory, seeds=None, *, draws=None) -> np.ndarray:
+    """Displacements ``(B, T, m)`` the robot receives along ``trajectory (T, m)`` in the runs
+    seeded by ``seeds`` (length ``B``), or with the runs' :func:`execution_draws` ``draws``:
+    at rest at the start, then the play operator and the offset (module docstring, step 3).
+    Inputs are trusted."""
+    from riskplan.robots.hysteresis import play_operator
+
+    traj = np.asarray(trajectory, dtype=np.float64)
+    T, m = traj.shape
+    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
+    e, play, offset = execution_draws(robot, seeds) if draws is None else draws
     B = len(e)
     eff = np.empty((B, T, m))
     for t in range(T):
         e = play_operator(e, np.broadcast_to(traj[t], (B, 1, m)), play)
         eff[:, t] = np.clip(e + offset, lim[:, 0], lim[:, 1])
+    return eff
+
+
+def simulate_executions(robot, trajectory, seeds, *, return_frames: bool = False):
+    """Backbones of the robot along ``trajectory (T, m)`` for runs seeded by ``seeds`` (length ``B``).
+
+    Protocol in the module docstring. Returns backbone positions ``(B, T, n, 3)`` in the
+    robot's base frame [m], and with ``return_frames`` also the body frames ``(B, T, n, 3, 3)``.
+    Inputs are trusted (validated by :func:`execute_on_robot`).
+    """
+    from riskplan.datasets.generate import to_base_frame
+
+    eff = execution_displacements(robot, trajectory, seeds)
+    B, T, m = eff.shape
     # configurations near the corners of the displacement box need more than max_tension; the
     # solver warns per call, which would flood a long run (the data generator does the same)
     rlog = logging.getLogger("riskplan.robots.robot")

@@ -148,7 +148,18 @@ DEFAULT_EXTENT = 2.0
 
 
 def sphere_directions(n: int) -> np.ndarray:
-    """``(n, 3)`` unit vectors spread evenly over the sphere (Fibonacci lattice, deterministic)."""
+    """Unit vectors spread evenly over the sphere (Fibonacci lattice, deterministic).
+
+    Parameters
+    ----------
+    n : int
+        Number of directions.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(n, 3)`` unit vectors; the first is nearest ``+z`` (``z = 1 - 1/n``).
+    """
     i = np.arange(n) + 0.5
     z = 1.0 - 2.0 * i / n
     r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
@@ -193,16 +204,27 @@ def sampled_body_risk(
 
     Parameters
     ----------
-    nominal: mixtures at the commanded configurations, batch ``(T,)``: ``weights (T, K)``,
+    nominal : mixture
+        Mixtures at the commanded configurations, batch ``(T,)``: ``weights (T, K)``,
         ``means (T, K, 3)``, ``precision_cholesky (T, K, 3, 3)`` (or one mixture, ``T = 1``).
-    drawn_means: ``(S, T, K, 3)`` component means at the configurations the ``S`` executions
-        receive (the same component order); ``S >= 2``.
-    environment: 3-D obstacles in the frame of the mixtures.
-    extent: ``c`` above (> 0).
+    drawn_means : array_like
+        ``(S, T, K, 3)`` component means at the configurations the ``S >= 2`` executions
+        receive (the same component order).
+    environment : Environment
+        3-D obstacles in the frame of the mixtures.
+    extent : float
+        ``c`` above (> 0).
+    n_points : int
+        Points of a body cloud (decides which components are body).
+    n_directions : int
+        Boundary points tested per piece.
+    validate : bool
+        Check the inputs (False: trusted).
 
     Returns
     -------
-    :class:`CloudRisk` with ``hits (S, T)``.
+    CloudRisk
+        ``per_configuration (T,)``, ``trajectory`` and ``hits (S, T)``.
     """
     env = check_environment(environment) if validate else environment
     gm = check_mixture(nominal, env.dim, validate=validate)

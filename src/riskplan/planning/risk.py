@@ -192,14 +192,37 @@ class SampledBodyRisk:
         )
 
     def __call__(self, configs) -> np.ndarray:
+        """Risk per configuration.
+
+        Parameters
+        ----------
+        configs : array_like
+            ``(N, m)`` configurations (planning coordinates of ``model``).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(N,)`` fractions of the sampled executions whose body touches an obstacle.
+        """
         c = np.atleast_2d(np.asarray(configs, dtype=np.float64))
         out = np.array([self._risk(x[None]).per_configuration[0] for x in c])
         self.evaluations += len(c)
         return out
 
     def trajectory(self, trajectory) -> float:
-        """Common-draw risk that the body touches an obstacle at some configuration of
-        ``trajectory (T, m)`` (each sampled execution keeps its draw along the path)."""
+        """Common-draw risk that the body touches an obstacle somewhere along a trajectory.
+
+        Parameters
+        ----------
+        trajectory : array_like
+            ``(T, m)`` configurations (planning coordinates of ``model``).
+
+        Returns
+        -------
+        float
+            Fraction of the sampled executions (each keeps its draw along the path) whose
+            body touches an obstacle at some configuration.
+        """
         self.evaluations += len(np.atleast_2d(trajectory))
         return self._risk(trajectory).trajectory
 

@@ -185,8 +185,20 @@ def default_radius(robot) -> float:
 
 
 def execution_draws(robot, seeds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per-run ``(start, play, offset)``, each ``(B, m)``, of the runs seeded by ``seeds``
-    (length ``B``; module docstring, steps 1-2). Inputs are trusted."""
+    """The transmission draws of the runs seeded by ``seeds`` (module docstring, steps 1-2).
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot (its displacement limits and ``[hysteresis]`` parameters).
+    seeds : sequence of int
+        One seed per run (length ``B``), split into the start draw and the run's variation.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``(start, play, offset)``, each ``(B, m)`` [m]. Inputs are trusted.
+    """
     from riskplan.datasets.protocol import random_starts
     from riskplan.robots.hysteresis import HysteresisModel
 
@@ -203,10 +215,26 @@ def execution_draws(robot, seeds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def execution_displacements(robot, trajectory, seeds=None, *, draws=None) -> np.ndarray:
-    """Displacements ``(B, T, m)`` the robot receives along ``trajectory (T, m)`` in the runs
-    seeded by ``seeds`` (length ``B``), or with the runs' :func:`execution_draws` ``draws``:
-    at rest at the start, then the play operator and the offset (module docstring, step 3).
-    Inputs are trusted."""
+    """Displacements the robot receives along a trajectory in given runs (module docstring, step 3).
+
+    At rest at the run's start, then the play operator and the run's offset.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    trajectory : array_like
+        ``(T, m)`` commanded displacements [m].
+    seeds : sequence of int, optional
+        One seed per run (length ``B``); ignored when ``draws`` is given.
+    draws : tuple of numpy.ndarray, optional
+        The runs' :func:`execution_draws` (computed once for many trajectories).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(B, T, m)`` effective displacements [m]. Inputs are trusted.
+    """
     from riskplan.robots.hysteresis import play_operator
 
     traj = np.asarray(trajectory, dtype=np.float64)

@@ -100,3 +100,21 @@ def test_rerun_reads_the_store(study, tmp_path, monkeypatch):
     monkeypatch.setattr(validate, "execute_on_robot", no_execution)
     again = run_risk_study(tmp_path / "out", SMOKE, ResultStore(tmp_path / "store", CONFIG), seed=0)
     assert again["measured"] == ref["measured"] and again["predicted"] == ref["predicted"]
+
+
+def test_transmission_mechanism_all_sources_is_the_robot():
+    """The mechanism's "all sources" rate is the robot's own executions (same seeds, same body
+    test); start history and offsets alone are rates of the same configurations."""
+    from riskplan.app.reproduce.risk_calibration import transmission_mechanism
+    from riskplan.planning.chest_scene import build_chest
+    from riskplan.planning.validate import execute_on_robot
+
+    x = np.array([[0.008256, -0.004725, 0.021455, 0.036358]])  # near contact on the robot
+    m = transmission_mechanism(x, [0.33], executions=40, seed=11)
+    robot = execute_on_robot(
+        "paper", x, build_chest(0).base_environment, 40, seed=11, body="disks", backend="serial"
+    )
+    assert m["rates"]["all sources"][0] == robot.per_configuration.probability[0]
+    assert 0.0 < m["rates"]["all sources"][0] < 1.0
+    assert set(m["mae_mid"]) == {"all sources", "start history", "offsets"}
+    assert 0.0 <= m["pattern_share_median"] <= 1.0

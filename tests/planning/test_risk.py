@@ -181,8 +181,8 @@ def test_sampled_body_risk_is_the_collision_module_on_the_transmission_draws(mod
     from riskplan.collision.body_risk import sampled_body_risk
     from riskplan.gaussian_mixture import as_numpy_mixture
     from riskplan.parallel import spawn_seeds
+    from riskplan.planning.executions import execution_displacements
     from riskplan.planning.risk import SampledBodyRisk
-    from riskplan.planning.validate import execution_displacements
 
     rm = _RobotModel(model)
     b = SampledBodyRisk(rm, scene, n_draws=256, seed=5)

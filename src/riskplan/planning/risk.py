@@ -118,7 +118,7 @@ class SampledBodyRisk:
 
     Each of ``n_draws`` samples is one execution of the robot's transmission (random start,
     the run's play widths and zero offsets, the play operator:
-    :func:`~riskplan.planning.validate.execution_displacements`, the law the robot file states
+    :func:`~riskplan.planning.executions.execution_displacements`, the law the robot file states
     and the data were generated with); the learned model, evaluated at the configuration that
     execution delivers, places the whole body; a component's surface spread is its predicted
     covariance less the executions' share. The draws are the same for every call (``seed``), so
@@ -161,7 +161,7 @@ class SampledBodyRisk:
         self.n_draws = int(n_draws)
         self.seed = int(seed)
         self.batch = int(batch)
-        from riskplan.planning.validate import execution_draws
+        from riskplan.planning.executions import execution_draws
 
         self.draws = execution_draws(self.robot, spawn_seeds(self.seed, self.n_draws))
         self.evaluations = 0
@@ -178,7 +178,7 @@ class SampledBodyRisk:
         """:class:`~riskplan.collision.body_risk.CloudRisk` of ``trajectory (T, m)`` (planning coordinates)."""
         from riskplan.collision.body_risk import sampled_body_risk
         from riskplan.gaussian_mixture import as_numpy_mixture
-        from riskplan.planning.validate import execution_displacements
+        from riskplan.planning.executions import execution_displacements
 
         y = np.atleast_2d(np.asarray(trajectory, dtype=np.float64))
         x = np.atleast_2d(self._to_model(y))

@@ -76,8 +76,6 @@ __all__ = [
     "default_radius",
     "disk_clearance",
     "execute_on_robot",
-    "execution_displacements",
-    "execution_draws",
     "mixture_monte_carlo",
     "simulate_executions",
     "tube_clearance",
@@ -184,71 +182,6 @@ def default_radius(robot) -> float:
     return float(BodyGeometry.from_params(robot.params).disk_radius)
 
 
-def execution_draws(robot, seeds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The transmission draws of the runs seeded by ``seeds`` (module docstring, steps 1-2).
-
-    Parameters
-    ----------
-    robot : TendonRobot
-        The robot (its displacement limits and ``[hysteresis]`` parameters).
-    seeds : sequence of int
-        One seed per run (length ``B``), split into the start draw and the run's variation.
-
-    Returns
-    -------
-    tuple of numpy.ndarray
-        ``(start, play, offset)``, each ``(B, m)`` [m]. Inputs are trusted.
-    """
-    from riskplan.datasets.protocol import random_starts
-    from riskplan.robots.hysteresis import HysteresisModel
-
-    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
-    model = HysteresisModel(robot)
-    starts, plays, offsets = [], [], []
-    for sd in seeds:
-        c_start, c_run = np.random.SeedSequence(int(sd)).spawn(2)
-        starts.append(random_starts(lim, 1, np.random.default_rng(c_start))[0])
-        play, offset = model.sample_run(np.random.default_rng(c_run))
-        plays.append(play)
-        offsets.append(offset)
-    return np.stack(starts), np.stack(plays), np.stack(offsets)
-
-
-def execution_displacements(robot, trajectory, seeds=None, *, draws=None) -> np.ndarray:
-    """Displacements the robot receives along a trajectory in given runs (module docstring, step 3).
-
-    At rest at the run's start, then the play operator and the run's offset.
-
-    Parameters
-    ----------
-    robot : TendonRobot
-        The robot.
-    trajectory : array_like
-        ``(T, m)`` commanded displacements [m].
-    seeds : sequence of int, optional
-        One seed per run (length ``B``); ignored when ``draws`` is given.
-    draws : tuple of numpy.ndarray, optional
-        The runs' :func:`execution_draws` (computed once for many trajectories).
-
-    Returns
-    -------
-    numpy.ndarray
-        ``(B, T, m)`` effective displacements [m]. Inputs are trusted.
-    """
-    from riskplan.robots.hysteresis import play_operator
-
-    traj = np.asarray(trajectory, dtype=np.float64)
-    T, m = traj.shape
-    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
-    e, play, offset = execution_draws(robot, seeds) if draws is None else draws
-    B = len(e)
-    eff = np.empty((B, T, m))
-    for t in range(T):
-        e = play_operator(e, np.broadcast_to(traj[t], (B, 1, m)), play)
-        eff[:, t] = np.clip(e + offset, lim[:, 0], lim[:, 1])
-    return eff
-
-
 def simulate_executions(robot, trajectory, seeds, *, return_frames: bool = False):
     """Backbones of the robot along ``trajectory (T, m)`` for runs seeded by ``seeds`` (length ``B``).
 
@@ -257,6 +190,7 @@ def simulate_executions(robot, trajectory, seeds, *, return_frames: bool = False
     Inputs are trusted (validated by :func:`execute_on_robot`).
     """
     from riskplan.datasets.generate import to_base_frame
+    from riskplan.planning.executions import execution_displacements
 
     eff = execution_displacements(robot, trajectory, seeds)
     B, T, m = eff.shape

@@ -314,7 +314,7 @@ def transmission_mechanism(
     from riskplan.parallel import spawn_seeds
     from riskplan.planning.chest import body_clearance
     from riskplan.planning.chest_scene import build_chest
-    from riskplan.planning.validate import execution_displacements
+    from riskplan.planning.executions import execution_displacements
     from riskplan.robots import load_robot
 
     Q = np.asarray(configurations, dtype=np.float64)

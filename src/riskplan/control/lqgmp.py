@@ -476,6 +476,9 @@ def lqgmp(
         zero-mean): ``μ_{t+1} = F_t μ_t + G_t (d̄_t, 0)`` with ``M_t − d̄_t d̄_tᵀ`` as the
         process noise covariance.
     seed : seeds the goal samples (the trajectories with ``"sampling"``).
+
+    A simulator with ``workspace_dim = 3`` (the 3-D needle) is evaluated by
+    :func:`riskplan.control.lqgmp3d.lqgmp_3d` against its 3-D convex obstacles.
     """
     from riskplan.collision import DEFAULT_CUTOFF, free_region, precision_cholesky_from_covariance
 
@@ -491,6 +494,19 @@ def lqgmp(
     if int(n_goal_samples) != n_goal_samples or n_goal_samples < 1:
         raise InvalidInputError(
             f"n_goal_samples: expected a positive integer, got {n_goal_samples!r}"
+        )
+    if getattr(sim, "workspace_dim", 2) == 3:  # 3-D convex obstacles (the 3-D needle)
+        from riskplan.control.lqgmp3d import lqgmp_3d
+
+        return lqgmp_3d(
+            sim,
+            plan,
+            controller,
+            method=method,
+            n_goal_samples=n_goal_samples,
+            cutoff=cutoff,
+            drift=drift,
+            seed=seed,
         )
     col, goal_idx = point_indices(sim)
     T = plan.n_steps

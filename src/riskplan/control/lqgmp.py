@@ -483,18 +483,6 @@ def lqgmp(
     from riskplan.collision import DEFAULT_CUTOFF, free_region, precision_cholesky_from_covariance
 
     cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
-    if method not in METHODS:
-        raise InvalidInputError(f"method: expected one of {METHODS}, got {method!r}")
-    if not isinstance(plan, NominalPlan):
-        raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
-    if not isinstance(controller, LQGController) or controller.n_steps != plan.n_steps:
-        raise InvalidInputError(
-            "controller: expected the LQGController of this plan (same number of steps)"
-        )
-    if int(n_goal_samples) != n_goal_samples or n_goal_samples < 1:
-        raise InvalidInputError(
-            f"n_goal_samples: expected a positive integer, got {n_goal_samples!r}"
-        )
     if getattr(sim, "workspace_dim", 2) == 3:  # 3-D convex obstacles (the 3-D needle)
         from riskplan.control.lqgmp3d import lqgmp_3d
 
@@ -507,6 +495,18 @@ def lqgmp(
             cutoff=cutoff,
             drift=drift,
             seed=seed,
+        )
+    if method not in METHODS:
+        raise InvalidInputError(f"method: expected one of {METHODS}, got {method!r}")
+    if not isinstance(plan, NominalPlan):
+        raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
+    if not isinstance(controller, LQGController) or controller.n_steps != plan.n_steps:
+        raise InvalidInputError(
+            "controller: expected the LQGController of this plan (same number of steps)"
+        )
+    if int(n_goal_samples) != n_goal_samples or n_goal_samples < 1:
+        raise InvalidInputError(
+            f"n_goal_samples: expected a positive integer, got {n_goal_samples!r}"
         )
     col, goal_idx = point_indices(sim)
     T = plan.n_steps

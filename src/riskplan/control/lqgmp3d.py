@@ -16,6 +16,9 @@ parallelepipeds (:class:`riskplan.geometry3d.ConvexBody`) — with the three met
   (:func:`riskplan.control.lqgmp._truncate`, moment matching), so later steps see only the
   trajectories that survived; ``P(no collision) = ∏_t (1 − min(1, p_t))``. Obstacles farther
   than ``cutoff`` whitened units are skipped.
+* ``"per-step"`` (the estimate Patil 2012 compares the truncation with): the same
+  half-spaces and ``p_t`` at every step, without truncating, so the steps count as
+  independent.
 * ``"sampling"``: ``n_goal_samples`` whole trajectories of the same linear-Gaussian
   recursion, each checked against the deformed obstacles at every step and the target at
   ``T`` — the linear model's own probability (the oracle the two estimates are tested
@@ -43,7 +46,10 @@ from riskplan.control.lqgmp import (
 from riskplan.errors import InvalidInputError
 from riskplan.geometry3d import nearest_to_origin
 
-__all__ = ["lqgmp_3d"]
+__all__ = ["METHODS_3D", "lqgmp_3d"]
+
+#: the 2-D methods and ``"per-step"`` (half-spaces without truncation)
+METHODS_3D = (*METHODS, "per-step")
 
 _TINY = 1e-24
 
@@ -70,8 +76,17 @@ def lqgmp_3d(
     from riskplan.collision import DEFAULT_CUTOFF
 
     cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
-    if method not in METHODS:
-        raise InvalidInputError(f"method: expected one of {METHODS}, got {method!r}")
+    if method not in METHODS_3D:
+        raise InvalidInputError(f"method: expected one of {METHODS_3D}, got {method!r}")
+    from riskplan.control.lqg import LQGController
+    from riskplan.control.plan import NominalPlan
+
+    if not isinstance(plan, NominalPlan):
+        raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
+    if not isinstance(controller, LQGController) or controller.n_steps != plan.n_steps:
+        raise InvalidInputError(
+            "controller: expected the LQGController of this plan (same number of steps)"
+        )
     if int(n_goal_samples) != n_goal_samples or n_goal_samples < 1:
         raise InvalidInputError(
             f"n_goal_samples: expected a positive integer, got {n_goal_samples!r}"
@@ -136,7 +151,7 @@ def lqgmp_3d(
                 chosen.append((n, d))
                 p_t += float(ndtr(-d))
             # truncate the joint distribution: nᵀ L⁻¹ (x − centre) ≤ d on the position
-            for n, d in chosen:
+            for n, d in chosen if method == "truncation" else ():
                 cpos = np.linalg.solve(L.T, n)
                 c = np.zeros(2 * nz)
                 c[pos] = cpos

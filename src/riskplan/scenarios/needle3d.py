@@ -94,10 +94,12 @@ class Needle3DState(SimState):
 
 
 def _obstacle_default():
+    # a corridor along the line from the start to the target: two balls above and below it
+    # and a box below its far half, 0.04 to 0.08 from the line
     return (
-        ("sphere", (0.45, 0.5, 0.5), 0.12),
-        ("box", (0.55, 0.12, 0.3), (0.7, 0.38, 0.7)),
-        ("sphere", (0.35, 0.78, 0.55), 0.1),
+        ("sphere", (0.45, 0.36, 0.5), 0.1),
+        ("box", (0.62, 0.3, 0.35), (0.74, 0.44, 0.65)),
+        ("sphere", (0.42, 0.68, 0.56), 0.1),
     )
 
 
@@ -505,13 +507,31 @@ class Needle3DScenario(FEMScenario):
         return u
 
     # ---- planning -----------------------------------------------------------------
+    def expected_goal_point(self, params: SimParams | None = None) -> np.ndarray:
+        """``(3,)`` where the world tip is when its material point is the target centre,
+        reached along the line from the start: ``c + u(c)`` under the push there. The tissue
+        carries the tip and the target alike, so this is also where the deformed target's
+        centre is then; the undeformed centre ``c`` lies about ``|u(c)|`` (0.07 on the
+        default scene, most of the target radius) behind it, and a tree steered there stops
+        short of the deformed target."""
+        params = params or self.nominal_params
+        cfg = self.config
+        c = np.asarray(cfg.target_center, dtype=np.float64)
+        e3 = c - np.asarray(cfg.start, dtype=np.float64)
+        n = float(np.linalg.norm(e3))
+        if n == 0.0:
+            return c
+        mat = np.concatenate([c, np.zeros(6), e3 / n])
+        return self._tissue_response(mat, params)[1][:3]
+
     def planning_space(self) -> Needle3DSpace:
         """The RRT's space (:class:`Needle3DSpace`): the block, the needle's curvature, the
-        target centre, 3 steps per edge and the kinematic steering rule."""
+        expected goal point (:meth:`expected_goal_point`), 3 steps per edge and the
+        kinematic steering rule."""
         cfg = self.config
         return Needle3DSpace(
             size=np.asarray(cfg.size, dtype=np.float64),
-            goal=np.concatenate([np.asarray(cfg.target_center, dtype=np.float64), np.zeros(9)]),
+            goal=np.concatenate([self.expected_goal_point(), np.zeros(9)]),
             radius=1.0 / cfg.curvature,
             steer=functools.partial(
                 needle3d_steer, tau=cfg.tau, kappa=cfg.curvature, duty=cfg.duty_cycle
@@ -538,7 +558,7 @@ class Needle3DSpace:
     goal: np.ndarray
     radius: float
     steer: object = None
-    steps_per_extension: int = 3
+    steps_per_extension: int = 6
     max_control_change: np.ndarray | None = None
     dim: int = 12
 

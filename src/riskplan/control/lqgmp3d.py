@@ -127,9 +127,15 @@ def lqgmp_3d(
             free[t] = 0.0
             mean[t + 1], cov[t + 1] = mu, S
             continue
-        if np.linalg.eigvalsh(Sp).min() <= _TINY:
+        ev = np.linalg.eigvalsh(Sp)
+        if ev[-1] <= _TINY:
             mean[t + 1], cov[t + 1] = mu, S  # a deterministic point outside every obstacle
             continue
+        if ev[0] <= 1e-12 * ev[-1]:
+            # near-singular (e.g. the force case: the tissue's offset of the tip only scales
+            # with f_int, a rank-1 spread): a jitter of 1e-9 of the largest variance, as the
+            # 2-D sigma method does; the spread direction keeps its distances
+            Sp = Sp + 1e-9 * ev[-1] * np.eye(3)
         L = np.linalg.cholesky(Sp)
         found = [nearest_to_origin(b, L, centre) for b in bodies]
         if method == "sigma":

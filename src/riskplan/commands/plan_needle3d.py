@@ -42,9 +42,9 @@ def register(plan_app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
+        from riskplan.app.reproduce.needle3d import plan_needle3d, write_outputs
         from riskplan.commands._shared import output_folder
         from riskplan.errors import InvalidInputError
-        from riskplan.experiments.needle3d_study import plan_needle3d, write_outputs
         from riskplan.io import check_output_folder
         from riskplan.scenarios.uncertainty import CASE_NAMES
 

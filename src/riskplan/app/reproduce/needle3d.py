@@ -340,3 +340,29 @@ def write_outputs(result: Needle3DResult, out, *, n_executed: int = 10, seed: in
     write_text_atomic(out / "needle3d.html", fig.to_html(include_plotlyjs="cdn"))
     files["figure"] = out / "needle3d.html"
     return files
+
+
+#: sizes of the ``reproduce`` stage ``needle3d`` by scale name
+NEEDLE3D_SCALES = {
+    "smoke": dict(n_plans=2, check_runs=0, check_plans=1, max_iterations=400),
+    "paper": dict(n_plans=10, check_runs=200, check_plans=6, max_iterations=600),
+}
+
+
+def run_needle3d(out, scale: str = "smoke", *, seed: int = 0, case: str = "actuation") -> dict:
+    """The ``reproduce`` stage ``needle3d``: :func:`plan_needle3d` at the sizes of
+    :data:`NEEDLE3D_SCALES` (``"smoke"`` unless ``scale`` is ``"paper"``), its outputs in
+    ``out/needle3d/`` (:func:`write_outputs`, the interactive figure included). Returns what
+    ``results.json`` holds: rows, timings, settings and the figure's path relative to ``out``."""
+    size = NEEDLE3D_SCALES["paper" if scale == "paper" else "smoke"]
+    res = plan_needle3d(case, seed=seed, **size)
+    folder = Path(out) / "needle3d"
+    folder.mkdir(parents=True, exist_ok=True)
+    files = write_outputs(res, folder, seed=seed)
+    return {
+        "best": res.best,
+        "rows": [r.as_dict() for r in res.rows],
+        "timings": res.timings,
+        "settings": res.settings,
+        "figure": str(Path("needle3d") / files["figure"].name),
+    }

@@ -99,9 +99,9 @@ def test_world_pose_rides_on_the_tissue(sim, tol):
     X = y.material[:3]
     U = sim.nodal_displacement(y)
     d = sim.mesh_data(y.n_elements)
-    basis = Basis(d.block.mesh, ElementVector(ElementTetP1()))
+    basis = Basis(d.block.mesh.to_skfem(), ElementVector(ElementTetP1()))
     flat = np.zeros(basis.N)
-    flat[d.block.node_dofs.ravel()] = U.ravel()
+    flat[np.asarray(basis.nodal_dofs).T.ravel()] = U.ravel()
     probe = basis.probes(X[:, None])
     uX = (probe @ flat).reshape(3)  # skfem interleaves components per node
     np.testing.assert_allclose(y.pose[:3], X + uX, **tol["interpolation"])

@@ -51,6 +51,22 @@ def test_figure_has_block_bodies_and_plans(straight):
     assert "executed" in names
 
 
+def test_outputs_are_written_whole(straight, tmp_path):
+    from riskplan.app.reproduce.needle3d import Needle3DResult, write_outputs
+
+    sim, plan = straight
+    ctrls, rows = evaluate_candidates(sim, [plan], seed=0, n_goal_samples=200)
+    res = Needle3DResult([plan], rows, 0, ctrls[0], {"rrt_s": 0.0}, {"case": "actuation"})
+    files = write_outputs(res, tmp_path, n_executed=1)
+    with np.load(files["selected"]) as z:
+        np.testing.assert_array_equal(z["controls"], plan.controls)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "needle3d.html",
+        "selected.npz",
+        "summary.json",
+    ]
+
+
 def test_plan_needle3d_rejects_a_bad_case(tmp_path):
     from typer.testing import CliRunner
 

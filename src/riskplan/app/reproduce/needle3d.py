@@ -308,7 +308,7 @@ def needle3d_figure(sim, plans, executed=(), highlight: int | None = None):
 def write_outputs(result: Needle3DResult, out, *, n_executed: int = 10, seed: int = 0) -> dict:
     """``selected.npz`` (controls, world path), ``summary.json`` (rows, timings, settings)
     and ``needle3d.html`` (the figure with ``n_executed`` closed-loop executions of the
-    selected plan). Atomic writes."""
+    selected plan; plotly.js embedded, so the page works offline). Atomic writes."""
     from riskplan.control.lqg import execute
     from riskplan.io import atomic_path, write_json_atomic, write_text_atomic
     from riskplan.scenarios.registry import scenario_from_config
@@ -317,7 +317,7 @@ def write_outputs(result: Needle3DResult, out, *, n_executed: int = 10, seed: in
     sim = scenario_from_config("needle3d", None, result.settings["case"])
     plan = result.plans[result.best]
     files = {}
-    with atomic_path(out / "selected.npz") as tmp:
+    with atomic_path(out / "selected.npz", suffix=".npz") as tmp:
         np.savez(tmp, controls=plan.controls, path=plan.reduced[:, :3])
     files["selected"] = out / "selected.npz"
     write_json_atomic(
@@ -337,7 +337,7 @@ def write_outputs(result: Needle3DResult, out, *, n_executed: int = 10, seed: in
             ex = execute(sim, plan, result.controller, sim.sample_params(gen), seed=gen)
             executed.append(ex.x[:, :3])
     fig = needle3d_figure(sim, result.plans, executed, highlight=result.best)
-    write_text_atomic(out / "needle3d.html", fig.to_html(include_plotlyjs="cdn"))
+    write_text_atomic(out / "needle3d.html", fig.to_html(include_plotlyjs=True))
     files["figure"] = out / "needle3d.html"
     return files
 

@@ -568,10 +568,28 @@ def lqgmp(
     LQGMPResult
         ``p_success``, ``p_collision_free``, ``p_goal``, per-step factors and the
         distributions.
+
+    Notes
+    -----
+    A simulator with ``workspace_dim = 3`` (the 3-D needle) is evaluated by
+    :func:`riskplan.control.lqgmp3d.lqgmp_3d` against its 3-D convex obstacles.
     """
     from riskplan.collision import DEFAULT_CUTOFF, free_region
 
     cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
+    if getattr(sim, "workspace_dim", 2) == 3:  # 3-D convex obstacles (the 3-D needle)
+        from riskplan.control.lqgmp3d import lqgmp_3d
+
+        return lqgmp_3d(
+            sim,
+            plan,
+            controller,
+            method=method,
+            n_goal_samples=n_goal_samples,
+            cutoff=cutoff,
+            drift=drift,
+            seed=seed,
+        )
     if method not in METHODS:
         raise InvalidInputError(f"method: expected one of {METHODS}, got {method!r}")
     if not isinstance(plan, NominalPlan):

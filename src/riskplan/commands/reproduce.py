@@ -29,7 +29,8 @@ def register(app: typer.Typer) -> None:
             ["figures"],
             "--stage",
             help="figures (the papers' figures) | calibration (LQG-MP predicted vs measured "
-            "success; deformable paper). Repeat to run both.",
+            "success; deformable paper) | sensitivity (the needle's Fig. 6 against noise and "
+            "force scales). Repeat to run several.",
         ),
         calibration_scale: str = typer.Option(
             None,

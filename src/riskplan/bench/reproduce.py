@@ -16,7 +16,7 @@ core, not the share of it the scheduler gave.
   — the same rate as Fig. 6 executes now: each case's draws in one task on a freshly
   unpickled scenario, four runs of the plan (two open, two closed loop) on each draw, so a
   draw's FEM model (and in the mesh case its mesh) is built once for the four
-  (:func:`riskplan.experiments.fig6.execute_methods`).
+  (:func:`riskplan.app.reproduce.deformable.execute_methods`).
 * ``smoke_all_s`` — wall-clock seconds of ``riskplan reproduce --paper all --scale smoke``
   (local process pool, all cores) in a fresh folder; ``None`` with ``--quick``.
 * ``*_rrt_s_per_candidate`` (one tree grown for one plan: an upper bound, trees of the
@@ -40,10 +40,10 @@ def executions_per_s(name: str, n_per_case: int, seed: int = 0, costs: dict | No
     ``costs``, if given, receives ``rrt_s`` (one candidate, one tree) and ``select_s`` (mean
     seconds of one candidate's linearisation + LQG + LQG-MP under one case), the per-plan
     costs that, with the execution rate, give the paper-scale estimate in docs/reproduce.md."""
-    from riskplan.experiments.fig6 import EVAL_CASES, evaluate_candidate, execute_batch
+    from riskplan.app.reproduce.deformable import EVAL_CASES, evaluate_candidate, execute_batch
     from riskplan.parallel import spawn_seeds
-    from riskplan.planning.rrt import RRTOptions, rrt_plans
     from riskplan.scenarios.registry import make_scenario
+    from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
 
     base = make_scenario(name)
     t0 = time.process_time()
@@ -78,11 +78,11 @@ def _shared_draws_rate(name: str, plan, seed: int, n_per_case: int) -> float:
     """Executions per CPU second as Fig. 6 runs them now: per case one task of ``n_per_case``
     draws on a freshly unpickled scenario (as a pool worker receives it), the plan executed
     open loop twice and closed loop twice on each draw
-    (:func:`riskplan.experiments.fig6.execute_methods`: a draw's FEM model and mesh are
+    (:func:`riskplan.app.reproduce.deformable.execute_methods`: a draw's FEM model and mesh are
     built once for all four)."""
     import pickle
 
-    from riskplan.experiments.fig6 import EVAL_CASES, evaluate_candidate, execute_methods
+    from riskplan.app.reproduce.deformable import EVAL_CASES, evaluate_candidate, execute_methods
     from riskplan.parallel import spawn_seeds
     from riskplan.scenarios.registry import make_scenario
 
@@ -120,7 +120,7 @@ def run(quick: bool = False) -> dict:
         else os.cpu_count(),
     }
     if not quick:
-        from riskplan.experiments.reproduce import reproduce
+        from riskplan.app.reproduce.pipeline import reproduce
 
         with tempfile.TemporaryDirectory() as tmp:
             t0 = time.perf_counter()

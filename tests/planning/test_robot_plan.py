@@ -74,6 +74,11 @@ def test_lab_task_to_an_exported_checked_plan(built):
     np.testing.assert_allclose(
         plan.tensions[-1], load_problem(TASK).goal[:3], **TOL["tension_solve"]
     )
+    # base rotation and retraction are the joints after the tendons, positions as planned
+    nom = read_tendon_plan(out / "nominal_plan.joint_trajectory.yaml")
+    np.testing.assert_array_equal(nom.displacements, nominal[:, :3])
+    np.testing.assert_array_equal(nom.rotation, nominal[:, 3])
+    np.testing.assert_array_equal(nom.retraction, nominal[:, 4])
     # checked on the robot model; no paper framing, no chest file names
     check = summary["robot_model_check"]
     assert set(check) == {"nominal", "optimised"}

@@ -9,7 +9,8 @@ assume the expected deformation: the tree is grown with the planning parameters
 
 One iteration (paper IV-A):
 
-1. draw ``x_sample``: uniform in the sampling box of the :class:`PlanningSpace`, or,
+1. draw ``x_sample``: uniform in the sampling box of the
+   :class:`~riskplan.scenarios.space.PlanningSpace`, or,
    with probability ``goal_bias``, the goal point (towards which distances ignore the
    periodic components: any heading will do in a goal region of positions);
 2. nearest node by the weighted metric of the space (vectorised over all nodes)
@@ -55,10 +56,13 @@ Choices the paper leaves open (documented in docs/planning.md):
   position only (the boundary points follow it).
 * states outside the sampling box are invalid (the needle leaving the tissue).
 
-Any simulator with the :class:`~riskplan.scenarios.simulator.Simulator` protocol plus
-``in_collision(state)``, ``in_goal(state)`` and ``goal_distance(state)`` can be planned
-for; give it a :class:`PlanningSpace` (argument ``space``) or a ``planning_space``
-attribute. The two paper scenarios have defaults (:func:`planning_space`).
+The planner knows no scenario by type: it plans for any
+:class:`~riskplan.scenarios.space.PlanningScenario` (a
+:class:`~riskplan.scenarios.base.Simulator` with ``in_collision(state)``,
+``in_goal(state)``, ``goal_distance(state)``, ``goal_radius`` and ``planning_space()``), or
+for a simulator with the first four given a space (argument ``space``). The two paper
+scenarios build theirs in ``NeedleScenario.planning_space`` and
+``ManipulationScenario.planning_space``.
 """
 
 from __future__ import annotations
@@ -67,7 +71,6 @@ import dataclasses
 import logging
 import math
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,11 +83,11 @@ from riskplan.errors import (
     PlanningError,
     SimulationError,
 )
+from riskplan.scenarios.space import PlanningSpace
 
 log = logging.getLogger(__name__)
 
 __all__ = [
-    "PlanningSpace",
     "RRTOptions",
     "TreeResult",
     "actuation_std",
@@ -102,180 +105,32 @@ _MAX_GOAL_FAILS = 3
 _SIM_FAILURES = (ConvergenceError, ElementInversionError, SimulationError, FloatingPointError)
 
 
-@dataclass(frozen=True, eq=False)
-class PlanningSpace:
-    """Where and how the RRT samples, measures and extends (paper IV-A).
-
-    Attributes
-    ----------
-    low, high:
-        ``(p,)`` sampling box of the reduced state ``x``; states whose weighted,
-        non-periodic components leave it are invalid.
-    weights:
-        ``(p,)`` non-negative weights of the nearest-node metric (0: component ignored,
-        not sampled and not bounded).
-    periodic:
-        ``(p,)`` bool, angles wrapped to ``(−π, π]`` in the metric.
-    goal:
-        ``(p,)`` the point the goal bias samples; distances to it ignore periodic components.
-    steps_per_extension:
-        Simulator steps one edge holds its control for.
-    max_control_change:
-        ``None`` (controls uniform in the bounds) or ``(q,)``: a child's control lies within
-        this of its parent's (the root's control is the midpoint of the bounds).
-    steer:
-        ``None`` or a local steering rule ``steer(x_from (p,), x_to (p,), bounds (q, 2),
-        steps) -> (q,)`` (or ``None``): a control that, held for at most ``steps`` steps,
-        drives the reduced state from ``x_from`` towards ``x_to`` within ``bounds``. In a
-        goal-directed extension it replaces the last of the random candidates
-        (:attr:`RRTOptions.goal_steer`). Needle: :func:`riskplan.scenarios.needle.car_steer`.
-    """
-
-    low: np.ndarray
-    high: np.ndarray
-    weights: np.ndarray
-    periodic: np.ndarray
-    goal: np.ndarray
-    steps_per_extension: int = 1
-    max_control_change: np.ndarray | None = None
-    steer: Callable | None = None
-
-    def __post_init__(self):
-        low = as_array(self.low, "low", shape=(None,))
-        p = low.shape[0]
-        high = as_array(self.high, "high", shape=(p,))
-        w = as_array(self.weights, "weights", shape=(p,))
-        per = np.asarray(self.periodic, dtype=bool)
-        if per.shape != (p,):
-            raise InvalidInputError(f"periodic: expected shape ({p},), got {per.shape}")
-        goal = as_array(self.goal, "goal", shape=(p,))
-        if np.any(w < 0) or not np.any(w > 0):
-            raise InvalidInputError("weights: expected non-negative values, at least one > 0")
-        if np.any(high[w > 0] <= low[w > 0]):
-            raise InvalidInputError("high: must exceed low on every weighted component")
-        k = int(self.steps_per_extension)
-        if k != self.steps_per_extension or k < 1:
-            raise InvalidInputError(
-                f"steps_per_extension: expected an integer >= 1, got {self.steps_per_extension!r}"
-            )
-        object.__setattr__(self, "steps_per_extension", k)
-        for name, v in (
-            ("low", low),
-            ("high", high),
-            ("weights", w),
-            ("periodic", per),
-            ("goal", goal),
-        ):
-            v = np.array(v)
-            v.setflags(write=False)
-            object.__setattr__(self, name, v)
-        if self.steer is not None and not callable(self.steer):
-            raise InvalidInputError(
-                f"steer: expected None or a callable, got {type(self.steer).__name__}"
-            )
-        if self.max_control_change is not None:
-            d = as_array(self.max_control_change, "max_control_change", shape=(None,))
-            if np.any(d <= 0):
-                raise InvalidInputError("max_control_change: expected values > 0")
-            d = np.array(d)
-            d.setflags(write=False)
-            object.__setattr__(self, "max_control_change", d)
-        # precomputed for the hot loop
-        object.__setattr__(self, "_sqrt_w", np.sqrt(w))
-        object.__setattr__(self, "_sqrt_w_goal", np.where(per, 0.0, np.sqrt(w)))
-        object.__setattr__(self, "_bounded", (w > 0) & ~per)
-
-    @property
-    def dim(self) -> int:
-        return int(self.low.shape[0])
-
-    def sample(self, gen: np.random.Generator, goal_bias: float = 0.0) -> tuple[np.ndarray, bool]:
-        """``(x_sample (p,), is_goal)``: the goal point with probability ``goal_bias``, else
-        uniform in the box."""
-        u = gen.random(self.dim + 1)
-        if u[-1] < goal_bias:
-            return self.goal.copy(), True
-        return self.low + u[:-1] * (self.high - self.low), False
-
-    def scaled(self, x: np.ndarray) -> np.ndarray:
-        """``(..., p)`` coordinates in which the metric is Euclidean (periodic ones wrapped
-        by :meth:`distance`)."""
-        return x * self._sqrt_w
-
-    def distance(self, xs: np.ndarray, x: np.ndarray, *, to_goal: bool = False) -> np.ndarray:
-        """Weighted distance ``(n,)`` from each row of ``xs (n, p)`` to ``x (p,)``.
-
-        ``to_goal``: the distance to the goal point, which ignores the periodic components
-        (a goal region is a region of positions; any heading will do)."""
-        d = xs - x
-        if to_goal:
-            d *= self._sqrt_w_goal
-        else:
-            if self.periodic.any():
-                d[:, self.periodic] = (d[:, self.periodic] + math.pi) % (2.0 * math.pi) - math.pi
-            d *= self._sqrt_w
-        return np.sqrt(np.einsum("ij,ij->i", d, d))
-
-    def contains(self, x: np.ndarray) -> bool:
-        """Whether the weighted, non-periodic components of ``x (p,)`` lie in the box."""
-        b = self._bounded
-        return bool(np.all(x[b] >= self.low[b]) and np.all(x[b] <= self.high[b]))
-
-
-def _needle_space(sim) -> PlanningSpace:
-    import functools
-
-    from riskplan.scenarios.needle import car_steer
-
-    cfg = sim.config
-    return PlanningSpace(
-        low=[0.0, 0.0, -math.pi],
-        high=[cfg.width, cfg.height, math.pi],
-        weights=[1.0, 1.0, cfg.r_min**2],
-        periodic=[False, False, True],
-        goal=[cfg.goal_center[0], cfg.goal_center[1], 0.0],
-        steps_per_extension=3,
-        steer=functools.partial(car_steer, tau=cfg.tau, r_min=cfg.r_min, phi_max=cfg.phi_max),
-    )
-
-
-def _manipulation_space(sim) -> PlanningSpace:
-    cfg = sim.config
-    p = sim.state_dim
-    lo, hi = cfg.outline.min(0), cfg.outline.max(0)
-    low, high, w, goal = np.zeros(p), np.ones(p), np.zeros(p), np.zeros(p)
-    low[:2], high[:2], w[:2], goal[:2] = lo, hi, 1.0, cfg.goal_center
-    return PlanningSpace(
-        low=low,
-        high=high,
-        weights=w,
-        periodic=np.zeros(p, dtype=bool),
-        goal=goal,
-        steps_per_extension=1,
-    )
-
-
 def planning_space(sim) -> PlanningSpace:
-    """The :class:`PlanningSpace` of ``sim``: its ``planning_space`` attribute if it has
-    one, else the default of a paper scenario (see the module docstring)."""
-    space = getattr(sim, "planning_space", None)
-    if space is not None:
-        space = space() if callable(space) else space
-        if not isinstance(space, PlanningSpace):
-            raise InvalidInputError(
-                f"sim.planning_space: expected a PlanningSpace, got {type(space).__name__}"
-            )
-        return space
-    from riskplan.scenarios.manipulation import ManipulationScenario
-    from riskplan.scenarios.needle import NeedleScenario
+    """The space ``sim`` hands over for planning.
 
-    if isinstance(sim, NeedleScenario):
-        return _needle_space(sim)
-    if isinstance(sim, ManipulationScenario):
-        return _manipulation_space(sim)
-    raise InvalidInputError(
-        f"sim: {type(sim).__name__} has no planning space; pass space=PlanningSpace(...) or give it a planning_space attribute"
-    )
+    Parameters
+    ----------
+    sim : PlanningScenario
+        A simulator with a ``planning_space()`` method
+        (:class:`riskplan.scenarios.space.PlanningScenario`).
+
+    Returns
+    -------
+    PlanningSpace
+        ``sim.planning_space()``, checked against the protocol.
+    """
+    method = getattr(sim, "planning_space", None)
+    if not callable(method):
+        raise InvalidInputError(
+            f"sim: {type(sim).__name__} has no planning_space() method "
+            "(riskplan.scenarios.space.PlanningScenario); pass space=BoxSpace(...) instead"
+        )
+    space = method()
+    if not isinstance(space, PlanningSpace):
+        raise InvalidInputError(
+            f"sim.planning_space(): expected a PlanningSpace, got {type(space).__name__}"
+        )
+    return space
 
 
 @dataclass(frozen=True)
@@ -421,15 +276,13 @@ def sampling_bounds(sim, options: RRTOptions) -> np.ndarray:
 
 
 def _goal_radius(sim, options: RRTOptions) -> float:
-    """``(1 − goal_depth) · r_goal``, or ``inf`` when ``goal_depth`` is 0."""
+    """``(1 − goal_depth) · sim.goal_radius``, or ``inf`` when ``goal_depth`` is 0."""
     if options.goal_depth == 0.0:
         return math.inf
     r = getattr(sim, "goal_radius", None)
     if r is None:
-        r = getattr(getattr(sim, "config", None), "goal_radius", None)
-    if r is None:
         raise InvalidInputError(
-            f"options.goal_depth: {type(sim).__name__} has no goal_radius (nor config.goal_radius); use goal_depth=0"
+            f"options.goal_depth: {type(sim).__name__} has no goal_radius; use goal_depth=0"
         )
     return (1.0 - options.goal_depth) * float(r)
 

@@ -56,6 +56,7 @@ Full state: material pose, displacement, step index; the world pose is a functio
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -73,6 +74,7 @@ from riskplan.scenarios.base import (
     frozen_array,
     gaussian_noise,
 )
+from riskplan.scenarios.space import BoxSpace
 
 __all__ = [
     "NeedleConfig",
@@ -444,6 +446,33 @@ class NeedleScenario(FEMScenario):
     def control_bounds(self) -> np.ndarray:
         """``[[0, v_max], [−φ_max, φ_max]]``."""
         return self._bounds
+
+    @property
+    def goal_radius(self) -> float:
+        """Radius of the (undeformed) goal disk, ``config.goal_radius``."""
+        return float(self.config.goal_radius)
+
+    def planning_space(self) -> BoxSpace:
+        """The RRT's space (:class:`~riskplan.scenarios.space.PlanningScenario`).
+
+        Returns
+        -------
+        BoxSpace
+            The tissue rectangle for ``(x, y)``, the metric ``(x, y)`` plus ``r_min · θ``
+            (a heading error of 1 rad counts like the arc the car needs to turn by it),
+            3 steps per extension (at most 0.15 length units, about the goal disk's
+            diameter) and :func:`car_steer` as the local steering rule.
+        """
+        cfg = self.config
+        return BoxSpace(
+            low=[0.0, 0.0, -math.pi],
+            high=[cfg.width, cfg.height, math.pi],
+            weights=[1.0, 1.0, cfg.r_min**2],
+            periodic=[False, False, True],
+            goal=[cfg.goal_center[0], cfg.goal_center[1], 0.0],
+            steps_per_extension=3,
+            steer=functools.partial(car_steer, tau=cfg.tau, r_min=cfg.r_min, phi_max=cfg.phi_max),
+        )
 
     def actuation_cov(self) -> tuple:
         """The actuation covariance ``diag(σ_v², σ_φ²)`` of ``config.actuation_std`` (the

@@ -103,7 +103,7 @@ def near_needle():
 @pytest.fixture(scope="session")
 def needle_result(near_needle):
     """Four candidate plans (two trees) on the coarse mesh, and the trees."""
-    from riskplan.planning.rrt import RRTOptions, rrt_plans
+    from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
 
     options = RRTOptions(plans_per_tree=2, max_iterations=1200)
     return rrt_plans(near_needle, 4, seed=3, params=SMALL_MESH, options=options, backend="serial")

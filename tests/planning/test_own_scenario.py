@@ -22,7 +22,6 @@ from scipy import stats
 
 from riskplan import geometry2d as geo
 from riskplan.control import execute, linearize, lqg_controller, lqgmp, monte_carlo_success
-from riskplan.planning.rrt import RRTOptions, rrt_plans
 from riskplan.scenarios.base import (
     SimParams,
     Simulator,
@@ -33,6 +32,7 @@ from riskplan.scenarios.base import (
 )
 from riskplan.scenarios.space import BoxSpace, PlanningScenario, PlanningSpace
 from riskplan.scenarios.uncertainty import ActuationNoise
+from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
 from tests.conftest import TOL
 
 TAU = 0.1
@@ -165,14 +165,14 @@ def test_own_scenario_plans_executes_and_scores():
 
 
 def test_planning_and_control_name_no_scenario():
-    """The seam holds by construction: nothing in planning/ or control/ imports a
+    """The seam holds by construction: nothing in tissue_planning/ (the RRT, the selection) or control/ imports a
     scenario module (only the protocols in scenarios.base and scenarios.space)."""
     root = Path(__file__).resolve().parents[2] / "src" / "riskplan"
     allowed = {"riskplan.scenarios.base", "riskplan.scenarios.space"}
     paths = [
         *(root / "control").glob("*.py"),
-        root / "planning" / "rrt.py",
-        root / "planning" / "select.py",
+        root / "tissue_planning" / "rrt.py",
+        root / "tissue_planning" / "select.py",
     ]
     for path in paths:
         for node in ast.walk(ast.parse(path.read_text())):

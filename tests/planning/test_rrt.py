@@ -11,15 +11,15 @@ import pytest
 
 from riskplan.control import NominalPlan
 from riskplan.errors import InvalidInputError, PlanningError
-from riskplan.planning.rrt import (
+from riskplan.scenarios.manipulation import ManipulationScenario
+from riskplan.scenarios.space import BoxSpace
+from riskplan.tissue_planning.rrt import (
     RRTOptions,
     grow_tree,
     planning_space,
     rrt_plans,
     sampling_bounds,
 )
-from riskplan.scenarios.manipulation import ManipulationScenario
-from riskplan.scenarios.space import BoxSpace
 from tests.conftest import TOL
 from tests.planning.conftest import SMALL_MESH, PointRobot
 
@@ -207,7 +207,7 @@ def test_plans_end_in_tightened_goal_with_margined_controls(near_needle, needle_
 
 
 def test_manipulation_sampling_bounds_keep_two_sigma():
-    from riskplan.planning.rrt import sampling_bounds
+    from riskplan.tissue_planning.rrt import sampling_bounds
 
     sim = ManipulationScenario()
     f = sim.config.df_max

@@ -237,7 +237,7 @@ def register(plan_app: typer.Typer) -> None:
                     workers=workers or None,
                 )
                 bar.update(t_va, total=1, completed=1)
-        from riskplan.experiments.robot_planning import write_robot_plan
+        from riskplan.app.outputs.robot_plan import write_robot_plan
 
         summary = write_robot_plan(
             out,

@@ -1,7 +1,7 @@
 """The planning seam: what a scenario hands the simulator RRT (Patil, van den Berg &
 Alterovitz, RSS 2011, section IV-A).
 
-The planner (:mod:`riskplan.planning.rrt`) knows no scenario by type. A scenario that can
+The planner (:mod:`riskplan.tissue_planning.rrt`) knows no scenario by type. A scenario that can
 be planned for is a :class:`PlanningScenario`: a
 :class:`~riskplan.scenarios.base.Simulator` that also tests collisions and the goal on its
 full states and hands over a :class:`PlanningSpace` from ``planning_space()``. The space
@@ -23,7 +23,7 @@ plan, execute and run LQG-MP for a scenario written outside the package.
 
 Control bounds and their margins come from the simulator: ``control_bounds (q, 2)`` and,
 optionally, ``actuation_cov() (q, q)``, whose standard deviations narrow the bounds the
-RRT samples in (:func:`riskplan.planning.rrt.sampling_bounds`).
+RRT samples in (:func:`riskplan.tissue_planning.rrt.sampling_bounds`).
 """
 
 from __future__ import annotations

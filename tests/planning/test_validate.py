@@ -247,6 +247,8 @@ def test_base_rotation_and_retraction_executions(tmp_path):
 
     rob = load_robot(Path(__file__).parents[1] / "data" / "kuntz-lab" / "task-0001.toml")
     m = rob.n_tendons
+    # the body: the lab's rod radius, not the paper robot's 10 mm separator disks
+    assert default_radius(rob) == 0.003 and default_radius(load_robot("paper")) == 0.01
     d = rob.displacements_for_tensions(np.array([[0.0, 0.0, 0.0], [0.8, 0.0, 0.0]]))
     phi = 0.7
     traj0 = np.c_[d, [0.0, 0.0], [0.0, 0.0]]

@@ -26,7 +26,9 @@ so a result depends on ``(robot, trajectory, seed, n)`` only, whatever the backe
 
 Body-in-obstacle test
     The body is the backbone swept by a ball of radius ``r`` (a tube closed by hemispheres).
-    Default ``r`` = the separator-disk radius of the point-cloud geometry
+    Default ``r`` = the robot description's ``collision_radius`` where it gives one (the Kuntz
+    lab's ``tendon_robot.radius``: their robots are rods without separator disks, 3 mm for the
+    task robot), else the separator-disk radius of the point-cloud geometry
     (:class:`~riskplan.robots.geometry.BodyGeometry`; 10 mm for the ``paper`` robot): the
     outer radius of the body the cameras see and the MDN learned, and the same 1 cm as
     :func:`~riskplan.kinematics.robot_mixture.robot_mixture`. The tube contains the 3 mm
@@ -180,7 +182,12 @@ def _check_environment(environment) -> Environment:
 
 
 def default_radius(robot) -> float:
-    """Outer body radius of ``robot``'s point-cloud geometry: its separator-disk radius [m]."""
+    """Outer body radius of ``robot`` [m]: the ``collision_radius`` its description gives (the
+    Kuntz lab's ``tendon_robot.radius``, a robot with no separator disks), else the
+    separator-disk radius of its point-cloud geometry."""
+    r = getattr(robot.params, "collision_radius", None)
+    if r is not None:
+        return float(r)
     from riskplan.robots.geometry import BodyGeometry
 
     return float(BodyGeometry.from_params(robot.params).disk_radius)

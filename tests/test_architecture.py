@@ -12,8 +12,26 @@ import riskplan
 
 SRC = Path(riskplan.__file__).parent
 DOC = Path(__file__).resolve().parents[1] / "docs" / "architecture.md"
-#: packages and modules that may import anything (the application layer)
-APPLICATION = {"bench", "commands", "experiments", "cli", "__main__"}
+#: the layers, bottom up: a shared core, two wings that never import each other (each a
+#: chain: a package imports only packages before it in its wing, and the core), and the
+#: application layer, which may import anything
+CORE = {
+    "errors",
+    "io",
+    "_validation",
+    "threads",
+    "parallel",
+    "budget",
+    "parsing",
+    "kernels",
+    "gaussian_mixture",
+    "geometry2d",
+    "robots",
+    "collision",
+}
+KINEMATIC_WING = ("datasets", "kinematics", "planning")
+TISSUE_WING = ("deformable", "scenarios", "control", "tissue_planning")
+APPLICATION = {"app", "bench", "commands", "cli", "__main__"}
 
 
 def _modules():
@@ -37,28 +55,70 @@ def test_architecture_doc_lists_every_module():
     missing = []
     for m in _modules():
         pkg = m.parts[0] if len(m.parts) > 1 else ""
-        if f"`{m.name}`" not in lists.get(pkg, ""):
+        # a module in a sub-package is named with its folder: `demo/robot.py`
+        name = "/".join(m.parts[1:]) if pkg else m.name
+        if f"`{name}`" not in lists.get(pkg, ""):
             missing.append(str(m))
     assert not missing, f"docs/architecture.md, section Modules, does not name: {missing}"
 
 
-def test_library_never_imports_the_application_layer():
+def _riskplan_imports(rel: Path) -> list[str]:
+    """The riskplan packages (first component after ``riskplan.``) that module ``rel`` imports."""
+    tree = ast.parse((SRC / rel).read_text(encoding="utf-8"))
+    out = []
+    for node in ast.walk(tree):
+        names = []
+        if isinstance(node, ast.ImportFrom) and node.module:
+            names = [node.module]
+            if node.module == "riskplan":
+                names = [f"riskplan.{a.name}" for a in node.names]
+        elif isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        for name in names:
+            parts = name.split(".")
+            if parts[0] == "riskplan" and len(parts) > 1:
+                out.append(parts[1])
+    return out
+
+
+def _allowed(pkg: str) -> set[str] | None:
+    """Packages ``pkg`` may import (None: anything)."""
+    if pkg in APPLICATION:
+        return None
+    if pkg in CORE:
+        return CORE
+    for wing in (KINEMATIC_WING, TISSUE_WING):
+        if pkg in wing:
+            return CORE | set(wing[: wing.index(pkg) + 1])
+    raise AssertionError(f"riskplan.{pkg} is in no layer of tests/test_architecture.py")
+
+
+def test_layers_core_two_wings_and_application():
+    """The import rule of docs/architecture.md: the core imports only the core; each wing
+    imports the core and the packages below it in its own wing, never the other wing; library
+    code never imports the application layer."""
     bad = []
-    for rel in _modules() + [p.relative_to(SRC) for p in SRC.rglob("__init__.py")]:
-        if rel.parts[0].removesuffix(".py") in APPLICATION:
+    all_modules = _modules() + [p.relative_to(SRC) for p in SRC.rglob("__init__.py")]
+    for rel in all_modules:
+        if rel == Path("__init__.py"):
+            continue  # the package's face: lazy names from every layer, checked below
+        pkg = rel.parts[0].removesuffix(".py")
+        allowed = _allowed(pkg)
+        if allowed is None:
             continue
-        tree = ast.parse((SRC / rel).read_text(encoding="utf-8"))
-        for node in ast.walk(tree):
-            names = []
-            if isinstance(node, ast.ImportFrom) and node.module:
-                names = [node.module]
-            elif isinstance(node, ast.Import):
-                names = [a.name for a in node.names]
-            for name in names:
-                parts = name.split(".")
-                if parts[0] == "riskplan" and len(parts) > 1 and parts[1] in APPLICATION:
-                    bad.append(f"{rel}: {name}")
+        bad += [f"{rel}: riskplan.{d}" for d in _riskplan_imports(rel) if d not in allowed]
     assert not bad, bad
+
+
+def test_the_face_imports_no_layer_eagerly():
+    """``riskplan/__init__.py`` imports no package at module level (names load lazily)."""
+    tree = ast.parse((SRC / "__init__.py").read_text(encoding="utf-8"))
+    eager = [
+        n.module
+        for n in tree.body
+        if isinstance(n, ast.ImportFrom) and n.module and n.module.startswith("riskplan.")
+    ]
+    assert set(eager) <= {"riskplan.errors"}, eager
 
 
 def test_array_packages_import_without_torch():
@@ -66,7 +126,7 @@ def test_array_packages_import_without_torch():
     (a torch ``GaussianMixture`` is still accepted, through its ``to_numpy()``)."""
     code = (
         "import sys\n"
-        "import riskplan.gaussian_mixture, riskplan.collision, riskplan.collision.robot_geometry\n"
+        "import riskplan.gaussian_mixture, riskplan.collision\n"
         "print(sorted(m for m in sys.modules if m == 'torch' or m.startswith('torch.')))\n"
     )
     out = subprocess.run(

@@ -38,7 +38,7 @@ def test_require_names_extra():
 def test_bad_seed_is_a_named_error(seed):
     # NumPy's own ValueError/TypeError used to reach the user as a traceback
     from riskplan._validation import as_generator
-    from riskplan.scenarios.chest import build_chest
+    from riskplan.planning.chest_scene import build_chest
 
     with pytest.raises(errors.InvalidInputError, match="seed"):
         as_generator(seed)
@@ -51,8 +51,8 @@ def test_bad_seed_of_the_tissue_planner_is_a_named_error(seed):
     # spawn_seeds (every parallel stage), the simulator RRT and the linearisation
     from riskplan.control import NominalPlan, linearize
     from riskplan.parallel import spawn_seeds
-    from riskplan.planning.rrt import rrt_plans
     from riskplan.scenarios.needle import NeedleScenario
+    from riskplan.tissue_planning.rrt import rrt_plans
 
     sim = NeedleScenario()
     plan = NominalPlan.from_rollout(sim, sim.initial_state(), sim.random_controls(3, seed=0))

@@ -1,14 +1,16 @@
 """riskplan: risk-aware motion planning for medical robots.
 
-Stages (one subpackage each, in pipeline order):
+A shared core, two wings that never import each other, and the application layer:
 
-``robots``      Cosserat-rod tendon robots, hysteresis, simulated depth cameras
-``datasets``    the data-collection protocol and HDF5 storage
-``kinematics``  Gaussian mixtures and the mixture density network
-``collision``   probability of collision of Gaussians / mixtures against meshes and polygons
-``deformable``  FEM tissue simulators
-``scenarios``   the planning scenarios of the papers (chest cavity, needle, manipulation)
-``experiments`` paper figures, the demo and its HTML report
+* core: ``robots`` (Cosserat-rod tendon robots, hysteresis, simulated cameras), ``collision``
+  (P(collision) of Gaussians and mixtures against meshes and polygons), ``gaussian_mixture``,
+  ``geometry2d``, ``parallel``, ``io``, ``errors``;
+* kinematic wing: ``datasets`` → ``kinematics`` (the mixture density network) → ``planning``
+  (chest cavity and any robot: PRM, risk, Bayesian optimisation, validation);
+* tissue wing: ``deformable`` (FEM) → ``scenarios`` (needle, manipulation) → ``control``
+  (LQG, LQG-MP) → ``tissue_planning`` (simulator RRT, plan selection);
+* application: ``app`` (demo, reproduce, command outputs, report), ``commands``, ``bench``,
+  ``cli``.
 
 Heavy libraries are imported lazily by the subpackages that need them, so
 ``import riskplan`` stays cheap.

@@ -107,8 +107,8 @@ def demo(
     workers: int = workers_option(),
 ) -> None:
     """Run the main job on embedded defaults and write OUT/report.html."""
+    from riskplan.app.demo.pipeline import run_demo
     from riskplan.commands._shared import output_folder, progress_bar
-    from riskplan.experiments.demo import run_demo
 
     with output_folder(out), progress_bar() as bar:
         task = bar.add_task("demo", total=None, status="starting")

@@ -14,14 +14,14 @@ from riskplan.collision import (
     probability_of_collision,
     trajectory_bound,
 )
-from riskplan.collision.robot_geometry import (
+from riskplan.errors import InvalidInputError
+from riskplan.gaussian_mixture import NumpyMixture
+from riskplan.kinematics import GaussianMixture
+from riskplan.kinematics.robot_mixture import (
     arc_backbone,
     backbone_mixture,
     backbone_numpy_mixture,
 )
-from riskplan.errors import InvalidInputError
-from riskplan.gaussian_mixture import NumpyMixture
-from riskplan.kinematics import GaussianMixture
 from tests.collision.conftest import random_upper
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from riskplan.collision.robot_geometry import arc_backbone, backbone_mixture
 from riskplan.errors import InvalidInputError
+from riskplan.kinematics.robot_mixture import arc_backbone, backbone_mixture
 from tests.conftest import TOL
 
 
@@ -55,7 +55,7 @@ class _ArcRobot:
 
 
 def test_robot_mixture_uses_robot_backbone():
-    from riskplan.collision.robot_geometry import robot_mixture
+    from riskplan.kinematics.robot_mixture import robot_mixture
 
     gm = robot_mixture(_ArcRobot(), np.array([[0.0, 0, 0, 0], [0.02, 0, 0, 0]]))
     ref = backbone_mixture(arc_backbone(np.array([0.0, 4.0]), 0.0), 5)

@@ -13,7 +13,7 @@ import pytest
 import trimesh
 
 from riskplan.collision import Environment
-from riskplan.collision.frames import load_environment, mesh_base_pose
+from riskplan.collision.mesh_files import load_environment, mesh_base_pose
 from riskplan.collision.segmentation import (
     LabelVolume,
     check_metre_scale,

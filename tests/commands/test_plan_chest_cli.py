@@ -170,7 +170,7 @@ def test_plan_chest_reads_the_mesh_sidecar(tiny, tmp_path):
     same plan as the same mesh with the pose given explicitly (one frame convention everywhere)."""
     import shutil
 
-    from riskplan.collision.frames import BasePose, sidecar_path
+    from riskplan.collision.mesh_files import BasePose, sidecar_path
 
     mesh = tmp_path / "box.stl"
     shutil.copy(tiny / "box.stl", mesh)

@@ -73,7 +73,7 @@ def test_from_segmentation_with_a_ros_order_base_pose(labels_mm, tmp_path):
     the robot base frame as x_base = R^T (x - p)."""
     from scipy.spatial.transform import Rotation
 
-    from riskplan.collision.frames import load_environment
+    from riskplan.collision.mesh_files import load_environment
 
     out = tmp_path / "organ.stl"
     q_xyzw = Rotation.from_euler("z", 90, degrees=True).as_quat()  # (x, y, z, w)

@@ -359,7 +359,7 @@ def test_lqgmp_sampling_with_d_matches_executions():
 
 
 def test_plan_selection_passes_the_option(rng):
-    from riskplan.planning.select import select_plan
+    from riskplan.tissue_planning.select import select_plan
 
     sim, plan, _ = _wall_toy(4)
     other = NominalPlan.from_rollout(sim, sim.initial_state(), np.tile([-0.05, 0.1, 0.0], (4, 1)))

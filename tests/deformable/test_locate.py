@@ -74,7 +74,7 @@ def test_nonconvex_notch_is_outside(poly200):
 def test_tree_candidates_equal_exhaustive_search(rng, tol):
     """Candidate elements from a k-d tree never change the answer (fallback is exhaustive)."""
     from riskplan.deformable import mesh_polygon, rectangle
-    from riskplan.deformable.locate import locate_points
+    from riskplan.deformable.material_points import locate_points
 
     mesh = mesh_polygon(rectangle(), 1000)
     pts = np.vstack([rng.uniform(-0.05, 1.05, size=(400, 2)), mesh.nodes[:50]])

@@ -2,8 +2,8 @@
 
 import math
 
-from riskplan.experiments import demo_kinematics
-from riskplan.experiments.report import Report
+from riskplan.app.demo import kinematics as demo_kinematics
+from riskplan.app.report import Report
 from tests.conftest import TOL
 
 

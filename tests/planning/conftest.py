@@ -103,7 +103,7 @@ def near_needle():
 @pytest.fixture(scope="session")
 def needle_result(near_needle):
     """Four candidate plans (two trees) on the coarse mesh, and the trees."""
-    from riskplan.planning.rrt import RRTOptions, rrt_plans
+    from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
 
     options = RRTOptions(plans_per_tree=2, max_iterations=1200)
     return rrt_plans(near_needle, 4, seed=3, params=SMALL_MESH, options=options, backend="serial")
@@ -122,20 +122,23 @@ class PointState:
 
 class PointRobot:
     """A user simulator: a point in the unit square moved by ``x += 0.1 u``, ``|u_i| ≤ 1``,
-    a square obstacle, a disk goal, and its own ``planning_space`` (the protocol extension)."""
+    a square obstacle, a disk goal, and its own ``planning_space()`` (the planning seam,
+    :class:`riskplan.scenarios.space.PlanningScenario`)."""
 
     control_dim = 2
     state_dim = 2
     obs_dim = 2
 
     def __init__(self, goal=(0.8, 0.8), goal_radius=0.08, obstacle=((0.35, 0.35), (0.6, 0.6))):
-        from riskplan.planning.rrt import PlanningSpace
-
         self._bounds = np.array([[-1.0, 1.0], [-1.0, 1.0]])
         self.goal_center = np.asarray(goal, float)
         self.goal_radius = goal_radius
         self.obstacle = geo.rectangle_polygon(*obstacle)
-        self.planning_space = PlanningSpace(
+
+    def planning_space(self):
+        from riskplan.scenarios.space import BoxSpace
+
+        return BoxSpace(
             low=[0, 0], high=[1, 1], weights=[1, 1], periodic=[False, False], goal=self.goal_center
         )
 

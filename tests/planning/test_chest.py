@@ -21,8 +21,8 @@ from tests.conftest import TOL
 
 @pytest.fixture(scope="module")
 def scene():
+    from riskplan.planning.chest_scene import build_chest
     from riskplan.robots import load_robot
-    from riskplan.scenarios.chest import build_chest
 
     return load_robot("paper"), build_chest(0).base_environment
 

@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from riskplan.collision.frames import BasePose
+from riskplan.collision.mesh_files import BasePose
 from riskplan.errors import InvalidInputError
 from riskplan.planning.export import (
     TendonPlan,

@@ -12,10 +12,10 @@ from hypothesis.extra import numpy as hnp
 
 from riskplan.planning.bo import LIMIT_SLACK, OptimiserConfig, optimise_trajectory
 from riskplan.planning.prm import interpolate_path
-from riskplan.planning.rrt import RRTOptions, rrt_plans
-from riskplan.planning.select import select_plan
 from riskplan.scenarios.needle import NeedleConfig, NeedleScenario
 from riskplan.scenarios.uncertainty import CASE_NAMES, get_case
+from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
+from riskplan.tissue_planning.select import select_plan
 from tests.conftest import TOL
 from tests.planning.conftest import SMALL_MESH
 from tests.properties import (

@@ -11,15 +11,15 @@ import pytest
 
 from riskplan.control import NominalPlan
 from riskplan.errors import InvalidInputError, PlanningError
-from riskplan.planning.rrt import (
-    PlanningSpace,
+from riskplan.scenarios.manipulation import ManipulationScenario
+from riskplan.scenarios.space import BoxSpace
+from riskplan.tissue_planning.rrt import (
     RRTOptions,
     grow_tree,
     planning_space,
     rrt_plans,
     sampling_bounds,
 )
-from riskplan.scenarios.manipulation import ManipulationScenario
 from tests.conftest import TOL
 from tests.planning.conftest import SMALL_MESH, PointRobot
 
@@ -145,7 +145,7 @@ def test_fewer_plans_than_asked_returns_what_was_found(point_robot, caplog):
 
 
 def test_distance_metric_against_a_loop(rng, tol):
-    space = PlanningSpace(
+    space = BoxSpace(
         low=[0, 0, -math.pi],
         high=[1, 1, math.pi],
         weights=[1, 4, 0.01],
@@ -172,11 +172,9 @@ def test_distance_metric_against_a_loop(rng, tol):
 
 def test_bad_input_is_named(point_robot):
     with pytest.raises(InvalidInputError, match="weights"):
-        PlanningSpace(low=[0, 0], high=[1, 1], weights=[0, 0], periodic=[False, False], goal=[0, 0])
+        BoxSpace(low=[0, 0], high=[1, 1], weights=[0, 0], periodic=[False, False], goal=[0, 0])
     with pytest.raises(InvalidInputError, match="steps_per_extension"):
-        PlanningSpace(
-            low=[0], high=[1], weights=[1], periodic=[False], goal=[0], steps_per_extension=0
-        )
+        BoxSpace(low=[0], high=[1], weights=[1], periodic=[False], goal=[0], steps_per_extension=0)
     with pytest.raises(InvalidInputError, match="n_plans"):
         rrt_plans(point_robot, 0)
     with pytest.raises(InvalidInputError, match="goal_bias"):
@@ -187,7 +185,7 @@ def test_bad_input_is_named(point_robot):
 
     with pytest.raises(InvalidInputError, match=r"in_goal|lacks"):
         rrt_plans(NoGoal(), 1)
-    with pytest.raises(InvalidInputError, match="planning space"):
+    with pytest.raises(InvalidInputError, match="planning_space"):
         planning_space(object())
 
 
@@ -209,7 +207,7 @@ def test_plans_end_in_tightened_goal_with_margined_controls(near_needle, needle_
 
 
 def test_manipulation_sampling_bounds_keep_two_sigma():
-    from riskplan.planning.rrt import sampling_bounds
+    from riskplan.tissue_planning.rrt import sampling_bounds
 
     sim = ManipulationScenario()
     f = sim.config.df_max
@@ -260,7 +258,7 @@ def test_goal_entry_keeps_an_edge_through_the_goal():
     without it (the end is no closer), so that tree never reaches the goal."""
     robot = PointRobot(goal=(0.2, 0.2), goal_radius=0.05, obstacle=((0.8, 0.8), (0.9, 0.9)))
     robot._bounds = np.array([[0.9, 1.0], [0.9, 1.0]])  # every step moves ~(0.095, 0.095)
-    space = PlanningSpace(
+    space = BoxSpace(
         low=[0, 0],
         high=[1, 1],
         weights=[1, 1],
@@ -293,7 +291,7 @@ def test_goal_steer_control_is_a_candidate_towards_the_goal_only():
         calls.append((np.array(x), np.array(target), k))
         return np.clip((target - x) / (0.1 * k), bounds[:, 0], bounds[:, 1])
 
-    space = dataclasses.replace(robot.planning_space, steps_per_extension=2, steer=steer)
+    space = dataclasses.replace(robot.planning_space(), steps_per_extension=2, steer=steer)
     opts = RRTOptions(n_controls=1, goal_bias=1.0, max_iterations=50, plans_per_tree=1)
     tree = grow_tree(robot, seed=0, space=space, options=opts)
     assert len(tree.plans) == 1
@@ -317,7 +315,7 @@ def test_steered_control_keeps_the_rate_limit():
     robot = PointRobot(goal=(0.5, 0.3), goal_radius=0.05, obstacle=((0.8, 0.8), (0.9, 0.9)))
     d = np.array([0.1, 0.1])
     space = dataclasses.replace(
-        robot.planning_space,
+        robot.planning_space(),
         max_control_change=d,
         steer=lambda x, t, b, k: np.clip((t - x) / (0.1 * k), b[:, 0], b[:, 1]),
     )
@@ -338,7 +336,7 @@ def test_steered_control_keeps_the_rate_limit():
 
 def test_steer_must_be_callable():
     with pytest.raises(InvalidInputError, match="steer"):
-        PlanningSpace(
+        BoxSpace(
             low=[0, 0], high=[1, 1], weights=[1, 1], periodic=[False, False], goal=[1, 1], steer=3
         )
 

@@ -9,8 +9,8 @@ import pytest
 import riskplan.control
 from riskplan.control.lqgmp import lqgmp
 from riskplan.errors import InvalidInputError, SimulationError
-from riskplan.planning.select import common_draws, evaluate_plan, honesty_check, select_plan
 from riskplan.scenarios.uncertainty import get_case
+from riskplan.tissue_planning.select import common_draws, evaluate_plan, honesty_check, select_plan
 from tests.conftest import approx_tol
 from tests.planning.conftest import SMALL_MESH
 

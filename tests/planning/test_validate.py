@@ -7,8 +7,8 @@ import pytest
 import trimesh
 
 from riskplan.collision import Environment, trajectory_bound
-from riskplan.collision.robot_geometry import arc_backbone
 from riskplan.errors import InvalidInputError
+from riskplan.kinematics.robot_mixture import arc_backbone
 from riskplan.planning.validate import (
     default_radius,
     execute_on_robot,

@@ -323,12 +323,12 @@ def test_lab_tendon_at_c_zero_bends_towards_plus_y(lab):
 
 
 def test_lab_task_start_is_free_and_goal_crosses_on_our_model():
-    """The lab's backbone check (experiments/lab_tasks.py) on task-0001: the home start (1 mm
+    """The lab's backbone check (app/reproduce/lab_tasks.py) on task-0001: the home start (1 mm
     exposed at the entry hole) keeps more than the lab's 3 mm radius from every obstacle cell;
     the goal's backbone crosses the anatomy on riskplan's model (docs/robots.md, "What the lab's
     task files mean": an open disagreement with the lab's model, not a convention). If this
     starts failing on the goal, the model now agrees with the lab's: update those docs."""
-    from riskplan.experiments.lab_tasks import configuration_clearance
+    from riskplan.app.reproduce.lab_tasks import configuration_clearance
     from riskplan.planning.problem import load_problem
 
     pr = load_problem(TASK)

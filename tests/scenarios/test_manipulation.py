@@ -10,8 +10,8 @@ import pytest
 
 from riskplan import geometry2d as geo
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
+from riskplan.scenarios.base import SimParams, rollout
 from riskplan.scenarios.manipulation import ManipulationConfig, ManipulationScenario
-from riskplan.scenarios.simulator import SimParams, rollout
 from tests.conftest import TOL
 
 

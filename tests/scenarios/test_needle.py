@@ -11,8 +11,8 @@ import pytest
 
 from riskplan import geometry2d as geo
 from riskplan.errors import InvalidInputError
+from riskplan.scenarios.base import SimParams, rollout
 from riskplan.scenarios.needle import NeedleConfig, NeedleScenario, car_steer, car_step
-from riskplan.scenarios.simulator import SimParams, rollout
 from tests.conftest import TOL
 
 TAU, RMIN, PHIMAX = 0.1, 0.25, math.pi / 3

@@ -5,7 +5,7 @@ from __future__ import annotations
 from hypothesis import given
 from hypothesis import strategies as st
 
-from riskplan.scenarios.chest import ChestParams
+from riskplan.planning.chest_scene import ChestParams
 from riskplan.scenarios.needle import NeedleScenario
 from tests.properties import PROPERTY, any_float, arrays_or_junk, assert_finite, call, junk
 

@@ -103,8 +103,8 @@ def test_small_custom_needle_scene_plans(tmp_path):
     """The 0.08 x 0.06 scene with v_max = 0.04: a fixed speed noise of 0.05 left no speed
     inside the RRT's 2-sigma margin; scaled to 0.004 it plans, and its plans reach the goal
     without collision when executed without noise."""
-    from riskplan.planning.rrt import RRTOptions, rrt_plans, sampling_bounds
     from riskplan.scenarios.base import rollout
+    from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans, sampling_bounds
 
     path = tmp_path / "small.toml"
     path.write_text(SMALL)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from PIL import Image
 
+from riskplan.scenarios.base import rollout
 from riskplan.scenarios.plotting import frame_indices, save_frames, save_gif
-from riskplan.scenarios.simulator import rollout
 
 
 def test_frame_indices():

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from riskplan.errors import InvalidInputError
-from riskplan.scenarios.simulator import (
+from riskplan.scenarios.base import (
     SimParams,
     SimState,
     Simulator,
@@ -149,7 +149,7 @@ def test_scenarios_pickle_without_caches(needle, manip):
 
 
 def test_make_scenario():
-    from riskplan.scenarios.simulator import make_scenario
+    from riskplan.scenarios.registry import make_scenario
 
     sim = make_scenario("manipulation", "actuation")
     p = sim.sample_params(1)

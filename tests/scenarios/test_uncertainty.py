@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from riskplan.errors import InvalidInputError
-from riskplan.scenarios.simulator import SimParams, actuation_noise, rollout
+from riskplan.scenarios.base import SimParams, actuation_noise, rollout
 from riskplan.scenarios.uncertainty import (
     CASE_NAMES,
     ActuationNoise,

@@ -15,7 +15,7 @@ from riskplan.bench import median_time
 
 
 def _mixtures(n, K, seed=0):
-    from riskplan.collision.robot_geometry import arc_backbone, backbone_mixture
+    from riskplan.kinematics.robot_mixture import arc_backbone, backbone_mixture
 
     rng = np.random.default_rng(seed)
     k = rng.uniform(0.0, 10.0, n)
@@ -79,7 +79,7 @@ def _closest_point_libraries(env, n, quick):
 
 def run(quick: bool = False) -> dict:
     from riskplan.collision import gaussian_bound, probability_of_collision, trajectory_bound
-    from riskplan.scenarios.chest import build_chest
+    from riskplan.planning.chest_scene import build_chest
 
     reps = 10 if quick else 60
     chest = build_chest(0)

@@ -74,10 +74,7 @@ def _scenario_figures(
 
 
 def run(quick: bool = False) -> dict:
-    from riskplan.experiments.demo_tissue import (
-        greedy_manipulation_controls,
-        greedy_needle_controls,
-    )
+    from riskplan.control.greedy import greedy_manipulation_controls, greedy_needle_controls
 
     figures = _scenario_figures(
         "needle",

@@ -45,7 +45,7 @@ def new_robot_end_to_end(quick: bool = False) -> dict:
     """``plan robot`` on the lab's task from an empty cache (module docs); seconds per stage."""
     import tempfile
 
-    from riskplan.experiments.robot_planning import write_robot_plan
+    from riskplan.app.outputs.robot_plan import write_robot_plan
     from riskplan.kinematics.model_cache import ensure_model
     from riskplan.planning.bo import OptimiserConfig
     from riskplan.planning.problem import load_problem
@@ -98,7 +98,7 @@ def new_robot_end_to_end(quick: bool = False) -> dict:
 def run(quick: bool = False, model: str = "paper") -> dict:
     import torch
 
-    from riskplan.experiments.optimiser_comparison import (
+    from riskplan.app.reproduce.optimiser_comparison import (
         compare_optimisers,
         nominal_problem,
     )

@@ -4,9 +4,9 @@
 Per scenario (needle V-A, manipulation V-B; case material-high, seed 0, the local process
 pool with one worker per core):
 
-* ``<scenario>_rrt_100_s``: wall-clock seconds of :func:`riskplan.planning.rrt.rrt_plans`
+* ``<scenario>_rrt_100_s``: wall-clock seconds of :func:`riskplan.tissue_planning.rrt.rrt_plans`
   for 100 candidate plans (the paper: needle 81 s, manipulation 438 s, C++ on a 3.33 GHz i7);
-* ``<scenario>_selection_s``: :func:`riskplan.planning.select.select_plan` over those plans
+* ``<scenario>_selection_s``: :func:`riskplan.tissue_planning.select.select_plan` over those plans
   (linearisation, LQG gains and LQG-MP for each; the paper: 57 s and 386 s).
 
 Also ``<scenario>_rrt_cpu_s`` / ``<scenario>_selection_cpu_s``: CPU seconds summed over the
@@ -27,9 +27,9 @@ def measure(scenario: str, n_plans: int, *, seed: int = 0, workers: int | None =
     """Seconds of the RRT and of the selection for ``n_plans`` candidates of ``scenario``."""
     import warnings
 
-    from riskplan.planning.rrt import rrt_plans
-    from riskplan.planning.select import select_plan
     from riskplan.scenarios.registry import make_scenario
+    from riskplan.tissue_planning.rrt import rrt_plans
+    from riskplan.tissue_planning.select import select_plan
 
     sim = make_scenario(scenario, "material-high")
     t0 = time.perf_counter()

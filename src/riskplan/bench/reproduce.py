@@ -35,10 +35,10 @@ def executions_per_s(name: str, n_per_case: int, seed: int = 0, costs: dict | No
     ``costs``, if given, receives ``rrt_s`` (one candidate, one tree) and ``select_s`` (mean
     seconds of one candidate's linearisation + LQG + LQG-MP under one case), the per-plan
     costs that, with the execution rate, give the paper-scale estimate in docs/reproduce.md."""
-    from riskplan.experiments.fig6 import EVAL_CASES, evaluate_candidate, execute_batch
+    from riskplan.app.reproduce.deformable import EVAL_CASES, evaluate_candidate, execute_batch
     from riskplan.parallel import spawn_seeds
-    from riskplan.planning.rrt import RRTOptions, rrt_plans
     from riskplan.scenarios.registry import make_scenario
+    from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
 
     base = make_scenario(name)
     t0 = time.process_time()
@@ -86,7 +86,7 @@ def run(quick: bool = False) -> dict:
         else os.cpu_count(),
     }
     if not quick:
-        from riskplan.experiments.reproduce import reproduce
+        from riskplan.app.reproduce.pipeline import reproduce
 
         with tempfile.TemporaryDirectory() as tmp:
             t0 = time.perf_counter()

@@ -20,13 +20,6 @@ from __future__ import annotations
 import numpy as np
 
 from riskplan.collision.environment import Environment
-from riskplan.collision.frames import (
-    BasePose,
-    environment_in_base_frame,
-    load_environment,
-    mesh_base_pose,
-    save_environment,
-)
 from riskplan.collision.gaussian import (
     DEFAULT_CUTOFF,
     FreeRegion,
@@ -37,6 +30,13 @@ from riskplan.collision.gaussian import (
     precision_cholesky_from_covariance,
 )
 from riskplan.collision.geometry import mahalanobis, unwhiten, whiten
+from riskplan.collision.mesh_files import (
+    BasePose,
+    environment_in_base_frame,
+    load_environment,
+    mesh_base_pose,
+    save_environment,
+)
 from riskplan.collision.mixture_bounds import COMBINES, component_bounds, mixture_bound
 from riskplan.collision.montecarlo import (
     MonteCarloEstimate,

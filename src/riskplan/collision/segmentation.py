@@ -27,7 +27,7 @@ Pipeline (each step a maintained library, no hand-written marching cubes):
 
 The mesh stays in the volume's physical frame; where the robot base lies in it is a separate
 fact (the sidecar written by :func:`save_segmentation_environment`, see
-:mod:`riskplan.collision.frames`).
+:mod:`riskplan.collision.mesh_files`).
 """
 
 from __future__ import annotations
@@ -302,7 +302,7 @@ def segmentation_mesh(
 
 
 def save_segmentation_environment(V, F, path, *, info: dict, base_pose=None):
-    """Write the mesh and its frame sidecar (:func:`riskplan.collision.frames.save_environment`).
+    """Write the mesh and its frame sidecar (:func:`riskplan.collision.mesh_files.save_environment`).
 
     With ``base_pose`` (the robot base in the volume's physical frame) the sidecar says
     ``"frame": "world"`` with the pose; the string ``"identity"`` declares the volume to be in the
@@ -310,7 +310,7 @@ def save_segmentation_environment(V, F, path, *, info: dict, base_pose=None):
     asks for ``--base-pose`` rather than reading the volume frame as the robot's.
     """
     from riskplan.collision.environment import Environment
-    from riskplan.collision.frames import BasePose, save_environment, sidecar_path
+    from riskplan.collision.mesh_files import BasePose, save_environment, sidecar_path
     from riskplan.io import write_json_atomic
 
     env = Environment(V, F, names=[f"label{info['label']}"])

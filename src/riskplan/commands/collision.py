@@ -37,10 +37,10 @@ def register(app: typer.Typer) -> None:
         pose, the seed, the parameters and the insertion point, so `riskplan collision --env OUT`
         gives the same answer as the built-in chest.
         """
-        from riskplan.collision.frames import sidecar_path
+        from riskplan.collision.mesh_files import sidecar_path
         from riskplan.errors import InvalidInputError
         from riskplan.io import check_output_file, output_lock
-        from riskplan.scenarios.chest import build_chest, chest_figure, chest_plotly
+        from riskplan.planning.chest_scene import build_chest, chest_figure, chest_plotly
 
         if out.suffix.lower() not in (".stl", ".obj", ".ply", ".off"):
             raise InvalidInputError(
@@ -101,7 +101,7 @@ def register(app: typer.Typer) -> None:
         spacing, origin and direction (SimpleITK, LPS), decimated (MeshLab quadric collapse, topology kept) to
         FACES triangles; a JSON sidecar OUT.json records the source, label, frame and base pose.
         """
-        from riskplan.collision.frames import BasePose, sidecar_path
+        from riskplan.collision.mesh_files import BasePose, sidecar_path
         from riskplan.collision.segmentation import (
             save_segmentation_environment,
             segmentation_mesh,
@@ -193,7 +193,7 @@ def register(app: typer.Typer) -> None:
                 "--arc describes the geometry itself; give either --arc or --displacements (with --model), not both"
             )
         if arc is not None:
-            from riskplan.collision.robot_geometry import arc_backbone, backbone_mixture
+            from riskplan.kinematics.robot_mixture import arc_backbone, backbone_mixture
 
             ka = parse_numbers(arc, "--arc", count=2)
             gm = backbone_mixture(arc_backbone(ka[0], ka[1])[None], 5)
@@ -220,7 +220,7 @@ def register(app: typer.Typer) -> None:
 
                 gm = load_model(model).predict(d)
             else:
-                from riskplan.collision.robot_geometry import robot_mixture
+                from riskplan.kinematics.robot_mixture import robot_mixture
                 from riskplan.robots import load_robot
 
                 gm = robot_mixture(load_robot(robot), d)
@@ -229,11 +229,11 @@ def register(app: typer.Typer) -> None:
                 raise InvalidInputError(
                     "--base-pose applies to mesh files; the procedural chest has its own base frame"
                 )
-            from riskplan.scenarios.chest import build_chest
+            from riskplan.planning.chest_scene import build_chest
 
             environment = build_chest(seed).base_environment
         else:
-            from riskplan.collision.frames import BasePose, load_environment
+            from riskplan.collision.mesh_files import BasePose, load_environment
 
             environment = load_environment(
                 env, base_pose=None if base_pose is None else BasePose.parse(base_pose)
@@ -286,8 +286,8 @@ def register(app: typer.Typer) -> None:
         ),
     ) -> None:
         """Bound vs Monte Carlo (95 % intervals) for a set of robot configurations in the chest."""
-        from riskplan.experiments.collision_table import collision_table as make_table
-        from riskplan.experiments.collision_table import to_markdown
+        from riskplan.app.outputs.collision_table import collision_table as make_table
+        from riskplan.app.outputs.collision_table import to_markdown
 
         rows, meta = make_table(seed=seed, n_samples=samples, model_path=model)
         text = to_markdown(rows, meta)

@@ -171,13 +171,13 @@ def register(plan_app: typer.Typer) -> None:
                 raise InvalidInputError(
                     "--base-pose applies to --env meshes; the procedural chest has its own base frame"
                 )
-            from riskplan.scenarios.chest import build_chest
+            from riskplan.planning.chest_scene import build_chest
 
             ch = build_chest(chest_seed)
             env_world, env_base, to_world = ch.environment, ch.base_environment, ch.to_world
             scene = {"scene": "procedural chest", "chest_seed": chest_seed}
         else:
-            from riskplan.collision.frames import (
+            from riskplan.collision.mesh_files import (
                 BasePose,
                 environment_in_base_frame,
                 mesh_base_pose,
@@ -255,7 +255,7 @@ def register(plan_app: typer.Typer) -> None:
                     workers=workers,
                 )
                 bar.update(t_va, total=1, completed=1)
-            from riskplan.experiments.chest_planning import write_plan
+            from riskplan.app.outputs.chest_plan import write_plan
 
             write_plan(
                 out,
@@ -302,10 +302,10 @@ def register_study(plan_app: typer.Typer) -> None:
         """Calibration of eq. 9/10 and the cloud risk against collision rates on the robot."""
         from dataclasses import asdict
 
+        from riskplan.app.reproduce.risk_calibration import RISK_STUDY_SCALES, run_risk_study
+        from riskplan.app.store import ResultStore
         from riskplan.commands._shared import progress_bar
         from riskplan.errors import InvalidInputError
-        from riskplan.experiments.risk_calibration import RISK_STUDY_SCALES, run_risk_study
-        from riskplan.experiments.store import ResultStore
 
         if scale not in RISK_STUDY_SCALES:
             raise InvalidInputError(

@@ -185,7 +185,7 @@ def register(plan_app: typer.Typer) -> None:
                     t_bo, completed=i, total=n, status=f"bound {b:.4f}"
                 ),
             )
-        from riskplan.experiments.robot_planning import write_robot_plan
+        from riskplan.app.outputs.robot_plan import write_robot_plan
 
         summary = write_robot_plan(
             out, plan, model=mdl, environment=environment, problem=prob, build=build

@@ -53,20 +53,15 @@ def register(plan_app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
+        from riskplan.app.outputs.tissue_plan import HONESTY_HEADER, summary_rows, write_outputs
         from riskplan.commands._shared import output_folder
         from riskplan.control.lqgmp import METHODS
         from riskplan.errors import InvalidInputError
-        from riskplan.experiments.planning_tissue import (
-            HONESTY_HEADER,
-            check_tissue_budget,
-            plan_tissue,
-            summary_rows,
-            write_outputs,
-        )
         from riskplan.io import check_output_folder
-        from riskplan.planning.rrt import RRTOptions
         from riskplan.scenarios.registry import make_scenario
         from riskplan.scenarios.uncertainty import CASE_NAMES
+        from riskplan.tissue_planning.plan import check_tissue_budget, plan_tissue
+        from riskplan.tissue_planning.rrt import RRTOptions
 
         if case not in CASE_NAMES:
             raise InvalidInputError(

@@ -1,5 +1,5 @@
 """``riskplan reproduce``: both papers' evaluations as one resumable command
-(:mod:`riskplan.experiments.reproduce`)."""
+(:mod:`riskplan.app.reproduce.pipeline`)."""
 
 from __future__ import annotations
 
@@ -47,9 +47,9 @@ def register(app: typer.Typer) -> None:
 
         Rerunning the same command continues from OUT/store and gives the same results.json.
         """
+        from riskplan.app.reproduce.deformable import highest_verdict
+        from riskplan.app.reproduce.pipeline import reproduce as run
         from riskplan.commands._shared import progress_bar
-        from riskplan.experiments.fig6 import highest_verdict
-        from riskplan.experiments.reproduce import reproduce as run
 
         with progress_bar() as bar:
             tasks: dict = {}
@@ -83,7 +83,9 @@ def register(app: typer.Typer) -> None:
                             if cal[e]["spearman"] is None
                             else f"{cal[e]['spearman']:.2f}"
                         )
-                        for e in ("sigma", "truncation", "sampling", "disturbance")
+                        for e in cal.get(
+                            "estimators", ("sigma", "truncation", "sampling", "disturbance")
+                        )
                     )
                     + f"; measured spread {cal['sigma']['measured_spread']:.3f}"
                 )
@@ -97,7 +99,7 @@ def register(app: typer.Typer) -> None:
             )
         f7 = results.get("mdn", {}).get("fig7")
         if f7 is not None:
-            from riskplan.experiments.paper_values import MDN
+            from riskplan.app.reproduce.paper_values import MDN
 
             c = f7["claims"]
             before, after = MDN["collision_before"]["value"], MDN["collision_after"]["value"]

@@ -43,7 +43,7 @@ import numpy as np
 from riskplan._validation import as_array
 from riskplan.deformable.banded import BandedCholeskySolver
 from riskplan.deformable.hyperelastic import SolveInfo
-from riskplan.deformable.locate import Interpolator
+from riskplan.deformable.material_points import Interpolator
 from riskplan.deformable.material import Material
 from riskplan.deformable.tetmesh import TetMesh
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
@@ -280,7 +280,7 @@ def find_points(mesh: TetMesh, points: np.ndarray, k: int = LOCATE_CANDIDATES):
 
 
 def locate3d(mesh: TetMesh, points, name: str = "points") -> Interpolator:
-    """An :class:`~riskplan.deformable.locate.Interpolator` for material points ``(P, 3)``
+    """An :class:`~riskplan.deformable.material_points.Interpolator` for material points ``(P, 3)``
     (or one ``(3,)``) of ``mesh``; raises :class:`InvalidInputError` naming the set
     (``name``: "target", "obstacle 2", ...) and the points outside the tissue."""
     pts = as_array(points, name, last_dim=3)

@@ -190,3 +190,16 @@ def mode_collapse(weight_p99: np.ndarray, threshold: float) -> list[int]:
     if not (0.0 < threshold < 1.0 and math.isfinite(threshold)):
         raise InvalidInputError(f"threshold: expected in (0, 1), got {threshold}")
     return [int(k) for k in np.flatnonzero(np.asarray(weight_p99) < threshold)]
+
+
+def evaluate_for_report(model, test_data, seed: int):
+    """The Fig. 5 evaluation the demo and ``reproduce`` report: 2048 samples and 1024 Chamfer
+    points per configuration, on at most 60 test configurations."""
+    return evaluate(
+        model,
+        test_data,
+        n_samples=2048,
+        chamfer_points=1024,
+        seed=seed,
+        max_configs=min(test_data.n_configs, 60),
+    )

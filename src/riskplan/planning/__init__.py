@@ -1,6 +1,5 @@
-"""Planning under kinematic uncertainty (MDN paper section V; deformable-planning paper).
-
-Chest cavity (MDN paper section V, Figs. 6-7):
+"""Planning a tendon robot under kinematic uncertainty (MDN paper section V, Figs. 6-7): the
+kinematic wing's top. Tissue planning is :mod:`riskplan.tissue_planning`.
 
 * :mod:`riskplan.planning.prm` — OMPL PRM in tendon-displacement space with the paper's
   validity condition (component means in free space), nominal trajectories;
@@ -9,11 +8,7 @@ Chest cavity (MDN paper section V, Figs. 6-7):
   and the comparison optimisers;
 * :mod:`riskplan.planning.chest` — the whole pipeline on a model and a mesh;
 * :mod:`riskplan.planning.validate` — does a planned trajectory hold on the simulated robot?
-
-Deformable tissue (deformable-planning paper, section IV):
-
-* :mod:`riskplan.planning.rrt` — the simulator RRT (candidate plans with stored simulator states);
-* :mod:`riskplan.planning.select` — LQG-MP plan selection and its Monte Carlo check.
+* :mod:`riskplan.planning.chest_scene` — the procedural chest cavity the paper plans in.
 """
 
 from riskplan.planning.bo import OptimisationResult, OptimiserConfig, optimise_trajectory

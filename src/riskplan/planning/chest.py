@@ -2,7 +2,7 @@
 trajectory, Bayesian optimisation of its eq.-10 bound, optional least-risk roadmap path.
 
 Frames: the learned model predicts mixtures in the robot *base* frame, so every environment
-passed here is in the base frame (:attr:`riskplan.scenarios.chest.Chest.base_environment`, or
+passed here is in the base frame (:attr:`riskplan.planning.chest_scene.Chest.base_environment`, or
 a user mesh mapped with :func:`riskplan.collision.load_environment`). Goal tips are base-frame points.
 
 Default scene. Start: zero displacement (the straight robot, free in the procedural chest).

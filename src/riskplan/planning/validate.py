@@ -29,7 +29,7 @@ Body-in-obstacle test
     Default ``r`` = the separator-disk radius of the point-cloud geometry
     (:class:`~riskplan.robots.geometry.BodyGeometry`; 10 mm for the ``paper`` robot): the
     outer radius of the body the cameras see and the MDN learned, and the same 1 cm as
-    :func:`~riskplan.collision.robot_geometry.robot_mixture`. The tube contains the 3 mm
+    :func:`~riskplan.kinematics.robot_mixture.robot_mixture`. The tube contains the 3 mm
     backbone and every disk whatever its orientation, so the test is conservative: between
     disks the real body is thinner, and contacts that only the envelope makes are counted
     (pass ``radius=`` the backbone radius for the other extreme, or ``body="disks"`` for the

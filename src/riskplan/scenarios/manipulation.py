@@ -69,6 +69,7 @@ from riskplan.scenarios.base import (
     frozen_array,
     gaussian_noise,
 )
+from riskplan.scenarios.space import BoxSpace
 
 __all__ = ["ManipulationConfig", "ManipulationScenario", "ManipulationState"]
 
@@ -354,6 +355,33 @@ class ManipulationScenario(FEMScenario):
     def control_bounds(self) -> np.ndarray:
         """``(6, 2)``: ``[−df_max, df_max]`` for every force increment."""
         return self._bounds
+
+    @property
+    def goal_radius(self) -> float:
+        """Radius of the goal disk the target must reach, ``config.goal_radius``."""
+        return float(self.config.goal_radius)
+
+    def planning_space(self) -> BoxSpace:
+        """The RRT's space (:class:`~riskplan.scenarios.space.PlanningScenario`).
+
+        Returns
+        -------
+        BoxSpace
+            The object's bounding box for the target position, which alone is measured
+            (the boundary points follow it), and one step of force increments per
+            extension (the increment bound is the rate limit: larger force jumps would skip
+            configurations that the collision check never sees).
+        """
+        cfg = self.config
+        p = self.state_dim
+        low, high, w, goal = np.zeros(p), np.ones(p), np.zeros(p), np.zeros(p)
+        low[:2], high[:2], w[:2], goal[:2] = (
+            cfg.outline.min(0),
+            cfg.outline.max(0),
+            1.0,
+            cfg.goal_center,
+        )
+        return BoxSpace(low=low, high=high, weights=w, periodic=np.zeros(p, dtype=bool), goal=goal)
 
     def actuation_cov(self) -> tuple:
         """Default actuation noise for this scenario: ``(0.1 df_max)²`` per increment

@@ -1,0 +1,238 @@
+"""``riskplan reproduce``: both papers' evaluations as one resumable job.
+
+* ``deformable`` — Patil, van den Berg & Alterovitz, RSS 2011, §V: Fig. 6 for the needle
+  and the manipulation scenario (:mod:`riskplan.app.reproduce.deformable`), the paper's claims
+  checked by numbers, LQG-MP's predicted ``P(success)`` beside the measured rate, and the
+  single executions of Figs. 4, 5 and 7(c-f).
+* ``mdn`` — the MDN paper: Fig. 4 (NLL vs K), Fig. 5, MDN vs Cosserat timing, and Fig. 7
+  (Bayesian optimisation of a chest-cavity path, the "about 15 % → below 7 % after 50
+  iterations" claim) (:mod:`riskplan.app.reproduce.mdn`).
+
+Every parallel stage runs on one :class:`riskplan.parallel.TaskPool` opened for the whole
+job, so the worker processes (or the Ray connection) start once, not once per stage.
+
+Outputs in ``out``: ``results.json`` (every number, a pure function of paper, scale and
+seed, so a rerun or a resumed run writes the same file whatever the backend),
+``timings.json`` (wall-clock times, which vary), ``report.html`` with PNG figures and
+interactive plotly pages, and ``store/`` (the finished work units,
+:class:`~riskplan.app.store.ResultStore`). Rerunning the same command continues
+from ``store/``; a store of another configuration or a corrupted record raises
+:class:`~riskplan.errors.DataFormatError` naming it.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+from riskplan.errors import InvalidInputError
+
+log = logging.getLogger(__name__)
+
+__all__ = ["PAPERS", "SCALE_NAMES", "STAGES", "reproduce", "resolve_scale"]
+
+PAPERS = ("mdn", "deformable", "all")
+SCALE_NAMES = ("smoke", "paper")
+#: ``figures``: the papers' figures and claims; ``calibration``: LQG-MP's predicted
+#: P(success) against measured closed-loop success (:mod:`riskplan.app.reproduce.calibration`,
+#: deformable paper only, its own sizes: ``calibration_scale``).
+STAGES = ("figures", "calibration")
+#: the calibration sizes a named scale uses unless ``calibration_scale`` names others
+_CALIBRATION_FOR = {"smoke": "smoke", "paper": "full"}
+SCENARIOS = ("needle", "manipulation")
+
+
+def resolve_scale(scale) -> tuple[str, dict]:
+    """``(name, {"needle": ScenarioScale, "manipulation": ScenarioScale, "mdn": MDNScale})``
+    for a scale name (:data:`SCALE_NAMES`) or an explicit dict of those (name ``"custom"``)."""
+    from riskplan.app.reproduce.deformable import SCALES
+    from riskplan.app.reproduce.mdn import MDN_SCALES
+
+    if isinstance(scale, str):
+        if scale not in SCALE_NAMES:
+            raise InvalidInputError(
+                f"scale: expected one of {', '.join(SCALE_NAMES)}, got {scale!r}"
+            )
+        return scale, {**SCALES[scale], "mdn": MDN_SCALES[scale]}
+    if isinstance(scale, dict):
+        return "custom", dict(scale)
+    raise InvalidInputError(
+        f"scale: expected one of {', '.join(SCALE_NAMES)} or a dict of scales, got {scale!r}"
+    )
+
+
+def _check(paper, backend, workers, ray_address):
+    from riskplan.parallel import BACKENDS, check_ray_address
+
+    if paper not in PAPERS:
+        raise InvalidInputError(f"paper: expected one of {', '.join(PAPERS)}, got {paper!r}")
+    if backend not in BACKENDS:
+        raise InvalidInputError(f"backend: expected one of {', '.join(BACKENDS)}, got {backend!r}")
+    if workers is not None and (int(workers) != workers or workers < 1):
+        raise InvalidInputError(f"workers: expected a positive integer, got {workers!r}")
+    if ray_address is not None:
+        if backend != "ray":
+            raise InvalidInputError(
+                f"address: only used with backend 'ray', got backend {backend!r}"
+            )
+        check_ray_address(ray_address)  # BackendUnavailableError within seconds
+
+
+def reproduce(
+    out,
+    *,
+    paper: str = "all",
+    scale="smoke",
+    backend: str = "local",
+    ray_address: str | None = None,
+    workers: int | None = None,
+    seed: int = 0,
+    progress=None,
+    stages=("figures",),
+    calibration_scale: str | None = None,
+) -> dict:
+    """Run (or continue) the reproduction and write ``out/results.json`` and ``out/report.html``.
+
+    Parameters
+    ----------
+    out : output folder (created; an existing one is continued).
+    paper : ``"mdn"``, ``"deformable"`` or ``"all"``.
+    scale : ``"smoke"`` (minutes), ``"paper"`` (the papers' sizes) or a dict of scales.
+    backend, ray_address, workers : :mod:`riskplan.parallel` (results do not depend on them).
+    seed : master seed.
+    progress : optional ``progress(stage, done, total)`` callback.
+    stages : which of :data:`STAGES` run (default the figures only). The stage list is not
+        part of the store's configuration, so stages can run one after another into the
+        same ``out`` (each resumes its own records); ``results.json`` holds what this call ran.
+    calibration_scale : sizes of the calibration stage
+        (:data:`riskplan.app.reproduce.calibration.CALIBRATION_SCALES`: ``smoke``,
+        ``reduced``, ``full``); ``None``: ``smoke`` for scale ``smoke``, ``full`` for
+        ``paper`` (a dict scale names its own under ``"calibration"``, or gets ``smoke``).
+
+    Returns the results dict (what ``results.json`` holds). Raises
+    :class:`~riskplan.errors.InvalidInputError` for bad arguments,
+    :class:`~riskplan.errors.BackendUnavailableError` for an unreachable Ray address and
+    :class:`~riskplan.errors.DataFormatError` for a corrupted or foreign results store.
+    """
+    from riskplan.io import check_output_folder, output_lock
+
+    _check(paper, backend, workers, ray_address)
+    stages = (stages,) if isinstance(stages, str) else tuple(stages)
+    if not stages or any(s not in STAGES for s in stages):
+        raise InvalidInputError(f"stages: expected names from {', '.join(STAGES)}, got {stages!r}")
+    out = check_output_folder(out, "out")
+    # one writer per output folder: a second run into it stops at once (the store's own
+    # checks keep records consistent, the lock keeps results.json and the report one run's)
+    with output_lock(out, "output folder"):
+        return _reproduce(
+            out, paper, scale, backend, ray_address, workers, seed, progress, stages,
+            calibration_scale,
+        )  # fmt: skip
+
+
+def _reproduce(
+    out, paper, scale, backend, ray_address, workers, seed, progress, stages, calibration_scale
+) -> dict:
+    import riskplan
+    from riskplan.app.reproduce.calibration import CALIBRATION_SCALES
+    from riskplan.app.store import ResultStore
+    from riskplan.io import write_json_atomic
+    from riskplan.parallel import TaskPool
+
+    scale_name, scales = resolve_scale(scale)
+    calib = scales.pop("calibration", None)
+    if calibration_scale is not None or calib is None:
+        cname = calibration_scale or _CALIBRATION_FOR.get(scale_name, "smoke")
+        if cname not in CALIBRATION_SCALES:
+            raise InvalidInputError(
+                f"calibration_scale: expected one of {', '.join(CALIBRATION_SCALES)}, got {cname!r}"
+            )
+        calib = CALIBRATION_SCALES[cname]
+    seed = int(seed)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    config = {
+        "paper": paper,
+        "scale": scale_name,
+        "sizes": {k: asdict(v) for k, v in scales.items()},
+        "calibration_sizes": {k: asdict(v) for k, v in calib.items()},
+        "seed": seed,
+        "version": riskplan.__version__,
+    }
+    store = ResultStore(out / "store", config)
+    results: dict = {"config": config}
+    figures = "figures" in stages
+    timings: dict = {"backend": backend, "workers": workers}
+    with TaskPool(backend, workers, ray_address) as pool:  # one pool for every stage
+        if figures and paper in ("deformable", "all"):
+            from riskplan.app.reproduce.deformable import run_scenario
+
+            results["deformable"] = {}
+            for name in SCENARIOS:
+                t0 = time.perf_counter()
+                results["deformable"][name] = run_scenario(
+                    name,
+                    scales[name],
+                    store,
+                    seed=seed,
+                    backend=backend,
+                    workers=workers,
+                    ray_address=ray_address,
+                    progress=progress,
+                    pool=pool,
+                )
+                timings[f"deformable_{name}_s"] = time.perf_counter() - t0
+        if figures and paper in ("mdn", "all"):
+            from riskplan.app.reproduce.mdn import run_fig7, run_mdn
+
+            t0 = time.perf_counter()
+            results["mdn"] = run_mdn(
+                out / "mdn",
+                scales["mdn"],
+                store,
+                seed=seed,
+                workers=workers,
+                backend=backend,
+                ray_address=ray_address,
+                progress=progress,
+            )
+            timings["mdn_s"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            results["mdn"]["fig7"] = run_fig7(
+                out / "mdn", scales["mdn"], store, seed=seed, progress=progress
+            )
+            timings["mdn_fig7_s"] = time.perf_counter() - t0
+            first = store.get("mdn.fig7")["seconds"]  # as first computed (a rerun reads them)
+            timings["mdn_fig7_first_run"] = first
+        if paper in ("deformable", "all") and "calibration" in stages:
+            from riskplan.app.reproduce.calibration import run_calibration
+
+            results.setdefault("deformable", {})
+            for name in SCENARIOS:
+                t0 = time.perf_counter()
+                results["deformable"].setdefault(name, {})["calibration"] = run_calibration(
+                    name,
+                    calib[name],
+                    store,
+                    seed=seed,
+                    backend=backend,
+                    workers=workers,
+                    ray_address=ray_address,
+                    progress=progress,
+                    pool=pool,
+                )
+                timings[f"calibration_{name}_s"] = time.perf_counter() - t0
+        timings["process_pools_started"] = pool.pools_started
+    write_json_atomic(out / "results.json", results, sort_keys=True)
+    write_json_atomic(out / "timings.json", timings, sort_keys=True)
+    from riskplan.app.reproduce.report import write_report
+
+    t0 = time.perf_counter()
+    write_report(out, results, store, timings, seed=seed)
+    timings["report_s"] = time.perf_counter() - t0
+    write_json_atomic(out / "timings.json", timings, sort_keys=True)
+    log.info("reproduce: results in %s", out)
+    return json.loads(json.dumps(results))

@@ -1,0 +1,264 @@
+"""Does a collision risk computed from the learned model predict the robot's collision rate?
+(beyond the MDN paper; issue 18, item 11; ``riskplan plan chest-risk-study``.)
+
+Eq. 9/10 measure the mixture's mass inside obstacles. This study puts that number and the
+body-contact cloud risk (:mod:`riskplan.collision.body_risk`, for several coherences ``ρ``)
+beside the collision rate measured on the simulated robot (:func:`~riskplan.planning.validate.execute_on_robot`,
+body of backbone and disks) for configurations and trajectories in the procedural chest:
+
+* configurations: seeded uniform draws within the displacement and tension limits whose MDN
+  component means are free (the planner's validity), stratified by their nominal body clearance
+  (:func:`~riskplan.planning.chest.body_clearance`): two thirds with ``|clearance| < band`` (near
+  contact, where the rate is between 0 and 1), one third from the rest, in draw order;
+* trajectories: straight ramps of ``steps`` configurations from zero displacement to end
+  configurations stratified the same way (other draws than the configurations');
+* each executed ``executions`` times on the robot (seeds ``spawn_seeds``), its rate with a
+  95 % Wilson interval;
+* metrics per risk: mean absolute error on the items whose measured rate is in [5 %, 95 %],
+  on all items, and the Brier score over all executions,
+  ``mean_i [r_i (1 - p_i)^2 + (1 - r_i) p_i^2]``; a binned calibration figure.
+
+Every piece is a record of a :class:`~riskplan.app.store.ResultStore` (chunks of robot
+executions, one record per risk), so an interrupted study continues where it stopped.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from riskplan.errors import InvalidInputError
+
+log = logging.getLogger(__name__)
+
+__all__ = ["RISK_STUDY_SCALES", "RiskStudyScale", "calibration_metrics", "run_risk_study"]
+
+CHUNK = 10
+
+
+@dataclass(frozen=True)
+class RiskStudyScale:
+    """Sizes of the study (module docstring)."""
+
+    configurations: int = 200
+    trajectories: int = 30
+    executions: int = 200
+    steps: int = 8
+    coherences: tuple = (0.0, 0.15, 0.5, 0.9, 1.0)
+    n_clouds: int = 128
+    n_points: int = 512
+    pool: int = 4000
+    band: float = 0.002
+
+    def __post_init__(self):
+        for name in ("configurations", "trajectories", "executions", "steps", "n_clouds", "pool"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or int(v) != v or v < 1:
+                raise InvalidInputError(f"{name}: expected a positive integer, got {v!r}")
+        if not all(0.0 <= float(c) <= 1.0 for c in self.coherences) or not self.coherences:
+            raise InvalidInputError(f"coherences: expected values in [0, 1], got {self.coherences}")
+        object.__setattr__(self, "coherences", tuple(float(c) for c in self.coherences))
+
+
+RISK_STUDY_SCALES = {
+    "smoke": RiskStudyScale(
+        configurations=9,
+        trajectories=3,
+        executions=40,
+        steps=4,
+        coherences=(0.5,),
+        n_clouds=32,
+        pool=600,
+    ),
+    "reduced": RiskStudyScale(configurations=60, trajectories=12),
+    "full": RiskStudyScale(),
+}
+
+
+def calibration_metrics(predicted, measured, *, low: float = 0.05, high: float = 0.95) -> dict:
+    """MAE on the items measured in ``[low, high]``, MAE on all, and the execution-level Brier score."""
+    p = np.asarray(predicted, dtype=np.float64)
+    r = np.asarray(measured, dtype=np.float64)
+    mid = (r >= low) & (r <= high)
+    return {
+        "mae_mid": float(np.abs(p - r)[mid].mean()) if mid.any() else None,
+        "n_mid": int(mid.sum()),
+        "mae_all": float(np.abs(p - r).mean()),
+        "brier": float(np.mean(r * (1 - p) ** 2 + (1 - r) * p**2)),
+        "n": len(r),
+    }
+
+
+def _select(robot, model, env, n, pool, band, rng):
+    """``n`` configurations: two thirds near contact, one third from the rest (draw order)."""
+    from riskplan.planning.chest import body_clearance
+    from riskplan.planning.prm import MeanValidity
+
+    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
+    q = lim[:, 0] + rng.random((int(pool), len(lim))) * (lim[:, 1] - lim[:, 0])
+    q = q[(robot.tensions_for_displacements(q, validate=False) <= robot.tension_limits).all(-1)]
+    q = q[MeanValidity(model, env)(q)]
+    _, c = body_clearance(robot, q, env)
+    near, far = np.nonzero(np.abs(c) < band)[0], np.nonzero(np.abs(c) >= band)[0]
+    k = min(len(near), int(np.ceil(2 * n / 3)))
+    idx = np.r_[near[:k], far[: n - k]]
+    if len(idx) < n:
+        raise InvalidInputError(f"pool: {pool} draws give only {len(idx)} configurations")
+    return q[idx], c[idx]
+
+
+def _robot_rates(store, key, robot, env, trajectories, executions, seed, progress, label):
+    from riskplan.parallel import spawn_seeds
+    from riskplan.planning.validate import execute_on_robot
+
+    seeds = spawn_seeds(seed, len(trajectories))
+    out = []
+    for k in range(0, len(trajectories), CHUNK):
+
+        def compute(k=k):
+            return [
+                execute_on_robot(
+                    robot,
+                    trajectories[i],
+                    env,
+                    executions,
+                    int(seeds[i]),
+                    body="disks",
+                    backend="serial",
+                ).trajectory.probability.item()
+                for i in range(k, min(k + CHUNK, len(trajectories)))
+            ]
+
+        out += store.get_or_compute(f"{key}.{k // CHUNK}", compute)
+        progress(label, min(k + CHUNK, len(trajectories)), len(trajectories))
+    return np.asarray(out)
+
+
+def run_risk_study(out, scale: RiskStudyScale, store, *, seed: int = 0, progress=None) -> dict:
+    """Run (or continue) the study; writes ``out/risk_calibration.{png,json}``, returns the JSON."""
+    from riskplan.collision import mixture_bound, trajectory_bound
+    from riskplan.collision.body_risk import cloud_risk
+    from riskplan.gaussian_mixture import as_numpy_mixture
+    from riskplan.io import write_json_atomic
+    from riskplan.kinematics import load_model
+    from riskplan.planning.chest_scene import build_chest
+    from riskplan.robots import load_robot
+
+    report = progress or (lambda stage, done, total: None)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    robot, model = load_robot("paper"), load_model("paper")
+    env = build_chest(0).base_environment
+    sel = store.get("risk.selection")
+    if sel is None:
+        rng = np.random.default_rng(seed)
+        q, c = _select(robot, model, env, scale.configurations, scale.pool, scale.band, rng)
+        e, ce = _select(robot, model, env, scale.trajectories, scale.pool, scale.band, rng)
+        sel = {"configurations": q.tolist(), "clearance": c.tolist(), "ends": e.tolist()}
+        sel["end_clearance"] = ce.tolist()
+        store.put("risk.selection", sel)
+    from riskplan.parallel import spawn_seeds
+
+    s_conf, s_traj = spawn_seeds(seed, 2)
+    Q = np.asarray(sel["configurations"])
+    ends = np.asarray(sel["ends"])
+    trajs = [np.linspace(np.zeros(len(x)), x, scale.steps) for x in ends]
+    r_conf = _robot_rates(
+        store, "risk.robot.conf", robot, env, [x[None] for x in Q], scale.executions, s_conf,
+        report, "risk study: robot, configurations",
+    )  # fmt: skip
+    r_traj = _robot_rates(
+        store, "risk.robot.traj", robot, env, trajs, scale.executions, s_traj,
+        report, "risk study: robot, trajectories",
+    )  # fmt: skip
+    risks = {}
+    gm = as_numpy_mixture(model.predict(Q))
+    risks["eq9 / eq10"] = (
+        mixture_bound(gm, env).tolist(),
+        [float(trajectory_bound(as_numpy_mixture(model.predict(t)), env)) for t in trajs],
+    )
+    for rho in scale.coherences:
+
+        def compute(rho=rho):
+            conf = [
+                cloud_risk(
+                    model.predict(x[None]), env, n_points=scale.n_points,
+                    n_clouds=scale.n_clouds, coherence=rho, seed=seed,
+                ).per_configuration[0].item()
+                for x in Q
+            ]  # fmt: skip
+            traj = [
+                cloud_risk(
+                    model.predict(t), env, n_points=scale.n_points, n_clouds=scale.n_clouds,
+                    coherence=rho, seed=seed,
+                ).trajectory
+                for t in trajs
+            ]  # fmt: skip
+            return [conf, traj]
+
+        risks[f"cloud ρ={rho:g}"] = tuple(store.get_or_compute(f"risk.cloud.{rho:g}", compute))
+        report("risk study: cloud risks", scale.coherences.index(rho) + 1, len(scale.coherences))
+    measured = np.r_[r_conf, r_traj]
+    metrics = {
+        name: {
+            "all": calibration_metrics(np.r_[c, t], measured),
+            "configurations": calibration_metrics(c, r_conf),
+            "trajectories": calibration_metrics(t, r_traj),
+        }
+        for name, (c, t) in risks.items()
+    }
+    result = {
+        "scale": asdict(scale),
+        "seed": int(seed),
+        "measured": {"configurations": r_conf.tolist(), "trajectories": r_traj.tolist()},
+        "predicted": {k: {"configurations": c, "trajectories": t} for k, (c, t) in risks.items()},
+        "nominal_clearance": sel["clearance"],
+        "metrics": metrics,
+        "share_measured_5_95": float(np.mean((measured >= 0.05) & (measured <= 0.95))),
+        "seconds": time.perf_counter() - t0,
+    }
+    write_json_atomic(out / "risk_calibration.json", result)
+    _figure(result, out / "risk_calibration.png")
+    return result
+
+
+def _figure(result: dict, path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from riskplan.io import atomic_path
+
+    measured = np.r_[result["measured"]["configurations"], result["measured"]["trajectories"]]
+    edges = np.array([0.0, 0.02, 0.05, 0.1, 0.2, 0.35, 0.5, 0.7, 0.9, 1.0])
+    fig, ax = plt.subplots(figsize=(6, 5))
+    ax.plot([0, 1], [0, 1], "k--", lw=1, label="perfect calibration")
+    for name, pr in result["predicted"].items():
+        p = np.r_[pr["configurations"], pr["trajectories"]]
+        b = np.clip(np.digitize(p, edges) - 1, 0, len(edges) - 2)
+        xs, ys, ns = [], [], []
+        for j in range(len(edges) - 1):
+            if (b == j).any():
+                xs.append(p[b == j].mean())
+                ys.append(measured[b == j].mean())
+                ns.append(int((b == j).sum()))
+        m = result["metrics"][name]["all"]
+        mae = "n/a" if m["mae_mid"] is None else f"{100 * m['mae_mid']:.1f}"
+        ax.plot(xs, ys, "o-", ms=4, label=f"{name} (MAE 5-95 %: {mae} pts, Brier {m['brier']:.3f})")
+    ax.set_xlabel("predicted risk (bin mean)")
+    ax.set_ylabel("collision rate on the robot (bin mean)")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.set_title("Calibration against the simulated robot (backbone + disks)", fontsize=10)
+    fig.tight_layout()
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=110)
+    plt.close(fig)

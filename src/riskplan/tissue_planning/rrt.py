@@ -1,0 +1,586 @@
+"""Simulator-based RRT for deformable environments (Patil, van den Berg & Alterovitz,
+RSS 2011, section IV-A; RRT after LaValle & Kuffner).
+
+The tree grows over the reduced state ``x`` (paper section III) while every node also
+stores the full simulator state ``y`` (FEM displacement, robot pose, applied loads), so
+expanding a node restarts the simulation from exactly the deformation it reached. Plans
+assume the expected deformation: the tree is grown with the planning parameters
+``sim.nominal_params`` (no actuation noise).
+
+One iteration (paper IV-A):
+
+1. draw ``x_sample``: uniform in the sampling box of the
+   :class:`~riskplan.scenarios.space.PlanningSpace`, or,
+   with probability ``goal_bias``, the goal point (towards which distances ignore the
+   periodic components: any heading will do in a goal region of positions);
+2. nearest node by the weighted metric of the space (vectorised over all nodes)
+
+       d(x, x')² = Σ_i w_i δ_i²,   δ_i = x_i − x'_i  (wrapped to (−π, π] if periodic);
+
+3. draw ``n_controls`` controls (uniform in the control bounds narrowed by
+   ``control_margin`` actuation standard deviations, or within
+   ``max_control_change`` of the node's own control), simulate each for
+   ``steps_per_extension`` steps from the node's stored state and rank them by the
+   distance of their end state to ``x_sample``. Towards the goal point, if the space has
+   a local steering rule (``PlanningSpace.steer``; the needle's lands the car exactly on
+   the goal point when its bounds allow), its control replaces the last random candidate
+   (``goal_steer``), and a candidate with a state in the (tightened) goal ranks first,
+   since its edge ends there (``goal_entry``; see :class:`RRTOptions`);
+4. take the best candidate whose every intermediate state lies inside the space's box and
+   is collision-free against the *deformed* obstacles (``sim.in_collision``); candidates
+   are checked lazily in rank order, so collision checks are paid only until one passes;
+5. if an intermediate state lies in the *deformed* goal region (``sim.in_goal``), and
+   within ``(1 − goal_depth) · r_goal`` of its centre (``sim.goal_distance``; see
+   :class:`RRTOptions`), the edge ends there and the new node is a goal node: a leaf, never
+   expanded. At most one goal
+   child per node, so the plans of one tree differ before their last edge.
+
+A plan is the path from the root to a goal node: the controls of its edges (each held
+for its steps) and every state on the way, as a :class:`riskplan.control.NominalPlan`.
+Many distinct candidates (the paper uses 100) come from several trees with independent
+seeds, each collecting ``plans_per_tree`` goal nodes; the trees run through
+:mod:`riskplan.parallel`, and a tree's result depends only on its seed, so the plans do
+not depend on the backend or on the number of workers.
+
+Choices the paper leaves open (documented in docs/planning.md):
+
+* steps per extension: the paper does not say. Needle: 3 steps of τ = 0.1 (at most
+  0.15 length units, about the goal disk's diameter); manipulation: 1
+  step of force increments uniform in their bounds (``±df_max = ±0.25 f_max``, narrowed
+  by the control margin): the increment bound is the rate limit, because a quasi-static
+  step jumps to the equilibrium of the new forces and larger force jumps would skip the
+  intermediate configurations that the collision check and the linearisation never see.
+* metric: needle ``(x, y)`` plus ``r_min · θ`` (a heading error of 1 rad counts like the
+  arc the car needs to turn by it; with 0.1 instead, trees more often crept past the goal
+  with the wrong heading and took 3–10 times as many iterations); manipulation: the target
+  position only (the boundary points follow it).
+* states outside the sampling box are invalid (the needle leaving the tissue).
+
+The planner knows no scenario by type: it plans for any
+:class:`~riskplan.scenarios.space.PlanningScenario` (a
+:class:`~riskplan.scenarios.base.Simulator` with ``in_collision(state)``,
+``in_goal(state)``, ``goal_distance(state)``, ``goal_radius`` and ``planning_space()``), or
+for a simulator with the first four given a space (argument ``space``). The two paper
+scenarios build theirs in ``NeedleScenario.planning_space`` and
+``ManipulationScenario.planning_space``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from riskplan._validation import as_array, as_generator, check_count
+from riskplan.errors import (
+    ConvergenceError,
+    ElementInversionError,
+    InvalidInputError,
+    PlanningError,
+    SimulationError,
+)
+from riskplan.scenarios.space import PlanningSpace
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "RRTOptions",
+    "TreeResult",
+    "actuation_std",
+    "grow_tree",
+    "planning_space",
+    "rrt_plans",
+    "sampling_bounds",
+]
+
+#: Goal-directed extensions of a node's lineage after which it is no longer picked for the
+#: goal (a car facing away from the goal would otherwise be picked again and again).
+_MAX_GOAL_FAILS = 3
+
+#: Errors a simulator may raise for one candidate control; such a candidate is discarded.
+_SIM_FAILURES = (ConvergenceError, ElementInversionError, SimulationError, FloatingPointError)
+
+
+def planning_space(sim) -> PlanningSpace:
+    """The space ``sim`` hands over for planning.
+
+    Parameters
+    ----------
+    sim : PlanningScenario
+        A simulator with a ``planning_space()`` method
+        (:class:`riskplan.scenarios.space.PlanningScenario`).
+
+    Returns
+    -------
+    PlanningSpace
+        ``sim.planning_space()``, checked against the protocol.
+    """
+    method = getattr(sim, "planning_space", None)
+    if not callable(method):
+        raise InvalidInputError(
+            f"sim: {type(sim).__name__} has no planning_space() method "
+            "(riskplan.scenarios.space.PlanningScenario); pass space=BoxSpace(...) instead"
+        )
+    space = method()
+    if not isinstance(space, PlanningSpace):
+        raise InvalidInputError(
+            f"sim.planning_space(): expected a PlanningSpace, got {type(space).__name__}"
+        )
+    return space
+
+
+@dataclass(frozen=True)
+class RRTOptions:
+    """Budget and sampling of one tree.
+
+    ``n_controls``: controls sampled per extension (the best valid one is kept);
+    ``goal_bias``: probability of sampling the goal point; ``max_iterations``: iterations
+    per tree (each one extension attempt); ``plans_per_tree``: goal nodes a tree collects
+    before it stops.
+
+    ``goal_depth`` (in ``[0, 1)``): a goal node must lie in the goal *and* within
+    ``(1 − goal_depth) · r_goal`` of the (deformed) goal centre, ``sim.goal_distance``
+    (``r_goal``: ``sim.goal_radius`` or ``sim.config.goal_radius``). Planning to a
+    tightened goal leaves the feedback controller room: a plan ending on the goal's edge
+    misses the goal under any execution error. 0: the first state in the goal ends a plan.
+
+    ``control_margin``: controls are sampled in ``[low + m, high − m]`` with
+    ``m = control_margin · σ`` per control, ``σ`` the standard deviation of the scenario's
+    actuation noise (:func:`actuation_std`). A nominal control on a bound has its noise
+    clipped on one side (a biased execution) and leaves the feedback no authority in that
+    direction; 2σ keeps about 98 % of each one-sided noise draw inside the bounds.
+    0: the whole bounds.
+
+    ``goal_entry``: in a goal-directed extension (the goal point sampled), a candidate
+    edge with a state in the (tightened) goal ranks before the others (it ends there, so
+    its end *is* in the goal), the others by the distance of their end state as usual.
+    Without it a candidate that passes through the goal and comes out on the far side
+    ranks by that far end, and is dropped when the far end is no closer than the node
+    (for 100 needle plans, the goal entry alone cut the trees needed from 15 to 13;
+    docs/planning.md). False: every candidate ranked by its end state.
+
+    ``goal_steer``: in a goal-directed extension, the control of the space's steering rule
+    (``PlanningSpace.steer``, if it has one) towards the goal point replaces the last of
+    the ``n_controls`` random candidates (the others stay random, so the tree still
+    explores; the random draws are the same with or without it). The kinodynamic RRT
+    extends a node with the input that brings it closest to the sample (LaValle &
+    Kuffner, IJRR 2001); a steering rule proposes such an input directly instead of
+    hoping that a random one comes close. It is used for the goal point only. With the
+    needle's tightened goal, random candidates rarely landed a state within half the goal
+    radius, and 7 of the 15 trees for 100 plans ran to ``max_iterations`` (with the
+    steering: 1 of 11; docs/planning.md). ``goal_entry = goal_steer = False,
+    goal_depth = control_margin = 0``: the plans of the original tree, bit for bit.
+    """
+
+    n_controls: int = 4
+    goal_bias: float = 0.3
+    max_iterations: int = 2000
+    plans_per_tree: int = 10
+    goal_depth: float = 0.5
+    control_margin: float = 2.0
+    goal_entry: bool = True
+    goal_steer: bool = True
+
+    def __post_init__(self):
+        for name in ("n_controls", "max_iterations", "plans_per_tree"):
+            check_count(getattr(self, name), name, 1)  # junk types: named, not a TypeError
+        for name in ("goal_bias", "goal_depth", "control_margin"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float | np.integer | np.floating):
+                raise InvalidInputError(f"{name}: expected a number, got {v!r}")
+        if not 0.0 <= self.goal_bias <= 1.0:
+            raise InvalidInputError(
+                f"goal_bias: expected a value in [0, 1], got {self.goal_bias!r}"
+            )
+        if not 0.0 <= self.goal_depth < 1.0:
+            raise InvalidInputError(
+                f"goal_depth: expected a value in [0, 1), got {self.goal_depth!r}"
+            )
+        for name in ("goal_entry", "goal_steer"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise InvalidInputError(
+                    f"{name}: expected True or False, got {getattr(self, name)!r}"
+                )
+        if not (math.isfinite(self.control_margin) and self.control_margin >= 0.0):
+            raise InvalidInputError(
+                f"control_margin: expected a finite value >= 0, got {self.control_margin!r}"
+            )
+
+
+@dataclass
+class TreeResult:
+    """What one tree returns: its plans, its nodes (for figures) and its statistics.
+
+    ``nodes (n, p)`` reduced states of the nodes, ``parents (n,)`` (root: −1),
+    ``goal_nodes``: node indices of the plans' ends, ``best_goal_distance``: the
+    simulator's goal distance of the node nearest the goal point (by the metric),
+    ``n_sim_steps``: simulator steps taken, ``cpu_s``: CPU seconds of the process growing it.
+    """
+
+    seed: int
+    plans: list
+    nodes: np.ndarray
+    parents: np.ndarray
+    goal_nodes: list
+    iterations: int
+    best_goal_distance: float
+    n_sim_steps: int = 0
+    cpu_s: float = 0.0
+
+    @property
+    def size(self) -> int:
+        return int(self.nodes.shape[0])
+
+
+def actuation_std(sim) -> np.ndarray | None:
+    """``(q,)`` standard deviations of ``sim``'s actuation noise, or ``None`` if unknown.
+
+    ``sim.actuation_cov()`` if it has one: the manipulation scenario's ``0.1 df_max``, the
+    needle's ``config.actuation_std`` (``(0.1 v_max, 5° · φ_max / 60°)`` unless set: the
+    paper's ``(0.05, 5°)``, scaled with the control bounds)."""
+    cov = getattr(sim, "actuation_cov", None)
+    if callable(cov):
+        return np.sqrt(np.diag(np.asarray(cov(), dtype=np.float64)))
+    return None
+
+
+def sampling_bounds(sim, options: RRTOptions) -> np.ndarray:
+    """``(q, 2)`` bounds the RRT samples controls in: ``sim.control_bounds`` narrowed by
+    ``options.control_margin`` actuation standard deviations on each side (see
+    :class:`RRTOptions`); the full bounds when the margin is 0 or the noise unknown."""
+    bounds = np.asarray(sim.control_bounds, dtype=np.float64)
+    if options.control_margin == 0.0:
+        return bounds
+    std = actuation_std(sim)
+    if std is None:
+        log.info(
+            "rrt: %s has no actuation noise model; controls use the full bounds", type(sim).__name__
+        )
+        return bounds
+    if std.shape != (bounds.shape[0],):
+        raise InvalidInputError(
+            f"sim: actuation noise has {std.shape[0]} components, but {bounds.shape[0]} controls"
+        )
+    m = options.control_margin * std
+    out = np.stack([bounds[:, 0] + m, bounds[:, 1] - m], axis=1)
+    if np.any(out[:, 1] <= out[:, 0]):
+        raise InvalidInputError(
+            f"options.control_margin: {options.control_margin} standard deviations {std.tolist()} leave no controls "
+            f"inside the bounds {bounds.tolist()}"
+        )
+    return out
+
+
+def _goal_radius(sim, options: RRTOptions) -> float:
+    """``(1 − goal_depth) · sim.goal_radius``, or ``inf`` when ``goal_depth`` is 0."""
+    if options.goal_depth == 0.0:
+        return math.inf
+    r = getattr(sim, "goal_radius", None)
+    if r is None:
+        raise InvalidInputError(
+            f"options.goal_depth: {type(sim).__name__} has no goal_radius; use goal_depth=0"
+        )
+    return (1.0 - options.goal_depth) * float(r)
+
+
+def _in_goal(sim, st, r_tight: float) -> bool:
+    """Whether ``st`` ends an edge: in ``sim``'s goal and within ``r_tight`` of its centre
+    (the cheaper distance test first)."""
+    if r_tight == math.inf:
+        return bool(sim.in_goal(st))
+    return bool(sim.goal_distance(st) <= r_tight and sim.in_goal(st))
+
+
+def _check_sim(sim) -> None:
+    for name in (
+        "step",
+        "reduced",
+        "initial_state",
+        "control_bounds",
+        "in_collision",
+        "in_goal",
+        "goal_distance",
+    ):
+        if not hasattr(sim, name):
+            raise InvalidInputError(
+                f"sim: {type(sim).__name__} lacks {name!r}, which the simulator RRT needs"
+            )
+
+
+def grow_tree(
+    sim, *, seed, params=None, space: PlanningSpace | None = None, options: RRTOptions | None = None
+) -> TreeResult:
+    """Grow one simulator RRT (paper IV-A) from ``sim.initial_state(params)`` until it has
+    ``options.plans_per_tree`` goal nodes or ``options.max_iterations`` iterations.
+
+    Returns a :class:`TreeResult` whose ``plans`` are :class:`riskplan.control.NominalPlan`
+    (possibly none: :func:`rrt_plans` raises :class:`PlanningError` if all trees fail).
+    Deterministic in ``seed``.
+    """
+    cpu0 = time.process_time()
+    _check_sim(sim)
+    params = sim.nominal_params if params is None else params
+    space = planning_space(sim) if space is None else space
+    options = options or RRTOptions()
+    if space.dim != sim.state_dim:
+        raise InvalidInputError(
+            f"space: has dimension {space.dim}, but sim.state_dim = {sim.state_dim}"
+        )
+    bounds = sampling_bounds(sim, options)
+    r_tight = _goal_radius(sim, options)
+    q = bounds.shape[0]
+    if space.max_control_change is not None and space.max_control_change.shape != (q,):
+        raise InvalidInputError(
+            f"space.max_control_change: expected shape ({q},), got {space.max_control_change.shape}"
+        )
+    gen = as_generator(seed)
+    k_steps = space.steps_per_extension
+    n_ctrl = options.n_controls
+
+    root = sim.initial_state(params)
+    x0 = np.asarray(sim.reduced(root), dtype=np.float64)
+    cap = 1024
+    X = np.empty((cap, space.dim))
+    X[0] = x0
+    parents = [-1]
+    node_state = [root]  # full state y of every node
+    edge_states: list[tuple] = [()]  # states after each step of the edge into the node
+    edge_controls: list[np.ndarray] = [np.empty((0, q))]
+    node_control = [0.5 * (bounds[:, 0] + bounds[:, 1])]
+    has_goal_child = [False]
+    is_goal = np.zeros(cap, dtype=bool)
+    goal_fails = np.zeros(cap, dtype=np.int64)
+    steer = space.steer if options.goal_steer else None
+    goal_nodes: list[int] = []
+    n = 1
+    n_steps = 0
+    it = 0
+
+    while it < options.max_iterations and len(goal_nodes) < options.plans_per_tree:
+        it += 1
+        x_s, to_goal = space.sample(gen, options.goal_bias)
+        dn = space.distance(X[:n], x_s, to_goal=to_goal)
+        dn[is_goal[:n]] = np.inf  # goal nodes are leaves
+        if to_goal:
+            dn[goal_fails[:n] >= _MAX_GOAL_FAILS] = np.inf
+            if not np.isfinite(dn).any():
+                continue
+        near = int(np.argmin(dn))
+        # candidate controls
+        if space.max_control_change is None:
+            U = bounds[:, 0] + gen.random((n_ctrl, q)) * (bounds[:, 1] - bounds[:, 0])
+        else:
+            d = space.max_control_change
+            U = node_control[near] + (2.0 * gen.random((n_ctrl, q)) - 1.0) * d
+            U = np.clip(U, bounds[:, 0], bounds[:, 1])
+        if to_goal and steer is not None:
+            # the space's local steering towards the goal point is one of the candidates
+            # (drawn after the random ones, so the random stream does not depend on it)
+            u_st = steer(X[near].copy(), x_s, bounds, k_steps)
+            if u_st is not None:
+                u_st = as_array(u_st, "space.steer(...)", shape=(q,))
+                if space.max_control_change is not None:  # the space's rate limit holds too
+                    d = space.max_control_change
+                    u_st = np.clip(u_st, node_control[near] - d, node_control[near] + d)
+                U[-1] = np.clip(u_st, bounds[:, 0], bounds[:, 1])
+        ends = np.full((n_ctrl, space.dim), np.nan)
+        traj: list = [None] * n_ctrl
+        for c in range(n_ctrl):
+            st = node_state[near]
+            seq = []
+            try:
+                for _ in range(k_steps):
+                    st = sim.step(st, U[c], params)
+                    seq.append(st)
+            except _SIM_FAILURES as exc:
+                log.debug("rrt: candidate control discarded (%s)", exc)
+                n_steps += len(seq) + 1
+                continue
+            n_steps += k_steps
+            xe = np.asarray(sim.reduced(st), dtype=np.float64)
+            if np.all(np.isfinite(xe)):
+                ends[c] = xe
+                traj[c] = seq
+        ok = np.isfinite(ends[:, 0])
+        dist = space.distance(np.where(ok[:, None], ends, 0.0), x_s, to_goal=to_goal)
+        dist[~ok] = np.inf
+        if to_goal and options.goal_entry:
+            # an edge through the goal ends there: it ranks first (stable among such edges)
+            for c in np.flatnonzero(ok):
+                if any(_in_goal(sim, st, r_tight) for st in traj[c]):
+                    dist[c] = -1.0
+        added = False
+        for c in np.argsort(dist, kind="stable"):
+            if not ok[c] or (to_goal and dist[c] >= dn[near]):
+                break  # towards the goal, only an edge that gets closer is worth adding
+            seq = traj[c]
+            accepted, goal_at = True, None
+            for j, st in enumerate(seq):
+                xj = ends[c] if j == len(seq) - 1 else np.asarray(sim.reduced(st), dtype=np.float64)
+                if not (np.all(np.isfinite(xj)) and space.contains(xj)) or sim.in_collision(st):
+                    accepted = False
+                    break
+                if _in_goal(sim, st, r_tight):
+                    goal_at = j
+                    break
+            if not accepted:
+                continue
+            if goal_at is not None:
+                if has_goal_child[near]:
+                    break  # one goal child per node keeps the plans of a tree distinct
+                seq = seq[: goal_at + 1]
+            if n == X.shape[0]:
+                X = np.concatenate([X, np.empty_like(X)])
+                is_goal = np.concatenate([is_goal, np.zeros_like(is_goal)])
+                goal_fails = np.concatenate([goal_fails, np.zeros_like(goal_fails)])
+            X[n] = np.asarray(sim.reduced(seq[-1]), dtype=np.float64)
+            parents.append(near)
+            node_state.append(seq[-1])
+            edge_states.append(tuple(seq))
+            edge_controls.append(np.tile(U[c], (len(seq), 1)))
+            node_control.append(U[c])
+            has_goal_child.append(False)
+            if goal_at is not None:
+                has_goal_child[near] = True
+                is_goal[n] = True
+                goal_nodes.append(n)
+            n += 1
+            added = True
+            break
+        if to_goal:
+            # every goal-directed attempt counts, and a child made by one inherits the count:
+            # a lineage creeping towards the goal with tiny steps (or facing away from it)
+            # stops being picked for the goal after _MAX_GOAL_FAILS attempts
+            goal_fails[near] += 1
+            if added:
+                goal_fails[n - 1] = goal_fails[near]
+
+    X = X[:n]
+    best_node = int(np.argmin(space.distance(X, space.goal, to_goal=True)))
+    best = float(sim.goal_distance(node_state[best_node]))
+    if goal_nodes:
+        best = min(best, min(float(sim.goal_distance(node_state[g])) for g in goal_nodes))
+    plans = [
+        _extract(sim, params, root, x0, parents, edge_states, edge_controls, g) for g in goal_nodes
+    ]
+    return TreeResult(
+        seed=int(seed) if isinstance(seed, (int, np.integer)) else -1,
+        plans=plans,
+        nodes=X.copy(),
+        parents=np.asarray(parents, dtype=np.int64),
+        goal_nodes=list(goal_nodes),
+        iterations=it,
+        best_goal_distance=best,
+        n_sim_steps=n_steps,
+        cpu_s=time.process_time() - cpu0,
+    )
+
+
+def _extract(sim, params, root, x0, parents, edge_states, edge_controls, leaf: int):
+    from riskplan.control import NominalPlan
+
+    chain = []
+    node = leaf
+    while node > 0:
+        chain.append(node)
+        node = parents[node]
+    chain.reverse()
+    states = [root]
+    controls = []
+    for node in chain:
+        states.extend(edge_states[node])
+        controls.append(edge_controls[node])
+    reduced = np.stack([x0] + [np.asarray(sim.reduced(s), dtype=np.float64) for s in states[1:]])
+    return NominalPlan(
+        states=tuple(states), controls=np.concatenate(controls), reduced=reduced, params=params
+    )
+
+
+def _tree_task(args) -> TreeResult:
+    sim, seed, params, space, options = args
+    return grow_tree(sim, seed=seed, params=params, space=space, options=options)
+
+
+def rrt_plans(
+    sim,
+    n_plans: int = 100,
+    *,
+    seed=0,
+    params=None,
+    space: PlanningSpace | None = None,
+    options: RRTOptions | None = None,
+    max_rounds: int = 4,
+    backend: str = "local",
+    workers: int | None = None,
+    on_tree=None,
+) -> tuple[list, list[TreeResult]]:
+    """``n_plans`` distinct candidate plans (paper IV-A: "multiple such plans are extracted").
+
+    Grows ``ceil(n_plans / options.plans_per_tree)`` trees with seeds
+    ``spawn_seeds(seed, ...)`` in parallel (``backend``/``workers`` as in
+    :func:`riskplan.parallel.map_tasks`); if they collect fewer plans than asked, up to
+    ``max_rounds − 1`` further rounds of trees (the next seeds of the same sequence) run
+    for the rest. Returns ``(plans, trees)``: the first ``n_plans`` plans in tree order (a
+    list of :class:`riskplan.control.NominalPlan`, fewer, with a warning, if the budget ran
+    out) and every :class:`TreeResult`. ``on_tree(index, tree)`` is called as trees finish.
+
+    Raises :class:`PlanningError` naming the trees' sizes and the best goal distance when no
+    tree reached the goal.
+    """
+    from riskplan.parallel import map_tasks, spawn_seeds
+
+    _check_sim(sim)
+    n_plans = check_count(n_plans, "n_plans", 1)  # None, text, 1.5: named, not a TypeError
+    max_rounds = check_count(max_rounds, "max_rounds", 1)
+    if options is not None and not isinstance(options, RRTOptions):
+        raise InvalidInputError(f"options: expected an RRTOptions, got {type(options).__name__}")
+    params = sim.nominal_params if params is None else params
+    space = planning_space(sim) if space is None else space
+    options = options or RRTOptions()
+    per = options.plans_per_tree
+    first = -(-int(n_plans) // per)
+    seeds = spawn_seeds(seed, first * max_rounds + int(n_plans))
+    trees: list[TreeResult] = []
+    plans: list = []
+    used = 0
+    for _ in range(int(max_rounds)):
+        missing = int(n_plans) - len(plans)
+        if missing <= 0:
+            break
+        n_trees = -(-missing // per)
+        batch = seeds[used : used + n_trees]
+        offset = len(trees)
+        # a single tree for fewer plans than a tree collects stops at what is missing
+        opts = options if missing >= per else dataclasses.replace(options, plans_per_tree=missing)
+        cb = None if on_tree is None else (lambda i, r, _o=offset: on_tree(_o + i, r))
+        results = map_tasks(
+            _tree_task,
+            [(sim, s, params, space, opts) for s in batch],
+            backend=backend,
+            workers=workers,
+            on_result=cb,
+        )
+        used += n_trees
+        trees.extend(results)
+        for r in results:
+            plans.extend(r.plans)
+    if not plans:
+        sizes = [t.size for t in trees]
+        best = min(t.best_goal_distance for t in trees)
+        raise PlanningError(
+            f"simulator RRT: no plan reached the goal in {len(trees)} trees of {options.max_iterations} iterations "
+            f"(tree sizes {min(sizes)}..{max(sizes)} nodes, best goal distance {best:.4g}); "
+            "raise options.max_iterations or n_controls, or check that the goal is reachable"
+        )
+    if len(plans) < n_plans:
+        log.warning(
+            "simulator RRT: %d of %d plans within the budget (%d trees)",
+            len(plans),
+            n_plans,
+            len(trees),
+        )
+    return plans[: int(n_plans)], trees

@@ -119,6 +119,21 @@ def element_stiffness(
     return K * volumes[:, None, None]
 
 
+def linear_stiffness_parts(G: np.ndarray, volumes: np.ndarray):
+    """``(K_λ, K_μ)``: flat element matrices ``(T·144,)`` of the linear stiffness for
+    ``(λ, μ) = (1, 0)`` and ``(0, 1)`` (``K = λ K_λ + μ K_μ``; :func:`element_stiffness` with
+    ``F = I``), from one outer product ``∇N_ai ∇N_bk``."""
+    T = len(volumes)
+    h = G.reshape(T, 12)
+    O = h[:, :, None] * h[:, None, :]  # ∇N_ai ∇N_bk
+    Km = O.reshape(T, 4, 3, 4, 3).transpose(0, 3, 2, 1, 4).reshape(T, 12, 12)  # ∇N_bi ∇N_ak
+    GG = np.matmul(G, np.swapaxes(G, 1, 2))
+    for i in range(3):
+        Km[:, i::3, i::3] += GG
+    v = volumes[:, None, None]
+    return (O * v).reshape(-1), (Km * v).reshape(-1)
+
+
 class TetPattern:
     """Index maps from the ``T·144`` element-matrix entries to the CSC matrix over all DOFs,
     its reduced part over ``free_dofs``, and the upper band of the reduced matrix in reverse
@@ -303,10 +318,26 @@ def locate3d(mesh: TetMesh, points, name: str = "points") -> Interpolator:
 
 
 def sphere_points(center, radius: float, n_points: int = 64) -> np.ndarray:
-    """Material points ``(n_points + 1, 3)`` of a spherical region (an embedded obstacle or
-    target): its centre and ``n_points`` points on its surface (Fibonacci lattice, nearly
-    uniform). Locate them with :meth:`TetTissue.interpolator`; their deformed positions
-    follow the tissue."""
+    """Material points of a spherical region (an embedded obstacle or target): its centre
+    and ``n_points`` points on its surface (Fibonacci lattice, nearly uniform).
+
+    Locate them with :meth:`TetTissue.interpolator`; their deformed positions follow the
+    tissue.
+
+    Parameters
+    ----------
+    center : array_like, shape (3,)
+        Centre of the sphere (reference configuration).
+    radius : float
+        Radius (> 0).
+    n_points : int
+        Points on the surface (>= 4).
+
+    Returns
+    -------
+    ndarray, shape (n_points + 1, 3)
+        The centre first, then the surface points.
+    """
     c = as_array(center, "center", shape=(3,))
     r = float(radius)
     if not (np.isfinite(r) and r > 0):
@@ -335,7 +366,17 @@ class TissueState3D:
     n_nodes: int
 
     def identical(self, other: TissueState3D) -> bool:
-        """Bit-for-bit equality (the snapshot/restore contract)."""
+        """Bit-for-bit equality (the snapshot/restore contract).
+
+        Parameters
+        ----------
+        other : TissueState3D
+            Another state.
+
+        Returns
+        -------
+        bool
+        """
         return (
             isinstance(other, TissueState3D)
             and self.n_nodes == other.n_nodes
@@ -437,6 +478,7 @@ class TetTissue:
         self._f = np.zeros(n)
         self._parts = _parts
         self._linear_solver = None
+        self._K_fc = None
         if law == "linear":
             self._factorise_linear()
 
@@ -445,10 +487,7 @@ class TetTissue:
         """``(K_λ, K_μ)`` element matrices ``(T·144,)`` (flat) of the linear stiffness with
         ``(λ, μ) = (1, 0)`` and ``(0, 1)``."""
         if self._parts is None:
-            self._parts = (
-                element_stiffness(self._G, self._V, 1.0, 0.0).reshape(-1),
-                element_stiffness(self._G, self._V, 0.0, 1.0).reshape(-1),
-            )
+            self._parts = linear_stiffness_parts(self._G, self._V)
         return self._parts
 
     @one_blas_thread
@@ -480,8 +519,21 @@ class TetTissue:
                 raise ConvergenceError(f"Newton: singular tangent ({exc})") from exc
 
     def with_material(self, material: Material) -> TetTissue:
-        """The same mesh, supports and law with another material (a material draw): re-uses
-        the sparsity layout and, for the linear law, the assembled parts; state at rest."""
+        """The same mesh, supports and law with another material (a material draw).
+
+        Re-uses the sparsity layout and, for the linear law, the assembled parts
+        ``K = λ K_λ + μ K_μ`` (only the factorisation is new). The new tissue is at rest.
+
+        Parameters
+        ----------
+        material : Material
+            The drawn material (``E``, ``nu``).
+
+        Returns
+        -------
+        TetTissue
+            A new tissue; this one is unchanged.
+        """
         return TetTissue(
             self.mesh,
             material,
@@ -519,7 +571,13 @@ class TetTissue:
         return v
 
     def snapshot(self) -> TissueState3D:
-        """The current state (read-only copies)."""
+        """The current state (read-only copies).
+
+        Returns
+        -------
+        TissueState3D
+            Displacement ``(N, 3)``, the load ``(N, 3)`` it balances, and ``n_nodes``.
+        """
         return TissueState3D(
             displacement=_frozen(self._u.reshape(-1, 3)),
             load=_frozen(self._f.reshape(-1, 3)),
@@ -527,7 +585,13 @@ class TetTissue:
         )
 
     def restore(self, state: TissueState3D) -> None:
-        """Make ``state`` (from :meth:`snapshot` of a tissue on the same mesh) current."""
+        """Make a saved state current (bit for bit).
+
+        Parameters
+        ----------
+        state : TissueState3D
+            From :meth:`snapshot` of a tissue on a mesh with the same node count.
+        """
         if not isinstance(state, TissueState3D):
             raise InvalidInputError(f"state: expected a TissueState3D, got {type(state).__name__}")
         if state.n_nodes != self.mesh.n_nodes:
@@ -544,41 +608,128 @@ class TetTissue:
 
     # ---- material points ----------------------------------------------------------------
     def locate(self, points):
-        """``(elements (P,), weights (P, 4))`` of reference points ``(P, 3)``: containing
-        element (``-1`` outside the tissue) and barycentric weights."""
+        """Containing elements and barycentric weights of reference points (no error outside).
+
+        Parameters
+        ----------
+        points : array_like, shape (P, 3)
+            Reference (material) positions.
+
+        Returns
+        -------
+        elements : ndarray, shape (P,)
+            Containing element, ``-1`` for a point outside the tissue.
+        weights : ndarray, shape (P, 4)
+            Barycentric weights ``λ_a`` (rows sum to 1).
+        """
         pts = np.ascontiguousarray(as_array(points, "points", last_dim=3).reshape(-1, 3))
         return find_points(self.mesh, pts)
 
     def contains(self, points) -> np.ndarray:
-        """``(P,)`` bool: which reference points lie in the tissue."""
+        """Which reference points lie in the tissue.
+
+        Parameters
+        ----------
+        points : array_like, shape (P, 3)
+            Reference positions.
+
+        Returns
+        -------
+        ndarray of bool, shape (P,)
+        """
         return self.locate(points)[0] >= 0
 
     def interpolator(self, points, name: str = "points") -> Interpolator:
-        """Barycentric interpolation at material points ``(P, 3)`` (an embedded target or
-        obstacle: :func:`sphere_points`); raises :class:`InvalidInputError` naming ``name``
-        for points outside the tissue."""
+        """Barycentric interpolation at material points (an embedded target or obstacle:
+        :func:`sphere_points`), located once.
+
+        Parameters
+        ----------
+        points : array_like, shape (P, 3) or (3,)
+            Reference positions.
+        name : str
+            What the points are ("target", "obstacle 2"); named in the error.
+
+        Returns
+        -------
+        Interpolator
+            ``.interpolate(u)``, ``.positions(u)``, ``.spread(F)`` on ``(N, 3)`` nodal arrays.
+
+        Raises
+        ------
+        InvalidInputError
+            Some point lies outside the tissue (the error names the set and the points).
+        """
         return locate3d(self.mesh, points, name)
 
     def displacement_at(self, points, u=None) -> np.ndarray:
-        """Displacement ``(P, 3)`` of material points ``(P, 3)`` (P1 interpolant
-        ``Σ_a λ_a u_a``) in the current state, or in ``u (N, 3)``."""
+        """Displacement of material points, ``u(X) = Σ_a λ_a(X) u_a`` (P1 interpolant).
+
+        Parameters
+        ----------
+        points : array_like, shape (P, 3)
+            Reference positions inside the tissue.
+        u : array_like, shape (N, 3), optional
+            Nodal displacement; ``None``: the current state.
+
+        Returns
+        -------
+        ndarray, shape (P, 3)
+        """
         return self.interpolator(points).interpolate(self._field(u))
 
     def positions(self, points, u=None) -> np.ndarray:
-        """Deformed positions ``X + u(X)`` ``(P, 3)`` of material points ``X (P, 3)``."""
+        """Deformed positions ``X + u(X)`` of material points.
+
+        Parameters
+        ----------
+        points : array_like, shape (P, 3)
+            Reference positions inside the tissue.
+        u : array_like, shape (N, 3), optional
+            Nodal displacement; ``None``: the current state.
+
+        Returns
+        -------
+        ndarray, shape (P, 3)
+        """
         return self.interpolator(points).positions(self._field(u))
 
     def deformation_gradient_at(self, points, u=None) -> np.ndarray:
-        """``F = I + ∇_X u`` ``(P, 3, 3)`` at material points ``(P, 3)`` (constant in each
-        element; a point on a shared face takes one of its elements)."""
+        """Deformation gradient ``F = I + ∇_X u`` at material points (constant in each
+        element; a point on a shared face takes one of its elements).
+
+        Parameters
+        ----------
+        points : array_like, shape (P, 3)
+            Reference positions inside the tissue.
+        u : array_like, shape (N, 3), optional
+            Nodal displacement; ``None``: the current state.
+
+        Returns
+        -------
+        ndarray, shape (P, 3, 3)
+        """
         ip = self.interpolator(points)
         u3 = self._field(u)
         e = ip.elements
         return deformation_gradients(u3[self.mesh.tets[e]], self._G[e])
 
     def point_forces(self, points, forces) -> np.ndarray:
-        """Consistent nodal forces ``(N, 3)`` of point forces ``forces (P, 3)`` at material
-        points ``(P, 3)``: ``f_a = λ_a(X_p) F_p`` over the containing element's nodes."""
+        """Consistent nodal forces of point forces at material points:
+        ``f_a = λ_a(X_p) F_p`` over the containing element's four nodes.
+
+        Parameters
+        ----------
+        points : array_like, shape (P, 3)
+            Reference positions inside the tissue.
+        forces : array_like, shape (P, 3)
+            Force at each point.
+
+        Returns
+        -------
+        ndarray, shape (N, 3)
+            Nodal forces (their sum is the resultant of ``forces``).
+        """
         ip = self.interpolator(points)
         f = as_array(forces, "forces", shape=(ip.n_points, 3))
         return ip.spread(f)
@@ -611,34 +762,93 @@ class TetTissue:
         return float(self._V @ W), fint, J, Finv, np.log(J)
 
     def energy(self, u=None) -> float:
-        """Stored energy ``Σ_e V_e W(F_e)`` (linear: ``½ uᵀ K u``) of ``u (N, 3)`` or the
-        current state; raises :class:`ElementInversionError` for an inverted element."""
+        """Stored energy ``Σ_e V_e W(F_e)`` (linear law: ``½ uᵀ K u``).
+
+        Parameters
+        ----------
+        u : array_like, shape (N, 3), optional
+            Nodal displacement; ``None``: the current state.
+
+        Returns
+        -------
+        float
+
+        Raises
+        ------
+        ElementInversionError
+            Some element has ``det F ≤ 0`` (neo-Hookean).
+        """
         e, _, J, _, _ = self._internal(self._field(u).reshape(-1).copy())
         if e is None:
             self._raise_inverted(J)
         return e
 
     def internal_forces(self, u=None) -> np.ndarray:
-        """Internal nodal forces ``f_int (N, 3)`` (all nodes, reactions included)."""
+        """Internal nodal forces ``f_int,a = Σ_e V_e P_e ∇N_a`` at all nodes (reactions included).
+
+        Parameters
+        ----------
+        u : array_like, shape (N, 3), optional
+            Nodal displacement; ``None``: the current state.
+
+        Returns
+        -------
+        ndarray, shape (N, 3)
+        """
         e, fint, J, _, _ = self._internal(self._field(u).reshape(-1).copy())
         if e is None:
             self._raise_inverted(J)
         return fint.reshape(-1, 3)
 
     def residual(self, u, nodal_forces) -> np.ndarray:
-        """``f_int(u) − f`` ``(N, 3)``, zero at the fixed nodes."""
+        """Out-of-balance forces ``f_int(u) − f``, zero at the fixed DOFs.
+
+        Parameters
+        ----------
+        u : array_like, shape (N, 3)
+            Nodal displacement.
+        nodal_forces : array_like, shape (N, 3)
+            External nodal forces.
+
+        Returns
+        -------
+        ndarray, shape (N, 3)
+        """
         f = as_array(nodal_forces, "nodal_forces", shape=(self.mesh.n_nodes, 3)).reshape(-1)
         r = self.internal_forces(u).reshape(-1) - f
         r[self.fixed_dofs] = 0.0
         return r.reshape(-1, 3)
 
     def reactions(self, u=None) -> np.ndarray:
-        """Support reactions ``(F, 3)``: ``f_int`` at the fixed nodes."""
+        """Support reactions: ``f_int`` at the fixed nodes.
+
+        Parameters
+        ----------
+        u : array_like, shape (N, 3), optional
+            Nodal displacement; ``None``: the current state.
+
+        Returns
+        -------
+        ndarray, shape (F, 3)
+            In sorted ``fixed_nodes`` order.
+        """
         return self.internal_forces(u)[self.fixed_nodes]
 
     def tangent(self, u=None, *, full: bool = False):
-        """Tangent stiffness ``∂f_int/∂u``: reduced CSC ``(n_free, n_free)`` or, with
-        ``full=True``, CSR ``(3N, 3N)``."""
+        """Tangent stiffness ``∂f_int/∂u`` (linear law: ``K``).
+
+        Parameters
+        ----------
+        u : array_like, shape (N, 3), optional
+            Nodal displacement; ``None``: the current state.
+        full : bool
+            ``False``: the reduced matrix over ``free_dofs``; ``True``: over all DOFs.
+
+        Returns
+        -------
+        scipy.sparse matrix
+            CSC ``(n_free, n_free)`` or CSR ``(3N, 3N)``.
+        """
         Ke = self._tangent_elements(self._field(u).reshape(-1).copy())
         return self._pattern.full_csr(Ke.reshape(-1, 12, 12)) if full else self._pattern.csc(Ke)
 
@@ -665,27 +875,73 @@ class TetTissue:
 
     # ---- solves -------------------------------------------------------------------------
     def solve_linear_free(self, f_free: np.ndarray) -> np.ndarray:
-        """``K_ff⁻¹ f_free`` with the cached factorisation (linear law; no validation)."""
+        """``K_ff⁻¹ f_free`` with the cached factorisation (linear law; hot path, no validation).
+
+        Parameters
+        ----------
+        f_free : ndarray, shape (n_free,) or (n_free, k)
+            Forces at ``free_dofs``.
+
+        Returns
+        -------
+        ndarray
+            Displacements at ``free_dofs``, same shape.
+        """
         return self._linear_solver(f_free)
 
     def solve(self, nodal_forces, *, fixed_values=None, load_steps: int = 1) -> np.ndarray:
-        """Equilibrium displacement ``(N, 3)`` under the nodal forces ``(N, 3)`` (entries at
-        fixed nodes are ignored); becomes the current state. See :meth:`solve_with_info`."""
+        """Equilibrium displacement under nodal forces; it becomes the current state.
+
+        Parameters
+        ----------
+        nodal_forces : array_like, shape (N, 3)
+            External nodal forces (entries at fixed DOFs are ignored).
+        fixed_values : array_like, optional
+            Prescribed displacements of the fixed DOFs (see :meth:`solve_with_info`).
+        load_steps : int
+            Load increments of a neo-Hookean solve.
+
+        Returns
+        -------
+        ndarray, shape (N, 3)
+            See :meth:`solve_with_info` (errors included).
+        """
         return self.solve_with_info(nodal_forces, fixed_values=fixed_values, load_steps=load_steps)[
             0
         ]
 
     @one_blas_thread
     def solve_with_info(self, nodal_forces, *, fixed_values=None, load_steps: int = 1):
-        """Equilibrium displacement ``(N, 3)`` and :class:`~riskplan.deformable.SolveInfo`.
+        """Equilibrium displacement and what the solver did; it becomes the current state.
 
-        ``fixed_values``: prescribed displacements of the fixed DOFs in ``fixed_dofs``
-        order (sorted flat DOF index; ``(F, 3)`` in sorted node order when only
-        ``fixed_nodes`` are given), default zero. Linear law: ``u_f = K_ff⁻¹ (f_f − K_fc ū)`` with the cached
-        factorisation. Neo-Hookean: Newton from the current state, the load (and the
-        prescribed values) ramped from the current ones in ``load_steps`` increments, a
-        failed increment halved up to 8 times; raises :class:`ConvergenceError` or
-        :class:`ElementInversionError` (the state is then unchanged).
+        Linear law: ``u_f = K_ff⁻¹ (f_f − K_fc ū)`` with the cached factorisation.
+        Neo-Hookean: Newton from the current state, the load (and the prescribed values) ramped
+        from the current ones in ``load_steps`` increments, a failed increment halved up to 8
+        times.
+
+        Parameters
+        ----------
+        nodal_forces : array_like, shape (N, 3)
+            External nodal forces (entries at fixed DOFs are ignored).
+        fixed_values : array_like, optional
+            Prescribed displacements of the fixed DOFs in ``fixed_dofs`` order (sorted flat DOF
+            index; ``(F, 3)`` in sorted node order when only ``fixed_nodes`` are given); default 0.
+        load_steps : int
+            Load increments (>= 1) of a neo-Hookean solve.
+
+        Returns
+        -------
+        u : ndarray, shape (N, 3)
+            Nodal displacement.
+        info : SolveInfo
+            Newton iterations, load steps, final residual norm, minimum ``det F``.
+
+        Raises
+        ------
+        ConvergenceError
+            Newton did not converge (residual and iterations attached); the state is unchanged.
+        ElementInversionError
+            Every trial inverted an element; the state is unchanged.
         """
         f = as_array(nodal_forces, "nodal_forces", shape=(self.mesh.n_nodes, 3)).reshape(-1).copy()
         f[self.fixed_dofs] = 0.0
@@ -707,8 +963,10 @@ class TetTissue:
             u[self.fixed_dofs] = ub
             rhs = f[self.free_dofs]
             if np.any(ub):
-                Kfull = self.tangent(full=True)
-                rhs = rhs - Kfull[self.free_dofs][:, self.fixed_dofs] @ ub
+                if self._K_fc is None:  # the coupling block, once per tissue
+                    Kfull = self.tangent(full=True)
+                    self._K_fc = Kfull[self.free_dofs][:, self.fixed_dofs].tocsr()
+                rhs = rhs - self._K_fc @ ub
             u[self.free_dofs] = self._linear_solver(rhs)
             if not np.all(np.isfinite(u)):
                 raise ConvergenceError(

@@ -365,6 +365,13 @@ class TissueState3D:
     load: np.ndarray
     n_nodes: int
 
+    def __setstate__(self, state: dict) -> None:
+        # unpickled arrays come back writeable: make them read-only again
+        for k, v in state.items():
+            if isinstance(v, np.ndarray):
+                v.setflags(write=False)
+            object.__setattr__(self, k, v)
+
     def identical(self, other: TissueState3D) -> bool:
         """Bit-for-bit equality (the snapshot/restore contract).
 

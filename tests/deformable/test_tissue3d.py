@@ -262,3 +262,23 @@ def test_prescribed_homogeneous_deformation_is_reproduced(block, law, scale):
 
     snap = pickle.loads(pickle.dumps(t.snapshot()))
     assert snap.identical(t.snapshot()) and not snap.displacement.flags.writeable
+
+
+def test_point_location_agrees_with_exhaustive_search():
+    from riskplan.deformable.tissue3d import INSIDE_TOL, find_points
+
+    m = tet_block(n_elements=5000)
+    rng = np.random.default_rng(7)
+    pts = np.vstack([rng.uniform(-0.05, 1.05, size=(400, 3)), m.nodes[:20]])
+    elem, lam = find_points(m, pts)
+    b = (
+        np.einsum("tij,pj->pti", m.barycentric_maps[:, :, :3], pts)
+        + m.barycentric_maps[None, :, :, 3]
+    )
+    best = b.min(axis=2).max(axis=1)
+    np.testing.assert_array_equal(elem >= 0, best >= -INSIDE_TOL)
+    inside = elem >= 0
+    assert np.all(lam[inside].min(axis=1) >= -INSIDE_TOL)
+    # the weights reproduce the point
+    X = np.einsum("pa,pak->pk", lam[inside], m.nodes[m.tets[elem[inside]]])
+    np.testing.assert_allclose(X, pts[inside], **TOL["float64_exact"])

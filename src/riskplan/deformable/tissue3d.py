@@ -255,9 +255,11 @@ def find_points(mesh: TetMesh, points: np.ndarray, k: int = LOCATE_CANDIDATES):
     """Containing element ``(P,)`` and barycentric weights ``(P, 4)`` of ``points (P, 3)``;
     element ``-1`` (weights of the best candidate) for points outside the mesh.
 
-    The ``k`` elements with the nearest centroids (a k-d tree) are tried first; points not
-    inside any of them are searched exhaustively, so the result does not depend on ``k``.
-    Picks the element whose smallest barycentric weight is largest.
+    The ``k`` elements with the nearest centroids (a k-d tree) are tried first, then the
+    ``4k`` nearest; points inside none of them are searched exhaustively, so whether a point
+    is found does not depend on ``k``. Picks, among the elements tried, the one whose
+    smallest barycentric weight is largest (a point on a shared face may take either
+    element; interpolated values agree).
     """
     from scipy.spatial import cKDTree
 
@@ -271,17 +273,23 @@ def find_points(mesh: TetMesh, points: np.ndarray, k: int = LOCATE_CANDIDATES):
     if tree is None:
         tree = cKDTree(mesh.centroids)
         object.__setattr__(mesh, "_centroid_tree", tree)
-    k = min(k, mesh.n_elements)
-    _, cand = tree.query(points, k=k)
-    cand = np.asarray(cand).reshape(P, k)
-    b = np.einsum("pkij,pj->pki", maps[cand][:, :, :, :3], points) + maps[cand][:, :, :, 3]
-    worst = b.min(axis=2)
-    j = worst.argmax(axis=1)
-    rows = np.arange(P)
-    ok = worst[rows, j] >= -INSIDE_TOL
-    elem[ok] = cand[rows[ok], j[ok]]
-    lam[:] = b[rows, j]
-    todo = np.flatnonzero(~ok)
+    todo = np.arange(P)
+    # nearest centroids first, then a wider ring for the few points whose element's centroid
+    # is not among the k nearest (slender elements), then the exhaustive search
+    for kk in (min(k, mesh.n_elements), min(4 * k, mesh.n_elements)):
+        if todo.size == 0:
+            break
+        q = points[todo]
+        _, cand = tree.query(q, k=kk)
+        cand = np.asarray(cand).reshape(len(todo), kk)
+        b = np.einsum("pkij,pj->pki", maps[cand][:, :, :, :3], q) + maps[cand][:, :, :, 3]
+        worst = b.min(axis=2)
+        j = worst.argmax(axis=1)
+        rows = np.arange(len(todo))
+        ok = worst[rows, j] >= -INSIDE_TOL
+        elem[todo[ok]] = cand[rows[ok], j[ok]]
+        lam[todo] = b[rows, j]
+        todo = todo[~ok]
     for s in range(0, len(todo), 64):
         idx = todo[s : s + 64]
         bb = np.einsum("tij,pj->pti", maps[:, :, :3], points[idx]) + maps[None, :, :, 3]

@@ -132,8 +132,14 @@ def test_point_force_and_reactions(block):
     F = np.array([[0.1, -0.2, 0.3]])
     f = t.point_forces([[0.5, 0.5, 1.7]], F)
     np.testing.assert_allclose(f.sum(0), F[0], **TOL["float64_exact"])
-    u = t.solve(f)
+    u, info = t.solve_with_info(f)
     np.testing.assert_allclose(t.reactions(u).sum(0), -F[0], **TOL["fem_reactions"])
+    # the reported residual is the evaluated one
+    r = np.linalg.norm(t.residual(u, f))
+    np.testing.assert_allclose(info.residual, r, **TOL["residual_norm"])
+    assert info.residual <= TOL["newton_residual"]["rtol"] * np.linalg.norm(F)
+    F_el = t.deformation_gradient_at(block.centroids)  # each centroid in its own element
+    np.testing.assert_allclose(info.min_jacobian, np.linalg.det(F_el).min(), **TOL["float64_exact"])
 
 
 @pytest.mark.parametrize("law", ["linear", "neo-hookean"])

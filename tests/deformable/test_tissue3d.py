@@ -288,3 +288,11 @@ def test_point_location_agrees_with_exhaustive_search():
     # the weights reproduce the point
     X = np.einsum("pa,pak->pk", lam[inside], m.nodes[m.tets[elem[inside]]])
     np.testing.assert_allclose(X, pts[inside], **TOL["float64_exact"])
+
+
+@pytest.mark.parametrize("law", ["linear", "neo-hookean"])
+def test_supports_that_leave_a_rigid_motion_free_are_refused(block, law):
+    """Only the normal component held on z = 0: the body may slide and spin in that plane.
+    The singular stiffness is refused, not answered with round-off."""
+    with pytest.raises(InvalidInputError, match="rigid motion free"):
+        TetTissue(block, MAT, fixed_dofs=3 * block.face_nodes("z-") + 2, law=law)

@@ -56,6 +56,10 @@ LAWS3D = ("linear", "neo-hookean")
 #: A point counts as inside an element when its smallest barycentric weight is >= -INSIDE_TOL.
 INSIDE_TOL = 1e-10
 
+#: Least ratio of the smallest to the largest Cholesky pivot of a linear stiffness: below it
+#: the matrix is singular up to round-off (1e-16 relative) and the supports are refused.
+SINGULAR_PIVOT_RATIO = 1e-12
+
 #: Element centroids tried per point before the exhaustive search (nearest first).
 LOCATE_CANDIDATES = 12
 
@@ -483,6 +487,19 @@ class TetTissue:
         self.fixed_dofs, self.free_dofs = np.flatnonzero(~mask), np.flatnonzero(mask)
         if self.free_dofs.size == 0:
             raise InvalidInputError("fixed_nodes, fixed_dofs: every DOF is fixed; nothing to solve")
+        # the six rigid motions (3 translations, 3 infinitesimal rotations) must each move
+        # some held DOF, else the stiffness is singular whatever the law
+        Xc = mesh.nodes - mesh.nodes.mean(0)
+        rigid = np.zeros((mesh.n_nodes, 3, 6))
+        for k in range(3):
+            rigid[:, k, k] = 1.0
+        rigid[:, :, 3:] = np.cross(np.eye(3)[None, :, :], Xc[:, None, :]).transpose(0, 2, 1)
+        R = rigid.reshape(n, 6)[self.fixed_dofs]
+        if np.linalg.matrix_rank(R, tol=1e-9 * float(np.abs(R).max(initial=1.0))) < 6:
+            raise InvalidInputError(
+                "fixed_nodes, fixed_dofs: the supports leave a rigid motion free (hold "
+                "at least three non-collinear nodes, or enough components)"
+            )
         self._fixed_dofs_arg = extra
         self._pattern = _pattern(mesh.tets, self.free_dofs, n)
         self._lam, self._mu = material.lam3d, material.mu
@@ -511,27 +528,39 @@ class TetTissue:
         self._linear_solver = self._factor(self._lam * Kl + self._mu * Km, linear=True)
 
     def _factor(self, Ke_flat: np.ndarray, linear: bool = False):
-        """Solver ``r -> K_ff⁻¹ r`` of the reduced matrix: banded Cholesky in RCM order,
-        sparse LU when it is not positive definite."""
+        """Solver ``r -> K_ff⁻¹ r`` of the reduced matrix: banded Cholesky in RCM order.
+
+        The linear stiffness is symmetric positive definite exactly when the supports hold
+        every rigid motion: a failed Cholesky factorisation, or a pivot ratio
+        ``min d / max d`` below :data:`SINGULAR_PIVOT_RATIO` (round-off of a singular
+        matrix; a held body measures 0.06-0.08 at 750-5000 elements), is an
+        :class:`InvalidInputError` about the supports, never a fall-back to LU (which would
+        answer a singular system with round-off). A neo-Hookean tangent may be indefinite
+        away from rest: sparse LU then, :class:`ConvergenceError` if that fails too.
+        """
         import scipy.linalg
 
+        singular = InvalidInputError(
+            "fixed_nodes, fixed_dofs: the stiffness is singular (the supports leave a rigid "
+            "motion free, or some part of the mesh is not held)"
+        )
         try:
             cb = scipy.linalg.cholesky_banded(
                 self._pattern.banded(Ke_flat), lower=False, check_finite=False
             )
-            return BandedCholeskySolver(cb, self._pattern.band_perm)
-        except np.linalg.LinAlgError:
+        except np.linalg.LinAlgError as exc:
+            if linear:
+                raise singular from exc
             from scipy.sparse.linalg import splu
 
             try:
                 return splu(self._pattern.csc(Ke_flat)).solve
-            except RuntimeError as exc:
-                if linear:
-                    raise InvalidInputError(
-                        "fixed_nodes: the stiffness is singular (some part of the mesh is not "
-                        "held by the fixed nodes)"
-                    ) from exc
-                raise ConvergenceError(f"Newton: singular tangent ({exc})") from exc
+            except RuntimeError as exc2:
+                raise ConvergenceError(f"Newton: singular tangent ({exc2})") from exc2
+        d = cb[-1] ** 2
+        if linear and not d.min() > SINGULAR_PIVOT_RATIO * d.max():
+            raise singular
+        return BandedCholeskySolver(cb, self._pattern.band_perm)
 
     def with_material(self, material: Material) -> TetTissue:
         """The same mesh, supports and law with another material (a material draw).

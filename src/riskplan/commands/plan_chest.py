@@ -126,7 +126,6 @@ def register(plan_app: typer.Typer) -> None:
         ),
     ) -> None:
         """Plan a nominal trajectory with a PRM and lower its P(collision) bound by Bayesian optimisation."""
-        import torch
 
         from riskplan.collision import Environment
         from riskplan.commands._shared import output_folder, progress_bar
@@ -138,7 +137,6 @@ def register(plan_app: typer.Typer) -> None:
         from riskplan.planning.chest import plan_chest
         from riskplan.planning.robot_plan import check_plan_budget
 
-        torch.set_num_threads(1)
         _check_finite(tip_tolerance=tip_tolerance, radius=radius, step=step, resolution=resolution)
         check_output_folder(out, "--out")
         mdl = load_model(model)

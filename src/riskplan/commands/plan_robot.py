@@ -77,8 +77,6 @@ def register(plan_app: typer.Typer) -> None:
         exported (CSV, JSON, ROS 2 JointTrajectory) and checked on the robot model."""
         import math
 
-        import torch
-
         from riskplan.commands._shared import progress_bar
         from riskplan.errors import InvalidInputError
         from riskplan.parsing import parse_numbers
@@ -89,7 +87,6 @@ def register(plan_app: typer.Typer) -> None:
             problem_from_options,
         )
 
-        torch.set_num_threads(1)
         for name, v in (
             ("step", step),
             ("resolution", resolution),

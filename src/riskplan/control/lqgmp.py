@@ -481,23 +481,57 @@ def lqgmp(
     drift: bool = False,
     seed=None,
 ) -> LQGMPResult:
-    """LQG-MP probability of success of ``plan`` under ``controller`` (module docstring).
+    r"""LQG-MP probability of success of ``plan`` under ``controller`` (paper IV-D).
+
+    The joint deviation :math:`\xi_t = (\bar x_t, \hat x_t)` evolves as
+    :math:`\xi_{t+1} = F_t \xi_t + G_t (m_t, n_t)` with
+
+    .. math::
+
+        F_t = \begin{bmatrix} A_t & B_t L_t \\ K_t H_t A_t & A_t + B_t L_t - K_t H_t A_t
+        \end{bmatrix}, \qquad
+        G_t = \begin{bmatrix} I & 0 \\ K_t H_t & K_t \end{bmatrix},
+
+        \Sigma_{t+1} = F_t \Sigma_t F_t^\top + G_t \,\mathrm{diag}(M_t, N_t)\, G_t^\top,
+        \qquad \Sigma_0 = \mathrm{diag}(P_0, 0),
+
+    and, with :math:`c_t` the number of standard deviations to the nearest obstacle
+    (``method="sigma"``),
+
+    .. math::
+
+        P(\text{success}) = P(\text{goal}) \prod_t \left(1 - e^{-c_t^2 / 2}\right)
+
+    (module docstring for ``"truncation"`` and ``"sampling"``).
 
     Parameters
     ----------
-    sim : the simulator (``obstacles(state)``, ``goal(state)``, optional point indices).
-    plan : :class:`~riskplan.control.NominalPlan` with ``T`` steps.
-    controller : :class:`~riskplan.control.lqg.LQGController` of the plan's linearisation.
-    method : ``"sigma"`` (paper), ``"truncation"`` (Patil 2012) or ``"sampling"`` (whole
-        trajectories of the linear model, module docstring).
-    n_goal_samples : draws of the final state for ``P(goal)``; with ``"sampling"``, the
-        number of trajectories.
-    cutoff : whitened radius of the free-region construction (default
+    sim : Simulator
+        The simulator (``obstacles(state)``, ``goal(state)``, optional point indices).
+    plan : NominalPlan
+        The plan with ``T`` steps.
+    controller : LQGController
+        The controller of the plan's linearisation.
+    method : {"sigma", "truncation", "sampling"}
+        The paper's, Patil 2012's, or whole trajectories of the linear model.
+    n_goal_samples : int
+        Draws of the final state for ``P(goal)``; with ``"sampling"``, the number of
+        trajectories.
+    cutoff : float, optional
+        Whitened radius of the free-region construction (default
         :data:`riskplan.collision.DEFAULT_CUTOFF`, see :mod:`riskplan.collision.gaussian`).
-    drift : carry the mean one-step deviation ``lin.drift`` (beyond the paper, whose model is
+    drift : bool
+        Carry the mean one-step deviation ``lin.drift`` (beyond the paper, whose model is
         zero-mean): ``μ_{t+1} = F_t μ_t + G_t (d̄_t, 0)`` with ``M_t − d̄_t d̄_tᵀ`` as the
         process noise covariance.
-    seed : seeds the goal samples (the trajectories with ``"sampling"``).
+    seed : int, numpy.random.Generator or None
+        Seeds the goal samples (the trajectories with ``"sampling"``).
+
+    Returns
+    -------
+    LQGMPResult
+        ``p_success``, ``p_collision_free``, ``p_goal``, per-step factors and the
+        distributions.
     """
     from riskplan.collision import DEFAULT_CUTOFF, free_region, precision_cholesky_from_covariance
 

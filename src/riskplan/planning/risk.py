@@ -128,7 +128,27 @@ def make_risk(name: str, model, environment, **options):
 
 
 def trajectory_risk(bound, trajectory) -> tuple[float, np.ndarray]:
-    """Eq. 10 of ``trajectory (T, m)`` and its per-configuration eq.-9 bounds ``(T,)``."""
+    r"""The eq.-10 bound of a trajectory and its per-configuration eq.-9 bounds (MDN paper V).
+
+    .. math::
+
+        p(\exists x \in \tau : x \notin X_f) \le 1 - \prod_{x \in \tau} \left(1 - p(x \notin X_f)\right)
+
+    Parameters
+    ----------
+    bound : callable
+        ``bound(configs (T, m)) -> (T,)``, the eq.-9 bound of each configuration (e.g. a
+        :class:`ConfigurationBound`).
+    trajectory : array_like
+        ``(T, m)`` configurations.
+
+    Returns
+    -------
+    risk : float
+        The eq.-10 bound.
+    bounds : numpy.ndarray
+        ``(T,)`` the per-configuration bounds.
+    """
     p = bound(trajectory)
     return float(trajectory_probability(p)), p
 
@@ -189,12 +209,32 @@ def least_risk_path(
     cost: RiskSegmentCost | None = None,
     progress=None,
 ) -> np.ndarray:
-    """Roadmap path ``(P, m)`` whose trajectory (interpolated at ``step``) has the least eq.-10 bound.
+    r"""Roadmap path whose trajectory (interpolated at ``step``) has the least eq.-10 bound.
 
     Dijkstra with lazily priced edges: an edge's configurations are evaluated only when the
     search settles one of its ends, and the search stops when it settles the goal, so
-    milestones riskier than the answer are never priced. ``progress(settled, total)``
-    reports the milestones settled so far.
+    milestones riskier than the answer are never priced. The edge cost is additive,
+    :math:`-\log(1 - p)` summed over the configurations.
+
+    Parameters
+    ----------
+    roadmap : Roadmap
+        The PRM.
+    bound : callable
+        ``bound(configs (N, m)) -> (N,)``, the eq.-9 bound.
+    start, goal : array_like
+        ``(m,)`` configurations.
+    step : float
+        Interpolation step of the trajectory.
+    cost : RiskSegmentCost, optional
+        A cost with its cache (shared between searches).
+    progress : callable, optional
+        ``progress(settled, total)`` reports the milestones settled so far.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(P, m)`` the path's vertices.
     """
     import heapq
 
@@ -257,7 +297,27 @@ def least_risk_path(
 def compare_paths(
     roadmap: Roadmap, bound, start, goal, *, step: float = DEFAULT_STEP, progress=None
 ) -> dict:
-    """Shortest vs least-risk roadmap path: trajectories, per-configuration and eq.-10 bounds."""
+    """Shortest against least-risk roadmap path.
+
+    Parameters
+    ----------
+    roadmap : Roadmap
+        The PRM.
+    bound : callable
+        ``bound(configs (N, m)) -> (N,)``, the eq.-9 bound.
+    start, goal : array_like
+        ``(m,)`` configurations.
+    step : float
+        Interpolation step of the trajectories.
+    progress : callable, optional
+        As in :func:`least_risk_path`.
+
+    Returns
+    -------
+    dict
+        ``{"shortest": ..., "least_risk": ...}``, each with ``path``, ``trajectory``,
+        per-configuration ``bounds``, the eq.-10 ``bound`` and the path ``length``.
+    """
     out = {}
     cost = RiskSegmentCost(bound, step)
     for name, path in (

@@ -250,9 +250,9 @@ def problem_from_options(robot, env, start, goal):
 
     from riskplan.parsing import parse_numbers
     from riskplan.planning.problem import Problem
-    from riskplan.robots import TendonRobot, load_robot
+    from riskplan.robots import load_robot
 
-    rob = robot if isinstance(robot, TendonRobot) else load_robot(robot)
+    rob = load_robot(robot)
     mesh = Path(env)
     if not mesh.is_file():
         raise InvalidInputError(f"--env: no such file: {mesh}")

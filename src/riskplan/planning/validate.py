@@ -54,7 +54,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskplan._validation import as_array, check_range
+from riskplan._validation import as_array, check_count, check_range
 from riskplan.collision import (
     Environment,
     MonteCarloEstimate,
@@ -137,22 +137,10 @@ def _check_seed(seed) -> int:
     return int(seed)
 
 
-def _check_count(n, name: str) -> int:
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise InvalidInputError(f"{name}: expected a positive integer, got {n!r}")
-    return int(n)
-
-
 def _as_robot(robot):
-    if isinstance(robot, str) or hasattr(robot, "__fspath__"):
-        from riskplan.robots import load_robot
+    from riskplan.robots import load_robot
 
-        return load_robot(robot)
-    if not hasattr(robot, "solve_displacements") or not hasattr(robot, "toml_text"):
-        raise InvalidInputError(
-            f"robot: expected a TendonRobot or a robot name/path, got {type(robot).__name__}"
-        )
-    return robot
+    return load_robot(robot)
 
 
 def _check_trajectory(trajectory, robot) -> np.ndarray:
@@ -336,11 +324,10 @@ def _geometry(text: str):
 _ENVIRONMENTS: dict = {}
 
 
-@functools.lru_cache(maxsize=4)
 def _robot(text: str):
-    from riskplan.robots import robot_from_toml
+    from riskplan.robots import cached_robot
 
-    return robot_from_toml(text)
+    return cached_robot(text)
 
 
 def execute_on_robot(
@@ -383,9 +370,9 @@ def execute_on_robot(
     robot = _as_robot(robot)
     traj = _check_trajectory(trajectory, robot)
     env = _check_environment(environment)
-    n = _check_count(n, "n")
+    n = check_count(n, "n", 1)
     seed = _check_seed(seed)
-    chunk = _check_count(chunk, "chunk")
+    chunk = check_count(chunk, "chunk", 1)
     if backend not in BACKENDS:
         raise InvalidInputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
     if not 0 < confidence < 1:
@@ -451,7 +438,7 @@ def mixture_monte_carlo(
     per configuration (what eq. 9 bounds). Wilson intervals at ``confidence``.
     """
     env = _check_environment(environment)
-    n = _check_count(n, "n")
+    n = check_count(n, "n", 1)
     seed = _check_seed(seed)
     m = int(getattr(model, "n_tendons", -1))
     traj = as_array(trajectory, "trajectory", min_ndim=2)

@@ -268,6 +268,12 @@ class FEMScenario:
             poissons_ratio=getattr(cfg, "poissons_ratio", SimParams.poissons_ratio),
         )
 
+    @property
+    def goal_radius(self) -> float:
+        """Radius of the (undeformed) goal disk, ``config.goal_radius``: what
+        ``RRTOptions.goal_depth`` tightens (:class:`~riskplan.scenarios.space.PlanningScenario`)."""
+        return float(self.config.goal_radius)
+
     def sample_params(self, seed=None) -> SimParams:
         """One draw from ``distribution`` (the nominal parameters if there is none)."""
         if self.distribution is None:

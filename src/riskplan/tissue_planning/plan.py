@@ -12,6 +12,7 @@ import time
 from dataclasses import dataclass, field
 
 from riskplan.errors import InvalidInputError
+from riskplan.parallel import spawn_seeds
 
 __all__ = ["STEP_S", "TissuePlanningResult", "check_tissue_budget", "plan_tissue"]
 
@@ -57,7 +58,9 @@ def plan_tissue(
     :func:`~riskplan.tissue_planning.select.select_plan` (``method``, ``n_samples`` parameter draws
     per step for ``M_t``), then ``check_runs`` closed-loop executions for the selected plan
     and ``check_others`` more (``check_runs = 0`` skips the check). ``on_tree(i, tree)``,
-    ``on_plan(i, score)``, ``on_check(row)`` report progress.
+    ``on_plan(i, score)``, ``on_check(row)`` report progress. The trees, the selection and
+    the check draw from three streams ``spawn_seeds(seed, 3)``
+    (:func:`riskplan.parallel.spawn_seeds`).
     """
     from riskplan._validation import check_count
     from riskplan.control.lqgmp import METHODS
@@ -76,8 +79,10 @@ def plan_tissue(
     options = rrt_options or RRTOptions()
     timings = {}
     t0 = time.perf_counter()
+    # trees, selection and check draw from independent streams spawned from seed
+    s_rrt, s_select, s_check = spawn_seeds(seed, 3)
     plans, trees = rrt_plans(
-        sim, n_plans, seed=seed, options=options, backend=backend, workers=workers, on_tree=on_tree
+        sim, n_plans, seed=s_rrt, options=options, backend=backend, workers=workers, on_tree=on_tree
     )
     timings["rrt"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -87,7 +92,7 @@ def plan_tissue(
         sim.distribution,
         method=method,
         n_samples=n_samples,
-        seed=seed + 1,
+        seed=s_select,
         backend=backend,
         workers=workers,
         on_result=on_plan,
@@ -103,7 +108,7 @@ def plan_tissue(
             sim.distribution,
             others=check_others,
             n=check_runs,
-            seed=seed + 2,
+            seed=s_check,
             backend=backend,
             workers=workers,
             on_row=on_check,

@@ -28,6 +28,7 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
+from riskplan._validation import check_workers
 from riskplan.errors import InvalidInputError
 
 log = logging.getLogger(__name__)
@@ -71,8 +72,7 @@ def _check(paper, backend, workers, ray_address):
         raise InvalidInputError(f"paper: expected one of {', '.join(PAPERS)}, got {paper!r}")
     if backend not in BACKENDS:
         raise InvalidInputError(f"backend: expected one of {', '.join(BACKENDS)}, got {backend!r}")
-    if workers is not None and (int(workers) != workers or workers < 1):
-        raise InvalidInputError(f"workers: expected a positive integer, got {workers!r}")
+    check_workers(workers)
     if ray_address is not None:
         if backend != "ray":
             raise InvalidInputError(

@@ -35,7 +35,6 @@ failure raises :class:`~riskplan.errors.ConvergenceError` (never a silent ``u = 
 from __future__ import annotations
 
 import logging
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,324 +44,53 @@ from riskplan.deformable.banded import BandedCholeskySolver
 from riskplan.deformable.hyperelastic import SolveInfo
 from riskplan.deformable.material import Material
 from riskplan.deformable.material_points import Interpolator
+from riskplan.deformable.tetassembly import (
+    TetPattern,
+    _norm,
+    _pattern,
+    deformation_gradients,
+    element_stiffness,
+    linear_stiffness_parts,
+    neohookean_stress,
+)
+from riskplan.deformable.tetlocate import (
+    INSIDE_TOL,
+    LOCATE_CANDIDATES,
+    find_points,
+    locate3d,
+    sphere_points,
+)
 from riskplan.deformable.tetmesh import TetMesh
+from riskplan.deformable.tetnewton import solve_nonlinear
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
 from riskplan.threads import one_blas_thread
+
+#: The pure parts live in :mod:`.tetassembly`, :mod:`.tetlocate` and :mod:`.tetnewton`; these
+#: names stay importable from here.
+__all__ = [
+    "INSIDE_TOL",
+    "LOCATE_CANDIDATES",
+    "SINGULAR_PIVOT_RATIO",
+    "TetPattern",
+    "TetTissue",
+    "TissueState3D",
+    "deformation_gradients",
+    "element_stiffness",
+    "find_points",
+    "linear_stiffness_parts",
+    "locate3d",
+    "neohookean_stress",
+    "solve_nonlinear",
+    "sphere_points",
+]
 
 logger = logging.getLogger(__name__)
 
 LAWS3D = ("linear", "neo-hookean")
 
-#: A point counts as inside an element when its smallest barycentric weight is >= -INSIDE_TOL.
-INSIDE_TOL = 1e-10
-
 #: Least ratio of the smallest to the largest Cholesky pivot of a linear stiffness: below it
 #: the matrix is singular up to round-off (1e-16 relative) and the supports are refused.
 SINGULAR_PIVOT_RATIO = 1e-12
-
-#: Element centroids tried per point before the exhaustive search (nearest first).
-LOCATE_CANDIDATES = 12
-
-# sparsity layouts by (tets, free DOFs): tissues of one mesh with different materials share one
-_PATTERNS: OrderedDict = OrderedDict()
-_PATTERN_CACHE = 8
-
-
-# --------------------------------------------------------------------------------------
-# pure element functions
-
-
-def deformation_gradients(u_elem: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """``F = I + Σ_a u_a ⊗ ∇N_a`` ``(T, 3, 3)`` from ``u_elem (T, 4, 3)``, ``G (T, 4, 3)``."""
-    F = np.einsum("tai,taj->tij", u_elem, G)
-    F[:, 0, 0] += 1.0
-    F[:, 1, 1] += 1.0
-    F[:, 2, 2] += 1.0
-    return F
-
-
-def neohookean_stress(F: np.ndarray, lam: float, mu: float):
-    """``(W (T,), P (T, 3, 3), J (T,), F⁻¹ (T, 3, 3))`` of the compressible neo-Hookean law
-    (module docstring); ``W`` is ``None`` when some ``J ≤ 0``."""
-    J = np.linalg.det(F)
-    if np.any(J <= 0.0):
-        return None, None, J, None
-    Finv = np.linalg.inv(F)
-    FinvT = np.swapaxes(Finv, 1, 2)
-    lnJ = np.log(J)
-    I1 = np.einsum("tij,tij->t", F, F)
-    W = 0.5 * mu * (I1 - 3.0 - 2.0 * lnJ) + 0.5 * lam * lnJ**2
-    P = mu * (F - FinvT) + (lam * lnJ)[:, None, None] * FinvT
-    return W, P, J, Finv
-
-
-def element_stiffness(
-    G: np.ndarray,
-    volumes: np.ndarray,
-    lam: float,
-    mu: float,
-    Finv: np.ndarray | None = None,
-    lnJ: np.ndarray | None = None,
-) -> np.ndarray:
-    """Element matrices ``(T, 12, 12)`` in local DOF order ``(a, i)``:
-
-        K_{ai,bk} = V [μ δ_ik ∇N_a·∇N_b + λ h_ai h_bk + c h_bi h_ak],   h_a = F⁻ᵀ ∇N_a,
-
-    the linear stiffness for ``Finv=None`` (``h = ∇N``, ``c = μ``), else the neo-Hookean
-    tangent at ``F`` (``c = μ − λ ln J``; ``F⁻¹ (T, 3, 3)`` and ``ln J (T,)`` given).
-    """
-    T = len(volumes)
-    h = G.reshape(T, 12) if Finv is None else np.matmul(G, Finv).reshape(T, 12)
-    O = h[:, :, None] * h[:, None, :]  # (T, (a,i), (b,k)): h_ai h_bk
-    swapped = O.reshape(T, 4, 3, 4, 3).transpose(0, 3, 2, 1, 4).reshape(T, 12, 12)  # h_bi h_ak
-    c = np.full(T, float(mu)) if lnJ is None else mu - lam * lnJ
-    K = lam * O + c[:, None, None] * swapped
-    GG = mu * np.matmul(G, np.swapaxes(G, 1, 2))  # (T, a, b)
-    for i in range(3):
-        K[:, i::3, i::3] += GG
-    return K * volumes[:, None, None]
-
-
-def linear_stiffness_parts(G: np.ndarray, volumes: np.ndarray):
-    """``(K_λ, K_μ)``: flat element matrices ``(T·144,)`` of the linear stiffness for
-    ``(λ, μ) = (1, 0)`` and ``(0, 1)`` (``K = λ K_λ + μ K_μ``; :func:`element_stiffness` with
-    ``F = I``), from one outer product ``∇N_ai ∇N_bk``."""
-    T = len(volumes)
-    h = G.reshape(T, 12)
-    O = h[:, :, None] * h[:, None, :]  # ∇N_ai ∇N_bk
-    Km = O.reshape(T, 4, 3, 4, 3).transpose(0, 3, 2, 1, 4).reshape(T, 12, 12)  # ∇N_bi ∇N_ak
-    GG = np.matmul(G, np.swapaxes(G, 1, 2))
-    for i in range(3):
-        Km[:, i::3, i::3] += GG
-    v = volumes[:, None, None]
-    return (O * v).reshape(-1), (Km * v).reshape(-1)
-
-
-class TetPattern:
-    """Index maps from the ``T·144`` element-matrix entries to the CSC matrix over all DOFs,
-    its reduced part over ``free_dofs``, and the upper band of the reduced matrix in reverse
-    Cuthill-McKee order (the layout of ``scipy.linalg.cholesky_banded``); built once per
-    mesh and support set from the node adjacency (``T·16`` node pairs, each a 3×3 block), so
-    an assembly is one ``bincount`` and two gathers.
-
-    Attributes: ``element_dofs (T, 12)``, ``band_perm (n_free,)``, ``bandwidth``.
-    """
-
-    def __init__(self, tets: np.ndarray, free_dofs: np.ndarray, n_dofs: int):
-        from scipy import sparse
-        from scipy.sparse.csgraph import reverse_cuthill_mckee
-
-        T = len(tets)
-        N = n_dofs // 3
-        self.element_dofs = (3 * tets[:, :, None] + np.arange(3)[None, None, :]).reshape(-1, 12)
-        self.n_dofs = n_dofs
-        # node pairs (a, b) of every element, keyed column-major: b (column) then a (row)
-        na = np.repeat(tets, 4, axis=1).ravel()  # (T·16,) row node of (a, b)
-        nb = np.tile(tets, (1, 4)).ravel()  # column node
-        uniq, pair = np.unique(nb * N + na, return_inverse=True)
-        col_node = uniq // N
-        ptr = np.searchsorted(col_node, np.arange(N + 1))  # node-pair pointer per column node
-        m = np.diff(ptr)  # pairs per column node
-        # full CSC slot of entry (t, a, i, b, k): 9 ptr[b] + 3 m_b k + 3 j + i, j = pair - ptr[b]
-        pair = pair.reshape(T, 4, 4)
-        nbn = tets[:, None, :]  # (T, 1, 4): node of b
-        base = 9 * ptr[nbn] + 3 * (pair - ptr[nbn])  # (T, 4a, 4b)
-        i = np.arange(3)[None, None, :, None, None]
-        k = np.arange(3)[None, None, None, None, :]
-        slot = base[:, :, None, :, None] + i + 3 * m[nbn][:, :, None, :, None] * k
-        self._slot = slot.reshape(-1)  # order (t, a, i, b, k) = element-matrix order
-        nnz = 9 * len(uniq)
-        self._nnz_full = nnz
-        # row and column DOF of every full slot
-        rows = np.empty(nnz, dtype=np.int64)
-        cols = np.empty(nnz, dtype=np.int64)
-        rows[self._slot] = self.element_dofs[:, :, None].repeat(12, 2).reshape(-1)
-        cols[self._slot] = self.element_dofs[:, None, :].repeat(12, 1).reshape(-1)
-        self._full_indices = rows.astype(np.int32)
-        self._full_indptr = np.concatenate([[0], np.cumsum(np.repeat(3 * m, 3))]).astype(np.int32)
-        nf = len(free_dofs)
-        red = np.full(n_dofs, -1, dtype=np.int64)
-        red[free_dofs] = np.arange(nf)
-        r, c = red[rows], red[cols]
-        keep = (r >= 0) & (c >= 0)
-        self._keep = np.flatnonzero(keep)
-        r, c = r[keep], c[keep]
-        self._shape = (nf, nf)
-        self._indices = r.astype(np.int32)
-        self._indptr = np.searchsorted(c, np.arange(nf + 1)).astype(np.int32)
-        pattern = sparse.csc_matrix(
-            (np.ones(len(r)), self._indices, self._indptr), shape=self._shape
-        )
-        perm = reverse_cuthill_mckee(pattern.tocsr(), symmetric_mode=True)
-        pos = np.empty(nf, dtype=np.int64)
-        pos[perm] = np.arange(nf)
-        pr, pc = pos[r], pos[c]
-        upper = pr <= pc
-        bw = int(np.max(pc[upper] - pr[upper])) if np.any(upper) else 0
-        self.band_perm = perm
-        self.bandwidth = bw
-        self._band_sel = np.flatnonzero(upper)
-        self._band_slot = (bw + pr[upper] - pc[upper]) * nf + pc[upper]
-        self._band_size = (bw + 1) * nf
-
-    def _full_data(self, Ke_flat: np.ndarray) -> np.ndarray:
-        return np.bincount(self._slot, Ke_flat, minlength=self._nnz_full)
-
-    def csc(self, Ke_flat: np.ndarray):
-        """Reduced ``(n_free, n_free)`` CSC matrix from element matrices ``(T·144,)``."""
-        from scipy import sparse
-
-        data = self._full_data(Ke_flat)[self._keep]
-        return sparse.csc_matrix((data, self._indices, self._indptr), shape=self._shape)
-
-    def banded(self, Ke_flat: np.ndarray) -> np.ndarray:
-        """Upper band ``(bandwidth + 1, n_free)`` of the RCM-permuted reduced matrix."""
-        ab = np.zeros(self._band_size)
-        ab[self._band_slot] = self._full_data(Ke_flat)[self._keep][self._band_sel]
-        return ab.reshape(self.bandwidth + 1, -1)
-
-    def full_csr(self, Ke: np.ndarray):
-        """The ``(3N, 3N)`` matrix over all DOFs (CSR) from element matrices ``(T, 12, 12)``."""
-        from scipy import sparse
-
-        data = self._full_data(np.ascontiguousarray(Ke).reshape(-1))
-        return sparse.csc_matrix(
-            (data, self._full_indices, self._full_indptr), shape=(self.n_dofs, self.n_dofs)
-        ).tocsr()
-
-
-def _pattern(tets: np.ndarray, free_dofs: np.ndarray, n_dofs: int) -> TetPattern:
-    key = (tets.shape, tets.tobytes(), free_dofs.tobytes(), int(n_dofs))
-    p = _PATTERNS.get(key)
-    if p is None:
-        p = _PATTERNS[key] = TetPattern(tets, free_dofs, n_dofs)
-        if len(_PATTERNS) > _PATTERN_CACHE:
-            _PATTERNS.popitem(last=False)
-    else:
-        _PATTERNS.move_to_end(key)
-    return p
-
-
-def _norm(x: np.ndarray) -> float:
-    """Euclidean norm without overflow for finite entries (scaled by the largest first)."""
-    m = float(np.max(np.abs(x), initial=0.0))
-    if m == 0.0 or not np.isfinite(m):
-        return m
-    return m * float(np.linalg.norm(x / m))
-
-
-# --------------------------------------------------------------------------------------
-# point location
-
-
-def find_points(mesh: TetMesh, points: np.ndarray, k: int = LOCATE_CANDIDATES):
-    """Containing element ``(P,)`` and barycentric weights ``(P, 4)`` of ``points (P, 3)``;
-    element ``-1`` (weights of the best candidate) for points outside the mesh.
-
-    The ``k`` elements with the nearest centroids (a k-d tree) are tried first, then the
-    ``4k`` nearest; points inside none of them are searched exhaustively, so whether a point
-    is found does not depend on ``k``. Picks, among the elements tried, the one whose
-    smallest barycentric weight is largest (a point on a shared face may take either
-    element; interpolated values agree).
-    """
-    from scipy.spatial import cKDTree
-
-    maps = mesh.barycentric_maps
-    P = len(points)
-    elem = np.full(P, -1, dtype=np.int64)
-    lam = np.zeros((P, 4))
-    if P == 0:
-        return elem, lam
-    tree = mesh.__dict__.get("_centroid_tree")
-    if tree is None:
-        tree = cKDTree(mesh.centroids)
-        object.__setattr__(mesh, "_centroid_tree", tree)
-    todo = np.arange(P)
-    # nearest centroids first, then a wider ring for the few points whose element's centroid
-    # is not among the k nearest (slender elements), then the exhaustive search
-    for kk in (min(k, mesh.n_elements), min(4 * k, mesh.n_elements)):
-        if todo.size == 0:
-            break
-        q = points[todo]
-        _, cand = tree.query(q, k=kk)
-        cand = np.asarray(cand).reshape(len(todo), kk)
-        b = np.einsum("pkij,pj->pki", maps[cand][:, :, :, :3], q) + maps[cand][:, :, :, 3]
-        worst = b.min(axis=2)
-        j = worst.argmax(axis=1)
-        rows = np.arange(len(todo))
-        ok = worst[rows, j] >= -INSIDE_TOL
-        elem[todo[ok]] = cand[rows[ok], j[ok]]
-        lam[todo] = b[rows, j]
-        todo = todo[~ok]
-    for s in range(0, len(todo), 64):
-        idx = todo[s : s + 64]
-        bb = np.einsum("tij,pj->pti", maps[:, :, :3], points[idx]) + maps[None, :, :, 3]
-        w = bb.min(axis=2)
-        e = w.argmax(axis=1)
-        r = np.arange(len(idx))
-        inside = w[r, e] >= -INSIDE_TOL
-        elem[idx] = np.where(inside, e, -1)
-        lam[idx] = bb[r, e]
-    return elem, lam
-
-
-def locate3d(mesh: TetMesh, points, name: str = "points") -> Interpolator:
-    """An :class:`~riskplan.deformable.material_points.Interpolator` for material points ``(P, 3)``
-    (or one ``(3,)``) of ``mesh``; raises :class:`InvalidInputError` naming the set
-    (``name``: "target", "obstacle 2", ...) and the points outside the tissue."""
-    pts = as_array(points, name, last_dim=3)
-    if pts.ndim > 2:
-        raise InvalidInputError(f"{name}: expected shape (P, 3) or (3,), got {pts.shape}")
-    pts = np.ascontiguousarray(pts.reshape(-1, 3))
-    elem, lam = find_points(mesh, pts)
-    outside = np.flatnonzero(elem < 0)
-    if outside.size:
-        raise InvalidInputError(
-            f"{name}: {outside.size} point(s) lie outside the tissue, e.g. index "
-            f"{outside[:5].tolist()} at {pts[outside[:3]].tolist()}"
-        )
-    idx = mesh.tets[elem]
-    for a in (pts, elem, lam, idx):
-        a.setflags(write=False)
-    return Interpolator(
-        points=pts, elements=elem, node_index=idx, weights=lam, n_nodes=mesh.n_nodes
-    )
-
-
-def sphere_points(center, radius: float, n_points: int = 64) -> np.ndarray:
-    """Material points of a spherical region (an embedded obstacle or target): its centre
-    and ``n_points`` points on its surface (Fibonacci lattice, nearly uniform).
-
-    Locate them with :meth:`TetTissue.interpolator`; their deformed positions follow the
-    tissue.
-
-    Parameters
-    ----------
-    center : array_like, shape (3,)
-        Centre of the sphere (reference configuration).
-    radius : float
-        Radius (> 0).
-    n_points : int
-        Points on the surface (>= 4).
-
-    Returns
-    -------
-    ndarray, shape (n_points + 1, 3)
-        The centre first, then the surface points.
-    """
-    c = as_array(center, "center", shape=(3,))
-    r = float(radius)
-    if not (np.isfinite(r) and r > 0):
-        raise InvalidInputError(f"radius: expected a finite radius > 0, got {radius!r}")
-    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or n_points < 4:
-        raise InvalidInputError(f"n_points: expected an int >= 4, got {n_points!r}")
-    k = np.arange(n_points) + 0.5
-    z = 1.0 - 2.0 * k / n_points
-    phi = np.pi * (1.0 + 5.0**0.5) * k
-    rho = np.sqrt(1.0 - z * z)
-    surf = np.stack([rho * np.cos(phi), rho * np.sin(phi), z], axis=1)
-    return np.vstack([c, c + r * surf])
-
 
 # --------------------------------------------------------------------------------------
 # state and tissue
@@ -1029,126 +757,7 @@ class TetTissue:
             rn = _norm((fint - f)[self.free_dofs])
             min_j = float(np.linalg.det(self._F(u)).min())
             return u.reshape(-1, 3).copy(), SolveInfo(0, 1, rn, min_j)
-        return self._solve_nonlinear(f, ub, int(load_steps))
-
-    def _solve_nonlinear(self, f: np.ndarray, ub: np.ndarray, load_steps: int, max_halvings=8):
-        u = self._u.copy()
-        f0 = self._f.copy()
-        ub0 = u[self.fixed_dofs].copy()
-        moving = bool(np.any(ub != ub0))
-        fscale = max(_norm(f[self.free_dofs]), _norm(f0[self.free_dofs]))
-        if not np.isfinite(fscale):
-            raise InvalidInputError("nodal_forces: the load's norm overflows float64")
-        if moving:  # forces of the order the prescribed motion produces
-            probe = np.zeros(self._n)
-            probe[self.fixed_dofs] = ub - ub0
-            Kfull = self.tangent(u.reshape(-1, 3), full=True)
-            fscale = max(fscale, _norm((Kfull @ probe)[self.free_dofs]))
-        if fscale == 0.0:
-            fscale = 1.0
-        s, ds = 0.0, 1.0 / load_steps
-        iters = steps = halvings = 0
-        rn = 0.0
-        J = None
-        while s < 1.0 - 1e-15:
-            s1 = min(1.0, s + ds)
-            fs = f0 + s1 * (f - f0) if s1 < 1.0 else f
-            try:
-                start = u
-                if moving:
-                    target = ub0 + s1 * (ub - ub0) if s1 < 1.0 else ub
-                    start = self._predictor(u, target - u[self.fixed_dofs])
-                u_new, it, rn, J = self._newton(start, fs, fscale)
-            except (ConvergenceError, ElementInversionError) as exc:
-                if halvings >= max_halvings:
-                    raise
-                halvings += 1
-                ds *= 0.5
-                logger.debug("load step %.3g -> %.3g failed (%s); halving", s, s1, exc)
-                continue
-            iters += it
-            steps += 1
-            u, s = u_new, s1
-            if it <= 4:
-                ds = min(2.0 * ds, 1.0 / load_steps)
-        if J is None:
-            _, _, J, _, _ = self._internal(u)
-        self._u, self._f = u, f
-        return u.reshape(-1, 3).copy(), SolveInfo(iters, steps, rn, float(np.min(J)))
-
-    def _predictor(self, u: np.ndarray, dub: np.ndarray) -> np.ndarray:
-        """Fixed DOFs moved by ``dub``, free ones by the linearised response
-        ``−K_ff⁻¹ K_fc dub`` (so a prescribed motion does not crush the elements next to
-        the supports)."""
-        Ke = self._tangent_elements(u)
-        Kfull = self._pattern.full_csr(Ke.reshape(-1, 12, 12))
-        rhs = Kfull[self.free_dofs][:, self.fixed_dofs] @ dub
-        out = u.copy()
-        out[self.fixed_dofs] += dub
-        out[self.free_dofs] -= self._factor(Ke)(rhs)
-        return out
-
-    def _newton(self, u: np.ndarray, f: np.ndarray, fscale: float):
-        """Newton with backtracking on Π from ``u`` for the load ``f`` (flat)."""
-        free = self.free_dofs
-        energy, fint, J, Finv, lnJ = self._internal(u)
-        if energy is None:
-            self._raise_inverted(J, " at the start of a load step")
-        tol = self.rtol * fscale + self.atol
-        f_free = f[free]
-        r = fint[free] - f_free
-        rn = _norm(r)
-        for it in range(self.max_iter + 1):
-            if not np.isfinite(rn):
-                raise ConvergenceError(
-                    f"Newton: non-finite residual ({rn}) after {it} iteration(s)",
-                    residual=rn,
-                    iterations=it,
-                )
-            if rn <= tol:
-                return u, it, rn, J
-            if it == self.max_iter:
-                break
-            Ke = element_stiffness(self._G, self._V, self._lam, self._mu, Finv, lnJ).reshape(-1)
-            try:
-                du = -self._factor(Ke)(r)
-            except ConvergenceError as exc:
-                exc.residual, exc.iterations = rn, it
-                raise
-            pi0 = energy - float(f @ u)
-            slope = float(r @ du)
-            if not slope < 0.0:  # indefinite tangent: steepest descent
-                du = -r
-                slope = -rn * rn
-            alpha = 1.0
-            J_bad = None
-            for _ in range(40):
-                trial = u.copy()
-                trial[free] += alpha * du
-                e1, fint1, J1, Finv1, lnJ1 = self._internal(trial)
-                if e1 is None:
-                    J_bad = J1
-                    alpha *= 0.5
-                    continue
-                r1 = fint1[free] - f_free
-                rn1 = _norm(r1)
-                if e1 - float(f @ trial) <= pi0 + 1e-4 * alpha * slope or rn1 < 0.5 * rn:
-                    break
-                alpha *= 0.5
-            else:
-                if J_bad is not None:
-                    self._raise_inverted(J_bad, " in every line-search trial")
-                raise ConvergenceError(
-                    f"Newton line search failed (residual {rn:.3g})", residual=rn, iterations=it
-                )
-            u, energy, fint, J, Finv, lnJ = trial, e1, fint1, J1, Finv1, lnJ1
-            r, rn = r1, rn1
-        raise ConvergenceError(
-            f"Newton did not converge in {self.max_iter} iterations (residual {rn:.3g}, "
-            f"tolerance {tol:.3g})",
-            residual=rn,
-            iterations=self.max_iter,
-        )
+        return solve_nonlinear(self, f, ub, int(load_steps))
 
     def __repr__(self) -> str:
         return (

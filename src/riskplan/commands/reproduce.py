@@ -29,7 +29,8 @@ def register(app: typer.Typer) -> None:
             ["figures"],
             "--stage",
             help="figures (the papers' figures) | calibration (LQG-MP predicted vs measured "
-            "success; deformable paper). Repeat to run both.",
+            "success; deformable paper) | needle3d (the 3-D needle: candidates, LQG-MP "
+            "estimators, executions, interactive figure). Repeat to run several.",
         ),
         calibration_scale: str = typer.Option(
             None,

@@ -252,10 +252,22 @@ def evaluate_candidate(args):
     """``args = (sim, plan, lin_samples, goal_samples, seed)``: linearise one candidate under one case's S, LQG gains, LQG-MP (paper §IV-B..D), with
     :func:`riskplan.tissue_planning.select.evaluate_plan`. A candidate whose linearisation fails
     (the simulator's solve along it) gets ``P(success) = 0``, no controller, and its error."""
-    from riskplan.errors import ConvergenceError, ElementInversionError, SimulationError
+    from riskplan.errors import (
+        ConvergenceError,
+        ElementInversionError,
+        NumericalError,
+        SimulationError,
+    )
     from riskplan.tissue_planning.select import evaluate_plan
 
-    failures = (ConvergenceError, ElementInversionError, SimulationError, np.linalg.LinAlgError)
+    # NumericalError: LQG-MP's propagation or a point covariance of a degenerate linear model
+    failures = (
+        ConvergenceError,
+        ElementInversionError,
+        NumericalError,
+        SimulationError,
+        np.linalg.LinAlgError,
+    )
 
     sim, plan, lin_samples, goal_samples, seed = args
     with warnings.catch_warnings():

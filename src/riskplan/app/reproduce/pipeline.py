@@ -40,7 +40,7 @@ SCALE_NAMES = ("smoke", "paper")
 #: ``figures``: the papers' figures and claims; ``calibration``: LQG-MP's predicted
 #: P(success) against measured closed-loop success (:mod:`riskplan.app.reproduce.calibration`,
 #: deformable paper only, its own sizes: ``calibration_scale``).
-STAGES = ("figures", "calibration")
+STAGES = ("figures", "calibration", "needle3d")
 #: the calibration sizes a named scale uses unless ``calibration_scale`` names others
 _CALIBRATION_FOR = {"smoke": "smoke", "paper": "full"}
 SCENARIOS = ("needle", "manipulation")
@@ -225,6 +225,12 @@ def _reproduce(
                     pool=pool,
                 )
                 timings[f"calibration_{name}_s"] = time.perf_counter() - t0
+        if paper in ("deformable", "all") and "needle3d" in stages:
+            from riskplan.app.reproduce.needle3d import run_needle3d
+
+            t0 = time.perf_counter()
+            results["needle3d"] = run_needle3d(out, scale_name, seed=seed)
+            timings["needle3d_s"] = time.perf_counter() - t0
         timings["process_pools_started"] = pool.pools_started
     write_json_atomic(out / "results.json", results, sort_keys=True)
     write_json_atomic(out / "timings.json", timings, sort_keys=True)

@@ -361,6 +361,48 @@ def _calibration_section(rep: Report, cal: dict) -> None:
     )
 
 
+def _needle3d_section(rep: Report, r: dict) -> None:
+    """The 3-D needle (:mod:`riskplan.app.reproduce.needle3d`): the link to the interactive
+    figure and the estimates against executions."""
+    import html
+
+    sec = rep.section("3-D needle under uncertainty (beyond the paper)")
+    st = r["settings"]
+    Report.text(
+        sec,
+        f"Case {st['case']}, {st['n_plans']} candidates of the simulator RRT on the "
+        f"{st['n_elements']}-tetrahedron planning mesh, {st['check_runs']} closed- and open-loop "
+        "executions per checked plan on common draws.",
+    )
+    sec.blocks.append(
+        f'<p><a href="{html.escape(r["figure"])}">tissue block, obstacles, target, candidate '
+        "plans and closed-loop executions of the selected plan (interactive 3-D view)</a></p>"
+    )
+    rows = []
+    for row in r["rows"]:
+        e = row["estimates"]
+        rows.append(
+            [row["index"], row["n_steps"], e["truncation"], e["per-step"], e["sigma"], e["sampling"],
+             f"{row['closed']}/{row['n']}" if row["n"] else "-",
+             f"{row['open']}/{row['n']}" if row["n"] else "-"]
+        )  # fmt: skip
+    Report.table(
+        sec,
+        [
+            "plan",
+            "steps",
+            "truncation",
+            "per-step",
+            "sigma",
+            "sampling",
+            "closed loop",
+            "open loop",
+        ],
+        rows,
+        caption="LQG-MP P(success) by estimator (ranked by the truncation) and measured successes",
+    )
+
+
 def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> Path:
     """Write ``out/report.html`` from ``results`` (see :func:`riskplan.app.reproduce.pipeline.reproduce`).
     Each part is rendered when present (``results["mdn"]`` may hold Fig. 7 only)."""
@@ -525,6 +567,9 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
     for sc in results.get("deformable", {}).values():
         if "calibration" in sc:
             _calibration_section(rep, sc["calibration"])
+
+    if "needle3d" in results:
+        _needle3d_section(rep, results["needle3d"])
 
     if "sweep" in results.get("mdn", {}):
         r = results["mdn"]

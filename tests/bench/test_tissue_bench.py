@@ -5,17 +5,23 @@ from __future__ import annotations
 
 import numpy as np
 
-from riskplan.bench import tissue
+from riskplan.bench import tissue, tissue3d
 
 
 def test_bench_keys():
     figures = tissue.run(quick=True)
-    assert set(figures) == {
+    keys = {
         "linear_step_ms_175",
         "linear_step_ms_1000",
         "nonlinear_step_ms_175",
         "nonlinear_step_ms_1000",
+        "tet_linear_step_ms_5k",
+        "tet_linear_resolve_ms_5k",
+        "tet_neohookean_step_ms_5k",
     }
+    if tissue3d.sfepy_available():
+        keys.add("sfepy_linear_step_ms_5k")
+    assert set(figures) == keys
     assert all(np.isfinite(v) and v > 0 for v in figures.values())
 
 
@@ -37,3 +43,21 @@ def test_bench_times_the_scenarios_public_step(tol):
     np.testing.assert_allclose(warm.displacement, cold.displacement, **tol["newton_paths"])
     assert np.abs(warm.displacement - s.displacement).max() > 1e-4  # the force change moves it
     assert sim.reduced(warm).shape == (sim.state_dim,)
+
+
+def test_tet_bench_times_one_problem_on_both_sides(tol):
+    """The 3-D figures time the same mesh (5040 tetrahedra) and load; both sides solve it to
+    the same displacement, and the neo-Hookean step moves the body by a finite amount."""
+    from riskplan.deformable import TetTissue
+
+    mesh, mat, fixed, f = tissue3d.setup()
+    assert mesh.n_elements == 5040
+    u = TetTissue(mesh, mat, fixed).solve(f)
+    un = TetTissue(mesh, mat, fixed, law="neo-hookean").solve(f)
+    # a finite deformation: the laws differ by more than 1 % of the displacement
+    assert np.abs(u).max() > 0.01 and np.abs(un - u).max() > 0.01 * np.abs(u).max()
+    if tissue3d.sfepy_available():
+        u_ref = tissue3d.sfepy_linear_problem(mesh, mat, fixed, tissue3d.BODY_FORCE)()
+        np.testing.assert_allclose(
+            u, u_ref, rtol=0, atol=tol["float64_exact"]["atol"] * np.abs(u).max()
+        )

@@ -111,7 +111,11 @@ def step_costs(quick: bool = False) -> dict:
 
 def run(quick: bool = False) -> dict:
     """``{"linear_step_ms_175", "linear_step_ms_1000", "nonlinear_step_ms_175",
-    "nonlinear_step_ms_1000"}``: median milliseconds per simulator step (module docstring)."""
+    "nonlinear_step_ms_1000"}``: median milliseconds per simulator step (module docstring),
+    and the 3-D tissue's figures of :func:`riskplan.bench.tissue3d.run` (``tet_*_5k``,
+    ``sfepy_linear_step_ms_5k`` where SfePy is installed)."""
+    from riskplan.bench import tissue3d
+
     r_lin = 50 if quick else 300
     r_nl = 10 if quick else 40
     out = {}
@@ -119,4 +123,5 @@ def run(quick: bool = False) -> dict:
         out[f"linear_step_ms_{n}"] = round(linear_step_ms(n, r_lin), 4)
     for n in ELEMENTS:
         out[f"nonlinear_step_ms_{n}"] = round(nonlinear_step_ms(n, r_nl), 3)
+    out.update(tissue3d.run(quick))
     return out

@@ -83,7 +83,9 @@ def register(app: typer.Typer) -> None:
                             if cal[e]["spearman"] is None
                             else f"{cal[e]['spearman']:.2f}"
                         )
-                        for e in ("sigma", "truncation", "sampling", "disturbance")
+                        for e in cal.get(
+                            "estimators", ("sigma", "truncation", "sampling", "disturbance")
+                        )
                     )
                     + f"; measured spread {cal['sigma']['measured_spread']:.3f}"
                 )

@@ -114,6 +114,7 @@ __all__ = [
     "RankDeficiencyWarning",
     "control_jacobian",
     "fit_disturbance",
+    "fit_measurement_bias",
     "linearize",
     "observation_model",
 ]
@@ -137,18 +138,39 @@ class Disturbance:
         plus the per-step actuation noise).
     fits : (n, q) the fitted ``d_i``, one row per parameter draw.
     weights : (p,) the state weights ``w`` of the least-squares fit.
+    C : (T, m, r) or None, the directions of a persistent *measurement* bias
+        ``b_t = C_t e`` with ``e ~ N(0, Σ_e)`` constant (simulators whose parameters move
+        the measurement, not the reduced state: the needle in its material frame;
+        :func:`fit_measurement_bias`). ``None`` (or ``r = 0``): no bias state.
+    bias_cov : (r, r) ``Σ_e`` (None without ``C``).
+    N : (T, m, m) or None, the residual measurement noise ``N^r_t`` with the bias state.
+    bias_fits : (n, r) or None, the fitted ``e_i``.
     """
 
     cov: np.ndarray
     M: np.ndarray
     fits: np.ndarray
     weights: np.ndarray
+    C: np.ndarray | None = None
+    bias_cov: np.ndarray | None = None
+    N: np.ndarray | None = None
+    bias_fits: np.ndarray | None = None
 
     def __post_init__(self):
-        for name in ("cov", "M", "fits", "weights"):
-            arr = np.array(getattr(self, name), dtype=np.float64, copy=True)
+        for name in ("cov", "M", "fits", "weights", "C", "bias_cov", "N", "bias_fits"):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            arr = np.array(v, dtype=np.float64, copy=True)
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
+        if self.C is not None and (self.bias_cov is None or self.N is None):
+            raise InvalidInputError("Disturbance: C needs bias_cov (r, r) and N (T, m, m)")
+
+    @property
+    def n_bias(self) -> int:
+        """``r``, the dimension of the measurement-bias state (0 without one)."""
+        return 0 if self.C is None else int(self.C.shape[2])
 
 
 @dataclass(frozen=True, eq=False)
@@ -305,22 +327,46 @@ def _persistent(params, plan_params):
     return None if quiet == plan_params else quiet
 
 
-def _draw_step(sim, run, plan: NominalPlan, t: int, s_i) -> np.ndarray:
-    """Reduced state after ``u*_t`` from ``y*_t`` under the draw ``s_i``; a draw on another
+def _draw_state(sim, run, plan: NominalPlan, t: int, s_i):
+    """Full state after ``u*_t`` from ``y*_t`` under the draw ``s_i``; a draw on another
     mesh (only with ``sim.transfer_state``) runs on its own mesh."""
     y_t = plan.states[t]
     if s_i.n_elements != plan.params.n_elements:
         y_i = sim.transfer_state(y_t, s_i)
-        return sim.reduced(run(y_i, plan.controls[t], s_i, None))
-    return sim.reduced(run(y_t, plan.controls[t], s_i, plan.states[t + 1]))
+        return run(y_i, plan.controls[t], s_i, None)
+    return run(y_t, plan.controls[t], s_i, plan.states[t + 1])
+
+
+def _draw_step(sim, run, plan: NominalPlan, t: int, s_i) -> np.ndarray:
+    """Reduced state after ``u*_t`` from ``y*_t`` under the draw ``s_i``."""
+    return sim.reduced(_draw_state(sim, run, plan, t, s_i))
+
+
+def _measured(sim, state) -> np.ndarray:
+    return np.asarray(sim.measure(state, noise=np.zeros(sim.obs_dim)), dtype=np.float64)
 
 
 def _steps(
-    sim, plan: NominalPlan, draws, W_factor, eps, a_prior, rcond, K, seeds, ts, disturbance=False
+    sim,
+    plan: NominalPlan,
+    draws,
+    W_factor,
+    eps,
+    a_prior,
+    rcond,
+    K,
+    seeds,
+    ts,
+    disturbance=False,
+    measuring=False,
 ) -> list:
-    """(A_t or None, B_t, M_t, drift_t, rank_t, D_t, P_t) for each t in ``ts``; ``D_t (n, p)``
-    the draws' deviations and ``P_t (n, p)`` those without actuation noise (both ``None``
-    unless ``disturbance``)."""
+    """(A_t or None, B_t, M_t, drift_t, rank_t, D_t, P_t, H_t, b_t, c_t) for each t in
+    ``ts``; ``D_t (n, p)`` the draws' deviations and ``P_t (n, p)`` those without actuation
+    noise (both ``None`` unless ``disturbance``). With ``measuring`` (a simulator with
+    ``observation_jacobian`` and ``measure``): ``H_t (m, p)`` at ``y*_{t+1}``, the draws'
+    measurement biases ``b_t (n, m)`` (the part of ``measure(y^i_{t+1}) − measure(y*_{t+1})``
+    that ``H_t`` does not explain) and ``c_t (n, m)`` those without actuation noise
+    (``None`` unless ``disturbance``); else ``None``."""
     bounds = np.asarray(sim.control_bounds, dtype=np.float64)
     params = plan.params
     p = plan.reduced.shape[1]
@@ -369,24 +415,43 @@ def _steps(
         )
         M = np.zeros((p, p))
         drift = np.zeros(p)
-        D = Pd = None
+        D = Pd = Ht = Bm = Pb = None
+        if measuring:
+            Ht = np.asarray(sim.observation_jacobian(plan.states[t + 1], params), dtype=np.float64)
+            z_next = _measured(sim, plan.states[t + 1])
         if draws:
             D = np.empty((len(draws), p))
+            Y = []
             for i, s_i in enumerate(draws):
-                D[i] = _draw_step(sim, run, plan, t, s_i)
+                y_i = _draw_state(sim, run, plan, t, s_i)
+                D[i] = sim.reduced(y_i)
+                if measuring:
+                    Y.append(_measured(sim, y_i))
             _finite(D, t + 1, "parameter draws")
             D -= x_next
             M = D.T @ D / len(draws)
             drift = D.mean(axis=0)
+            if measuring:
+                Bm = np.asarray(Y) - z_next - D @ Ht.T
+                _finite(Bm, t + 1, "measurements of the parameter draws")
             if disturbance:
                 Pd = D.copy()
+                Pb = None if Bm is None else Bm.copy()
                 for i, s_i in enumerate(draws):
                     if s_i.actuation_cov is None:
                         continue  # no per-step part: the persistent deviation is D[i]
                     quiet = _persistent(s_i, params)
-                    Pd[i] = 0.0 if quiet is None else _draw_step(sim, run, plan, t, quiet) - x_next
+                    if quiet is None:
+                        Pd[i] = 0.0
+                        if Pb is not None:
+                            Pb[i] = 0.0
+                        continue
+                    y_q = _draw_state(sim, run, plan, t, quiet)
+                    Pd[i] = sim.reduced(y_q) - x_next
+                    if Pb is not None:
+                        Pb[i] = _measured(sim, y_q) - z_next - Ht @ Pd[i]
                 _finite(Pd, t + 1, "parameter draws without actuation noise")
-        out.append((A, B, M, drift, rank, D, Pd))
+        out.append((A, B, M, drift, rank, D, Pd, Ht, Bm, Pb))
     return out
 
 
@@ -422,6 +487,57 @@ def fit_disturbance(B, P, D, weights, rcond: float = 1e-8) -> Disturbance:
     return Disturbance(
         cov=fits.T @ fits / n, M=0.5 * (M + np.swapaxes(M, 1, 2)), fits=fits, weights=w
     )
+
+
+#: share of the draws' squared measurement bias the bias state must explain
+#: (:func:`fit_measurement_bias`): the fewest principal directions reaching it are kept
+BIAS_ENERGY = 0.99
+
+
+def fit_measurement_bias(Pb, Bm, N, energy: float = BIAS_ENERGY, max_rank: int | None = None):
+    """A persistent measurement bias ``b_{i,t} ≈ C_t e_i`` of the parameter draws (beyond the
+    paper; the measurement-side twin of :func:`fit_disturbance`).
+
+    A draw that moves what is *measured* but not the reduced state (the needle in its
+    material frame: the tissue's displacement under the robot depends on E, ν and the
+    force; the robot's material pose does not) biases every measurement of an execution
+    in the same way. With ``c_i = vec_t(Pb[t, i]) (T m,)`` the persistent biases of draw
+    ``i`` along the plan, the principal directions of ``Y = [c_1 … c_n]ᵀ = U S Vᵀ`` give
+
+        C_t = V[:, :r] (rows of step t, (m, r)),   e_i = U[i, :r] S[:r],
+        Σ_e = (1/n) Σ_i e_i e_iᵀ,   N^r_t = N_t + (1/n) Σ_i (b_{i,t} − C_t e_i)(…)ᵀ
+
+    with ``r`` the fewest directions holding ``energy`` of ``Σ S²`` (at most ``max_rank``).
+    ``Bm[t, i]``, the full bias (per-step noise included), fills the residual.
+
+    Parameters
+    ----------
+    Pb : (T, n, m) persistent biases (without actuation noise).
+    Bm : (T, n, m) full biases.
+    N : (T, m, m) the sensing noise covariances.
+
+    Returns
+    -------
+    ``(C (T, m, r), Σ_e (r, r), N^r (T, m, m), fits (n, r))``; ``r = 0`` when the draws
+    do not bias the measurement.
+    """
+    Pb = np.asarray(Pb, dtype=np.float64)
+    Bm = np.asarray(Bm, dtype=np.float64)
+    N = np.asarray(N, dtype=np.float64)
+    T, n, m = Pb.shape
+    Y = Pb.transpose(1, 0, 2).reshape(n, T * m)
+    U, S, Vt = np.linalg.svd(Y, full_matrices=False)
+    total = float((S**2).sum())
+    if total <= 0.0:
+        r = 0
+    else:
+        r = int(np.searchsorted(np.cumsum(S**2) / total, energy) + 1)
+        r = min(r, len(S), n if max_rank is None else int(max_rank))
+    C = Vt[:r].T.reshape(T, m, r)
+    fits = U[:, :r] * S[:r]
+    R = Bm - np.einsum("tmr,nr->tnm", C, fits)
+    Nr = N + np.einsum("tni,tnj->tij", R, R) / n
+    return C, fits.T @ fits / n, 0.5 * (Nr + np.swapaxes(Nr, 1, 2)), fits
 
 
 def _param_draws(sim, plan: NominalPlan, params_distribution, n_samples: int, seed) -> list:
@@ -556,6 +672,13 @@ def linearize(
     step_seeds = spawn_seeds(master, T + 1)
     draws = _param_draws(sim, plan, params_distribution, int(n_samples), step_seeds[T])
 
+    # a measurement that depends on the full state (the needle in its material frame):
+    # H_t per step and the draws' measurement biases; an explicit H keeps the constant one
+    measuring = (
+        H is None
+        and callable(getattr(sim, "observation_jacobian", None))
+        and callable(getattr(sim, "measure", None))
+    )
     ts = list(range(T))
     n_chunks = 1 if backend == "serial" else max(1, min(T, 4 * (workers or 2)))
     chunks = [ts[k::n_chunks] for k in range(n_chunks)]
@@ -571,6 +694,7 @@ def linearize(
         n_a_runs,
         step_seeds,
         bool(disturbance),
+        measuring,
     )
     results = map_tasks(fn, chunks, backend=backend, workers=workers, chunksize=1)
     per_t = {}
@@ -611,6 +735,15 @@ def linearize(
             stacklevel=2,
         )
     m = H0.shape[0]
+    Hs = np.broadcast_to(H0, (T, m, p))
+    Ns = np.broadcast_to(N0, (T, m, m))
+    if measuring:
+        Hs = np.stack([per_t[t][7] for t in range(T)])
+        if draws:
+            # the paper's zero-mean reading on the measurement side: the draws' spread of
+            # what H_t does not explain is measurement noise, as M_t is on the state side
+            Bm = np.stack([per_t[t][8] for t in range(T)])
+            Ns = N0 + np.einsum("tni,tnj->tij", Bm, Bm) / len(draws)
     scale = getattr(sim, "state_scale", None)
     dist = None
     if disturbance:
@@ -623,6 +756,23 @@ def linearize(
                 weights,
                 rcond=float(rcond),
             )
+            if measuring:
+                C, Se, Nr, ef = fit_measurement_bias(
+                    np.stack([per_t[t][9] for t in range(T)]),
+                    np.stack([per_t[t][8] for t in range(T)]),
+                    np.broadcast_to(N0, (T, m, m)),
+                )
+                if C.shape[2]:
+                    dist = Disturbance(
+                        cov=dist.cov,
+                        M=dist.M,
+                        fits=dist.fits,
+                        weights=dist.weights,
+                        C=C,
+                        bias_cov=Se,
+                        N=Nr,
+                        bias_fits=ef,
+                    )
         else:
             dist = Disturbance(
                 cov=np.zeros((q, q)), M=np.zeros((T, p, p)), fits=np.zeros((0, q)), weights=weights
@@ -631,8 +781,8 @@ def linearize(
         A=A,
         B=B,
         M=M,
-        H=np.broadcast_to(H0, (T, m, p)),
-        N=np.broadcast_to(N0, (T, m, m)),
+        H=Hs,
+        N=Ns,
         rank=rank,
         drift=drift,
         state_scale=None if scale is None else np.array(scale, dtype=np.float64),
@@ -641,7 +791,9 @@ def linearize(
     )
 
 
-def _run_chunk(sim, plan, draws, W_factor, eps, a_prior, rcond, K, step_seeds, disturbance, ts):
+def _run_chunk(
+    sim, plan, draws, W_factor, eps, a_prior, rcond, K, step_seeds, disturbance, measuring, ts
+):
     return _steps(
         sim,
         plan,
@@ -654,4 +806,5 @@ def _run_chunk(sim, plan, draws, W_factor, eps, a_prior, rcond, K, step_seeds, d
         [step_seeds[t] for t in ts],
         ts,
         disturbance,
+        measuring,
     )

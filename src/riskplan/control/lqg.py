@@ -9,7 +9,8 @@ starting from the simulator's start state under the drawn parameters ``s`` and `
 
     u_t       = clip(u*_t + L_t x̂_t, bounds)                  (open loop: u_t = u*_t)
     y_{t+1}   = g(y_t, u_t, s)                                  (actuation noise inside s)
-    z_{t+1}   = h(x_{t+1}) + n_t,   n_t ~ N(0, N)               (sim.observe with a generator)
+    z_{t+1}   = h(x_{t+1}) + n_t,   n_t ~ N(0, N)               (sim.observe with a generator;
+                                                                 sim.measure(y_{t+1}) where defined)
     x̂⁻        = A_t x̂_t + B_t (u_t − u*_t)
     x̂_{t+1}   = x̂⁻ + K_t (z_{t+1} − h(x*_{t+1}) − H_t x̂⁻)
 
@@ -73,6 +74,18 @@ __all__ = [
 ]
 
 
+def _block_diag(*blocks) -> np.ndarray:
+    """The block-diagonal matrix of square ``blocks`` (``None`` skipped)."""
+    blocks = [np.asarray(b, dtype=np.float64) for b in blocks if b is not None]
+    n = sum(b.shape[0] for b in blocks)
+    out = np.zeros((n, n))
+    k = 0
+    for b in blocks:
+        out[k : k + b.shape[0], k : k + b.shape[0]] = b
+        k += b.shape[0]
+    return out
+
+
 def augmented_model(lin: Linearization):
     """The linear model of the state ``(x̄_t, d)`` with a constant input disturbance
     ``d (q,)`` (beyond the paper; needs ``lin.disturbance``,
@@ -83,22 +96,35 @@ def augmented_model(lin: Linearization):
 
     Returns ``(A (T, p+q, p+q), B (T, p+q, q), H (T, m, p+q), M (T, p+q, p+q), N (T, m, m))``
     with ``M = diag(M^r_t, 0)``: ``d`` does not change during an execution.
+
+    With a persistent measurement bias in the model (``lin.disturbance.C (T, m, r)``,
+    :func:`~riskplan.control.linearize.fit_measurement_bias`) the state is
+    ``(x̄_t, d, e)`` of dimension ``p + q + r``, ``e`` constant too, and
+
+        z̄_{t+1} = H_t x̄_{t+1} + C_t e + n_t,   n_t ~ N(0, N^r_t)
+
+    (``H = [H_t, 0, C_t]``, ``N = N^r_t``).
     """
     if lin.disturbance is None:
         raise InvalidInputError("lin: has no disturbance model; linearize it with disturbance=True")
     T, p, q = lin.B.shape
     m = lin.H.shape[1]
-    n = p + q
+    dist = lin.disturbance
+    r = dist.n_bias
+    n = p + q + r
     A = np.zeros((T, n, n))
     A[:, :p, :p] = lin.A
-    A[:, :p, p:] = lin.B
-    A[:, p:, p:] = np.eye(q)
+    A[:, :p, p : p + q] = lin.B
+    A[:, p:, p:] = np.eye(q + r)
     B = np.zeros((T, n, q))
     B[:, :p] = lin.B
     H = np.zeros((T, m, n))
     H[:, :, :p] = lin.H
     M = np.zeros((T, n, n))
-    M[:, :p, :p] = lin.disturbance.M
+    M[:, :p, :p] = dist.M
+    if r:
+        H[:, :, p + q :] = dist.C
+        return A, B, H, M, np.asarray(dist.N)
     return A, B, H, M, np.asarray(lin.N)
 
 
@@ -193,9 +219,11 @@ def lqg_controller(
         K, P = kalman_gains(lin.A, lin.H, lin.M, lin.N, P0)
         return LQGController(L=L, K=K, P=P, P0=P0, lin=lin)
     T = L.shape[0]
-    L = np.concatenate([L, np.broadcast_to(-np.eye(q), (T, q, q))], axis=2)
+    r = lin.disturbance.n_bias
+    # the bias e moves only the measurement: no feedback on it (its gain is 0)
+    L = np.concatenate([L, np.broadcast_to(-np.eye(q), (T, q, q)), np.zeros((T, q, r))], axis=2)
     A, _B, H, M, N = augmented_model(lin)
-    P0 = np.block([[P0, np.zeros((p, q))], [np.zeros((q, p)), lin.disturbance.cov]])
+    P0 = _block_diag(P0, lin.disturbance.cov, lin.disturbance.bias_cov)
     K, P = kalman_gains(A, H, M, N, P0)
     return LQGController(L=L, K=K, P=P, P0=P0, lin=lin, disturbance=True)
 
@@ -288,7 +316,18 @@ def execute(
         L, K = controller.L, controller.K
         A, B, H = controller.model()[:3]
         xhat = np.zeros(A.shape[1])
-        z_nominal = [_observe_nominal(sim, plan.reduced[t + 1]) for t in range(T)]
+        # a simulator whose measurement needs the full state (``measure(state, noise,
+        # rng)``: the needle in its material frame) is sensed through it
+        measure = getattr(sim, "measure", None)
+        if measure is not None:
+            z_nominal = [
+                np.asarray(
+                    measure(plan.states[t + 1], noise=np.zeros(sim.obs_dim)), dtype=np.float64
+                )
+                for t in range(T)
+            ]
+        else:
+            z_nominal = [_observe_nominal(sim, plan.reduced[t + 1]) for t in range(T)]
     collided = False
     failed = None
     error = None
@@ -313,13 +352,16 @@ def execute(
             states.append(y)
         xs.append(x)
         if closed:
-            z = np.asarray(sim.observe(x, rng=gen), dtype=np.float64)
+            if measure is not None:
+                z = np.asarray(measure(y, rng=gen), dtype=np.float64)
+            else:
+                z = np.asarray(sim.observe(x, rng=gen), dtype=np.float64)
             zbar = z - z_nominal[t]
             xp = A[t] @ xhat + B[t] @ (u - plan.controls[t])
             xhat = xp + K[t] @ (zbar - H[t] @ xp)
         est.append(plan.reduced[t + 1] + xhat[:p])
         if augmented:
-            dist.append(xhat[p:].copy())
+            dist.append(xhat[p : p + sim.control_dim].copy())
         if inside is not None and not inside(y):
             failed, outcome = t + 1, "left_tissue"
             break

@@ -63,7 +63,13 @@ Beyond the paper, a controller with the persistent-disturbance state
 model (:func:`riskplan.control.lqg.augmented_model`): ``ξ_t = (x̄_t, d, x̂_t, d̂_t)`` of
 dimension ``2(p + q)``, ``A_t, B_t, H_t, M_t`` replaced by the augmented ones, ``L_t`` by
 ``[L_t, −I]`` and ``Σ_0 = diag(P0, Σ_d, 0, 0)``: the true ``d ~ N(0, Σ_d)`` is drawn once and
-kept, the estimate starts at zero. Collision and goal are read from ``x̄_t = ξ_t[:p]`` as
+kept, the estimate starts at zero. With a persistent measurement bias ``e`` in the model
+(:func:`riskplan.control.linearize.fit_measurement_bias`) ``e`` joins ``d`` the same way
+(dimension ``2(p + q + r)``).
+
+Obstacles and goal are read in the reduced state's coordinates: ``sim.state_obstacles`` /
+``sim.state_goal`` where the simulator defines them (the needle's material frame: the
+reference polygons), else ``sim.obstacles`` / ``sim.goal``. Collision and goal are read from ``x̄_t = ξ_t[:p]`` as
 before; every method (sigma, truncation, sampling) works unchanged on it.
 
 ``P(goal)``: ``n_goal_samples`` draws of ``x_T`` (the final, truncated distribution in the
@@ -190,6 +196,22 @@ def body_points(sim, plan: NominalPlan, t: int, col: np.ndarray):
             f"[0, {k}), lam (n,) in [0, 1]) with n >= 2"
         )
     return base, a, b, lam, True
+
+
+def _obstacles(sim, state) -> list:
+    """The obstacles of ``state`` in the reduced state's coordinates:
+    ``sim.state_obstacles(state)`` where the simulator defines it (a reduced state in
+    another frame than the obstacles', e.g. the needle's material frame), else
+    ``sim.obstacles(state)``."""
+    hook = getattr(sim, "state_obstacles", None)
+    return hook(state) if hook is not None else sim.obstacles(state)
+
+
+def _goal(sim, state) -> np.ndarray:
+    """The goal polygon of ``state`` in the reduced state's coordinates
+    (``sim.state_goal`` where defined, else ``sim.goal``)."""
+    hook = getattr(sim, "state_goal", None)
+    return hook(state) if hook is not None else sim.goal(state)
 
 
 def _weights(body, k):
@@ -335,7 +357,7 @@ def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
     """Vectorised ``method="sigma"`` over all steps and points; None if the obstacle
     polygons or the body points change size along the plan (then the per-step loop runs)."""
     T = plan.n_steps
-    polys = [sim.obstacles(plan.states[t + 1]) for t in range(T)]
+    polys = [_obstacles(sim, plan.states[t + 1]) for t in range(T)]
     if not len(polys[0]):
         return np.ones(T)
     sizes = {tuple(len(q) for q in ps) for ps in polys}
@@ -407,7 +429,7 @@ def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed
     free = np.ones(T)
     for t in range(T):
         xi = xi @ F[t].T + dm[t] + gen.standard_normal((n, 2 * nz)) @ _factor(Qn[t]).T
-        polys = sim.obstacles(plan.states[t + 1])
+        polys = _obstacles(sim, plan.states[t + 1])
         if not len(polys):
             continue
         env = polygon_environment(polys)
@@ -433,7 +455,7 @@ def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed
             hit |= edge_hit.reshape(m, nb).any(axis=1)
         alive[idx[hit]] = False
         free[t] = float(alive.sum()) / before
-    goal_env = polygon_environment([sim.goal(plan.states[T])])
+    goal_env = polygon_environment([_goal(sim, plan.states[T])])
     in_goal = np.asarray(goal_env.contains(plan.reduced[T][goal_idx] + xi[:, goal_idx]), dtype=bool)
     n_free = int(alive.sum())
     p_goal = float(in_goal[alive].mean()) if n_free else float(in_goal.mean())
@@ -535,7 +557,7 @@ def lqgmp(
         S = 0.5 * (S + S.T)
         _check_propagation(mu[None], S[None], t + 1)  # before any geometry sees it
         y = plan.states[t + 1]
-        polys = sim.obstacles(y)
+        polys = _obstacles(sim, y)
         if not len(polys):
             mean[t + 1], cov[t + 1] = mu, S
             continue
@@ -588,7 +610,7 @@ def lqgmp(
     w, v = np.linalg.eigh(0.5 * (Sx + Sx.T))
     fac = v * np.sqrt(np.clip(w, 0.0, None))
     xT = plan.reduced[T] + mean[T, :p] + gen.standard_normal((int(n_goal_samples), p)) @ fac.T
-    goal_env = polygon_environment([sim.goal(plan.states[T])])
+    goal_env = polygon_environment([_goal(sim, plan.states[T])])
     p_goal = float(goal_env.contains(xT[:, goal_idx]).mean())
     return LQGMPResult(
         p_success=p_free * p_goal,

@@ -11,7 +11,9 @@ geometry and kinematics, pure arrays), ``mesh`` (``TissueMesh`` with its cached 
 arrays, polygon meshing), ``material``, ``laws`` (hyperelastic energies, stresses,
 tangents), ``banded`` (RCM + banded Cholesky), ``assembly`` (element forces/tangents,
 DOF bookkeeping, sparse layouts), ``locate`` (material points), ``loads``, ``linear``
-(linear model), ``hyperelastic`` (hyperelastic model, Newton solver).
+(linear model), ``hyperelastic`` (hyperelastic model, Newton solver); 3-D tissue:
+``tetmesh`` (tetrahedral meshes, quality check), ``tissue3d`` (``TetTissue``: linear and
+neo-Hookean P1 tetrahedra).
 """
 
 from riskplan.deformable.hyperelastic import HyperelasticModel, NeoHookeanModel, SolveInfo
@@ -26,6 +28,8 @@ from riskplan.deformable.loads import (
 from riskplan.deformable.material import Material
 from riskplan.deformable.material_points import Interpolator, contains, locate
 from riskplan.deformable.mesh import TissueMesh, mesh_polygon, rectangle
+from riskplan.deformable.tetmesh import TetMesh, tet_block, tet_fill_surface
+from riskplan.deformable.tissue3d import TetTissue, TissueState3D, sphere_points
 
 __all__ = [
     "HyperelasticModel",
@@ -34,7 +38,10 @@ __all__ = [
     "Material",
     "NeoHookeanModel",
     "SolveInfo",
+    "TetMesh",
+    "TetTissue",
     "TissueMesh",
+    "TissueState3D",
     "body_load",
     "contains",
     "element_strains",
@@ -45,5 +52,8 @@ __all__ = [
     "patch_weights",
     "point_load",
     "rectangle",
+    "sphere_points",
+    "tet_block",
+    "tet_fill_surface",
     "traction_load",
 ]

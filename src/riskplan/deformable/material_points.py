@@ -72,9 +72,10 @@ def locate_points(maps: np.ndarray, points: np.ndarray, chunk: int = 256, candid
 class Interpolator:
     """Barycentric interpolation at ``P`` material points of a mesh with ``N`` nodes.
 
-    Attributes: ``points (P, 2)`` reference positions, ``elements (P,)`` containing
-    elements, ``node_index (P, 3)`` their nodes, ``weights (P, 3)`` barycentric weights
-    (rows sum to 1), ``n_nodes``.
+    Attributes: ``points (P, d)`` reference positions, ``elements (P,)`` containing
+    elements, ``node_index (P, k)`` their nodes, ``weights (P, k)`` barycentric weights
+    (rows sum to 1), ``n_nodes``; ``d = 2, k = 3`` for triangles, ``d = 3, k = 4`` for
+    tetrahedra (:func:`riskplan.deformable.tissue3d.locate3d`).
     """
 
     points: np.ndarray
@@ -113,7 +114,7 @@ class Interpolator:
         """``scipy.sparse.csr_matrix (P, N)`` with ``matrix @ u[:, k] = interpolate(u)[:, k]``."""
         from scipy import sparse
 
-        rows = np.repeat(np.arange(self.n_points), 3)
+        rows = np.repeat(np.arange(self.n_points), self.weights.shape[1])
         return sparse.csr_matrix(
             (self.weights.ravel(), (rows, self.node_index.ravel())),
             shape=(self.n_points, self.n_nodes),

@@ -49,9 +49,27 @@ Modelling choices the paper leaves open (documented in docs/scenarios.md):
 * the tissue has no memory: the displacement is the response to the current push only.
 
 Full state: material pose, displacement, step index; the world pose is a function of them
-(kept in the state so that it is computed once). Reduced state ``x = (x, y, θ)``, the
-**world** pose (what LQG-MP checks against the deformed obstacles); sensing
-``z = (x, y) + n``, ``n ~ N(0, σ² I)`` (the world position, as the paper senses the robot).
+(kept in the state so that it is computed once). Sensing ``z = (x, y) + n``,
+``n ~ N(0, σ² I)``: the world position, as the paper senses the robot.
+
+Reduced state, two frames (``frame``; :meth:`NeedleScenario.with_frame`):
+
+* ``"world"`` (default; the paper's formulation, used by the reproduction's figures):
+  ``x = (x, y, θ)``, the world pose, what LQG-MP checks against the deformed obstacles;
+  ``z = H x + n`` with the constant ``H = [I₂ 0]``. With the tissue carrying the robot,
+  the world pose does not determine the next one (the deformation is hidden state), and
+  the fitted ``A_t`` of :func:`riskplan.control.linearize` are ill-conditioned
+  (docs/control.md, "Calibration").
+* ``"material"`` (beyond the paper): ``x = (X, Y, Θ)``, the material pose. Its dynamics
+  are the plain car above, whatever the tissue does; the tissue enters only the
+  measurement, ``z = h(x; s) + n`` with ``h(X, Y, Θ; s) = X + u(X; Θ, s)``, whose Jacobian
+  ``H_t = ∂h/∂x`` at the plan's pose is taken by central differences
+  (:meth:`NeedleScenario.observation_jacobian`). Obstacles and goal are fixed sets of
+  material points, so LQG-MP checks ``x`` against the reference polygons
+  (:meth:`NeedleScenario.state_obstacles`): the world position is inside a deformed
+  obstacle exactly when the material point is inside the reference one (the map
+  ``X ↦ X + u(X)`` is one-to-one while no element inverts), up to the deformed polygon's
+  edges being drawn straight between moved vertices.
 """
 
 from __future__ import annotations
@@ -77,6 +95,7 @@ from riskplan.scenarios.base import (
 from riskplan.scenarios.space import BoxSpace
 
 __all__ = [
+    "FRAMES",
     "NeedleConfig",
     "NeedleScenario",
     "NeedleState",
@@ -84,6 +103,16 @@ __all__ = [
     "car_step",
     "world_pose",
 ]
+
+
+#: The reduced-state frames of :class:`NeedleScenario` (module docstring).
+FRAMES = ("world", "material")
+
+#: Step of the central differences of :meth:`NeedleScenario.observation_jacobian`, in
+#: units of the scene size: far below an element (about 0.1 on the planning mesh), so a
+#: difference straddles an element edge (where the P1 field has a kink) only for a pose
+#: within 1e-6 of it.
+H_STEP = 1e-6
 
 
 def car_step(pose, v, phi, *, tau: float = 0.1, r_min: float = 0.25, phi_max: float = math.pi / 3):
@@ -417,8 +446,18 @@ class NeedleScenario(FEMScenario):
     name = "needle"
     state_type = NeedleState
 
-    def __init__(self, config: NeedleConfig | None = None, distribution=None, cache_size: int = 32):
+    def __init__(
+        self,
+        config: NeedleConfig | None = None,
+        distribution=None,
+        cache_size: int = 32,
+        frame: str = "world",
+    ):
         super().__init__(config or NeedleConfig(), distribution, cache_size)
+        if frame not in FRAMES:
+            raise InvalidInputError(f"frame: expected one of {FRAMES}, got {frame!r}")
+        #: the reduced state's frame (module docstring): ``"world"`` (the paper's) or ``"material"``
+        self.frame = frame
         self._bounds = np.array(
             [[0.0, self.config.v_max], [-self.config.phi_max, self.config.phi_max]]
         )
@@ -576,12 +615,74 @@ class NeedleScenario(FEMScenario):
             f[d.mesh.triangles[elem]] += lam[:, None] * dirn[None]
         return f
 
+    def with_frame(self, frame: str) -> NeedleScenario:
+        """This scenario (same configuration, distribution and FEM caches) with the reduced
+        state in ``frame`` (:data:`FRAMES`, module docstring). Simulation, collision and
+        goal tests are the same in both frames; what changes is what the controller and
+        LQG-MP see: :meth:`reduced`, :meth:`observation_jacobian`, :meth:`state_obstacles`
+        and :meth:`state_goal`."""
+        import copy
+
+        if frame not in FRAMES:
+            raise InvalidInputError(f"frame: expected one of {FRAMES}, got {frame!r}")
+        out = copy.copy(self)
+        out.frame = frame
+        return out
+
     def reduced(self, state: NeedleState) -> np.ndarray:
-        """``x = (x, y, θ)``, the world pose (a copy)."""
-        return np.array(state.pose)
+        """``x``, a copy: the world pose ``(x, y, θ)`` (``frame="world"``) or the material
+        pose ``(X, Y, Θ)`` (``frame="material"``)."""
+        return np.array(state.pose if self.frame == "world" else state.material)
+
+    def measure(self, state: NeedleState, noise=None, rng=None) -> np.ndarray:
+        """``z = (x, y) + n``, the sensed world position of the robot in ``state`` (both
+        frames; in the world frame equal to ``observe(reduced(state))``). ``noise (2,)``
+        explicit, or drawn from ``N(0, σ² I)`` with ``rng``; zero if neither is given."""
+        return np.array(state.pose[:2]) + gaussian_noise(self.sensing_cov, noise, rng, 2)
+
+    def observation_jacobian(
+        self, state: NeedleState, params: SimParams | None = None
+    ) -> np.ndarray:
+        """``H (2, 3)`` of the measurement at ``state`` with respect to the reduced state.
+
+        World frame: the constant ``[I₂ 0]``. Material frame: ``H = ∂h/∂(X, Y, Θ)`` of
+        ``h = X + u(X; Θ, s)`` (module docstring; ``s = params``, default the nominal), by
+        central differences with step :data:`H_STEP`, the tissue's response recomputed at
+        each perturbed material pose: ``u`` depends on the pose both through where the
+        interpolation reads it and through where and in which direction the robot pushes.
+        A robot outside the tissue (nothing moves it) has ``H = [I₂ 0]``.
+        """
+        if self.frame == "world":
+            return np.array(self.observation_matrix)
+        params = params or self.nominal_params
+        mat = np.asarray(state.material, dtype=np.float64)
+        H = np.zeros((2, 3))
+        for k in range(3):
+            e = np.zeros(3)
+            e[k] = H_STEP
+            hi = self._tissue_response(mat + e, params)[1][:2]
+            lo = self._tissue_response(mat - e, params)[1][:2]
+            H[:, k] = (hi - lo) / (2.0 * H_STEP)
+        return H
+
+    def state_obstacles(self, state: NeedleState) -> list[np.ndarray]:
+        """The obstacles in the reduced state's coordinates (what LQG-MP checks ``x``
+        against): the deformed polygons of ``state`` (world frame, :meth:`obstacles`) or
+        the reference polygons of material points (material frame)."""
+        if self.frame == "world":
+            return self.obstacles(state)
+        return [np.array(p) for p in self.config.obstacles]
+
+    def state_goal(self, state: NeedleState) -> np.ndarray:
+        """The goal polygon ``(24, 2)`` in the reduced state's coordinates (world:
+        :meth:`goal`; material: the reference goal disk's 24-gon)."""
+        if self.frame == "world":
+            return self.goal(state)
+        return np.array(self.config.goal_polygon)
 
     def observe(self, x, noise=None, rng=None) -> np.ndarray:
-        """``z = H x + n`` (paper eq. 3): position only. ``noise (2,)`` given explicitly,
+        """``z = H x + n`` (paper eq. 3): position only, for the world frame's reduced state
+        (in the material frame the measurement is not linear in ``x``: :meth:`measure`). ``noise (2,)`` given explicitly,
         or drawn from ``N(0, σ² I)`` with ``rng``; zero if neither is given."""
         x = as_array(x, "x", shape=(3,))
         return self.observation_matrix @ x + gaussian_noise(self.sensing_cov, noise, rng, 2)

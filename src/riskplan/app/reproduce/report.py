@@ -281,7 +281,8 @@ def _calibration_section(rep: Report, cal: dict) -> None:
         f"Rule (fixed in advance): {cal['rule']}. Cases: {', '.join(cal['cases'])}. "
         f"{size['n_executions']} closed-loop executions per plan, case and controller on common draws; "
         "sigma, truncation and sampling predict the paper's LQG controller, 'with disturbance state' "
-        "predicts the disturbance-state controller and is compared with its own executions. "
+        "predicts the disturbance-state controller, the material-frame estimators (needle) their "
+        "own material-frame controllers; each is compared with its own controller's executions. "
         "Candidates whose linearisation failed: "
         + ", ".join(f"{c}: {k}" for c, k in cal["failed"].items())
         + ".",
@@ -295,8 +296,9 @@ def _calibration_section(rep: Report, cal: dict) -> None:
         f"calibration_{name}",
         f"{name}: predicted vs measured P(success), 95 % Wilson intervals; the dashed line is the diagonal.",
     )
+    ests = [e for e in ESTIMATORS if cal.get(e) is not None]
     rows = []
-    for e in ESTIMATORS:
+    for e in ests:
         m = cal[e]
         rows.append(
             [
@@ -324,30 +326,35 @@ def _calibration_section(rep: Report, cal: dict) -> None:
         caption="best estimator meeting the goal: "
         + (ESTIMATOR_LABELS[cal["best"]] if cal["best"] else "none"),
     )
+    # one column per estimator, each controller's measured rate after its last estimator
+    ctrl_names = {
+        "lqg": "paper's LQG",
+        "dist": "disturbance controller",
+        "mat": "material-frame LQG",
+        "matdist": "material-frame bias-state controller",
+    }
+    columns = []
+    for i, e in enumerate(ests):
+        columns.append(("p", e))
+        k = CONTROLLER_OF[e]
+        if i + 1 == len(ests) or CONTROLLER_OF[ests[i + 1]] != k:
+            columns.append(("m", k))
     detail = []
     for r in cal["rows"]:
-        lqg, dist = r["measured"]["lqg"], r["measured"]["dist"]
-        detail.append(
-            [r["case"], f"{r['rank']} (#{r['candidate']})", f"{r['a_norm_max']:.3g}"]
-            + [f"{r['predicted'][e]:.3f}" for e in ESTIMATORS if CONTROLLER_OF[e] == "lqg"]
-            + [
-                f"{lqg['rate']:.3f} [{lqg['low']:.3f}, {lqg['high']:.3f}]",
-                f"{r['predicted']['disturbance']:.3f}",
-                f"{dist['rate']:.3f} [{dist['low']:.3f}, {dist['high']:.3f}]",
-            ]
-        )
+        row = [r["case"], f"{r['rank']} (#{r['candidate']})", f"{r['a_norm_max']:.3g}"]
+        for kind, v in columns:
+            if kind == "p":
+                row.append(f"{r['predicted'][v]:.3f}")
+            else:
+                m = r["measured"][v]
+                row.append(f"{m['rate']:.3f} [{m['low']:.3f}, {m['high']:.3f}]")
+        detail.append(row)
     Report.table(
         sec,
-        [
-            "case",
-            "σ rank (candidate)",
-            "max ‖A_t‖₂",
-            "sigma",
-            "truncation",
-            "sampling",
-            "measured LQG [95 %]",
-            "with disturbance state",
-            "measured, disturbance controller [95 %]",
+        ["case", "σ rank (candidate)", "max ‖A_t‖₂ (paper's)"]
+        + [
+            ESTIMATOR_LABELS[v] if kind == "p" else f"measured, {ctrl_names[v]} [95 %]"
+            for kind, v in columns
         ],
         detail,
         caption="every measured (case, plan): predicted P(success) beside the measured rate",

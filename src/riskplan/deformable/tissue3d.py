@@ -43,8 +43,8 @@ import numpy as np
 from riskplan._validation import as_array
 from riskplan.deformable.banded import BandedCholeskySolver
 from riskplan.deformable.hyperelastic import SolveInfo
-from riskplan.deformable.material_points import Interpolator
 from riskplan.deformable.material import Material
+from riskplan.deformable.material_points import Interpolator
 from riskplan.deformable.tetmesh import TetMesh
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
 from riskplan.threads import one_blas_thread

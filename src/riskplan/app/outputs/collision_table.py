@@ -8,7 +8,7 @@ Robot geometry, in order of preference: a trained MDN (``model``/``model_path``)
 robot's Cosserat model through :func:`~riskplan.kinematics.robot_mixture.robot_mixture`,
 or constant-curvature arcs of the 0.2 m paper robot.
 
-Reproduce: ``riskplan collision-table --samples 100000 --seed 0`` or
+Reproduce: ``riskplan collision table --samples 100000 --seed 0`` or
 ``python -m riskplan.app.outputs.collision_table``.
 """
 

@@ -34,7 +34,7 @@ def register(plan_app: typer.Typer) -> None:
         model: str = typer.Option(
             "paper",
             "--model",
-            help="'paper' (shipped model) or a model folder from `riskplan train`.",
+            help="'paper' (shipped model) or a model folder from `riskplan model train`.",
         ),
         env: Path = typer.Option(
             None,

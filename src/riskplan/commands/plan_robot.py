@@ -38,7 +38,7 @@ def register(plan_app: typer.Typer) -> None:
         model: str = typer.Option(
             None,
             "--model",
-            help="A model folder from `riskplan train` (default: the robot's cached model, built if absent).",
+            help="A model folder from `riskplan model train` (default: the robot's cached model, built if absent).",
         ),
         preset: str = typer.Option(
             "small", "--preset", help="Data-set preset of a model built here (tiny, small, paper)."

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from riskplan.errors import InvalidInputError
 
-__all__ = ["SCENARIO_NAMES", "make_scenario", "scenario_from_config"]
+__all__ = ["SCENARIO_NAMES", "load_scenario_file", "make_scenario", "scenario_from_config"]
 
 #: Names accepted by :func:`make_scenario` (and the CLI ``--scenario`` option).
 SCENARIO_NAMES = ("needle", "manipulation", "needle3d")
@@ -33,8 +33,6 @@ def make_scenario(name: str, case: str = "nominal"):
     if name == "needle3d":
         return scenario_from_config("needle3d", None, case)
     if isinstance(name, str | PathLike) and (str(name).endswith(".toml") or Path(name).is_file()):
-        from riskplan.scenarios.files import load_scenario_file
-
         return load_scenario_file(name, case)
     raise InvalidInputError(
         f"scenario: expected one of {', '.join(SCENARIO_NAMES)} or a scenario file (.toml), "
@@ -73,3 +71,12 @@ def scenario_from_config(kind: str, config, case: str = "nominal"):
         raise InvalidInputError(f"kind: expected one of {', '.join(SCENARIO_NAMES)}, got {kind!r}")
     sim.distribution = get_case(case, sim.nominal_params, actuation_cov=sim.actuation_cov())
     return sim
+
+
+def load_scenario_file(path, case: str = "nominal"):
+    """The scenario of a file (:func:`~riskplan.scenarios.files.read_scenario_config`) with
+    the parameter distribution of uncertainty ``case`` as its S (as :func:`make_scenario`)."""
+    from riskplan.scenarios.files import read_scenario_config
+
+    kind, cfg = read_scenario_config(path)
+    return scenario_from_config(kind, cfg, case)

@@ -384,9 +384,11 @@ def plan_robot(
         robot).
     step, resolution: trajectory step and motion-check spacing, planning coordinates.
     least_risk: also search the roadmap for the least-risk path (edge cost ``-log(1 - p)``).
-    risk: the per-configuration risk optimised, ``"eq9"`` (the paper's bound, the default) or
-        ``"cloud"`` (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact); combined
-        along the trajectory by eq. 10 either way.
+    risk: the per-configuration risk optimised, ``"eq9"`` (the paper's bound, the default),
+        ``"cloud"`` (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact) or
+        ``"bodies"`` (:class:`~riskplan.planning.risk.SampledBodyRisk`, body contact over
+        sampled executions; needs the model's robot); combined along the trajectory by eq. 10
+        either way.
 
     Eq. 9 per configuration ``p_t``, eq. 10 ``P = 1 - prod_t (1 - p_t)``. Raises
     :class:`InvalidInputError` for malformed or invalid inputs before any work,

@@ -178,27 +178,10 @@ def simulate_executions(robot, trajectory, seeds, *, return_frames: bool = False
     Inputs are trusted (validated by :func:`execute_on_robot`).
     """
     from riskplan.datasets.generate import to_base_frame
-    from riskplan.datasets.protocol import random_starts
-    from riskplan.robots.hysteresis import HysteresisModel, play_operator
+    from riskplan.planning.executions import execution_displacements
 
-    traj = np.asarray(trajectory, dtype=np.float64)
-    T, m = traj.shape
-    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
-    model = HysteresisModel(robot)
-    starts, plays, offsets = [], [], []
-    for sd in seeds:
-        c_start, c_run = np.random.SeedSequence(int(sd)).spawn(2)
-        starts.append(random_starts(lim, 1, np.random.default_rng(c_start))[0])
-        play, offset = model.sample_run(np.random.default_rng(c_run))
-        plays.append(play)
-        offsets.append(offset)
-    e = np.stack(starts)  # at rest at the start: engaged = start
-    play, offset = np.stack(plays), np.stack(offsets)
-    B = len(e)
-    eff = np.empty((B, T, m))
-    for t in range(T):
-        e = play_operator(e, np.broadcast_to(traj[t], (B, 1, m)), play)
-        eff[:, t] = np.clip(e + offset, lim[:, 0], lim[:, 1])
+    eff = execution_displacements(robot, trajectory, seeds)
+    B, T, m = eff.shape
     # configurations near the corners of the displacement box need more than max_tension; the
     # solver warns per call, which would flood a long run (the data generator does the same)
     rlog = logging.getLogger("riskplan.robots.robot")

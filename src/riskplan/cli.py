@@ -26,7 +26,7 @@ app = typer.Typer(
 )
 
 # Areas in pipeline order. Each module defines ``register(app: typer.Typer) -> None``.
-AREAS = ("robot", "dataset", "kinematics", "collision", "tissue", "plan", "reproduce")
+AREAS = ("robot", "dataset", "kinematics", "collision", "tissue", "plan", "reproduce", "study")
 # Benchmarks: ``riskplan.bench.<area>.run(quick: bool) -> dict`` (``-`` in an area name is ``_``
 # in the module name: ``planning-tissue`` -> ``riskplan.bench.planning_tissue``).
 BENCH_AREAS = (

@@ -34,7 +34,7 @@ def register(plan_app: typer.Typer) -> None:
         model: str = typer.Option(
             "paper",
             "--model",
-            help="'paper' (shipped model) or a model folder from `riskplan train`.",
+            help="'paper' (shipped model) or a model folder from `riskplan model train`.",
         ),
         env: Path = typer.Option(
             None,
@@ -186,6 +186,14 @@ def register(plan_app: typer.Typer) -> None:
             # frame from --base-pose, else the mesh's sidecar (riskplan env chest), else a named error
             pose = mesh_base_pose(env, BasePose.parse(base_pose) if base_pose is not None else None)
             env_world = Environment.load(env)
+            # units judged against the robot planned for (--robot, else the model's own)
+            judge = rob if rob is not None else mdl.robot
+            if judge is not None:
+                from riskplan.collision.segmentation import check_metre_scale
+
+                check_metre_scale(
+                    env_world.vertices, judge.params.backbone.length, source=f"--env {env}"
+                )
             env_base = environment_in_base_frame(env_world, pose)
             to_world = pose.to_world
             scene = {"scene": str(env), **pose.to_json()}

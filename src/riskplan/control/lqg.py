@@ -9,8 +9,7 @@ starting from the simulator's start state under the drawn parameters ``s`` and `
 
     u_t       = clip(u*_t + L_t x̂_t, bounds)                  (open loop: u_t = u*_t)
     y_{t+1}   = g(y_t, u_t, s)                                  (actuation noise inside s)
-    z_{t+1}   = h(x_{t+1}) + n_t,   n_t ~ N(0, N)               (sim.observe with a generator;
-                                                                 sim.measure(y_{t+1}) where defined)
+    z_{t+1}   = h(x_{t+1}) + n_t,   n_t ~ N(0, N)               (sim.measure(y_{t+1}) or sim.observe)
     x̂⁻        = A_t x̂_t + B_t (u_t − u*_t)
     x̂_{t+1}   = x̂⁻ + K_t (z_{t+1} − h(x*_{t+1}) − H_t x̂⁻)
 

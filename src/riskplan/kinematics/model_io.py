@@ -250,7 +250,7 @@ def load_model(path, robot=None) -> MDNModel:
     if extra.get("finished") is False:
         log.warning(
             "model %s is unfinished: saved during a training run that has not ended (best epoch %s); "
-            "resume it with `riskplan train --resume`",
+            "resume it with `riskplan model train --resume`",
             path,
             extra.get("best_epoch"),
         )

@@ -31,6 +31,7 @@ from riskplan.robots.params import (
     rpy_to_matrix,
 )
 from riskplan.robots.pose import BasePose, quaternion_to_matrix
+from riskplan.robots.rod_tables import LOCAL_MAXIT, LOCAL_TOL
 
 __all__ = [
     "PACKAGED_ROBOTS",
@@ -45,8 +46,6 @@ log = logging.getLogger(__name__)
 
 PACKAGED_ROBOTS = {"paper": "paper_robot.toml"}
 
-LOCAL_TOL = 1e-10  # Newton step (strain units: 1 and 1/m) of the local strain solve
-LOCAL_MAXIT = 50
 DISP_TOL = 1e-12  # m, complementarity residual of the displacement -> tension solve
 DISP_MAXIT = 60
 SHOOT_TOL = 1e-11  # N m, tip-moment residual of the shooting solve

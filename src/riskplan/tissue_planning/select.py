@@ -35,6 +35,7 @@ from riskplan.errors import (
     ConvergenceError,
     ElementInversionError,
     InvalidInputError,
+    NumericalError,
     SimulationError,
 )
 
@@ -55,7 +56,13 @@ __all__ = [
     "tie_note",
 ]
 
-_FAILURES = (ConvergenceError, ElementInversionError, SimulationError, np.linalg.LinAlgError)
+_FAILURES = (
+    ConvergenceError,
+    ElementInversionError,
+    NumericalError,
+    SimulationError,
+    np.linalg.LinAlgError,
+)
 
 
 @dataclass(frozen=True)

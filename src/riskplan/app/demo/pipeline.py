@@ -2,7 +2,7 @@
 
 Stages run in pipeline order and share a context dict (e.g. the robot stage puts
 the data-set paths there, the kinematics stage the trained model). Each stage is a
-module ``riskplan.app.demo_<area>`` with
+module ``riskplan.app.demo.<area>`` with
 
     def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None
 """

@@ -8,7 +8,7 @@ Robot geometry, in order of preference: a trained MDN (``model``/``model_path``)
 robot's Cosserat model through :func:`~riskplan.kinematics.robot_mixture.robot_mixture`,
 or constant-curvature arcs of the 0.2 m paper robot.
 
-Reproduce: ``riskplan collision-table --samples 100000 --seed 0`` or
+Reproduce: ``riskplan collision table --samples 100000 --seed 0`` or
 ``python -m riskplan.app.outputs.collision_table``.
 """
 
@@ -188,19 +188,3 @@ def to_markdown(rows, meta) -> str:
         f"(both variants); Monte Carlo: {meta['monte_carlo_seconds']:.1f} s.\n"
     )
     return head + "\n".join(lines) + tail
-
-
-def main() -> None:  # pragma: no cover - thin CLI wrapper
-    import argparse
-
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--samples", type=int, default=100_000)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--model", default=None)
-    args = ap.parse_args()
-    rows, meta = collision_table(seed=args.seed, n_samples=args.samples, model_path=args.model)
-    print(to_markdown(rows, meta))
-
-
-if __name__ == "__main__":  # pragma: no cover
-    main()

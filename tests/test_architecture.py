@@ -26,6 +26,7 @@ CORE = {
     "kernels",
     "gaussian_mixture",
     "geometry2d",
+    "geometry3d",
     "robots",
     "collision",
 }

@@ -193,7 +193,9 @@ def test_millimetres_where_metres_are_expected_are_said():
     with pytest.raises(
         InvalidInputError, match=r"times the robot's length \(0.12 m\).*millimetres.*--scale 0.001"
     ):
-        check_metre_scale(V, 0.12)
+        check_metre_scale(V, 0.12, remedy="Scale them by 0.001 (--scale 0.001)")
+    with pytest.raises(InvalidInputError, match=r"^organ.stl: .*millimetres.*by 0.001 before use"):
+        check_metre_scale(V, 0.12, source="organ.stl")
     np.testing.assert_allclose(
         check_metre_scale(V * 1e-3, 0.12), np.linalg.norm([0.15, 0.08, 0.06]), **TOL["float64_ref"]
     )

@@ -111,3 +111,25 @@ def test_env_file_gives_the_built_in_chest_answer(tmp_path):
     assert abs(json.loads(res.output)[0]["probability"] - built_in[0]["probability"]) <= rel * max(
         built_in[0]["probability"], 1e-3
     )
+
+
+def test_collision_env_in_millimetres_is_refused(tmp_path):
+    """A mesh in millimetres (a 0.2 m box written as 200 units) is judged against the robot's
+    length and refused, naming the option and the units; the same mesh in metres is accepted."""
+    import trimesh
+
+    from riskplan.errors import InvalidInputError
+
+    box = trimesh.creation.box(extents=[0.2, 0.2, 0.2])
+    box.apply_translation([0.3, 0.0, 0.1])
+    box.export(tmp_path / "m.stl")
+    box.apply_scale(1000.0)
+    box.export(tmp_path / "mm.stl")
+    args = ["collision", "--arc", "8,0", "--samples", "200", "--base-pose", "0,0,0,1,0,0,0"]
+    res = runner.invoke(app, [*args, "--env", str(tmp_path / "mm.stl"), "--json"])
+    assert isinstance(res.exception, InvalidInputError), res.output
+    msg = str(res.exception)
+    assert "--env" in msg and "mm.stl" in msg
+    assert "times the robot's length" in msg and "millimetres" in msg
+    res = runner.invoke(app, [*args, "--env", str(tmp_path / "m.stl"), "--json"])
+    assert res.exit_code == 0, res.output

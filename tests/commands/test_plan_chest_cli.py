@@ -222,3 +222,39 @@ def test_plan_chest_with_the_cloud_risk(tiny, tmp_path):
     assert plan["settings"]["risk"] == "cloud"
     nominal = json.loads((out / "nominal.json").read_text())
     assert all(0.0 <= p <= 1.0 for p in nominal["bounds_eq9"])
+
+
+def test_plan_chest_env_in_millimetres_is_refused(tmp_path):
+    """The --env mesh's units are judged against the model's robot before anything is written:
+    a mesh in millimetres is refused with the option, the ratio and the units named."""
+    import trimesh
+
+    from riskplan.kinematics import MDN, MDNModel, Normalisation, save_model
+    from riskplan.robots import load_robot
+
+    rob = load_robot("paper")
+    m = rob.n_tendons
+    torch.manual_seed(0)
+    net = MDN(m, 2, hidden=(8,), head_hidden=()).double()
+    norm = Normalisation(
+        np.full(m, 0.015), np.full(m, 0.015), np.array([0.0, 0.0, 0.1]), np.full(3, 0.02)
+    )
+    lim = np.tile([-0.01, 0.04], (m, 1))
+    save_model(
+        MDNModel(net, norm, lim, robot_name=rob.name, robot_toml=rob.toml_text()),
+        tmp_path / "model",
+    )
+    box = trimesh.creation.box(extents=[0.04, 0.2, 0.2])
+    box.apply_translation([0.06, 0.0, 0.1])
+    box.apply_scale(1000.0)
+    box.export(tmp_path / "mm.stl")
+    out = tmp_path / "out"
+    res = _run(
+        ["--model", str(tmp_path / "model"), "--env", str(tmp_path / "mm.stl")]
+        + ["--base-pose", "0,0,0,1,0,0,0", "--milestones", "10", "--executions", "0"]
+        + ["--out", str(out)]
+    )
+    assert isinstance(res.exception, InvalidInputError), res.output
+    msg = str(res.exception)
+    assert "--env" in msg and "times the robot's length" in msg and "millimetres" in msg
+    assert not out.exists() or not any(out.iterdir())

@@ -162,3 +162,78 @@ def test_base_pose_quaternion_orders_are_explicit(rng):
     assert not np.allclose(d.rotation, R, **TOL["orthonormality"])
     with pytest.raises(InvalidInputError, match="xyzw:x,y,z,qx,qy,qz,qw"):
         BasePose.parse("xyzw:1,2,3")
+
+
+@pytest.fixture(scope="module")
+def lab_robot():
+    """The lab's task robot: 3 tendons, base rotation and retraction enabled."""
+    from pathlib import Path
+
+    rob = load_robot(Path(__file__).parents[1] / "data" / "kuntz-lab" / "task-0001.toml")
+    assert rob.n_config == rob.n_tendons + 2
+    return rob
+
+
+def test_base_rotation_and_retraction_are_joints(tmp_path, rng, lab_robot):
+    """A robot with base motion exports rotation and retraction as the joints ``base_rotation``
+    (rad) and ``base_retraction`` (m) after the tendons; CSV and JSON round-trip bit for bit,
+    the YAML's positions too, and its times to the nanosecond."""
+    lim = lab_robot.configuration_limits
+    T, m = 9, lab_robot.n_tendons
+    # reachable configurations: tensions inside their limits, base motion inside its limits
+    v = lim[:, 0] + rng.uniform(0.1, 0.9, size=(T, lab_robot.n_config)) * np.ptp(lim, axis=1)
+    v[:, :m] = rng.uniform(0.0, 0.5, size=(T, m)) * lab_robot.tension_limits
+    q = lab_robot.configuration_to_displacements(v)
+    risk = rng.uniform(0, 0.05, size=T)
+    plan = tendon_plan(lab_robot, q, risk, trajectory_risk=0.1, name="optimised")
+    np.testing.assert_array_equal(plan.displacements, q[:, :m])
+    np.testing.assert_array_equal(plan.rotation, q[:, m])
+    np.testing.assert_array_equal(plan.retraction, q[:, m + 1])
+    # tensions of the robot retracted by each row's retraction: those the rows were made from
+    np.testing.assert_allclose(plan.tensions, v[:, :m], **TOL["tension_solve"])
+    files = write_tendon_plan(plan, tmp_path)
+    msg = yaml.safe_load(files["ros"].read_text())
+    names = [t.name for t in lab_robot.params.tendons]
+    assert msg["joint_names"] == names + ["base_rotation", "base_retraction"]
+    for i, p in enumerate(msg["points"]):
+        assert p["positions"] == q[i].tolist()
+        assert p["effort"] == plan.tensions[i].tolist() + [0.0, 0.0]
+    for kind in ("csv", "json", "ros"):
+        back = read_tendon_plan(files[kind])
+        assert back.tendon_names == plan.tendon_names
+        for key in ("displacements", "tensions", "rotation", "retraction"):
+            np.testing.assert_array_equal(getattr(back, key), getattr(plan, key))
+        if kind == "ros":
+            np.testing.assert_allclose(back.times, plan.times, **TOL["ros_duration"])
+        else:
+            np.testing.assert_array_equal(back.times, plan.times)
+            np.testing.assert_array_equal(back.risk, plan.risk)
+    # a robot without base motion has no base joints and keeps its layout
+    assert read_tendon_plan(files["json"]).trajectory_risk == 0.1
+
+
+def test_base_motion_sets_the_step_time(lab_robot):
+    """Each step lasts as long as its slowest actuator: a pure rotation of pi/2 takes
+    (pi/2) / ROTATION_SPEED, a pure retraction of 20 mm 0.02 / RETRACTION_SPEED, and a rotation
+    across +-pi is taken the short way round."""
+    from riskplan.planning.export import RETRACTION_SPEED, ROTATION_SPEED
+
+    d = np.zeros((4, 3))
+    rot = np.array([0.0, np.pi / 2, np.pi / 2, np.pi / 2])
+    ret = np.array([0.0, 0.0, 0.02, 0.02])
+    t = plan_times(d, rotation=rot, retraction=ret)
+    np.testing.assert_allclose(
+        np.diff(t),
+        [np.pi / 2 / ROTATION_SPEED, 0.02 / RETRACTION_SPEED, 0.0],
+        **TOL["float64_exact"],
+    )
+    wrap = plan_times(np.zeros((2, 3)), rotation=np.array([np.pi - 0.1, -np.pi + 0.1]))
+    np.testing.assert_allclose(wrap[-1], 0.2 / ROTATION_SPEED, **TOL["float64_exact"])
+    with pytest.raises(InvalidInputError, match="rotation_speed"):
+        plan_times(d, rotation=rot, rotation_speed=0.0)
+
+
+def test_a_tendon_named_like_a_base_joint_is_refused():
+    d = np.zeros((2, 2))
+    with pytest.raises(InvalidInputError, match="base_rotation"):
+        TendonPlan(np.zeros(2), d, None, np.zeros(2), ["a", "base_rotation"])

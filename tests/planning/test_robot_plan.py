@@ -74,6 +74,11 @@ def test_lab_task_to_an_exported_checked_plan(built):
     np.testing.assert_allclose(
         plan.tensions[-1], load_problem(TASK).goal[:3], **TOL["tension_solve"]
     )
+    # base rotation and retraction are the joints after the tendons, positions as planned
+    nom = read_tendon_plan(out / "nominal_plan.joint_trajectory.yaml")
+    np.testing.assert_array_equal(nom.displacements, nominal[:, :3])
+    np.testing.assert_array_equal(nom.rotation, nominal[:, 3])
+    np.testing.assert_array_equal(nom.retraction, nominal[:, 4])
     # checked on the robot model; no paper framing, no chest file names
     check = summary["robot_model_check"]
     assert set(check) == {"nominal", "optimised"}
@@ -102,6 +107,28 @@ def test_given_model_is_used_and_nothing_is_built(built, tmp_path):
     assert r.exit_code == 0, r.output
     assert json.loads((tmp_path / "o" / "plan.json").read_text())["model"] is None
     assert not fresh.exists()
+
+
+def test_executions_validate_a_base_motion_plan(built, tmp_path):
+    """`--executions N`: both trajectories (tendons, rotation, retraction) executed N times on
+    the simulated robot with the base as commanded, the tube body only (the disks sit at the
+    unretracted arc lengths); written as the chest plan writes its validation."""
+    _root, _, build_json, _ = built
+    out = tmp_path / "v"
+    r = _plan(
+        "--problem", str(TASK), "--model", str(build_json.parent / "model"),
+        "--out", str(out), "--executions", "12", "--mixture-samples", "200", *FAST,
+    )  # fmt: skip
+    assert r.exit_code == 0, r.output
+    rows = json.loads((out / "validation.json").read_text())["rows"]
+    assert [row["name"] for row in rows] == ["nominal", "optimised"]
+    nominal = np.array(json.loads((out / "nominal.json").read_text())["configurations"])
+    for row in rows:
+        assert row["n_robot"] == 12 and 0 <= row["robot_hits"] <= 12
+        assert row["robot_disks_mc"] is None
+        assert row["robot_low"] <= row["robot_mc"] <= row["robot_high"]
+    assert rows[0]["T"] == len(nominal) and len(rows[0]["robot_per_config"]) == len(nominal)
+    assert "retracting base: tube only" in (out / "validation.md").read_text()
 
 
 def _task_copy(tmp_path, old=None, new=None, mesh_scale=1.0):

@@ -233,3 +233,46 @@ def test_endpoint_warnings_name_a_colliding_start_or_goal():
     assert len(endpoint_warnings(rows, threshold=0.2)) == 4
     with pytest.raises(InvalidInputError, match="threshold"):
         endpoint_warnings(rows, threshold=0.0)
+
+
+def test_base_rotation_and_retraction_executions(tmp_path):
+    """A robot with base motion runs (T, n_config) trajectories: the tendons through the play
+    operator, the base as commanded. Oracles: turning the base by phi and the scene by Rz(phi)
+    gives the same clearances (common seeds); a retraction rho moves a slab's contact as the
+    exposed length L - rho: the straight robot hits a slab at z = 0.09 m when exposed 0.12 m,
+    never when exposed 0.07 m."""
+    from pathlib import Path
+
+    from riskplan.robots import load_robot
+
+    rob = load_robot(Path(__file__).parents[1] / "data" / "kuntz-lab" / "task-0001.toml")
+    m = rob.n_tendons
+    # the body: the lab's rod radius, not the paper robot's 10 mm separator disks
+    assert default_radius(rob) == 0.003 and default_radius(load_robot("paper")) == 0.01
+    d = rob.displacements_for_tensions(np.array([[0.0, 0.0, 0.0], [0.8, 0.0, 0.0]]))
+    phi = 0.7
+    traj0 = np.c_[d, [0.0, 0.0], [0.0, 0.0]]
+    traj1 = np.c_[d, [phi, phi], [0.0, 0.0]]
+    # a slab on the side the bent robot's tip moves to, 4 mm inside its nominal tip (the play
+    # operator leaves the executions short of the nominal shape)
+    tip = rob.solve_displacements(d[1]).positions[-1]
+    u = tip[:2] / np.linalg.norm(tip[:2])
+    e = np.array([[u[0], -u[1], 0.0], [u[1], u[0], 0.0], [0.0, 0.0, 1.0]])  # x -> u
+    near = float(np.linalg.norm(tip[:2])) - 0.004
+    slab0 = box_env([near, -0.05, 0.0], [near + 0.05, 0.05, 0.2])
+    side = Environment(slab0.vertices @ e.T, slab0.faces, validate=False)
+    c, s = np.cos(phi), np.sin(phi)
+    Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    turned = Environment(side.vertices @ Rz.T, side.faces, validate=False)
+    a = execute_on_robot(rob, traj0, side, 6, seed=2, backend="serial", radius=0.003)
+    b = execute_on_robot(rob, traj1, turned, 6, seed=2, backend="serial", radius=0.003)
+    np.testing.assert_allclose(a.clearance, b.clearance, **TOL["float64_ref"])
+    assert np.all(a.clearance[:, 0] > 0) and np.any(a.clearance[:, 1] < 0)  # the bend reaches
+    # retraction: a slab across the robot's axis above the exposed tip
+    slab = box_env([-0.05, -0.05, 0.09], [0.05, 0.05, 0.2])
+    zero = rob.displacements_for_tensions(np.zeros((1, m)))
+    full = execute_on_robot(rob, np.c_[zero, [0.0], [0.0]], slab, 4, seed=2, radius=0.003)
+    short = execute_on_robot(rob, np.c_[zero, [0.0], [0.05]], slab, 4, seed=2, radius=0.003)
+    assert int(full.trajectory.hits) == 4 and int(short.trajectory.hits) == 0
+    with pytest.raises(InvalidInputError, match=r"\(T, 3\) or \(T, 5\)"):
+        execute_on_robot(rob, np.zeros((2, 4)), slab, 2)

@@ -247,11 +247,31 @@ def decimate(vertices, faces, target_faces: int):
     return V2, F2
 
 
-def check_metre_scale(vertices, robot_length: float, *, source: str = "mesh") -> float:
+def check_metre_scale(
+    vertices,
+    robot_length: float,
+    *,
+    source: str = "mesh",
+    remedy: str = "Scale them by 0.001 before use",
+) -> float:
     """Raise :class:`InvalidInputError` when a mesh's extent suggests millimetres where metres
     are expected: its bounding-box diagonal exceeds ``MILLIMETRE_FACTOR`` robot lengths.
 
-    Returns the diagonal (m).
+    Parameters
+    ----------
+    vertices : (V, 3) array
+        The mesh's vertices (m expected).
+    robot_length : float
+        The robot's backbone length (m) the extent is judged against.
+    source : str
+        The file, option or field named in the error.
+    remedy : str
+        The sentence that ends the error (what the user can do).
+
+    Returns
+    -------
+    float
+        The bounding-box diagonal (m).
     """
     V = np.asarray(vertices, dtype=np.float64)
     diag = float(np.linalg.norm(np.ptp(V, axis=0)))
@@ -259,7 +279,7 @@ def check_metre_scale(vertices, robot_length: float, *, source: str = "mesh") ->
         raise InvalidInputError(
             f"{source}: the mesh spans {diag:.4g} m, {diag / robot_length:.0f} times the robot's length "
             f"({robot_length:.4g} m); its coordinates look like millimetres where metres are expected. "
-            "Scale them by 0.001 (--scale 0.001)"
+            f"{remedy}"
         )
     return diag
 
@@ -282,7 +302,12 @@ def segmentation_mesh(
     vol = read_label_volume(path)
     V, F = label_surface(vol, int(label), scale=scale)
     if robot_length is not None:
-        check_metre_scale(V, robot_length, source=f"{path} label {label}")
+        check_metre_scale(
+            V,
+            robot_length,
+            source=f"{path} label {label}",
+            remedy="Scale them by 0.001 (--scale 0.001)",
+        )
     info = {
         "source": Path(path).name,
         "label": int(label),

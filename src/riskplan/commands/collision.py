@@ -239,8 +239,22 @@ def register(app: typer.Typer) -> None:
         else:
             from riskplan.collision.mesh_files import BasePose, load_environment
 
+            # the mesh's units are judged against the robot whose geometry is checked: the
+            # model's robot, else --robot (also for --arc, whose scale the robot sets)
+            judge = None
+            if model is not None:
+                from riskplan.kinematics import load_model as _load_model
+
+                judge = _load_model(model).robot
+            if judge is None:
+                from riskplan.robots import load_robot as _load_robot
+
+                judge = _load_robot(robot)
             environment = load_environment(
-                env, base_pose=None if base_pose is None else BasePose.parse(base_pose)
+                env,
+                base_pose=None if base_pose is None else BasePose.parse(base_pose),
+                robot_length=judge.params.backbone.length,
+                source=f"--env {env}",
             )
         p = probability_of_collision(gm, environment, method, n_samples=samples, seed=seed)
         # the reference estimates the event the chosen method bounds: any point of the

@@ -101,13 +101,11 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Train a mixture density network on a point-cloud data set."""
         cfg = _config(locals(), n_components=components, early_stop_patience=patience)
-        import torch
 
         from riskplan.commands._shared import output_folder, progress_bar, stop_interrupted
         from riskplan.kinematics.data import read_point_clouds
         from riskplan.kinematics.training import train as run_train
 
-        torch.set_num_threads(1)
         ds = read_point_clouds(data)
         with output_folder(out), progress_bar() as bar:
             task = bar.add_task("training", total=cfg.epochs, status="")
@@ -304,7 +302,6 @@ def register(app: typer.Typer) -> None:
         seed: int = typer.Option(0, min=0),
     ) -> None:
         """Test NLL, Chamfer distance, HDR calibration and the paper's Fig. 5."""
-        import torch
 
         from riskplan.commands._shared import output_folder
         from riskplan.io import check_output_folder, write_json_atomic
@@ -314,7 +311,6 @@ def register(app: typer.Typer) -> None:
         from riskplan.kinematics.plotting import fig_samples_vs_truth, plotly_samples_vs_truth
 
         check_output_folder(out, "--out")
-        torch.set_num_threads(1)
         m = load_model(model)
         ds = read_point_clouds(data)
         with output_folder(out):

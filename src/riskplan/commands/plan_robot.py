@@ -18,7 +18,7 @@ def register(plan_app: typer.Typer) -> None:
         problem: Path = typer.Option(
             None,
             "--problem",
-            help="Problem file (the Kuntz lab's task TOML or riskplan's): the robot, its problem table (start, goal) and its environment table (meshes, spheres).",
+            help="Problem file (the Kuntz lab's task TOML or riskplan's): the robot, its problem table (start, goal) and its environment (meshes, spheres, points, voxels).",
         ),
         robot: str = typer.Option(
             None, "--robot", help="Robot (name or TOML), with --env and --start/--goal."
@@ -71,13 +71,30 @@ def register(plan_app: typer.Typer) -> None:
         resume: bool = typer.Option(
             False, "--resume", help="Continue an interrupted optimisation from OUT/checkpoint.json."
         ),
+        executions: int = typer.Option(
+            0,
+            "--executions",
+            min=0,
+            help="Validation: executions of each trajectory on the simulated robot (0: skip; the chest plan's check uses 1000).",
+        ),
+        mixture_samples: int = typer.Option(
+            100_000,
+            "--mixture-samples",
+            min=1,
+            help="Validation: Monte Carlo trials of the MDN mixtures.",
+        ),
+        voxels: str = typer.Option(
+            "auto",
+            "--voxels",
+            help="Plan against the problem's [voxel_environment]: auto (when it gives no mesh), on, off.",
+        ),
     ) -> None:
         """Plan for any robot in any anatomy (MDN paper section V): the model, the roadmap, the
         nominal trajectory, its P(collision) bound lowered by Bayesian optimisation; the plan
         exported (CSV, JSON, ROS 2 JointTrajectory) and checked on the robot model."""
         import math
 
-        import torch
+        import numpy as np
 
         from riskplan.commands._shared import progress_bar
         from riskplan.errors import InvalidInputError
@@ -89,7 +106,6 @@ def register(plan_app: typer.Typer) -> None:
             problem_from_options,
         )
 
-        torch.set_num_threads(1)
         for name, v in (
             ("step", step),
             ("resolution", resolution),
@@ -121,7 +137,7 @@ def register(plan_app: typer.Typer) -> None:
             if goal is not None and goal_tip is not None:
                 raise InvalidInputError("give --goal or --goal-tip, not both")
             prob = problem_from_options(robot, env, start, goal)
-        environment = problem_environment(prob)
+        environment = problem_environment(prob, voxels=voxels)
         s_cfg, g_cfg = problem_configurations(prob)
         tip = None if goal_tip is None else parse_numbers(goal_tip, "--goal-tip", count=3)
         if tip is not None:
@@ -160,8 +176,23 @@ def register(plan_app: typer.Typer) -> None:
                     progress=on_build,
                 )
                 mdl, box = build.model, build.box
-            from riskplan.planning.robot_plan import plan_robot
+            from riskplan.planning.robot_plan import (
+                check_plan_budget,
+                configuration_weights,
+                plan_robot,
+            )
 
+            if executions:
+                n_in = len(s_cfg)
+                lim = np.asarray(box if box is not None else mdl.limits, dtype=np.float64)
+                check_plan_budget(
+                    lim * configuration_weights(rob, n_in)[:, None],
+                    n_milestones=milestones,
+                    step=step,
+                    resolution=resolution,
+                    optimiser=cfg,
+                    executions=executions,
+                )
             out.mkdir(parents=True, exist_ok=True)
             t_rm = bar.add_task("roadmap", total=milestones, status="")
             t_bo = bar.add_task("optimisation (bo)", total=iterations, status="")
@@ -185,10 +216,35 @@ def register(plan_app: typer.Typer) -> None:
                     t_bo, completed=i, total=n, status=f"bound {b:.4f}"
                 ),
             )
+            validation = None
+            if executions:
+                from riskplan.planning.validate import validation_table
+
+                t_va = bar.add_task(
+                    f"validation ({executions} robot executions per trajectory)", total=None
+                )
+                validation = validation_table(
+                    mdl,
+                    {"nominal": plan.nominal, "optimised": plan.optimised.trajectory},
+                    environment,
+                    robot=rob,
+                    n_robot=executions,
+                    n_mixture=mixture_samples,
+                    seed=seed,
+                    backend="serial" if workers == 1 else "local",
+                    workers=workers or None,
+                )
+                bar.update(t_va, total=1, completed=1)
         from riskplan.app.outputs.robot_plan import write_robot_plan
 
         summary = write_robot_plan(
-            out, plan, model=mdl, environment=environment, problem=prob, build=build
+            out,
+            plan,
+            model=mdl,
+            environment=environment,
+            problem=prob,
+            build=build,
+            validation=validation,
         )
         res = plan.optimised
         typer.echo(
@@ -208,4 +264,10 @@ def register(plan_app: typer.Typer) -> None:
                 f"check on the robot model, {name}: {c['colliding']} of {c['configurations']} configurations collide, "
                 f"{c['above_max_tension']} need more than max_tension"
             )
+        if validation is not None:
+            from riskplan.planning.validate import endpoint_warnings, validation_markdown
+
+            typer.echo(validation_markdown(validation))
+            for line in endpoint_warnings(validation):
+                typer.echo(f"warning: {line}", err=True)
         typer.echo(f"wrote {out}")

@@ -5,11 +5,14 @@ Tendon robots (the chest planner and any plan in tendon-displacement space):
 and :func:`write_tendon_plan` writes it as
 
 * ``<stem>.csv`` -- one row per configuration: ``step, time_s, d_<tendon> (m)...,
-  tension_<tendon> (N)..., risk``;
+  [base_rotation_rad, base_retraction_m,] tension_<tendon> (N)..., risk``;
 * ``<stem>.json`` -- the same columns as lists, with names, units and the trajectory risk;
 * ``<stem>.joint_trajectory.yaml`` -- a ROS 2 ``trajectory_msgs/msg/JointTrajectory``:
-  ``joint_names`` = tendon names, ``positions`` = displacements (m), ``effort`` = tensions (N),
-  ``time_from_start`` = ``{sec, nanosec}``; e.g. ``ros2 topic pub /joint_trajectory
+  ``joint_names`` = tendon names, then ``base_rotation`` (rad, a revolute joint about the
+  base's z axis) and ``base_retraction`` (m, a prismatic joint, positive pulls the robot back
+  into its base) when the robot has them; ``positions`` = displacements (m), then rotation and
+  retraction; ``effort`` = tensions (N), then 0 for each base joint (no effort is planned for
+  them); ``time_from_start`` = ``{sec, nanosec}``; e.g. ``ros2 topic pub /joint_trajectory
   trajectory_msgs/msg/JointTrajectory "$(cat plan.joint_trajectory.yaml)"``.
 
 :func:`read_tendon_plan` reads any of the three back (the YAML's times to the nanosecond).
@@ -43,7 +46,15 @@ from riskplan.errors import DataFormatError, InvalidInputError
 # default actuator speed for the time stamps (m/s): 5 mm/s moves the paper robot's whole
 # displacement range (50 mm) in 10 s; an open choice, stated in every file written
 TENDON_SPEED = 0.005
+# base speeds of the time stamps, open choices of the same kind, stated in every file: a
+# half turn in 10 s (rad/s), and 10 mm/s retraction, which moves the lab's 0.119 m retraction
+# range in about 12 s (m/s)
+ROTATION_SPEED = np.pi / 10
+RETRACTION_SPEED = 0.01
 YAML_SUFFIX = ".joint_trajectory.yaml"
+#: ROS joint names of the base's degrees of freedom (after the tendons, in the lab's order)
+BASE_ROTATION_JOINT = "base_rotation"
+BASE_RETRACTION_JOINT = "base_retraction"
 
 
 @dataclass(frozen=True)
@@ -61,6 +72,8 @@ class TendonPlan:
     trajectory_risk : risk of the whole trajectory (e.g. the eq. 10 bound), or None.
     name : plan name (nominal, optimised, ...).
     tendon_speed : the speed the times were made with (m/s), or None when given.
+    rotation : (T,) base rotation (rad) about the base's z axis, or None (robot without it).
+    retraction : (T,) base retraction (m, positive pulls the robot into its base), or None.
     """
 
     times: np.ndarray
@@ -71,18 +84,30 @@ class TendonPlan:
     trajectory_risk: float | None = None
     name: str = "plan"
     tendon_speed: float | None = None
+    rotation: np.ndarray | None = None
+    retraction: np.ndarray | None = None
 
     def __post_init__(self):
         t = np.asarray(self.times, dtype=np.float64)
         d = np.asarray(self.displacements, dtype=np.float64)
         tau = None if self.tensions is None else np.asarray(self.tensions, dtype=np.float64)
         r = np.asarray(self.risk, dtype=np.float64)
+        rot = None if self.rotation is None else np.asarray(self.rotation, dtype=np.float64)
+        ret = None if self.retraction is None else np.asarray(self.retraction, dtype=np.float64)
         if d.ndim != 2 or d.shape[0] < 1:
             raise InvalidInputError(f"displacements: expected (T, m), got shape {d.shape}")
         T, m = d.shape
         arrays = [("times", t), ("displacements", d), ("risk", r)]
         arrays += [] if tau is None else [("tensions", tau)]
-        for key, a, shape in (("times", t, (T,)), ("tensions", tau, (T, m)), ("risk", r, (T,))):
+        arrays += [] if rot is None else [("rotation", rot)]
+        arrays += [] if ret is None else [("retraction", ret)]
+        for key, a, shape in (
+            ("times", t, (T,)),
+            ("tensions", tau, (T, m)),
+            ("risk", r, (T,)),
+            ("rotation", rot, (T,)),
+            ("retraction", ret, (T,)),
+        ):
             if a is not None and a.shape != shape:
                 raise InvalidInputError(f"{key}: expected shape {shape}, got {a.shape}")
         for key, a in arrays:
@@ -93,21 +118,53 @@ class TendonPlan:
         names = tuple(str(n) for n in self.tendon_names)
         if len(names) != m or len(set(names)) != m:
             raise InvalidInputError(f"tendon_names: expected {m} distinct names, got {names}")
+        clash = {BASE_ROTATION_JOINT, BASE_RETRACTION_JOINT} & set(names)
+        if clash:
+            raise InvalidInputError(
+                f"tendon_names: {sorted(clash)} is the ROS joint name of a base degree of freedom; "
+                "rename the tendon"
+            )
         for key, a in arrays:
             a.setflags(write=False)
             object.__setattr__(self, key, a)
         object.__setattr__(self, "tendon_names", names)
 
 
-def plan_times(displacements, tendon_speed: float = TENDON_SPEED) -> np.ndarray:
-    """``(T,)`` times: ``t_0 = 0``, ``t_i = t_{i-1} + max_j |d_ij - d_(i-1)j| / v``."""
-    if not (np.isfinite(tendon_speed) and tendon_speed > 0):
-        raise InvalidInputError(
-            f"tendon_speed: expected a positive speed (m/s), got {tendon_speed!r}"
-        )
+def plan_times(
+    displacements,
+    tendon_speed: float = TENDON_SPEED,
+    *,
+    rotation=None,
+    retraction=None,
+    rotation_speed: float = ROTATION_SPEED,
+    retraction_speed: float = RETRACTION_SPEED,
+) -> np.ndarray:
+    """``(T,)`` times: ``t_0 = 0`` and each step the time of its slowest actuator,
+
+    .. math:: t_i = t_{i-1} + \\max\\big(\\max_j |d_{ij} - d_{i-1,j}| / v,\\;
+              |\\mathrm{wrap}(\\theta_i - \\theta_{i-1})| / \\omega,\\;
+              |r_i - r_{i-1}| / v_r\\big)
+
+    with the base terms only where ``rotation`` (rad, the short way round as the robot model
+    interpolates) or ``retraction`` (m) ``(T,)`` is given.
+    """
+    for key, v, unit in (
+        ("tendon_speed", tendon_speed, "m/s"),
+        ("rotation_speed", rotation_speed, "rad/s"),
+        ("retraction_speed", retraction_speed, "m/s"),
+    ):
+        if not (np.isfinite(v) and v > 0):
+            raise InvalidInputError(f"{key}: expected a positive speed ({unit}), got {v!r}")
     d = np.asarray(displacements, dtype=np.float64)
-    step = np.abs(np.diff(d, axis=0)).max(axis=1) if len(d) > 1 else np.zeros(0)
-    return np.concatenate([[0.0], np.cumsum(step / tendon_speed)])
+    step = np.abs(np.diff(d, axis=0)).max(axis=1) / tendon_speed if len(d) > 1 else np.zeros(0)
+    if rotation is not None and len(d) > 1:
+        dth = np.diff(np.asarray(rotation, dtype=np.float64))
+        step = np.maximum(step, np.abs((dth + np.pi) % (2 * np.pi) - np.pi) / rotation_speed)
+    if retraction is not None and len(d) > 1:
+        step = np.maximum(
+            step, np.abs(np.diff(np.asarray(retraction, dtype=np.float64))) / retraction_speed
+        )
+    return np.concatenate([[0.0], np.cumsum(step)])
 
 
 def tendon_plan(
@@ -119,16 +176,32 @@ def tendon_plan(
     name: str = "plan",
     tendon_speed: float = TENDON_SPEED,
 ) -> TendonPlan:
-    """A :class:`TendonPlan` of a trajectory ``(T, m)`` for ``robot`` (tensions from the robot
-    model, :meth:`TendonRobot.tensions_for_displacements`; times from :func:`plan_times`).
+    """A :class:`TendonPlan` of a trajectory for ``robot`` (tensions from the robot model,
+    :meth:`TendonRobot.tensions_for_displacements`, at each configuration's retraction; times
+    from :func:`plan_times`).
 
+    ``displacements``: ``(T, m)`` tendon displacements, or ``(T, n_config)`` configurations of a
+    robot with base rotation and/or retraction (tendons, then rotation, then retraction: the
+    lab's order), whose base columns become the plan's ``rotation``/``retraction``.
     ``robot`` may be ``None`` (a model stored without its robot): no tensions, tendons named
     ``tendon0 .. tendon{m-1}``."""
-    d = np.asarray(displacements, dtype=np.float64)
+    q = np.asarray(displacements, dtype=np.float64)
+    rot = ret = None
+    if robot is not None and q.ndim == 2 and q.shape[1] == robot.n_config > robot.n_tendons:
+        d, rot, ret = robot.split_configuration(q)
+    else:
+        d = q
+    tau = None
+    if robot is not None:
+        tau = (
+            robot.tensions_for_displacements(d)
+            if ret is None
+            else robot.tensions_for_displacements(d, retraction=ret)
+        )
     return TendonPlan(
-        times=plan_times(d, tendon_speed),
+        times=plan_times(d, tendon_speed, rotation=rot, retraction=ret),
         displacements=d,
-        tensions=None if robot is None else robot.tensions_for_displacements(d),
+        tensions=tau,
         risk=np.asarray(risk, dtype=np.float64),
         tendon_names=(
             tuple(f"tendon{j}" for j in range(d.shape[1]))
@@ -138,6 +211,8 @@ def tendon_plan(
         trajectory_risk=None if trajectory_risk is None else float(trajectory_risk),
         name=name,
         tendon_speed=float(tendon_speed),
+        rotation=rot,
+        retraction=ret,
     )
 
 
@@ -155,16 +230,44 @@ def _conventions(plan: TendonPlan) -> dict:
         else "unknown (no robot model)",
         "risk": "per-step collision bound (eq. 9); trajectory_risk: eq. 10",
         "frame": "tendon space; no Cartesian frame",
+        **(
+            {
+                "base_rotation": f"rad about the base's z axis; ROS joint {BASE_ROTATION_JOINT!r}, "
+                f"timed at {ROTATION_SPEED:.6g} rad/s"
+            }
+            if plan.rotation is not None
+            else {}
+        ),
+        **(
+            {
+                "base_retraction": "m, positive pulls the robot into its base; ROS joint "
+                f"{BASE_RETRACTION_JOINT!r}, timed at {RETRACTION_SPEED} m/s"
+            }
+            if plan.retraction is not None
+            else {}
+        ),
     }
+
+
+def _base_columns(plan: TendonPlan) -> list[tuple[str, str, np.ndarray]]:
+    """``(csv column, ROS joint, values)`` of the plan's base degrees of freedom, in order."""
+    out = []
+    if plan.rotation is not None:
+        out.append(("base_rotation_rad", BASE_ROTATION_JOINT, plan.rotation))
+    if plan.retraction is not None:
+        out.append(("base_retraction_m", BASE_RETRACTION_JOINT, plan.retraction))
+    return out
 
 
 def tendon_plan_csv(plan: TendonPlan) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     tau = plan.tensions is not None
+    base = _base_columns(plan)
     w.writerow(
         ["step", "time_s"]
         + [f"d_{n}" for n in plan.tendon_names]
+        + [c for c, _, _ in base]
         + ([f"tension_{n}" for n in plan.tendon_names] if tau else [])
         + ["risk"]
     )
@@ -172,6 +275,7 @@ def tendon_plan_csv(plan: TendonPlan) -> str:
         w.writerow(
             [i, repr(float(plan.times[i]))]
             + [repr(float(v)) for v in plan.displacements[i]]
+            + [repr(float(v[i])) for _, _, v in base]
             + ([repr(float(v)) for v in plan.tensions[i]] if tau else [])
             + [repr(float(plan.risk[i]))]
         )
@@ -187,6 +291,8 @@ def tendon_plan_json(plan: TendonPlan) -> dict:
         "time_s": plan.times.tolist(),
         "displacements_m": plan.displacements.tolist(),
         "tensions_n": None if plan.tensions is None else plan.tensions.tolist(),
+        "base_rotation_rad": None if plan.rotation is None else plan.rotation.tolist(),
+        "base_retraction_m": None if plan.retraction is None else plan.retraction.tolist(),
         "risk": plan.risk.tolist(),
         "conventions": _conventions(plan),
     }
@@ -198,26 +304,38 @@ def _ros_duration(t: float) -> tuple[int, int]:
 
 
 def joint_trajectory_yaml(plan: TendonPlan, frame_id: str = "") -> str:
-    """ROS 2 ``trajectory_msgs/msg/JointTrajectory`` as YAML (block style, floats in full)."""
+    """ROS 2 ``trajectory_msgs/msg/JointTrajectory`` as YAML (block style, floats in full).
+
+    Joints: the tendons (positions = displacements, m; effort = tensions, N), then
+    ``base_rotation`` (rad) and ``base_retraction`` (m) where the plan has them (effort 0: none
+    is planned for the base)."""
 
     def flow(values):
         return "[" + ", ".join(repr(float(v)) for v in values) + "]"
 
+    base = _base_columns(plan)
+    joints = list(plan.tendon_names) + [j for _, j, _ in base]
+    what = "tendon displacements (m)" + "".join(
+        f", {j} ({'rad' if j == BASE_ROTATION_JOINT else 'm'})" for _, j, _ in base
+    )
     lines = [
-        f"# riskplan plan {plan.name!r}: positions = tendon displacements (m), effort = tensions (N)",
+        f"# riskplan plan {plan.name!r}: positions = {what}; effort = tensions (N)"
+        + (", 0 for the base joints" if base else ""),
         "header:",
         "  stamp: {sec: 0, nanosec: 0}",
         f"  frame_id: {json.dumps(frame_id)}",
-        "joint_names: [" + ", ".join(json.dumps(n) for n in plan.tendon_names) + "]",
+        "joint_names: [" + ", ".join(json.dumps(n) for n in joints) + "]",
         "points:",
     ]
     for i in range(len(plan.times)):
         sec, nsec = _ros_duration(float(plan.times[i]))
+        pos = list(plan.displacements[i]) + [v[i] for _, _, v in base]
+        eff = list(plan.tensions[i]) + [0.0] * len(base) if plan.tensions is not None else None
         lines += [
-            f"  - positions: {flow(plan.displacements[i])}",
+            f"  - positions: {flow(pos)}",
             "    velocities: []",
             "    accelerations: []",
-            f"    effort: {flow(plan.tensions[i]) if plan.tensions is not None else '[]'}",
+            f"    effort: {flow(eff) if eff is not None else '[]'}",
             f"    time_from_start: {{sec: {sec}, nanosec: {nsec}}}",
         ]
     return "\n".join(lines) + "\n"
@@ -262,6 +380,8 @@ def read_tendon_plan(path) -> TendonPlan:
                 trajectory_risk=j.get("trajectory_risk"),
                 name=j.get("name", path.stem),
                 tendon_speed=j.get("tendon_speed_m_per_s"),
+                rotation=j.get("base_rotation_rad"),
+                retraction=j.get("base_retraction_m"),
             )
         if path.suffix == ".csv":
             return _read_csv(path)
@@ -279,16 +399,26 @@ def _read_csv(path: Path) -> TendonPlan:
     names = [h[2:] for h in header if h.startswith("d_")]
     m = len(names)
     tau = any(h.startswith("tension_") for h in header)
-    if header[:2] != ["step", "time_s"] or header[-1] != "risk" or len(header) != 3 + (1 + tau) * m:
+    base = [h for h in header[2 + m :] if h in ("base_rotation_rad", "base_retraction_m")]
+    nb = len(base)
+    if (
+        header[:2] != ["step", "time_s"]
+        or header[-1] != "risk"
+        or len(header) != 3 + (1 + tau) * m + nb
+        or header[2 + m : 2 + m + nb] != base
+    ):
         raise ValueError(f"unexpected columns {header}")
     body = body.reshape(-1, len(header))
+    col = {h: body[:, 2 + m + k] for k, h in enumerate(base)}
     return TendonPlan(
         times=body[:, 1],
         displacements=body[:, 2 : 2 + m],
-        tensions=body[:, 2 + m : 2 + 2 * m] if tau else None,
+        tensions=body[:, 2 + m + nb : 2 + 2 * m + nb] if tau else None,
         risk=body[:, -1],
         tendon_names=names,
         name=path.stem,
+        rotation=col.get("base_rotation_rad"),
+        retraction=col.get("base_retraction_m"),
     )
 
 
@@ -297,15 +427,25 @@ def _read_yaml(path: Path) -> TendonPlan:
 
     msg = yaml.safe_load(path.read_text(encoding="utf-8"))
     pts = msg["points"]
-    names = msg["joint_names"]
+    names = list(msg["joint_names"])
     times = [p["time_from_start"]["sec"] + p["time_from_start"]["nanosec"] * 1e-9 for p in pts]
+    pos = np.array([p["positions"] for p in pts], dtype=np.float64).reshape(len(pts), len(names))
+    tendon = [
+        k for k, n in enumerate(names) if n not in (BASE_ROTATION_JOINT, BASE_RETRACTION_JOINT)
+    ]
+    base = {n: pos[:, k] for k, n in enumerate(names) if k not in tendon}
+    eff = None
+    if all(p["effort"] for p in pts):
+        eff = np.array([p["effort"] for p in pts], dtype=np.float64)[:, tendon]
     return TendonPlan(
         times=times,
-        displacements=[p["positions"] for p in pts],
-        tensions=[p["effort"] for p in pts] if all(p["effort"] for p in pts) else None,
+        displacements=pos[:, tendon],
+        tensions=eff,
         risk=np.zeros(len(pts)),  # a JointTrajectory has no field for risk
-        tendon_names=names,
+        tendon_names=[names[k] for k in tendon],
         name=path.name.removesuffix(YAML_SUFFIX),
+        rotation=base.get(BASE_ROTATION_JOINT),
+        retraction=base.get(BASE_RETRACTION_JOINT),
     )
 
 

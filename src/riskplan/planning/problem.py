@@ -211,7 +211,7 @@ class VoxelEnvironment:
     @property
     def rotation(self) -> np.ndarray:
         """``(3, 3)`` ``R`` with ``x_voxel = R x_robot``."""
-        from riskplan.robots.params import quaternion_to_matrix
+        from riskplan.robots.pose import quaternion_to_matrix
 
         return quaternion_to_matrix(self.rotation_quat)
 
@@ -306,12 +306,15 @@ class Problem:
     def load_meshes(self, *, check_units: bool = True):
         """The environment meshes as one ``trimesh.Trimesh`` (robot frame, m), or None.
 
-        With ``check_units``, a mesh whose bounding box is more than 100 times the robot's
-        length is refused: its units are most likely millimetres where metres are expected.
+        With ``check_units``, a mesh whose bounding box is more than ``MILLIMETRE_FACTOR``
+        robot lengths across is refused (:func:`~riskplan.collision.segmentation.check_metre_scale`):
+        its units are most likely millimetres where metres are expected.
         """
         if not self.meshes:
             return None
         import trimesh
+
+        from riskplan.collision.segmentation import check_metre_scale
 
         parts = []
         L = self.robot.params.backbone.length
@@ -322,15 +325,11 @@ class Problem:
                 raise _err(
                     self.path, f"environment.meshes[{k}].filename", f"cannot read {mp} ({exc})"
                 ) from exc
-            size = float(np.linalg.norm(mesh.extents)) if len(mesh.vertices) else 0.0
-            if check_units and size > 100 * L:
-                raise _err(
-                    self.path,
-                    f"environment.meshes[{k}].filename",
-                    f"{mp.name} spans {size:.4g} units, {size / L:.0f} times the robot's length "
-                    f"{L} m: its units look like millimetres where metres are expected "
-                    "(scale it by 0.001)",
-                )
+            if check_units and len(mesh.vertices):
+                try:
+                    check_metre_scale(mesh.vertices, L, source=mp.name)
+                except InvalidInputError as exc:
+                    raise _err(self.path, f"environment.meshes[{k}].filename", str(exc)) from None
             parts.append(mesh)
         return trimesh.util.concatenate(parts) if len(parts) > 1 else parts[0]
 

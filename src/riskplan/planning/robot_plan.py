@@ -171,26 +171,61 @@ def _icosphere(center, radius):
     return m
 
 
-def problem_environment(problem, *, check_units: bool = True):
+#: when the planner uses a problem's ``[voxel_environment]``: ``auto`` = when the problem gives
+#: no mesh (the lab's task files give the same anatomy as an STL and as voxels; the voxel
+#: surface is about 130 times the STL's triangles), ``on``, ``off``
+VOXEL_POLICIES = ("auto", "on", "off")
+
+
+def _concat(envs, names):
+    """One :class:`Environment` of solid obstacles from several (their obstacles in order)."""
+    V, F, owner, off, k = [], [], [], 0, 0
+    for e in envs:
+        V.append(e.vertices)
+        F.append(e.faces + off)
+        owner.append(e.face_obstacle + k)
+        off += len(e.vertices)
+        k += e.n_obstacles
+    return Environment(
+        np.vstack(V), np.vstack(F), np.concatenate(owner), list(names), validate=False
+    )
+
+
+def problem_environment(problem, *, check_units: bool = True, voxels: str = "auto"):
     """The planner's scene of a :class:`~riskplan.planning.problem.Problem` (robot frame).
 
-    Meshes (``[environment.meshes]``, units checked against the robot's length) and spheres
-    (``[environment.spheres]``, as closed icospheres). All closed: an :class:`Environment` of
-    solid obstacles. Any mesh open (the lab's anatomy has an opening where the robot enters): a
-    :class:`WallEnvironment` of all surfaces, the closed ones solid. ``[[environment.points]]``
-    and ``[voxel_environment]`` are not used by the planner (points have no volume; the voxels
-    describe the same anatomy as the mesh); a problem with neither meshes nor spheres is
-    refused. Raises :class:`InvalidInputError` naming the file and field.
+    * Meshes (``[environment.meshes]``, units checked against the robot's length) and spheres
+      (``[environment.spheres]``, as closed icospheres).
+    * Points (``[[environment.points]]``): a point has no volume, so it is an obstacle for the
+      robot's body, not for its backbone: a sphere of the robot's ``collision_radius`` (the
+      lab's ``tendon_robot.radius``; else the backbone's outer radius) about the point, the
+      set of backbone positions at which the body touches it.
+    * Voxels (``[voxel_environment]``, per ``voxels``: :data:`VOXEL_POLICIES`): the union of the
+      occupied cells, its exact boundary (:func:`riskplan.collision.voxels.voxel_environment`),
+      moved into the robot frame (:meth:`VoxelEnvironment.voxel_to_robot`).
+
+    All closed: an :class:`Environment` of solid obstacles. Any mesh open (the lab's anatomy
+    has an opening where the robot enters): a :class:`WallEnvironment` of all surfaces, the
+    closed ones solid. A problem with no obstacle the planner uses is refused. Raises
+    :class:`InvalidInputError` naming the file and field.
     """
     import trimesh
 
     from riskplan.collision.geometry import check_closed_mesh
 
     where = f"{problem.path}: " if problem.path is not None else ""
-    if not problem.meshes and not problem.spheres:
+    if voxels not in VOXEL_POLICIES:
+        raise InvalidInputError(f"voxels: expected one of {VOXEL_POLICIES}, got {voxels!r}")
+    use_voxels = problem.voxel_environment is not None and (
+        voxels == "on" or (voxels == "auto" and not problem.meshes)
+    )
+    if voxels == "on" and problem.voxel_environment is None:
+        raise InvalidInputError(f"{where}voxel_environment: none in the problem (voxels='on')")
+    if not problem.meshes and not problem.spheres and not len(problem.points) and not use_voxels:
         raise InvalidInputError(
-            f"{where}environment: no meshes or spheres; the planner needs obstacle surfaces "
-            "([[environment.meshes]] filename or [[environment.spheres]])"
+            f"{where}environment: no meshes, spheres, points or voxels; the planner needs "
+            "obstacles ([[environment.meshes]] filename, [[environment.spheres]], "
+            "[[environment.points]] or [voxel_environment])"
         )
     parts, names = [], []
     if problem.meshes:
@@ -202,6 +237,36 @@ def problem_environment(problem, *, check_units: bool = True):
     for k, s in enumerate(problem.spheres):
         parts.append(_icosphere(s.center, s.radius))
         names.append(f"sphere{k}")
+    if len(problem.points):
+        p = problem.robot.params
+        r = p.collision_radius if p.collision_radius is not None else p.backbone.outer_radius
+        for k, pt in enumerate(np.asarray(problem.points, dtype=np.float64).reshape(-1, 3)):
+            parts.append(_icosphere(pt, r))
+            names.append(f"point{k}")
+    extra = []
+    if use_voxels:
+        from riskplan.collision.voxels import voxel_environment
+
+        ve = problem.voxel_environment
+        grid = ve.load()
+        if len(grid.occupied) == 0:
+            raise InvalidInputError(
+                f"{where}voxel_environment: the voxel file has no occupied cell"
+            )
+        extra.append(
+            voxel_environment(
+                grid.occupied, grid.limits[:, 0], grid.spacing, transform=ve.voxel_to_robot
+            )
+        )
+        if check_units:
+            from riskplan.collision.segmentation import check_metre_scale
+
+            try:
+                check_metre_scale(
+                    extra[-1].vertices, problem.robot.params.backbone.length, source="voxels"
+                )
+            except InvalidInputError as exc:
+                raise InvalidInputError(f"{where}voxel_environment.filename: {exc}") from None
     closed = []
     for m in parts:
         try:
@@ -210,12 +275,19 @@ def problem_environment(problem, *, check_units: bool = True):
         except InvalidInputError:
             closed.append(False)
     if all(closed):
-        return Environment.from_meshes(parts, names=names)
+        envs = ([Environment.from_meshes(parts, names=names)] if parts else []) + extra
+        return envs[0] if len(envs) == 1 else _concat(envs, names + ["voxels"] * len(extra))
     solid_parts = [(m, n) for m, n, c in zip(parts, names, closed) if c]
-    solid = (
-        Environment.from_meshes([m for m, _ in solid_parts], names=[n for _, n in solid_parts])
+    solid_envs = (
+        [Environment.from_meshes([m for m, _ in solid_parts], names=[n for _, n in solid_parts])]
         if solid_parts
-        else None
+        else []
+    ) + extra
+    solid_names = [n for _, n in solid_parts] + ["voxels"] * len(extra)
+    solid = (
+        None
+        if not solid_envs
+        else (solid_envs[0] if len(solid_envs) == 1 else _concat(solid_envs, solid_names))
     )
     V, F, owner, off = [], [], [], 0
     for i, m in enumerate(parts):
@@ -223,8 +295,16 @@ def problem_environment(problem, *, check_units: bool = True):
         F.append(np.asarray(m.faces, dtype=np.int64) + off)
         owner.append(np.full(len(m.faces), i))
         off += len(m.vertices)
+    for j, e in enumerate(extra):
+        V.append(e.vertices)
+        F.append(e.faces + off)
+        owner.append(np.full(len(e.faces), len(parts) + j))
+        off += len(e.vertices)
     log.info("open surfaces in the scene (%s): planning with walls", names)
-    return WallEnvironment(np.vstack(V), np.vstack(F), np.concatenate(owner), names, solid=solid)
+    all_names = names + ["voxels"] * len(extra)
+    return WallEnvironment(
+        np.vstack(V), np.vstack(F), np.concatenate(owner), all_names, solid=solid
+    )
 
 
 def problem_configurations(problem) -> tuple[np.ndarray, np.ndarray]:
@@ -250,9 +330,9 @@ def problem_from_options(robot, env, start, goal):
 
     from riskplan.parsing import parse_numbers
     from riskplan.planning.problem import Problem
-    from riskplan.robots import TendonRobot, load_robot
+    from riskplan.robots import load_robot
 
-    rob = robot if isinstance(robot, TendonRobot) else load_robot(robot)
+    rob = load_robot(robot)
     mesh = Path(env)
     if not mesh.is_file():
         raise InvalidInputError(f"--env: no such file: {mesh}")
@@ -384,9 +464,11 @@ def plan_robot(
         robot).
     step, resolution: trajectory step and motion-check spacing, planning coordinates.
     least_risk: also search the roadmap for the least-risk path (edge cost ``-log(1 - p)``).
-    risk: the per-configuration risk optimised, ``"eq9"`` (the paper's bound, the default) or
-        ``"cloud"`` (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact); combined
-        along the trajectory by eq. 10 either way.
+    risk: the per-configuration risk optimised, ``"eq9"`` (the paper's bound, the default),
+        ``"cloud"`` (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact) or
+        ``"bodies"`` (:class:`~riskplan.planning.risk.SampledBodyRisk`, body contact over
+        sampled executions; needs the model's robot); combined along the trajectory by eq. 10
+        either way.
 
     Eq. 9 per configuration ``p_t``, eq. 10 ``P = 1 - prod_t (1 - p_t)``. Raises
     :class:`InvalidInputError` for malformed or invalid inputs before any work,

@@ -26,7 +26,9 @@ so a result depends on ``(robot, trajectory, seed, n)`` only, whatever the backe
 
 Body-in-obstacle test
     The body is the backbone swept by a ball of radius ``r`` (a tube closed by hemispheres).
-    Default ``r`` = the separator-disk radius of the point-cloud geometry
+    Default ``r`` = the robot description's ``collision_radius`` where it gives one (the Kuntz
+    lab's ``tendon_robot.radius``: their robots are rods without separator disks, 3 mm for the
+    task robot), else the separator-disk radius of the point-cloud geometry
     (:class:`~riskplan.robots.geometry.BodyGeometry`; 10 mm for the ``paper`` robot): the
     outer radius of the body the cameras see and the MDN learned, and the same 1 cm as
     :func:`~riskplan.kinematics.robot_mixture.robot_mixture`. The tube contains the 3 mm
@@ -54,7 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskplan._validation import as_array, check_range
+from riskplan._validation import as_array, check_count, check_range
 from riskplan.collision import (
     Environment,
     MonteCarloEstimate,
@@ -137,32 +139,24 @@ def _check_seed(seed) -> int:
     return int(seed)
 
 
-def _check_count(n, name: str) -> int:
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise InvalidInputError(f"{name}: expected a positive integer, got {n!r}")
-    return int(n)
-
-
 def _as_robot(robot):
-    if isinstance(robot, str) or hasattr(robot, "__fspath__"):
-        from riskplan.robots import load_robot
+    from riskplan.robots import load_robot
 
-        return load_robot(robot)
-    if not hasattr(robot, "solve_displacements") or not hasattr(robot, "toml_text"):
-        raise InvalidInputError(
-            f"robot: expected a TendonRobot or a robot name/path, got {type(robot).__name__}"
-        )
-    return robot
+    return load_robot(robot)
 
 
 def _check_trajectory(trajectory, robot) -> np.ndarray:
-    m = robot.n_tendons
+    m, nc = robot.n_tendons, robot.n_config
     traj = as_array(trajectory, "trajectory", min_ndim=2)
-    if traj.ndim != 2 or traj.shape[1] != m or traj.shape[0] < 1:
+    if traj.ndim != 2 or traj.shape[1] not in (m, nc) or traj.shape[0] < 1:
+        what = f"(T, {m})" if nc == m else f"(T, {m}) or (T, {nc}) with base rotation/retraction"
         raise InvalidInputError(
-            f"trajectory: expected shape (T, {m}) with T >= 1 for robot {robot.name!r} ({m} tendons), got {traj.shape}"
+            f"trajectory: expected shape {what} with T >= 1 for robot {robot.name!r} ({m} tendons), got {traj.shape}"
         )
-    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
+    lim = np.asarray(
+        robot.displacement_limits if traj.shape[1] == m else robot.configuration_limits,
+        dtype=np.float64,
+    )
     check_range(traj, "trajectory", low=lim[:, 0], high=lim[:, 1])
     return traj
 
@@ -176,7 +170,12 @@ def _check_environment(environment) -> Environment:
 
 
 def default_radius(robot) -> float:
-    """Outer body radius of ``robot``'s point-cloud geometry: its separator-disk radius [m]."""
+    """Outer body radius of ``robot`` [m]: the ``collision_radius`` its description gives (the
+    Kuntz lab's ``tendon_robot.radius``, a robot with no separator disks), else the
+    separator-disk radius of its point-cloud geometry."""
+    r = getattr(robot.params, "collision_radius", None)
+    if r is not None:
+        return float(r)
     from riskplan.robots.geometry import BodyGeometry
 
     return float(BodyGeometry.from_params(robot.params).disk_radius)
@@ -185,39 +184,36 @@ def default_radius(robot) -> float:
 def simulate_executions(robot, trajectory, seeds, *, return_frames: bool = False):
     """Backbones of the robot along ``trajectory (T, m)`` for runs seeded by ``seeds`` (length ``B``).
 
-    Protocol in the module docstring. Returns backbone positions ``(B, T, n, 3)`` in the
-    robot's base frame [m], and with ``return_frames`` also the body frames ``(B, T, n, 3, 3)``.
-    Inputs are trusted (validated by :func:`execute_on_robot`).
+    Protocol in the module docstring. A robot with base rotation/retraction takes
+    ``(T, n_config)`` configurations (tendons, then rotation, then retraction): the tendons go
+    through the play operator as above, the base arrives as commanded (as in the data-set
+    protocol, :func:`riskplan.datasets.generate.simulate_target`). Returns backbone positions
+    ``(B, T, n, 3)`` in the robot's base frame [m], and with ``return_frames`` also the body
+    frames ``(B, T, n, 3, 3)``. Inputs are trusted (validated by :func:`execute_on_robot`).
     """
     from riskplan.datasets.generate import to_base_frame
-    from riskplan.datasets.protocol import random_starts
-    from riskplan.robots.hysteresis import HysteresisModel, play_operator
+    from riskplan.planning.executions import execution_displacements
 
-    traj = np.asarray(trajectory, dtype=np.float64)
-    T, m = traj.shape
-    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
-    model = HysteresisModel(robot)
-    starts, plays, offsets = [], [], []
-    for sd in seeds:
-        c_start, c_run = np.random.SeedSequence(int(sd)).spawn(2)
-        starts.append(random_starts(lim, 1, np.random.default_rng(c_start))[0])
-        play, offset = model.sample_run(np.random.default_rng(c_run))
-        plays.append(play)
-        offsets.append(offset)
-    e = np.stack(starts)  # at rest at the start: engaged = start
-    play, offset = np.stack(plays), np.stack(offsets)
-    B = len(e)
-    eff = np.empty((B, T, m))
-    for t in range(T):
-        e = play_operator(e, np.broadcast_to(traj[t], (B, 1, m)), play)
-        eff[:, t] = np.clip(e + offset, lim[:, 0], lim[:, 1])
+    q = np.asarray(trajectory, dtype=np.float64)
+    rot = ret = None
+    if q.shape[1] != robot.n_tendons:
+        traj, rot, ret = robot.split_configuration(q, validate=False)
+    else:
+        traj = q
+    eff = execution_displacements(robot, traj, seeds)
+    B, T, m = eff.shape
     # configurations near the corners of the displacement box need more than max_tension; the
     # solver warns per call, which would flood a long run (the data generator does the same)
     rlog = logging.getLogger("riskplan.robots.robot")
     level = rlog.level
     rlog.setLevel(logging.ERROR)
+    base = {}
+    if rot is not None:
+        base["rotation"] = np.tile(rot, B)  # run-major like eff.reshape(B * T, m)
+    if ret is not None:
+        base["retraction"] = np.tile(ret, B)
     try:
-        shape = robot.solve_displacements(eff.reshape(B * T, m), validate=False)
+        shape = robot.solve_displacements(eff.reshape(B * T, m), validate=False, **base)
     finally:
         rlog.setLevel(level)
     P, R = to_base_frame(robot, shape.positions, shape.rotations)
@@ -336,11 +332,10 @@ def _geometry(text: str):
 _ENVIRONMENTS: dict = {}
 
 
-@functools.lru_cache(maxsize=4)
 def _robot(text: str):
-    from riskplan.robots import robot_from_toml
+    from riskplan.robots import cached_robot
 
-    return robot_from_toml(text)
+    return cached_robot(text)
 
 
 def execute_on_robot(
@@ -363,7 +358,8 @@ def execute_on_robot(
     Parameters
     ----------
     robot: :class:`~riskplan.robots.TendonRobot` or a robot name/path (``"paper"``).
-    trajectory: ``(T, m)`` commanded tendon displacements [m], within the robot's limits.
+    trajectory: ``(T, m)`` commanded tendon displacements [m], within the robot's limits; or
+        ``(T, n_config)`` configurations of a robot with base rotation/retraction.
     environment: 3-D obstacles in the robot's base frame (e.g. ``build_chest(seed).base_environment``).
     n, seed: number of executions and their seed (module docstring: protocol and seeding).
     body: ``"tube"`` (default): the backbone swept by a ball of ``radius`` (module docstring);
@@ -383,9 +379,9 @@ def execute_on_robot(
     robot = _as_robot(robot)
     traj = _check_trajectory(trajectory, robot)
     env = _check_environment(environment)
-    n = _check_count(n, "n")
+    n = check_count(n, "n", 1)
     seed = _check_seed(seed)
-    chunk = _check_count(chunk, "chunk")
+    chunk = check_count(chunk, "chunk", 1)
     if backend not in BACKENDS:
         raise InvalidInputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
     if not 0 < confidence < 1:
@@ -451,7 +447,7 @@ def mixture_monte_carlo(
     per configuration (what eq. 9 bounds). Wilson intervals at ``confidence``.
     """
     env = _check_environment(environment)
-    n = _check_count(n, "n")
+    n = check_count(n, "n", 1)
     seed = _check_seed(seed)
     m = int(getattr(model, "n_tendons", -1))
     traj = as_array(trajectory, "trajectory", min_ndim=2)
@@ -491,7 +487,8 @@ def validation_table(
     (:func:`mixture_monte_carlo`, ``n_mixture`` trials), ``robot_mc`` / ``robot_low`` /
     ``robot_high`` / ``robot_hits`` / ``robot_per_config`` (:func:`execute_on_robot`, ``n_robot``
     executions, the conservative tube of ``radius``), the same with prefix ``robot_disks_`` for
-    the backbone-plus-disks body (``body="disks"``, the same executions), ``radius`` and ``n_robot``. Every trajectory uses the same ``seed`` (common
+    the backbone-plus-disks body (``body="disks"``, the same executions; ``None`` for a
+    trajectory with base retraction, judged with the tube only), ``radius`` and ``n_robot``. Trajectories may be ``(T, n_config)`` configurations of a robot with base rotation/retraction. Every trajectory uses the same ``seed`` (common
     random numbers: the same starts and transmission draws), which sharpens the comparison
     between trajectories. ``robot`` defaults to the robot the model was trained for.
     """
@@ -504,9 +501,12 @@ def validation_table(
             raise InvalidInputError("robot: the model carries no robot description; pass robot=")
         robot = robot_from_toml(model.robot_toml)
     robot = _as_robot(robot)
-    if int(model.n_tendons) != robot.n_tendons:
+    # a model of a robot with base motion takes its configurations (tendons, rotation,
+    # retraction): its input count is the robot's n_config
+    if int(model.n_tendons) not in (robot.n_tendons, robot.n_config):
         raise InvalidInputError(
-            f"model: has {model.n_tendons} tendons, robot {robot.name!r} has {robot.n_tendons}"
+            f"model: has {model.n_tendons} inputs, robot {robot.name!r} has {robot.n_tendons} "
+            f"tendons ({robot.n_config} configuration variables)"
         )
     rows = []
     for name, traj in trajectories.items():
@@ -517,8 +517,22 @@ def validation_table(
         rob = execute_on_robot(
             robot, traj, environment, n_robot, seed, radius=radius, backend=backend, workers=workers
         )
-        dsk = execute_on_robot(
-            robot, traj, environment, n_robot, seed, body="disks", backend=backend, workers=workers
+        # the disks sit at the unretracted robot's arc lengths: a retracted robot's body is
+        # another geometry, so its executions are judged with the tube only
+        retracts = traj.shape[1] != robot.n_tendons and robot.base_motion.retraction
+        dsk = (
+            None
+            if retracts
+            else execute_on_robot(
+                robot,
+                traj,
+                environment,
+                n_robot,
+                seed,
+                body="disks",
+                backend=backend,
+                workers=workers,
+            )
         )
         rows.append(
             {
@@ -536,11 +550,26 @@ def validation_table(
                 "robot_high": float(rob.trajectory.high),
                 "robot_hits": int(rob.trajectory.hits),
                 "robot_per_config": rob.per_configuration.probability.tolist(),
-                "robot_disks_mc": float(dsk.trajectory.probability),
-                "robot_disks_low": float(dsk.trajectory.low),
-                "robot_disks_high": float(dsk.trajectory.high),
-                "robot_disks_hits": int(dsk.trajectory.hits),
-                "robot_disks_per_config": dsk.per_configuration.probability.tolist(),
+                **(
+                    {
+                        "robot_disks_mc": float(dsk.trajectory.probability),
+                        "robot_disks_low": float(dsk.trajectory.low),
+                        "robot_disks_high": float(dsk.trajectory.high),
+                        "robot_disks_hits": int(dsk.trajectory.hits),
+                        "robot_disks_per_config": dsk.per_configuration.probability.tolist(),
+                    }
+                    if dsk is not None
+                    else {
+                        k: None
+                        for k in (
+                            "robot_disks_mc",
+                            "robot_disks_low",
+                            "robot_disks_high",
+                            "robot_disks_hits",
+                            "robot_disks_per_config",
+                        )
+                    }
+                ),
                 "n_robot": int(n_robot),
                 "radius": rob.radius,
             }
@@ -561,8 +590,13 @@ def validation_markdown(rows: list[dict]) -> str:
             f"| {r['name']} | {100 * r['bound']:.1f} % | {100 * r['bound_union']:.1f} % | {100 * r['mixture_mc']:.1f} % "
             f"[{100 * r['mixture_low']:.1f}, {100 * r['mixture_high']:.1f}] (n = {r['n_mixture']}) | "
             f"{100 * r['robot_mc']:.1f} % [{100 * r['robot_low']:.1f}, {100 * r['robot_high']:.1f}] "
-            f"(n = {r['n_robot']}, radius {1000 * r['radius']:.0f} mm) | {100 * r['robot_disks_mc']:.1f} % "
-            f"[{100 * r['robot_disks_low']:.1f}, {100 * r['robot_disks_high']:.1f}] |"
+            f"(n = {r['n_robot']}, radius {1000 * r['radius']:.0f} mm) | "
+            + (
+                f"{100 * r['robot_disks_mc']:.1f} % "
+                f"[{100 * r['robot_disks_low']:.1f}, {100 * r['robot_disks_high']:.1f}] |"
+                if r.get("robot_disks_mc") is not None
+                else "– (retracting base: tube only) |"
+            )
         )
     return "\n".join(lines) + "\n"
 

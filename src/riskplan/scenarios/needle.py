@@ -1,6 +1,7 @@
 """Scenario 1 of the deformable-planning paper (Patil, van den Berg & Alterovitz, RSS 2011,
 section V-A): a car without reverse — a planar model of a bevel-tip steerable needle —
-moving through a deformable unit square fixed at its four corners. The paper: "the robot
+moving through a deformable unit square fixed at its four corners (or, from a scenario file,
+a tissue of any outline with a named fixed boundary: :class:`NeedleConfig`). The paper: "the robot
 traverses the deformable plane and pushes its surface forward"; the robot rides on the
 tissue, so where the tissue goes, the robot goes.
 
@@ -264,6 +265,16 @@ def _default_obstacles():
 class NeedleConfig:
     """Geometry and constants of the needle scenario (paper V-A values by default).
 
+    ``width``/``height``: the reference tissue ``[0, width] x [0, height]`` (the paper's
+    unit square);
+    ``outline``: or a tissue of any simple polygon ``(n, 2)`` of material points
+    (counter-clockwise); ``width``/``height`` then become its bounding box's extents and
+    :attr:`bounds` its box;
+    ``fixed_segments``: ``(k, 2, 2)`` material segments whose mesh nodes are fixed (a
+    zero-length segment fixes the node at its point); ``fixed_region``: ``(2, 2)`` box
+    ``[lo, hi]`` whose boundary nodes are fixed. Both ``None`` (the paper): the outline's
+    vertices (the square's four corners) are fixed. At least two distinct nodes must end up
+    fixed (no rigid motion), checked when the mesh is made;
     ``obstacles``: polygons ``(k, 2)`` of material points (reference configuration);
     ``goal_center``/``goal_radius``: the goal disk (a 24-gon of material points);
     ``sensing_std``: standard deviation of each position measurement;
@@ -298,8 +309,31 @@ class NeedleConfig:
     actuation_std: tuple[float, float] | None = None
     youngs_modulus: float = 50.0
     poissons_ratio: float = 0.4
+    outline: np.ndarray | None = None
+    fixed_segments: np.ndarray | None = None
+    fixed_region: np.ndarray | None = None
 
     def __post_init__(self):
+        if self.outline is not None:
+            poly = geo.check_simple_polygon(
+                as_array(self.outline, "outline", shape=(None, 2)), "outline"
+            )
+            if geo.polygon_area(poly) <= 0:
+                raise InvalidInputError("outline: must be counter-clockwise with a positive area")
+            object.__setattr__(self, "outline", frozen_array(poly))
+            ext = poly.max(0) - poly.min(0)
+            object.__setattr__(self, "width", float(ext[0]))
+            object.__setattr__(self, "height", float(ext[1]))
+        if self.fixed_segments is not None:
+            seg = as_array(self.fixed_segments, "fixed_segments", shape=(None, 2, 2))
+            object.__setattr__(self, "fixed_segments", frozen_array(seg))
+        if self.fixed_region is not None:
+            box = as_array(self.fixed_region, "fixed_region", shape=(2, 2))
+            if not np.all(box[1] >= box[0]):
+                raise InvalidInputError(
+                    f"fixed_region: hi must not be below lo, got {box.tolist()}"
+                )
+            object.__setattr__(self, "fixed_region", frozen_array(box))
         if self.sensing_std is None:
             object.__setattr__(
                 self, "sensing_std", 0.01 * max(float(self.width), float(self.height))
@@ -344,11 +378,62 @@ class NeedleConfig:
 
     @property
     def corners(self) -> np.ndarray:
+        """The reference tissue's polygon ``(n, 2)``: the outline, else the rectangle."""
+        if self.outline is not None:
+            return self.outline
         return geo.rectangle_polygon((0.0, 0.0), (self.width, self.height))
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """``(2, 2)`` ``[lo, hi]`` bounding box of the reference tissue."""
+        if self.outline is not None:
+            return np.stack([self.outline.min(0), self.outline.max(0)])
+        return np.array([[0.0, 0.0], [float(self.width), float(self.height)]])
+
+    def fixed_nodes(self, mesh) -> np.ndarray:
+        """Sorted indices of the fixed nodes of ``mesh`` (a mesh of :attr:`corners`): the
+        outline's vertex nodes by default, else the nodes within ``1e-9`` of the tissue's
+        extent of a ``fixed_segments`` entry and the boundary nodes inside ``fixed_region``.
+        Raises :class:`InvalidInputError` when fewer than two nodes are fixed."""
+        if self.fixed_segments is None and self.fixed_region is None:
+            return mesh.vertex_nodes
+        X = mesh.nodes
+        tol = 1e-9 * float(np.ptp(self.corners, axis=0).max())
+        keep = np.zeros(len(X), dtype=bool)
+        if self.fixed_segments is not None and len(self.fixed_segments):
+            seg = np.ascontiguousarray(self.fixed_segments.reshape(-1, 4))
+            dist, _, _ = geo.closest_points_on_segments(seg, np.ascontiguousarray(X))
+            keep |= dist <= tol
+        if self.fixed_region is not None:
+            b = mesh.boundary_nodes
+            lo, hi = self.fixed_region
+            inside = np.all((X[b] >= lo - tol) & (X[b] <= hi + tol), axis=1)
+            keep[b[inside]] = True
+        nodes = np.flatnonzero(keep)
+        if len(nodes) < 2:
+            raise InvalidInputError(
+                f"fixed boundary: {len(nodes)} mesh node(s) fixed; at least two distinct nodes "
+                "must be fixed so the tissue cannot move as a rigid body"
+            )
+        return nodes
 
     @property
     def goal_polygon(self) -> np.ndarray:
         return geo.circle_polygon(self.goal_center, self.goal_radius, 24)
+
+
+@dataclass(frozen=True, eq=False)
+class _OutlineSpace(BoxSpace):
+    """The needle's :class:`BoxSpace` of a non-rectangular tissue: a state is valid when it
+    lies in the box and its position in the reference ``outline (n, 2)`` (boundary
+    included; the world position is judged, as the rectangle's box judges it)."""
+
+    outline: np.ndarray | None = None
+
+    def contains(self, x: np.ndarray) -> bool:
+        return super().contains(x) and bool(
+            geo.points_in_polygon(np.asarray(x[:2], dtype=np.float64)[None], self.outline)[0]
+        )
 
 
 class _MeshData:
@@ -361,7 +446,7 @@ class _MeshData:
         mesh = mesh_polygon(cfg.corners, n_elements)
         self.mesh = mesh
         self.base = LinearElasticModel(
-            mesh, Material(50.0, 0.4, plane=cfg.plane), mesh.vertex_nodes
+            mesh, Material(50.0, 0.4, plane=cfg.plane), cfg.fixed_nodes(mesh)
         )
         self.locator = mesh.locator
         #: ``(n_elements, 3, 2)`` ∇_X of the P1 shape functions (the deformation gradient)
@@ -486,26 +571,29 @@ class NeedleScenario(FEMScenario):
         """``[[0, v_max], [−φ_max, φ_max]]``."""
         return self._bounds
 
-    @property
-    def goal_radius(self) -> float:
-        """Radius of the (undeformed) goal disk, ``config.goal_radius``."""
-        return float(self.config.goal_radius)
-
     def planning_space(self) -> BoxSpace:
         """The RRT's space (:class:`~riskplan.scenarios.space.PlanningScenario`).
 
         Returns
         -------
         BoxSpace
-            The tissue rectangle for ``(x, y)``, the metric ``(x, y)`` plus ``r_min · θ``
+            The tissue's bounding box for ``(x, y)`` (the rectangle, or the outline's box:
+            samples outside a non-rectangular outline leave the tissue, which the planner's
+            state checks reject), the metric ``(x, y)`` plus ``r_min · θ``
             (a heading error of 1 rad counts like the arc the car needs to turn by it),
             3 steps per extension (at most 0.15 length units, about the goal disk's
             diameter) and :func:`car_steer` as the local steering rule.
         """
         cfg = self.config
-        return BoxSpace(
-            low=[0.0, 0.0, -math.pi],
-            high=[cfg.width, cfg.height, math.pi],
+        (lo_x, lo_y), (hi_x, hi_y) = cfg.bounds
+        space = (
+            BoxSpace
+            if cfg.outline is None
+            else functools.partial(_OutlineSpace, outline=cfg.outline)
+        )
+        return space(
+            low=[lo_x, lo_y, -math.pi],
+            high=[hi_x, hi_y, math.pi],
             weights=[1.0, 1.0, cfg.r_min**2],
             periodic=[False, False, True],
             goal=[cfg.goal_center[0], cfg.goal_center[1], 0.0],
@@ -704,8 +792,10 @@ class NeedleScenario(FEMScenario):
 
     def inside(self, state: NeedleState) -> bool:
         """Whether the robot is in the tissue: its material point lies in the reference
-        square."""
+        square (or the reference outline, boundary included)."""
         x, y = state.material[0], state.material[1]
+        if self.config.outline is not None:
+            return bool(geo.points_in_polygon(np.array([[x, y]]), self.config.outline)[0])
         return bool(0.0 <= x <= self.config.width and 0.0 <= y <= self.config.height)
 
     def in_collision(self, state: NeedleState) -> bool:

@@ -33,7 +33,8 @@ def _limits(sim):
     cfg = sim.config
     if sim.name == "needle":
         m = 0.05 * _scene_size(sim)
-        return (-m, cfg.width + m), (-m, cfg.height + m)
+        (lo_x, lo_y), (hi_x, hi_y) = cfg.bounds
+        return (lo_x - m, hi_x + m), (lo_y - m, hi_y + m)
     pts = np.concatenate([cfg.outline, cfg.obstacle, cfg.goal_polygon])
     lo, hi = pts.min(0), pts.max(0)
     pad = 0.25 * float((hi - lo).max())

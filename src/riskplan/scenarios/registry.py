@@ -14,7 +14,7 @@ from riskplan.errors import InvalidInputError
 __all__ = ["SCENARIO_NAMES", "load_scenario_file", "make_scenario", "scenario_from_config"]
 
 #: Names accepted by :func:`make_scenario` (and the CLI ``--scenario`` option).
-SCENARIO_NAMES = ("needle", "manipulation")
+SCENARIO_NAMES = ("needle", "manipulation", "needle3d")
 
 
 def make_scenario(name: str, case: str = "nominal"):
@@ -30,6 +30,8 @@ def make_scenario(name: str, case: str = "nominal"):
         from riskplan.scenarios.manipulation import ManipulationConfig
 
         return scenario_from_config("manipulation", ManipulationConfig(), case)
+    if name == "needle3d":
+        return scenario_from_config("needle3d", None, case)
     if isinstance(name, str | PathLike) and (str(name).endswith(".toml") or Path(name).is_file()):
         return load_scenario_file(name, case)
     raise InvalidInputError(
@@ -39,7 +41,8 @@ def make_scenario(name: str, case: str = "nominal"):
 
 
 def scenario_from_config(kind: str, config, case: str = "nominal"):
-    """The scenario of ``kind`` (``"needle"`` or ``"manipulation"``) built on ``config``,
+    """The scenario of ``kind`` (``"needle"``, ``"manipulation"`` or ``"needle3d"``) built on
+    ``config`` (``None``: the default),
     with the distribution of ``case`` around its nominal parameters and its own actuation
     covariance."""
     from riskplan.scenarios.uncertainty import get_case
@@ -52,6 +55,18 @@ def scenario_from_config(kind: str, config, case: str = "nominal"):
         from riskplan.scenarios.manipulation import ManipulationScenario
 
         sim = ManipulationScenario(config)
+    elif kind == "needle3d":
+        from riskplan.scenarios.needle3d import Needle3DScenario
+
+        sim = Needle3DScenario(config)
+        if case == "mesh":
+            from riskplan.scenarios.uncertainty import MeshUncertainty
+
+            # the 2-D paper draws 50..1000 triangles around a 175-triangle planning mesh; in
+            # 3-D the counts are tetrahedra around the 1296 of the planning mesh, up to the
+            # 5000 SimParams allows (grids of 4 to 9 cells per axis)
+            sim.distribution = MeshUncertainty(base=sim.nominal_params, low=400, high=5000)
+            return sim
     else:
         raise InvalidInputError(f"kind: expected one of {', '.join(SCENARIO_NAMES)}, got {kind!r}")
     sim.distribution = get_case(case, sim.nominal_params, actuation_cov=sim.actuation_cov())

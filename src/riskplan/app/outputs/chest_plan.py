@@ -74,27 +74,14 @@ def export_tendon_plans(out, trajectories: dict, robot) -> list[str]:
     """The controller's files of each trajectory ``{name: (T x m, eq. 9 bounds, eq. 10 bound)}``:
     ``<name>_plan.csv``, ``<name>_plan.json``, ``<name>_plan.joint_trajectory.yaml``
     (:mod:`riskplan.planning.export`)."""
-    from riskplan.planning.export import TendonPlan, plan_times, tendon_plan, write_tendon_plan
+    from riskplan.planning.export import tendon_plan, write_tendon_plan
 
     files = []
     for name, (traj, b, P) in trajectories.items():
-        traj = np.asarray(traj, dtype=np.float64)
-        if robot is not None and traj.shape[1] == robot.n_config > robot.n_tendons:
-            # base motion: the tendon columns, tensions at each configuration's retraction
-            # (the base columns are in <name>.csv/json)
-            d, _, ret = robot.split_configuration(traj)
-            plan = TendonPlan(
-                times=plan_times(d),
-                displacements=d,
-                tensions=robot.tensions_for_displacements(d, retraction=ret),
-                risk=b,
-                tendon_names=tuple(t.name for t in robot.params.tendons),
-                trajectory_risk=P,
-                name=name,
-                tendon_speed=0.005,
-            )
-        else:
-            plan = tendon_plan(robot, traj, b, trajectory_risk=P, name=name)
+        # base rotation/retraction columns become the plan's base joints (tendon_plan)
+        plan = tendon_plan(
+            robot, np.asarray(traj, dtype=np.float64), b, trajectory_risk=P, name=name
+        )
         written = write_tendon_plan(plan, out, stem=f"{name}_plan")
         files += [p.name for p in written.values()]
     return files

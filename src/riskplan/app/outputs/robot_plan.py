@@ -39,8 +39,13 @@ def robot_model_check(robot, trajectory, environment) -> dict:
     }
 
 
-def write_robot_plan(out, plan, *, model, environment, problem=None, build=None) -> dict:
-    """Write the plan's files (module docs); returns the ``plan.json`` summary."""
+def write_robot_plan(
+    out, plan, *, model, environment, problem=None, build=None, validation=None
+) -> dict:
+    """Write the plan's files (module docs); returns the ``plan.json`` summary.
+
+    ``validation``: optional :func:`riskplan.planning.validate.validation_table` rows (the
+    executions on the simulated robot), written as the chest plan writes them."""
     import json
     from pathlib import Path
 
@@ -80,6 +85,7 @@ def write_robot_plan(out, plan, *, model, environment, problem=None, build=None)
         extra=extra,
         scene="scene",
         paper=None,
+        validation=validation,
     )
     summary = json.loads((out / "plan.json").read_text(encoding="utf-8"))
     write_json_atomic(out / "plan.json", summary)

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from riskplan.threads import one_torch_thread
+
 METHODS = ("random", "bo", "trust_region")
 
 
@@ -68,12 +70,11 @@ def nominal_problem(
     }
 
 
+@one_torch_thread
 def _run_one(args):
-    import torch
 
     from riskplan.planning.bo import OptimiserConfig, optimise_trajectory
 
-    torch.set_num_threads(1)
     problem, method, seed, iterations = args
     cfg = OptimiserConfig(iterations=iterations, method=method)
     t0 = time.perf_counter()

@@ -1,6 +1,6 @@
 """``riskplan study ...``: the measurement runs behind figures in the docs that are not
 ``reproduce`` stages (the optimiser comparison, the disturbance state, LQG-MP against Monte
-Carlo, the lab's task files). Each command parses its options, calls one function of
+Carlo, the lab's task files, one scenario's Fig. 6 of the deformable paper). Each command parses its options, calls one function of
 :mod:`riskplan.app.reproduce` and prints."""
 
 from __future__ import annotations
@@ -78,6 +78,42 @@ def lab_tasks(
 
     for line in lab_task_report(folder):
         typer.echo(line)
+
+
+@app.command("fig6")
+def fig6(
+    scenario: str = typer.Argument(..., help="needle | manipulation"),
+    out: Path = typer.Option(..., "--out", "-o", help="Output folder (resumable: OUT/store)."),
+    scale: str = typer.Option("smoke", help="smoke | paper: the counts of that scale."),
+    disturbance: bool = typer.Option(
+        False, help="The persistent-disturbance controller and its LQG-MP (beyond the paper)."
+    ),
+    candidates: int = typer.Option(None, min=1, help="Replace the scale's candidate count."),
+    executions: int = typer.Option(None, min=1, help="Replace the scale's executions per bar."),
+    workers: int = workers_option(),
+    seed: int = typer.Option(0, help="Root seed."),
+) -> None:
+    """The deformable paper's Fig. 6 for one scenario, with timings (docs/reproduce.md):
+    OUT/fig6_<scenario>.json and OUT/timings_<scenario>.json; prints the claims."""
+    import time
+
+    from riskplan.app.reproduce.deformable import run_one_scenario
+
+    def progress(stage, done, total):
+        typer.echo(f"{time.strftime('%H:%M:%S')} {stage}: {done}/{total}")
+
+    res = run_one_scenario(
+        scenario,
+        out,
+        scale_name=scale,
+        disturbance=disturbance,
+        candidates=candidates,
+        executions=executions,
+        workers=workers or None,
+        seed=seed,
+        progress=progress,
+    )
+    typer.echo(json.dumps(res["claims"], indent=1))
 
 
 def register(root: typer.Typer) -> None:

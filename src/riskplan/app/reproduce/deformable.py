@@ -860,73 +860,98 @@ def _feedback_rates(name, scale, store, chosen, plans, sims, seed, pmap, report,
     return out
 
 
-def main(argv=None) -> None:  # pragma: no cover - a measurement command (docs/reproduce.md)
-    """``python -m riskplan.app.reproduce.deformable SCENARIO --scale smoke|paper --out DIR
-    [--disturbance] [--candidates N] [--executions N] [--workers N] [--seed S]``: Fig. 6 of
-    one scenario into ``DIR`` (resumable: ``DIR/store``), writing ``DIR/fig6_<scenario>.json``
-    (the :func:`run_scenario` result) and ``DIR/timings_<scenario>.json`` (wall seconds per
-    stage, CPU seconds of this process and of its finished workers). ``--candidates`` /
-    ``--executions`` replace the scale's counts (a reduced run; the result records the
-    sizes that ran)."""
-    import argparse
-    import json
+def run_one_scenario(
+    scenario: str,
+    out,
+    *,
+    scale_name: str = "smoke",
+    disturbance: bool = False,
+    candidates: int | None = None,
+    executions: int | None = None,
+    workers: int | None = None,
+    seed: int = 0,
+    progress=None,
+) -> dict:
+    """Fig. 6 of one scenario into ``out`` (``riskplan study fig6``; resumable: ``out/store``).
+
+    Parameters
+    ----------
+    scenario : {"needle", "manipulation"}
+        The scenario.
+    out : path-like
+        Output folder; ``fig6_<scenario>[_disturbance].json`` holds the :func:`run_scenario`
+        result and ``timings_<...>.json`` the wall seconds per stage and the CPU seconds of
+        this process and of its finished workers.
+    scale_name : {"smoke", "paper"}
+        The scale whose counts are used.
+    disturbance : bool
+        Use the persistent-disturbance controller and its LQG-MP (beyond the paper).
+    candidates, executions : int, optional
+        Replace the scale's candidate and execution counts (a reduced run; the result
+        records the sizes that ran).
+    workers : int, optional
+        Local worker processes (``None``: one per core).
+    seed : int
+        Root seed.
+    progress : callable, optional
+        ``progress(stage, done, total)``.
+
+    Returns
+    -------
+    dict
+        The :func:`run_scenario` result.
+    """
     import resource
     import time
 
     from riskplan.app.store import ResultStore
+    from riskplan.errors import InvalidInputError
     from riskplan.io import write_json_atomic
     from riskplan.parallel import TaskPool
 
-    ap = argparse.ArgumentParser(prog="python -m riskplan.app.reproduce.deformable")
-    ap.add_argument("scenario", choices=("needle", "manipulation"))
-    ap.add_argument("--scale", default="smoke", choices=tuple(SCALES))
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--disturbance", action="store_true")
-    ap.add_argument("--candidates", type=int, default=None)
-    ap.add_argument("--executions", type=int, default=None)
-    ap.add_argument("--workers", type=int, default=None)
-    ap.add_argument("--seed", type=int, default=0)
-    a = ap.parse_args(argv)
-    scale = SCALES[a.scale][a.scenario]
-    if a.candidates is not None:
-        scale = dataclasses.replace(scale, n_candidates=a.candidates)
-    if a.executions is not None:
+    if scenario not in ("needle", "manipulation"):
+        raise InvalidInputError(f"scenario: expected needle or manipulation, got {scenario!r}")
+    if scale_name not in SCALES:
+        raise InvalidInputError(f"scale: expected one of {sorted(SCALES)}, got {scale_name!r}")
+    scale = SCALES[scale_name][scenario]
+    if candidates is not None:
+        scale = dataclasses.replace(scale, n_candidates=candidates)
+    if executions is not None:
         scale = dataclasses.replace(
-            scale,
-            n_executions=a.executions,
-            n_feedback=min(scale.n_feedback, a.executions),
+            scale, n_executions=executions, n_feedback=min(scale.n_feedback, executions)
         )
-    out = Path(a.out)
+    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     store = ResultStore(
         out / "store",
-        {"figure": "fig6", "scenario": a.scenario, "sizes": asdict(scale), "seed": a.seed},
+        {"figure": "fig6", "scenario": scenario, "sizes": asdict(scale), "seed": seed},
     )
     t0 = time.perf_counter()
     stages: dict = {}
 
-    def progress(stage, done, total):
+    def tracked(stage, done, total):
         now = time.perf_counter() - t0
         st = stages.setdefault(stage, {"start_s": now, "end_s": now, "total": total})
         st["end_s"] = now
         st["done"] = done
-        print(f"{time.strftime('%H:%M:%S')} {stage}: {done}/{total}", flush=True)
+        if progress is not None:
+            progress(stage, done, total)
 
-    with TaskPool("local", a.workers) as pool:
+    with TaskPool("local", workers) as pool:
         res = run_scenario(
-            a.scenario,
+            scenario,
             scale,
             store,
-            seed=a.seed,
+            seed=seed,
             backend="local",
-            workers=a.workers,
+            workers=workers,
             pool=pool,
-            progress=progress,
-            disturbance=a.disturbance,
+            progress=tracked,
+            disturbance=disturbance,
         )
     own = resource.getrusage(resource.RUSAGE_SELF)
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-    tag = a.scenario + ("_disturbance" if a.disturbance else "")
+    tag = scenario + ("_disturbance" if disturbance else "")
     write_json_atomic(out / f"fig6_{tag}.json", res)
     write_json_atomic(
         out / f"timings_{tag}.json",
@@ -937,8 +962,4 @@ def main(argv=None) -> None:  # pragma: no cover - a measurement command (docs/r
             "stages": stages,
         },
     )
-    print(json.dumps(res["claims"], indent=1))
-
-
-if __name__ == "__main__":  # pragma: no cover
-    main()
+    return res

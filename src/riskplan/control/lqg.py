@@ -316,6 +316,19 @@ def _observe_nominal(sim, x: np.ndarray) -> np.ndarray:
     return np.asarray(sim.observe(x, noise=np.zeros(sim.obs_dim)), dtype=np.float64)
 
 
+def _nominal_measurements(sim, plan):
+    """``(measure, z*_1 .. z*_T)``: a simulator whose measurement needs the full state
+    (``measure(state, noise, rng)``: the needle in its material frame) is sensed through
+    it, any other through ``observe`` of the reduced state."""
+    measure = getattr(sim, "measure", None)
+    if measure is not None:
+        zeros = np.zeros(sim.obs_dim)
+        z = [np.asarray(measure(y, noise=zeros), dtype=np.float64) for y in plan.states[1:]]
+    else:
+        z = [_observe_nominal(sim, x) for x in plan.reduced[1:]]
+    return measure, z
+
+
 GOAL_AT = ("final", "any")
 
 
@@ -391,22 +404,8 @@ def execute(
         A, B, H = controller.model()[:3]
         xhat = np.zeros(A.shape[1])
         ukf = execution_ukf(sim, plan, controller) if estimator == "ukf" else None
-        # a simulator whose measurement needs the full state (``measure(state, noise,
-        # rng)``: the needle in its material frame) is sensed through it
-        measure = getattr(sim, "measure", None)
-        if measure is not None:
-            z_nominal = [
-                np.asarray(
-                    measure(plan.states[t + 1], noise=np.zeros(sim.obs_dim)), dtype=np.float64
-                )
-                for t in range(T)
-            ]
-        else:
-            z_nominal = [_observe_nominal(sim, plan.reduced[t + 1]) for t in range(T)]
-    collided = False
-    failed = None
-    error = None
-    outcome = None
+        measure, z_nominal = _nominal_measurements(sim, plan)
+    collided, failed, error, outcome = False, None, None, None
     inside = getattr(sim, "inside", None)
     for t in range(T):
         if closed:

@@ -1,6 +1,6 @@
 """``riskplan study ...``: the measurement runs behind figures in the docs that are not
 ``reproduce`` stages (the optimiser comparison, the disturbance state, LQG-MP against Monte
-Carlo, the lab's task files, one scenario's Fig. 6 of the deformable paper). Each command parses its options, calls one function of
+Carlo, the lab's task files, the UKF and iLQR against LQG, one scenario's Fig. 6 of the deformable paper). Each command parses its options, calls one function of
 :mod:`riskplan.app.reproduce` and prints."""
 
 from __future__ import annotations
@@ -114,6 +114,24 @@ def fig6(
         progress=progress,
     )
     typer.echo(json.dumps(res["claims"], indent=1))
+
+
+@app.command("control-variants")
+def control_variants(
+    scenario: list[str] = typer.Option(
+        ["needle", "manipulation"], "--scenario", help="Scenario (repeat for several)."
+    ),
+    case: str = typer.Option("material-high", help="Uncertainty case."),
+    runs: int = typer.Option(100, min=1, help="Paired executions per variant."),
+    seed: int = typer.Option(0, help="Root seed."),
+) -> None:
+    """LQG, LQG with the UKF and iLQR + LQG on the same draws, one JSON row per scenario
+    (docs/control.md, "Beyond LQG")."""
+    from riskplan.app.reproduce.control_variants import compare_variants
+
+    for name in scenario:
+        row = {"scenario": name, "case": case, **compare_variants(name, case, runs, seed=seed)}
+        typer.echo(json.dumps(row, default=float))
 
 
 def register(root: typer.Typer) -> None:

@@ -106,6 +106,7 @@ TOL = {
     "covariance_support": dict(rtol=1e-10, atol=1e-6),  # eigenvalue > rtol max; |x| off it < atol
     "half_plane_truncation": dict(rtol=0.0, atol=1e-9),  # truncated Gaussian vs closed form
     "half_plane_sigma": dict(rtol=1e-9, atol=0.0),  # chi-square ball vs closed form
+    "sigma_jitter": dict(rtol=1e-8, atol=0.0),  # ... with a 1e-9 variance jitter (rank-1 spread)
     "steady_state": dict(rtol=1e-6, atol=0.0),  # loop state after 40 steps vs its fixed point
     # Monte Carlo
     "monte_carlo_mean": dict(rtol=0.0, atol=0.05),  # 4000 draws, sd 0.009 (atol x max |c|)

@@ -26,6 +26,7 @@ CORE = {
     "kernels",
     "gaussian_mixture",
     "geometry2d",
+    "geometry3d",
     "robots",
     "collision",
 }
@@ -143,3 +144,16 @@ def test_one_version():
     import riskplan
 
     assert riskplan.__version__ == version("riskplan")
+
+
+def test_one_command_line():
+    """The typer CLI is the one command line: no module but ``cli.py`` and ``__main__.py``
+    carries a ``__main__`` block or argparse."""
+    bad = []
+    for rel in _modules():
+        if rel.name in {"cli.py", "__main__.py"}:
+            continue
+        text = (SRC / rel).read_text(encoding="utf-8")
+        if '__name__ == "__main__"' in text or "import argparse" in text:
+            bad.append(str(rel))
+    assert not bad, bad

@@ -235,3 +235,18 @@ def test_workers_capped_at_the_cores_unless_a_cluster(caplog):
         assert pool.workers == cores
         assert pool.accepts("local", 100_000, None)  # calls asking for the same run on it
         assert pool.map(abs, [-1, -2, 3]) == [1, 2, 3]
+
+
+def test_chunk_sizing_is_one_rule():
+    """``workers=None`` means one per core in the chunk sizing as in the pools."""
+    from riskplan.parallel import chunk_count, chunk_size, default_workers, effective_workers
+
+    cores = default_workers()
+    assert chunk_count(100, "serial", 8) == 1
+    assert chunk_count(1, "local", 2) == 1
+    assert chunk_count(100, "local", None) == 4 * effective_workers("local", None) == 4 * cores
+    assert chunk_count(3, "local", None) == min(3, 4 * cores)
+    assert chunk_count(100, "local", 1) == 4
+    assert chunk_size(100, "local", 1) == min(8, 100 // 4)
+    assert chunk_size(0, "local", None) == 1
+    assert 1 <= chunk_size(5, "local", None) <= 8

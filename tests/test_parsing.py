@@ -165,7 +165,7 @@ def test_cli_options_follow_the_convention():
     res = runner.invoke(app, ["robot", "shape", "-t", "1,0,0"])
     assert isinstance(res.exception, InvalidInputError)
     assert "--tensions: expected 4 comma-separated numbers" in str(res.exception)
-    res = runner.invoke(app, ["collision", "--arc", "8,0,1"])
+    res = runner.invoke(app, ["collision", "probability", "--arc", "8,0,1"])
     assert isinstance(res.exception, InvalidInputError) and "--arc: expected 2" in str(
         res.exception
     )

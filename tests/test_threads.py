@@ -85,3 +85,42 @@ def test_fem_factorisations_run_on_one_blas_thread(monkeypatch):
         assert all(n == 2 for n in _counts())
     assert dense and banded
     assert all(n == 1 for counts in dense + banded for n in counts)
+
+
+def test_torch_threads_limits_and_restores_after_an_error():
+    torch = pytest.importorskip("torch")
+    from riskplan.threads import one_torch_thread, torch_threads
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        with pytest.raises(RuntimeError), torch_threads(1):
+            assert torch.get_num_threads() == 1
+            raise RuntimeError("inside")
+        assert torch.get_num_threads() == 2
+        assert one_torch_thread(torch.get_num_threads)() == 1
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)
+
+
+def test_library_code_never_sets_process_threads():
+    """Thread policy has one home: only ``threads.py`` calls ``set_num_threads``; entry
+    points (cli, worker start-up) go through ``threads.limit_process_threads``."""
+    import ast
+    from pathlib import Path
+
+    import riskplan
+
+    root = Path(riskplan.__file__).parent
+    offenders = []
+    for path in root.rglob("*.py"):
+        if path.name == "threads.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Attribute) and node.attr in (
+                "set_num_threads",
+                "set_num_interop_threads",
+            ):
+                offenders.append(f"{path.relative_to(root)}:{node.lineno}")
+    assert offenders == []

@@ -26,7 +26,7 @@ app = typer.Typer(
 )
 
 # Areas in pipeline order. Each module defines ``register(app: typer.Typer) -> None``.
-AREAS = ("robot", "dataset", "kinematics", "collision", "tissue", "plan", "reproduce")
+AREAS = ("robot", "dataset", "kinematics", "collision", "tissue", "plan", "reproduce", "study")
 # Benchmarks: ``riskplan.bench.<area>.run(quick: bool) -> dict`` (``-`` in an area name is ``_``
 # in the module name: ``planning-tissue`` -> ``riskplan.bench.planning_tissue``).
 BENCH_AREAS = (
@@ -43,8 +43,9 @@ BENCH_AREAS = (
 
 def _setup_threads() -> None:
     # torch and SciPy share few cores; one thread each is faster here (see docs/architecture.md).
-    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
-        os.environ.setdefault(var, "1")
+    from riskplan.threads import limit_process_threads
+
+    limit_process_threads(1)
     os.environ.setdefault("MPLBACKEND", "Agg")
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
 
@@ -151,11 +152,7 @@ def bench(
         raise typer.BadParameter(
             f"unknown area {area!r}; expected one of {', '.join(BENCH_AREAS)}", param_hint="AREA"
         )
-    import torch
-
-    from riskplan.bench import machine_info
-
-    torch.set_num_threads(1)  # one thread each is faster on few shared cores (_setup_threads)
+    from riskplan.bench import machine_info  # threads: one each, set by _setup_threads
 
     mod = importlib.import_module(f"riskplan.bench.{area.replace('-', '_')}")
     figures = dict(mod.run(quick=quick))

@@ -1,4 +1,4 @@
-"""Batched Gaussian mixtures as NumPy arrays: the mixture core (MDN paper, eqs. 1-6), no torch.
+r"""Batched Gaussian mixtures as NumPy arrays: the mixture core (MDN paper, eqs. 1-6), no torch.
 
 Every package that reads mixtures builds on this module: the collision estimators and the
 planners use :class:`NumpyMixture` directly; the learned kinematics' differentiable torch type
@@ -12,8 +12,23 @@ upper-triangular matrix ``U_k`` with positive diagonal such that the precision i
     log N(x; mu_k, Sigma_k) = -d/2 log(2 pi) + sum_i log U_k[i, i] - 1/2 ||U_k (x - mu_k)||^2
 
 (eqs. 4-6: ``det Sigma^{-1/2} = prod diag U`` and the quadratic form is a squared norm), and
-``log p(x) = logsumexp_k (log w_k + log N(x; mu_k, Sigma_k))`` (eq. 1). No matrix is inverted
-or factorised to evaluate a density. A draw is ``x = mu_k + U_k^{-1} z`` with ``k ~ w`` and
+``log p(x) = logsumexp_k (log w_k + log N(x; mu_k, Sigma_k))`` (eq. 1). In the paper's
+notation:
+
+.. math::
+
+    p(x) = \sum_{k=1}^{K} w_k \, \mathcal{N}(x; \mu_k, \Sigma_k), \quad w_k \ge 0,
+    \ \sum_k w_k = 1 \qquad \text{(eq. 1)}
+
+    \Sigma_k^{-1} = U_k^\top U_k \qquad \text{(eq. 3)}
+
+    \log |\Sigma_k^{-1}|^{1/2} = \sum_{j=1}^{d} \log (U_k)_{jj} \qquad
+    \text{(eqs. 4-6)}
+
+    \log \mathcal{N}(x; \mu_k, \Sigma_k) = -\frac{d}{2} \log 2\pi
+    + \sum_{j} \log (U_k)_{jj} - \frac{1}{2} \| U_k (x - \mu_k) \|^2.
+
+No matrix is inverted or factorised to evaluate a density. A draw is ``x = mu_k + U_k^{-1} z`` with ``k ~ w`` and
 ``z ~ N(0, I)``: its covariance is ``U_k^{-1} U_k^{-T} = Sigma_k``.
 
 Shapes (leading batch axes ``...`` are shared by all three arrays)::

@@ -64,6 +64,35 @@ def check_output_file(path, name: str = "out") -> Path:
     return path
 
 
+def read_json_object(path) -> dict:
+    """A JSON file that must hold one object.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+
+    Returns
+    -------
+    dict
+        Its object. A missing file raises :class:`~riskplan.errors.InvalidInputError`; an
+        unreadable one, or one that is not a JSON object,
+        :class:`~riskplan.errors.DataFormatError`, naming the path.
+    """
+    from riskplan.errors import DataFormatError, InvalidInputError
+
+    path = Path(path)
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise InvalidInputError(f"file not found: {path}") from exc
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise DataFormatError(f"{path}: not a readable JSON file ({exc})") from exc
+    if not isinstance(meta, dict):
+        raise DataFormatError(f"{path}: expected a JSON object")
+    return meta
+
+
 def canonical_json(obj) -> str:
     """Deterministic JSON text of ``obj`` (sorted keys, no spaces, non-finite numbers refused):
     the text content hashes are computed on."""

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from riskplan._validation import check_workers
 from riskplan.errors import BackendUnavailableError, InvalidInputError, require
 
 log = logging.getLogger(__name__)
@@ -91,6 +92,57 @@ def effective_workers(backend: str, workers: int | None, ray_address: str | None
         )
         n = cores
     return n
+
+
+def chunk_count(n_items: int, backend: str, workers: int | None, *, per_worker: int = 4) -> int:
+    """How many interleaved chunks a map over ``n_items`` is cut into (the one rule).
+
+    Parameters
+    ----------
+    n_items : int
+        Number of items to map.
+    backend : str
+        ``"serial"`` runs everything as one chunk.
+    workers : int or None
+        As everywhere in riskplan: ``None`` is one per core, and the count is capped at the
+        cores (:func:`effective_workers`).
+    per_worker : int
+        Chunks per worker (several keep the workers busy when chunks take unequal time).
+
+    Returns
+    -------
+    int
+        ``1`` for the serial backend or at most one item, else
+        ``min(n_items, per_worker · effective_workers(backend, workers))``.
+    """
+    if backend == "serial" or n_items <= 1:
+        return 1
+    return max(1, min(int(n_items), per_worker * effective_workers(backend, workers)))
+
+
+def chunk_size(n_items: int, backend: str, workers: int | None, *, most: int = 8) -> int:
+    """Items per task for streaming maps (:func:`imap_tasks`): about four tasks per
+    worker, at most ``most`` items each.
+
+    Parameters
+    ----------
+    n_items : int
+        Number of items to map.
+    backend : str
+        The backend the map runs on.
+    workers : int or None
+        ``None`` is one per core (:func:`effective_workers`).
+    most : int
+        Upper bound on the size (progress stays fine-grained).
+
+    Returns
+    -------
+    int
+        ``max(1, min(most, n_items // chunk_count(n_items, backend, workers)))``.
+    """
+    if n_items <= 0:
+        return 1
+    return max(1, min(most, n_items // chunk_count(n_items, backend, workers)))
 
 
 def _run_chunk(fn: Callable, chunk: Sequence[tuple[int, Any]]) -> list[tuple[int, Any]]:
@@ -157,23 +209,9 @@ def _terminate_pool(pool) -> None:
 
 def _limit_threads() -> None:
     # Worker processes share few cores: one BLAS/torch thread each avoids oversubscription.
-    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
-        os.environ.setdefault(var, "1")
-    try:
-        import torch
+    from riskplan.threads import limit_process_threads
 
-        torch.set_num_threads(1)
-    except ImportError:  # pragma: no cover
-        pass
-
-
-def _check_workers(workers) -> None:
-    if workers is not None and (
-        isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1
-    ):
-        raise InvalidInputError(
-            f"workers: expected a positive integer (or None for all cores), got {workers!r}"
-        )
+    limit_process_threads(1)
 
 
 #: The :class:`TaskPool` whose ``with`` block is running in this context (thread, task).
@@ -200,7 +238,7 @@ class TaskPool:
     ):
         if backend not in BACKENDS:
             raise InvalidInputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
-        _check_workers(workers)
+        check_workers(workers)
         self.backend = backend
         self.workers = effective_workers(backend, workers, ray_address)
         self._requested = None if workers is None else int(workers)
@@ -379,7 +417,7 @@ def imap_tasks(
     """
     if backend not in BACKENDS:
         raise InvalidInputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
-    _check_workers(workers)
+    check_workers(workers)
     if pool is None:
         active = _ACTIVE_POOL.get()
         if active is not None and active.accepts(backend, workers, ray_address):

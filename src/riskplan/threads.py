@@ -61,3 +61,81 @@ def one_blas_thread(fn: F) -> F:
             return fn(*args, **kwargs)
 
     return wrapper  # type: ignore[return-value]
+
+
+#: The environment variables that cap the OpenMP/BLAS pools of a process at start-up.
+THREAD_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+
+def limit_process_threads(n: int = 1) -> None:
+    """The thread policy of a process riskplan owns (the CLI, a worker process).
+
+    Parameters
+    ----------
+    n : int
+        Threads per pool. Variables of :data:`THREAD_ENV` the user set are kept (an
+        explicit choice wins); torch, which reads ``OMP_NUM_THREADS`` when it is first
+        imported, follows them, and a torch imported already is set to ``n`` too.
+
+    Notes
+    -----
+    Library code never calls this (it changes the process); it uses :func:`torch_threads`
+    or :func:`blas_threads`, which restore what they change.
+    """
+    import os
+    import sys
+
+    for var in THREAD_ENV:
+        os.environ.setdefault(var, str(int(n)))
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        torch.set_num_threads(int(os.environ.get("OMP_NUM_THREADS", n)))
+
+
+@contextmanager
+def torch_threads(limit: int = 1) -> Iterator[None]:
+    """Run the block with at most ``limit`` torch intra-op threads, then restore the count.
+
+    Parameters
+    ----------
+    limit : int
+        Upper bound on ``torch.get_num_threads()`` inside the block.
+
+    Yields
+    ------
+    None
+        Small MDN batches on few shared cores run faster on one thread; the caller's
+        setting is back after the block, whatever it raised.
+    """
+    import torch
+
+    before = torch.get_num_threads()
+    if before > limit:
+        torch.set_num_threads(limit)
+    try:
+        yield
+    finally:
+        if torch.get_num_threads() != before:
+            torch.set_num_threads(before)
+
+
+def one_torch_thread(fn: F) -> F:
+    """Decorator: run ``fn`` inside ``torch_threads(1)``.
+
+    Parameters
+    ----------
+    fn : callable
+        The function to wrap.
+
+    Returns
+    -------
+    callable
+        ``fn`` with at most one torch thread for the duration of each call.
+    """
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with torch_threads(1):
+            return fn(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]

@@ -142,3 +142,29 @@ def test_reproduce_stage_is_selectable(tmp_path, monkeypatch):
     assert res["deformable"]["needle"]["calibration"]["sigma"]["n_plans"] >= 1
     html = (out / "report.html").read_text()
     assert "LQG-MP calibration: needle" in html and (out / "calibration_needle.png").exists()
+
+
+def test_a_degenerate_lqgmp_fails_the_candidate_not_the_run(monkeypatch):
+    """A NumericalError from LQG-MP (an overflowing propagation, a position covariance
+    without a Cholesky factor) marks the candidate as failed in Fig. 6's and the
+    calibration's evaluations, as a failed linearisation does, instead of ending the run."""
+    import importlib
+
+    from riskplan.app.reproduce.calibration import estimate_candidate
+    from riskplan.app.reproduce.deformable import evaluate_candidate
+    from riskplan.control import NominalPlan
+    from riskplan.errors import NumericalError
+    from riskplan.scenarios.registry import make_scenario
+
+    sim = make_scenario("needle", "actuation")
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), sim.random_controls(4, seed=1))
+
+    def broken(*args, **kwargs):
+        raise NumericalError("LQG-MP: the position covariance at step 2 has no Cholesky factor")
+
+    monkeypatch.setattr(importlib.import_module("riskplan.control.lqgmp"), "lqgmp", broken)
+    got = evaluate_candidate((sim, plan, 2, 20, 0))
+    assert got["p_success"] == 0.0 and got["controller"] is None
+    assert "Cholesky" in got["error"]
+    est = estimate_candidate((sim, plan, 2, 20, 0, ("sigma",)))
+    assert est["error"].startswith("NumericalError") and est["p"] == {}

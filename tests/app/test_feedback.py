@@ -30,7 +30,10 @@ def test_condition_draws():
     assert all(d.n_elements == sim.nominal_params.n_elements for d in draws)
     p = condition_params("fig7ef", sim, gen)
     assert p.n_elements == 1000 and p.youngs_modulus == sim.nominal_params.youngs_modulus
-    assert {c.case for c in CONDITIONS.values()} == {"material-high", "mesh"}
+    assert {c.case for c in CONDITIONS.values() if c.scenario == "manipulation"} == {
+        "material-high",
+        "mesh",
+    }
     with pytest.raises(InvalidInputError, match="figure"):
         condition_params("fig9", sim, gen)
 
@@ -65,3 +68,23 @@ def test_batch_runs_open_and_closed_on_the_same_draws():
     assert len(rows) == 3
     for r in rows:
         assert r[:3] == r[3:6]
+
+
+def test_needle_conditions_fixed_in_advance():
+    """Figs. 4 and 5 of the needle: the actuation case's draws, and E fixed at the values of
+    needle_study.FIG5_YOUNGS with the planning parameters otherwise."""
+    from riskplan.app.reproduce.needle_study import FIG5_YOUNGS
+
+    act = make_scenario("needle", "actuation")
+    p = condition_params("fig4", act, np.random.default_rng(0))
+    assert p == act.distribution.sample(np.random.default_rng(0))
+    assert p.actuation_cov is not None
+    sim = make_scenario("needle", "material-high")
+    stiff = [condition_params(f, sim, np.random.default_rng(1)) for f in ("fig5", "fig5-67")]
+    assert tuple(s.youngs_modulus for s in stiff) == FIG5_YOUNGS
+    for s in stiff:
+        assert s.replace(youngs_modulus=sim.nominal_params.youngs_modulus) == sim.nominal_params
+    assert {CONDITIONS[f].case for f in ("fig4", "fig5", "fig5-67")} == {
+        "actuation",
+        "material-high",
+    }

@@ -125,3 +125,33 @@ def test_sensitivity_at_a_tiny_scale(tmp_path):
     assert set(r["actuation_everywhere"]) == set(METHODS)
     again = sensitivity(tiny, tmp_path, factors=(0.5, 1.0), backend="serial")
     assert again["force"] == r["force"]
+
+
+def test_reproduce_sensitivity_stage(tmp_path, monkeypatch):
+    """``stages=("sensitivity",)`` runs the needle's sensitivity alone into results.json
+    (each variant's per-case rates beside the mean tables) and the report."""
+    import json
+
+    from riskplan.app.reproduce import pipeline as rep
+    from riskplan.app.reproduce.deformable import METHODS, ScenarioScale
+
+    tiny = ScenarioScale(
+        n_candidates=1,
+        n_executions=2,
+        batch_size=2,
+        lin_samples=2,
+        goal_samples=50,
+        plans_per_tree=1,
+    )
+    monkeypatch.setattr(rep, "_sensitivity_scales", lambda: {"smoke": tiny})
+    out = tmp_path / "out"
+    rep.reproduce(out, paper="deformable", stages=("sensitivity",), backend="serial")
+    saved = json.loads((out / "results.json").read_text())
+    sens = saved["deformable"]["needle"]["sensitivity"]
+    assert set(saved["deformable"]["needle"]) == {"sensitivity"}  # the figures did not run
+    assert set(sens["actuation"]) == set(sens["force"]) == {"0.5", "1.0", "2.0"}
+    assert set(sens["actuation_everywhere"]) == set(METHODS)
+    assert sens["scale"]["n_executions"] == 2
+    assert set(sens["cases"]["act2_force1"]) == {"actuation"}  # case 3 only under our reading
+    html = (out / "report.html").read_text()
+    assert "needle: sensitivity" in html and "the other reading" in html

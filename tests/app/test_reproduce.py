@@ -284,3 +284,80 @@ def test_ray_cluster_gives_bit_identical_results(reference, ray_head, tmp_path):
     finally:
         ray.shutdown()
     assert json.dumps(got, sort_keys=True) == json.dumps(ref, sort_keys=True)
+
+
+def test_execute_methods_equals_execute_batch(reference):
+    """Several methods on the same draws in one task equal one batch per method bit for
+    bit (execute_methods builds a draw's model once for all of them)."""
+    from riskplan.app.reproduce.deformable import BlobStore, execute_batch, execute_methods
+    from riskplan.parallel import spawn_seeds
+    from riskplan.scenarios.registry import make_scenario
+
+    src, _ = reference
+    blobs = BlobStore(ResultStore(src, CONFIG))
+    plans = blobs.get("fig6.needle.plans.deforming")
+    ctrl = blobs.get("fig6.needle.select.material-high.deforming.000")["controller"]
+    sim = make_scenario("needle", "material-high")
+    seeds = spawn_seeds(11, 6)
+    runs = [(plans[0], None), (plans[0], ctrl)]
+    joint = execute_methods((make_scenario("needle", "material-high"), runs, seeds))
+    for (plan, c), rows in zip(runs, joint):
+        assert rows == execute_batch((sim, plan, c, seeds))
+
+
+def test_disturbance_variant_is_stored_apart(reference, tmp_path):
+    """``disturbance=True`` reuses the candidates, stores its selection and executions under
+    ``fig6d.`` and executes the disturbance-state controller."""
+    import shutil
+
+    from riskplan.app.reproduce.deformable import BlobStore
+
+    src, ref = reference
+    root = tmp_path / "d"
+    shutil.copytree(src, root)
+    store = ResultStore(root, CONFIG)
+    got = run_scenario("needle", TINY, store, seed=3, cases=CASES, disturbance=True)
+    assert got["disturbance"] is True and ref["disturbance"] is False
+    assert got["plan_steps"] == ref["plan_steps"]
+    keys = set(store.keys())
+    assert any(k.startswith("fig6d.needle.exec.") for k in keys)
+    sel = BlobStore(store).get("fig6d.needle.select.material-high.deforming.000")
+    assert sel["controller"] is None or sel["controller"].disturbance
+    assert sel["controller"] is not None or sel["error"]
+
+
+def test_a_material_that_inverts_the_tissue_is_a_solver_failure_with_its_reason():
+    """Bad input during an execution (issue 18, "Everywhere"): parameters that make the
+    tissue invert or the solver diverge count as solver failures with the solver's reason,
+    never as collisions or successes, in the rows Fig. 6 stores and in its counts. Here a
+    huge force on a tiny patch (tests/scenarios/test_manipulation.py) from the first step."""
+    from riskplan.app.reproduce.deformable import _outcome_counts, execute_methods
+    from riskplan.control import NominalPlan
+    from riskplan.scenarios.base import SimParams
+    from riskplan.scenarios.manipulation import ManipulationConfig, ManipulationScenario
+
+    base = SimParams(n_elements=60)
+
+    class Nominal:  # draws the planning parameters (the failure comes from the forces)
+        planning_params = base
+
+        def sample(self, gen):
+            gen.random()
+            return base
+
+    sim = ManipulationScenario(
+        ManipulationConfig(f_max=1e4, df_max=1e4, patch_radius=0.03), distribution=Nominal()
+    )
+    u = np.array([[-1e4, 0.0, 0.0, 0.0, 0.0, -1e4]])
+    plan = NominalPlan(
+        controls=u,
+        reduced=np.zeros((2, sim.state_dim)),
+        states=(sim.initial_state(base), sim.initial_state(base)),
+        params=base,
+    )
+    (rows,) = execute_methods((sim, [(plan, None)], [1, 2, 3]))
+    flags, reasons = _outcome_counts(rows)
+    assert flags[:, 3].tolist() == [1, 1, 1]  # solver failed
+    assert flags[:, 0].sum() == flags[:, 1].sum() == 0  # neither success nor collision
+    assert sum(reasons.values()) == 3
+    assert all("manipulation step t=0" in k for k in reasons), reasons

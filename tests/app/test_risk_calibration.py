@@ -42,6 +42,10 @@ def test_scale_errors():
         RiskStudyScale(configurations=0)
     with pytest.raises(InvalidInputError, match="coherences"):
         RiskStudyScale(coherences=(1.5,))
+    with pytest.raises(InvalidInputError, match="extents"):
+        RiskStudyScale(extents=(0.0,))
+    with pytest.raises(InvalidInputError, match="draws"):
+        RiskStudyScale(draws=0)
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +62,7 @@ def test_study_records(study):
     for pr in r["predicted"].values():
         p = np.r_[pr["configurations"], pr["trajectories"]]
         assert p.shape == (n_c + n_t,) and np.all((p >= 0) & (p <= 1))
-    assert set(r["predicted"]) == {"eq9 / eq10", "cloud ρ=0.5"}
+    assert set(r["predicted"]) == {"eq9 / eq10", "cloud ρ=0.5", "bodies c=2"}
     # stratified: two thirds of the configurations were near contact (|clearance| < band)
     c = np.abs(r["nominal_clearance"])
     assert (c < SMOKE.band).sum() >= 2 * n_c // 3
@@ -75,7 +79,8 @@ def test_cloud_risk_beats_eq9_on_the_same_executions(study):
     assert m["cloud ρ=0.5"]["all"]["brier"] < m["eq9 / eq10"]["all"]["brier"]
     # recomputed from the stored numbers, not read from the summary
     meas = np.r_[r["measured"]["configurations"], r["measured"]["trajectories"]]
-    for name in ("cloud ρ=0.5", "eq9 / eq10"):
+    assert m["bodies c=2"]["all"]["brier"] < m["eq9 / eq10"]["all"]["brier"]
+    for name in ("cloud ρ=0.5", "eq9 / eq10", "bodies c=2"):
         p = np.r_[r["predicted"][name]["configurations"], r["predicted"][name]["trajectories"]]
         brier = np.mean(meas * (1 - p) ** 2 + (1 - meas) * p**2)
         np.testing.assert_allclose(m[name]["all"]["brier"], brier, **TOL["float64_exact"])
@@ -95,3 +100,21 @@ def test_rerun_reads_the_store(study, tmp_path, monkeypatch):
     monkeypatch.setattr(validate, "execute_on_robot", no_execution)
     again = run_risk_study(tmp_path / "out", SMOKE, ResultStore(tmp_path / "store", CONFIG), seed=0)
     assert again["measured"] == ref["measured"] and again["predicted"] == ref["predicted"]
+
+
+def test_transmission_mechanism_all_sources_is_the_robot():
+    """The mechanism's "all sources" rate is the robot's own executions (same seeds, same body
+    test); start history and offsets alone are rates of the same configurations."""
+    from riskplan.app.reproduce.risk_calibration import transmission_mechanism
+    from riskplan.planning.chest_scene import build_chest
+    from riskplan.planning.validate import execute_on_robot
+
+    x = np.array([[0.008256, -0.004725, 0.021455, 0.036358]])  # near contact on the robot
+    m = transmission_mechanism(x, [0.33], executions=40, seed=11)
+    robot = execute_on_robot(
+        "paper", x, build_chest(0).base_environment, 40, seed=11, body="disks", backend="serial"
+    )
+    assert m["rates"]["all sources"][0] == robot.per_configuration.probability[0]
+    assert 0.0 < m["rates"]["all sources"][0] < 1.0
+    assert set(m["mae_mid"]) == {"all sources", "start history", "offsets"}
+    assert 0.0 <= m["pattern_share_median"] <= 1.0

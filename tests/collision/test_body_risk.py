@@ -9,7 +9,7 @@ import pytest
 from scipy.stats import norm
 
 from riskplan.collision import Environment
-from riskplan.collision.body_risk import allocate_points, cloud_risk
+from riskplan.collision.body_risk import allocate_points, cloud_risk, sampled_body_risk
 from riskplan.errors import InvalidInputError
 from riskplan.gaussian_mixture import NumpyMixture
 from tests.collision.conftest import box_mesh
@@ -103,3 +103,82 @@ def test_allocate_points():
 def test_errors(slab, kw, match):
     with pytest.raises(InvalidInputError, match=match):
         cloud_risk(one(), slab, **kw)
+
+
+# --- sampled whole bodies (sampled_body_risk) ---------------------------------------------
+
+BODY_SD = 0.1  # isotropic surface spread of the body piece
+EXEC_SD = 0.1  # execution spread of its mean, normal to the face z = 0
+EXTENT = 2.0
+
+
+@pytest.fixture(scope="module")
+def floor():
+    # a big box filling z > 0 near the origin (the first lattice direction is nearly +z)
+    return Environment.from_meshes([box_mesh([-5.0, -5.0, 0.0], [5.0, 5.0, 5.0])])
+
+
+def body_case(gap_sds, n, seed):
+    """One body piece whose ellipsoid (extent EXTENT) stays ``gap_sds`` execution standard
+    deviations below the face; its predicted covariance folds in the execution spread."""
+    mz = -(EXTENT * BODY_SD + gap_sds * EXEC_SD)
+    cov = np.diag([BODY_SD**2, BODY_SD**2, BODY_SD**2 + EXEC_SD**2])
+    nominal = NumpyMixture.from_covariances(
+        np.array([[1.0]]), np.array([[[0.0, 0.0, mz]]]), cov[None, None]
+    )
+    z = np.random.default_rng(seed).standard_normal(n)
+    drawn = np.zeros((n, 1, 1, 3))
+    drawn[:, 0, 0, 2] = mz + EXEC_SD * z
+    return nominal, drawn, z
+
+
+@pytest.mark.parametrize("gap_sds", [0.0, 1.0, 2.0])
+def test_sampled_bodies_closed_form(floor, gap_sds):
+    """The piece touches iff its execution shift closes the gap: P = 1 - Φ(gap) (the surface
+    spread is recovered by removing the executions' share from the predicted covariance)."""
+    n = 4000
+    nominal, drawn, _ = body_case(gap_sds, n, seed=7)
+    r = sampled_body_risk(nominal, drawn, floor, extent=EXTENT)
+    assert within(r.per_configuration[0], 1 - norm.cdf(gap_sds), n)
+    # the counterfactual: without removing the executions' share the body is wider and the
+    # same draws collide more often
+    wide = np.zeros_like(drawn) + drawn.mean(axis=0)
+    wide[:2] += np.array([0.0, 0.0, 1e-9])  # two draws so that S >= 2; no execution spread
+    assert sampled_body_risk(nominal, wide, floor, extent=EXTENT).per_configuration[0] in (0, 1)
+
+
+def test_sampled_bodies_are_the_draws(floor):
+    """Sample by sample: a draw collides exactly when its shift closes the gap (up to the
+    boundary lattice, whose pole is at cos = 1 - 1/n_directions)."""
+    nominal, drawn, z = body_case(1.0, 2000, seed=8)
+    r = sampled_body_risk(nominal, drawn, floor, extent=EXTENT, n_directions=4096)
+    sure = np.abs(z - 1.0) > 0.05  # away from the boundary of the decision
+    assert np.array_equal(r.hits[sure, 0], (z > 1.0)[sure])
+
+
+def test_sampled_bodies_trajectory_keeps_the_draw(floor):
+    nominal, drawn, _ = body_case(1.0, 1000, seed=9)
+    gm = NumpyMixture(
+        np.repeat(nominal.weights, 2, 0),
+        np.repeat(nominal.means, 2, 0),
+        np.repeat(nominal.precision_cholesky, 2, 0),
+    )
+    r = sampled_body_risk(gm, np.repeat(drawn, 2, axis=1), floor, extent=EXTENT)
+    assert r.per_configuration[0] == r.per_configuration[1] == r.trajectory
+    assert r.hits.shape == (1000, 2)
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        (dict(extent=0.0), "extent"),
+        (dict(n_directions=0), "n_directions"),
+        (dict(drawn=np.zeros((1, 1, 1, 3))), "drawn_means"),
+        (dict(drawn=np.full((3, 1, 1, 3), np.nan)), "drawn_means"),
+    ],
+)
+def test_sampled_bodies_errors(floor, kw, match):
+    nominal, drawn, _ = body_case(1.0, 10, seed=0)
+    drawn = kw.pop("drawn", drawn)
+    with pytest.raises(InvalidInputError, match=match):
+        sampled_body_risk(nominal, drawn, floor, **kw)

@@ -28,6 +28,18 @@ def test_intervals_match_scipy(method, scipy_method):
         np.testing.assert_allclose([lo, hi], [ci.low, ci.high], **TOL["scipy_reference"])
 
 
+def test_vectorised_wilson_matches_scipy_per_entry():
+    """The closed form on a whole array of hit counts against scipy's binomtest, entry by
+    entry (the maintained implementation is the oracle of the vectorised one)."""
+    n = 200
+    hits = np.arange(0, n + 1, 7)
+    for conf in (0.9, 0.95, 0.99):
+        lo, hi = binomial_interval(hits, n, conf, "wilson")
+        want = [binomtest(int(k), n).proportion_ci(conf, method="wilson") for k in hits]
+        np.testing.assert_allclose(lo, [c.low for c in want], **TOL["scipy_reference"])
+        np.testing.assert_allclose(hi, [c.high for c in want], **TOL["scipy_reference"])
+
+
 def test_seeded_and_consistent(boxes_env):
     gm = GaussianMixture.from_covariances(
         np.array([0.5, 0.5]),

@@ -71,9 +71,9 @@ CASES = [
     (["robot", "shape", "-d", "0,0,0,0", "--plot", "{d}/a_file/p.png"], "existing file"),
     (["dataset", "generate", "--out", "{d}", "--split", "train", "--preset", "tiny"], "folder"),
     # parsing
-    (["collision", "-d", "0,0,0,0;0,0"], "equal length"),
-    (["collision", "--arc", "8,0", "-d", "0,0,0,0"], "either --arc"),
-    (["collision", "--env", "{d}/a_file", "--arc", "8,0"], "mesh"),
+    (["collision", "probability", "-d", "0,0,0,0;0,0"], "equal length"),
+    (["collision", "probability", "--arc", "8,0", "-d", "0,0,0,0"], "either --arc"),
+    (["collision", "probability", "--env", "{d}/a_file", "--arc", "8,0"], "mesh"),
 ]
 
 USAGE = [  # rejected by the option parser itself (exit code 2), before anything runs
@@ -92,7 +92,7 @@ USAGE = [  # rejected by the option parser itself (exit code 2), before anything
     ],
     ["dataset", "generate", "--out", "{d}/x.h5", "--workers", "-1"],
     ["demo", "--out", "{d}/demo", "--seed", "-3"],
-    ["collision", "--arc", "8,0", "--samples", "0"],
+    ["collision", "probability", "--arc", "8,0", "--samples", "0"],
     # --workers is one shared option (min 0) wherever a command runs a process pool
     ["plan", "tissue", "--out", "{d}/pt", "--workers", "-1"],
     ["reproduce", "--out", "{d}/rp", "--workers", "-1"],
@@ -216,7 +216,11 @@ def test_usage_errors(files, argv):
 def test_help_texts_keep_their_units_and_name_real_commands():
     import re
 
-    for argv in (["robot", "shape", "--help"], ["predict", "--help"], ["collision", "--help"]):
+    for argv in (
+        ["robot", "shape", "--help"],
+        ["predict", "--help"],
+        ["collision", "probability", "--help"],
+    ):
         out = re.sub(r"\s+", " ", runner.invoke(app, argv, terminal_width=200).output)
         if argv[0] != "collision":
             assert "(m)" in out, argv  # "[m]" was swallowed as rich markup

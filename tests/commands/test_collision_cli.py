@@ -36,7 +36,9 @@ def test_env_chest(tmp_path):
 
 
 def test_collision_arc_json():
-    res = runner.invoke(app, ["collision", "--arc", "8,0", "--samples", "2000", "--json"])
+    res = runner.invoke(
+        app, ["collision", "probability", "--arc", "8,0", "--samples", "2000", "--json"]
+    )
     assert res.exit_code == 0, res.output
     rows = json.loads(res.output)
     assert rows[0]["probability"] >= rows[0]["mc_low"]
@@ -47,7 +49,18 @@ def test_collision_union_reference_estimates_the_union_event():
     # event "any of K points, one per component, collides", not "a mixture point collides"
     def rows(method):
         res = runner.invoke(
-            app, ["collision", "--arc", "8,0", "--samples", "2000", "--method", method, "--json"]
+            app,
+            [
+                "collision",
+                "probability",
+                "--arc",
+                "8,0",
+                "--samples",
+                "2000",
+                "--method",
+                method,
+                "--json",
+            ],
         )
         assert res.exit_code == 0, res.output
         return json.loads(res.output)[0]
@@ -60,13 +73,13 @@ def test_collision_union_reference_estimates_the_union_event():
 
 
 def test_collision_requires_configuration():
-    res = runner.invoke(app, ["collision"])
+    res = runner.invoke(app, ["collision", "probability"])
     assert res.exit_code != 0
 
 
 def test_collision_robot_configurations():
     res = runner.invoke(
-        app, ["collision", "-d", "0,0,0,0;0.02,0,0,0", "--samples", "2000", "--json"]
+        app, ["collision", "probability", "-d", "0,0,0,0;0.02,0,0,0", "--samples", "2000", "--json"]
     )
     assert res.exit_code == 0, res.output
     rows = json.loads(res.output)
@@ -81,7 +94,7 @@ def test_env_file_gives_the_built_in_chest_answer(tmp_path):
     rel = TOL["float32_mesh_probability"]["rtol"]
     out = tmp_path / "chest.stl"
     assert runner.invoke(app, ["env", "chest", "--out", str(out)]).exit_code == 0
-    args = ["collision", "-d", "0,0,0,0;0.02,0,0,0", "--samples", "200", "--json"]
+    args = ["collision", "probability", "-d", "0,0,0,0;0.02,0,0,0", "--samples", "200", "--json"]
     built_in = json.loads(runner.invoke(app, args).output)
     from_file = json.loads(runner.invoke(app, args + ["--env", str(out)]).output)
     for a, b in zip(built_in, from_file):

@@ -105,8 +105,12 @@ def test_predict_and_collision_take_tensions():
     np.testing.assert_allclose(
         json.loads(a.output)["means"], json.loads(b.output)["means"], **TOL["solver"]
     )
-    a = runner.invoke(app, ["collision", "--tensions", spec_t, "--json", "--samples", "100"])
-    b = runner.invoke(app, ["collision", "--displacements", spec_d, "--json", "--samples", "100"])
+    a = runner.invoke(
+        app, ["collision", "probability", "--tensions", spec_t, "--json", "--samples", "100"]
+    )
+    b = runner.invoke(
+        app, ["collision", "probability", "--displacements", spec_d, "--json", "--samples", "100"]
+    )
     assert a.exit_code == 0 and b.exit_code == 0, a.output + b.output
     pa = [r["probability"] for r in json.loads(a.output)]
     pb = [r["probability"] for r in json.loads(b.output)]

@@ -48,7 +48,9 @@ def test_from_segmentation_writes_mesh_and_sidecar(labels_mm, tmp_path):
     centre = env.vertices.mean(axis=0)
     assert np.linalg.norm(centre - np.array([-84.5, 35.5, 20.5]) * 1e-3) <= 1e-3  # one voxel
     # without a base pose the mesh is not read as if the volume were the robot's frame
-    res = runner.invoke(app, ["collision", "--env", str(out), "--arc", "8,0", "--samples", "100"])
+    res = runner.invoke(
+        app, ["collision", "probability", "--env", str(out), "--arc", "8,0", "--samples", "100"]
+    )
     assert res.exit_code != 0 and "--base-pose" in str(res.exception)
 
 

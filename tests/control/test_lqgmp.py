@@ -470,3 +470,49 @@ def test_overflow_propagates_from_the_gains_and_the_propagation(rng):
         with pytest.raises(NumericalError) as exc:
             lqgmp(sim, plan, ctrl, method=method, n_goal_samples=10)
         assert exc.value.step == 2
+
+
+@pytest.mark.parametrize("method", ["sigma", "truncation"])
+def test_near_singular_point_covariance_on_the_per_step_path(method, monkeypatch):
+    # A persistent deviation along x only (a rank-1 spread, as 2 parameter draws of a
+    # large state can leave): the per-step path (taken when polygon sizes change along a
+    # plan) must treat the near-singular 2 × 2 covariance as the vectorised path does, not
+    # fail its Cholesky factor ("covariance: not positive definite") and lose the plan.
+    import importlib
+
+    from riskplan.control.lqg import LQGController
+
+    mod = importlib.import_module("riskplan.control.lqgmp")  # the module, not the function
+    T, sd, d = 6, 0.1, 0.1
+    sim = LinearToy(np.eye(3), np.eye(3), sensing_std=0.1)
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), np.tile([0.0, 0.1, 0.0], (T, 1)))
+    sim._obstacles = [_wall(d, -10.0, 10.0)]
+    sim._goal = square(0.0, 1.0, 100.0)
+    v = np.array([1.0, 1e-9, 0.0])  # variance 1e-20 across: above 1e-24, far below 1e-12 of 1e-2
+    M = np.zeros((T, 3, 3))
+    M[0] = sd**2 * np.outer(v, v)
+    lin = Linearization(
+        A=np.broadcast_to(np.eye(3), (T, 3, 3)),
+        B=np.broadcast_to(np.eye(3), (T, 3, 3)),
+        M=M,
+        H=np.broadcast_to(sim.observation_matrix, (T, 2, 3)),
+        N=np.broadcast_to(sim.sensing_cov, (T, 2, 2)),
+        rank=np.full(T, 3),
+    )
+    zeros = np.zeros
+    ctrl = LQGController(
+        L=zeros((T, 3, 3)), K=zeros((T, 3, 2)), P=zeros((T, 3, 3)), P0=zeros((3, 3)), lin=lin
+    )
+    fast = lqgmp(sim, plan, ctrl, method="sigma", n_goal_samples=10)
+    monkeypatch.setattr(mod, "_sigma_free", lambda *a, **k: None)
+    slow = lqgmp(sim, plan, ctrl, method=method, n_goal_samples=10)
+    if method == "sigma":
+        np.testing.assert_allclose(slow.p_free_steps, fast.p_free_steps, **TOL["float64_exact"])
+        np.testing.assert_allclose(
+            slow.p_success, (-math.expm1(-0.5 * (d / sd) ** 2)) ** T, **TOL["sigma_jitter"]
+        )
+    else:
+        # the first step is the half-plane's exact Φ(d/σ)
+        np.testing.assert_allclose(
+            slow.p_free_steps[0], float(ndtr(d / sd)), **TOL["half_plane_truncation"]
+        )

@@ -183,3 +183,20 @@ def test_fit_measurement_bias_recovers_a_known_direction(rng):
     # no bias: no state
     C0, Se0, _Nr0, _f0 = fit_measurement_bias(np.zeros((T, n, m)), noise, N)
     assert C0.shape == (T, m, 0) and Se0.shape == (0, 0)
+
+
+def test_plan_tissue_selection_setup(pushed):
+    from riskplan.tissue_planning.plan import SELECTIONS, selection_setup
+
+    sim, plan, _, pm = pushed
+    s, ps, method, dist = selection_setup(sim, [plan], "material")
+    entry = SELECTIONS["material"]["needle"]
+    assert s.frame == entry["frame"] and (method, dist) == (entry["method"], entry["disturbance"])
+    np.testing.assert_array_equal(ps[0].reduced, pm.reduced)
+    assert ps[0].states is plan.states
+    s, ps, method, dist = selection_setup(sim, [plan], "paper")
+    assert s is sim and ps[0] is plan and (method, dist) == ("sigma", False)
+    s, ps, method, dist = selection_setup(sim, [plan], "calibrated")
+    assert s is sim and ps[0] is plan and method == SELECTIONS["calibrated"]["needle"]["method"]
+    with pytest.raises(InvalidInputError, match="selection"):
+        selection_setup(sim, [plan], "best")

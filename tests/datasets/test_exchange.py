@@ -194,7 +194,7 @@ def test_cli_export_import(generated, tmp_path):
 
 
 def test_an_imported_set_trains(generated, tmp_path):
-    """Imported clouds go straight into `riskplan train` (two epochs of a small network)."""
+    """Imported clouds go straight into `riskplan model train` (two epochs of a small network)."""
     man = export_dataset(generated, tmp_path / "x", fmt="ply")
     data = import_dataset(man, tmp_path / "imported.h5")
     res = runner.invoke(

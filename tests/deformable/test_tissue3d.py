@@ -132,8 +132,14 @@ def test_point_force_and_reactions(block):
     F = np.array([[0.1, -0.2, 0.3]])
     f = t.point_forces([[0.5, 0.5, 1.7]], F)
     np.testing.assert_allclose(f.sum(0), F[0], **TOL["float64_exact"])
-    u = t.solve(f)
+    u, info = t.solve_with_info(f)
     np.testing.assert_allclose(t.reactions(u).sum(0), -F[0], **TOL["fem_reactions"])
+    # the reported residual is the evaluated one
+    r = np.linalg.norm(t.residual(u, f))
+    np.testing.assert_allclose(info.residual, r, **TOL["residual_norm"])
+    assert info.residual <= TOL["newton_residual"]["rtol"] * np.linalg.norm(F)
+    F_el = t.deformation_gradient_at(block.centroids)  # each centroid in its own element
+    np.testing.assert_allclose(info.min_jacobian, np.linalg.det(F_el).min(), **TOL["float64_exact"])
 
 
 @pytest.mark.parametrize("law", ["linear", "neo-hookean"])
@@ -243,3 +249,50 @@ def test_tissue_pickles_and_solves_the_same(block):
     assert t2.snapshot().identical(t.snapshot())
     g = 1.5 * f
     assert t2.solve(g).tobytes() == t.solve(g).tobytes()
+
+
+@pytest.mark.parametrize("law,scale", [("linear", 0.01), ("neo-hookean", 0.2)])
+def test_prescribed_homogeneous_deformation_is_reproduced(block, law, scale):
+    """A homogeneous deformation u = (F − I) X prescribed on the whole boundary is an
+    equilibrium of any law: the interior nodes follow it (for the neo-Hookean law with
+    strains of order 0.2, through the prescribed-motion predictor and Newton)."""
+    rng = np.random.default_rng(3)
+    H = scale * rng.normal(size=(3, 3))
+    H = 0.5 * (H + H.T) + scale * np.eye(3)
+    t = TetTissue(block, MAT, block.boundary_nodes, law=law)
+    exact = block.nodes @ H.T
+    u = t.solve(np.zeros((block.n_nodes, 3)), fixed_values=exact[t.fixed_nodes], load_steps=2)
+    np.testing.assert_allclose(u, exact, **TOL["nonlinear_patch"])
+    # the state pickles read-only and compares bit for bit
+    import pickle
+
+    snap = pickle.loads(pickle.dumps(t.snapshot()))
+    assert snap.identical(t.snapshot()) and not snap.displacement.flags.writeable
+
+
+def test_point_location_agrees_with_exhaustive_search():
+    from riskplan.deformable.tissue3d import INSIDE_TOL, find_points
+
+    m = tet_block(n_elements=5000)
+    rng = np.random.default_rng(7)
+    pts = np.vstack([rng.uniform(-0.05, 1.05, size=(400, 3)), m.nodes[:20]])
+    elem, lam = find_points(m, pts)
+    b = (
+        np.einsum("tij,pj->pti", m.barycentric_maps[:, :, :3], pts)
+        + m.barycentric_maps[None, :, :, 3]
+    )
+    best = b.min(axis=2).max(axis=1)
+    np.testing.assert_array_equal(elem >= 0, best >= -INSIDE_TOL)
+    inside = elem >= 0
+    assert np.all(lam[inside].min(axis=1) >= -INSIDE_TOL)
+    # the weights reproduce the point
+    X = np.einsum("pa,pak->pk", lam[inside], m.nodes[m.tets[elem[inside]]])
+    np.testing.assert_allclose(X, pts[inside], **TOL["float64_exact"])
+
+
+@pytest.mark.parametrize("law", ["linear", "neo-hookean"])
+def test_supports_that_leave_a_rigid_motion_free_are_refused(block, law):
+    """Only the normal component held on z = 0: the body may slide and spin in that plane.
+    The singular stiffness is refused, not answered with round-off."""
+    with pytest.raises(InvalidInputError, match="rigid motion free"):
+        TetTissue(block, MAT, fixed_dofs=3 * block.face_nodes("z-") + 2, law=law)

@@ -13,6 +13,7 @@ def test_train_predict_evaluate_cli(synth_paths, tmp_path):
     r = runner.invoke(
         app,
         [
+            "model",  # the group; the old spellings below are hidden aliases
             "train",
             "--data",
             str(train),

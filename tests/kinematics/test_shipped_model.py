@@ -98,6 +98,7 @@ def test_cli_collision_with_shipped_model(tmp_path):
         app,
         [
             "collision",
+            "probability",
             "--env",
             str(stl),
             "--base-pose",

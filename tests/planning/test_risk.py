@@ -111,7 +111,7 @@ def test_make_risk_names(model, scene):
     from riskplan.errors import InvalidInputError
     from riskplan.planning.risk import RISKS, CloudRiskBound, make_risk
 
-    assert RISKS == ("eq9", "cloud")
+    assert RISKS == ("eq9", "cloud", "bodies")
     assert isinstance(make_risk("eq9", model, scene), ConfigurationBound)
     assert isinstance(make_risk("cloud", model, scene), CloudRiskBound)
     with pytest.raises(InvalidInputError, match="risk"):
@@ -132,3 +132,79 @@ def test_segment_cost_short_last_segment(tol):
     np.testing.assert_allclose(out, [3 * c + c, c, c], **tol["float64_exact"])
     mid = cost(a[[1, 0, 2]], b[[1, 0, 2]])
     np.testing.assert_allclose(mid, out[[1, 0, 2]], **tol["float64_exact"])
+
+
+class _RobotModel:
+    """The analytic model with a transmission: a robot of two tendons in the model's limits."""
+
+    def __init__(self, model, play=0.0005, offset_std=0.0001):
+        from types import SimpleNamespace
+
+        from riskplan.robots.params import HysteresisParams
+
+        self.base = model
+        self.limits = model.limits
+        self.n_tendons = model.n_tendons
+        self.robot = SimpleNamespace(
+            n_tendons=2,
+            displacement_limits=np.asarray(model.limits),
+            params=SimpleNamespace(
+                hysteresis=HysteresisParams(play=play, play_variation=0.2, offset_std=offset_std)
+            ),
+        )
+
+    def predict(self, d):
+        return self.base.predict(d)
+
+
+def _tip_gap_config(gap):
+    """Displacements whose tip component mean lies ``2 SIGMA + gap`` outside the box face x = -0.03."""
+    from tests.planning.conftest import GAIN, SIGMA
+
+    return np.array([0.015 + (-0.03 - 2 * SIGMA - gap) / GAIN, 0.015])
+
+
+def test_sampled_body_risk_without_transmission_is_the_ellipsoid(model, scene):
+    """No play and no offset: every execution receives the command, the body is the predicted
+    components at extent 2 (a 2σ ball here), and the risk is exactly 0 or 1."""
+    from riskplan.planning.risk import SampledBodyRisk
+
+    b = SampledBodyRisk(_RobotModel(model, play=0.0, offset_std=0.0), scene, n_draws=8)
+    got = b(np.stack([_tip_gap_config(0.001), _tip_gap_config(-0.001)]))
+    np.testing.assert_array_equal(got, [0.0, 1.0])
+
+
+def test_sampled_body_risk_is_the_collision_module_on_the_transmission_draws(model, scene):
+    """With the robot's play the same configuration collides in some executions only; the value
+    is :func:`sampled_body_risk` on the means at the executions' displacements (same draws),
+    deterministic, and the trajectory keeps each execution's draw."""
+    from riskplan.collision.body_risk import sampled_body_risk
+    from riskplan.gaussian_mixture import as_numpy_mixture
+    from riskplan.parallel import spawn_seeds
+    from riskplan.planning.executions import execution_displacements
+    from riskplan.planning.risk import SampledBodyRisk
+
+    rm = _RobotModel(model)
+    b = SampledBodyRisk(rm, scene, n_draws=256, seed=5)
+    x = _tip_gap_config(0.0)
+    p = b(x[None])[0]
+    assert 0.0 < p < 1.0
+    eff = execution_displacements(rm.robot, x[None], spawn_seeds(5, 256))
+    drawn = as_numpy_mixture(model.predict(eff.reshape(-1, 2))).means.reshape(256, 1, 2, 3)
+    ref = sampled_body_risk(as_numpy_mixture(model.predict(x[None])), drawn, scene)
+    assert p == ref.per_configuration[0]
+    assert b(x[None])[0] == p and b.evaluations == 2
+    traj = np.stack([x, x, _tip_gap_config(0.01)])
+    assert b.trajectory(traj) >= p
+
+
+def test_sampled_body_risk_errors(model, scene):
+    from riskplan.errors import InvalidInputError
+    from riskplan.planning.risk import SampledBodyRisk
+
+    with pytest.raises(InvalidInputError, match="robot"):
+        SampledBodyRisk(model, scene)
+    with pytest.raises(InvalidInputError, match="extent"):
+        SampledBodyRisk(_RobotModel(model), scene, extent=0.0)
+    with pytest.raises(InvalidInputError, match="n_draws"):
+        SampledBodyRisk(_RobotModel(model), scene, n_draws=1)

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from riskplan.threads import one_torch_thread
+
 N_BATCH = 10_000
 
 
@@ -35,12 +37,9 @@ def make_bench_model(n_tendons: int, limits: np.ndarray, n_components: int = 5, 
     return MDNModel(net, norm, limits, "", "bench")
 
 
+@one_torch_thread
 def run(quick: bool = False) -> dict:
-    import torch
-
     from riskplan.bench import median_time
-
-    torch.set_num_threads(1)
     from riskplan.robots import load_robot
 
     robot = load_robot("paper")

@@ -26,6 +26,7 @@ import time
 import numpy as np
 
 from riskplan.bench import cpu_model, median_time
+from riskplan.threads import one_torch_thread
 
 
 def lab_task():
@@ -95,8 +96,8 @@ def new_robot_end_to_end(quick: bool = False) -> dict:
     }
 
 
+@one_torch_thread
 def run(quick: bool = False, model: str = "paper") -> dict:
-    import torch
 
     from riskplan.app.reproduce.optimiser_comparison import (
         compare_optimisers,
@@ -104,7 +105,6 @@ def run(quick: bool = False, model: str = "paper") -> dict:
     )
     from riskplan.planning.risk import trajectory_risk
 
-    torch.set_num_threads(1)
     milestones = 40 if quick else 300
     seeds = range(2) if quick else range(5)
     iterations = 2 if quick else 50

@@ -1,8 +1,8 @@
 """Speed of planning under uncertainty in deformable tissue (issue 11):
 ``riskplan bench planning-tissue --json``.
 
-Per scenario (needle V-A, manipulation V-B; case material-high, seed 0, the local process
-pool with one worker per core):
+Per scenario (needle V-A, manipulation V-B, the 3-D needle; case material-high, seed 0,
+the local process pool with one worker per core):
 
 * ``<scenario>_rrt_100_s``: wall-clock seconds of :func:`riskplan.tissue_planning.rrt.rrt_plans`
   for 100 candidate plans (the paper: needle 81 s, manipulation 438 s, C++ on a 3.33 GHz i7);
@@ -12,8 +12,10 @@ pool with one worker per core):
 Also ``<scenario>_rrt_cpu_s`` / ``<scenario>_selection_cpu_s``: CPU seconds summed over the
 workers' tasks (on a shared machine the wall clock also counts other users' load; on two
 idle cores the wall time would be about half the CPU sum plus start-up). And the plans
-actually found, the CPU model and the core count. ``--quick``: 10 needle
-and 4 manipulation plans (keys ``..._rrt_10_s`` / ``..._rrt_4_s``), for a smoke test.
+actually found, the CPU model and the core count. ``--quick``: 10 needle,
+4 manipulation and 2 needle3d plans (keys ``..._rrt_10_s`` / ``..._rrt_4_s`` /
+``..._rrt_2_s``), for a smoke test. The 3-D needle plans on its 1296-tetrahedron planning
+mesh (:data:`riskplan.scenarios.needle3d.PLANNING_ELEMENTS`).
 """
 
 from __future__ import annotations
@@ -32,8 +34,13 @@ def measure(scenario: str, n_plans: int, *, seed: int = 0, workers: int | None =
     from riskplan.tissue_planning.select import select_plan
 
     sim = make_scenario(scenario, "material-high")
+    options = None
+    if scenario == "needle3d":  # the options of `riskplan plan needle3d`
+        from riskplan.tissue_planning.rrt import RRTOptions
+
+        options = RRTOptions(plans_per_tree=5, max_iterations=600, goal_bias=0.5, goal_depth=0.3)
     t0 = time.perf_counter()
-    plans, trees = rrt_plans(sim, n_plans, seed=seed, workers=workers)
+    plans, trees = rrt_plans(sim, n_plans, seed=seed, workers=workers, options=options)
     t_rrt = time.perf_counter() - t0
     t0 = time.perf_counter()
     with warnings.catch_warnings():
@@ -57,6 +64,7 @@ def run(quick: bool = False) -> dict:
     out: dict = {}
     out.update(measure("needle", 10 if quick else 100))
     out.update(measure("manipulation", 4 if quick else 100))
+    out.update(measure("needle3d", 2 if quick else 100))
     out["cpu_model"] = cpu_model()
     out["cores"] = default_workers()
     return out

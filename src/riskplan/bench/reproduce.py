@@ -12,6 +12,11 @@ Rates and per-candidate costs are measured in CPU time of this (single-threaded)
 (``time.process_time``), so on a machine shared with other jobs they still describe one
 core, not the share of it the scheduler gave.
 
+* ``needle_executions_per_s_shared_draws`` / ``manipulation_executions_per_s_shared_draws``
+  — the same rate as Fig. 6 executes now: each case's draws in one task on a freshly
+  unpickled scenario, four runs of the plan (two open, two closed loop) on each draw, so a
+  draw's FEM model (and in the mesh case its mesh) is built once for the four
+  (:func:`riskplan.app.reproduce.deformable.execute_methods`).
 * ``smoke_all_s`` — wall-clock seconds of ``riskplan reproduce --paper all --scale smoke``
   (local process pool, all cores) in a fresh folder; ``None`` with ``--quick``.
 * ``*_rrt_s_per_candidate`` (one tree grown for one plan: an upper bound, trees of the
@@ -61,10 +66,37 @@ def executions_per_s(name: str, n_per_case: int, seed: int = 0, costs: dict | No
         elapsed += time.process_time() - t0
         count += 2 * n_per_case
     if costs is not None:
+        costs["shared_draws_executions_per_s"] = _shared_draws_rate(name, plan, seed, n_per_case)
         costs["rrt_s"] = t_rrt
         costs["select_s"] = sum(t_select[1:]) / max(
             1, len(t_select) - 1
         )  # the first one pays imports and JIT
+    return count / elapsed
+
+
+def _shared_draws_rate(name: str, plan, seed: int, n_per_case: int) -> float:
+    """Executions per CPU second as Fig. 6 runs them now: per case one task of ``n_per_case``
+    draws on a freshly unpickled scenario (as a pool worker receives it), the plan executed
+    open loop twice and closed loop twice on each draw
+    (:func:`riskplan.app.reproduce.deformable.execute_methods`: a draw's FEM model and mesh are
+    built once for all four)."""
+    import pickle
+
+    from riskplan.app.reproduce.deformable import EVAL_CASES, evaluate_candidate, execute_methods
+    from riskplan.parallel import spawn_seeds
+    from riskplan.scenarios.registry import make_scenario
+
+    elapsed, count = 0.0, 0
+    for case in EVAL_CASES:
+        sim = make_scenario(name, case)
+        ctrl = evaluate_candidate((sim, plan, 16, 2000, seed))["controller"]
+        seeds = spawn_seeds(seed + 1, n_per_case)
+        runs = [(plan, None), (plan, None), (plan, ctrl), (plan, ctrl)]
+        task = pickle.dumps((sim, runs, seeds))
+        t0 = time.process_time()
+        execute_methods(pickle.loads(task))
+        elapsed += time.process_time() - t0
+        count += len(runs) * n_per_case
     return count / elapsed
 
 
@@ -77,6 +109,8 @@ def run(quick: bool = False) -> dict:
         ),
         "needle_rrt_s_per_candidate": needle["rrt_s"],
         "needle_select_s_per_candidate_case": needle["select_s"],
+        "needle_executions_per_s_shared_draws": needle["shared_draws_executions_per_s"],
+        "manipulation_executions_per_s_shared_draws": manipulation["shared_draws_executions_per_s"],
         "manipulation_rrt_s_per_candidate": manipulation["rrt_s"],
         "manipulation_select_s_per_candidate_case": manipulation["select_s"],
         "smoke_all_s": None,

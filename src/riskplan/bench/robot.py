@@ -82,7 +82,7 @@ def run(
 ) -> dict:
     from riskplan.bench import median_time
     from riskplan.robots import cosserat, load_robot
-    from riskplan.robots.robot import LOCAL_MAXIT, LOCAL_TOL
+    from riskplan.robots.rod_tables import LOCAL_MAXIT, LOCAL_TOL
 
     robot = load_robot("paper")
     rng = np.random.default_rng(0)

@@ -31,7 +31,7 @@ from riskplan.collision.gaussian import (
 )
 from riskplan.collision.geometry import mahalanobis, unwhiten, whiten
 from riskplan.collision.mesh_files import (
-    BasePose,
+    BasePose,  # noqa: F401 - riskplan.robots.BasePose, importable here too (documented there)
     environment_in_base_frame,
     load_environment,
     mesh_base_pose,
@@ -95,7 +95,6 @@ __all__ = [
     "COMBINES",
     "DEFAULT_CUTOFF",
     "METHODS",
-    "BasePose",
     "Environment",
     "FreeRegion",
     "MonteCarloEstimate",

@@ -1,4 +1,4 @@
-"""Upper bound on the probability that a Gaussian point lies inside obstacles
+r"""Upper bound on the probability that a Gaussian point lies inside obstacles
 (Patil, van den Berg, Alterovitz, ICRA 2012; MDN paper section V, eq. 8).
 
 Method, per Gaussian ``N(mu, Sigma)`` with ``Sigma^{-1} = U^T U``:
@@ -10,7 +10,10 @@ Method, per Gaussian ``N(mu, Sigma)`` with ``Sigma^{-1} = U^T U``:
 3. The intersection of the half-spaces is convex, contains the origin and meets no face, so
    (if the mean is in free space) it lies in free space, and
 
-       P(collision) <= P(y outside the polytope) <= sum_j (1 - Phi(b_j)).
+   .. math::
+
+       \hat E = \bar U (E - \mu) \quad \text{(eq. 8)}, \qquad
+       P(\text{collision}) \le P(y \notin \{a_j^\top y \le b_j\}) \le \sum_j (1 - \Phi(b_j)).
 
 Faces (triangles or 2-D edges) are the convex pieces of the obstacles' surfaces.
 

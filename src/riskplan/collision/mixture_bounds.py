@@ -1,4 +1,4 @@
-"""Collision probability bounds of Gaussian mixtures (MDN paper section V, eq. 9).
+r"""Collision probability bounds of Gaussian mixtures (MDN paper section V, eq. 9).
 
 Mixtures are :class:`~riskplan.gaussian_mixture.NumpyMixture` batches; a torch
 :class:`riskplan.kinematics.GaussianMixture` is accepted too and converted by its
@@ -7,7 +7,11 @@ Mixtures are :class:`~riskplan.gaussian_mixture.NumpyMixture` batches; a torch
 Two quantities, side by side:
 
 ``combine="weighted"`` (the paper's eq. 9)
-    ``P <= sum_i w_i sum_j (1 - Phi(b_ij))``. This bounds the probability that ONE point drawn
+    .. math::
+
+        p(x \notin X_f) \le \sum_{i=1}^{N} w_i \sum_{j=1}^{K_i} \left(1 - \Phi(b_{ij})\right)
+
+    This bounds the probability that ONE point drawn
     from the geometry distribution (pick component ``i`` with probability ``w_i``, then a point
     from it) lies outside free space. It is not the probability that any part of the robot
     collides: a robot whose mixture puts weight 0.2 on a tip component that surely collides gets
@@ -52,7 +56,26 @@ def check_mixture(mixture, d: int, *, validate: bool = True) -> NumpyMixture:
 def component_bounds(
     mixture, environment: Environment, *, cutoff: float = DEFAULT_CUTOFF, validate: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per-component bounds ``p_i = min(1, sum_j (1 - Phi(b_ij)))`` and weights; both ``(..., K)``."""
+    r"""Per-component bounds :math:`p_i = \min(1, \sum_j (1 - \Phi(b_{ij})))` and the weights.
+
+    Parameters
+    ----------
+    mixture : NumpyMixture or GaussianMixture
+        Batch of mixtures with ``K`` components.
+    environment : Environment
+        Obstacles in the mixture's frame.
+    cutoff : float
+        Whitened radius beyond which faces are not visited (module :mod:`riskplan.collision.gaussian`).
+    validate : bool
+        Check the arguments.
+
+    Returns
+    -------
+    bounds : numpy.ndarray
+        ``(..., K)``.
+    weights : numpy.ndarray
+        ``(..., K)``.
+    """
     check_environment(environment)
     gm = check_mixture(mixture, environment.dim, validate=validate)
     terms = gaussian_bound_terms(
@@ -69,12 +92,35 @@ def mixture_bound(
     cutoff: float = DEFAULT_CUTOFF,
     validate: bool = True,
 ) -> np.ndarray:
-    """Upper bound on the collision probability of a mixture batch; returns ``(...,)`` in [0, 1].
+    r"""Upper bound on the collision probability of a mixture batch (MDN paper eq. 9).
 
-    ``combine="weighted"``: eq. 9, ``sum_i w_i min(1, sum_j (1 - Phi(b_ij)))`` — probability that
-    a point drawn from the mixture is outside free space. ``combine="union"``:
-    ``min(1, sum_i min(1, sum_j (1 - Phi(b_ij))))`` — any of the components' points (see module
-    docstring).
+    ``combine="weighted"``: eq. 9, the probability that a point drawn from the mixture is
+    outside free space,
+
+    .. math::
+
+        \sum_i w_i \min\left(1, \sum_j (1 - \Phi(b_{ij}))\right);
+
+    ``combine="union"``: :math:`\min(1, \sum_i \min(1, \sum_j (1 - \Phi(b_{ij}))))`, any of
+    the components' points (module docstring).
+
+    Parameters
+    ----------
+    mixture : NumpyMixture or GaussianMixture
+        Batch of mixtures.
+    environment : Environment
+        Obstacles in the mixture's frame.
+    combine : {"weighted", "union"}
+        Which quantity.
+    cutoff : float
+        Whitened radius beyond which faces are not visited.
+    validate : bool
+        Check the arguments.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(...,)`` in ``[0, 1]``.
     """
     if combine not in COMBINES:
         raise InvalidInputError(f"combine: expected one of {COMBINES}, got {combine!r}")

@@ -46,10 +46,35 @@ class MonteCarloEstimate:
 def binomial_interval(
     hits, n: int, confidence: float = 0.95, method: str = "wilson"
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Two-sided ``confidence`` interval for a binomial proportion ``hits / n``.
+    r"""Two-sided ``confidence`` interval for a binomial proportion ``hits / n``.
 
-    ``wilson``: Wilson score interval. ``clopper-pearson``: exact interval from Beta quantiles
-    (never below nominal coverage).
+    ``wilson``: the Wilson score interval, vectorised over ``hits``,
+
+    .. math::
+
+        \frac{\hat p + \frac{z^2}{2n} \pm z \sqrt{\frac{\hat p (1 - \hat p)}{n} +
+        \frac{z^2}{4 n^2}}}{1 + \frac{z^2}{n}}, \qquad \hat p = k / n,
+        \quad z = \Phi^{-1}(1 - \alpha / 2)
+
+    (the same numbers as ``scipy.stats.binomtest(k, n).proportion_ci(method="wilson")``,
+    which the tests use as the oracle). ``clopper-pearson``: the exact interval from Beta
+    quantiles (never below nominal coverage).
+
+    Parameters
+    ----------
+    hits : array_like of int
+        Successes ``k``, each in ``[0, n]``.
+    n : int
+        Trials (> 0).
+    confidence : float
+        Level in ``(0, 1)``.
+    method : {"wilson", "clopper-pearson"}
+        The interval.
+
+    Returns
+    -------
+    low, high : numpy.ndarray
+        Bounds of the interval, the shape of ``hits``.
     """
     from scipy.special import betaincinv, ndtri
 

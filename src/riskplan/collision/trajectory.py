@@ -1,7 +1,12 @@
-"""Collision probability along a trajectory (MDN paper section V, eq. 10).
+r"""Collision probability along a trajectory (MDN paper section V, eq. 10).
 
-``combine="independent"`` (eq. 10): ``1 - prod_t (1 - p_t)``. This treats the per-state
-events as independent; it is what the paper optimises.
+``combine="independent"`` (eq. 10):
+
+.. math::
+
+    p(\exists x \in \tau : x \notin X_f) \le 1 - \prod_{x \in \tau} \left(1 - p(x \notin X_f)\right).
+
+This treats the per-state events as independent; it is what the paper optimises.
 ``combine="union"``: ``min(1, sum_t p_t)`` (Boole), an upper bound whatever the dependence
 between states; it is never smaller than the eq. 10 value.
 """
@@ -21,10 +26,25 @@ TRAJECTORY_COMBINES = ("independent", "union")
 def trajectory_probability(
     probabilities, *, combine: str = "independent", axis: int = -1
 ) -> np.ndarray:
-    """Combine per-state probabilities ``(..., T)`` (along ``axis``) into ``(...,)``.
+    r"""Combine per-state probabilities into the probability of a trajectory.
 
-    ``independent``: ``1 - prod_t (1 - p_t)`` (eq. 10), computed as ``-expm1(sum log1p(-p_t))``
-    for accuracy at small ``p``. ``union``: ``min(1, sum_t p_t)``.
+    ``independent``: :math:`1 - \prod_t (1 - p_t)` (eq. 10), computed as
+    ``-expm1(sum log1p(-p_t))`` for accuracy at small ``p``. ``union``:
+    :math:`\min(1, \sum_t p_t)`.
+
+    Parameters
+    ----------
+    probabilities : array_like
+        ``(..., T)`` per-state probabilities in ``[0, 1]`` (states along ``axis``).
+    combine : {"independent", "union"}
+        The rule.
+    axis : int
+        The axis of the states.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(...,)`` in ``[0, 1]``.
     """
     p = np.asarray(probabilities, dtype=np.float64)
     if p.ndim == 0:
@@ -50,8 +70,28 @@ def trajectory_bound(
     cutoff: float = DEFAULT_CUTOFF,
     validate: bool = True,
 ) -> np.ndarray:
-    """Eq. 10 over eq. 9: ``mixtures`` with batch shape ``(..., T)`` (T states along the last
-    batch axis); returns ``(...,)``."""
+    """Eq. 10 over eq. 9: the bound of a trajectory of mixtures.
+
+    Parameters
+    ----------
+    mixtures : NumpyMixture or GaussianMixture
+        Batch shape ``(..., T)``, the states along the last batch axis.
+    environment : Environment
+        Obstacles in the mixtures' frame.
+    combine : {"independent", "union"}
+        Along the trajectory (:func:`trajectory_probability`).
+    mixture_combine : {"weighted", "union"}
+        Per state (:func:`~riskplan.collision.mixture_bound`).
+    cutoff : float
+        Whitened radius beyond which faces are not visited.
+    validate : bool
+        Check the arguments.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(...,)`` in ``[0, 1]``.
+    """
     p = mixture_bound(
         mixtures, environment, combine=mixture_combine, cutoff=cutoff, validate=validate
     )

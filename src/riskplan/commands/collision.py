@@ -1,8 +1,8 @@
 """`riskplan` subcommands for the collision area (heavy imports stay inside the commands).
 
 * ``riskplan env chest --out chest.stl [--seed N] [--view chest.png] [--html chest.html]``
-* ``riskplan collision --env chest|FILE [--model M | --arc K,PHI] --displacements d1,d2,...``
-* ``riskplan collision-table --out docs-table.md`` (bound vs Monte Carlo in the chest)
+* ``riskplan collision probability --env chest|FILE [--model M | --arc K,PHI] --displacements d1,d2,...``
+* ``riskplan collision table --out docs-table.md`` (bound vs Monte Carlo in the chest)
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ def register(app: typer.Typer) -> None:
         """Build the procedural chest cavity (MDN paper Fig. 6) and write it as one mesh file.
 
         The mesh is in the world frame; a JSON sidecar OUT.json records the frame, the robot base
-        pose, the seed, the parameters and the insertion point, so `riskplan collision --env OUT`
+        pose, the seed, the parameters and the insertion point, so `riskplan collision probability --env OUT`
         gives the same answer as the built-in chest.
         """
         from riskplan.collision.mesh_files import sidecar_path
@@ -134,7 +134,11 @@ def register(app: typer.Typer) -> None:
             f"-> {out} (+ {sidecar_path(out).name})"
         )
 
-    @app.command("collision")
+    collision_app = add_group(
+        app, "collision", "P(collision) of the robot's predicted geometry: bound and table."
+    )
+
+    @collision_app.command("probability")
     def collision(
         env: str = typer.Option(
             "chest",
@@ -157,7 +161,7 @@ def register(app: typer.Typer) -> None:
         model: Path = typer.Option(
             None,
             "--model",
-            help="Trained MDN model folder (riskplan train) or a shipped name ('paper'). Default: robot backbone mixture.",
+            help="Trained MDN model folder (riskplan model train) or a shipped name ('paper'). Default: robot backbone mixture.",
         ),
         arc: str = typer.Option(
             None,
@@ -286,7 +290,7 @@ def register(app: typer.Typer) -> None:
             )
         Console().print(table)
 
-    @app.command("collision-table")
+    @collision_app.command("table")
     def collision_table(
         out: Path = typer.Option(
             None, "--out", "-o", help="Write the markdown table here (default: print)."
@@ -312,3 +316,6 @@ def register(app: typer.Typer) -> None:
 
             write_text_atomic(out, text)
             typer.echo(f"table: {out}")
+
+    # the spelling before the group
+    app.command("collision-table", hidden=True)(collision_table)

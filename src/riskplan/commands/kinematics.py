@@ -59,9 +59,15 @@ def _parse_displacements(spec: str):
 
 
 def register(app: typer.Typer) -> None:
-    """Add this area's commands to the top-level app."""
+    """Add this area's commands to the top-level app: the group ``riskplan model ...`` and
+    the old ungrouped spellings (``riskplan model train`` ...) as hidden aliases."""
+    from riskplan.commands._shared import add_group
 
-    @app.command()
+    model_app = add_group(
+        app, "model", "The mixture density network: train, predict, sweep, evaluate."
+    )
+
+    @model_app.command()
     def train(
         data: Path = typer.Option(
             ..., "--data", help="Training data set (HDF5 from `riskplan dataset`)."
@@ -95,13 +101,11 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Train a mixture density network on a point-cloud data set."""
         cfg = _config(locals(), n_components=components, early_stop_patience=patience)
-        import torch
 
         from riskplan.commands._shared import output_folder, progress_bar, stop_interrupted
         from riskplan.kinematics.data import read_point_clouds
         from riskplan.kinematics.training import train as run_train
 
-        torch.set_num_threads(1)
         ds = read_point_clouds(data)
         with output_folder(out), progress_bar() as bar:
             task = bar.add_task("training", total=cfg.epochs, status="")
@@ -144,7 +148,7 @@ def register(app: typer.Typer) -> None:
             f"({len(res.history)} epochs{', stopped early' if res.stopped_early else ''}, {res.skipped_steps} skipped steps); model: {out}"
         )
 
-    @app.command()
+    @model_app.command()
     def predict(
         model: Path = typer.Option(
             ..., "--model", "-m", help="Model folder, or a shipped model name ('paper')."
@@ -173,7 +177,7 @@ def register(app: typer.Typer) -> None:
         m = load_model(model)
         if m.metadata.get("finished") is False:
             typer.secho(
-                f"warning: {model} is an unfinished model (its training run has not ended); resume it with riskplan train --resume",
+                f"warning: {model} is an unfinished model (its training run has not ended); resume it with riskplan model train --resume",
                 fg="yellow",
                 err=True,
             )
@@ -208,7 +212,7 @@ def register(app: typer.Typer) -> None:
                     f"  w={w[c, k]:.3f}  mean=({', '.join(f'{v * 1e3:8.2f}' for v in mu[c, k])}) mm"
                 )
 
-    @app.command()
+    @model_app.command()
     def sweep(
         data: Path = typer.Option(..., "--data", help="Training data set."),
         test: Path = typer.Option(..., "--test", help="Test data set."),
@@ -274,7 +278,7 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"K={e.n_components:2d}  test NLL {e.test_nll:9.4f}{flag}")
         typer.echo(f"recommended K = {res.recommended} ({res.rule}); results in {out}")
 
-    @app.command()
+    @model_app.command()
     def evaluate(
         model: Path = typer.Option(
             ..., "--model", "-m", help="Model folder, or a shipped model name ('paper')."
@@ -298,7 +302,6 @@ def register(app: typer.Typer) -> None:
         seed: int = typer.Option(0, min=0),
     ) -> None:
         """Test NLL, Chamfer distance, HDR calibration and the paper's Fig. 5."""
-        import torch
 
         from riskplan.commands._shared import output_folder
         from riskplan.io import check_output_folder, write_json_atomic
@@ -308,7 +311,6 @@ def register(app: typer.Typer) -> None:
         from riskplan.kinematics.plotting import fig_samples_vs_truth, plotly_samples_vs_truth
 
         check_output_folder(out, "--out")
-        torch.set_num_threads(1)
         m = load_model(model)
         ds = read_point_clouds(data)
         with output_folder(out):
@@ -340,3 +342,6 @@ def register(app: typer.Typer) -> None:
             "HDR calibration: " + ", ".join(f"{a:g} -> {c:.3f}" for a, c in ev.calibration.items())
         )
         typer.echo(f"results in {out}")
+
+    for command in (train, predict, sweep, evaluate):  # the spellings before the group
+        app.command(command.__name__, hidden=True)(command)

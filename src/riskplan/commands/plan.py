@@ -8,7 +8,7 @@ import importlib
 
 import typer
 
-PLANNERS = ("plan_chest", "plan_robot", "plan_tissue")
+PLANNERS = ("plan_chest", "plan_robot", "plan_tissue", "plan_needle3d")
 
 
 def register(app: typer.Typer) -> None:

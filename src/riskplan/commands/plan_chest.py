@@ -34,7 +34,7 @@ def register(plan_app: typer.Typer) -> None:
         model: str = typer.Option(
             "paper",
             "--model",
-            help="'paper' (shipped model) or a model folder from `riskplan train`.",
+            help="'paper' (shipped model) or a model folder from `riskplan model train`.",
         ),
         env: Path = typer.Option(
             None,
@@ -92,8 +92,10 @@ def register(plan_app: typer.Typer) -> None:
         risk: str = typer.Option(
             "eq9",
             "--risk",
-            help="Risk optimised per configuration: eq9 (the paper's bound) or cloud (body contact "
-            "from sampled body clouds, docs/validation.md); eq. 10 combines it along the path.",
+            help="Risk optimised per configuration: eq9 (the paper's bound), cloud (body contact "
+            "from sampled body clouds) or bodies (body contact over sampled executions: the "
+            "transmission's draws through the learned model; docs/validation.md); eq. 10 "
+            "combines it along the path.",
         ),
         robot: str = typer.Option(
             None,
@@ -126,7 +128,6 @@ def register(plan_app: typer.Typer) -> None:
         ),
     ) -> None:
         """Plan a nominal trajectory with a PRM and lower its P(collision) bound by Bayesian optimisation."""
-        import torch
 
         from riskplan.collision import Environment
         from riskplan.commands._shared import output_folder, progress_bar
@@ -138,7 +139,6 @@ def register(plan_app: typer.Typer) -> None:
         from riskplan.planning.chest import plan_chest
         from riskplan.planning.robot_plan import check_plan_budget
 
-        torch.set_num_threads(1)
         _check_finite(tip_tolerance=tip_tolerance, radius=radius, step=step, resolution=resolution)
         check_output_folder(out, "--out")
         mdl = load_model(model)
@@ -283,7 +283,7 @@ def register(plan_app: typer.Typer) -> None:
                 f"shortest path bound {plan.paths['shortest']['bound']:.4f}, least-risk path bound {plan.paths['least_risk']['bound']:.4f}"
             )
         typer.echo(
-            f"{'eq. 10 bound' if risk == 'eq9' else 'cloud risk (eq. 10 product)'}: "
+            f"{'eq. 10 bound' if risk == 'eq9' else f'{risk} risk (eq. 10 product)'}: "
             f"nominal {plan.nominal_bound:.4f} -> optimised {res.bound:.4f} "
             f"({100 * res.reduction:.1f} % lower, {len(res.trace) - 1} iterations, {res.evaluations} bound evaluations)"
         )
@@ -307,7 +307,7 @@ def register_study(plan_app: typer.Typer) -> None:
         scale: str = typer.Option("reduced", help="smoke | reduced | full (docs/validation.md)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the selection and executions."),
     ) -> None:
-        """Calibration of eq. 9/10 and the cloud risk against collision rates on the robot."""
+        """Calibration of eq. 9/10, the cloud risk and the sampled-body risk against collision rates on the robot."""
         from dataclasses import asdict
 
         from riskplan.app.reproduce.risk_calibration import RISK_STUDY_SCALES, run_risk_study

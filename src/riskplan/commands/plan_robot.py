@@ -38,7 +38,7 @@ def register(plan_app: typer.Typer) -> None:
         model: str = typer.Option(
             None,
             "--model",
-            help="A model folder from `riskplan train` (default: the robot's cached model, built if absent).",
+            help="A model folder from `riskplan model train` (default: the robot's cached model, built if absent).",
         ),
         preset: str = typer.Option(
             "small", "--preset", help="Data-set preset of a model built here (tiny, small, paper)."
@@ -95,7 +95,6 @@ def register(plan_app: typer.Typer) -> None:
         import math
 
         import numpy as np
-        import torch
 
         from riskplan.commands._shared import progress_bar
         from riskplan.errors import InvalidInputError
@@ -107,7 +106,6 @@ def register(plan_app: typer.Typer) -> None:
             problem_from_options,
         )
 
-        torch.set_num_threads(1)
         for name, v in (
             ("step", step),
             ("resolution", resolution),

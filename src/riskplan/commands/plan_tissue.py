@@ -34,10 +34,17 @@ def register(plan_app: typer.Typer) -> None:
             0, "--seed", min=0, help="master seed (trees, linearisation, checks)"
         ),
         method: str = typer.Option(
-            "sigma",
+            None,
             "--method",
             help="LQG-MP collision estimate: sigma (paper; conservative) | truncation | "
-            "sampling (trajectories of the linear model)",
+            "sampling (trajectories of the linear model); default: the --selection's",
+        ),
+        selection: str = typer.Option(
+            "calibrated",
+            "--selection",
+            help="calibrated (default: per scenario the estimator that matched measured success "
+            "best, docs/control.md) | material (needle: material frame with the bias state) | "
+            "paper (sigma on the world-frame LQG)",
         ),
         check_runs: int = typer.Option(
             1000, "--check-runs", min=0, help="closed-loop executions per checked plan (0: skip)"
@@ -69,9 +76,15 @@ def register(plan_app: typer.Typer) -> None:
             )
         if plans < 1:
             raise InvalidInputError(f"--plans: expected >= 1, got {plans}")
-        if method not in METHODS:
+        if method is not None and method not in METHODS:
             raise InvalidInputError(
                 f"--method: expected one of {', '.join(METHODS)}, got {method!r}"
+            )
+        from riskplan.tissue_planning.plan import SELECTIONS
+
+        if selection not in SELECTIONS:
+            raise InvalidInputError(
+                f"--selection: expected one of {', '.join(SELECTIONS)}, got {selection!r}"
             )
         # a scenario file is read and checked here, before any work
         sim = make_scenario(scenario, case)
@@ -124,6 +137,7 @@ def register(plan_app: typer.Typer) -> None:
                 workers=workers or None,
                 rrt_options=options,
                 method=method,
+                selection=selection,
                 check_runs=check_runs,
                 check_others=check_others,
                 on_tree=on_tree,

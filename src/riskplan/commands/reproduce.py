@@ -29,7 +29,9 @@ def register(app: typer.Typer) -> None:
             ["figures"],
             "--stage",
             help="figures (the papers' figures) | calibration (LQG-MP predicted vs measured "
-            "success; deformable paper). Repeat to run both.",
+            "success; deformable paper) | sensitivity (the needle's Fig. 6 against noise and "
+            "force scales) | needle3d (the 3-D needle: candidates, LQG-MP estimators, "
+            "executions, interactive figure). Repeat to run several.",
         ),
         calibration_scale: str = typer.Option(
             None,

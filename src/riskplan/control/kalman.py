@@ -25,8 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from riskplan._validation import as_array
-from riskplan.control._checks import check_psd, dynamics, per_step, raise_overflow
+from riskplan._validation import as_array, check_dynamics, check_psd, per_step, raise_overflow
 from riskplan.errors import InvalidInputError
 
 __all__ = ["kalman_gains", "kalman_recursion"]
@@ -60,21 +59,42 @@ def kalman_recursion(A: np.ndarray, H: np.ndarray, M: np.ndarray, N: np.ndarray,
 
 
 def kalman_gains(A, H, M, N, P0) -> tuple[np.ndarray, np.ndarray]:
-    """Kalman gains ``K (T, p, m)`` and posterior covariances ``P (T, p, p)`` (module docstring).
+    r"""Kalman gains and posterior covariances in filter form (paper IV-C).
+
+    .. math::
+
+        P^-_{t+1} = A_t P_t A_t^\top + M_t, \qquad
+        K_t = P^-_{t+1} H_t^\top (H_t P^-_{t+1} H_t^\top + N_t)^{-1}, \qquad
+        P_{t+1} = (I - K_t H_t) P^-_{t+1}.
 
     Parameters
     ----------
-    A : (T, p, p) state matrices.
-    H : (m, p) or (T, m, p) observation matrices; ``H[t]`` observes ``x_{t+1}``.
-    M : (p, p) or (T, p, p) process noise covariance, symmetric positive semi-definite.
-    N : (m, m) or (T, m, m) measurement noise covariance, symmetric positive definite.
-    P0 : (p, p) covariance of the initial estimate, symmetric positive semi-definite.
+    A : array_like
+        ``(T, p, p)`` state matrices.
+    H : array_like
+        ``(m, p)`` or ``(T, m, p)`` observation matrices; ``H[t]`` observes ``x_{t+1}``.
+    M : array_like
+        ``(p, p)`` or ``(T, p, p)`` process noise covariance, symmetric positive
+        semi-definite.
+    N : array_like
+        ``(m, m)`` or ``(T, m, m)`` measurement noise covariance, symmetric positive
+        definite.
+    P0 : array_like
+        ``(p, p)`` covariance of the initial estimate, symmetric positive semi-definite.
 
-    Returns ``(K, P)``: ``K[t]`` corrects the estimate of ``x_{t+1}`` with ``z_{t+1}``,
-    ``P[t] = Cov(x_{t+1} − x̂_{t+1})``. Raises :class:`~riskplan.errors.NumericalError`
-    naming the step where the recursion overflows float64 on finite input.
+    Returns
+    -------
+    K : numpy.ndarray
+        ``(T, p, m)``; ``K[t]`` corrects the estimate of ``x_{t+1}`` with ``z_{t+1}``.
+    P : numpy.ndarray
+        ``(T, p, p)``, ``P[t] = Cov(x_{t+1} − x̂_{t+1})``.
+
+    Raises
+    ------
+    NumericalError
+        The step where the recursion overflows float64 on finite input.
     """
-    A, _ = dynamics(A)
+    A, _ = check_dynamics(A)
     T, p, _ = A.shape
     Harr = as_array(H, "H", min_ndim=2)
     m = Harr.shape[-2]

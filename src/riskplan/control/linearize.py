@@ -622,7 +622,7 @@ def linearize(
     ``H (T, m, p)``, ``N (T, m, m)`` (and ``disturbance`` with ``disturbance=True``). Raises :class:`~riskplan.errors.SimulationError` naming
     the step when the simulator returns a non-finite state.
     """
-    from riskplan.parallel import map_tasks, spawn_seeds
+    from riskplan.parallel import chunk_count, map_tasks, spawn_seeds
 
     if not isinstance(plan, NominalPlan):
         raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
@@ -680,7 +680,7 @@ def linearize(
         and callable(getattr(sim, "measure", None))
     )
     ts = list(range(T))
-    n_chunks = 1 if backend == "serial" else max(1, min(T, 4 * (workers or 2)))
+    n_chunks = chunk_count(T, backend, workers)
     chunks = [ts[k::n_chunks] for k in range(n_chunks)]
     fn = partial(
         _run_chunk,

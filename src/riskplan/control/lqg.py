@@ -5,12 +5,11 @@ paper does not report: how good is LQG-MP's estimate?).
 Controller (:func:`lqg_controller`): LQR gains ``L_t`` (:func:`~riskplan.control.lqr_gains`)
 and Kalman gains ``K_t`` (:func:`~riskplan.control.kalman_gains`) of a
 :class:`~riskplan.control.Linearization`. Execution (:func:`execute`), ``t = 0 .. T-1``,
-starting from the simulator's start state under the drawn parameters ``s`` and ``x̂_0 = 0``:
+starting from the simulator's start state under the drawn parameters ``s`` and ``x̂_0 = 0``::
 
     u_t       = clip(u*_t + L_t x̂_t, bounds)                  (open loop: u_t = u*_t)
     y_{t+1}   = g(y_t, u_t, s)                                  (actuation noise inside s)
-    z_{t+1}   = h(x_{t+1}) + n_t,   n_t ~ N(0, N)               (sim.observe with a generator;
-                                                                 sim.measure(y_{t+1}) where defined)
+    z_{t+1}   = h(x_{t+1}) + n_t,   n_t ~ N(0, N)               (sim.measure(y_{t+1}) or sim.observe)
     x̂⁻        = A_t x̂_t + B_t (u_t − u*_t)
     x̂_{t+1}   = x̂⁻ + K_t (z_{t+1} − h(x*_{t+1}) − H_t x̂⁻)
 
@@ -87,23 +86,38 @@ def _block_diag(*blocks) -> np.ndarray:
 
 
 def augmented_model(lin: Linearization):
-    """The linear model of the state ``(x̄_t, d)`` with a constant input disturbance
+    r"""The linear model of the state ``(x̄_t, d)`` with a constant input disturbance
     ``d (q,)`` (beyond the paper; needs ``lin.disturbance``,
     ``linearize(..., disturbance=True)``):
 
-        [x̄_{t+1}; d] = [[A_t, B_t], [0, I]] [x̄_t; d] + [B_t; 0] ū_t + [m^r_t; 0],   m^r_t ~ N(0, M^r_t)
-        z̄_{t+1}      = [H_t, 0] [x̄_{t+1}; d] + n_t
+    .. math::
 
-    Returns ``(A (T, p+q, p+q), B (T, p+q, q), H (T, m, p+q), M (T, p+q, p+q), N (T, m, m))``
-    with ``M = diag(M^r_t, 0)``: ``d`` does not change during an execution.
+        \begin{bmatrix} \bar x_{t+1} \\ d \end{bmatrix} =
+        \begin{bmatrix} A_t & B_t \\ 0 & I \end{bmatrix}
+        \begin{bmatrix} \bar x_t \\ d \end{bmatrix} +
+        \begin{bmatrix} B_t \\ 0 \end{bmatrix} \bar u_t +
+        \begin{bmatrix} m^r_t \\ 0 \end{bmatrix}, \qquad
+        \bar z_{t+1} = [H_t \;\; 0] \begin{bmatrix} \bar x_{t+1} \\ d \end{bmatrix} + n_t,
+
+    with :math:`m^r_t \sim N(0, M^r_t)`.
 
     With a persistent measurement bias in the model (``lin.disturbance.C (T, m, r)``,
     :func:`~riskplan.control.linearize.fit_measurement_bias`) the state is
     ``(x̄_t, d, e)`` of dimension ``p + q + r``, ``e`` constant too, and
-
-        z̄_{t+1} = H_t x̄_{t+1} + C_t e + n_t,   n_t ~ N(0, N^r_t)
-
+    :math:`\bar z_{t+1} = H_t \bar x_{t+1} + C_t e + n_t`, :math:`n_t \sim N(0, N^r_t)`
     (``H = [H_t, 0, C_t]``, ``N = N^r_t``).
+
+    Parameters
+    ----------
+    lin : Linearization
+        A linearisation with its ``disturbance`` model.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``(A (T, n, n), B (T, n, q), H (T, m, n), M (T, n, n), N (T, m, m))``, ``n = p + q``
+        (``p + q + r`` with a measurement bias), with ``M = diag(M^r_t, 0)``: ``d`` does not
+        change during an execution.
     """
     if lin.disturbance is None:
         raise InvalidInputError("lin: has no disturbance model; linearize it with disturbance=True")
@@ -160,11 +174,25 @@ class LQGController:
 
 
 def bryson_weights(state_scale, control_scale) -> tuple[np.ndarray, np.ndarray]:
-    """Bryson's rule (Bryson & Ho, *Applied Optimal Control*, 1975, section 5.4):
-    ``Q = diag(1 / x_max²)`` ``(p, p)`` and ``R = diag(1 / u_max²)`` ``(q, q)`` from the
-    acceptable deviation of each state component ``x_max (p,)`` and of each control
-    component ``u_max (q,)``, so every term of the LQR cost is dimensionless and a
-    deviation of one "acceptable" unit costs 1 in any component."""
+    """Bryson's rule (Bryson & Ho, *Applied Optimal Control*, 1975, section 5.4).
+
+    ``Q = diag(1 / x_max²)`` and ``R = diag(1 / u_max²)``, so every term of the LQR cost is
+    dimensionless and a deviation of one "acceptable" unit costs 1 in any component.
+
+    Parameters
+    ----------
+    state_scale : array_like
+        ``x_max (p,)``, the acceptable deviation of each state component (> 0).
+    control_scale : array_like
+        ``u_max (q,)``, the acceptable deviation of each control component (> 0).
+
+    Returns
+    -------
+    Q : numpy.ndarray
+        ``(p, p)`` diagonal state cost.
+    R : numpy.ndarray
+        ``(q, q)`` diagonal control cost.
+    """
     xs = as_array(state_scale, "state_scale", shape=(None,))
     us = as_array(control_scale, "control_scale", shape=(None,))
     for name, v in (("state_scale", xs), ("control_scale", us)):
@@ -176,7 +204,7 @@ def bryson_weights(state_scale, control_scale) -> tuple[np.ndarray, np.ndarray]:
 def lqg_controller(
     lin: Linearization, Q=None, R=None, Q_final=None, P0=None, *, disturbance: bool = False
 ) -> LQGController:
-    """LQR + Kalman gains for ``lin`` (``A (T, p, p)``, ``B (T, p, q)``, ...).
+    r"""LQR + Kalman gains for ``lin`` (paper IV-C).
 
     Defaults (explicit ``Q``/``R`` override them): Bryson's rule (:func:`bryson_weights`),
     ``Q = diag(1 / lin.state_scale²)`` and ``R = diag(1 / lin.control_scale²)``, the
@@ -190,12 +218,31 @@ def lqg_controller(
     (:func:`augmented_model`). ``d`` cannot be steered, so the LQR cost is put on what the
     plant receives, ``v_t = ū_t + d``:
 
-        J = Σ_{t<T} (x̄_tᵀ Q x̄_t + v_tᵀ R v_t) + x̄_Tᵀ Q_final x̄_T,   x̄_{t+1} = A_t x̄_t + B_t v_t
+    .. math::
+
+        J = \sum_{t<T} (\bar x_t^\top Q \bar x_t + v_t^\top R v_t) + \bar x_T^\top Q_{final}
+        \bar x_T, \qquad \bar x_{t+1} = A_t \bar x_t + B_t v_t,
 
     which is the plain LQR in ``(x̄, v)``: ``v_t = L_t x̄_t``, so ``ū_t = L_t x̄_t − d`` and
     the augmented gain is ``[L_t, −I]`` (the plain gain plus a feed-forward cancelling
     ``B_t d``). The Kalman filter estimates ``(x̄, d)`` on the augmented model from
     ``P0 = diag(P0, Σ_d)`` with the residual process noise ``M^r_t``.
+
+    Parameters
+    ----------
+    lin : Linearization
+        ``A (T, p, p)``, ``B (T, p, q)``, ``M``, ``H``, ``N`` of the plan.
+    Q, R, Q_final : array_like, optional
+        LQR costs (:func:`~riskplan.control.lqr_gains`); defaults above.
+    P0 : array_like, optional
+        ``(p, p)`` covariance of the initial estimate (default 0).
+    disturbance : bool
+        Estimate and cancel a constant input disturbance (beyond the paper).
+
+    Returns
+    -------
+    LQGController
+        Gains ``L``, ``K``, covariances ``P`` and the linearisation.
     """
     if not isinstance(lin, Linearization):
         raise InvalidInputError(f"lin: expected a Linearization, got {type(lin).__name__}")
@@ -286,14 +333,35 @@ def execute(
     keep_states: bool = True,
     goal_at: str = "final",
 ) -> Execution:
-    """Run ``plan`` on ``sim`` under the true parameters ``params`` (module docstring;
-    ``goal_at`` ``"final"`` or ``"any"`` is when the goal counts).
+    """Run ``plan`` on ``sim`` under the true parameters ``params`` (module docstring).
 
-    ``controller=None`` executes open loop (``u_t = u*_t``, no filter). ``seed`` seeds the
-    sensing noise. A solve that fails (:class:`~riskplan.errors.ConvergenceError`,
+    ``controller=None`` executes open loop (``u_t = u*_t``, no filter). A solve that fails
+    (:class:`~riskplan.errors.ConvergenceError`,
     :class:`~riskplan.errors.ElementInversionError`,
     :class:`~riskplan.errors.SimulationError`) or returns a non-finite state ends the run
     with the outcome ``"solver_failure"`` and a reason naming the step.
+
+    Parameters
+    ----------
+    sim : Simulator
+        The true simulator.
+    plan : NominalPlan
+        The plan executed.
+    controller : LQGController or None
+        Closed loop with these gains, open loop with ``None``.
+    params : SimParams
+        The true parameters ``s`` of this execution.
+    seed : int, numpy.random.Generator or None
+        Seeds the sensing noise.
+    keep_states : bool
+        Keep every simulator state in the result (``False`` saves memory).
+    goal_at : {"final", "any"}
+        When the goal counts: at the plan's last step, or at any step.
+
+    Returns
+    -------
+    Execution
+        States, estimates, applied controls and the outcome.
     """
     _check_goal_at(goal_at)
     gen = as_generator(seed)
@@ -448,16 +516,37 @@ def monte_carlo_success(
     workers: int | None = None,
     goal_at: str = "final",
 ) -> SuccessEstimate:
-    """Success rate of ``n`` executions of ``plan`` (closed loop with ``controller``, open loop
-    with ``None``), each with its own ``s ~ distribution`` (``sim.nominal_params`` if ``None``)
-    and sensing noise, with a Wilson interval (:func:`riskplan.collision.binomial_interval`).
+    """Success rate of ``n`` executions of ``plan``, with a Wilson interval
+    (:func:`riskplan.collision.binomial_interval`).
 
     Run ``i`` draws its parameters and noise from ``spawn_seeds(seed, n)[i]``, so the result
     does not depend on ``backend`` (:func:`riskplan.parallel.map_tasks`) or ``workers``.
-    ``goal_at``: when the goal counts (:func:`execute`).
+
+    Parameters
+    ----------
+    sim, plan, controller
+        As in :func:`execute`, for every run.
+    distribution : object with ``sample(gen)``, optional
+        Each run's ``s ~ distribution``; ``None``: every run on ``sim.nominal_params`` (only
+        the sensing noise differs).
+    n : int
+        Number of executions.
+    seed : int, numpy.random.Generator or None
+        Root of the runs' seeds.
+    confidence : float
+        Level of the interval.
+    backend, workers
+        As in :func:`riskplan.parallel.map_tasks`.
+    goal_at : {"final", "any"}
+        When the goal counts (:func:`execute`).
+
+    Returns
+    -------
+    SuccessEstimate
+        Successes, probability, interval, per-run outcomes.
     """
     from riskplan.collision import binomial_interval
-    from riskplan.parallel import map_tasks, spawn_seeds
+    from riskplan.parallel import chunk_count, map_tasks, spawn_seeds
 
     if int(n) != n or n < 1:
         raise InvalidInputError(f"n: expected a positive integer, got {n!r}")
@@ -466,7 +555,7 @@ def monte_carlo_success(
     if isinstance(seed, np.random.Generator):
         seed = int(seed.integers(2**63))
     seeds = spawn_seeds(seed, n)
-    n_chunks = 1 if backend == "serial" else min(n, 4 * (workers or 2))
+    n_chunks = chunk_count(n, backend, workers)
     chunks = [seeds[k::n_chunks] for k in range(n_chunks)]
     results = map_tasks(
         partial(_run_batch, sim, plan, controller, distribution, goal_at),

@@ -384,7 +384,14 @@ def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
     # gets a jitter of 1e-9 of its largest variance (its spread direction keeps its distances)
     jitter = np.where(ev[..., 0] <= 1e-12 * ev[..., -1], 1e-9 * ev[..., -1], 0.0)
     covs = np.where(ok[..., None, None], covs + jitter[..., None, None] * np.eye(2), np.eye(2))
-    c, inside = sigma_distances(starts, ends, pts, covs)
+    try:
+        c, inside = sigma_distances(starts, ends, pts, covs)
+    except InvalidInputError as exc:  # a degenerate model, not bad input (_point_factor)
+        from riskplan.errors import NumericalError
+
+        raise NumericalError(
+            f"LQG-MP: a position covariance has no Cholesky factor ({exc})"
+        ) from exc
     c = np.where(ok, c, np.inf)
     cmin = c.min(axis=1)
     free = np.where(np.isinf(cmin), 1.0, -np.expm1(-0.5 * np.minimum(cmin, 1e150) ** 2))
@@ -392,6 +399,35 @@ def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
     if outline:
         hit |= np.array([_outline_meets(polys[t], pts[t, :nv]) for t in range(T)])
     return np.where(hit, 0.0, free)
+
+
+def _regularised(Sp: np.ndarray) -> np.ndarray | None:
+    """A point's ``(2, 2)`` covariance as both sigma paths use it: ``None`` for a
+    deterministic point (largest variance ≤ 1e-24: no risk outside an obstacle), else the
+    covariance with a jitter of 1e-9 of its largest variance where it is near-singular
+    (smallest ≤ 1e-12 of the largest), as :func:`_sigma_free` does: a rank-1 spread keeps
+    its distances along its direction and gets a Cholesky factor."""
+    ev = np.linalg.eigvalsh(Sp)
+    if ev[-1] <= 1e-24:
+        return None
+    if ev[0] <= 1e-12 * ev[-1]:
+        return Sp + 1e-9 * ev[-1] * np.eye(2)
+    return Sp
+
+
+def _point_factor(Sp: np.ndarray, t: int) -> np.ndarray:
+    """The whitening factor of a point covariance at step ``t``; one that has none after
+    :func:`_regularised` (a degenerate linear model) is a :class:`NumericalError` naming the
+    step, not bad input: a plan evaluation counts it as a failed candidate."""
+    from riskplan.collision import precision_cholesky_from_covariance
+    from riskplan.errors import NumericalError
+
+    try:
+        return precision_cholesky_from_covariance(Sp)
+    except InvalidInputError as exc:
+        raise NumericalError(
+            f"LQG-MP: the position covariance at step {t} has no Cholesky factor ({exc})", step=t
+        ) from exc
 
 
 def _check_propagation(mean: np.ndarray, cov: np.ndarray, first: int = 0) -> None:
@@ -481,27 +517,79 @@ def lqgmp(
     drift: bool = False,
     seed=None,
 ) -> LQGMPResult:
-    """LQG-MP probability of success of ``plan`` under ``controller`` (module docstring).
+    r"""LQG-MP probability of success of ``plan`` under ``controller`` (paper IV-D).
+
+    The joint deviation :math:`\xi_t = (\bar x_t, \hat x_t)` evolves as
+    :math:`\xi_{t+1} = F_t \xi_t + G_t (m_t, n_t)` with
+
+    .. math::
+
+        F_t = \begin{bmatrix} A_t & B_t L_t \\ K_t H_t A_t & A_t + B_t L_t - K_t H_t A_t
+        \end{bmatrix}, \qquad
+        G_t = \begin{bmatrix} I & 0 \\ K_t H_t & K_t \end{bmatrix},
+
+        \Sigma_{t+1} = F_t \Sigma_t F_t^\top + G_t \,\mathrm{diag}(M_t, N_t)\, G_t^\top,
+        \qquad \Sigma_0 = \mathrm{diag}(P_0, 0),
+
+    and, with :math:`c_t` the number of standard deviations to the nearest obstacle
+    (``method="sigma"``),
+
+    .. math::
+
+        P(\text{success}) = P(\text{goal}) \prod_t \left(1 - e^{-c_t^2 / 2}\right)
+
+    (module docstring for ``"truncation"`` and ``"sampling"``).
 
     Parameters
     ----------
-    sim : the simulator (``obstacles(state)``, ``goal(state)``, optional point indices).
-    plan : :class:`~riskplan.control.NominalPlan` with ``T`` steps.
-    controller : :class:`~riskplan.control.lqg.LQGController` of the plan's linearisation.
-    method : ``"sigma"`` (paper), ``"truncation"`` (Patil 2012) or ``"sampling"`` (whole
-        trajectories of the linear model, module docstring).
-    n_goal_samples : draws of the final state for ``P(goal)``; with ``"sampling"``, the
-        number of trajectories.
-    cutoff : whitened radius of the free-region construction (default
+    sim : Simulator
+        The simulator (``obstacles(state)``, ``goal(state)``, optional point indices).
+    plan : NominalPlan
+        The plan with ``T`` steps.
+    controller : LQGController
+        The controller of the plan's linearisation.
+    method : {"sigma", "truncation", "sampling"}
+        The paper's, Patil 2012's, or whole trajectories of the linear model.
+    n_goal_samples : int
+        Draws of the final state for ``P(goal)``; with ``"sampling"``, the number of
+        trajectories.
+    cutoff : float, optional
+        Whitened radius of the free-region construction (default
         :data:`riskplan.collision.DEFAULT_CUTOFF`, see :mod:`riskplan.collision.gaussian`).
-    drift : carry the mean one-step deviation ``lin.drift`` (beyond the paper, whose model is
+    drift : bool
+        Carry the mean one-step deviation ``lin.drift`` (beyond the paper, whose model is
         zero-mean): ``μ_{t+1} = F_t μ_t + G_t (d̄_t, 0)`` with ``M_t − d̄_t d̄_tᵀ`` as the
         process noise covariance.
-    seed : seeds the goal samples (the trajectories with ``"sampling"``).
+    seed : int, numpy.random.Generator or None
+        Seeds the goal samples (the trajectories with ``"sampling"``).
+
+    Returns
+    -------
+    LQGMPResult
+        ``p_success``, ``p_collision_free``, ``p_goal``, per-step factors and the
+        distributions.
+
+    Notes
+    -----
+    A simulator with ``workspace_dim = 3`` (the 3-D needle) is evaluated by
+    :func:`riskplan.control.lqgmp3d.lqgmp_3d` against its 3-D convex obstacles.
     """
-    from riskplan.collision import DEFAULT_CUTOFF, free_region, precision_cholesky_from_covariance
+    from riskplan.collision import DEFAULT_CUTOFF, free_region
 
     cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
+    if getattr(sim, "workspace_dim", 2) == 3:  # 3-D convex obstacles (the 3-D needle)
+        from riskplan.control.lqgmp3d import lqgmp_3d
+
+        return lqgmp_3d(
+            sim,
+            plan,
+            controller,
+            method=method,
+            n_goal_samples=n_goal_samples,
+            cutoff=cutoff,
+            drift=drift,
+            seed=seed,
+        )
     if method not in METHODS:
         raise InvalidInputError(f"method: expected one of {METHODS}, got {method!r}")
     if not isinstance(plan, NominalPlan):
@@ -576,10 +664,10 @@ def lqgmp(
                 sl = slice(j, j + 1)
                 # this point under the truncations so far
                 pj, Sp = _mix(col, W[sl], base[sl], mu[:p], S)
-                pj, Sp = pj[0], Sp[0]
-                if np.linalg.eigvalsh(Sp).min() <= 1e-24:
+                pj, Sp = pj[0], _regularised(Sp[0])
+                if Sp is None:
                     continue  # a deterministic point outside every obstacle: no risk
-                U = precision_cholesky_from_covariance(Sp)
+                U = _point_factor(Sp, t)
                 fr = free_region(pj, U, env, cutoff=cutoff)
                 p_t += float(fr.bound_terms.sum())
                 for nrm, off in zip(fr.normals, fr.offsets):
@@ -591,10 +679,10 @@ def lqgmp(
         else:
             c_min = math.inf
             for j in range(len(pts)):
-                Sp = covs[j]
-                if np.linalg.eigvalsh(Sp).min() <= 1e-24:
+                Sp = _regularised(covs[j])
+                if Sp is None:
                     continue
-                U = precision_cholesky_from_covariance(Sp)
+                U = _point_factor(Sp, t)
                 d = free_region(pts[j], U, env, cutoff=cutoff).distances
                 if d.size:
                     c_min = min(c_min, float(d.min()))

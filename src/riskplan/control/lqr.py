@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from riskplan.control._checks import check_psd, dynamics, per_step, raise_overflow
+from riskplan._validation import check_dynamics, check_psd, per_step, raise_overflow
 
 __all__ = ["lqr_gains", "lqr_recursion"]
 
@@ -49,22 +49,47 @@ def lqr_recursion(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, Q_
 
 
 def lqr_gains(A, B, Q, R, Q_final) -> np.ndarray:
-    """Feedback gains ``L (T, q, p)`` of the finite-horizon LQR, ``u_t = L_t x_t`` (module docstring).
+    r"""Feedback gains of the finite-horizon LQR, ``u_t = L_t x_t`` (paper IV-C).
+
+    With ``S_T = Q_final`` and, for ``t = T-1 .. 0``,
+
+    .. math::
+
+        L_t = -(B_t^\top S_{t+1} B_t + R)^{-1} B_t^\top S_{t+1} A_t, \qquad
+        S_t = Q + A_t^\top S_{t+1} (A_t + B_t L_t),
+
+    which minimise :math:`\sum_{t<T} (x_t^\top Q x_t + u_t^\top R u_t) + x_T^\top
+    Q_{final} x_T` for :math:`x_{t+1} = A_t x_t + B_t u_t`.
 
     Parameters
     ----------
-    A : (T, p, p) state matrices, ``x_{t+1} = A_t x_t + B_t u_t``.
-    B : (T, p, q) control matrices.
-    Q : (p, p) or (T, p, p) state cost, symmetric positive semi-definite (weights ``x_0 .. x_{T-1}``).
-    R : (q, q) or (T, q, q) control cost, symmetric positive definite.
-    Q_final : (p, p) final state cost on ``x_T``, symmetric positive semi-definite.
+    A : array_like
+        ``(T, p, p)`` state matrices, ``x_{t+1} = A_t x_t + B_t u_t``.
+    B : array_like
+        ``(T, p, q)`` control matrices.
+    Q : array_like
+        ``(p, p)`` or ``(T, p, p)`` state cost, symmetric positive semi-definite (weights
+        ``x_0 .. x_{T-1}``).
+    R : array_like
+        ``(q, q)`` or ``(T, q, q)`` control cost, symmetric positive definite.
+    Q_final : array_like
+        ``(p, p)`` final state cost on ``x_T``, symmetric positive semi-definite.
 
-    Raises :class:`~riskplan.errors.InvalidInputError` for mismatched shapes, non-finite
-    values or costs that are not symmetric positive (semi-)definite, and
-    :class:`~riskplan.errors.NumericalError` naming the step where the recursion overflows
-    float64 on finite input (e.g. a huge unstable ``A``).
+    Returns
+    -------
+    numpy.ndarray
+        ``L (T, q, p)``.
+
+    Raises
+    ------
+    InvalidInputError
+        Mismatched shapes, non-finite values or costs that are not symmetric positive
+        (semi-)definite.
+    NumericalError
+        The step where the recursion overflows float64 on finite input (e.g. a huge
+        unstable ``A``).
     """
-    A, B = dynamics(A, B)
+    A, B = check_dynamics(A, B)
     T, p, q = B.shape
     Q = per_step(Q, "Q", T, (p, p))
     R = per_step(R, "R", T, (q, q))

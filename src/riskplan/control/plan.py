@@ -77,9 +77,29 @@ class NominalPlan:
     def from_rollout(
         cls, sim, initial_state, controls, params: SimParams | None = None
     ) -> NominalPlan:
-        """Simulate ``controls (ℓ, q)`` from ``initial_state`` with ``params`` (default
-        ``sim.nominal_params``) and store every state; raises
-        :class:`~riskplan.errors.SimulationError` naming the step at a non-finite reduced state."""
+        """Simulate ``controls`` from ``initial_state`` and store every state.
+
+        Parameters
+        ----------
+        sim : Simulator
+            The simulator.
+        initial_state : object
+            The start state ``y_0``.
+        controls : array_like
+            ``(ℓ, q)`` controls.
+        params : SimParams, optional
+            The parameters (default ``sim.nominal_params``).
+
+        Returns
+        -------
+        NominalPlan
+            The plan with ``ℓ + 1`` states.
+
+        Raises
+        ------
+        SimulationError
+            Naming the step at a non-finite reduced state.
+        """
         params = sim.nominal_params if params is None else params
         u = as_array(controls, "controls", shape=(None, sim.control_dim))
         states = [initial_state]

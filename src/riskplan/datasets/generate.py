@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from riskplan._validation import as_array, check_range
+from riskplan._validation import as_array, check_range, check_workers
 from riskplan.datasets import storage
 from riskplan.datasets.protocol import (
     SPLITS,
@@ -41,16 +41,15 @@ from riskplan.datasets.protocol import (
     target_configurations,
 )
 from riskplan.errors import DataFormatError, InvalidInputError
-from riskplan.parallel import BACKENDS, imap_tasks, spawn_seeds
+from riskplan.parallel import BACKENDS, chunk_size, imap_tasks, spawn_seeds
 
 log = logging.getLogger(__name__)
 
 
-@functools.lru_cache(maxsize=4)
 def _robot_from_toml(text: str):
-    from riskplan.robots import robot_from_toml
+    from riskplan.robots import cached_robot
 
-    return robot_from_toml(text)
+    return cached_robot(text)
 
 
 @functools.lru_cache(maxsize=4)
@@ -284,10 +283,9 @@ def generate_dataset(
     The path of the finished file, or of the partial file if ``max_new`` stopped early.
     Resuming needs the same robot, protocol, split and seed, else :class:`DataFormatError`.
     """
-    if isinstance(robot, (str, os.PathLike)):
-        from riskplan.robots import load_robot
+    from riskplan.robots import load_robot
 
-        robot = load_robot(robot)
+    robot = load_robot(robot)
     protocol = protocol_for_robot(preset, robot)
     split = _check_split(split)
     if backend not in BACKENDS:
@@ -296,12 +294,7 @@ def generate_dataset(
         raise InvalidInputError(f"seed: expected a non-negative integer, got {seed!r}")
     if max_new is not None and max_new < 0:
         raise InvalidInputError(f"max_new: expected >= 0, got {max_new}")
-    if workers is not None and (
-        isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1
-    ):
-        raise InvalidInputError(
-            f"workers: expected a positive integer (or None for all cores), got {workers!r}"
-        )
+    check_workers(workers)
     out = Path(out)
     if out.is_dir():
         raise InvalidInputError(
@@ -419,8 +412,7 @@ def _generate_locked(
         if backend == "local" and len(items) * protocol.n_starts < min_parallel_clouds:
             backend = "serial"
         if chunksize is None:
-            nw = workers or 2
-            chunksize = max(1, min(8, len(items) // (4 * nw) if items else 1))
+            chunksize = chunk_size(len(items), backend, workers)
         for k, (pts, tips, starts, tens) in imap_tasks(
             _task,
             items,
@@ -470,10 +462,29 @@ def _report_over_max_tension(f, robot, out) -> None:
 def generate_splits(
     robot, preset, stem, *, seed: int = 0, splits=("train", "test"), **kwargs
 ) -> dict[str, Path]:
-    """Generate several splits: ``<stem>_train.h5`` and ``<stem>_test.h5`` (:func:`split_paths`).
+    """Generate several splits, ``<stem>_train.h5`` and ``<stem>_test.h5`` (:func:`split_paths`).
 
     Each split uses the same ``seed``; the per-target seeds also depend on the split.
-    Returns ``{split: path}``.
+
+    Parameters
+    ----------
+    robot : str, os.PathLike or TendonRobot
+        As in :func:`generate_dataset`.
+    preset : str or Protocol
+        The data-collection protocol.
+    stem : str or os.PathLike
+        File stem (a trailing ``.h5`` is dropped).
+    seed : int
+        Root seed.
+    splits : tuple of str
+        The splits to write.
+    **kwargs
+        Passed to :func:`generate_dataset`.
+
+    Returns
+    -------
+    dict
+        ``{split: path}``.
     """
     return {
         sp: generate_dataset(robot, preset, path, split=sp, seed=seed, **kwargs)
@@ -482,8 +493,20 @@ def generate_splits(
 
 
 def split_paths(stem, splits=("train", "test")) -> dict[str, Path]:
-    """The file of each split: ``data.h5`` (or ``data``) -> ``{"train": data_train.h5,
-    "test": data_test.h5}``."""
+    """The file of each split: ``data.h5`` (or ``data``) -> ``data_train.h5``, ``data_test.h5``.
+
+    Parameters
+    ----------
+    stem : str or os.PathLike
+        File stem (a trailing ``.h5`` is dropped).
+    splits : tuple of str
+        The splits.
+
+    Returns
+    -------
+    dict
+        ``{split: pathlib.Path}``.
+    """
     stem = Path(stem)
     if stem.suffix == ".h5":
         stem = stem.with_suffix("")

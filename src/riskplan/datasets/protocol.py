@@ -202,7 +202,17 @@ _register_presets()
 
 
 def get_protocol(preset_or_protocol) -> Protocol:
-    """A :class:`Protocol` from a preset name, a Protocol, or its JSON text."""
+    """A :class:`Protocol` from a preset name, a Protocol, or its JSON text.
+
+    Parameters
+    ----------
+    preset_or_protocol : str or Protocol
+        A name of ``PRESETS``, a protocol (returned as it is) or its JSON.
+
+    Returns
+    -------
+    Protocol
+    """
     if isinstance(preset_or_protocol, Protocol):
         return preset_or_protocol
     if isinstance(preset_or_protocol, str):

@@ -371,6 +371,16 @@ def load_dataset(path) -> Dataset:
 
     The file must carry ``format="riskplan-dataset"`` and a supported ``format_version`` and
     every data set of the schema with consistent shapes; points must be finite.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The HDF5 file.
+
+    Returns
+    -------
+    Dataset
+        The data set with its metadata.
     """
     import h5py
 

@@ -41,7 +41,18 @@ def over_max_tension(tensions, tension_limits, done=None) -> dict:
 
 
 def summarize(path) -> dict:
-    """Summary of a data-set file: robot, protocol, configurations done, cloud and tip spread."""
+    """Summary of a data-set file: robot, protocol, configurations done, cloud and tip spread.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The data-set file.
+
+    Returns
+    -------
+    dict
+        The summary ``riskplan dataset info`` prints.
+    """
     ds = load_dataset(path)
     done = ds.done
     summary = {

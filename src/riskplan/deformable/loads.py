@@ -81,7 +81,7 @@ def point_load(mesh: TissueMesh, points, forces) -> np.ndarray:
     """Consistent nodal forces ``(N, 2)`` of point forces ``forces (P, 2)`` at reference
     points ``points (P, 2)`` (P1 shape functions at the points). Points outside the body
     raise :class:`InvalidInputError`. For repeated loads at the same points use
-    :func:`riskplan.deformable.material_points` once and ``Interpolator.spread``."""
+    :func:`riskplan.deformable.locate` once and ``Interpolator.spread``."""
     pts = as_array(points, "points", last_dim=2).reshape(-1, 2)
     f = as_array(forces, "forces", last_dim=2).reshape(-1, 2)
     if len(f) != len(pts):

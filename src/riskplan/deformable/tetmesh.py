@@ -235,9 +235,20 @@ class TetMesh:
         return float(np.sqrt((e**2).sum(-1)).max())
 
     def face_nodes(self, face: str, tol: float = 1e-9) -> np.ndarray:
-        """Sorted nodes ``(F,)`` on one face of the bounding box: ``face`` in
-        :data:`FACES` (``"z-"``: the nodes with ``z`` within ``tol`` times the box's extent
-        of the lowest ``z``)."""
+        """Nodes on one face of the bounding box.
+
+        Parameters
+        ----------
+        face : str
+            One of :data:`FACES` (``"z-"``: the lowest ``z``).
+        tol : float
+            Distance from the face, relative to the box's largest extent.
+
+        Returns
+        -------
+        ndarray of int, shape (F,)
+            Sorted node indices.
+        """
         if face not in FACES:
             raise InvalidInputError(f"face: expected one of {FACES}, got {face!r}")
         k = "xyz".index(face[0])
@@ -247,7 +258,18 @@ class TetMesh:
         return np.flatnonzero(np.abs(self.nodes[:, k] - value) <= tol * span)
 
     def nodes_in_box(self, lower, upper) -> np.ndarray:
-        """Sorted nodes ``(F,)`` inside the closed axis-aligned box ``[lower, upper]``."""
+        """Nodes inside a closed axis-aligned box.
+
+        Parameters
+        ----------
+        lower, upper : array_like, shape (3,)
+            Opposite corners of the box.
+
+        Returns
+        -------
+        ndarray of int, shape (F,)
+            Sorted node indices.
+        """
         lo = as_array(lower, "lower", shape=(3,))
         hi = as_array(upper, "upper", shape=(3,))
         return np.flatnonzero(np.all((self.nodes >= lo) & (self.nodes <= hi), axis=1))
@@ -318,9 +340,24 @@ def tet_block(
     """Tetrahedral mesh of the axis-aligned block ``origin + [0, size]`` with about
     ``n_elements`` tetrahedra (scikit-fem ``MeshTet.init_tensor``, 6 per grid hexahedron).
 
-    The count is ``6 nx ny nz`` for the grid of :func:`grid_shape` (or the given
-    ``shape``): 5000 requested on a unit cube gives 9 × 9 × 10 cells, 4860 elements. Every
-    grid point is a node, so faces are exact planes (:meth:`TetMesh.face_nodes`).
+    The count is ``6 nx ny nz`` for the grid of :func:`grid_shape` (or the given ``shape``):
+    5000 requested on a unit cube gives 5040 elements. Every grid point is a node, so faces
+    are exact planes (:meth:`TetMesh.face_nodes`).
+
+    Parameters
+    ----------
+    size : array_like, shape (3,)
+        Side lengths (> 0).
+    n_elements : int
+        Requested element count (6 to :data:`MAX_ELEMENTS`); ignored when ``shape`` is given.
+    origin : array_like, shape (3,)
+        Lower corner.
+    shape : tuple of int, optional
+        Grid cells ``(nx, ny, nz)``.
+
+    Returns
+    -------
+    TetMesh
     """
     skfem = require("skfem", "fem")
     size_a = as_array(size, "size", shape=(3,))
@@ -381,16 +418,32 @@ def _largest_component(tets: np.ndarray) -> np.ndarray:
 
 
 def tet_fill_surface(surface, n_elements: int = 5000, *, max_iter: int = 12) -> TetMesh:
-    """Tetrahedral mesh of the inside of a closed triangle surface (``trimesh.Trimesh`` or
-    a file trimesh reads, e.g. an organ's STL) with about ``n_elements`` tetrahedra.
+    """Tetrahedral mesh of the inside of a closed triangle surface with about
+    ``n_elements`` tetrahedra.
 
-    Method: the Kuhn-split tensor lattice of the surface's bounding box (cubic cells of
-    side ``h``), keeping the tetrahedra whose centroid lies inside the surface
-    (``trimesh`` ``contains``), then the largest face-connected set of them; ``h`` is
-    bisected so the kept count comes close to the request (within a few percent; the count
-    moves in steps of the lattice). The boundary is a staircase within one cell ``h`` of the
-    surface. Raises :class:`InvalidInputError`
-    for an open surface or a request too small to leave any element.
+    Method: the Kuhn-split tensor lattice of the surface's bounding box (cubic cells of side
+    ``h``), keeping the tetrahedra whose centroid lies inside the surface (``trimesh``
+    ``contains``), then the largest face-connected set of them; ``h`` is bisected so the
+    kept count comes close to the request (within a few percent; the count moves in steps of
+    the lattice). The boundary is a staircase within one cell ``h`` of the surface.
+
+    Parameters
+    ----------
+    surface : trimesh.Trimesh or path
+        A closed (watertight) surface, or a file trimesh reads (e.g. an organ's STL).
+    n_elements : int
+        Requested element count.
+    max_iter : int
+        Lattice sizes tried at most.
+
+    Returns
+    -------
+    TetMesh
+
+    Raises
+    ------
+    InvalidInputError
+        An open or unreadable surface, or a request too small to leave any element.
     """
     n = _count(n_elements)
     surf = _load_surface(surface)

@@ -7,14 +7,17 @@
 from riskplan.kinematics.mdn import MDN, MDNModel, Normalisation
 from riskplan.kinematics.model_io import load_model, resolve_model, save_model, shipped_models
 from riskplan.kinematics.torch_mixture import GaussianMixture
+from riskplan.kinematics.training import TrainConfig, train
 
 __all__ = [
     "MDN",
     "GaussianMixture",
     "MDNModel",
     "Normalisation",
+    "TrainConfig",
     "load_model",
     "resolve_model",
     "save_model",
     "shipped_models",
+    "train",
 ]

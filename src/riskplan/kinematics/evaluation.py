@@ -21,11 +21,12 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from riskplan._validation import as_generator
+from riskplan._validation import as_generator, check_count
 from riskplan.errors import InvalidInputError
 from riskplan.kinematics.data import PointCloudData, check_compatible
 from riskplan.kinematics.mdn import MDNModel
 from riskplan.kinematics.torch_mixture import GaussianMixture
+from riskplan.parallel import spawn_seeds
 
 DEFAULT_LEVELS = (0.5, 0.9, 0.95)
 
@@ -116,11 +117,6 @@ def nll_per_config(model: MDNModel, data: PointCloudData, chunk: int = 64) -> np
     return out
 
 
-def _check_count(v, name: str) -> None:
-    if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
-        raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
-
-
 def evaluate(
     model: MDNModel,
     data: PointCloudData,
@@ -141,9 +137,9 @@ def evaluate(
     """
     levels = _check_levels(levels)
     for name, v in (("n_samples", n_samples), ("chamfer_points", chamfer_points)):
-        _check_count(v, name)
+        check_count(v, name, 1)
     if max_configs is not None:
-        _check_count(max_configs, "max_configs")
+        check_count(max_configs, "max_configs", 1)
     check_compatible(
         {
             "robot_toml": model.robot_toml,
@@ -161,11 +157,15 @@ def evaluate(
     cov = np.empty((C, len(levels)))
     n_ch = min(chamfer_points, N)
     chunk = 32
+    # per chunk, one stream for the HDR coverage and one for the Chamfer samples
+    chunk_seeds = spawn_seeds(seed, 2 * (-(-C // chunk)))
     for s in range(0, C, chunk):
         gm = model.predict(data.displacements[s : s + chunk])
         pts = torch.from_numpy(data.points[s : s + chunk].astype(np.float64))
-        cov[s : s + chunk] = hdr_coverage(gm, pts, levels, n_samples, seed=seed + s).numpy()
-        samples = gm.sample(n_ch, seed=seed + 1_000_003 + s).numpy()
+        cov[s : s + chunk] = hdr_coverage(
+            gm, pts, levels, n_samples, seed=chunk_seeds[2 * (s // chunk)]
+        ).numpy()
+        samples = gm.sample(n_ch, seed=chunk_seeds[2 * (s // chunk) + 1]).numpy()
         for i in range(gm.batch_shape[0]):
             gt = data.points[s + i]
             if n_ch < N:

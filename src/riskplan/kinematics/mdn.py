@@ -1,4 +1,4 @@
-"""The mixture density network (MDN paper, section III, Fig. 2) and the trained model.
+r"""The mixture density network (MDN paper, section III, Fig. 2) and the trained model.
 
 Network: normalised tendon displacements ``(..., m)`` → shared fully connected trunk →
 three separate fully connected heads producing, for each of ``K`` components,
@@ -10,7 +10,22 @@ three separate fully connected heads producing, for each of ``K`` components,
   (eq. 3) is positive definite for any network output.
 
 The loss is the mean negative log-likelihood of a configuration's ground-truth points
-(the loss after eq. 7), with ``log |Sigma^{-1}|^{1/2} = sum_j log diag(Ubar)_j`` (eqs. 4-6).
+(the loss after eq. 7), with ``log |Sigma^{-1}|^{1/2} = sum_j log diag(Ubar)_j`` (eqs. 4-6):
+
+.. math::
+
+    (\bar U_k)_{jl} = \begin{cases} (U_k)_{jl}, & j < l \\ \exp (U_k)_{jj}, & j = l
+    \\ 0, & j > l \end{cases} \qquad \text{(eq. 2)}
+
+    \mathrm{MDN}_\theta(y) = \{ w_{k|\theta}, \mu_{k|\theta}, U_{k|\theta} \}_{k=1}^K
+    \qquad \text{(eq. 7)}
+
+    \mathcal{L}(\theta) = \mathbb{E}_{x, y} \left[ -\log \sum_{k=1}^K w_{k|\theta}
+    \exp\left( \sum_{j} \log (\bar U_{k|\theta})_{jj} - \frac{1}{2} \| \bar U_{k|\theta}
+    (x - \mu_{k|\theta}) \|^2 \right) \right] + \frac{d}{2} \log 2\pi.
+
+(The paper writes ``diag(U)`` in the loss's exponent; with eq. 2 that is
+``log diag(Ubar)``.)
 
 The network works in normalised coordinates: inputs ``(d - input_mean) / input_scale``
 and points ``(x - output_centre) / output_scale`` (per axis). :class:`MDNModel` maps the
@@ -343,7 +358,19 @@ class MDNModel:
 
     # ------------------------------------------------------------- predict
     def mixture(self, displacements: torch.Tensor) -> GaussianMixture:
-        """Differentiable torch path (no input validation): ``(..., m)`` tensor → mixture in metres."""
+        """Differentiable torch path (no input validation) from displacements to the mixture in
+        metres.
+
+        Parameters
+        ----------
+        displacements : torch.Tensor
+            ``(..., m)`` tendon displacements [m].
+
+        Returns
+        -------
+        GaussianMixture
+            Batch shape ``(...)``, in the base frame, metres.
+        """
         p = next(self.net.parameters())
         n = self.normalisation
         x = (
@@ -355,15 +382,30 @@ class MDNModel:
         return GaussianMixture(torch.exp(log_w), c + s * mu, u / s, validate=False)
 
     def predict(self, displacements, dtype: torch.dtype = torch.float64) -> GaussianMixture:
-        """Gaussian mixture of the robot's geometry for displacements ``(..., m)`` [m].
+        """Gaussian mixture of the robot's geometry for tendon displacements (MDN paper eq. 7).
 
-        Returns a :class:`GaussianMixture` with batch shape ``(...)``, ``K`` components,
-        ``d = 3``, base frame, metres. Raises :class:`InvalidInputError` for a wrong number
-        of tendons, NaN/inf, or displacements outside the robot's limits.
+        Evaluated with fused NumPy matrix products (in the network's precision, the softmax and
+        eq. 2 in float64) rather than the torch module: for one configuration this avoids
+        torch's per-operation overhead.
 
-        Evaluated with fused NumPy matrix products (in the network's precision, the
-        softmax and eq. 2 in float64) rather than the torch module: for one
-        configuration this avoids torch's per-operation overhead.
+        Parameters
+        ----------
+        displacements : array_like
+            ``(..., m)`` [m], within the robot's limits.
+        dtype : torch.dtype
+            Of the returned mixture.
+
+        Returns
+        -------
+        GaussianMixture
+            Batch shape ``(...)``, ``K`` components, ``d = 3``, base frame, metres.
+
+        Raises
+        ------
+        InvalidInputError
+            A wrong number of tendons, NaN/inf, or displacements outside the robot's limits.
+        DataFormatError
+            The weights predict NaN or inf (corrupted or unstable).
         """
         d = self.check_displacements(displacements)
         arrays = self._forward_numpy(d)

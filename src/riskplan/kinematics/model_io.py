@@ -122,8 +122,22 @@ def resolve_model(name_or_path) -> Path:
     """The model folder for a path or a shipped model name.
 
     An existing folder (or its ``model.json`` / ``weights.pt``) wins; otherwise a name from
-    :func:`shipped_models` resolves to its packaged folder. Anything else raises
-    :class:`DataFormatError` listing the shipped names.
+    :func:`shipped_models` resolves to its packaged folder.
+
+    Parameters
+    ----------
+    name_or_path : str or os.PathLike
+        Folder, file in it, or shipped name.
+
+    Returns
+    -------
+    pathlib.Path
+        The folder.
+
+    Raises
+    ------
+    DataFormatError
+        Neither a folder nor a shipped name (the message lists the shipped names).
     """
     if not isinstance(name_or_path, (str, Path)):
         raise InvalidInputError(
@@ -144,14 +158,26 @@ def resolve_model(name_or_path) -> Path:
 
 
 def load_model(path, robot=None) -> MDNModel:
-    """Load a model folder written by :func:`save_model`, or a shipped model by name (``"paper"``).
+    """Load a model folder written by :func:`save_model`, or a shipped model by name.
 
-    ``path``: a model folder, its ``model.json``, or a name from :func:`shipped_models`
-    (used only when no folder of that name exists). ``robot``: optional robot (anything with
-    ``toml_text()``) the model must belong to.
-    Raises :class:`DataFormatError` naming the problem: an unknown name (listing the shipped
-    ones), missing files, corrupted JSON or weights, weights that do not match the metadata
-    (SHA-256 check, shipped models included), or a model of another robot.
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A model folder, its ``model.json``, or a name from :func:`shipped_models`
+        (``"paper"``; used only when no folder of that name exists).
+    robot : TendonRobot, optional
+        The robot (anything with ``toml_text()``) the model must belong to.
+
+    Returns
+    -------
+    MDNModel
+        The model, its weights checked against the metadata's SHA-256.
+
+    Raises
+    ------
+    DataFormatError
+        An unknown name (listing the shipped ones), missing files, corrupted JSON or
+        weights, weights that do not match the metadata, or a model of another robot.
     """
     path = resolve_model(path)
     meta_path = path / META_NAME
@@ -224,7 +250,7 @@ def load_model(path, robot=None) -> MDNModel:
     if extra.get("finished") is False:
         log.warning(
             "model %s is unfinished: saved during a training run that has not ended (best epoch %s); "
-            "resume it with `riskplan train --resume`",
+            "resume it with `riskplan model train --resume`",
             path,
             extra.get("best_epoch"),
         )

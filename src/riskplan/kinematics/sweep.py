@@ -22,8 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
+from riskplan._validation import check_workers
 from riskplan.errors import InvalidInputError
 from riskplan.kinematics.training import TrainConfig
+from riskplan.threads import one_torch_thread
 
 log = logging.getLogger(__name__)
 
@@ -116,11 +118,10 @@ def recommend(components, test_nll, collapsed, nll_tolerance: float = DEFAULT_NL
     return min(cand)
 
 
+@one_torch_thread
 def _sweep_one(task: tuple) -> dict:
     """Train and score one ``K`` (module level so process pools can run it)."""
     import time
-
-    import torch
 
     from riskplan.errors import ConvergenceError
     from riskplan.kinematics.data import read_point_clouds
@@ -128,7 +129,6 @@ def _sweep_one(task: tuple) -> dict:
     from riskplan.kinematics.training import train
 
     train_path, test_path, K, cfg_json, out_dir, threshold, max_seconds = task
-    torch.set_num_threads(1)
     t0 = time.perf_counter()
     cfg = TrainConfig.from_json({**cfg_json, "n_components": K})
     train_data = read_point_clouds(train_path)
@@ -182,13 +182,14 @@ def sweep(
     """Train one model per ``K`` in ``components`` and score it on ``test_path`` (Fig. 4).
 
     Models go to ``out/K{K}/``. ``workers > 1`` trains several ``K`` at once in
-    processes; ``backend`` (``None``: ``"local"`` when ``workers > 1``, else ``"serial"``),
-    ``ray_address``: :func:`riskplan.parallel.map_tasks` (``workers=None``: its default). ``on_result(index, entry_dict)`` reports each finished ``K``.
+    processes; ``backend`` (``None``: ``"local"`` when more than one worker runs, else
+    ``"serial"``), ``ray_address``: :func:`riskplan.parallel.map_tasks` (``workers=None``:
+    one per core, as everywhere). ``on_result(index, entry_dict)`` reports each finished ``K``.
     ``max_seconds_per_k``: wall-clock budget of each training (see ``train(max_seconds=)``).
     Both data sets are checked (readable, non-empty, same robot) before any training.
     """
     from riskplan.kinematics.data import check_compatible, read_point_clouds
-    from riskplan.parallel import map_tasks
+    from riskplan.parallel import effective_workers, map_tasks
 
     components = (
         parse_components(components)
@@ -201,12 +202,7 @@ def sweep(
         raise InvalidInputError(f"collapse_threshold: expected in (0, 1), got {collapse_threshold}")
     if not nll_tolerance >= 0.0:
         raise InvalidInputError(f"nll_tolerance: expected >= 0, got {nll_tolerance}")
-    if workers is not None and (
-        isinstance(workers, bool) or not isinstance(workers, int) or workers < 1
-    ):
-        raise InvalidInputError(
-            f"workers: expected a positive integer (or None for all cores), got {workers!r}"
-        )
+    check_workers(workers)
     from riskplan.io import check_output_folder
 
     check_output_folder(out, "out")
@@ -229,7 +225,10 @@ def sweep(
         for K in components
     ]
     if backend is None:
-        backend = "serial" if (workers or 0) <= 1 or len(tasks) == 1 else "local"
+        # workers=None is one per core, as everywhere (riskplan.parallel.effective_workers)
+        backend = (
+            "serial" if len(tasks) == 1 or effective_workers("local", workers) <= 1 else "local"
+        )
     results = map_tasks(
         _sweep_one,
         tasks,

@@ -112,10 +112,28 @@ class GaussianMixture(MixtureBatch):
         return x.to(self.dtype)
 
     def component_log_prob(self, points) -> torch.Tensor:
-        """``log N(x_n; mu_k, Sigma_k)`` for points ``(..., N, d)``; returns ``(..., K, N)``.
+        r"""Component log densities (eqs. 4-6 of the MDN paper),
 
-        Raises :class:`InvalidInputError` for points of the wrong dimension or type, a leading
-        shape that does not broadcast against the batch shape, or NaN/inf values.
+        .. math::
+
+            \log \mathcal{N}(x_n; \mu_k, \Sigma_k) = -\frac{d}{2} \log 2\pi + \sum_j \log (U_k)_{jj}
+            - \frac{1}{2} \| U_k (x_n - \mu_k) \|^2.
+
+        Parameters
+        ----------
+        points : array_like or torch.Tensor
+            ``(..., N, d)``; the leading shape broadcasts against the batch shape.
+
+        Returns
+        -------
+        torch.Tensor
+            ``(..., K, N)``.
+
+        Raises
+        ------
+        InvalidInputError
+            Points of the wrong dimension or type, a leading shape that does not broadcast, or
+            NaN/inf values.
         """
         x = self._check_points(points)
         diff = x.unsqueeze(-3) - self.means.unsqueeze(-2)  # (..., K, N, d)
@@ -129,20 +147,42 @@ class GaussianMixture(MixtureBatch):
         return -0.5 * sq + logdet.unsqueeze(-1) - 0.5 * self.dim * math.log(2.0 * math.pi)
 
     def log_prob(self, points) -> torch.Tensor:
-        """Mixture log density (eq. 1) of points ``(..., N, d)``; returns ``(..., N)``.
+        r"""Mixture log density (eq. 1), :math:`\log \sum_k w_k \mathcal{N}(x; \mu_k, \Sigma_k)`.
 
-        Stable for far-away points: the sum over components is a log-sum-exp.
-        Zero-weight components contribute ``-inf`` inside the log-sum-exp and are ignored.
+        Stable for far-away points: the sum over components is a log-sum-exp; zero-weight
+        components contribute ``-inf`` inside it and are ignored.
+
+        Parameters
+        ----------
+        points : array_like or torch.Tensor
+            ``(..., N, d)``.
+
+        Returns
+        -------
+        torch.Tensor
+            ``(..., N)``.
         """
         comp = self.component_log_prob(points)
         logw = torch.log(self.weights).unsqueeze(-1)
         return torch.logsumexp(logw + comp, dim=-2)
 
     def sample(self, n: int, seed=None) -> torch.Tensor:
-        """Draw ``n`` points from each mixture; returns ``(..., n, d)``.
+        """Draw points from each mixture: ``x = mu_k + U_k^{-1} z`` with ``k ~ w``, ``z ~ N(0, I)``.
 
-        ``seed``: ``None``, an int or a ``torch.Generator``. The draws come from torch's
-        generator, so they differ from ``to_numpy().sample(n, seed)`` (same distribution).
+        The draws come from torch's generator, so they differ from ``to_numpy().sample(n, seed)``
+        (same distribution).
+
+        Parameters
+        ----------
+        n : int
+            Points per mixture (>= 0).
+        seed : None, int or torch.Generator
+            The random stream.
+
+        Returns
+        -------
+        torch.Tensor
+            ``(..., n, d)``.
         """
         if n < 0:
             raise InvalidInputError(f"n: expected >= 0, got {n}")

@@ -12,6 +12,8 @@ kinematic wing's top. Tissue planning is :mod:`riskplan.tissue_planning`.
 """
 
 from riskplan.planning.bo import OptimisationResult, OptimiserConfig, optimise_trajectory
+from riskplan.planning.chest import ChestPlan, RecessGoal, plan_chest, recess_goal
+from riskplan.planning.chest_scene import Chest, ChestParams, build_chest
 from riskplan.planning.prm import (
     MeanValidity,
     Roadmap,
@@ -20,12 +22,14 @@ from riskplan.planning.prm import (
     interpolate_path,
     tip_positions,
 )
+from riskplan.planning.problem import Problem, load_problem
 from riskplan.planning.risk import (
     ConfigurationBound,
     compare_paths,
     least_risk_path,
     trajectory_risk,
 )
+from riskplan.planning.robot_plan import RobotPlan, plan_robot
 from riskplan.planning.validate import (
     MixtureMonteCarlo,
     RobotMonteCarlo,
@@ -36,21 +40,32 @@ from riskplan.planning.validate import (
 )
 
 __all__ = [
+    "Chest",
+    "ChestParams",
+    "ChestPlan",
     "ConfigurationBound",
     "MeanValidity",
     "MixtureMonteCarlo",
     "OptimisationResult",
     "OptimiserConfig",
+    "Problem",
+    "RecessGoal",
     "Roadmap",
     "RobotMonteCarlo",
+    "RobotPlan",
+    "build_chest",
     "build_roadmap",
     "compare_paths",
     "execute_on_robot",
     "goal_from_tip",
     "interpolate_path",
     "least_risk_path",
+    "load_problem",
     "mixture_monte_carlo",
     "optimise_trajectory",
+    "plan_chest",
+    "plan_robot",
+    "recess_goal",
     "tip_positions",
     "trajectory_risk",
     "tube_clearance",

@@ -83,9 +83,10 @@ def plan_chest(
     robot in ``build_chest(0)``; other models with 4 tendons get it too, others need a goal).
     ``least_risk``: also search the roadmap for the least-risk path (edge cost
     ``-log(1 - p)``) and report both paths' bounds. ``risk``: the per-configuration risk
-    optimised, ``"eq9"`` (the paper's bound, the default) or ``"cloud"``
-    (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact); combined along the
-    trajectory by eq. 10 either way.
+    optimised, ``"eq9"`` (the paper's bound, the default), ``"cloud"``
+    (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact) or ``"bodies"``
+    (:class:`~riskplan.planning.risk.SampledBodyRisk`, body contact over sampled executions);
+    combined along the trajectory by eq. 10 either way.
     The chest's use of :func:`riskplan.planning.robot_plan.plan_robot` (the paper robot has
     no base motion: planning coordinates are the displacements).
     """

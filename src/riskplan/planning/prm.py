@@ -152,13 +152,29 @@ def check_step(step, name: str = "step") -> float:
 
 
 def interpolate_path(path, step: float = DEFAULT_STEP, *, validate: bool = True) -> np.ndarray:
-    """Split each segment of ``path (P, m)`` into ``ceil(length / step)`` equal pieces; ``(T, m)``.
+    """Split each segment of a path into ``ceil(length / step)`` equal pieces.
 
     The path's vertices are kept; consecutive configurations are at most ``step`` apart.
-    ``path`` must be finite with ``P >= 1`` rows, ``step`` finite and > 0, and the trajectory
-    within the work budget (:mod:`riskplan.budget`), else
-    :class:`~riskplan.errors.InvalidInputError` (``BudgetError``); ``validate=False`` skips
-    the checks (internal callers with checked arguments).
+
+    Parameters
+    ----------
+    path : array_like
+        ``(P, m)``, finite, ``P >= 1``.
+    step : float
+        Largest distance between consecutive configurations (finite, > 0).
+    validate : bool
+        Check the arguments and the work budget (:mod:`riskplan.budget`); ``False`` for
+        internal callers with checked arguments.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(T, m)`` the trajectory.
+
+    Raises
+    ------
+    InvalidInputError
+        Bad arguments, or a trajectory beyond the work budget (``BudgetError``).
     """
     if validate:
         from riskplan._validation import as_array
@@ -475,10 +491,22 @@ def build_roadmap(
 
 
 def tip_positions(model, configs) -> np.ndarray:
-    """Predicted tip ``(N, 3)``: the component mean farthest from the base origin.
+    """Predicted tip: the component mean farthest from the base origin.
 
     The mixture's components cover the robot's body; the farthest mean is the one that
     describes its distal end (the tip), in the base frame.
+
+    Parameters
+    ----------
+    model : MDNModel
+        The learned kinematics.
+    configs : array_like
+        ``(N, m)`` configurations.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(N, 3)`` tip positions.
     """
     gm = model.predict(np.atleast_2d(np.asarray(configs, dtype=np.float64)))
     mu = as_numpy_mixture(gm, validate=False).means
@@ -495,10 +523,35 @@ def goal_from_tip(
     n_samples: int = 4096,
     seed: int = 0,
 ) -> np.ndarray:
-    """A valid configuration whose predicted tip lies within ``tolerance`` of ``target (3,)`` (base frame).
+    """A valid configuration whose predicted tip lies within ``tolerance`` of ``target``.
 
     Candidates: the roadmap's milestones and ``n_samples`` seeded uniform configurations; the
-    valid candidate with the closest tip wins. :class:`PlanningError` if none is within tolerance.
+    valid candidate with the closest tip wins.
+
+    Parameters
+    ----------
+    roadmap : Roadmap
+        Its milestones are candidates and its validity check filters them.
+    model : MDNModel
+        The learned kinematics (:func:`tip_positions`).
+    target : array_like
+        ``(3,)`` tip position in the base frame.
+    tolerance : float
+        Largest tip distance accepted.
+    n_samples : int
+        Uniform candidates besides the milestones.
+    seed : int
+        Seeds the candidates.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(m,)`` the configuration.
+
+    Raises
+    ------
+    PlanningError
+        No valid candidate is within ``tolerance``.
     """
     target = as_array(target, "goal_tip", shape=(3,))
     tolerance = _check_positive(tolerance, "tolerance")

@@ -211,7 +211,7 @@ class VoxelEnvironment:
     @property
     def rotation(self) -> np.ndarray:
         """``(3, 3)`` ``R`` with ``x_voxel = R x_robot``."""
-        from riskplan.robots.params import quaternion_to_matrix
+        from riskplan.robots.pose import quaternion_to_matrix
 
         return quaternion_to_matrix(self.rotation_quat)
 

@@ -112,8 +112,124 @@ class CloudRiskBound:
         return out
 
 
-#: risks the chest planner can optimise: the paper's eq. 9 and the body-contact cloud risk
-RISKS = ("eq9", "cloud")
+class SampledBodyRisk:
+    """Body-contact risk at configurations as a mixture over sampled whole bodies: ``(N, m) -> (N,)``
+    (:func:`riskplan.collision.body_risk.sampled_body_risk`, beyond the paper).
+
+    Each of ``n_draws`` samples is one execution of the robot's transmission (random start,
+    the run's play widths and zero offsets, the play operator:
+    :func:`~riskplan.planning.executions.execution_displacements`, the law the robot file states
+    and the data were generated with); the learned model, evaluated at the configuration that
+    execution delivers, places the whole body; a component's surface spread is its predicted
+    covariance less the executions' share. The draws are the same for every call (``seed``), so
+    the risk is a deterministic function of the configuration. :meth:`trajectory` gives the
+    common-draw trajectory risk (each execution keeps its start, play and offset along the path).
+
+    ``model``: an MDN model with ``robot`` (its :class:`~riskplan.robots.TendonRobot`) or a
+    :class:`~riskplan.planning.robot_plan.ScaledModel` of one (configurations then in planning
+    coordinates). ``evaluations`` counts configurations evaluated.
+    """
+
+    def __init__(
+        self,
+        model,
+        environment,
+        *,
+        n_draws: int = 128,
+        extent: float | None = None,
+        seed: int = 0,
+        batch: int = 16,
+    ):
+        from riskplan.collision.body_risk import DEFAULT_EXTENT
+        from riskplan.errors import InvalidInputError
+        from riskplan.parallel import spawn_seeds
+
+        extent = DEFAULT_EXTENT if extent is None else extent
+        if not (np.isfinite(extent) and extent > 0):
+            raise InvalidInputError(f"extent: expected a finite number > 0, got {extent!r}")
+        if isinstance(n_draws, bool) or int(n_draws) != n_draws or n_draws < 2:
+            raise InvalidInputError(f"n_draws: expected an integer >= 2, got {n_draws!r}")
+        base = getattr(model, "model", model)
+        self.robot = getattr(base, "robot", None)
+        if self.robot is None:
+            raise InvalidInputError(
+                "model: the sampled-body risk needs the model's robot (its transmission law)"
+            )
+        self.model = model
+        self.environment = environment
+        self.extent = float(extent)
+        self.n_draws = int(n_draws)
+        self.seed = int(seed)
+        self.batch = int(batch)
+        from riskplan.planning.executions import execution_draws
+
+        self.draws = execution_draws(self.robot, spawn_seeds(self.seed, self.n_draws))
+        self.evaluations = 0
+
+    def _to_model(self, configs):
+        to_model = getattr(self.model, "to_model", None)
+        return configs if to_model is None else to_model(configs)
+
+    def _to_planning(self, configs):
+        to_planning = getattr(self.model, "to_planning", None)
+        return configs if to_planning is None else to_planning(configs)
+
+    def _risk(self, trajectory):
+        """:class:`~riskplan.collision.body_risk.CloudRisk` of ``trajectory (T, m)`` (planning coordinates)."""
+        from riskplan.collision.body_risk import sampled_body_risk
+        from riskplan.gaussian_mixture import as_numpy_mixture
+        from riskplan.planning.executions import execution_displacements
+
+        y = np.atleast_2d(np.asarray(trajectory, dtype=np.float64))
+        x = np.atleast_2d(self._to_model(y))
+        eff = execution_displacements(self.robot, x, draws=self.draws)  # (S, T, m)
+        S, T, m = eff.shape
+        nominal = as_numpy_mixture(self.model.predict(y))
+        drawn = as_numpy_mixture(self.model.predict(self._to_planning(eff.reshape(S * T, m))))
+        means = drawn.means.reshape(S, T, *drawn.means.shape[-2:])
+        return sampled_body_risk(
+            nominal, means, self.environment, extent=self.extent, validate=False
+        )
+
+    def __call__(self, configs) -> np.ndarray:
+        """Risk per configuration.
+
+        Parameters
+        ----------
+        configs : array_like
+            ``(N, m)`` configurations (planning coordinates of ``model``).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(N,)`` fractions of the sampled executions whose body touches an obstacle.
+        """
+        c = np.atleast_2d(np.asarray(configs, dtype=np.float64))
+        out = np.array([self._risk(x[None]).per_configuration[0] for x in c])
+        self.evaluations += len(c)
+        return out
+
+    def trajectory(self, trajectory) -> float:
+        """Common-draw risk that the body touches an obstacle somewhere along a trajectory.
+
+        Parameters
+        ----------
+        trajectory : array_like
+            ``(T, m)`` configurations (planning coordinates of ``model``).
+
+        Returns
+        -------
+        float
+            Fraction of the sampled executions (each keeps its draw along the path) whose
+            body touches an obstacle at some configuration.
+        """
+        self.evaluations += len(np.atleast_2d(trajectory))
+        return self._risk(trajectory).trajectory
+
+
+#: risks the chest planner can optimise: the paper's eq. 9, the body-contact cloud risk and
+#: the sampled-body risk (docs/validation.md compares them with the robot)
+RISKS = ("eq9", "cloud", "bodies")
 
 
 def make_risk(name: str, model, environment, **options):
@@ -124,11 +240,33 @@ def make_risk(name: str, model, environment, **options):
         return ConfigurationBound(model, environment)
     if name == "cloud":
         return CloudRiskBound(model, environment, **options)
+    if name == "bodies":
+        return SampledBodyRisk(model, environment, **options)
     raise InvalidInputError(f"risk: expected one of {RISKS}, got {name!r}")
 
 
 def trajectory_risk(bound, trajectory) -> tuple[float, np.ndarray]:
-    """Eq. 10 of ``trajectory (T, m)`` and its per-configuration eq.-9 bounds ``(T,)``."""
+    r"""The eq.-10 bound of a trajectory and its per-configuration eq.-9 bounds (MDN paper V).
+
+    .. math::
+
+        p(\exists x \in \tau : x \notin X_f) \le 1 - \prod_{x \in \tau} \left(1 - p(x \notin X_f)\right)
+
+    Parameters
+    ----------
+    bound : callable
+        ``bound(configs (T, m)) -> (T,)``, the eq.-9 bound of each configuration (e.g. a
+        :class:`ConfigurationBound`).
+    trajectory : array_like
+        ``(T, m)`` configurations.
+
+    Returns
+    -------
+    risk : float
+        The eq.-10 bound.
+    bounds : numpy.ndarray
+        ``(T,)`` the per-configuration bounds.
+    """
     p = bound(trajectory)
     return float(trajectory_probability(p)), p
 
@@ -189,12 +327,32 @@ def least_risk_path(
     cost: RiskSegmentCost | None = None,
     progress=None,
 ) -> np.ndarray:
-    """Roadmap path ``(P, m)`` whose trajectory (interpolated at ``step``) has the least eq.-10 bound.
+    r"""Roadmap path whose trajectory (interpolated at ``step``) has the least eq.-10 bound.
 
     Dijkstra with lazily priced edges: an edge's configurations are evaluated only when the
     search settles one of its ends, and the search stops when it settles the goal, so
-    milestones riskier than the answer are never priced. ``progress(settled, total)``
-    reports the milestones settled so far.
+    milestones riskier than the answer are never priced. The edge cost is additive,
+    :math:`-\log(1 - p)` summed over the configurations.
+
+    Parameters
+    ----------
+    roadmap : Roadmap
+        The PRM.
+    bound : callable
+        ``bound(configs (N, m)) -> (N,)``, the eq.-9 bound.
+    start, goal : array_like
+        ``(m,)`` configurations.
+    step : float
+        Interpolation step of the trajectory.
+    cost : RiskSegmentCost, optional
+        A cost with its cache (shared between searches).
+    progress : callable, optional
+        ``progress(settled, total)`` reports the milestones settled so far.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(P, m)`` the path's vertices.
     """
     import heapq
 
@@ -257,7 +415,27 @@ def least_risk_path(
 def compare_paths(
     roadmap: Roadmap, bound, start, goal, *, step: float = DEFAULT_STEP, progress=None
 ) -> dict:
-    """Shortest vs least-risk roadmap path: trajectories, per-configuration and eq.-10 bounds."""
+    """Shortest against least-risk roadmap path.
+
+    Parameters
+    ----------
+    roadmap : Roadmap
+        The PRM.
+    bound : callable
+        ``bound(configs (N, m)) -> (N,)``, the eq.-9 bound.
+    start, goal : array_like
+        ``(m,)`` configurations.
+    step : float
+        Interpolation step of the trajectories.
+    progress : callable, optional
+        As in :func:`least_risk_path`.
+
+    Returns
+    -------
+    dict
+        ``{"shortest": ..., "least_risk": ...}``, each with ``path``, ``trajectory``,
+        per-configuration ``bounds``, the eq.-10 ``bound`` and the path ``length``.
+    """
     out = {}
     cost = RiskSegmentCost(bound, step)
     for name, path in (

@@ -330,9 +330,9 @@ def problem_from_options(robot, env, start, goal):
 
     from riskplan.parsing import parse_numbers
     from riskplan.planning.problem import Problem
-    from riskplan.robots import TendonRobot, load_robot
+    from riskplan.robots import load_robot
 
-    rob = robot if isinstance(robot, TendonRobot) else load_robot(robot)
+    rob = load_robot(robot)
     mesh = Path(env)
     if not mesh.is_file():
         raise InvalidInputError(f"--env: no such file: {mesh}")
@@ -464,9 +464,11 @@ def plan_robot(
         robot).
     step, resolution: trajectory step and motion-check spacing, planning coordinates.
     least_risk: also search the roadmap for the least-risk path (edge cost ``-log(1 - p)``).
-    risk: the per-configuration risk optimised, ``"eq9"`` (the paper's bound, the default) or
-        ``"cloud"`` (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact); combined
-        along the trajectory by eq. 10 either way.
+    risk: the per-configuration risk optimised, ``"eq9"`` (the paper's bound, the default),
+        ``"cloud"`` (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact) or
+        ``"bodies"`` (:class:`~riskplan.planning.risk.SampledBodyRisk`, body contact over
+        sampled executions; needs the model's robot); combined along the trajectory by eq. 10
+        either way.
 
     Eq. 9 per configuration ``p_t``, eq. 10 ``P = 1 - prod_t (1 - p_t)``. Raises
     :class:`InvalidInputError` for malformed or invalid inputs before any work,

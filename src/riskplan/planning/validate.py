@@ -56,7 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskplan._validation import as_array, check_range
+from riskplan._validation import as_array, check_count, check_range
 from riskplan.collision import (
     Environment,
     MonteCarloEstimate,
@@ -139,22 +139,10 @@ def _check_seed(seed) -> int:
     return int(seed)
 
 
-def _check_count(n, name: str) -> int:
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise InvalidInputError(f"{name}: expected a positive integer, got {n!r}")
-    return int(n)
-
-
 def _as_robot(robot):
-    if isinstance(robot, str) or hasattr(robot, "__fspath__"):
-        from riskplan.robots import load_robot
+    from riskplan.robots import load_robot
 
-        return load_robot(robot)
-    if not hasattr(robot, "solve_displacements") or not hasattr(robot, "toml_text"):
-        raise InvalidInputError(
-            f"robot: expected a TendonRobot or a robot name/path, got {type(robot).__name__}"
-        )
-    return robot
+    return load_robot(robot)
 
 
 def _check_trajectory(trajectory, robot) -> np.ndarray:
@@ -204,8 +192,7 @@ def simulate_executions(robot, trajectory, seeds, *, return_frames: bool = False
     frames ``(B, T, n, 3, 3)``. Inputs are trusted (validated by :func:`execute_on_robot`).
     """
     from riskplan.datasets.generate import to_base_frame
-    from riskplan.datasets.protocol import random_starts
-    from riskplan.robots.hysteresis import HysteresisModel, play_operator
+    from riskplan.planning.executions import execution_displacements
 
     q = np.asarray(trajectory, dtype=np.float64)
     rot = ret = None
@@ -213,23 +200,8 @@ def simulate_executions(robot, trajectory, seeds, *, return_frames: bool = False
         traj, rot, ret = robot.split_configuration(q, validate=False)
     else:
         traj = q
-    T, m = traj.shape
-    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
-    model = HysteresisModel(robot)
-    starts, plays, offsets = [], [], []
-    for sd in seeds:
-        c_start, c_run = np.random.SeedSequence(int(sd)).spawn(2)
-        starts.append(random_starts(lim, 1, np.random.default_rng(c_start))[0])
-        play, offset = model.sample_run(np.random.default_rng(c_run))
-        plays.append(play)
-        offsets.append(offset)
-    e = np.stack(starts)  # at rest at the start: engaged = start
-    play, offset = np.stack(plays), np.stack(offsets)
-    B = len(e)
-    eff = np.empty((B, T, m))
-    for t in range(T):
-        e = play_operator(e, np.broadcast_to(traj[t], (B, 1, m)), play)
-        eff[:, t] = np.clip(e + offset, lim[:, 0], lim[:, 1])
+    eff = execution_displacements(robot, traj, seeds)
+    B, T, m = eff.shape
     # configurations near the corners of the displacement box need more than max_tension; the
     # solver warns per call, which would flood a long run (the data generator does the same)
     rlog = logging.getLogger("riskplan.robots.robot")
@@ -360,11 +332,10 @@ def _geometry(text: str):
 _ENVIRONMENTS: dict = {}
 
 
-@functools.lru_cache(maxsize=4)
 def _robot(text: str):
-    from riskplan.robots import robot_from_toml
+    from riskplan.robots import cached_robot
 
-    return robot_from_toml(text)
+    return cached_robot(text)
 
 
 def execute_on_robot(
@@ -408,9 +379,9 @@ def execute_on_robot(
     robot = _as_robot(robot)
     traj = _check_trajectory(trajectory, robot)
     env = _check_environment(environment)
-    n = _check_count(n, "n")
+    n = check_count(n, "n", 1)
     seed = _check_seed(seed)
-    chunk = _check_count(chunk, "chunk")
+    chunk = check_count(chunk, "chunk", 1)
     if backend not in BACKENDS:
         raise InvalidInputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
     if not 0 < confidence < 1:
@@ -476,7 +447,7 @@ def mixture_monte_carlo(
     per configuration (what eq. 9 bounds). Wilson intervals at ``confidence``.
     """
     env = _check_environment(environment)
-    n = _check_count(n, "n")
+    n = check_count(n, "n", 1)
     seed = _check_seed(seed)
     m = int(getattr(model, "n_tendons", -1))
     traj = as_array(trajectory, "trajectory", min_ndim=2)

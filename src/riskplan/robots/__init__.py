@@ -8,7 +8,6 @@
 
 from riskplan.robots.params import (
     Backbone,
-    BasePose,
     Disks,
     Gravity,
     HysteresisParams,
@@ -17,10 +16,12 @@ from riskplan.robots.params import (
     params_to_toml,
     parse_robot_toml,
 )
+from riskplan.robots.pose import BasePose
 from riskplan.robots.robot import (
     PACKAGED_ROBOTS,
     RodShape,
     TendonRobot,
+    cached_robot,
     load_robot,
     robot_from_toml,
 )
@@ -36,6 +37,7 @@ __all__ = [
     "RodShape",
     "Tendon",
     "TendonRobot",
+    "cached_robot",
     "load_robot",
     "params_to_toml",
     "parse_robot_toml",

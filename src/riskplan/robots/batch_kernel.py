@@ -50,7 +50,7 @@ from numba import get_num_threads, njit, prange
 from riskplan.errors import ConvergenceError, InvalidInputError
 from riskplan.robots import cosserat
 from riskplan.robots.integration import rk4_row
-from riskplan.robots.rod_tables import RodTables
+from riskplan.robots.rod_tables import LOCAL_MAXIT, LOCAL_TOL, RodTables
 from riskplan.robots.strains import (
     tendon_slope_source,
     tendon_stiffness,
@@ -633,8 +633,6 @@ def solve_tensions_batch(robot, tensions, *, parallel: bool | None = None, valid
     set). Raises :class:`InvalidInputError` for bad tensions or a robot with gravity on and
     :class:`ConvergenceError` if a configuration fails in the scalar kernel too.
     """
-    from riskplan.robots.robot import LOCAL_MAXIT, LOCAL_TOL
-
     if robot.loaded:
         raise InvalidInputError(
             "solve_tensions_batch: the robot has gravity on; use robot.solve_tensions"

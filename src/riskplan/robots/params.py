@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 
 from riskplan.errors import RobotDescriptionError
+from riskplan.robots.pose import BasePose, quaternion_to_matrix
 
 __all__ = [
     "Backbone",
     "BaseMotion",
-    "BasePose",
     "Disks",
     "Gravity",
     "HysteresisParams",
@@ -28,7 +28,6 @@ __all__ = [
     "Tendon",
     "load_robot_params",
     "parse_robot_toml",
-    "quaternion_to_matrix",
     "read_robot_text",
     "rpy_to_matrix",
     "suggest_key",
@@ -115,22 +114,6 @@ class Gravity:
 
 
 @dataclass(frozen=True)
-class BasePose:
-    """Base frame in the world: ``x_world = position + rotation @ x_base``."""
-
-    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    rotation: tuple[tuple[float, ...], ...] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
-
-    @property
-    def matrix(self) -> np.ndarray:
-        return np.array(self.rotation, dtype=np.float64)
-
-    @property
-    def is_identity(self) -> bool:
-        return bool(np.all(np.array(self.position) == 0.0) and np.all(self.matrix == np.eye(3)))
-
-
-@dataclass(frozen=True)
 class BaseMotion:
     """Base rotation and retraction as configuration variables (the Kuntz lab's
     ``enable_rotation`` / ``enable_retraction``).
@@ -206,18 +189,6 @@ def rpy_to_matrix(rpy) -> np.ndarray:
     Ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
     Rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
     return Rz @ Ry @ Rx
-
-
-def quaternion_to_matrix(q) -> np.ndarray:
-    """Unit quaternion ``(w, x, y, z)`` to a rotation matrix (normalised first)."""
-    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
 
 
 # ---------------------------------------------------------------- parsing helpers
@@ -637,7 +608,7 @@ def params_to_dict(p: RobotParams) -> dict:
             for t in p.tendons
         ],
         "gravity": {"enabled": p.gravity.enabled, "vector": list(p.gravity.vector)},
-        "base": {"position": list(p.base.position), "rotation": [list(r) for r in p.base.rotation]},
+        "base": {"position": p.base.position.tolist(), "rotation": p.base.rotation.tolist()},
         "hysteresis": {
             "play": p.hysteresis.play,
             "play_variation": p.hysteresis.play_variation,

@@ -6,8 +6,10 @@ checks inputs once at the boundary and places results in the world by the base p
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
+import os
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
@@ -20,25 +22,30 @@ from riskplan.errors import ConvergenceError, InvalidInputError, RobotDescriptio
 from riskplan.robots import cosserat
 from riskplan.robots.params import (
     BaseMotion,
-    BasePose,
     Disks,
     Gravity,
     RobotParams,
     params_to_toml,
     parse_robot_toml,
-    quaternion_to_matrix,
     read_robot_text,
     rpy_to_matrix,
 )
+from riskplan.robots.pose import BasePose, quaternion_to_matrix
+from riskplan.robots.rod_tables import LOCAL_MAXIT, LOCAL_TOL
 
-__all__ = ["PACKAGED_ROBOTS", "RodShape", "TendonRobot", "load_robot", "robot_from_toml"]
+__all__ = [
+    "PACKAGED_ROBOTS",
+    "RodShape",
+    "TendonRobot",
+    "cached_robot",
+    "load_robot",
+    "robot_from_toml",
+]
 
 log = logging.getLogger(__name__)
 
 PACKAGED_ROBOTS = {"paper": "paper_robot.toml"}
 
-LOCAL_TOL = 1e-10  # Newton step (strain units: 1 and 1/m) of the local strain solve
-LOCAL_MAXIT = 50
 DISP_TOL = 1e-12  # m, complementarity residual of the displacement -> tension solve
 DISP_MAXIT = 60
 SHOOT_TOL = 1e-11  # N m, tip-moment residual of the shooting solve
@@ -379,6 +386,20 @@ class TendonRobot:
         (:func:`cosserat.shape_free`; batches of ``BATCH_KERNEL_MIN`` or more go through the
         SIMD kernel of :mod:`riskplan.robots.batch_kernel`, same results); with gravity: shooting on the base moment
         (:func:`cosserat.shape_loaded`). Raises :class:`ConvergenceError` if a solve fails.
+
+        Parameters
+        ----------
+        tensions : array_like
+            ``(..., m)`` tendon tensions [N].
+        rotation, retraction : float or array_like, optional
+            Base rotation [rad] and retraction [m] (scalars or ``(...)``).
+        validate : bool
+            Check the arguments (``False`` for internal callers with checked arguments).
+
+        Returns
+        -------
+        RodShape
+            Backbone positions and frames of batch shape ``(...)``.
         """
         if rotation is not None or retraction is not None:
             return self._solve_moved(True, tensions, rotation, retraction, validate)
@@ -677,6 +698,20 @@ class TendonRobot:
         (:func:`cosserat.solve_displacement_tensions`). ``RodShape.tensions`` holds them. Solved
         tensions above ``max_tension`` are returned with a logged warning (the limit bounds
         tension *input*). Raises :class:`ConvergenceError` with the residual on failure.
+
+        Parameters
+        ----------
+        displacements : array_like
+            ``(..., m)`` tendon displacements [m].
+        rotation, retraction : float or array_like, optional
+            As in :meth:`solve_tensions`.
+        validate : bool
+            Check the arguments.
+
+        Returns
+        -------
+        RodShape
+            Backbone of batch shape ``(...)``, with the solved ``tensions``.
         """
         if rotation is not None or retraction is not None:
             return self._solve_moved(False, displacements, rotation, retraction, validate)
@@ -745,7 +780,20 @@ class TendonRobot:
         return tau.reshape(batch + (m,))
 
     def tendon_lengths(self, tensions, *, validate: bool = True) -> np.ndarray:
-        """Tendon path lengths ``l_i = int |v + u x r_i + r_i'| ds`` ``(..., m)`` [m] for tensions ``(..., m)``."""
+        """Tendon path lengths ``l_i = int |v + u x r_i + r_i'| ds`` ``(..., m)`` [m] for tensions ``(..., m)``.
+
+        Parameters
+        ----------
+        tensions : array_like
+            ``(..., m)`` [N].
+        validate : bool
+            Check the arguments.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(..., m)`` path lengths [m].
+        """
         flat, batch = self._batch_input(tensions, self.check_tensions, validate)
         m = self.n_tendons
         out = np.empty(flat.shape)
@@ -826,13 +874,67 @@ def _robot_text(name_or_path) -> tuple[str, str]:
 
 
 def load_robot(name_or_path="paper") -> TendonRobot:
-    """A packaged robot by name (``"paper"``) or a robot TOML file path."""
-    if isinstance(name_or_path, TendonRobot):
+    """The one resolver of "name | path | robot".
+
+    Parameters
+    ----------
+    name_or_path : str, os.PathLike or TendonRobot
+        A packaged robot's name (``"paper"``), a robot TOML file, or a robot (returned as
+        it is; so is an object with ``solve_displacements`` and ``toml_text``).
+
+    Returns
+    -------
+    TendonRobot
+        The robot.
+
+    Raises
+    ------
+    RobotDescriptionError
+        An unknown name, a missing or unreadable file, an invalid description.
+    InvalidInputError
+        Anything else.
+    """
+    if isinstance(name_or_path, TendonRobot) or (
+        hasattr(name_or_path, "solve_displacements") and hasattr(name_or_path, "toml_text")
+    ):
         return name_or_path
+    if not isinstance(name_or_path, str | os.PathLike):
+        raise InvalidInputError(
+            f"robot: expected a TendonRobot or a robot name/path, got {type(name_or_path).__name__}"
+        )
     text, default = _robot_text(name_or_path)
     return TendonRobot(parse_robot_toml(text, default_name=default), toml_text=text)
 
 
 def robot_from_toml(text: str) -> TendonRobot:
-    """Rebuild a robot from its TOML text (e.g. stored in a data set's metadata)."""
+    """Rebuild a robot from its TOML text (e.g. stored in a data set's metadata).
+
+    Parameters
+    ----------
+    text : str
+        The robot description.
+
+    Returns
+    -------
+    TendonRobot
+        A new robot.
+    """
     return TendonRobot(parse_robot_toml(text), toml_text=text)
+
+
+@functools.lru_cache(maxsize=8)
+def cached_robot(text: str) -> TendonRobot:
+    """The robot of a TOML text, built once per process (the one cache worker tasks that
+    carry a robot as its text use: data generation, executions on the robot).
+
+    Parameters
+    ----------
+    text : str
+        The robot description.
+
+    Returns
+    -------
+    TendonRobot
+        The same object for the same text (at most 8 texts kept).
+    """
+    return robot_from_toml(text)

@@ -19,6 +19,11 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+# the local strain solve's Newton tolerance (strain units: 1 and 1/m) and iteration cap, shared by
+# the scalar and the batch kernels' callers
+LOCAL_TOL = 1e-10
+LOCAL_MAXIT = 50
+
 # status codes returned by the kernels
 OK = 0
 LOCAL_FAIL = 1

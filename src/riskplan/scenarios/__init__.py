@@ -1,6 +1,76 @@
 """Tissue scenarios of the deformable-planning paper: the :class:`~riskplan.scenarios.base.Simulator`
-protocol, the needle and manipulation scenarios, their uncertainty cases and scenario files.
+protocol, the planning space a scenario hands the planner
+(:mod:`~riskplan.scenarios.space`), the needle and manipulation scenarios, their uncertainty
+cases and scenario files.
 
-Modules are imported on demand (``from riskplan.scenarios.registry import make_scenario``);
-this package imports nothing heavy at import time.
+The names below load their module on first use (PEP 562), so ``import riskplan.scenarios``
+imports nothing heavy: ``from riskplan.scenarios import make_scenario``.
 """
+
+from __future__ import annotations
+
+import importlib
+
+#: public name -> the module of this package that defines it
+_HOME = {
+    "FEMScenario": "base",
+    "SimParams": "base",
+    "SimState": "base",
+    "Simulator": "base",
+    "actuation_noise": "base",
+    "apply_actuation_noise": "base",
+    "check_control": "base",
+    "frozen_array": "base",
+    "gaussian_noise": "base",
+    "rollout": "base",
+    "BoxSpace": "space",
+    "PlanningScenario": "space",
+    "PlanningSpace": "space",
+    "SCENARIO_NAMES": "registry",
+    "load_scenario_file": "registry",
+    "make_scenario": "registry",
+    "scenario_from_config": "registry",
+    "SHIPPED_SCENARIOS": "files",
+    "read_scenario_config": "files",
+    "shipped_path": "files",
+    "NeedleConfig": "needle",
+    "NeedleScenario": "needle",
+    "NeedleState": "needle",
+    "car_steer": "needle",
+    "car_step": "needle",
+    "world_pose": "needle",
+    "ManipulationConfig": "manipulation",
+    "ManipulationScenario": "manipulation",
+    "ManipulationState": "manipulation",
+    "ActuationNoise": "uncertainty",
+    "CASE_NAMES": "uncertainty",
+    "InteractionForceUncertainty": "uncertainty",
+    "MaterialUncertainty": "uncertainty",
+    "MeshUncertainty": "uncertainty",
+    "Nominal": "uncertainty",
+    "ParamDistribution": "uncertainty",
+    "WithActuation": "uncertainty",
+    "get_case": "uncertainty",
+    "needle_actuation_cov": "uncertainty",
+    "read_controls": "controls",
+    "draw_frame": "plotting",
+    "figure_for": "plotting",
+    "frame_indices": "plotting",
+    "save_frames": "plotting",
+    "save_gif": "plotting",
+}
+
+__all__ = sorted(_HOME)
+
+
+def __getattr__(name: str):
+    module = _HOME.get(name)
+    if module is None:
+        raise AttributeError(f"module 'riskplan.scenarios' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"riskplan.scenarios.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_HOME))

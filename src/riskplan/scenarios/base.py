@@ -229,6 +229,12 @@ class SimState:
         return True
 
 
+#: Per-process caches (models, meshes) shared by unpickled copies of one scenario
+#: configuration (:meth:`FEMScenario.__setstate__`); at most this many configurations kept.
+_SHARED_SCENARIOS = 8
+_SHARED_CACHES: dict = {}
+
+
 class FEMScenario:
     """Machinery shared by the FEM-backed scenarios: the parameter distribution S, per-mesh
     data (mesh, loads, interpolators) and a small LRU cache of FEM models.
@@ -252,7 +258,37 @@ class FEMScenario:
         state = self.__dict__.copy()
         state["_models"] = OrderedDict()
         state["_meshes"] = {}
+        state["_cache_key"] = self._content_key()
         return state
+
+    def __setstate__(self, state):
+        key = state.pop("_cache_key", None)
+        self.__dict__.update(state)
+        if key is not None:
+            # copies of one scenario unpickled in the same process (the tasks a worker
+            # receives) share its meshes and models: they are pure functions of the
+            # configuration and the parameters, so sharing changes no result
+            shared = _SHARED_CACHES.get(key)
+            if shared is None:
+                if len(_SHARED_CACHES) >= _SHARED_SCENARIOS:
+                    _SHARED_CACHES.pop(next(iter(_SHARED_CACHES)))
+                shared = _SHARED_CACHES[key] = (self._models, self._meshes)
+            self._models, self._meshes = shared
+
+    def _content_key(self) -> str:
+        """SHA-256 of the pickled configuration and class: equal for copies of a scenario
+        with the same configuration (computed once per object)."""
+        key = self.__dict__.get("_key")
+        if key is None:
+            import hashlib
+            import pickle
+
+            blob = pickle.dumps(
+                (type(self).__module__, type(self).__qualname__, self.config),
+                protocol=pickle.HIGHEST_PROTOCOL,
+            )
+            key = self.__dict__["_key"] = hashlib.sha256(blob).hexdigest()
+        return key
 
     @property
     def nominal_params(self) -> SimParams:
@@ -267,6 +303,12 @@ class FEMScenario:
             youngs_modulus=getattr(cfg, "youngs_modulus", SimParams.youngs_modulus),
             poissons_ratio=getattr(cfg, "poissons_ratio", SimParams.poissons_ratio),
         )
+
+    @property
+    def goal_radius(self) -> float:
+        """Radius of the (undeformed) goal disk, ``config.goal_radius``: what
+        ``RRTOptions.goal_depth`` tightens (:class:`~riskplan.scenarios.space.PlanningScenario`)."""
+        return float(self.config.goal_radius)
 
     def sample_params(self, seed=None) -> SimParams:
         """One draw from ``distribution`` (the nominal parameters if there is none)."""
@@ -446,4 +488,20 @@ def gaussian_noise(cov: np.ndarray, noise, rng, dim: int, name: str = "noise") -
     if rng is None:
         return np.zeros(dim)
     gen = as_generator(rng)
-    return gen.multivariate_normal(np.zeros(dim), cov, method="cholesky")
+    c = np.asarray(cov, dtype=np.float64)
+    key = (c.shape, c.tobytes())
+    factor = _CHOLESKY_T.get(key)
+    if factor is None:
+        if len(_CHOLESKY_T) >= 64:
+            _CHOLESKY_T.clear()
+        factor = _CHOLESKY_T[key] = np.linalg.cholesky(c).T
+    # NumPy's multivariate_normal(method="cholesky") with the factor computed once per
+    # covariance (a hot path of executions): the same draws and the same products, bit
+    # for bit (tests/scenarios/test_base.py), and the generator left in the same state
+    x = gen.standard_normal((1, dim)) @ factor
+    x += np.zeros(dim)
+    return x[0]
+
+
+#: Transposed Cholesky factors of the sensing covariances seen (gaussian_noise).
+_CHOLESKY_T: dict = {}

@@ -1,5 +1,5 @@
 """Tissue scenario files: a TOML description of a needle or manipulation scene
-(:func:`load_scenario_file`, :func:`read_scenario_config`).
+(:func:`read_scenario_config`; :func:`riskplan.scenarios.registry.load_scenario_file` builds the scenario).
 
 The format, key by key with units, is in docs/scenarios.md ("Scenario files"); the paper's
 two scenes ship as ``riskplan/data/needle.toml`` and ``riskplan/data/manipulation.toml``
@@ -23,7 +23,7 @@ import numpy as np
 from riskplan import geometry2d as geo
 from riskplan.errors import InvalidInputError
 
-__all__ = ["SHIPPED_SCENARIOS", "load_scenario_file", "read_scenario_config", "shipped_path"]
+__all__ = ["SHIPPED_SCENARIOS", "read_scenario_config", "shipped_path"]
 
 #: Built-in scenario names and their shipped files (in ``riskplan/data``).
 SHIPPED_SCENARIOS = {"needle": "needle.toml", "manipulation": "manipulation.toml"}
@@ -677,13 +677,3 @@ def read_scenario_config(path) -> tuple[str, object]:
             raise
         raise InvalidInputError(f"{path}: {exc}") from exc
     return kind, cfg
-
-
-def load_scenario_file(path, case: str = "nominal"):
-    """The scenario of a file (:func:`read_scenario_config`) with the parameter
-    distribution of uncertainty ``case`` as its S (as
-    :func:`riskplan.scenarios.registry.make_scenario`)."""
-    from riskplan.scenarios.registry import scenario_from_config
-
-    kind, cfg = read_scenario_config(path)
-    return scenario_from_config(kind, cfg, case)

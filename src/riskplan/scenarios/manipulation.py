@@ -356,22 +356,12 @@ class ManipulationScenario(FEMScenario):
         """``(6, 2)``: ``[−df_max, df_max]`` for every force increment."""
         return self._bounds
 
-    @property
-    def goal_radius(self) -> float:
-        """Radius of the goal disk the target must reach, ``config.goal_radius``."""
-        return float(self.config.goal_radius)
-
     def planning_space(self) -> BoxSpace:
-        """The RRT's space (:class:`~riskplan.scenarios.space.PlanningScenario`).
-
-        Returns
-        -------
-        BoxSpace
-            The object's bounding box for the target position, which alone is measured
-            (the boundary points follow it), and one step of force increments per
-            extension (the increment bound is the rate limit: larger force jumps would skip
-            configurations that the collision check never sees).
-        """
+        """The RRT's :class:`~riskplan.scenarios.space.BoxSpace`: the object's bounding box
+        for the target position, which alone is measured (the boundary points follow it),
+        and one step of force increments per extension (the increment bound is the rate
+        limit: larger force jumps would skip configurations that the collision check never
+        sees)."""
         cfg = self.config
         p = self.state_dim
         low, high, w, goal = np.zeros(p), np.ones(p), np.zeros(p), np.zeros(p)

@@ -571,11 +571,6 @@ class NeedleScenario(FEMScenario):
         """``[[0, v_max], [−φ_max, φ_max]]``."""
         return self._bounds
 
-    @property
-    def goal_radius(self) -> float:
-        """Radius of the (undeformed) goal disk, ``config.goal_radius``."""
-        return float(self.config.goal_radius)
-
     def planning_space(self) -> BoxSpace:
         """The RRT's space (:class:`~riskplan.scenarios.space.PlanningScenario`).
 

@@ -11,10 +11,10 @@ from pathlib import Path
 
 from riskplan.errors import InvalidInputError
 
-__all__ = ["SCENARIO_NAMES", "make_scenario", "scenario_from_config"]
+__all__ = ["SCENARIO_NAMES", "load_scenario_file", "make_scenario", "scenario_from_config"]
 
 #: Names accepted by :func:`make_scenario` (and the CLI ``--scenario`` option).
-SCENARIO_NAMES = ("needle", "manipulation")
+SCENARIO_NAMES = ("needle", "manipulation", "needle3d")
 
 
 def make_scenario(name: str, case: str = "nominal"):
@@ -30,9 +30,9 @@ def make_scenario(name: str, case: str = "nominal"):
         from riskplan.scenarios.manipulation import ManipulationConfig
 
         return scenario_from_config("manipulation", ManipulationConfig(), case)
+    if name == "needle3d":
+        return scenario_from_config("needle3d", None, case)
     if isinstance(name, str | PathLike) and (str(name).endswith(".toml") or Path(name).is_file()):
-        from riskplan.scenarios.files import load_scenario_file
-
         return load_scenario_file(name, case)
     raise InvalidInputError(
         f"scenario: expected one of {', '.join(SCENARIO_NAMES)} or a scenario file (.toml), "
@@ -41,7 +41,8 @@ def make_scenario(name: str, case: str = "nominal"):
 
 
 def scenario_from_config(kind: str, config, case: str = "nominal"):
-    """The scenario of ``kind`` (``"needle"`` or ``"manipulation"``) built on ``config``,
+    """The scenario of ``kind`` (``"needle"``, ``"manipulation"`` or ``"needle3d"``) built on
+    ``config`` (``None``: the default),
     with the distribution of ``case`` around its nominal parameters and its own actuation
     covariance."""
     from riskplan.scenarios.uncertainty import get_case
@@ -54,7 +55,28 @@ def scenario_from_config(kind: str, config, case: str = "nominal"):
         from riskplan.scenarios.manipulation import ManipulationScenario
 
         sim = ManipulationScenario(config)
+    elif kind == "needle3d":
+        from riskplan.scenarios.needle3d import Needle3DScenario
+
+        sim = Needle3DScenario(config)
+        if case == "mesh":
+            from riskplan.scenarios.uncertainty import MeshUncertainty
+
+            # the 2-D paper draws 50..1000 triangles around a 175-triangle planning mesh; in
+            # 3-D the counts are tetrahedra around the 1296 of the planning mesh, up to the
+            # 5000 SimParams allows (grids of 4 to 9 cells per axis)
+            sim.distribution = MeshUncertainty(base=sim.nominal_params, low=400, high=5000)
+            return sim
     else:
         raise InvalidInputError(f"kind: expected one of {', '.join(SCENARIO_NAMES)}, got {kind!r}")
     sim.distribution = get_case(case, sim.nominal_params, actuation_cov=sim.actuation_cov())
     return sim
+
+
+def load_scenario_file(path, case: str = "nominal"):
+    """The scenario of a file (:func:`~riskplan.scenarios.files.read_scenario_config`) with
+    the parameter distribution of uncertainty ``case`` as its S (as :func:`make_scenario`)."""
+    from riskplan.scenarios.files import read_scenario_config
+
+    kind, cfg = read_scenario_config(path)
+    return scenario_from_config(kind, cfg, case)

@@ -152,45 +152,15 @@ class PlanningScenario(Simulator, Protocol):
         ...
 
     def in_collision(self, state) -> bool:
-        """Whether a full state collides (with the deformed obstacles).
-
-        Parameters
-        ----------
-        state : object
-            A full simulator state ``y``.
-
-        Returns
-        -------
-        bool
-        """
+        """Whether the full state ``state`` collides with the (deformed) obstacles."""
         ...
 
     def in_goal(self, state) -> bool:
-        """Whether a full state lies in the (deformed) goal region.
-
-        Parameters
-        ----------
-        state : object
-            A full simulator state ``y``.
-
-        Returns
-        -------
-        bool
-        """
+        """Whether the goal point of ``state`` lies in the (deformed) goal region."""
         ...
 
     def goal_distance(self, state) -> float:
-        """Distance of the goal point of ``state`` to the (deformed) goal centre.
-
-        Parameters
-        ----------
-        state : object
-            A full simulator state ``y``.
-
-        Returns
-        -------
-        float
-        """
+        """Distance from the goal point of ``state`` to the (deformed) goal centre."""
         ...
 
 
@@ -283,22 +253,8 @@ class BoxSpace:
         return int(self.low.shape[0])
 
     def sample(self, gen: np.random.Generator, goal_bias: float = 0.0) -> tuple[np.ndarray, bool]:
-        """The goal point with probability ``goal_bias``, else uniform in the box.
-
-        Parameters
-        ----------
-        gen : numpy.random.Generator
-            The tree's random stream (``p + 1`` uniforms per call).
-        goal_bias : float
-            Probability of returning the goal point.
-
-        Returns
-        -------
-        x : numpy.ndarray
-            ``(p,)`` the sample.
-        is_goal : bool
-            Whether it is the goal point.
-        """
+        """The goal point with probability ``goal_bias``, else uniform in the box; ``p + 1``
+        uniforms of ``gen`` per call (:meth:`PlanningSpace.sample`)."""
         u = gen.random(self.dim + 1)
         if u[-1] < goal_bias:
             return self.goal.copy(), True
@@ -347,16 +303,7 @@ class BoxSpace:
         return np.sqrt(np.einsum("ij,ij->i", d, d))
 
     def contains(self, x: np.ndarray) -> bool:
-        """Whether the weighted, non-periodic components of ``x`` lie in the box.
-
-        Parameters
-        ----------
-        x : numpy.ndarray
-            ``(p,)`` reduced state.
-
-        Returns
-        -------
-        bool
-        """
+        """Whether the weighted, non-periodic components of ``x (p,)`` lie in the box
+        (:meth:`PlanningSpace.contains`)."""
         b = self._bounded
         return bool(np.all(x[b] >= self.low[b]) and np.all(x[b] <= self.high[b]))

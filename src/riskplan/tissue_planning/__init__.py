@@ -5,3 +5,59 @@ RRT (:mod:`~riskplan.tissue_planning.rrt`), LQG-MP plan selection
 
 The tissue wing's top: it imports ``scenarios`` and ``control`` and never the kinematic wing.
 """
+
+from riskplan.tissue_planning.plan import (
+    STEP_S,
+    TissuePlanningResult,
+    check_tissue_budget,
+    plan_tissue,
+)
+from riskplan.tissue_planning.rrt import (
+    RRTOptions,
+    TreeResult,
+    actuation_std,
+    grow_tree,
+    planning_space,
+    rrt_plans,
+    sampling_bounds,
+)
+from riskplan.tissue_planning.select import (
+    SATURATED,
+    Calibration,
+    HonestyRow,
+    PlanScore,
+    Selection,
+    calibration_metrics,
+    common_draws,
+    evaluate_plan,
+    evenly_spaced_ranks,
+    honesty_check,
+    select_plan,
+    tie_note,
+)
+
+__all__ = [
+    "SATURATED",
+    "STEP_S",
+    "Calibration",
+    "HonestyRow",
+    "PlanScore",
+    "RRTOptions",
+    "Selection",
+    "TissuePlanningResult",
+    "TreeResult",
+    "actuation_std",
+    "calibration_metrics",
+    "check_tissue_budget",
+    "common_draws",
+    "evaluate_plan",
+    "evenly_spaced_ranks",
+    "grow_tree",
+    "honesty_check",
+    "plan_tissue",
+    "planning_space",
+    "rrt_plans",
+    "sampling_bounds",
+    "select_plan",
+    "tie_note",
+]

@@ -12,15 +12,75 @@ import time
 from dataclasses import dataclass, field
 
 from riskplan.errors import InvalidInputError
+from riskplan.parallel import spawn_seeds
 
-__all__ = ["STEP_S", "TissuePlanningResult", "check_tissue_budget", "plan_tissue"]
+__all__ = [
+    "SELECTIONS",
+    "STEP_S",
+    "TissuePlanningResult",
+    "check_tissue_budget",
+    "plan_tissue",
+    "selection_setup",
+]
+
+#: How ``plan tissue`` selects (``selection=``): ``"paper"`` is the paper's σ-distance on
+#: the world-frame LQG; ``"calibrated"`` (the default outside the paper reproduction) is,
+#: per scenario, the estimator with the lowest mean absolute error against measured
+#: closed-loop success in the calibration study at the reduced scale (docs/control.md,
+#: "Calibration": needle Patil truncation on the paper's LQG, mae 0.009, ρ 0.82;
+#: manipulation sampling with the persistent-disturbance state, mae 0.066, ρ 0.89);
+#: ``"material"``: the needle in its material frame with the bias state (mae 0.012, ρ 0.88,
+#: and the controller that does not lose runs at force ×2; ``frame``: the needle's
+#: reduced-state frame, ``NeedleScenario.with_frame``).
+SELECTIONS = {
+    "paper": {
+        "needle": {"frame": None, "method": "sigma", "disturbance": False},
+        "manipulation": {"frame": None, "method": "sigma", "disturbance": False},
+    },
+    "calibrated": {
+        "needle": {"frame": None, "method": "truncation", "disturbance": False},
+        "manipulation": {"frame": None, "method": "sampling", "disturbance": True},
+    },
+    "material": {
+        "needle": {"frame": "material", "method": "sampling", "disturbance": True},
+        "manipulation": {"frame": None, "method": "sampling", "disturbance": True},
+    },
+}
+
+
+def selection_setup(sim, plans, selection: str):
+    """The simulator, plans, LQG-MP method and controller of a :data:`SELECTIONS` entry.
+
+    Parameters
+    ----------
+    sim : the scenario (its ``name``, a scenario file's kind, picks the entry).
+    plans : the candidate :class:`~riskplan.control.NominalPlan` list.
+    selection : ``"calibrated"``, ``"material"`` or ``"paper"``.
+
+    Returns
+    -------
+    ``(sim, plans, method, disturbance)``: the simulator and plans in the entry's frame
+    (:meth:`~riskplan.control.NominalPlan.reframed`), its method and whether the
+    controller carries the persistent-disturbance state.
+    """
+    if selection not in SELECTIONS:
+        raise InvalidInputError(
+            f"selection: expected one of {', '.join(SELECTIONS)}, got {selection!r}"
+        )
+    entry = SELECTIONS[selection].get(getattr(sim, "name", ""), SELECTIONS["paper"]["needle"])
+    if entry["frame"] is not None and callable(getattr(sim, "with_frame", None)):
+        sim = sim.with_frame(entry["frame"])
+        plans = [p.reframed(sim) for p in plans]
+    return sim, plans, entry["method"], entry["disturbance"]
 
 
 @dataclass
 class TissuePlanningResult:
     """Everything one run produces: the scenario (``sim``, with the case's distribution),
     ``plans``, ``trees``, the :class:`~riskplan.tissue_planning.select.Selection`, the honesty rows
-    and wall-clock ``timings`` (seconds: ``rrt``, ``selection``, ``check``)."""
+    and wall-clock ``timings`` (seconds: ``rrt``, ``selection``, ``check``);
+    ``selection_mode`` (:data:`SELECTIONS`) and ``frame`` (the needle's reduced-state frame
+    of the selection; ``selection.plan`` and its controller are in it)."""
 
     scenario: str
     case: str
@@ -31,6 +91,8 @@ class TissuePlanningResult:
     selection: object
     honesty: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
+    selection_mode: str = "paper"
+    frame: str | None = None
 
 
 def plan_tissue(
@@ -42,13 +104,14 @@ def plan_tissue(
     workers: int | None = None,
     backend: str = "local",
     rrt_options=None,
-    method: str = "sigma",
+    method: str | None = None,
     n_samples: int = 16,
     check_runs: int = 1000,
     check_others: int = 2,
     on_tree=None,
     on_plan=None,
     on_check=None,
+    selection: str = "calibrated",
 ) -> TissuePlanningResult:
     """Run the method on one scenario (``"needle"`` or ``"manipulation"``) and uncertainty
     ``case`` (:data:`riskplan.scenarios.uncertainty.CASE_NAMES`).
@@ -57,7 +120,11 @@ def plan_tissue(
     :func:`~riskplan.tissue_planning.select.select_plan` (``method``, ``n_samples`` parameter draws
     per step for ``M_t``), then ``check_runs`` closed-loop executions for the selected plan
     and ``check_others`` more (``check_runs = 0`` skips the check). ``on_tree(i, tree)``,
-    ``on_plan(i, score)``, ``on_check(row)`` report progress.
+    ``on_plan(i, score)``, ``on_check(row)`` report progress. The trees, the selection and
+    the check draw from three streams ``spawn_seeds(seed, 3)``
+    (:func:`riskplan.parallel.spawn_seeds`). ``selection``: ``"calibrated"`` (default),
+    ``"material"`` or ``"paper"`` (:data:`SELECTIONS`); ``method`` overrides its LQG-MP
+    method.
     """
     from riskplan._validation import check_count
     from riskplan.control.lqgmp import METHODS
@@ -66,8 +133,12 @@ def plan_tissue(
     from riskplan.tissue_planning.select import honesty_check, select_plan
 
     # every argument checked before the trees grow (a bad method used to fail after them)
-    if method not in METHODS:
+    if method is not None and method not in METHODS:
         raise InvalidInputError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    if selection not in SELECTIONS:
+        raise InvalidInputError(
+            f"selection: expected one of {', '.join(SELECTIONS)}, got {selection!r}"
+        )
     n_plans = check_count(n_plans, "n_plans", 1)
     check_runs = check_count(check_runs, "check_runs", 0)
     check_others = check_count(check_others, "check_others", 0)
@@ -76,18 +147,23 @@ def plan_tissue(
     options = rrt_options or RRTOptions()
     timings = {}
     t0 = time.perf_counter()
+    # trees, selection and check draw from independent streams spawned from seed
+    s_rrt, s_select, s_check = spawn_seeds(seed, 3)
     plans, trees = rrt_plans(
-        sim, n_plans, seed=seed, options=options, backend=backend, workers=workers, on_tree=on_tree
+        sim, n_plans, seed=s_rrt, options=options, backend=backend, workers=workers, on_tree=on_tree
     )
     timings["rrt"] = time.perf_counter() - t0
     t0 = time.perf_counter()
+    ssim, splans, smethod, dist = selection_setup(sim, plans, selection)
+    mode = selection
     selection = select_plan(
-        sim,
-        plans,
+        ssim,
+        splans,
         sim.distribution,
-        method=method,
+        method=smethod if method is None else method,
+        disturbance=dist,
         n_samples=n_samples,
-        seed=seed + 1,
+        seed=s_select,
         backend=backend,
         workers=workers,
         on_result=on_plan,
@@ -97,19 +173,31 @@ def plan_tissue(
     if check_runs:
         t0 = time.perf_counter()
         rows = honesty_check(
-            sim,
-            plans,
+            ssim,
+            splans,
             selection,
             sim.distribution,
             others=check_others,
             n=check_runs,
-            seed=seed + 2,
+            seed=s_check,
             backend=backend,
             workers=workers,
             on_row=on_check,
         )
         timings["check"] = time.perf_counter() - t0
-    return TissuePlanningResult(scenario, case, seed, sim, plans, trees, selection, rows, timings)
+    return TissuePlanningResult(
+        scenario,
+        case,
+        seed,
+        sim,
+        plans,
+        trees,
+        selection,
+        rows,
+        timings,
+        selection_mode=mode,
+        frame=getattr(ssim, "frame", None) if ssim is not sim else None,
+    )
 
 
 #: least time of one simulator step (s): a tenth of the measured 16.5 µs of a needle step on

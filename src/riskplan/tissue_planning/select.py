@@ -35,6 +35,7 @@ from riskplan.errors import (
     ConvergenceError,
     ElementInversionError,
     InvalidInputError,
+    NumericalError,
     SimulationError,
 )
 
@@ -55,7 +56,13 @@ __all__ = [
     "tie_note",
 ]
 
-_FAILURES = (ConvergenceError, ElementInversionError, SimulationError, np.linalg.LinAlgError)
+_FAILURES = (
+    ConvergenceError,
+    ElementInversionError,
+    NumericalError,
+    SimulationError,
+    np.linalg.LinAlgError,
+)
 
 
 @dataclass(frozen=True)
@@ -219,7 +226,7 @@ def select_plan(
     Raises :class:`~riskplan.errors.PlanningError` if no candidate could be evaluated.
     """
     from riskplan.errors import PlanningError
-    from riskplan.parallel import default_workers, map_tasks, spawn_seeds
+    from riskplan.parallel import chunk_count, map_tasks, spawn_seeds
 
     plans = list(plans)
     if not plans:
@@ -238,7 +245,7 @@ def select_plan(
     items = list(zip(range(len(plans)), plans, seeds))
     # one simulator per chunk: a scenario travels without its FEM caches, so chunks of plans
     # (interleaved for balance) share the mesh and the models of the common draws
-    n_chunks = 1 if backend == "serial" else min(len(plans), 4 * (workers or default_workers()))
+    n_chunks = chunk_count(len(plans), backend, workers)
     chunks = [items[k::n_chunks] for k in range(n_chunks)]
     out = [None] * len(plans)
 

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from riskplan.app.report import Report
+from riskplan.threads import one_torch_thread
 
 log = logging.getLogger(__name__)
 
@@ -55,8 +56,8 @@ def _data_paths(ctx: dict, seed: int, workers) -> tuple[Path, Path] | None:
     return Path(paths["train"]), Path(paths["test"])
 
 
+@one_torch_thread
 def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
-    import torch
 
     from riskplan.kinematics.data import read_point_clouds
     from riskplan.kinematics.plotting import (
@@ -67,7 +68,6 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     from riskplan.kinematics.sweep import sweep
     from riskplan.kinematics.training import TrainConfig, train
 
-    torch.set_num_threads(1)
     sec = report.section("Learned kinematics: mixture density network (MDN paper, Figs. 4-5)")
     paths = _data_paths(ctx, seed, workers)
     if paths is None:
@@ -122,7 +122,7 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
         list(SWEEP_COMPONENTS),
         sweep_cfg,
         out=out / "sweep",
-        workers=workers or 2,
+        workers=workers,
         max_seconds_per_k=SWEEP_TIME_BUDGET,
     )
     report.figure(

@@ -2,7 +2,7 @@
 
 Stages run in pipeline order and share a context dict (e.g. the robot stage puts
 the data-set paths there, the kinematics stage the trained model). Each stage is a
-module ``riskplan.app.demo_<area>`` with
+module ``riskplan.app.demo.<area>`` with
 
     def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None
 """
@@ -29,16 +29,14 @@ def run_demo(
     ``progress(done, total, stage, seconds)`` is called before each stage (``seconds=None``) and
     after it (with its run time), whatever the stages are.
     """
+    from riskplan._validation import check_workers
     from riskplan.errors import InvalidInputError
     from riskplan.io import check_output_folder
 
     out = check_output_folder(out, "out")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise InvalidInputError(f"seed: expected a non-negative integer, got {seed!r}")
-    if workers is not None and (
-        isinstance(workers, bool) or not isinstance(workers, int) or workers < 1
-    ):
-        raise InvalidInputError(f"workers: expected a positive integer or None, got {workers!r}")
+    check_workers(workers)
     stages = tuple(stages)
     report = Report(out, title="riskplan demo")
     ctx: dict = {"out": out}

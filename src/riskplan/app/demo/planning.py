@@ -17,6 +17,7 @@ import logging
 import numpy as np
 
 from riskplan.app.report import Report
+from riskplan.threads import one_torch_thread
 
 log = logging.getLogger(__name__)
 
@@ -25,8 +26,8 @@ ITERATIONS = 10
 CANDIDATES = 128
 
 
+@one_torch_thread
 def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
-    import torch
 
     from riskplan.app.outputs.chest_plan import trace_figure, trajectories_plotly
     from riskplan.errors import PlanningError
@@ -41,7 +42,6 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     )
     from riskplan.planning.risk import ConfigurationBound, trajectory_risk
 
-    torch.set_num_threads(1)
     sec = report.section(
         "Planning in the chest cavity: PRM + Bayesian optimisation (MDN paper section V, Fig. 7)"
     )

@@ -59,13 +59,15 @@ def _frames_figure(sim, states, n: int = 4):
 
 
 def _case_table(sim, controls, n_samples: int, seed: int, cap_mesh: int | None = None):
+    from riskplan.parallel import spawn_seeds
     from riskplan.scenarios.uncertainty import CASE_NAMES, get_case
 
     rows = []
+    case_seeds = spawn_seeds(seed, len(CASE_NAMES))
     for j, name in enumerate(CASE_NAMES):
         kw = {"actuation_cov": sim.actuation_cov()} if hasattr(sim, "actuation_cov") else {}
         dist = get_case(name, sim.nominal_params, **kw)
-        draws = dist.sample_many(1 if name == "nominal" else n_samples, seed=seed + 101 * j)
+        draws = dist.sample_many(1 if name == "nominal" else n_samples, seed=case_seeds[j])
         if cap_mesh is not None:
             draws = [d.replace(n_elements=min(d.n_elements, cap_mesh)) for d in draws]
         res = [open_loop_outcome(sim, controls, d) for d in draws]

@@ -8,7 +8,7 @@ Robot geometry, in order of preference: a trained MDN (``model``/``model_path``)
 robot's Cosserat model through :func:`~riskplan.kinematics.robot_mixture.robot_mixture`,
 or constant-curvature arcs of the 0.2 m paper robot.
 
-Reproduce: ``riskplan collision-table --samples 100000 --seed 0`` or
+Reproduce: ``riskplan collision table --samples 100000 --seed 0`` or
 ``python -m riskplan.app.outputs.collision_table``.
 """
 
@@ -96,6 +96,7 @@ def collision_table(
         probability_of_collision,
         trajectory_bound,
     )
+    from riskplan.parallel import spawn_seeds
     from riskplan.planning.chest_scene import build_chest
 
     if model is None and model_path is None and robot is None and use_robot:
@@ -110,8 +111,10 @@ def collision_table(
     union = probability_of_collision(gm, env, "union")
     t_bound = time.perf_counter() - t0
     t0 = time.perf_counter()
-    mc = monte_carlo_probability(gm, env, n_samples, seed=seed)
-    mcu = monte_carlo_probability(gm, env, n_samples, combine="union", seed=seed + 1)
+    # the chest is built from seed; the three Monte Carlo estimates draw from streams spawned from it
+    s_mc, s_union, s_traj = spawn_seeds(seed, 3)
+    mc = monte_carlo_probability(gm, env, n_samples, seed=s_mc)
+    mcu = monte_carlo_probability(gm, env, n_samples, combine="union", seed=s_union)
     t_mc = time.perf_counter() - t0
     rows = []
     for i, lab in enumerate(labels):
@@ -133,7 +136,7 @@ def collision_table(
     path = configs[0] + np.linspace(0, 1, trajectory_steps)[:, None] * (target - configs[0])
     gmt = make(path)
     tb = trajectory_bound(gmt, env)
-    tmc = monte_carlo_trajectory(gmt, env, max(1000, n_samples // 10), seed=seed + 2)
+    tmc = monte_carlo_trajectory(gmt, env, max(1000, n_samples // 10), seed=s_traj)
     rows.append(
         dict(
             label=f"trajectory, {trajectory_steps} states home -> {labels[int(np.argmax(bound))]} (eq. 10)",
@@ -185,19 +188,3 @@ def to_markdown(rows, meta) -> str:
         f"(both variants); Monte Carlo: {meta['monte_carlo_seconds']:.1f} s.\n"
     )
     return head + "\n".join(lines) + tail
-
-
-def main() -> None:  # pragma: no cover - thin CLI wrapper
-    import argparse
-
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--samples", type=int, default=100_000)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--model", default=None)
-    args = ap.parse_args()
-    rows, meta = collision_table(seed=args.seed, n_samples=args.samples, model_path=args.model)
-    print(to_markdown(rows, meta))
-
-
-if __name__ == "__main__":  # pragma: no cover
-    main()

@@ -171,6 +171,8 @@ def write_outputs(
             "p_collision_free": best.p_collision_free,
             "p_goal": best.p_goal,
             "method": sel.method,
+            "selection": result.selection_mode,
+            "frame": result.frame,
             "n_tied": sel.n_tied,
             "tie": sel.tie_note,
             "honesty_check": [dict(asdict(r), inside=r.inside) for r in result.honesty],

@@ -54,6 +54,7 @@ from riskplan.errors import (
     ConvergenceError,
     ElementInversionError,
     InvalidInputError,
+    NumericalError,
     SimulationError,
 )
 
@@ -151,7 +152,13 @@ def case_scenario(name: str, case: str):
 
 
 #: a candidate whose linearisation fails with one of these is counted and left out
-_FAILURES = (ConvergenceError, ElementInversionError, SimulationError, np.linalg.LinAlgError)
+_FAILURES = (
+    ConvergenceError,
+    ElementInversionError,
+    NumericalError,
+    SimulationError,
+    np.linalg.LinAlgError,
+)
 
 
 @dataclass(frozen=True)
@@ -198,15 +205,15 @@ def _scales(n_candidates, n_plans, n_executions, batch_size, **kw):
 
 
 #: Named sizes. ``smoke``: minutes, checks the machinery; ``reduced``: needle all 20
-#: candidates × 200 executions × 3 cases × 4 controllers, manipulation 10 of 20 candidates
-#: × 200 executions × 2 cases × 2 controllers (its linearisations and executions cost about
-#: ten times the needle's); ``full``: the issue's study, 20 of 100 candidates at evenly
-#: spaced ranks × 500 executions per case and controller.
+#: candidates × 100 executions × 3 cases × 4 controllers (24,000 executions), manipulation
+#: 10 of 20 candidates × 200 executions × 2 cases × 2 controllers (its linearisations and
+#: executions cost about ten times the needle's); ``full``: the issue's study, 20 of 100
+#: candidates at evenly spaced ranks × 500 executions per case and controller.
 CALIBRATION_SCALES: dict[str, dict[str, CalibrationScale]] = {
     "smoke": _scales(4, 4, 20, 10, lin_samples=6, goal_samples=300, plans_per_tree=2),
     "reduced": {
         "needle": CalibrationScale(
-            20, 20, 200, 50, lin_samples=8, goal_samples=1000, plans_per_tree=5
+            20, 20, 100, 50, lin_samples=8, goal_samples=1000, plans_per_tree=5
         ),
         "manipulation": CalibrationScale(
             20, 10, 200, 50, lin_samples=8, goal_samples=1000, plans_per_tree=5

@@ -84,6 +84,7 @@ __all__ = [
     "claims",
     "evaluate_candidate",
     "execute_batch",
+    "execute_methods",
     "highest_verdict",
     "open_closed_rates",
     "paired_outcomes",
@@ -123,8 +124,8 @@ class ScenarioScale:
     parameter draws for ``M_t``; ``goal_samples``: LQG-MP draws for ``P(goal)``;
     ``plans_per_tree`` / ``max_iterations`` / ``n_controls``: the RRT budget
     (:class:`riskplan.tissue_planning.rrt.RRTOptions`); ``n_feedback``: executions of each
-    open-vs-closed condition of :mod:`riskplan.app.reproduce.feedback` (Fig. 7(c-f) as
-    rates; 0: not run).
+    open-vs-closed condition of :mod:`riskplan.app.reproduce.feedback` (Figs. 4, 5 and
+    7(c-f) as rates; 0: not run).
     """
 
     n_candidates: int
@@ -172,6 +173,7 @@ SCALES: dict[str, dict[str, ScenarioScale]] = {
             lin_samples=6,
             goal_samples=300,
             plans_per_tree=2,
+            n_feedback=10,
         ),
         "manipulation": ScenarioScale(
             n_candidates=2,
@@ -185,7 +187,7 @@ SCALES: dict[str, dict[str, ScenarioScale]] = {
     },
     "paper": {
         "needle": ScenarioScale(
-            n_candidates=100, n_executions=1000, batch_size=50, plans_per_tree=10
+            n_candidates=100, n_executions=1000, batch_size=50, plans_per_tree=10, n_feedback=200
         ),
         "manipulation": ScenarioScale(
             n_candidates=100,
@@ -251,13 +253,28 @@ class BlobStore:
 def evaluate_candidate(args):
     """``args = (sim, plan, lin_samples, goal_samples, seed)``: linearise one candidate under one case's S, LQG gains, LQG-MP (paper §IV-B..D), with
     :func:`riskplan.tissue_planning.select.evaluate_plan`. A candidate whose linearisation fails
-    (the simulator's solve along it) gets ``P(success) = 0``, no controller, and its error."""
-    from riskplan.errors import ConvergenceError, ElementInversionError, SimulationError
+    (the simulator's solve along it) gets ``P(success) = 0``, no controller, and its error.
+    An optional sixth element ``disturbance`` (default ``False``) selects the
+    persistent-disturbance controller and its LQG-MP (beyond the paper)."""
+    from riskplan.errors import (
+        ConvergenceError,
+        ElementInversionError,
+        NumericalError,
+        SimulationError,
+    )
     from riskplan.tissue_planning.select import evaluate_plan
 
-    failures = (ConvergenceError, ElementInversionError, SimulationError, np.linalg.LinAlgError)
+    # NumericalError: LQG-MP's propagation or a point covariance of a degenerate linear model
+    failures = (
+        ConvergenceError,
+        ElementInversionError,
+        NumericalError,
+        SimulationError,
+        np.linalg.LinAlgError,
+    )
 
-    sim, plan, lin_samples, goal_samples, seed = args
+    sim, plan, lin_samples, goal_samples, seed, *rest = args
+    disturbance = bool(rest[0]) if rest else False
     with warnings.catch_warnings():
         # rank-deficient X_t along straight stretches is expected and documented by linearize
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -269,6 +286,7 @@ def evaluate_candidate(args):
                 n_samples=lin_samples,
                 n_goal_samples=goal_samples,
                 seed=seed,
+                disturbance=disturbance,
             )
         except failures as exc:
             return {
@@ -313,6 +331,38 @@ def execute_batch(args) -> list[list]:
     return out
 
 
+def execute_methods(args) -> list[list[list]]:
+    """``args = (sim, runs, seeds)`` with ``runs = [(plan, controller or None), ...]``: the
+    executions of several methods on the same draws, draw by draw: for each seed the
+    parameters ``s ~ S`` are drawn once and every run executes under them, so the FEM model
+    (and, in the mesh case, the mesh) of a draw is built once for all methods instead of
+    once per method. Returns one list per run, each as :func:`execute_batch` returns it
+    for ``(sim, plan, controller, seeds)``, bit for bit (each execution is a function of
+    its seed only)."""
+    from riskplan.control.lqg import execute
+
+    sim, runs, seeds = args
+    out: list[list] = [[] for _ in runs]
+    for s in seeds:
+        for k, (plan, controller) in enumerate(runs):
+            # a fresh generator per run: the sensing noise of each starts where the draw of
+            # s leaves it, as in execute_batch
+            gen = np.random.default_rng(s)
+            params = sim.distribution.sample(gen)
+            ex = execute(sim, plan, controller, params, seed=gen, keep_states=False)
+            out[k].append(
+                [
+                    int(ex.success),
+                    int(ex.collided),
+                    int(ex.reached_goal),
+                    int(ex.outcome == "solver_failure"),
+                    int(ex.left_tissue),
+                    ex.error if ex.outcome == "solver_failure" else None,
+                ]
+            )
+    return out
+
+
 def _outcome_counts(rows: list) -> tuple[np.ndarray, dict]:
     """Flags ``(n, 5)`` int and the solver-failure reasons with their counts, from the rows
     of :func:`execute_batch`."""
@@ -354,6 +404,7 @@ def run_scenario(
     cases=EVAL_CASES,
     pool=None,
     make_sim=None,
+    disturbance: bool = False,
 ) -> dict:
     """The Fig. 6 evaluation of scenario ``name`` (``"needle"`` or ``"manipulation"``).
 
@@ -371,6 +422,11 @@ def run_scenario(
     make_sim : ``make_sim(name, case) -> simulator`` with its distribution S (default
         :func:`riskplan.scenarios.registry.make_scenario`); for variants of the cases
         (sensitivity studies, :mod:`riskplan.app.reproduce.needle_study`).
+    disturbance : the closed-loop methods use the persistent-disturbance controller and
+        its LQG-MP (:func:`riskplan.control.lqg_controller` with ``disturbance=True``;
+        beyond the paper) instead of the paper's LQG. The candidates are the same; the
+        selections, executions and open-vs-closed runs are stored under ``fig6d.<name>``,
+        so both variants can share one store (and its RRT candidates).
 
     Returns
     -------
@@ -441,7 +497,8 @@ def run_scenario(
     sims = {c: make(name, c) for c in cases}
     selected_sets = [s for s in plans if s in SELECTED_SETS]
     sel_items = [(c, s, j) for c in cases for s in selected_sets for j in range(len(plans[s]))]
-    sel_key = {it: f"fig6.{name}.select.{it[0]}.{it[1]}.{it[2]:03d}" for it in sel_items}
+    pre = f"fig6d.{name}" if disturbance else f"fig6.{name}"
+    sel_key = {it: f"{pre}.select.{it[0]}.{it[1]}.{it[2]:03d}" for it in sel_items}
     selection: dict = {it: blobs.get(sel_key[it]) for it in sel_items}
     todo = [it for it in sel_items if selection[it] is None]
     done = len(sel_items) - len(todo)
@@ -453,6 +510,7 @@ def run_scenario(
             scale.lin_samples,
             scale.goal_samples,
             _seed_for(seed, name, "select", c, s, j),
+            *((True,) if disturbance else ()),
         )
         for (c, s, j) in todo
     ]
@@ -487,27 +545,38 @@ def run_scenario(
     n_batches = -(-n // bs)
     case_seeds = {c: spawn_seeds(_seed_for(seed, name, "execute", c), n) for c in cases}
     batch_items = [(c, m, b) for (c, m) in chosen for b in range(n_batches)]
-    bkey = {it: f"fig6.{name}.exec.{it[0]}.{it[1]}.b{it[2]:05d}" for it in batch_items}
+    bkey = {it: f"{pre}.exec.{it[0]}.{it[1]}.b{it[2]:05d}" for it in batch_items}
     flags: dict = {it: store.get(bkey[it]) for it in batch_items}
     todo = [it for it in batch_items if flags[it] is None]
     done = len(batch_items) - len(todo)
     report(f"{name}: executions", done * bs, len(batch_items) * bs)
 
-    def task(it):
-        c, m, b = it
+    # one task per (case, batch) runs every method still missing there on the same draws
+    # (execute_methods: a draw's FEM model and mesh are built once for all methods)
+    groups: dict = {}
+    for c, m, b in todo:
+        groups.setdefault((c, b), []).append(m)
+
+    def run_of(c, m):
         s, j, sel = chosen[c, m]
         # None also if its linearisation failed
-        ctrl = None if m in OPEN_LOOP else sel["controller"]
-        return (sims[c], plans[s][j], ctrl, case_seeds[c][b * bs : (b + 1) * bs])
+        return (plans[s][j], None if m in OPEN_LOOP else sel["controller"])
 
-    for i, res in pmap(execute_batch, [task(it) for it in todo]):
-        flags[todo[i]] = res
-        store.put(bkey[todo[i]], res)
-        done += 1
-        report(f"{name}: executions", done * bs, len(batch_items) * bs)
+    group_items = list(groups.items())
+    tasks = [
+        (sims[c], [run_of(c, m) for m in ms], case_seeds[c][b * bs : (b + 1) * bs])
+        for (c, b), ms in group_items
+    ]
+    for i, res in pmap(execute_methods, tasks):
+        (c, b), ms = group_items[i]
+        for m, rows in zip(ms, res):
+            flags[c, m, b] = rows
+            store.put(bkey[c, m, b], rows)
+            done += 1
+            report(f"{name}: executions", done * bs, len(batch_items) * bs)
 
     # 4b. Fig. 7(c-f) as rates: the ``ours`` plan open vs closed loop on common draws
-    feedback = _feedback_rates(name, scale, store, chosen, plans, sims, seed, pmap, report)
+    feedback = _feedback_rates(name, scale, store, chosen, plans, sims, seed, pmap, report, pre)
 
     # 5. numbers
     out_cases: dict = {}
@@ -566,6 +635,7 @@ def run_scenario(
     return {
         "scenario": name,
         "scale": asdict(scale),
+        "disturbance": bool(disturbance),
         "not_applicable": dict(na),
         "candidates": {s: len(p) for s, p in plans.items()},
         "plan_steps": {s: [int(p.n_steps) for p in ps] for s, ps in plans.items()},
@@ -743,7 +813,7 @@ def single_executions(name: str, plans_and_controllers: dict, *, seed: int = 0) 
     return out
 
 
-def _feedback_rates(name, scale, store, chosen, plans, sims, seed, pmap, report) -> dict:
+def _feedback_rates(name, scale, store, chosen, plans, sims, seed, pmap, report, pre=None) -> dict:
     """``{figure: paired summary}`` of :mod:`riskplan.app.reproduce.feedback` for the conditions
     of scenario ``name`` whose case ran: the ``ours`` plan of that case executed open and
     closed loop on ``scale.n_feedback`` common draws, in stored batches (resumable)."""
@@ -756,7 +826,8 @@ def _feedback_rates(name, scale, store, chosen, plans, sims, seed, pmap, report)
         return {}
     n_batches = -(-n // bs)
     items = [(f, b) for f in figs for b in range(n_batches)]
-    key = {it: f"fig6.{name}.feedback.{it[0]}.b{it[1]:05d}" for it in items}
+    pre = pre or f"fig6.{name}"
+    key = {it: f"{pre}.feedback.{it[0]}.b{it[1]:05d}" for it in items}
     rows = {it: store.get(key[it]) for it in items}
     todo = [it for it in items if rows[it] is None]
     seeds = {f: spawn_seeds(_seed_for(seed, name, "feedback", f), n) for f in figs}
@@ -787,3 +858,108 @@ def _feedback_rates(name, scale, store, chosen, plans, sims, seed, pmap, report)
         )
         out[f] = summary
     return out
+
+
+def run_one_scenario(
+    scenario: str,
+    out,
+    *,
+    scale_name: str = "smoke",
+    disturbance: bool = False,
+    candidates: int | None = None,
+    executions: int | None = None,
+    workers: int | None = None,
+    seed: int = 0,
+    progress=None,
+) -> dict:
+    """Fig. 6 of one scenario into ``out`` (``riskplan study fig6``; resumable: ``out/store``).
+
+    Parameters
+    ----------
+    scenario : {"needle", "manipulation"}
+        The scenario.
+    out : path-like
+        Output folder; ``fig6_<scenario>[_disturbance].json`` holds the :func:`run_scenario`
+        result and ``timings_<...>.json`` the wall seconds per stage and the CPU seconds of
+        this process and of its finished workers.
+    scale_name : {"smoke", "paper"}
+        The scale whose counts are used.
+    disturbance : bool
+        Use the persistent-disturbance controller and its LQG-MP (beyond the paper).
+    candidates, executions : int, optional
+        Replace the scale's candidate and execution counts (a reduced run; the result
+        records the sizes that ran).
+    workers : int, optional
+        Local worker processes (``None``: one per core).
+    seed : int
+        Root seed.
+    progress : callable, optional
+        ``progress(stage, done, total)``.
+
+    Returns
+    -------
+    dict
+        The :func:`run_scenario` result.
+    """
+    import resource
+    import time
+
+    from riskplan.app.store import ResultStore
+    from riskplan.errors import InvalidInputError
+    from riskplan.io import write_json_atomic
+    from riskplan.parallel import TaskPool
+
+    if scenario not in ("needle", "manipulation"):
+        raise InvalidInputError(f"scenario: expected needle or manipulation, got {scenario!r}")
+    if scale_name not in SCALES:
+        raise InvalidInputError(f"scale: expected one of {sorted(SCALES)}, got {scale_name!r}")
+    scale = SCALES[scale_name][scenario]
+    if candidates is not None:
+        scale = dataclasses.replace(scale, n_candidates=candidates)
+    if executions is not None:
+        scale = dataclasses.replace(
+            scale, n_executions=executions, n_feedback=min(scale.n_feedback, executions)
+        )
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    store = ResultStore(
+        out / "store",
+        {"figure": "fig6", "scenario": scenario, "sizes": asdict(scale), "seed": seed},
+    )
+    t0 = time.perf_counter()
+    stages: dict = {}
+
+    def tracked(stage, done, total):
+        now = time.perf_counter() - t0
+        st = stages.setdefault(stage, {"start_s": now, "end_s": now, "total": total})
+        st["end_s"] = now
+        st["done"] = done
+        if progress is not None:
+            progress(stage, done, total)
+
+    with TaskPool("local", workers) as pool:
+        res = run_scenario(
+            scenario,
+            scale,
+            store,
+            seed=seed,
+            backend="local",
+            workers=workers,
+            pool=pool,
+            progress=tracked,
+            disturbance=disturbance,
+        )
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    tag = scenario + ("_disturbance" if disturbance else "")
+    write_json_atomic(out / f"fig6_{tag}.json", res)
+    write_json_atomic(
+        out / f"timings_{tag}.json",
+        {
+            "wall_s": time.perf_counter() - t0,
+            "cpu_s_self": own.ru_utime + own.ru_stime,
+            "cpu_s_workers": kids.ru_utime + kids.ru_stime,
+            "stages": stages,
+        },
+    )
+    return res

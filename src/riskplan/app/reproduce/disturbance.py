@@ -17,8 +17,6 @@ line per scenario and case.
 
 from __future__ import annotations
 
-import json
-import sys
 import warnings
 
 CONTROLLERS = ("open", "plain", "disturbance")
@@ -109,10 +107,3 @@ def disturbance_rows(
             row[f"{name}_solver_failed"] = int(mc.solver_failed.sum())
         rows.append(row)
     return rows
-
-
-if __name__ == "__main__":  # pragma: no cover - a command, measured in docs/control.md
-    n_runs = int(sys.argv[1]) if len(sys.argv) > 1 else 200
-    for name in sys.argv[2:] or ["needle", "manipulation"]:
-        for row in disturbance_rows(name, n=n_runs, workers=2):
-            print(json.dumps(row), flush=True)

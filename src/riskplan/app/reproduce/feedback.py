@@ -19,6 +19,13 @@ Conditions (:data:`CONDITIONS`; the paper gives no numbers):
 * ``fig7ef`` — a 1000-element mesh (the top of the mesh case's range; plans use 175), the
   nominal material; executions differ in their sensing noise only, so the open-loop runs
   are all alike. The controller is the ``mesh`` case's.
+* ``fig4`` (needle, §V-A) — actuation noise: draws of the ``actuation`` case, whose
+  controller runs.
+* ``fig5``, ``fig5-67`` (needle) — a stiffer material at values fixed in advance
+  (:data:`riskplan.app.reproduce.needle_study.FIG5_YOUNGS`): E = 150 (three times the
+  planning value, "much stiffer") and E = 67 (about +2σ of the high-variance case), the
+  planning parameters otherwise; the ``material-high`` case's controller. Open loop is
+  deterministic there; the runs differ in their sensing noise.
 
 Success as in Fig. 6 (:func:`riskplan.control.lqg.execute`): no collision at any state
 and the final target in the goal; a solver failure counts as a failure and is counted
@@ -60,7 +67,18 @@ CONDITIONS = {
         "mesh",
         "Fig. 7(e, f): a 1000-element mesh (plans use 175)",
     ),
+    "fig4": Condition("fig4", "needle", "actuation", "Fig. 4: actuation noise (case 3's draws)"),
+    "fig5": Condition(
+        "fig5", "needle", "material-high", "Fig. 5: a much stiffer material, E = 150"
+    ),
+    "fig5-67": Condition(
+        "fig5-67", "needle", "material-high", "Fig. 5 at E = 67 (about +2σ of case 2)"
+    ),
 }
+
+#: Young's moduli of the needle's stiffer-material conditions (values fixed in advance,
+#: riskplan.app.reproduce.needle_study.FIG5_YOUNGS)
+_STIFF_E = {"fig5": 150.0, "fig5-67": 67.0}
 
 #: the softer material of Fig. 7(c, d): the planning value minus two standard deviations
 #: of the high-variance material case (sd √75 ≈ 8.66)
@@ -85,6 +103,10 @@ def condition_params(figure: str, sim, gen: np.random.Generator):
         return case.sample(gen)
     if figure == "fig7ef":
         return base.replace(n_elements=1000)
+    if figure == "fig4":
+        return sim.distribution.sample(gen)
+    if figure in _STIFF_E:
+        return base.replace(youngs_modulus=_STIFF_E[figure])
     raise InvalidInputError(f"figure: expected one of {tuple(CONDITIONS)}, got {figure!r}")
 
 

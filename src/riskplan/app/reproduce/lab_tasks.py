@@ -103,7 +103,10 @@ def tip_agreement(robot, csv_path) -> dict:
     return {"n": len(A), "error": np.linalg.norm(tips - lab, axis=1), "invariant_error": inv}
 
 
-def main(folder) -> None:  # pragma: no cover - a measurement run on the lab's data
+def lab_task_report(folder) -> list[str]:
+    """The lines of ``riskplan study lab-tasks FOLDER``: the lab's task configurations of
+    ``FOLDER/tasks*/task-*.toml`` against its voxel anatomy, and our tips against the tips of
+    its ``cheap-ik*.csv`` files (docs/robots.md, "What the lab's task files mean")."""
     import tomllib
 
     from riskplan.planning.problem import load_problem
@@ -127,19 +130,16 @@ def main(folder) -> None:  # pragma: no cover - a measurement run on the lab's d
     checks = configuration_clearance(robot, configs, venv)
     r = robot.params.collision_radius
     n = len(checks)
-    print(f"{len(files)} task files, {n} distinct start/goal configurations")
-    print(f"backbone crosses the voxel obstacles: {sum(c.crosses for c in checks)} / {n}")
-    print(f"clearance >= radius {r * 1e3:g} mm: {sum(c.clearance >= r for c in checks)} / {n}")
+    lines = [f"{len(files)} task files, {n} distinct start/goal configurations"]
+    lines.append(f"backbone crosses the voxel obstacles: {sum(c.crosses for c in checks)} / {n}")
+    lines.append(
+        f"clearance >= radius {r * 1e3:g} mm: {sum(c.clearance >= r for c in checks)} / {n}"
+    )
     for csv in sorted(root.glob("cheap-ik*.csv")):
         a = tip_agreement(robot, csv)
         e, i = a["error"] * 1e3, a["invariant_error"] * 1e3
-        print(
+        lines.append(
             f"{csv.name}: n={a['n']} tip error median {np.median(e):.1f} mm "
             f"({e.min():.1f}-{e.max():.1f}); (rho, z) error median {np.median(i):.1f} mm"
         )
-
-
-if __name__ == "__main__":  # pragma: no cover
-    import sys
-
-    main(sys.argv[1])
+    return lines

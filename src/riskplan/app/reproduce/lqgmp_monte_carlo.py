@@ -22,8 +22,6 @@ JSON line per plan and case.
 
 from __future__ import annotations
 
-import json
-import sys
 import warnings
 
 PLANS = {
@@ -91,10 +89,3 @@ def needle_rows(
             row[name] = [round(mc.probability, 3), round(mc.low, 3), round(mc.high, 3)]
         rows.append(row)
     return rows
-
-
-if __name__ == "__main__":  # pragma: no cover - a command, measured in docs/control.md
-    n_runs = int(sys.argv[1]) if len(sys.argv) > 1 else 1000
-    for name in sys.argv[2:] or list(PLANS):
-        for row in needle_rows(n=n_runs, plan=name):
-            print(json.dumps(row), flush=True)

@@ -29,6 +29,7 @@ import numpy as np
 
 from riskplan.app.demo.kinematics import TRAIN
 from riskplan.errors import InvalidInputError
+from riskplan.threads import one_torch_thread
 
 log = logging.getLogger(__name__)
 
@@ -117,6 +118,7 @@ def _timing(model, robot, n: int, seed: int) -> dict:
     }
 
 
+@one_torch_thread
 def run_mdn(
     out,
     scale: MDNScale,
@@ -135,7 +137,6 @@ def run_mdn(
     found = store.get("mdn.results")
     if found is not None:
         return found
-    import torch
 
     from riskplan.datasets import generate_splits
     from riskplan.kinematics import load_model
@@ -149,7 +150,6 @@ def run_mdn(
     from riskplan.kinematics.training import CHECKPOINT_NAME, TrainConfig, train
     from riskplan.robots import load_robot
 
-    torch.set_num_threads(1)
     report = progress or (lambda stage, done, total: None)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -351,6 +351,7 @@ def _fig7_plotly(r: dict):
     )
 
 
+@one_torch_thread
 def run_fig7(out, scale: MDNScale, store, *, seed: int = 0, progress=None) -> dict:
     """Fig. 7 of the MDN paper: plan in the procedural chest, optimise the path's eq.-10 bound
     with ``scale.bo_iterations`` iterations of Bayesian optimisation, write ``out/fig7.png``
@@ -364,15 +365,12 @@ def run_fig7(out, scale: MDNScale, store, *, seed: int = 0, progress=None) -> di
     report = progress or (lambda stage, done, total: None)
     found = store.get("mdn.fig7")
     if found is None:
-        import torch
-
         from riskplan.app.outputs.chest_plan import trajectory_record
         from riskplan.kinematics import load_model
         from riskplan.planning.bo import OptimiserConfig
         from riskplan.planning.chest import plan_chest
         from riskplan.planning.chest_scene import build_chest
 
-        torch.set_num_threads(1)
         n = int(scale.bo_iterations)
         report("mdn: Fig. 7 (BO)", 0, n)
         cpu0 = time.process_time()

@@ -16,11 +16,12 @@ and spread (min-max and interquartile range) per method. Run from the command li
 
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
 import numpy as np
+
+from riskplan.threads import one_torch_thread
 
 METHODS = ("random", "bo", "trust_region")
 
@@ -69,12 +70,11 @@ def nominal_problem(
     }
 
 
+@one_torch_thread
 def _run_one(args):
-    import torch
 
     from riskplan.planning.bo import OptimiserConfig, optimise_trajectory
 
-    torch.set_num_threads(1)
     problem, method, seed, iterations = args
     cfg = OptimiserConfig(iterations=iterations, method=method)
     t0 = time.perf_counter()
@@ -197,24 +197,21 @@ def traces_figure(rows: list[dict]):
     return fig
 
 
-def main(argv=None) -> None:
-    from riskplan.io import write_json_atomic, write_text_atomic
+def run_comparison(
+    out, *, model: str = "paper", iterations: int = 50, seeds: int = 5, workers: int | None = None
+) -> str:
+    """The comparison of ``riskplan study optimisers``: ``seeds`` runs of each optimiser for
+    ``iterations`` iterations on the nominal chest problem of ``model``; writes
+    ``out/comparison.json``, ``.md`` and ``.png`` (atomic writes) and returns the Markdown."""
+    from riskplan.io import atomic_path, write_json_atomic, write_text_atomic
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--model", default="paper")
-    ap.add_argument("--iterations", type=int, default=50)
-    ap.add_argument("--seeds", type=int, default=5)
-    ap.add_argument("--workers", type=int, default=None)
-    ap.add_argument("--out", type=Path, default=Path("optimiser-comparison"))
-    a = ap.parse_args(argv)
-    problem = nominal_problem(a.model)
-    rows = compare_optimisers(
-        problem, seeds=range(a.seeds), iterations=a.iterations, workers=a.workers
-    )
+    out = Path(out)
+    problem = nominal_problem(model)
+    rows = compare_optimisers(problem, seeds=range(seeds), iterations=iterations, workers=workers)
     summary = summarise(rows)
-    a.out.mkdir(parents=True, exist_ok=True)
+    out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(
-        a.out / "comparison.json",
+        out / "comparison.json",
         {"rows": rows, "summary": summary, "nominal_bound": rows[0]["initial_bound"]},
     )
     p = problem["bounds"]
@@ -224,17 +221,11 @@ def main(argv=None) -> None:
         + f"\nFloor (start and goal fixed): {floor:.4f}\n\n"
         + trace_table(rows)
     )
-    write_text_atomic(a.out / "comparison.md", md)
+    write_text_atomic(out / "comparison.md", md)
     import matplotlib
 
     matplotlib.use("Agg")
-    from riskplan.io import atomic_path
-
     fig = traces_figure(rows)
-    with atomic_path(a.out / "comparison.png", suffix=".png") as tmp:
+    with atomic_path(out / "comparison.png", suffix=".png") as tmp:
         fig.savefig(tmp, dpi=120)
-    print(md)
-
-
-if __name__ == "__main__":  # pragma: no cover
-    main()
+    return md

@@ -28,6 +28,7 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
+from riskplan._validation import check_workers
 from riskplan.errors import InvalidInputError
 
 log = logging.getLogger(__name__)
@@ -38,11 +39,41 @@ PAPERS = ("mdn", "deformable", "all")
 SCALE_NAMES = ("smoke", "paper")
 #: ``figures``: the papers' figures and claims; ``calibration``: LQG-MP's predicted
 #: P(success) against measured closed-loop success (:mod:`riskplan.app.reproduce.calibration`,
-#: deformable paper only, its own sizes: ``calibration_scale``).
-STAGES = ("figures", "calibration")
+#: deformable paper only, its own sizes: ``calibration_scale``); ``sensitivity``: the
+#: needle's Fig. 6 under actuation-noise and interaction-force scales ×0.5, ×1, ×2 and the
+#: other reading of the cases (:func:`riskplan.app.reproduce.needle_study.sensitivity`, its own
+#: sizes: :func:`_sensitivity_scales`); ``needle3d``: the 3-D needle (beyond the paper).
+STAGES = ("figures", "calibration", "sensitivity", "needle3d")
 #: the calibration sizes a named scale uses unless ``calibration_scale`` names others
 _CALIBRATION_FOR = {"smoke": "smoke", "paper": "full"}
 SCENARIOS = ("needle", "manipulation")
+
+
+def _sensitivity_scales() -> dict:
+    """The sizes of the sensitivity stage per named scale: ``smoke`` (seconds) and, for
+    ``paper``, the documented reduced scale of docs/reproduce.md (5 candidates per set, 100
+    executions per bar, 8 linearisation draws, 500 LQG-MP goal samples, 5 plans per tree;
+    about 25 min on two cores), each variant a Fig. 6 of the needle."""
+    from riskplan.app.reproduce.deformable import ScenarioScale
+
+    return {
+        "smoke": ScenarioScale(
+            n_candidates=1,
+            n_executions=10,
+            batch_size=10,
+            lin_samples=4,
+            goal_samples=100,
+            plans_per_tree=1,
+        ),
+        "paper": ScenarioScale(
+            n_candidates=5,
+            n_executions=100,
+            batch_size=50,
+            lin_samples=8,
+            goal_samples=500,
+            plans_per_tree=5,
+        ),
+    }
 
 
 def resolve_scale(scale) -> tuple[str, dict]:
@@ -71,8 +102,7 @@ def _check(paper, backend, workers, ray_address):
         raise InvalidInputError(f"paper: expected one of {', '.join(PAPERS)}, got {paper!r}")
     if backend not in BACKENDS:
         raise InvalidInputError(f"backend: expected one of {', '.join(BACKENDS)}, got {backend!r}")
-    if workers is not None and (int(workers) != workers or workers < 1):
-        raise InvalidInputError(f"workers: expected a positive integer, got {workers!r}")
+    check_workers(workers)
     if ray_address is not None:
         if backend != "ray":
             raise InvalidInputError(
@@ -107,6 +137,9 @@ def reproduce(
     stages : which of :data:`STAGES` run (default the figures only). The stage list is not
         part of the store's configuration, so stages can run one after another into the
         same ``out`` (each resumes its own records); ``results.json`` holds what this call ran.
+    The ``sensitivity`` stage (needle) runs at :func:`_sensitivity_scales` of ``scale``
+        (``custom`` scales: ``smoke``) into ``out/sensitivity`` (resumable, one store per
+        variant).
     calibration_scale : sizes of the calibration stage
         (:data:`riskplan.app.reproduce.calibration.CALIBRATION_SCALES`: ``smoke``,
         ``reduced``, ``full``); ``None``: ``smoke`` for scale ``smoke``, ``full`` for
@@ -225,6 +258,39 @@ def _reproduce(
                     pool=pool,
                 )
                 timings[f"calibration_{name}_s"] = time.perf_counter() - t0
+        if paper in ("deformable", "all") and "sensitivity" in stages:
+            from riskplan.app.reproduce.needle_study import sensitivity
+
+            sscale = _sensitivity_scales().get(scale_name, _sensitivity_scales()["smoke"])
+            t0 = time.perf_counter()
+            sens = sensitivity(
+                sscale,
+                out / "sensitivity",
+                seed=seed,
+                backend=backend,
+                workers=workers,
+                progress=progress,
+            )
+            runs = sens.pop("runs")
+            sens["scale"] = asdict(sscale)
+            # per variant and case the success rate of each method (None: not applicable)
+            sens["cases"] = {
+                tag: {
+                    c: {m: (None if v is None else v["rate"]) for m, v in ms.items()}
+                    for c, ms in r["cases"].items()
+                }
+                for tag, r in runs.items()
+            }
+            results.setdefault("deformable", {}).setdefault("needle", {})["sensitivity"] = (
+                json.loads(json.dumps(sens))
+            )
+            timings["sensitivity_needle_s"] = time.perf_counter() - t0
+        if paper in ("deformable", "all") and "needle3d" in stages:
+            from riskplan.app.reproduce.needle3d import run_needle3d
+
+            t0 = time.perf_counter()
+            results["needle3d"] = run_needle3d(out, scale_name, seed=seed)
+            timings["needle3d_s"] = time.perf_counter() - t0
         timings["process_pools_started"] = pool.pools_started
     write_json_atomic(out / "results.json", results, sort_keys=True)
     write_json_atomic(out / "timings.json", timings, sort_keys=True)

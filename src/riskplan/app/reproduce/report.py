@@ -361,6 +361,87 @@ def _calibration_section(rep: Report, cal: dict) -> None:
     )
 
 
+def _needle3d_section(rep: Report, r: dict) -> None:
+    """The 3-D needle (:mod:`riskplan.app.reproduce.needle3d`): the link to the interactive
+    figure and the estimates against executions."""
+    import html
+
+    sec = rep.section("3-D needle under uncertainty (beyond the paper)")
+    st = r["settings"]
+    Report.text(
+        sec,
+        f"Case {st['case']}, {st['n_plans']} candidates of the simulator RRT on the "
+        f"{st['n_elements']}-tetrahedron planning mesh, {st['check_runs']} closed- and open-loop "
+        "executions per checked plan on common draws.",
+    )
+    sec.blocks.append(
+        f'<p><a href="{html.escape(r["figure"])}">tissue block, obstacles, target, candidate '
+        "plans and closed-loop executions of the selected plan (interactive 3-D view)</a></p>"
+    )
+    rows = []
+    for row in r["rows"]:
+        e = row["estimates"]
+        rows.append(
+            [row["index"], row["n_steps"], e["truncation"], e["per-step"], e["sigma"], e["sampling"],
+             f"{row['closed']}/{row['n']}" if row["n"] else "-",
+             f"{row['open']}/{row['n']}" if row["n"] else "-"]
+        )  # fmt: skip
+    Report.table(
+        sec,
+        [
+            "plan",
+            "steps",
+            "truncation",
+            "per-step",
+            "sigma",
+            "sampling",
+            "closed loop",
+            "open loop",
+        ],
+        rows,
+        caption="LQG-MP P(success) by estimator (ranked by the truncation) and measured successes",
+    )
+
+
+def _sensitivity_section(rep: Report, sens: dict) -> None:
+    """The needle's sensitivity tables (stage ``sensitivity``): each method's mean success
+    over the five cases against the actuation-noise and interaction-force scales, and the
+    other reading of the cases."""
+    from riskplan.app.reproduce.deformable import METHOD_LABELS, METHODS
+
+    sec = rep.section("Deformable-planning paper, needle: sensitivity (beyond the paper)")
+    size = sens.get("scale", {})
+    Report.text(
+        sec,
+        f"Fig. 6 of the needle for each variant at a reduced scale ({size.get('n_candidates')} "
+        f"candidates per set, {size.get('n_executions')} executions per bar, "
+        f"{size.get('lin_samples')} linearisation draws, {size.get('goal_samples')} LQG-MP goal "
+        "samples). Actuation-noise scales act in case 3 only (our reading of the cases); the "
+        "interaction-force scales change the plans and every case. Mean success over the five "
+        "cases, in %.",
+    )
+
+    def row(label, means):
+        return [label] + [
+            "n/a" if means.get(m) is None else f"{100 * means[m]:.1f}" for m in METHODS
+        ]
+
+    rows = []
+    for kind in ("actuation", "force"):
+        for f, means in sorted(sens.get(kind, {}).items(), key=lambda kv: float(kv[0])):
+            rows.append(row(f"{kind} ×{float(f):g}", means))
+    if sens.get("actuation_everywhere"):
+        rows.append(
+            row("actuation noise in every case (the other reading)", sens["actuation_everywhere"])
+        )
+    Report.table(
+        sec,
+        ["variant"] + [METHOD_LABELS[m] for m in METHODS],
+        rows,
+        caption="each method's mean success over the five cases against the noise and force scales",
+    )
+
+
 def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> Path:
     """Write ``out/report.html`` from ``results`` (see :func:`riskplan.app.reproduce.pipeline.reproduce`).
     Each part is rendered when present (``results["mdn"]`` may hold Fig. 7 only)."""
@@ -525,6 +606,12 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
     for sc in results.get("deformable", {}).values():
         if "calibration" in sc:
             _calibration_section(rep, sc["calibration"])
+    sens = results.get("deformable", {}).get("needle", {}).get("sensitivity")
+    if sens:
+        _sensitivity_section(rep, sens)
+
+    if "needle3d" in results:
+        _needle3d_section(rep, results["needle3d"])
 
     if "sweep" in results.get("mdn", {}):
         r = results["mdn"]

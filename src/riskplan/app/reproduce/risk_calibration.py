@@ -35,7 +35,13 @@ from riskplan.errors import InvalidInputError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["RISK_STUDY_SCALES", "RiskStudyScale", "calibration_metrics", "run_risk_study"]
+__all__ = [
+    "RISK_STUDY_SCALES",
+    "RiskStudyScale",
+    "calibration_metrics",
+    "run_risk_study",
+    "transmission_mechanism",
+]
 
 CHUNK = 10
 
@@ -48,20 +54,33 @@ class RiskStudyScale:
     trajectories: int = 30
     executions: int = 200
     steps: int = 8
-    coherences: tuple = (0.0, 0.15, 0.5, 0.9, 1.0)
+    coherences: tuple = (0.5,)
     n_clouds: int = 128
+    draws: int = 256
+    extents: tuple = (2.0,)
     n_points: int = 512
     pool: int = 4000
     band: float = 0.002
 
     def __post_init__(self):
-        for name in ("configurations", "trajectories", "executions", "steps", "n_clouds", "pool"):
+        for name in (
+            "configurations",
+            "trajectories",
+            "executions",
+            "steps",
+            "n_clouds",
+            "pool",
+            "draws",
+        ):
             v = getattr(self, name)
             if isinstance(v, bool) or int(v) != v or v < 1:
                 raise InvalidInputError(f"{name}: expected a positive integer, got {v!r}")
         if not all(0.0 <= float(c) <= 1.0 for c in self.coherences) or not self.coherences:
             raise InvalidInputError(f"coherences: expected values in [0, 1], got {self.coherences}")
         object.__setattr__(self, "coherences", tuple(float(c) for c in self.coherences))
+        if not self.extents or not all(float(c) > 0 for c in self.extents):
+            raise InvalidInputError(f"extents: expected values > 0, got {self.extents}")
+        object.__setattr__(self, "extents", tuple(float(c) for c in self.extents))
 
 
 RISK_STUDY_SCALES = {
@@ -73,8 +92,11 @@ RISK_STUDY_SCALES = {
         coherences=(0.5,),
         n_clouds=32,
         pool=600,
+        draws=32,
     ),
-    "reduced": RiskStudyScale(configurations=60, trajectories=12),
+    "reduced": RiskStudyScale(
+        configurations=60, trajectories=12, coherences=(0.0, 0.15, 0.5, 0.9, 1.0)
+    ),
     "full": RiskStudyScale(),
 }
 
@@ -146,6 +168,7 @@ def run_risk_study(out, scale: RiskStudyScale, store, *, seed: int = 0, progress
     from riskplan.io import write_json_atomic
     from riskplan.kinematics import load_model
     from riskplan.planning.chest_scene import build_chest
+    from riskplan.planning.risk import SampledBodyRisk
     from riskplan.robots import load_robot
 
     report = progress or (lambda stage, done, total: None)
@@ -203,6 +226,14 @@ def run_risk_study(out, scale: RiskStudyScale, store, *, seed: int = 0, progress
 
         risks[f"cloud ρ={rho:g}"] = tuple(store.get_or_compute(f"risk.cloud.{rho:g}", compute))
         report("risk study: cloud risks", scale.coherences.index(rho) + 1, len(scale.coherences))
+    for c in scale.extents:
+
+        def compute(c=c):
+            risk = SampledBodyRisk(model, env, n_draws=scale.draws, extent=c, seed=seed)
+            return [risk(Q).tolist(), [risk.trajectory(t) for t in trajs]]
+
+        risks[f"bodies c={c:g}"] = tuple(store.get_or_compute(f"risk.bodies.{c:g}", compute))
+        report("risk study: sampled-body risks", scale.extents.index(c) + 1, len(scale.extents))
     measured = np.r_[r_conf, r_traj]
     metrics = {
         name: {
@@ -262,3 +293,64 @@ def _figure(result: dict, path) -> None:
     with atomic_path(path, suffix=".png") as tmp:
         fig.savefig(tmp, dpi=110)
     plt.close(fig)
+
+
+def transmission_mechanism(
+    configurations, measured, *, executions: int = 200, seed: int = 777, offset_seed: int = 5
+):
+    """Which part of the transmission decides the robot's collisions (docs/validation.md).
+
+    For each configuration ``(N, 4)`` of the ``paper`` robot in ``build_chest(0)``, with
+    ``executions`` fresh runs (seed ``seed``; the offsets-only runs draw their offsets from
+    ``offset_seed``): the collision rate from the runs' own
+    displacements (all sources), from the start history alone (nominal play, no play variation,
+    no offset) and from the zero offsets alone (no play), each the body clearance
+    (:func:`~riskplan.planning.chest.body_clearance`) at the displacements a run receives; and
+    the share of the clearance variance between the 16 approach patterns (each tendon's start
+    below or above its target). Returns the mean absolute errors against ``measured (N,)`` on
+    the items measured in [5 %, 95 %] and the median share there.
+    """
+    from riskplan.datasets.protocol import random_starts
+    from riskplan.parallel import spawn_seeds
+    from riskplan.planning.chest import body_clearance
+    from riskplan.planning.chest_scene import build_chest
+    from riskplan.planning.executions import execution_displacements
+    from riskplan.robots import load_robot
+
+    Q = np.asarray(configurations, dtype=np.float64)
+    r = np.asarray(measured, dtype=np.float64)
+    robot, env = load_robot("paper"), build_chest(0).base_environment
+    lim = np.asarray(robot.displacement_limits, dtype=np.float64)
+    hp = robot.params.hysteresis
+    seeds = spawn_seeds(seed, executions)
+    starts = np.stack(
+        [
+            random_starts(
+                lim, 1, np.random.default_rng(np.random.SeedSequence(int(s)).spawn(2)[0])
+            )[0]
+            for s in seeds
+        ]
+    )
+    offsets = hp.offset_std * np.random.default_rng(offset_seed).standard_normal(starts.shape)
+    rates = {"all sources": [], "start history": [], "offsets": []}
+    share = []
+    for x in Q:
+        runs = {
+            "all sources": execution_displacements(robot, x[None], seeds)[:, 0],
+            "start history": np.clip(np.clip(starts, x - hp.play, x + hp.play), *lim.T),
+            "offsets": np.clip(x + offsets, *lim.T),
+        }
+        for name, eff in runs.items():
+            c = body_clearance(robot, eff, env)[1]
+            rates[name].append(float((c < 0).mean()))
+            if name == "all sources":
+                pattern = ((starts < x) * (2 ** np.arange(len(x)))).sum(-1)
+                means = np.array([c[pattern == p].mean() for p in pattern])
+                share.append(float(means.var() / c.var()) if c.var() > 0 else np.nan)
+    mid = (r >= 0.05) & (r <= 0.95)
+    return {
+        "mae_mid": {k: float(np.abs(np.asarray(v) - r)[mid].mean()) for k, v in rates.items()},
+        "pattern_share_median": float(np.nanmedian(np.asarray(share)[mid])),
+        "n_mid": int(mid.sum()),
+        "rates": rates,
+    }

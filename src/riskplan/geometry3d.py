@@ -1,0 +1,147 @@
+"""Convex bodies in 3-D for the 3-D needle: balls and boxes of material points, their images
+under an affine map (ellipsoids and parallelepipeds), and the nearest point of such a body
+to the origin after whitening (the construction of Patil, van den Berg & Alterovitz, ICRA
+2012, in 3-D).
+
+A body is ``{c + A s : s ∈ B}`` with ``B`` the unit ball of the 2-norm (``kind =
+"ellipsoid"``) or of the ∞-norm (``kind = "box"``). For a Gaussian ``N(μ, Σ)`` with
+``Σ = L Lᵀ`` the whitened body is ``{a + M s}`` with ``a = L⁻¹ (c − μ)``, ``M = L⁻¹ A``; its
+nearest point ``y*`` to the origin gives the whitened distance ``d = |y*|`` and the
+half-space ``nᵀ y ≤ d`` (``n = y*/d``) that holds the origin and no point of the body
+(the body is convex and ``y*`` its nearest point).
+
+Nearest points, exactly:
+
+* ellipsoid: ``min |a + M s|²`` s.t. ``|s| ≤ 1`` (a trust-region subproblem). The
+  unconstrained minimiser ``−M⁻¹ a`` inside the ball means the origin is inside; else
+  ``s(λ) = −(MᵀM + λ I)⁻¹ Mᵀ a`` with ``|s(λ)| = 1``, ``λ > 0`` found by safeguarded Newton
+  on ``1/|s(λ)| − 1`` (Moré & Sorensen 1983), in the eigenbasis of ``MᵀM``;
+* box: ``min |a + M s|²`` s.t. ``|s_i| ≤ 1`` (a 3-variable bound-constrained least-squares
+  problem): every one of the 27 active sets (each ``s_i`` free, −1 or +1) is solved and the
+  best feasible candidate kept; the optimum's active set is among them.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from riskplan.errors import InvalidInputError
+
+__all__ = ["KINDS", "ConvexBody", "nearest_to_origin"]
+
+KINDS = ("ellipsoid", "box")
+
+
+@dataclass(frozen=True, eq=False)
+class ConvexBody:
+    """``{centre + A s : s ∈ B}`` (module docstring); ``centre (3,)``, ``A (3, 3)`` invertible."""
+
+    kind: str
+    centre: np.ndarray
+    A: np.ndarray
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise InvalidInputError(f"kind: expected one of {KINDS}, got {self.kind!r}")
+        c = np.asarray(self.centre, dtype=np.float64).reshape(3)
+        A = np.asarray(self.A, dtype=np.float64).reshape(3, 3)
+        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(A))):
+            raise InvalidInputError("ConvexBody: centre and A must be finite")
+        object.__setattr__(self, "centre", c)
+        object.__setattr__(self, "A", A)
+        object.__setattr__(self, "_Ainv", np.linalg.inv(A))
+
+    def local(self, points) -> np.ndarray:
+        """``s = A⁻¹ (x − c)`` for points ``(..., 3)``."""
+        return (np.asarray(points, dtype=np.float64) - self.centre) @ self._Ainv.T
+
+    def norm(self, points) -> np.ndarray:
+        """The body's gauge of each point ``(...)``: ``≤ 1`` inside (closed)."""
+        s = self.local(points)
+        if self.kind == "ellipsoid":
+            return np.sqrt(np.einsum("...i,...i->...", s, s))
+        return np.abs(s).max(axis=-1)
+
+    def contains(self, points) -> np.ndarray:
+        """Whether each point ``(..., 3)`` lies in the body (closed)."""
+        return self.norm(points) <= 1.0
+
+    def support_min(self, n, a=None, M=None) -> float:
+        """``min_{s ∈ B} nᵀ (a + M s)`` (``a = centre``, ``M = A`` by default)."""
+        a = self.centre if a is None else a
+        M = self.A if M is None else M
+        g = M.T @ n
+        spread = float(np.linalg.norm(g)) if self.kind == "ellipsoid" else float(np.abs(g).sum())
+        return float(n @ a) - spread
+
+    def surface(self, n: int = 12) -> np.ndarray:
+        """Points ``(k, 3)`` on the boundary (a latitude-longitude grid of the sphere or the
+        cube mapped by ``A``), for figures."""
+        u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 2 * n), np.linspace(0, np.pi, n))
+        s = np.stack([np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v)], -1).reshape(-1, 3)
+        if self.kind == "box":
+            s = s / np.abs(s).max(axis=1, keepdims=True)
+        return self.centre + s @ self.A.T
+
+
+def _nearest_ellipsoid(a, M):
+    Minv_a = np.linalg.solve(M, a)
+    if float(Minv_a @ Minv_a) <= 1.0:
+        return None
+    w, V = np.linalg.eigh(M.T @ M)
+    b = V.T @ (M.T @ a)
+
+    def norm_s(lam):
+        return math.sqrt(float(np.sum((b / (w + lam)) ** 2)))
+
+    # Newton on φ(λ) = 1/|s(λ)| − 1 (concave, increasing), from λ = 0 (|s(0)| > 1)
+    lam = 0.0
+    for _ in range(200):
+        ns = norm_s(lam)
+        dns = -float(np.sum(b**2 / (w + lam) ** 3)) / ns  # d|s|/dλ
+        phi = 1.0 / ns - 1.0
+        dphi = -dns / (ns * ns)
+        step = -phi / dphi
+        lam = max(lam + step, 0.5 * lam)
+        if abs(phi) < 1e-14:
+            break
+    s = -V @ (b / (w + lam))
+    s /= np.linalg.norm(s)
+    return a + M @ s
+
+
+def _nearest_box(a, M):
+    best, best_val = None, math.inf
+    for pattern in itertools.product((0, -1, 1), repeat=3):
+        s = np.array(pattern, dtype=np.float64)
+        free = np.array([p == 0 for p in pattern])
+        if free.any():
+            r = a + M[:, ~free] @ s[~free]
+            sol, *_ = np.linalg.lstsq(M[:, free], -r, rcond=None)
+            if np.any(np.abs(sol) > 1.0 + 1e-12):
+                continue
+            s[free] = sol
+        y = a + M @ s
+        val = float(y @ y)
+        if val < best_val:
+            best, best_val = y, val
+    if np.all(np.abs(np.linalg.solve(M, -a)) <= 1.0):
+        return None
+    return best
+
+
+def nearest_to_origin(body: ConvexBody, L: np.ndarray, mu: np.ndarray):
+    """``(d, n)``: the whitened distance from ``N(mu, L Lᵀ)``'s mean to ``body`` and the unit
+    normal ``n (3,)`` (whitened) of the separating half-space ``nᵀ y ≤ d``; ``(0.0, None)``
+    when the mean lies in the body."""
+    a = np.linalg.solve(L, body.centre - mu)
+    M = np.linalg.solve(L, body.A)
+    y = _nearest_ellipsoid(a, M) if body.kind == "ellipsoid" else _nearest_box(a, M)
+    if y is None:
+        return 0.0, None
+    d = float(np.linalg.norm(y))
+    return d, y / d

@@ -1,0 +1,79 @@
+"""The 3-D needle study: estimators and executions on one hand-made plan, the figure, the
+command's bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from riskplan.app.reproduce.needle3d import (
+    ESTIMATORS,
+    evaluate_candidates,
+    measure_plan,
+    needle3d_figure,
+)
+from riskplan.control import NominalPlan
+from riskplan.scenarios.registry import scenario_from_config
+
+
+@pytest.fixture(scope="module")
+def straight():
+    sim = scenario_from_config("needle3d", None, "actuation")
+    plan = NominalPlan.from_rollout(sim, sim.initial_state(), np.tile([0.5, 10.0], (16, 1)))
+    assert sim.in_goal(plan.states[-1]) and not any(sim.in_collision(s) for s in plan.states)
+    return sim, plan
+
+
+def test_estimators_and_executions_on_common_draws(straight):
+    sim, plan = straight
+    ctrls, rows = evaluate_candidates(sim, [plan], seed=0, n_goal_samples=500)
+    row = rows[0]
+    assert ctrls[0] is not None and set(row.estimates) == set(ESTIMATORS)
+    assert all(0.0 <= p <= 1.0 for p in row.estimates.values())
+    # sigma's chi-square factor is conservative against the truncation's half-spaces
+    assert row.estimates["sigma"] <= row.estimates["truncation"]
+    measure_plan(sim, plan, ctrls[0], row, n=4, seed=1)
+    assert row.n == 4
+    for mode in ("closed", "open"):
+        outcomes = getattr(row, f"outcomes_{mode}")
+        assert sum(outcomes.values()) == 4
+        assert outcomes.get("success", 0) == getattr(row, mode)
+        lo, hi = getattr(row, f"{mode}_ci")
+        assert lo <= getattr(row, mode) / 4 <= hi
+        assert getattr(row, f"target_error_{mode}") >= 0.0
+
+
+def test_figure_has_block_bodies_and_plans(straight):
+    sim, plan = straight
+    fig = needle3d_figure(sim, [plan, plan], executed=[plan.reduced[:, :3]], highlight=0)
+    names = [t.name for t in fig.data]
+    assert "target" in names and sum(n.startswith("obstacle") for n in names if n) == 3
+    assert "executed" in names
+
+
+def test_outputs_are_written_whole(straight, tmp_path):
+    from riskplan.app.reproduce.needle3d import Needle3DResult, write_outputs
+
+    sim, plan = straight
+    ctrls, rows = evaluate_candidates(sim, [plan], seed=0, n_goal_samples=200)
+    res = Needle3DResult([plan], rows, 0, ctrls[0], {"rrt_s": 0.0}, {"case": "actuation"})
+    files = write_outputs(res, tmp_path, n_executed=1)
+    with np.load(files["selected"]) as z:
+        np.testing.assert_array_equal(z["controls"], plan.controls)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "needle3d.html",
+        "selected.npz",
+        "summary.json",
+    ]
+
+
+def test_plan_needle3d_rejects_a_bad_case(tmp_path):
+    from typer.testing import CliRunner
+
+    from riskplan.cli import app
+
+    res = CliRunner().invoke(
+        app, ["plan", "needle3d", "--case", "nope", "--out", str(tmp_path / "o")]
+    )
+    assert res.exit_code != 0
+    assert "--case" in (res.output + str(res.exception))

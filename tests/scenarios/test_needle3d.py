@@ -1,0 +1,196 @@
+"""3-D bevel-tip needle: SE(3) kinematics against RK4 and closed forms, the scenario's
+tissue coupling against an independent interpolation of a full FEM solve, determinism,
+outcomes and bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from riskplan.errors import InvalidInputError
+from riskplan.scenarios.base import SimParams
+from riskplan.scenarios.bevel import (
+    needle_step,
+    pose_step_jacobian,
+    pose_vector,
+    rk4_needle,
+    se3_exp,
+    se3_exp_batch,
+)
+from riskplan.scenarios.needle3d import Needle3DConfig, Needle3DScenario
+
+
+def _rotation(seed):
+    q = np.random.default_rng(seed).standard_normal(4)
+    q /= np.linalg.norm(q)
+    w, x, y, z = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return Needle3DScenario()
+
+
+@pytest.mark.parametrize(
+    "v, omega, rho", [(0.5, 0.0, 1.0), (0.3, 7.0, 1.0), (0.5, -10.0, 0.4), (0.2, 1e-6, 1.0)]
+)
+def test_exact_step_matches_rk4(tol, v, omega, rho):
+    R0, p0 = _rotation(1), np.array([0.1, 0.2, 0.3])
+    R1, p1 = needle_step(R0, p0, v, omega, tau=0.1, kappa=2.0, rho=rho)
+    R2, p2 = rk4_needle(R0, p0, v, omega, tau=0.1, kappa=2.0, rho=rho, n=200)
+    np.testing.assert_allclose(R1, R2, **tol["rk4_closed_form"])
+    np.testing.assert_allclose(p1, p2, **tol["rk4_closed_form"])
+    np.testing.assert_allclose(R1.T @ R1, np.eye(3), **tol["float64_abs"])
+
+
+def test_constant_curvature_arc_closed_form(tol):
+    # no rotation: the tip follows a circle of radius 1/κ bending towards −e₂
+    kappa, v, n = 2.0, 0.5, 7
+    R, p = np.eye(3), np.zeros(3)
+    for _ in range(n):
+        R, p = needle_step(R, p, v, 0.0, tau=0.1, kappa=kappa)
+    s = n * 0.1 * v
+    expected = np.array([0.0, -(1 - math.cos(kappa * s)) / kappa, math.sin(kappa * s) / kappa])
+    np.testing.assert_allclose(p, expected, **tol["float64_ref"])
+
+
+@pytest.mark.parametrize("theta", [0.0, 0.99e-4, 1.01e-4, 0.3, 2.5])
+def test_se3_exp_against_matrix_exponential(tol, theta):
+    """The closed form (and its series below θ = 1e-4) against scipy's expm of ξ̂ (4 × 4)."""
+    from scipy.linalg import expm
+
+    w = theta * np.array([0.6, -0.8, 0.0])
+    xi = np.concatenate([[0.1, -0.2, 0.3], w])
+    X = np.zeros((4, 4))
+    X[:3, :3] = [[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]]
+    X[:3, 3] = xi[:3]
+    ref = expm(X)
+    E, d = se3_exp(xi)
+    np.testing.assert_allclose(E, ref[:3, :3], **tol["float64_ref"])
+    np.testing.assert_allclose(d, ref[:3, 3], **tol["float64_ref"])
+    Eb, db = se3_exp_batch(np.stack([xi, xi]))
+    np.testing.assert_allclose(Eb[1], E, **tol["float64_exact"])
+    np.testing.assert_allclose(db[1], d, **tol["float64_exact"])
+
+
+def test_pose_step_is_linear_with_exact_jacobian(tol):
+    R0, p0 = _rotation(3), np.array([0.4, 0.1, -0.2])
+    J = pose_step_jacobian(0.4, 3.0, tau=0.1, kappa=2.0)
+    R1, p1 = needle_step(R0, p0, 0.4, 3.0, tau=0.1, kappa=2.0)
+    np.testing.assert_allclose(J @ pose_vector(R0, p0), pose_vector(R1, p1), **tol["float64_exact"])
+
+
+def test_world_pose_rides_on_the_tissue(sim, tol):
+    """World position = X + u(X), with u from a full nodal solve interpolated by scikit-fem."""
+    from skfem import Basis, ElementTetP1, ElementVector
+
+    y = sim.initial_state()
+    for u in ([0.5, 2.0], [0.4, -3.0], [0.5, 0.0]):
+        y = sim.step(y, u)
+    X = y.material[:3]
+    U = sim.nodal_displacement(y)
+    d = sim.mesh_data(y.n_elements)
+    basis = Basis(d.block.mesh.to_skfem(), ElementVector(ElementTetP1()))
+    flat = np.zeros(basis.N)
+    flat[np.asarray(basis.nodal_dofs).T.ravel()] = U.ravel()
+    probe = basis.probes(X[:, None])
+    uX = (probe @ flat).reshape(3)  # skfem interleaves components per node
+    np.testing.assert_allclose(y.pose[:3], X + uX, **tol["interpolation"])
+    assert np.linalg.norm(uX) > 0.01  # the tissue does carry the tip
+    # the frame is the material frame
+    np.testing.assert_array_equal(y.pose[3:], y.material[3:])
+
+
+def test_linear_elasticity_scales_with_E(sim, tol):
+    ctrl = [[0.5, 2.0], [0.5, -1.0]]
+    offs = []
+    for E in (50.0, 150.0):
+        p = SimParams(youngs_modulus=E, n_elements=sim.nominal_params.n_elements)
+        y = sim.initial_state(p)
+        for u in ctrl:
+            y = sim.step(y, u, p)
+        offs.append(y.pose[:3] - y.material[:3])
+    np.testing.assert_allclose(offs[1], offs[0] / 3.0, **tol["float64_ref"])
+
+
+def test_no_force_world_is_material(sim):
+    p = SimParams(force_scale=0.0, n_elements=sim.nominal_params.n_elements)
+    y = sim.initial_state(p)
+    for _ in range(3):
+        y = sim.step(y, [0.5, 1.0], p)
+    np.testing.assert_array_equal(y.pose, y.material)
+    assert not np.any(y.displacement)
+
+
+def test_step_is_deterministic_and_pure(sim):
+    params = SimParams(
+        n_elements=sim.nominal_params.n_elements,
+        actuation_cov=sim.actuation_cov(),
+        actuation_seed=5,
+    )
+    y0 = sim.initial_state(params)
+    a = sim.step(y0, [0.4, 2.0], params)
+    b = Needle3DScenario().step(y0, [0.4, 2.0], params)
+    assert a.identical(b)
+    assert y0.t == 0 and not np.any(y0.displacement)
+    assert not np.array_equal(a.applied, [0.4, 2.0])  # actuation noise applied
+
+
+def test_deformed_obstacle_contains_its_deformed_centre(sim):
+    y = sim.initial_state()
+    for _ in range(6):
+        y = sim.step(y, [0.5, 10.0])
+    for b in sim.obstacles(y):
+        assert b.contains(b.centre)
+    g = sim.goal(y)
+    assert sim.goal_distance(y) == pytest.approx(float(np.linalg.norm(y.pose[:3] - g.centre)))
+
+
+def test_leaving_the_tissue_is_an_outcome(sim):
+    from riskplan.control import NominalPlan
+    from riskplan.control.lqg import execute
+
+    cfg = Needle3DConfig(start=(0.9, 0.5, 0.5), obstacles=())
+    s = Needle3DScenario(cfg)
+    y0 = s.initial_state()
+    plan = NominalPlan.from_rollout(s, y0, np.tile([0.5, 10.0], (6, 1)))
+    ex = execute(s, plan, None, s.nominal_params)
+    assert ex.outcome == "left_tissue" and "left the body" in ex.reason
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        (dict(target_center=(1.2, 0.5, 0.5)), "target"),
+        (dict(target_center=(0.97, 0.5, 0.5)), "target"),
+        (dict(start=(-0.1, 0.5, 0.5)), "start"),
+        (dict(obstacles=(("sphere", (0.95, 0.5, 0.5), 0.1),)), "obstacles"),
+        (dict(obstacles=(("cone", (0.5, 0.5, 0.5), 0.1),)), "obstacles"),
+        (dict(obstacles=(("box", (0.5, 0.5, 0.5), (0.4, 0.6, 0.6)),)), "obstacles"),
+        (dict(start_axis=(0, 0, 1), start_bevel=(0, 0, 2)), "start_axis"),
+        (dict(curvature=0.0), "curvature"),
+        (dict(poissons_ratio=0.5), "poissons_ratio"),
+    ],
+)
+def test_bad_config(kw, match):
+    with pytest.raises(InvalidInputError, match=match):
+        Needle3DConfig(**kw)
+
+
+def test_bad_control_and_state(sim):
+    y = sim.initial_state()
+    with pytest.raises(InvalidInputError):
+        sim.step(y, [0.6, 0.0])
+    with pytest.raises(InvalidInputError):
+        sim.step(y, [0.5, np.nan])
+    with pytest.raises(InvalidInputError, match="mesh"):
+        sim.step(y, [0.5, 0.0], SimParams(n_elements=500))

@@ -125,7 +125,16 @@ def test_collision_env_in_millimetres_is_refused(tmp_path):
     box.export(tmp_path / "m.stl")
     box.apply_scale(1000.0)
     box.export(tmp_path / "mm.stl")
-    args = ["collision", "--arc", "8,0", "--samples", "200", "--base-pose", "0,0,0,1,0,0,0"]
+    args = [
+        "collision",
+        "probability",
+        "--arc",
+        "8,0",
+        "--samples",
+        "200",
+        "--base-pose",
+        "0,0,0,1,0,0,0",
+    ]
     res = runner.invoke(app, [*args, "--env", str(tmp_path / "mm.stl"), "--json"])
     assert isinstance(res.exception, InvalidInputError), res.output
     msg = str(res.exception)

@@ -111,3 +111,46 @@ def extrude_polygon(poly: np.ndarray, z0: float, z1: float) -> tuple[np.ndarray,
         j = (i + 1) % k
         faces += [[i, j, k + j], [i, k + j, k + i], [cb, j, i], [ct, k + i, k + j]]
     return V, np.asarray(faces, dtype=np.int64)
+
+
+# a mesh larger than this many robot lengths is taken to be in millimetres, not metres: the
+# largest anatomy a continuum robot works in (a chest, ~0.4 m) is a few robot lengths, while a
+# millimetre-valued mesh of the same anatomy is ~1000 times larger
+MILLIMETRE_FACTOR = 50.0
+
+
+def check_metre_scale(
+    vertices,
+    robot_length: float,
+    *,
+    source: str = "mesh",
+    remedy: str = "Scale them by 0.001 before use",
+) -> float:
+    """Raise :class:`InvalidInputError` when a mesh's extent suggests millimetres where metres
+    are expected: its bounding-box diagonal exceeds ``MILLIMETRE_FACTOR`` robot lengths.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array
+        The mesh's vertices (m expected).
+    robot_length : float
+        The robot's backbone length (m) the extent is judged against.
+    source : str
+        The file, option or field named in the error.
+    remedy : str
+        The sentence that ends the error (what the user can do).
+
+    Returns
+    -------
+    float
+        The bounding-box diagonal (m).
+    """
+    V = np.asarray(vertices, dtype=np.float64)
+    diag = float(np.linalg.norm(np.ptp(V, axis=0)))
+    if diag > MILLIMETRE_FACTOR * robot_length:
+        raise InvalidInputError(
+            f"{source}: the mesh spans {diag:.4g} m, {diag / robot_length:.0f} times the robot's length "
+            f"({robot_length:.4g} m); its coordinates look like millimetres where metres are expected. "
+            f"{remedy}"
+        )
+    return diag

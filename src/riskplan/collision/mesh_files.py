@@ -147,13 +147,13 @@ def load_environment(
     :func:`mesh_base_pose` (explicit ``base_pose``, else the sidecar, else a named error).
 
     With ``robot_length`` (m) the mesh's extent is judged against the robot's length by
-    :func:`~riskplan.collision.segmentation.check_metre_scale` before anything else is done:
+    :func:`~riskplan.collision.geometry.check_metre_scale` before anything else is done:
     a mesh more than ``MILLIMETRE_FACTOR`` robot lengths across is refused as millimetres.
     ``source`` names the option or field in that error (default: the path).
     """
     env = Environment.load(path, split=split)
     if robot_length is not None:
-        from riskplan.collision.segmentation import check_metre_scale
+        from riskplan.collision.geometry import check_metre_scale
 
         check_metre_scale(env.vertices, robot_length, source=source or str(path))
     pose = mesh_base_pose(path, base_pose)

@@ -189,7 +189,7 @@ def register(plan_app: typer.Typer) -> None:
             # units judged against the robot planned for (--robot, else the model's own)
             judge = rob if rob is not None else mdl.robot
             if judge is not None:
-                from riskplan.collision.segmentation import check_metre_scale
+                from riskplan.collision.geometry import check_metre_scale
 
                 check_metre_scale(
                     env_world.vertices, judge.params.backbone.length, source=f"--env {env}"

@@ -307,14 +307,14 @@ class Problem:
         """The environment meshes as one ``trimesh.Trimesh`` (robot frame, m), or None.
 
         With ``check_units``, a mesh whose bounding box is more than ``MILLIMETRE_FACTOR``
-        robot lengths across is refused (:func:`~riskplan.collision.segmentation.check_metre_scale`):
+        robot lengths across is refused (:func:`~riskplan.collision.geometry.check_metre_scale`):
         its units are most likely millimetres where metres are expected.
         """
         if not self.meshes:
             return None
         import trimesh
 
-        from riskplan.collision.segmentation import check_metre_scale
+        from riskplan.collision.geometry import check_metre_scale
 
         parts = []
         L = self.robot.params.backbone.length

@@ -259,7 +259,7 @@ def problem_environment(problem, *, check_units: bool = True, voxels: str = "aut
             )
         )
         if check_units:
-            from riskplan.collision.segmentation import check_metre_scale
+            from riskplan.collision.geometry import check_metre_scale
 
             try:
                 check_metre_scale(

@@ -391,10 +391,21 @@ class NeedleConfig:
         return np.array([[0.0, 0.0], [float(self.width), float(self.height)]])
 
     def fixed_nodes(self, mesh) -> np.ndarray:
-        """Sorted indices of the fixed nodes of ``mesh`` (a mesh of :attr:`corners`): the
-        outline's vertex nodes by default, else the nodes within ``1e-9`` of the tissue's
-        extent of a ``fixed_segments`` entry and the boundary nodes inside ``fixed_region``.
-        Raises :class:`InvalidInputError` when fewer than two nodes are fixed."""
+        """The fixed nodes of a mesh of the tissue.
+
+        Parameters
+        ----------
+        mesh : TissueMesh
+            A mesh of :attr:`corners`.
+
+        Returns
+        -------
+        (F,) int array
+            Sorted node indices: the outline's vertex nodes by default, else the nodes within
+            ``1e-9`` of the tissue's extent of a ``fixed_segments`` entry and the boundary
+            nodes inside ``fixed_region``. Raises :class:`InvalidInputError` when fewer than
+            two nodes are fixed.
+        """
         if self.fixed_segments is None and self.fixed_region is None:
             return mesh.vertex_nodes
         X = mesh.nodes

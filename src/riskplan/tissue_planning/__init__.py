@@ -39,8 +39,8 @@ from riskplan.tissue_planning.select import (
 )
 
 __all__ = [
-    "SELECTIONS",
     "SATURATED",
+    "SELECTIONS",
     "STEP_S",
     "Calibration",
     "HonestyRow",

@@ -146,9 +146,8 @@ def pose_from_vector(x) -> tuple[np.ndarray, np.ndarray]:
 
 def pose_step_jacobian(v, omega, *, tau: float, kappa: float, rho: float = 1.0) -> np.ndarray:
     """``(12, 12)`` exact Jacobian of the pose vector after one step with respect to the pose
-    vector before it (the step is linear in it for a fixed control, module docstring)::
-
-        p' = p + Σ_j d_j e_j,      e'_k = Σ_j E_jk e_j.
+    vector before it (the step is linear in it for a fixed control, module docstring):
+    ``p' = p + Σ_j d_j e_j``, ``e'_k = Σ_j E_jk e_j``.
     """
     E, d = se3_exp(tau * bevel_twist(v, omega, kappa, rho))
     J = np.zeros((12, 12))

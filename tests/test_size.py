@@ -24,7 +24,6 @@ MAX_FUNCTION_LINES = 120
 KNOWN_LONG_FILES = {
     "app/reproduce/deformable.py": 789,
     "control/linearize.py": 657,
-    "control/lqgmp.py": 601,
     "deformable/tissue3d.py": 846,
     "robots/batch_kernel.py": 673,
     "robots/params.py": 666,

@@ -84,12 +84,22 @@ free at ``t + 1``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from riskplan._validation import as_generator
 from riskplan.control.lqg import LQGController
+from riskplan.control.lqgmp3d import lqgmp_3d
+from riskplan.control.lqgmp_common import (
+    METHODS,
+    LQGMPResult,
+    _check_propagation,
+    _factor,
+    _point_factor,
+    _regularised,
+    _truncate,
+    joint_covariances,
+)
 from riskplan.control.plan import NominalPlan
 from riskplan.errors import InvalidInputError
 
@@ -103,33 +113,10 @@ __all__ = [
     "polygon_environment",
 ]
 
-METHODS = ("sigma", "truncation", "sampling")
 
 #: points checked inside each edge of a declared outline by the sigma and truncation methods
 #: (evenly spaced; the sampling method tests the edges themselves)
 OUTLINE_POINTS = 8
-
-# whitened variance below which a direction counts as deterministic (no truncation, no bound)
-_TINY = 1e-300
-
-
-@dataclass(frozen=True, eq=False)
-class LQGMPResult:
-    """LQG-MP estimate of one plan.
-
-    ``p_success``, ``p_collision_free``, ``p_goal`` (floats); ``p_free_steps (T,)`` the
-    per-step factor of ``p_collision_free`` (steps 1..T); ``mean (T + 1, 2p)`` and
-    ``cov (T + 1, 2p, 2p)`` of ``ξ_t = (x̄_t, x̂_t)`` (the mean is zero for ``"sigma"``;
-    after truncation for ``"truncation"``, and carries the drift with ``drift=True``); ``method``.
-    """
-
-    p_success: float
-    p_collision_free: float
-    p_goal: float
-    p_free_steps: np.ndarray
-    mean: np.ndarray
-    cov: np.ndarray
-    method: str
 
 
 def point_indices(sim) -> tuple[np.ndarray, np.ndarray]:
@@ -257,62 +244,6 @@ def polygon_environment(polygons):
     return Environment.from_polygons(polygons, validate=False)
 
 
-def joint_covariances(
-    ctrl: LQGController, drift: bool = False
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``F (T, 2n, 2n)``, the noise term ``G diag(M, N) Gᵀ (T, 2n, 2n)`` and the mean input
-    ``G (d̄, 0) (T, 2n)`` of the recursion (zero unless ``drift``; then ``M − d̄ d̄ᵀ``
-    replaces the second moment ``M``), for the controller's model
-    (:meth:`~riskplan.control.lqg.LQGController.model`: ``n = p``, or ``p + q`` with the
-    disturbance state)."""
-    lin = ctrl.lin
-    if drift and ctrl.disturbance:
-        raise InvalidInputError(
-            "drift=True: not defined for a disturbance-state controller (its d carries the persistent shift)"
-        )
-    A, B, H, M, N = ctrl.model()
-    L, K = ctrl.L, ctrl.K
-    d = lin.drift if drift else np.zeros(A.shape[:2])
-    if drift:
-        M = M - d[:, :, None] * d[:, None, :]
-    T, p, _ = A.shape
-    m = H.shape[1]
-    BL = B @ L
-    KHA = K @ H @ A
-    F = np.empty((T, 2 * p, 2 * p))
-    F[:, :p, :p] = A
-    F[:, :p, p:] = BL
-    F[:, p:, :p] = KHA
-    F[:, p:, p:] = A + BL - KHA
-    G = np.zeros((T, 2 * p, p + m))
-    G[:, :p, :p] = np.eye(p)
-    G[:, p:, :p] = K @ H
-    G[:, p:, p:] = K
-    Wn = np.zeros((T, p + m, p + m))
-    Wn[:, :p, :p] = M
-    Wn[:, p:, p:] = N
-    return F, G @ Wn @ np.swapaxes(G, 1, 2), np.einsum("tij,tj->ti", G[:, :, :p], d)
-
-
-def _truncate(mu, S, c, b):
-    """Condition ``N(mu, S)`` on ``cᵀξ <= b`` (moment matching of the truncated normal)."""
-    from scipy.special import ndtr
-
-    Sc = S @ c
-    var = float(c @ Sc)
-    if var <= _TINY:
-        return mu, S
-    sd = math.sqrt(var)
-    alpha = (b - float(c @ mu)) / sd
-    Phi = float(ndtr(alpha))
-    if Phi <= 1e-300:
-        return mu, S  # the whole mass is beyond: nothing sensible to keep; the bound says p = 1
-    lam = math.exp(-0.5 * alpha * alpha) / math.sqrt(2 * math.pi) / Phi
-    mu = mu - Sc * (lam / sd)
-    S = S - np.outer(Sc, Sc) * ((alpha * lam + lam * lam) / var)
-    return mu, 0.5 * (S + S.T)
-
-
 def _edges(polys) -> tuple[np.ndarray, np.ndarray]:
     """Edge start points ``(E, 2)`` and end points ``(E, 2)`` of polygons."""
     a = np.concatenate([np.asarray(p, dtype=np.float64) for p in polys])
@@ -399,56 +330,6 @@ def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
     if outline:
         hit |= np.array([_outline_meets(polys[t], pts[t, :nv]) for t in range(T)])
     return np.where(hit, 0.0, free)
-
-
-def _regularised(Sp: np.ndarray) -> np.ndarray | None:
-    """A point's ``(2, 2)`` covariance as both sigma paths use it: ``None`` for a
-    deterministic point (largest variance ≤ 1e-24: no risk outside an obstacle), else the
-    covariance with a jitter of 1e-9 of its largest variance where it is near-singular
-    (smallest ≤ 1e-12 of the largest), as :func:`_sigma_free` does: a rank-1 spread keeps
-    its distances along its direction and gets a Cholesky factor."""
-    ev = np.linalg.eigvalsh(Sp)
-    if ev[-1] <= 1e-24:
-        return None
-    if ev[0] <= 1e-12 * ev[-1]:
-        return Sp + 1e-9 * ev[-1] * np.eye(2)
-    return Sp
-
-
-def _point_factor(Sp: np.ndarray, t: int) -> np.ndarray:
-    """The whitening factor of a point covariance at step ``t``; one that has none after
-    :func:`_regularised` (a degenerate linear model) is a :class:`NumericalError` naming the
-    step, not bad input: a plan evaluation counts it as a failed candidate."""
-    from riskplan.collision import precision_cholesky_from_covariance
-    from riskplan.errors import NumericalError
-
-    try:
-        return precision_cholesky_from_covariance(Sp)
-    except InvalidInputError as exc:
-        raise NumericalError(
-            f"LQG-MP: the position covariance at step {t} has no Cholesky factor ({exc})", step=t
-        ) from exc
-
-
-def _check_propagation(mean: np.ndarray, cov: np.ndarray, first: int = 0) -> None:
-    """Raise :class:`NumericalError` naming the first step whose propagated mean or covariance
-    (states ``first, first + 1, ..``) left float64's range (finite gains of a very unstable
-    model can still overflow it)."""
-    ok = np.isfinite(mean).all(axis=-1) & np.isfinite(cov).all(axis=(-2, -1))
-    if not ok.all():
-        from riskplan.errors import NumericalError
-
-        t = first + int(np.flatnonzero(~ok)[0])
-        raise NumericalError(
-            f"LQG-MP covariance propagation overflowed float64 at step {t - 1} (state {t})",
-            step=t - 1,
-        )
-
-
-def _factor(S: np.ndarray) -> np.ndarray:
-    """``V`` with ``V Vᵀ = S`` for a symmetric positive semi-definite ``S`` (eigen-factor)."""
-    w, v = np.linalg.eigh(0.5 * (S + S.T))
-    return v * np.sqrt(np.clip(w, 0.0, None))
 
 
 def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed) -> LQGMPResult:
@@ -578,8 +459,6 @@ def lqgmp(
 
     cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
     if getattr(sim, "workspace_dim", 2) == 3:  # 3-D convex obstacles (the 3-D needle)
-        from riskplan.control.lqgmp3d import lqgmp_3d
-
         return lqgmp_3d(
             sim,
             plan,

@@ -35,7 +35,6 @@ KNOWN_LONG_FUNCTIONS = {
     "app/reproduce/calibration.py:run_calibration": 233,
     "app/reproduce/deformable.py:run_scenario": 234,
     "app/reproduce/mdn.py:run_mdn": 124,
-    "app/reproduce/report.py:write_report": 219,
     "commands/collision.py:register": 283,
     "commands/dataset.py:register": 179,
     "commands/kinematics.py:register": 282,

@@ -323,6 +323,37 @@ def _check_goal_at(goal_at: str) -> None:
         raise InvalidInputError(f"goal_at: expected one of {GOAL_AT}, got {goal_at!r}")
 
 
+def _nominal_measurements(sim, plan: NominalPlan, measure) -> list[np.ndarray]:
+    """The noise-free measurements of the plan's states 1..T: through ``measure(state,
+    noise=)`` when the simulator senses the full state (the needle in its material frame),
+    else through :func:`_observe_nominal` of the reduced state."""
+    T = plan.n_steps
+    if measure is not None:
+        return [
+            np.asarray(measure(plan.states[t + 1], noise=np.zeros(sim.obs_dim)), dtype=np.float64)
+            for t in range(T)
+        ]
+    return [_observe_nominal(sim, plan.reduced[t + 1]) for t in range(T)]
+
+
+def _sense(sim, measure, y, x: np.ndarray, gen) -> np.ndarray:
+    """One noisy measurement of the state ``y`` (reduced ``x``)."""
+    if measure is not None:
+        return np.asarray(measure(y, rng=gen), dtype=np.float64)
+    return np.asarray(sim.observe(x, rng=gen), dtype=np.float64)
+
+
+def _reason(outcome: str, failed, error, goal_at: str):
+    """The reason an execution's ``outcome`` names (``None`` for a success)."""
+    return {
+        "success": None,
+        "solver_failure": error,
+        "left_tissue": f"left the body at step {failed}",
+        "collision": f"collision at step {failed}",
+        "missed_goal": "not in the goal at the end" if goal_at == "final" else "never in the goal",
+    }[outcome]
+
+
 def execute(
     sim,
     plan: NominalPlan,
@@ -387,19 +418,8 @@ def execute(
         # a simulator whose measurement needs the full state (``measure(state, noise,
         # rng)``: the needle in its material frame) is sensed through it
         measure = getattr(sim, "measure", None)
-        if measure is not None:
-            z_nominal = [
-                np.asarray(
-                    measure(plan.states[t + 1], noise=np.zeros(sim.obs_dim)), dtype=np.float64
-                )
-                for t in range(T)
-            ]
-        else:
-            z_nominal = [_observe_nominal(sim, plan.reduced[t + 1]) for t in range(T)]
-    collided = False
-    failed = None
-    error = None
-    outcome = None
+        z_nominal = _nominal_measurements(sim, plan, measure)
+    collided, failed, error, outcome = False, None, None, None
     inside = getattr(sim, "inside", None)
     for t in range(T):
         if closed:
@@ -420,11 +440,7 @@ def execute(
             states.append(y)
         xs.append(x)
         if closed:
-            if measure is not None:
-                z = np.asarray(measure(y, rng=gen), dtype=np.float64)
-            else:
-                z = np.asarray(sim.observe(x, rng=gen), dtype=np.float64)
-            zbar = z - z_nominal[t]
+            zbar = _sense(sim, measure, y, x, gen) - z_nominal[t]
             xp = A[t] @ xhat + B[t] @ (u - plan.controls[t])
             xhat = xp + K[t] @ (zbar - H[t] @ xp)
         est.append(plan.reduced[t + 1] + xhat[:p])
@@ -441,13 +457,7 @@ def execute(
     reached = outcome is None and (goal_at == "any" or len(xs) == T + 1) and bool(sim.in_goal(y))
     if outcome is None:
         outcome = "success" if reached else "missed_goal"
-    reason = {
-        "success": None,
-        "solver_failure": error,
-        "left_tissue": f"left the body at step {failed}",
-        "collision": f"collision at step {failed}",
-        "missed_goal": "not in the goal at the end" if goal_at == "final" else "never in the goal",
-    }[outcome]
+    reason = _reason(outcome, failed, error, goal_at)
     if not keep_states:
         states = [states[0], y]
     return Execution(

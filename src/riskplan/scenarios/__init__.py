@@ -56,7 +56,7 @@ _HOME = {
     "Needle3DConfig": "needle3d_config",
     "Needle3DScenario": "needle3d",
     "Needle3DState": "needle3d_config",
-    "needle3d_steer": "needle3d",
+    "needle3d_steer": "needle3d_space",
     "ManipulationConfig": "manipulation",
     "ManipulationScenario": "manipulation",
     "ManipulationState": "manipulation",

@@ -39,7 +39,6 @@ Noise scaled to the scene as in 2-D: ``σ = 0.01 · max(size)``; actuation
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -55,6 +54,7 @@ from riskplan.scenarios.base import (
 )
 from riskplan.scenarios.bevel import needle_step, pose_step_jacobian
 from riskplan.scenarios.needle3d_config import Needle3DConfig, Needle3DState, _MeshData3D
+from riskplan.scenarios.needle3d_space import Needle3DSpace, needle3d_steer
 
 __all__ = [
     "PLANNING_ELEMENTS",
@@ -117,7 +117,13 @@ class Needle3DScenario(FEMScenario):
         )
 
     def actuation_cov(self) -> tuple:
-        """``diag(σ²)`` of ``config.actuation_std``."""
+        """``diag(σ²)`` of ``config.actuation_std``.
+
+        Returns
+        -------
+        tuple of tuple of float, shape (q, q)
+            The actuation noise covariance.
+        """
         s = self.config.actuation_std
         return tuple(
             tuple(s[i] ** 2 if i == j else 0.0 for j in range(len(s))) for i in range(len(s))
@@ -142,7 +148,13 @@ class Needle3DScenario(FEMScenario):
 
     def mesh_data(self, n_elements: int):
         """The block and tracked-point layout, cached per grid (element counts that give
-        the same grid share it)."""
+        the same grid share it).
+
+        Parameters
+        ----------
+        n_elements : int
+            Requested number of tetrahedra (rounded to a grid by :func:`~riskplan.scenarios.tissue3d.grid_for`).
+        """
         from riskplan.scenarios.tissue3d import grid_for
 
         d = self._meshes.get(n_elements)
@@ -163,7 +175,18 @@ class Needle3DScenario(FEMScenario):
 
     # ---- protocol -----------------------------------------------------------------
     def initial_state(self, params: SimParams | None = None) -> Needle3DState:
-        """Tip at ``config.start`` with the start frame, undeformed tissue, ``t = 0``."""
+        """Tip at ``config.start`` with the start frame, undeformed tissue, ``t = 0``.
+
+        Parameters
+        ----------
+        params : SimParams or None
+            The simulation parameters (``None``: :attr:`nominal_params`).
+
+        Returns
+        -------
+        Needle3DState
+            The state at ``t = 0``.
+        """
         params = params or self.nominal_params
         d = self.mesh_data(params.n_elements)
         cfg = self.config
@@ -182,7 +205,22 @@ class Needle3DScenario(FEMScenario):
 
     def step(self, state: Needle3DState, control, params: SimParams | None = None) -> Needle3DState:
         """``y_{t+1} = g(y_t, u_t, s)``: the exact screw step of the material frame, the
-        push ``f_int e₃`` at the new material point, the world pose (module docstring)."""
+        push ``f_int e₃`` at the new material point, the world pose (module docstring).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The state ``y_t``.
+        control : array_like, shape (q,)
+            The control ``(v, ω)`` (``(v, ω, ρ)`` with duty cycling).
+        params : SimParams or None
+            The simulation parameters (``None``: :attr:`nominal_params`).
+
+        Returns
+        -------
+        Needle3DState
+            The state ``y_{t+1}``.
+        """
         params = params or self.nominal_params
         self._check_state(state, params)
         u = check_control(control, self._bounds)
@@ -217,7 +255,20 @@ class Needle3DScenario(FEMScenario):
         return tracked, pose
 
     def transfer_state(self, state: Needle3DState, params: SimParams) -> Needle3DState:
-        """``state`` on the mesh of ``params`` (same material pose, push recomputed there)."""
+        """``state`` on the mesh of ``params`` (same material pose, push recomputed there).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The state on its own mesh.
+        params : SimParams
+            Parameters whose mesh the state is moved to.
+
+        Returns
+        -------
+        Needle3DState
+            The same material pose with the push recomputed on the new mesh.
+        """
         if not isinstance(state, Needle3DState):
             raise InvalidInputError(f"state: expected a Needle3DState, got {type(state).__name__}")
         d = self.mesh_data(params.n_elements)
@@ -238,17 +289,56 @@ class Needle3DScenario(FEMScenario):
     def a_prior(self, y_next: Needle3DState, params: SimParams) -> np.ndarray:
         """``(12, 12)`` the exact Jacobian of the kinematic step that led to ``y_next``
         (:func:`riskplan.scenarios.bevel.pose_step_jacobian`; the tissue's offset of the
-        world position is left to the fit on the excited directions)."""
+        world position is left to the fit on the excited directions).
+
+        Parameters
+        ----------
+        y_next : Needle3DState
+            The state after the step (its ``applied`` control is used).
+        params : SimParams
+            The simulation parameters (unused by the kinematic Jacobian).
+
+        Returns
+        -------
+        numpy.ndarray, shape (12, 12)
+            The Jacobian of the reduced state.
+        """
         u = y_next.applied
         cfg = self.config
         return pose_step_jacobian(u[0], u[1], tau=cfg.tau, kappa=cfg.curvature, rho=self._rho(u))
 
     def reduced(self, state: Needle3DState) -> np.ndarray:
-        """``x (12,)``: world position and the material frame (a copy)."""
+        """``x (12,)``: world position and the material frame (a copy).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        numpy.ndarray, shape (12,)
+            The reduced state ``x``.
+        """
         return np.array(state.pose)
 
     def observe(self, x, noise=None, rng=None) -> np.ndarray:
-        """``z = x[:3] + n`` (the tip position)."""
+        """``z = x[:3] + n`` (the tip position).
+
+        Parameters
+        ----------
+        x : array_like, shape (12,)
+            The reduced state.
+        noise : array_like, shape (3,), optional
+            The sensing noise to add; drawn with ``rng`` when ``None``.
+        rng : int, numpy.random.Generator or None
+            Seeds the drawn noise.
+
+        Returns
+        -------
+        numpy.ndarray, shape (3,)
+            The measured tip position.
+        """
         x = as_array(x, "x", shape=(12,))
         return x[:3] + gaussian_noise(self.sensing_cov, noise, rng, 3)
 
@@ -268,40 +358,140 @@ class Needle3DScenario(FEMScenario):
         return out
 
     def obstacles(self, state: Needle3DState) -> list[ConvexBody]:
-        """The deformed obstacles (ellipsoids, parallelepipeds) in ``state``."""
+        """The deformed obstacles (ellipsoids, parallelepipeds) in ``state``.
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        list of ConvexBody
+            The deformed obstacles.
+        """
         return self._bodies(state)[:-1]
 
     def goal(self, state: Needle3DState) -> ConvexBody:
-        """The deformed target (an ellipsoid)."""
+        """The deformed target (an ellipsoid).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        ConvexBody
+            The deformed target.
+        """
         return self._bodies(state)[-1]
 
     def goal_center(self, state: Needle3DState) -> np.ndarray:
+        """The deformed target's centre.
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        numpy.ndarray, shape (3,)
+            The centre in world coordinates.
+        """
         return self.goal(state).centre
 
     def inside(self, state: Needle3DState) -> bool:
-        """The tip's material point lies in the block."""
+        """The tip's material point lies in the block.
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        bool
+            Whether the tip is inside the tissue block.
+        """
         return self._data(state).block.contains(state.material[:3])
 
     def in_collision(self, state: Needle3DState) -> bool:
+        """The world tip lies in a deformed obstacle.
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        bool
+            Whether the tip is in collision.
+        """
         x = state.pose[:3]
         return any(bool(b.contains(x)) for b in self.obstacles(state))
 
     def in_goal(self, state: Needle3DState) -> bool:
+        """The world tip lies in the deformed target.
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        bool
+            Whether the tip is in the goal.
+        """
         return bool(self.goal(state).contains(state.pose[:3]))
 
     def goal_distance(self, state: Needle3DState) -> float:
+        """Distance of the world tip from the deformed target's centre (its tracked sample).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        float
+            The distance (length units of the block).
+        """
         d = self._data(state)
         a = d.slices[-1][0]
         c = d.centres[-1] + state.displacement[a]
         return float(np.linalg.norm(state.pose[:3] - c))
 
     def path(self, states) -> np.ndarray:
-        """World tip positions ``(T, 3)``."""
+        """World tip positions ``(T, 3)``.
+
+        Parameters
+        ----------
+        states : sequence of Needle3DState
+            The states of an execution.
+
+        Returns
+        -------
+        numpy.ndarray, shape (T, 3)
+            The world tip positions.
+        """
         return np.array([s.pose[:3] for s in states])
 
     def nodal_displacement(self, state: Needle3DState, params: SimParams | None = None):
         """The block's nodal displacement ``(N, 3)`` in ``state`` (recomputed from the push:
-        the state keeps the tracked points only)."""
+        the state keeps the tracked points only).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+        params : SimParams or None
+            The simulation parameters (``None``: :attr:`nominal_params`).
+        """
         params = params or self.nominal_params
         self._check_state(state, params)
         d = self.mesh_data(state.n_elements)
@@ -314,7 +504,20 @@ class Needle3DScenario(FEMScenario):
         return self.model(params).solve(F)
 
     def random_controls(self, n_steps: int, seed=None) -> np.ndarray:
-        """``(n_steps, q)`` random controls inside the bounds (demos and tests)."""
+        """``(n_steps, q)`` random controls inside the bounds (demos and tests).
+
+        Parameters
+        ----------
+        n_steps : int
+            Number of controls.
+        seed : int, numpy.random.Generator or None
+            Seeds the draws.
+
+        Returns
+        -------
+        numpy.ndarray, shape (n_steps, q)
+            Uniform controls inside :attr:`control_bounds`.
+        """
         n_steps = check_count(n_steps, "n_steps")
         gen = as_generator(seed)
         lo, hi = self._bounds[:, 0], self._bounds[:, 1]
@@ -329,7 +532,18 @@ class Needle3DScenario(FEMScenario):
         carries the tip and the target alike, so this is also where the deformed target's
         centre is then; the undeformed centre ``c`` lies about ``|u(c)|`` (0.07 on the
         default scene, most of the target radius) behind it, and a tree steered there stops
-        short of the deformed target."""
+        short of the deformed target.
+
+        Parameters
+        ----------
+        params : SimParams or None
+            The simulation parameters (``None``: :attr:`nominal_params`).
+
+        Returns
+        -------
+        numpy.ndarray, shape (3,)
+            The expected world goal point.
+        """
         params = params or self.nominal_params
         cfg = self.config
         c = np.asarray(cfg.target_center, dtype=np.float64)
@@ -343,7 +557,13 @@ class Needle3DScenario(FEMScenario):
     def planning_space(self) -> Needle3DSpace:
         """The RRT's space (:class:`Needle3DSpace`): the block, the needle's curvature, the
         expected goal point (:meth:`expected_goal_point`), 3 steps per edge and the
-        kinematic steering rule."""
+        kinematic steering rule.
+
+        Returns
+        -------
+        Needle3DSpace
+            The planning space.
+        """
         cfg = self.config
         return Needle3DSpace(
             size=np.asarray(cfg.size, dtype=np.float64),
@@ -353,81 +573,3 @@ class Needle3DScenario(FEMScenario):
                 needle3d_steer, tau=cfg.tau, kappa=cfg.curvature, duty=cfg.duty_cycle
             ),
         )
-
-
-@dataclass(frozen=True, eq=False)
-class Needle3DSpace:
-    """The 3-D needle's :class:`~riskplan.scenarios.space.PlanningSpace`.
-
-    Samples: a position uniform in the block and an axis ``e₃`` uniform on the sphere
-    (``e₁ = e₂ = 0``: the roll is not sampled). Metric (the 2-D needle's ``(x, y, r_min θ)``
-    in 3-D)::
-
-        d(x, x')² = |p − p'|² + (r ∠(e₃, e₃'))²
-
-    with ``r = 1/κ`` (an axis error of 1 rad counts like the arc the needle needs to turn by
-    it); towards the goal point the position only (any direction will do in the target).
-    Valid: the position lies in the block.
-    """
-
-    size: np.ndarray
-    goal: np.ndarray
-    radius: float
-    steer: object = None
-    steps_per_extension: int = 6
-    max_control_change: np.ndarray | None = None
-    dim: int = 12
-
-    def sample(self, gen: np.random.Generator, goal_bias: float = 0.0):
-        u = gen.random(4)
-        if u[-1] < goal_bias:
-            return self.goal.copy(), True
-        x = np.zeros(12)
-        x[:3] = u[:3] * self.size
-        a = gen.standard_normal(3)
-        x[9:12] = a / np.linalg.norm(a)
-        return x, False
-
-    def distance(self, xs: np.ndarray, x: np.ndarray, *, to_goal: bool = False) -> np.ndarray:
-        xs = np.asarray(xs, dtype=np.float64)
-        dp = xs[:, :3] - x[:3]
-        d2 = np.einsum("ij,ij->i", dp, dp)
-        if not to_goal:
-            c = np.clip(xs[:, 9:12] @ x[9:12], -1.0, 1.0)
-            ang = np.arccos(c)
-            d2 = d2 + (self.radius * ang) ** 2
-        return np.sqrt(d2)
-
-    def contains(self, x: np.ndarray) -> bool:
-        return bool(np.all(x[:3] >= 0.0) and np.all(x[:3] <= self.size))
-
-
-def needle3d_steer(x_from, x_to, bounds, n_steps: int, *, tau: float, kappa: float, duty: bool):
-    """A control towards the point ``x_to[:3]`` (a candidate of the RRT's goal-directed
-    extension): the best of a grid of constant controls — 5 speeds × 41 rotation rates (× 5
-    curvature fractions with duty cycling) spanning ``bounds`` — by the nearest approach to
-    the point of their exact kinematic paths over ``n_steps`` steps (the material frame,
-    without the tissue; the bevel's motion has no closed-form two-point steering)."""
-    from riskplan.scenarios.bevel import se3_exp_batch
-
-    p = np.asarray(x_from[:3], dtype=np.float64)
-    R = np.asarray(x_from[3:12], dtype=np.float64).reshape(3, 3).T
-    target = np.asarray(x_to[:3], dtype=np.float64)
-    lo, hi = bounds[:, 0], bounds[:, 1]
-    vs = lo[0] + (hi[0] - lo[0]) * np.array([0.2, 0.4, 0.6, 0.8, 1.0])
-    ws = np.linspace(lo[1], hi[1], 41)
-    rhos = np.linspace(lo[2], hi[2], 5) if duty else np.array([1.0])
-    V, Wg, P = (g.ravel() for g in np.meshgrid(vs, ws, rhos, indexing="ij"))
-    xi = np.zeros((len(V), 6))
-    xi[:, 2], xi[:, 3], xi[:, 5] = tau * V, tau * P * kappa * V, tau * Wg
-    E, dd = se3_exp_batch(xi)
-    Rk = np.broadcast_to(R, E.shape)
-    pk = np.broadcast_to(p, dd.shape)
-    best = np.full(len(V), np.inf)
-    for _ in range(int(n_steps)):
-        pk = pk + np.einsum("nij,nj->ni", Rk, dd)
-        Rk = Rk @ E
-        best = np.minimum(best, np.linalg.norm(pk - target, axis=1))
-    i = int(np.argmin(best))
-    u = np.array([V[i], Wg[i], P[i]])
-    return u[: bounds.shape[0]]

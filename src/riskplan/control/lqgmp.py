@@ -83,21 +83,19 @@ free at ``t + 1``.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from riskplan._validation import as_generator
 from riskplan.control.lqg import LQGController
-from riskplan.control.lqgmp3d import lqgmp_3d
+from riskplan.control.lqgmp3d import _check_arguments, lqgmp_3d
 from riskplan.control.lqgmp_common import (
     METHODS,
     LQGMPResult,
     _check_propagation,
     _factor,
-    _point_factor,
-    _regularised,
-    _truncate,
+    _mix,
+    _sigma_step,
+    _truncation_step,
     joint_covariances,
 )
 from riskplan.control.plan import NominalPlan
@@ -217,15 +215,6 @@ def _weights(body, k):
     Wi = ((1.0 - s) * W[None] + s * W[nxt][None]).reshape(-1, k)
     bi = ((1.0 - s) * base[None] + s * base[nxt][None]).reshape(-1, 2)
     return np.concatenate([base, bi]), np.concatenate([W, Wi]), n
-
-
-def _mix(col, W, base, mu, S):
-    """Means ``(..., n, 2)`` and covariances ``(..., n, 2, 2)`` of the points
-    ``base + W d`` for mean deviations ``mu (..., ≥p)`` and covariances ``S (..., ≥p, ≥p)``."""
-    Sp = S[..., col[:, None, :, None], col[None, :, None, :]]  # (..., k, k, 2, 2)
-    pts = base + np.einsum("rk,...kd->...rd", W, mu[..., col])
-    covs = np.einsum("ri,rj,...ijab->...rab", W, W, Sp)
-    return pts, covs
 
 
 def _outline_meets(polys, ring) -> bool:
@@ -387,6 +376,19 @@ def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed
     )
 
 
+def _goal_probability(sim, plan, mean_x, cov_x, goal_idx, n_goal_samples, seed) -> float:
+    """P(goal): the fraction of ``n_goal_samples`` draws of the final true state
+    ``N(x*_T + mean_x, cov_x)`` whose goal point lies in the goal region."""
+    T = plan.n_steps
+    p = mean_x.shape[0]
+    gen = as_generator(seed)
+    w, v = np.linalg.eigh(0.5 * (cov_x + cov_x.T))
+    fac = v * np.sqrt(np.clip(w, 0.0, None))
+    xT = plan.reduced[T] + mean_x + gen.standard_normal((int(n_goal_samples), p)) @ fac.T
+    goal_env = polygon_environment([_goal(sim, plan.states[T])])
+    return float(goal_env.contains(xT[:, goal_idx]).mean())
+
+
 def lqgmp(
     sim,
     plan: NominalPlan,
@@ -455,7 +457,7 @@ def lqgmp(
     A simulator with ``workspace_dim = 3`` (the 3-D needle) is evaluated by
     :func:`riskplan.control.lqgmp3d.lqgmp_3d` against its 3-D convex obstacles.
     """
-    from riskplan.collision import DEFAULT_CUTOFF, free_region
+    from riskplan.collision import DEFAULT_CUTOFF
 
     cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
     if getattr(sim, "workspace_dim", 2) == 3:  # 3-D convex obstacles (the 3-D needle)
@@ -471,16 +473,7 @@ def lqgmp(
         )
     if method not in METHODS:
         raise InvalidInputError(f"method: expected one of {METHODS}, got {method!r}")
-    if not isinstance(plan, NominalPlan):
-        raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
-    if not isinstance(controller, LQGController) or controller.n_steps != plan.n_steps:
-        raise InvalidInputError(
-            "controller: expected the LQGController of this plan (same number of steps)"
-        )
-    if int(n_goal_samples) != n_goal_samples or n_goal_samples < 1:
-        raise InvalidInputError(
-            f"n_goal_samples: expected a positive integer, got {n_goal_samples!r}"
-        )
+    _check_arguments(plan, controller, n_goal_samples)
     col, goal_idx = point_indices(sim)
     T = plan.n_steps
     p = plan.reduced.shape[1]
@@ -501,20 +494,8 @@ def lqgmp(
             cov[t + 1] = S = 0.5 * (S + S.T)
         _check_propagation(mean, cov)
         if method == "sampling":
-            return _sampled(
-                sim,
-                plan,
-                controller,
-                F,
-                Qn,
-                dm,
-                mean,
-                cov,
-                col,
-                goal_idx,
-                n_goal_samples,
-                seed,
-            )
+            rest = (F, Qn, dm, mean, cov, col, goal_idx, n_goal_samples, seed)
+            return _sampled(sim, plan, controller, *rest)
         fast = _sigma_free(sim, plan, mean, cov, col, p)
         S = cov[0].copy()
         mu = np.zeros(2 * nz)
@@ -538,47 +519,17 @@ def lqgmp(
             mean[t + 1], cov[t + 1] = mu, S
             continue
         if truncating:
-            p_t = 0.0
-            for j in range(len(pts)):
-                sl = slice(j, j + 1)
-                # this point under the truncations so far
-                pj, Sp = _mix(col, W[sl], base[sl], mu[:p], S)
-                pj, Sp = pj[0], _regularised(Sp[0])
-                if Sp is None:
-                    continue  # a deterministic point outside every obstacle: no risk
-                U = _point_factor(Sp, t)
-                fr = free_region(pj, U, env, cutoff=cutoff)
-                p_t += float(fr.bound_terms.sum())
-                for nrm, off in zip(fr.normals, fr.offsets):
-                    c = np.zeros(2 * nz)
-                    for i in np.flatnonzero(W[j]):
-                        c[col[i]] += W[j, i] * nrm
-                    mu, S = _truncate(mu, S, c, off - float(nrm @ base[j]))
-            free[t] = 1.0 - min(1.0, p_t)
+            mu, S, free[t] = _truncation_step(col, W, base, mu, S, p, env, t, cutoff)
         else:
-            c_min = math.inf
-            for j in range(len(pts)):
-                Sp = _regularised(covs[j])
-                if Sp is None:
-                    continue
-                U = _point_factor(Sp, t)
-                d = free_region(pts[j], U, env, cutoff=cutoff).distances
-                if d.size:
-                    c_min = min(c_min, float(d.min()))
-            free[t] = 1.0 if math.isinf(c_min) else -math.expm1(-0.5 * c_min * c_min)
+            free[t] = _sigma_step(pts, covs, env, t, cutoff)
         mean[t + 1], cov[t + 1] = mu, S
     _check_propagation(mean, cov)
     if not truncating and fast is not None:
         free = fast
     p_free = float(np.prod(free))
-    # P(goal): sample the final true state
-    gen = as_generator(seed)
-    Sx = cov[T, :p, :p]
-    w, v = np.linalg.eigh(0.5 * (Sx + Sx.T))
-    fac = v * np.sqrt(np.clip(w, 0.0, None))
-    xT = plan.reduced[T] + mean[T, :p] + gen.standard_normal((int(n_goal_samples), p)) @ fac.T
-    goal_env = polygon_environment([_goal(sim, plan.states[T])])
-    p_goal = float(goal_env.contains(xT[:, goal_idx]).mean())
+    p_goal = _goal_probability(
+        sim, plan, mean[T, :p], cov[T, :p, :p], goal_idx, n_goal_samples, seed
+    )
     return LQGMPResult(
         p_success=p_free * p_goal,
         p_collision_free=p_free,

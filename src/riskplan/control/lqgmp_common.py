@@ -1,7 +1,8 @@
 """What LQG-MP's 2-D and 3-D estimates share: the methods, the result, the joint
 recursion of true and estimated state, and the Gaussian helpers (truncation by a half-space,
-the propagation check, the eigen-factor). :mod:`riskplan.control.lqgmp` and
-:mod:`riskplan.control.lqgmp3d` both build on it."""
+the propagation check, the eigen-factor), and the 2-D per-step helpers of the sigma and
+truncation methods. :mod:`riskplan.control.lqgmp` and :mod:`riskplan.control.lqgmp3d` both
+build on it."""
 
 from __future__ import annotations
 
@@ -145,3 +146,56 @@ def _point_factor(Sp: np.ndarray, t: int) -> np.ndarray:
         raise NumericalError(
             f"LQG-MP: the position covariance at step {t} has no Cholesky factor ({exc})", step=t
         ) from exc
+
+
+def _mix(col, W, base, mu, S):
+    """Means ``(..., n, 2)`` and covariances ``(..., n, 2, 2)`` of the points
+    ``base + W d`` for mean deviations ``mu (..., ≥p)`` and covariances ``S (..., ≥p, ≥p)``."""
+    Sp = S[..., col[:, None, :, None], col[None, :, None, :]]  # (..., k, k, 2, 2)
+    pts = base + np.einsum("rk,...kd->...rd", W, mu[..., col])
+    covs = np.einsum("ri,rj,...ijab->...rab", W, W, Sp)
+    return pts, covs
+
+
+def _truncation_step(col, W, base, mu, S, p, env, t, cutoff):
+    """``method="truncation"`` at step ``t``: each body point's bound against ``env`` under
+    the truncations so far, then the truncation of ``N(mu, S)`` by its free region.
+    Returns the truncated ``mu``, ``S`` and the step's factor of ``P(collision free)``."""
+    from riskplan.collision import free_region
+
+    nz = mu.shape[0] // 2
+    p_t = 0.0
+    for j in range(len(base)):
+        sl = slice(j, j + 1)
+        # this point under the truncations so far
+        pj, Sp = _mix(col, W[sl], base[sl], mu[:p], S)
+        pj, Sp = pj[0], _regularised(Sp[0])
+        if Sp is None:
+            continue  # a deterministic point outside every obstacle: no risk
+        U = _point_factor(Sp, t)
+        fr = free_region(pj, U, env, cutoff=cutoff)
+        p_t += float(fr.bound_terms.sum())
+        for nrm, off in zip(fr.normals, fr.offsets):
+            c = np.zeros(2 * nz)
+            for i in np.flatnonzero(W[j]):
+                c[col[i]] += W[j, i] * nrm
+            mu, S = _truncate(mu, S, c, off - float(nrm @ base[j]))
+    return mu, S, 1.0 - min(1.0, p_t)
+
+
+def _sigma_step(pts, covs, env, t, cutoff) -> float:
+    """``method="sigma"`` at step ``t`` (the per-step path): the factor of ``P(collision
+    free)`` from the least whitened distance of the body points ``pts (n, 2)`` with
+    covariances ``covs (n, 2, 2)`` to ``env``."""
+    from riskplan.collision import free_region
+
+    c_min = math.inf
+    for j in range(len(pts)):
+        Sp = _regularised(covs[j])
+        if Sp is None:
+            continue
+        U = _point_factor(Sp, t)
+        d = free_region(pts[j], U, env, cutoff=cutoff).distances
+        if d.size:
+            c_min = min(c_min, float(d.min()))
+    return 1.0 if math.isinf(c_min) else -math.expm1(-0.5 * c_min * c_min)

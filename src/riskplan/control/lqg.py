@@ -53,6 +53,7 @@ from riskplan.control.kalman import kalman_gains
 from riskplan.control.linearize import Linearization
 from riskplan.control.lqr import lqr_gains
 from riskplan.control.plan import NominalPlan
+from riskplan.control.sensing import nominal_measurements, sense
 from riskplan.control.ukf import execution_ukf
 from riskplan.errors import (
     ConvergenceError,
@@ -312,29 +313,23 @@ class Execution:
         return self.outcome == "left_tissue"
 
 
-def _observe_nominal(sim, x: np.ndarray) -> np.ndarray:
-    return np.asarray(sim.observe(x, noise=np.zeros(sim.obs_dim)), dtype=np.float64)
-
-
-def _nominal_measurements(sim, plan):
-    """``(measure, z*_1 .. z*_T)``: a simulator whose measurement needs the full state
-    (``measure(state, noise, rng)``: the needle in its material frame) is sensed through
-    it, any other through ``observe`` of the reduced state."""
-    measure = getattr(sim, "measure", None)
-    if measure is not None:
-        zeros = np.zeros(sim.obs_dim)
-        z = [np.asarray(measure(y, noise=zeros), dtype=np.float64) for y in plan.states[1:]]
-    else:
-        z = [_observe_nominal(sim, x) for x in plan.reduced[1:]]
-    return measure, z
-
-
 GOAL_AT = ("final", "any")
 
 
 def _check_goal_at(goal_at: str) -> None:
     if goal_at not in GOAL_AT:
         raise InvalidInputError(f"goal_at: expected one of {GOAL_AT}, got {goal_at!r}")
+
+
+def _reason(outcome: str, failed, error, goal_at: str):
+    """The reason an execution's ``outcome`` names (``None`` for a success)."""
+    return {
+        "success": None,
+        "solver_failure": error,
+        "left_tissue": f"left the body at step {failed}",
+        "collision": f"collision at step {failed}",
+        "missed_goal": "not in the goal at the end" if goal_at == "final" else "never in the goal",
+    }[outcome]
 
 
 def execute(
@@ -403,8 +398,11 @@ def execute(
         L, K = controller.L, controller.K
         A, B, H = controller.model()[:3]
         xhat = np.zeros(A.shape[1])
+        # a simulator whose measurement needs the full state (``measure(state, noise,
+        # rng)``: the needle in its material frame) is sensed through it
+        measure = getattr(sim, "measure", None)
+        z_nominal = nominal_measurements(sim, plan, measure)
         ukf = execution_ukf(sim, plan, controller) if estimator == "ukf" else None
-        measure, z_nominal = _nominal_measurements(sim, plan)
     collided, failed, error, outcome = False, None, None, None
     inside = getattr(sim, "inside", None)
     for t in range(T):
@@ -426,11 +424,7 @@ def execute(
             states.append(y)
         xs.append(x)
         if closed:
-            if measure is not None:
-                z = np.asarray(measure(y, rng=gen), dtype=np.float64)
-            else:
-                z = np.asarray(sim.observe(x, rng=gen), dtype=np.float64)
-            zbar, ubar = z - z_nominal[t], u - plan.controls[t]
+            zbar, ubar = sense(sim, measure, y, x, gen) - z_nominal[t], u - plan.controls[t]
             if ukf is not None:
                 xhat = ukf(t, xhat, ubar, zbar)
             else:
@@ -450,13 +444,7 @@ def execute(
     reached = outcome is None and (goal_at == "any" or len(xs) == T + 1) and bool(sim.in_goal(y))
     if outcome is None:
         outcome = "success" if reached else "missed_goal"
-    reason = {
-        "success": None,
-        "solver_failure": error,
-        "left_tissue": f"left the body at step {failed}",
-        "collision": f"collision at step {failed}",
-        "missed_goal": "not in the goal at the end" if goal_at == "final" else "never in the goal",
-    }[outcome]
+    reason = _reason(outcome, failed, error, goal_at)
     if not keep_states:
         states = [states[0], y]
     return Execution(

@@ -83,13 +83,21 @@ free at ``t + 1``.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-
 import numpy as np
 
 from riskplan._validation import as_generator
 from riskplan.control.lqg import LQGController
+from riskplan.control.lqgmp3d import _check_arguments, lqgmp_3d
+from riskplan.control.lqgmp_common import (
+    METHODS,
+    LQGMPResult,
+    _check_propagation,
+    _factor,
+    _mix,
+    _sigma_step,
+    _truncation_step,
+    joint_covariances,
+)
 from riskplan.control.plan import NominalPlan
 from riskplan.errors import InvalidInputError
 
@@ -103,33 +111,10 @@ __all__ = [
     "polygon_environment",
 ]
 
-METHODS = ("sigma", "truncation", "sampling")
 
 #: points checked inside each edge of a declared outline by the sigma and truncation methods
 #: (evenly spaced; the sampling method tests the edges themselves)
 OUTLINE_POINTS = 8
-
-# whitened variance below which a direction counts as deterministic (no truncation, no bound)
-_TINY = 1e-300
-
-
-@dataclass(frozen=True, eq=False)
-class LQGMPResult:
-    """LQG-MP estimate of one plan.
-
-    ``p_success``, ``p_collision_free``, ``p_goal`` (floats); ``p_free_steps (T,)`` the
-    per-step factor of ``p_collision_free`` (steps 1..T); ``mean (T + 1, 2p)`` and
-    ``cov (T + 1, 2p, 2p)`` of ``ξ_t = (x̄_t, x̂_t)`` (the mean is zero for ``"sigma"``;
-    after truncation for ``"truncation"``, and carries the drift with ``drift=True``); ``method``.
-    """
-
-    p_success: float
-    p_collision_free: float
-    p_goal: float
-    p_free_steps: np.ndarray
-    mean: np.ndarray
-    cov: np.ndarray
-    method: str
 
 
 def point_indices(sim) -> tuple[np.ndarray, np.ndarray]:
@@ -232,15 +217,6 @@ def _weights(body, k):
     return np.concatenate([base, bi]), np.concatenate([W, Wi]), n
 
 
-def _mix(col, W, base, mu, S):
-    """Means ``(..., n, 2)`` and covariances ``(..., n, 2, 2)`` of the points
-    ``base + W d`` for mean deviations ``mu (..., ≥p)`` and covariances ``S (..., ≥p, ≥p)``."""
-    Sp = S[..., col[:, None, :, None], col[None, :, None, :]]  # (..., k, k, 2, 2)
-    pts = base + np.einsum("rk,...kd->...rd", W, mu[..., col])
-    covs = np.einsum("ri,rj,...ijab->...rab", W, W, Sp)
-    return pts, covs
-
-
 def _outline_meets(polys, ring) -> bool:
     """True if the closed polygon ``ring (n, 2)`` meets one of ``polys``."""
     from riskplan import geometry2d as geo
@@ -255,62 +231,6 @@ def polygon_environment(polygons):
     from riskplan.collision import Environment
 
     return Environment.from_polygons(polygons, validate=False)
-
-
-def joint_covariances(
-    ctrl: LQGController, drift: bool = False
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``F (T, 2n, 2n)``, the noise term ``G diag(M, N) Gᵀ (T, 2n, 2n)`` and the mean input
-    ``G (d̄, 0) (T, 2n)`` of the recursion (zero unless ``drift``; then ``M − d̄ d̄ᵀ``
-    replaces the second moment ``M``), for the controller's model
-    (:meth:`~riskplan.control.lqg.LQGController.model`: ``n = p``, or ``p + q`` with the
-    disturbance state)."""
-    lin = ctrl.lin
-    if drift and ctrl.disturbance:
-        raise InvalidInputError(
-            "drift=True: not defined for a disturbance-state controller (its d carries the persistent shift)"
-        )
-    A, B, H, M, N = ctrl.model()
-    L, K = ctrl.L, ctrl.K
-    d = lin.drift if drift else np.zeros(A.shape[:2])
-    if drift:
-        M = M - d[:, :, None] * d[:, None, :]
-    T, p, _ = A.shape
-    m = H.shape[1]
-    BL = B @ L
-    KHA = K @ H @ A
-    F = np.empty((T, 2 * p, 2 * p))
-    F[:, :p, :p] = A
-    F[:, :p, p:] = BL
-    F[:, p:, :p] = KHA
-    F[:, p:, p:] = A + BL - KHA
-    G = np.zeros((T, 2 * p, p + m))
-    G[:, :p, :p] = np.eye(p)
-    G[:, p:, :p] = K @ H
-    G[:, p:, p:] = K
-    Wn = np.zeros((T, p + m, p + m))
-    Wn[:, :p, :p] = M
-    Wn[:, p:, p:] = N
-    return F, G @ Wn @ np.swapaxes(G, 1, 2), np.einsum("tij,tj->ti", G[:, :, :p], d)
-
-
-def _truncate(mu, S, c, b):
-    """Condition ``N(mu, S)`` on ``cᵀξ <= b`` (moment matching of the truncated normal)."""
-    from scipy.special import ndtr
-
-    Sc = S @ c
-    var = float(c @ Sc)
-    if var <= _TINY:
-        return mu, S
-    sd = math.sqrt(var)
-    alpha = (b - float(c @ mu)) / sd
-    Phi = float(ndtr(alpha))
-    if Phi <= 1e-300:
-        return mu, S  # the whole mass is beyond: nothing sensible to keep; the bound says p = 1
-    lam = math.exp(-0.5 * alpha * alpha) / math.sqrt(2 * math.pi) / Phi
-    mu = mu - Sc * (lam / sd)
-    S = S - np.outer(Sc, Sc) * ((alpha * lam + lam * lam) / var)
-    return mu, 0.5 * (S + S.T)
 
 
 def _edges(polys) -> tuple[np.ndarray, np.ndarray]:
@@ -401,56 +321,6 @@ def _sigma_free(sim, plan, mean, cov, col, p) -> np.ndarray | None:
     return np.where(hit, 0.0, free)
 
 
-def _regularised(Sp: np.ndarray) -> np.ndarray | None:
-    """A point's ``(2, 2)`` covariance as both sigma paths use it: ``None`` for a
-    deterministic point (largest variance ≤ 1e-24: no risk outside an obstacle), else the
-    covariance with a jitter of 1e-9 of its largest variance where it is near-singular
-    (smallest ≤ 1e-12 of the largest), as :func:`_sigma_free` does: a rank-1 spread keeps
-    its distances along its direction and gets a Cholesky factor."""
-    ev = np.linalg.eigvalsh(Sp)
-    if ev[-1] <= 1e-24:
-        return None
-    if ev[0] <= 1e-12 * ev[-1]:
-        return Sp + 1e-9 * ev[-1] * np.eye(2)
-    return Sp
-
-
-def _point_factor(Sp: np.ndarray, t: int) -> np.ndarray:
-    """The whitening factor of a point covariance at step ``t``; one that has none after
-    :func:`_regularised` (a degenerate linear model) is a :class:`NumericalError` naming the
-    step, not bad input: a plan evaluation counts it as a failed candidate."""
-    from riskplan.collision import precision_cholesky_from_covariance
-    from riskplan.errors import NumericalError
-
-    try:
-        return precision_cholesky_from_covariance(Sp)
-    except InvalidInputError as exc:
-        raise NumericalError(
-            f"LQG-MP: the position covariance at step {t} has no Cholesky factor ({exc})", step=t
-        ) from exc
-
-
-def _check_propagation(mean: np.ndarray, cov: np.ndarray, first: int = 0) -> None:
-    """Raise :class:`NumericalError` naming the first step whose propagated mean or covariance
-    (states ``first, first + 1, ..``) left float64's range (finite gains of a very unstable
-    model can still overflow it)."""
-    ok = np.isfinite(mean).all(axis=-1) & np.isfinite(cov).all(axis=(-2, -1))
-    if not ok.all():
-        from riskplan.errors import NumericalError
-
-        t = first + int(np.flatnonzero(~ok)[0])
-        raise NumericalError(
-            f"LQG-MP covariance propagation overflowed float64 at step {t - 1} (state {t})",
-            step=t - 1,
-        )
-
-
-def _factor(S: np.ndarray) -> np.ndarray:
-    """``V`` with ``V Vᵀ = S`` for a symmetric positive semi-definite ``S`` (eigen-factor)."""
-    w, v = np.linalg.eigh(0.5 * (S + S.T))
-    return v * np.sqrt(np.clip(w, 0.0, None))
-
-
 def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed) -> LQGMPResult:
     """``method="sampling"``: ``n`` joint trajectories of the linear-Gaussian recursion."""
     from riskplan import geometry2d as geo
@@ -504,6 +374,19 @@ def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed
         cov=cov,
         method="sampling",
     )
+
+
+def _goal_probability(sim, plan, mean_x, cov_x, goal_idx, n_goal_samples, seed) -> float:
+    """P(goal): the fraction of ``n_goal_samples`` draws of the final true state
+    ``N(x*_T + mean_x, cov_x)`` whose goal point lies in the goal region."""
+    T = plan.n_steps
+    p = mean_x.shape[0]
+    gen = as_generator(seed)
+    w, v = np.linalg.eigh(0.5 * (cov_x + cov_x.T))
+    fac = v * np.sqrt(np.clip(w, 0.0, None))
+    xT = plan.reduced[T] + mean_x + gen.standard_normal((int(n_goal_samples), p)) @ fac.T
+    goal_env = polygon_environment([_goal(sim, plan.states[T])])
+    return float(goal_env.contains(xT[:, goal_idx]).mean())
 
 
 def lqgmp(
@@ -574,12 +457,10 @@ def lqgmp(
     A simulator with ``workspace_dim = 3`` (the 3-D needle) is evaluated by
     :func:`riskplan.control.lqgmp3d.lqgmp_3d` against its 3-D convex obstacles.
     """
-    from riskplan.collision import DEFAULT_CUTOFF, free_region
+    from riskplan.collision import DEFAULT_CUTOFF
 
     cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
     if getattr(sim, "workspace_dim", 2) == 3:  # 3-D convex obstacles (the 3-D needle)
-        from riskplan.control.lqgmp3d import lqgmp_3d
-
         return lqgmp_3d(
             sim,
             plan,
@@ -592,16 +473,7 @@ def lqgmp(
         )
     if method not in METHODS:
         raise InvalidInputError(f"method: expected one of {METHODS}, got {method!r}")
-    if not isinstance(plan, NominalPlan):
-        raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
-    if not isinstance(controller, LQGController) or controller.n_steps != plan.n_steps:
-        raise InvalidInputError(
-            "controller: expected the LQGController of this plan (same number of steps)"
-        )
-    if int(n_goal_samples) != n_goal_samples or n_goal_samples < 1:
-        raise InvalidInputError(
-            f"n_goal_samples: expected a positive integer, got {n_goal_samples!r}"
-        )
+    _check_arguments(plan, controller, n_goal_samples)
     col, goal_idx = point_indices(sim)
     T = plan.n_steps
     p = plan.reduced.shape[1]
@@ -622,20 +494,8 @@ def lqgmp(
             cov[t + 1] = S = 0.5 * (S + S.T)
         _check_propagation(mean, cov)
         if method == "sampling":
-            return _sampled(
-                sim,
-                plan,
-                controller,
-                F,
-                Qn,
-                dm,
-                mean,
-                cov,
-                col,
-                goal_idx,
-                n_goal_samples,
-                seed,
-            )
+            rest = (F, Qn, dm, mean, cov, col, goal_idx, n_goal_samples, seed)
+            return _sampled(sim, plan, controller, *rest)
         fast = _sigma_free(sim, plan, mean, cov, col, p)
         S = cov[0].copy()
         mu = np.zeros(2 * nz)
@@ -659,47 +519,17 @@ def lqgmp(
             mean[t + 1], cov[t + 1] = mu, S
             continue
         if truncating:
-            p_t = 0.0
-            for j in range(len(pts)):
-                sl = slice(j, j + 1)
-                # this point under the truncations so far
-                pj, Sp = _mix(col, W[sl], base[sl], mu[:p], S)
-                pj, Sp = pj[0], _regularised(Sp[0])
-                if Sp is None:
-                    continue  # a deterministic point outside every obstacle: no risk
-                U = _point_factor(Sp, t)
-                fr = free_region(pj, U, env, cutoff=cutoff)
-                p_t += float(fr.bound_terms.sum())
-                for nrm, off in zip(fr.normals, fr.offsets):
-                    c = np.zeros(2 * nz)
-                    for i in np.flatnonzero(W[j]):
-                        c[col[i]] += W[j, i] * nrm
-                    mu, S = _truncate(mu, S, c, off - float(nrm @ base[j]))
-            free[t] = 1.0 - min(1.0, p_t)
+            mu, S, free[t] = _truncation_step(col, W, base, mu, S, p, env, t, cutoff)
         else:
-            c_min = math.inf
-            for j in range(len(pts)):
-                Sp = _regularised(covs[j])
-                if Sp is None:
-                    continue
-                U = _point_factor(Sp, t)
-                d = free_region(pts[j], U, env, cutoff=cutoff).distances
-                if d.size:
-                    c_min = min(c_min, float(d.min()))
-            free[t] = 1.0 if math.isinf(c_min) else -math.expm1(-0.5 * c_min * c_min)
+            free[t] = _sigma_step(pts, covs, env, t, cutoff)
         mean[t + 1], cov[t + 1] = mu, S
     _check_propagation(mean, cov)
     if not truncating and fast is not None:
         free = fast
     p_free = float(np.prod(free))
-    # P(goal): sample the final true state
-    gen = as_generator(seed)
-    Sx = cov[T, :p, :p]
-    w, v = np.linalg.eigh(0.5 * (Sx + Sx.T))
-    fac = v * np.sqrt(np.clip(w, 0.0, None))
-    xT = plan.reduced[T] + mean[T, :p] + gen.standard_normal((int(n_goal_samples), p)) @ fac.T
-    goal_env = polygon_environment([_goal(sim, plan.states[T])])
-    p_goal = float(goal_env.contains(xT[:, goal_idx]).mean())
+    p_goal = _goal_probability(
+        sim, plan, mean[T, :p], cov[T, :p, :p], goal_idx, n_goal_samples, seed
+    )
     return LQGMPResult(
         p_success=p_free * p_goal,
         p_collision_free=p_free,

@@ -13,7 +13,7 @@ parallelepipeds (:class:`riskplan.geometry3d.ConvexBody`) — with the three met
   (:func:`riskplan.geometry3d.nearest_to_origin`; convex obstacles need one each, the 2-D
   polygons' edge-by-edge construction is not needed); ``p_t = Σ_j (1 − Φ(d_j))`` and the
   joint Gaussian of ``ξ_t`` is truncated to each half-space in turn
-  (:func:`riskplan.control.lqgmp._truncate`, moment matching), so later steps see only the
+  (:func:`riskplan.control.lqgmp_common._truncate`, moment matching), so later steps see only the
   trajectories that survived; ``P(no collision) = ∏_t (1 − min(1, p_t))``. Obstacles farther
   than ``cutoff`` whitened units are skipped.
 * ``"per-step"`` (the estimate Patil 2012 compares the truncation with): the same
@@ -35,7 +35,7 @@ from scipy.special import ndtr
 from scipy.stats import chi2
 
 from riskplan._validation import as_generator
-from riskplan.control.lqgmp import (
+from riskplan.control.lqgmp_common import (
     METHODS,
     LQGMPResult,
     _check_propagation,
@@ -58,6 +58,24 @@ def _point_cov(S, p3):
     return S[np.ix_(p3, p3)]
 
 
+def _check_arguments(plan, controller, n_goal_samples) -> None:
+    """Raise :class:`InvalidInputError` unless ``plan`` is a :class:`NominalPlan`,
+    ``controller`` its :class:`LQGController` and ``n_goal_samples`` a positive integer."""
+    from riskplan.control.lqg import LQGController
+    from riskplan.control.plan import NominalPlan
+
+    if not isinstance(plan, NominalPlan):
+        raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
+    if not isinstance(controller, LQGController) or controller.n_steps != plan.n_steps:
+        raise InvalidInputError(
+            "controller: expected the LQGController of this plan (same number of steps)"
+        )
+    if int(n_goal_samples) != n_goal_samples or n_goal_samples < 1:
+        raise InvalidInputError(
+            f"n_goal_samples: expected a positive integer, got {n_goal_samples!r}"
+        )
+
+
 def lqgmp_3d(
     sim,
     plan,
@@ -78,19 +96,7 @@ def lqgmp_3d(
     cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
     if method not in METHODS_3D:
         raise InvalidInputError(f"method: expected one of {METHODS_3D}, got {method!r}")
-    from riskplan.control.lqg import LQGController
-    from riskplan.control.plan import NominalPlan
-
-    if not isinstance(plan, NominalPlan):
-        raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
-    if not isinstance(controller, LQGController) or controller.n_steps != plan.n_steps:
-        raise InvalidInputError(
-            "controller: expected the LQGController of this plan (same number of steps)"
-        )
-    if int(n_goal_samples) != n_goal_samples or n_goal_samples < 1:
-        raise InvalidInputError(
-            f"n_goal_samples: expected a positive integer, got {n_goal_samples!r}"
-        )
+    _check_arguments(plan, controller, n_goal_samples)
     pos = np.asarray(getattr(sim, "goal_point_indices", (0, 1, 2)), dtype=np.int64)
     if pos.shape != (3,):
         raise InvalidInputError("sim.goal_point_indices: expected the 3 indices of the position")

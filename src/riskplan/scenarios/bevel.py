@@ -47,21 +47,62 @@ __all__ = [
 
 
 def hat(w) -> np.ndarray:
-    """``[w]× (3, 3)``: the skew matrix with ``[w]× a = w × a``."""
+    """``[w]× (3, 3)``: the skew matrix with ``[w]× a = w × a``.
+
+    Parameters
+    ----------
+    w : array_like, shape (3,)
+        The vector.
+
+    Returns
+    -------
+    numpy.ndarray, shape (3, 3)
+        The skew-symmetric matrix of ``w``.
+    """
     x, y, z = (float(c) for c in w)
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
 def bevel_twist(v: float, omega: float, kappa: float, rho: float = 1.0) -> np.ndarray:
     """Body twist ``ξ (6,)`` = ``(v_b, ω_b)`` of the unicycle model (module docstring):
-    ``(0, 0, v, ρ κ v, 0, ω)``."""
+    ``(0, 0, v, ρ κ v, 0, ω)``.
+
+    Parameters
+    ----------
+    v : float
+        Insertion speed along e₃ (length per unit time).
+    omega : float
+        Spin rate about e₃ (rad per unit time).
+    kappa : float
+        Curvature κ of the bevel tip (1 / length).
+    rho : float
+        Duty-cycle factor ρ ∈ [0, 1] scaling the curvature.
+
+    Returns
+    -------
+    numpy.ndarray, shape (6,)
+        The twist ``(v_b, ω_b)``.
+    """
     return np.array([0.0, 0.0, float(v), float(rho) * float(kappa) * float(v), 0.0, float(omega)])
 
 
 def se3_exp(xi) -> tuple[np.ndarray, np.ndarray]:
     """``(E (3, 3), d (3,))`` = ``exp(ξ̂)`` for a twist ``ξ = (v, ω) (6,)`` (module
     docstring; series expansions of the coefficients below θ = 1e-4, where the closed
-    forms lose digits)."""
+    forms lose digits).
+
+    Parameters
+    ----------
+    xi : array_like, shape (6,)
+        The twist: linear part ``v`` then angular part ``ω``.
+
+    Returns
+    -------
+    E : numpy.ndarray, shape (3, 3)
+        The rotation of ``exp(ξ̂)``.
+    d : numpy.ndarray, shape (3,)
+        Its translation.
+    """
     v = np.asarray(xi[:3], dtype=np.float64)
     w = np.asarray(xi[3:], dtype=np.float64)
     th2 = float(w @ w)
@@ -82,7 +123,20 @@ def se3_exp(xi) -> tuple[np.ndarray, np.ndarray]:
 
 
 def se3_exp_batch(xi) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`se3_exp` over a batch ``xi (n, 6)``: ``(E (n, 3, 3), d (n, 3))``."""
+    """:func:`se3_exp` over a batch ``xi (n, 6)``: ``(E (n, 3, 3), d (n, 3))``.
+
+    Parameters
+    ----------
+    xi : array_like, shape (n, 6)
+        The twists, one per row.
+
+    Returns
+    -------
+    E : numpy.ndarray, shape (n, 3, 3)
+        The rotations.
+    d : numpy.ndarray, shape (n, 3)
+        The translations.
+    """
     xi = np.asarray(xi, dtype=np.float64)
     v, w = xi[:, :3], xi[:, 3:]
     th2 = np.einsum("ij,ij->i", w, w)
@@ -103,7 +157,32 @@ def se3_exp_batch(xi) -> tuple[np.ndarray, np.ndarray]:
 
 
 def needle_step(R, p, v, omega, *, tau: float, kappa: float, rho: float = 1.0):
-    """One exact step ``g_{t+1} = g_t exp(τ ξ̂)`` of the unicycle model: ``(R' (3, 3), p' (3,))``."""
+    """One exact step ``g_{t+1} = g_t exp(τ ξ̂)`` of the unicycle model: ``(R' (3, 3), p' (3,))``.
+
+    Parameters
+    ----------
+    R : array_like, shape (3, 3)
+        Tip frame before the step (columns e₁, e₂, e₃).
+    p : array_like, shape (3,)
+        Tip position before the step.
+    v : float
+        Insertion speed (length per unit time).
+    omega : float
+        Spin rate (rad per unit time).
+    tau : float
+        Step duration.
+    kappa : float
+        Curvature κ (1 / length).
+    rho : float
+        Duty-cycle factor ρ scaling the curvature.
+
+    Returns
+    -------
+    R : numpy.ndarray, shape (3, 3)
+        Tip frame after the step.
+    p : numpy.ndarray, shape (3,)
+        Tip position after the step.
+    """
     E, d = se3_exp(tau * bevel_twist(v, omega, kappa, rho))
     R = np.asarray(R, dtype=np.float64)
     return R @ E, np.asarray(p, dtype=np.float64) + R @ d
@@ -111,7 +190,34 @@ def needle_step(R, p, v, omega, *, tau: float, kappa: float, rho: float = 1.0):
 
 def rk4_needle(R, p, v, omega, *, tau: float, kappa: float, rho: float = 1.0, n: int = 1000):
     """``ġ = g ξ̂`` integrated with ``n`` classical Runge–Kutta steps (the independent
-    oracle of :func:`needle_step`; the rotation drifts off SO(3) by O(h⁴))."""
+    oracle of :func:`needle_step`; the rotation drifts off SO(3) by O(h⁴)).
+
+    Parameters
+    ----------
+    R : array_like, shape (3, 3)
+        Tip frame at the start.
+    p : array_like, shape (3,)
+        Tip position at the start.
+    v : float
+        Insertion speed (length per unit time).
+    omega : float
+        Spin rate (rad per unit time).
+    tau : float
+        Duration integrated over.
+    kappa : float
+        Curvature κ (1 / length).
+    rho : float
+        Duty-cycle factor ρ scaling the curvature.
+    n : int
+        Number of Runge–Kutta steps (each ``τ / n`` long).
+
+    Returns
+    -------
+    R : numpy.ndarray, shape (3, 3)
+        Tip frame at the end.
+    p : numpy.ndarray, shape (3,)
+        Tip position at the end.
+    """
     xi = bevel_twist(v, omega, kappa, rho)
     W, vb = hat(xi[3:]), xi[:3]
     h = tau / n
@@ -132,23 +238,66 @@ def rk4_needle(R, p, v, omega, *, tau: float, kappa: float, rho: float = 1.0, n:
 
 
 def pose_vector(R, p) -> np.ndarray:
-    """``(12,)`` = ``(p, e₁, e₂, e₃)``, the columns of ``R`` after the position."""
+    """``(12,)`` = ``(p, e₁, e₂, e₃)``, the columns of ``R`` after the position.
+
+    Parameters
+    ----------
+    R : array_like, shape (3, 3)
+        Frame (columns e₁, e₂, e₃).
+    p : array_like, shape (3,)
+        Position.
+
+    Returns
+    -------
+    numpy.ndarray, shape (12,)
+        The pose vector.
+    """
     return np.concatenate(
         [np.asarray(p, dtype=np.float64), np.asarray(R, dtype=np.float64).T.ravel()]
     )
 
 
 def pose_from_vector(x) -> tuple[np.ndarray, np.ndarray]:
-    """``(R (3, 3), p (3,))`` of a pose vector ``(12,)`` (no re-orthonormalisation)."""
+    """``(R (3, 3), p (3,))`` of a pose vector ``(12,)`` (no re-orthonormalisation).
+
+    Parameters
+    ----------
+    x : array_like, shape (12,)
+        Pose vector ``(p, e₁, e₂, e₃)``.
+
+    Returns
+    -------
+    R : numpy.ndarray, shape (3, 3)
+        Frame with columns e₁, e₂, e₃.
+    p : numpy.ndarray, shape (3,)
+        Position.
+    """
     x = np.asarray(x, dtype=np.float64)
     return x[3:12].reshape(3, 3).T.copy(), x[:3].copy()
 
 
 def pose_step_jacobian(v, omega, *, tau: float, kappa: float, rho: float = 1.0) -> np.ndarray:
     """``(12, 12)`` exact Jacobian of the pose vector after one step with respect to the pose
-    vector before it (the step is linear in it for a fixed control, module docstring)::
+    vector before it (the step is linear in it for a fixed control, module docstring):
+    ``p' = p + Σ_j d_j e_j``, ``e'_k = Σ_j E_jk e_j``.
 
-        p' = p + Σ_j d_j e_j,      e'_k = Σ_j E_jk e_j.
+    Parameters
+    ----------
+    v : float
+        Insertion speed (length per unit time).
+    omega : float
+        Spin rate (rad per unit time).
+    tau : float
+        Step duration.
+    kappa : float
+        Curvature κ (1 / length).
+    rho : float
+        Duty-cycle factor ρ scaling the curvature.
+
+    Returns
+    -------
+    numpy.ndarray, shape (12, 12)
+        The Jacobian ``∂x' / ∂x``.
     """
     E, d = se3_exp(tau * bevel_twist(v, omega, kappa, rho))
     J = np.zeros((12, 12))

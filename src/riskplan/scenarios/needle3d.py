@@ -39,8 +39,6 @@ Noise scaled to the scene as in 2-D: ``σ = 0.01 · max(size)``; actuation
 from __future__ import annotations
 
 import functools
-import math
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -50,13 +48,13 @@ from riskplan.geometry3d import ConvexBody
 from riskplan.scenarios.base import (
     FEMScenario,
     SimParams,
-    SimState,
     apply_actuation_noise,
     check_control,
-    frozen_array,
     gaussian_noise,
 )
 from riskplan.scenarios.bevel import needle_step, pose_step_jacobian
+from riskplan.scenarios.needle3d_config import Needle3DConfig, Needle3DState, _MeshData3D
+from riskplan.scenarios.needle3d_space import Needle3DSpace, needle3d_steer
 
 __all__ = [
     "PLANNING_ELEMENTS",
@@ -68,188 +66,6 @@ __all__ = [
 
 #: Tetrahedra of the planning mesh (a 6 × 6 × 6 grid of cubes, 6 tetrahedra each).
 PLANNING_ELEMENTS = 1296
-
-_AXES = np.vstack([np.eye(3), -np.eye(3)])
-_CORNERS = np.array(
-    [[sx, sy, sz] for sx in (-1.0, 1.0) for sy in (-1.0, 1.0) for sz in (-1.0, 1.0)]
-)
-
-
-@dataclass(frozen=True, eq=False)
-class Needle3DState(SimState):
-    """Full state: ``material (12,)`` the tip's material pose vector (position, e₁, e₂, e₃);
-    ``pose (12,)`` the world pose (position ``X + u(X)``, the material frame);
-    ``displacement (k, 3)`` the displacement of the tracked material points (obstacle and
-    target samples); ``applied (q,)`` the control applied in the step that led here (zero at
-    ``t = 0``; the exact kinematic Jacobian of that step is :meth:`Needle3DScenario.a_prior`)."""
-
-    pose: np.ndarray = field(default_factory=lambda: np.zeros(12))
-    material: np.ndarray = field(default_factory=lambda: np.zeros(12))
-    applied: np.ndarray = field(default_factory=lambda: np.zeros(2))
-
-    def __post_init__(self):
-        super().__post_init__()
-        for name in ("pose", "material", "applied"):
-            object.__setattr__(self, name, frozen_array(getattr(self, name)))
-
-
-def _obstacle_default():
-    # a corridor along the line from the start to the target: two balls above and below it
-    # and a box below its far half, 0.04 to 0.08 from the line
-    return (
-        ("sphere", (0.45, 0.36, 0.5), 0.1),
-        ("box", (0.62, 0.3, 0.35), (0.74, 0.44, 0.65)),
-        ("sphere", (0.42, 0.68, 0.56), 0.1),
-    )
-
-
-@dataclass(frozen=True, eq=False)
-class Needle3DConfig:
-    """Geometry and constants of the 3-D needle scenario.
-
-    ``size (3,)``: the block ``[0, size]`` (bottom face ``z = 0`` fixed); ``start (3,)``,
-    ``start_axis (3,)`` (e₃, the insertion direction) and ``start_bevel (3,)`` (e₁, the axis
-    the needle bends about; made orthogonal to e₃); ``target_center``, ``target_radius``;
-    ``obstacles``: ``("sphere", centre, radius)`` or ``("box", low, high)`` in material
-    coordinates; ``v_max``, ``omega_max`` (rad per unit time), ``tau``, ``curvature`` κ
-    (``1 / r``); ``duty_cycle``: a third control ρ ∈ [0, 1] scales the curvature;
-    ``sensing_std`` and ``actuation_std`` (``None``: scaled to the scene, module docstring);
-    ``youngs_modulus``, ``poissons_ratio``: the nominal material (the 2-D paper's E = 50,
-    ν = 0.4).
-
-    Why these defaults: the unit cube and E, ν, f_int of the 2-D paper scene; κ = 2 (a
-    radius of half the block: the bevel needle turns by about a right angle across the
-    block); ``ω_max = 10`` (one step turns the bevel by up to 1 rad, so spinning at
-    ``ω_max`` gives a helix of radius ``κ / (κ² + (ω/v)²) ≈ 0.005`` at ``v = v_max``:
-    practically straight).
-    """
-
-    size: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    start: tuple[float, float, float] = (0.05, 0.5, 0.5)
-    start_axis: tuple[float, float, float] = (1.0, 0.0, 0.0)
-    start_bevel: tuple[float, float, float] = (0.0, 0.0, 1.0)
-    target_center: tuple[float, float, float] = (0.85, 0.55, 0.5)
-    target_radius: float = 0.1
-    obstacles: tuple = field(default_factory=_obstacle_default)
-    v_max: float = 0.5
-    omega_max: float = 10.0
-    tau: float = 0.1
-    curvature: float = 2.0
-    duty_cycle: bool = False
-    sensing_std: float | None = None
-    actuation_std: tuple | None = None
-    youngs_modulus: float = 50.0
-    poissons_ratio: float = 0.4
-
-    def __post_init__(self):
-        size = as_array(self.size, "size", shape=(3,))
-        if not np.all(size > 0) or not np.all(np.isfinite(size)):
-            raise InvalidInputError(f"size: expected finite values > 0, got {size.tolist()}")
-        for name in ("v_max", "omega_max", "tau", "curvature", "target_radius", "youngs_modulus"):
-            v = float(getattr(self, name))
-            if not (math.isfinite(v) and v > 0):
-                raise InvalidInputError(f"{name}: must be finite and > 0, got {v!r}")
-        if not -1.0 < float(self.poissons_ratio) < 0.5:
-            raise InvalidInputError(
-                f"poissons_ratio: must lie in (-1, 0.5), got {self.poissons_ratio!r}"
-            )
-        if self.sensing_std is None:
-            object.__setattr__(self, "sensing_std", 0.01 * float(size.max()))
-        if not (math.isfinite(float(self.sensing_std)) and float(self.sensing_std) > 0):
-            raise InvalidInputError(
-                f"sensing_std: must be finite and > 0, got {self.sensing_std!r}"
-            )
-        q = 3 if self.duty_cycle else 2
-        if self.actuation_std is None:
-            std = (0.1 * self.v_max, 0.1 * self.omega_max, 0.1)[:q]
-            object.__setattr__(self, "actuation_std", std)
-        std = as_array(self.actuation_std, "actuation_std", shape=(q,))
-        if not (np.all(np.isfinite(std)) and np.all(std >= 0)):
-            raise InvalidInputError(f"actuation_std: must be finite and >= 0, got {std.tolist()}")
-        object.__setattr__(self, "actuation_std", tuple(float(s) for s in std))
-        start = as_array(self.start, "start", shape=(3,))
-        if not (np.all(start >= 0) and np.all(start <= size)):
-            raise InvalidInputError(f"start: {start.tolist()} lies outside the tissue block")
-        tc = as_array(self.target_center, "target_center", shape=(3,))
-        r = float(self.target_radius)
-        if not (np.all(tc - r >= 0) and np.all(tc + r <= size)):
-            raise InvalidInputError(
-                f"target: the ball at {tc.tolist()} of radius {r} is not inside the tissue block"
-            )
-        e3 = as_array(self.start_axis, "start_axis", shape=(3,))
-        e1 = as_array(self.start_bevel, "start_bevel", shape=(3,))
-        if np.linalg.norm(e3) == 0 or np.linalg.norm(np.cross(e3, e1)) < 1e-9 * np.linalg.norm(e1):
-            raise InvalidInputError("start_axis/start_bevel: expected two non-parallel vectors")
-        obs = []
-        for i, o in enumerate(self.obstacles):
-            if not isinstance(o, (tuple, list)) or len(o) != 3 or o[0] not in ("sphere", "box"):
-                raise InvalidInputError(
-                    f"obstacles[{i}]: expected ('sphere', centre, radius) or ('box', low, high), got {o!r}"
-                )
-            if o[0] == "sphere":
-                c = as_array(o[1], f"obstacles[{i}] centre", shape=(3,))
-                rr = float(o[2])
-                if not (math.isfinite(rr) and rr > 0):
-                    raise InvalidInputError(f"obstacles[{i}]: radius must be > 0, got {o[2]!r}")
-                lo, hi = c - rr, c + rr
-                obs.append(("sphere", tuple(c.tolist()), rr))
-            else:
-                lo = as_array(o[1], f"obstacles[{i}] low", shape=(3,))
-                hi = as_array(o[2], f"obstacles[{i}] high", shape=(3,))
-                if not np.all(hi > lo):
-                    raise InvalidInputError(f"obstacles[{i}]: high must exceed low")
-                obs.append(("box", tuple(lo.tolist()), tuple(hi.tolist())))
-            if not (np.all(lo >= 0) and np.all(hi <= size)):
-                raise InvalidInputError(f"obstacles[{i}]: not inside the tissue block")
-        object.__setattr__(self, "obstacles", tuple(obs))
-
-    @property
-    def start_frame(self) -> np.ndarray:
-        """``R₀ (3, 3)`` = ``[e₁ e₂ e₃]`` from ``start_axis`` and ``start_bevel``."""
-        e3 = np.asarray(self.start_axis, dtype=np.float64)
-        e3 = e3 / np.linalg.norm(e3)
-        e1 = np.asarray(self.start_bevel, dtype=np.float64)
-        e1 = e1 - (e1 @ e3) * e3
-        e1 /= np.linalg.norm(e1)
-        return np.stack([e1, np.cross(e3, e1), e3], axis=1)
-
-    def bodies(self):
-        """``[(kind, centre (3,), A (3, 3))]`` of the obstacles then the target, and the
-        sample offsets of each (the material points whose displacement fixes its affine
-        image)."""
-        out = []
-        for o in self.obstacles:
-            if o[0] == "sphere":
-                c, r = np.asarray(o[1]), float(o[2])
-                out.append(("ellipsoid", c, r * np.eye(3), r * _AXES))
-            else:
-                lo, hi = np.asarray(o[1]), np.asarray(o[2])
-                h = 0.5 * (hi - lo)
-                out.append(("box", 0.5 * (lo + hi), np.diag(h), _CORNERS * h))
-        r = float(self.target_radius)
-        out.append(("ellipsoid", np.asarray(self.target_center), r * np.eye(3), r * _AXES))
-        return out
-
-
-class _MeshData3D:
-    """Per element count: the block and the layout of the tracked points."""
-
-    def __init__(self, cfg: Needle3DConfig, n_elements: int):
-        from riskplan.scenarios.tissue3d import TetBlock
-
-        bodies = cfg.bodies()
-        pts, self.slices = [], []
-        for _, c, _, offs in bodies:
-            k = len(pts)
-            pts.append(c)
-            pts.extend(c + offs)
-            self.slices.append((k, len(pts)))
-        self.kinds = [b[0] for b in bodies]
-        self.centres = [b[1] for b in bodies]
-        self.shapes = [b[2] for b in bodies]
-        #: least-squares fit of ∇u from the samples: G = (pinv(offsets) Δu)ᵀ
-        self.fit = [np.linalg.pinv(offs) for *_, offs in bodies]
-        self.block = TetBlock(cfg.size, n_elements, np.array(pts))
 
 
 class Needle3DScenario(FEMScenario):
@@ -301,7 +117,13 @@ class Needle3DScenario(FEMScenario):
         )
 
     def actuation_cov(self) -> tuple:
-        """``diag(σ²)`` of ``config.actuation_std``."""
+        """``diag(σ²)`` of ``config.actuation_std``.
+
+        Returns
+        -------
+        tuple of tuple of float, shape (q, q)
+            The actuation noise covariance.
+        """
         s = self.config.actuation_std
         return tuple(
             tuple(s[i] ** 2 if i == j else 0.0 for j in range(len(s))) for i in range(len(s))
@@ -326,7 +148,13 @@ class Needle3DScenario(FEMScenario):
 
     def mesh_data(self, n_elements: int):
         """The block and tracked-point layout, cached per grid (element counts that give
-        the same grid share it)."""
+        the same grid share it).
+
+        Parameters
+        ----------
+        n_elements : int
+            Requested number of tetrahedra (rounded to a grid by :func:`~riskplan.scenarios.tissue3d.grid_for`).
+        """
         from riskplan.scenarios.tissue3d import grid_for
 
         d = self._meshes.get(n_elements)
@@ -347,7 +175,18 @@ class Needle3DScenario(FEMScenario):
 
     # ---- protocol -----------------------------------------------------------------
     def initial_state(self, params: SimParams | None = None) -> Needle3DState:
-        """Tip at ``config.start`` with the start frame, undeformed tissue, ``t = 0``."""
+        """Tip at ``config.start`` with the start frame, undeformed tissue, ``t = 0``.
+
+        Parameters
+        ----------
+        params : SimParams or None
+            The simulation parameters (``None``: :attr:`nominal_params`).
+
+        Returns
+        -------
+        Needle3DState
+            The state at ``t = 0``.
+        """
         params = params or self.nominal_params
         d = self.mesh_data(params.n_elements)
         cfg = self.config
@@ -366,7 +205,22 @@ class Needle3DScenario(FEMScenario):
 
     def step(self, state: Needle3DState, control, params: SimParams | None = None) -> Needle3DState:
         """``y_{t+1} = g(y_t, u_t, s)``: the exact screw step of the material frame, the
-        push ``f_int e₃`` at the new material point, the world pose (module docstring)."""
+        push ``f_int e₃`` at the new material point, the world pose (module docstring).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The state ``y_t``.
+        control : array_like, shape (q,)
+            The control ``(v, ω)`` (``(v, ω, ρ)`` with duty cycling).
+        params : SimParams or None
+            The simulation parameters (``None``: :attr:`nominal_params`).
+
+        Returns
+        -------
+        Needle3DState
+            The state ``y_{t+1}``.
+        """
         params = params or self.nominal_params
         self._check_state(state, params)
         u = check_control(control, self._bounds)
@@ -401,7 +255,20 @@ class Needle3DScenario(FEMScenario):
         return tracked, pose
 
     def transfer_state(self, state: Needle3DState, params: SimParams) -> Needle3DState:
-        """``state`` on the mesh of ``params`` (same material pose, push recomputed there)."""
+        """``state`` on the mesh of ``params`` (same material pose, push recomputed there).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The state on its own mesh.
+        params : SimParams
+            Parameters whose mesh the state is moved to.
+
+        Returns
+        -------
+        Needle3DState
+            The same material pose with the push recomputed on the new mesh.
+        """
         if not isinstance(state, Needle3DState):
             raise InvalidInputError(f"state: expected a Needle3DState, got {type(state).__name__}")
         d = self.mesh_data(params.n_elements)
@@ -422,17 +289,56 @@ class Needle3DScenario(FEMScenario):
     def a_prior(self, y_next: Needle3DState, params: SimParams) -> np.ndarray:
         """``(12, 12)`` the exact Jacobian of the kinematic step that led to ``y_next``
         (:func:`riskplan.scenarios.bevel.pose_step_jacobian`; the tissue's offset of the
-        world position is left to the fit on the excited directions)."""
+        world position is left to the fit on the excited directions).
+
+        Parameters
+        ----------
+        y_next : Needle3DState
+            The state after the step (its ``applied`` control is used).
+        params : SimParams
+            The simulation parameters (unused by the kinematic Jacobian).
+
+        Returns
+        -------
+        numpy.ndarray, shape (12, 12)
+            The Jacobian of the reduced state.
+        """
         u = y_next.applied
         cfg = self.config
         return pose_step_jacobian(u[0], u[1], tau=cfg.tau, kappa=cfg.curvature, rho=self._rho(u))
 
     def reduced(self, state: Needle3DState) -> np.ndarray:
-        """``x (12,)``: world position and the material frame (a copy)."""
+        """``x (12,)``: world position and the material frame (a copy).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        numpy.ndarray, shape (12,)
+            The reduced state ``x``.
+        """
         return np.array(state.pose)
 
     def observe(self, x, noise=None, rng=None) -> np.ndarray:
-        """``z = x[:3] + n`` (the tip position)."""
+        """``z = x[:3] + n`` (the tip position).
+
+        Parameters
+        ----------
+        x : array_like, shape (12,)
+            The reduced state.
+        noise : array_like, shape (3,), optional
+            The sensing noise to add; drawn with ``rng`` when ``None``.
+        rng : int, numpy.random.Generator or None
+            Seeds the drawn noise.
+
+        Returns
+        -------
+        numpy.ndarray, shape (3,)
+            The measured tip position.
+        """
         x = as_array(x, "x", shape=(12,))
         return x[:3] + gaussian_noise(self.sensing_cov, noise, rng, 3)
 
@@ -452,40 +358,140 @@ class Needle3DScenario(FEMScenario):
         return out
 
     def obstacles(self, state: Needle3DState) -> list[ConvexBody]:
-        """The deformed obstacles (ellipsoids, parallelepipeds) in ``state``."""
+        """The deformed obstacles (ellipsoids, parallelepipeds) in ``state``.
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        list of ConvexBody
+            The deformed obstacles.
+        """
         return self._bodies(state)[:-1]
 
     def goal(self, state: Needle3DState) -> ConvexBody:
-        """The deformed target (an ellipsoid)."""
+        """The deformed target (an ellipsoid).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        ConvexBody
+            The deformed target.
+        """
         return self._bodies(state)[-1]
 
     def goal_center(self, state: Needle3DState) -> np.ndarray:
+        """The deformed target's centre.
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        numpy.ndarray, shape (3,)
+            The centre in world coordinates.
+        """
         return self.goal(state).centre
 
     def inside(self, state: Needle3DState) -> bool:
-        """The tip's material point lies in the block."""
+        """The tip's material point lies in the block.
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        bool
+            Whether the tip is inside the tissue block.
+        """
         return self._data(state).block.contains(state.material[:3])
 
     def in_collision(self, state: Needle3DState) -> bool:
+        """The world tip lies in a deformed obstacle.
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        bool
+            Whether the tip is in collision.
+        """
         x = state.pose[:3]
         return any(bool(b.contains(x)) for b in self.obstacles(state))
 
     def in_goal(self, state: Needle3DState) -> bool:
+        """The world tip lies in the deformed target.
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        bool
+            Whether the tip is in the goal.
+        """
         return bool(self.goal(state).contains(state.pose[:3]))
 
     def goal_distance(self, state: Needle3DState) -> float:
+        """Distance of the world tip from the deformed target's centre (its tracked sample).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        float
+            The distance (length units of the block).
+        """
         d = self._data(state)
         a = d.slices[-1][0]
         c = d.centres[-1] + state.displacement[a]
         return float(np.linalg.norm(state.pose[:3] - c))
 
     def path(self, states) -> np.ndarray:
-        """World tip positions ``(T, 3)``."""
+        """World tip positions ``(T, 3)``.
+
+        Parameters
+        ----------
+        states : sequence of Needle3DState
+            The states of an execution.
+
+        Returns
+        -------
+        numpy.ndarray, shape (T, 3)
+            The world tip positions.
+        """
         return np.array([s.pose[:3] for s in states])
 
     def nodal_displacement(self, state: Needle3DState, params: SimParams | None = None):
         """The block's nodal displacement ``(N, 3)`` in ``state`` (recomputed from the push:
-        the state keeps the tracked points only)."""
+        the state keeps the tracked points only).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+        params : SimParams or None
+            The simulation parameters (``None``: :attr:`nominal_params`).
+        """
         params = params or self.nominal_params
         self._check_state(state, params)
         d = self.mesh_data(state.n_elements)
@@ -498,7 +504,20 @@ class Needle3DScenario(FEMScenario):
         return self.model(params).solve(F)
 
     def random_controls(self, n_steps: int, seed=None) -> np.ndarray:
-        """``(n_steps, q)`` random controls inside the bounds (demos and tests)."""
+        """``(n_steps, q)`` random controls inside the bounds (demos and tests).
+
+        Parameters
+        ----------
+        n_steps : int
+            Number of controls.
+        seed : int, numpy.random.Generator or None
+            Seeds the draws.
+
+        Returns
+        -------
+        numpy.ndarray, shape (n_steps, q)
+            Uniform controls inside :attr:`control_bounds`.
+        """
         n_steps = check_count(n_steps, "n_steps")
         gen = as_generator(seed)
         lo, hi = self._bounds[:, 0], self._bounds[:, 1]
@@ -513,7 +532,18 @@ class Needle3DScenario(FEMScenario):
         carries the tip and the target alike, so this is also where the deformed target's
         centre is then; the undeformed centre ``c`` lies about ``|u(c)|`` (0.07 on the
         default scene, most of the target radius) behind it, and a tree steered there stops
-        short of the deformed target."""
+        short of the deformed target.
+
+        Parameters
+        ----------
+        params : SimParams or None
+            The simulation parameters (``None``: :attr:`nominal_params`).
+
+        Returns
+        -------
+        numpy.ndarray, shape (3,)
+            The expected world goal point.
+        """
         params = params or self.nominal_params
         cfg = self.config
         c = np.asarray(cfg.target_center, dtype=np.float64)
@@ -527,7 +557,13 @@ class Needle3DScenario(FEMScenario):
     def planning_space(self) -> Needle3DSpace:
         """The RRT's space (:class:`Needle3DSpace`): the block, the needle's curvature, the
         expected goal point (:meth:`expected_goal_point`), 3 steps per edge and the
-        kinematic steering rule."""
+        kinematic steering rule.
+
+        Returns
+        -------
+        Needle3DSpace
+            The planning space.
+        """
         cfg = self.config
         return Needle3DSpace(
             size=np.asarray(cfg.size, dtype=np.float64),
@@ -537,81 +573,3 @@ class Needle3DScenario(FEMScenario):
                 needle3d_steer, tau=cfg.tau, kappa=cfg.curvature, duty=cfg.duty_cycle
             ),
         )
-
-
-@dataclass(frozen=True, eq=False)
-class Needle3DSpace:
-    """The 3-D needle's :class:`~riskplan.scenarios.space.PlanningSpace`.
-
-    Samples: a position uniform in the block and an axis ``e₃`` uniform on the sphere
-    (``e₁ = e₂ = 0``: the roll is not sampled). Metric (the 2-D needle's ``(x, y, r_min θ)``
-    in 3-D)::
-
-        d(x, x')² = |p − p'|² + (r ∠(e₃, e₃'))²
-
-    with ``r = 1/κ`` (an axis error of 1 rad counts like the arc the needle needs to turn by
-    it); towards the goal point the position only (any direction will do in the target).
-    Valid: the position lies in the block.
-    """
-
-    size: np.ndarray
-    goal: np.ndarray
-    radius: float
-    steer: object = None
-    steps_per_extension: int = 6
-    max_control_change: np.ndarray | None = None
-    dim: int = 12
-
-    def sample(self, gen: np.random.Generator, goal_bias: float = 0.0):
-        u = gen.random(4)
-        if u[-1] < goal_bias:
-            return self.goal.copy(), True
-        x = np.zeros(12)
-        x[:3] = u[:3] * self.size
-        a = gen.standard_normal(3)
-        x[9:12] = a / np.linalg.norm(a)
-        return x, False
-
-    def distance(self, xs: np.ndarray, x: np.ndarray, *, to_goal: bool = False) -> np.ndarray:
-        xs = np.asarray(xs, dtype=np.float64)
-        dp = xs[:, :3] - x[:3]
-        d2 = np.einsum("ij,ij->i", dp, dp)
-        if not to_goal:
-            c = np.clip(xs[:, 9:12] @ x[9:12], -1.0, 1.0)
-            ang = np.arccos(c)
-            d2 = d2 + (self.radius * ang) ** 2
-        return np.sqrt(d2)
-
-    def contains(self, x: np.ndarray) -> bool:
-        return bool(np.all(x[:3] >= 0.0) and np.all(x[:3] <= self.size))
-
-
-def needle3d_steer(x_from, x_to, bounds, n_steps: int, *, tau: float, kappa: float, duty: bool):
-    """A control towards the point ``x_to[:3]`` (a candidate of the RRT's goal-directed
-    extension): the best of a grid of constant controls — 5 speeds × 41 rotation rates (× 5
-    curvature fractions with duty cycling) spanning ``bounds`` — by the nearest approach to
-    the point of their exact kinematic paths over ``n_steps`` steps (the material frame,
-    without the tissue; the bevel's motion has no closed-form two-point steering)."""
-    from riskplan.scenarios.bevel import se3_exp_batch
-
-    p = np.asarray(x_from[:3], dtype=np.float64)
-    R = np.asarray(x_from[3:12], dtype=np.float64).reshape(3, 3).T
-    target = np.asarray(x_to[:3], dtype=np.float64)
-    lo, hi = bounds[:, 0], bounds[:, 1]
-    vs = lo[0] + (hi[0] - lo[0]) * np.array([0.2, 0.4, 0.6, 0.8, 1.0])
-    ws = np.linspace(lo[1], hi[1], 41)
-    rhos = np.linspace(lo[2], hi[2], 5) if duty else np.array([1.0])
-    V, Wg, P = (g.ravel() for g in np.meshgrid(vs, ws, rhos, indexing="ij"))
-    xi = np.zeros((len(V), 6))
-    xi[:, 2], xi[:, 3], xi[:, 5] = tau * V, tau * P * kappa * V, tau * Wg
-    E, dd = se3_exp_batch(xi)
-    Rk = np.broadcast_to(R, E.shape)
-    pk = np.broadcast_to(p, dd.shape)
-    best = np.full(len(V), np.inf)
-    for _ in range(int(n_steps)):
-        pk = pk + np.einsum("nij,nj->ni", Rk, dd)
-        Rk = Rk @ E
-        best = np.minimum(best, np.linalg.norm(pk - target, axis=1))
-    i = int(np.argmin(best))
-    u = np.array([V[i], Wg[i], P[i]])
-    return u[: bounds.shape[0]]

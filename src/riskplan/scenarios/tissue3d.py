@@ -24,7 +24,20 @@ __all__ = ["TetBlock", "TetBlockModel", "grid_for"]
 
 def grid_for(size, n_elements: int) -> tuple[int, int, int]:
     """Cells per axis ``(nx, ny, nz)`` of the block mesh for about ``n_elements`` tetrahedra
-    (:func:`riskplan.deformable.tetmesh.grid_shape`)."""
+    (:func:`riskplan.deformable.tetmesh.grid_shape`).
+
+    Parameters
+    ----------
+    size : array_like, shape (3,)
+        The block's edge lengths.
+    n_elements : int
+        The requested number of tetrahedra.
+
+    Returns
+    -------
+    tuple of int
+        ``(nx, ny, nz)``, cells per axis.
+    """
     from riskplan.deformable.tetmesh import grid_shape
 
     return tuple(int(n) for n in grid_shape(np.asarray(size, dtype=np.float64), int(n_elements)))
@@ -55,13 +68,37 @@ class TetBlock:
         self._base = None
 
     def contains(self, X) -> bool:
-        """Whether the material point ``X (3,)`` lies in the block (closed)."""
+        """Whether the material point ``X (3,)`` lies in the block (closed).
+
+        Parameters
+        ----------
+        X : array_like, shape (3,)
+            The material point.
+
+        Returns
+        -------
+        bool
+            Whether it lies in ``[0, size]``.
+        """
         X = np.asarray(X, dtype=np.float64)
         return bool(np.all(X >= 0.0) and np.all(X <= self.size))
 
     def locate(self, points) -> tuple[np.ndarray, np.ndarray]:
         """``(elem (k,), lam (k, 4))``: containing tetrahedra (``−1`` outside) and
-        barycentric weights (:func:`riskplan.deformable.tissue3d.find_points`)."""
+        barycentric weights (:func:`riskplan.deformable.tissue3d.find_points`).
+
+        Parameters
+        ----------
+        points : array_like, shape (k, 3)
+            Material points.
+
+        Returns
+        -------
+        elem : numpy.ndarray, shape (k,)
+            Index of the containing tetrahedron (``−1`` outside).
+        lam : numpy.ndarray, shape (k, 4)
+            Barycentric weights in it.
+        """
         from riskplan.deformable.tissue3d import find_points
 
         pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
@@ -69,7 +106,20 @@ class TetBlock:
 
     def model(self, youngs_modulus: float, poissons_ratio: float) -> TetBlockModel:
         """The factorised model of one isotropic material (the first material builds the
-        tissue; later ones re-use its assembly, :meth:`TetTissue.with_material`)."""
+        tissue; later ones re-use its assembly, :meth:`TetTissue.with_material`).
+
+        Parameters
+        ----------
+        youngs_modulus : float
+            Young's modulus E.
+        poissons_ratio : float
+            Poisson's ratio ν.
+
+        Returns
+        -------
+        TetBlockModel
+            The factorised linear-elastic model.
+        """
         from riskplan.deformable import Material, TetTissue
 
         mat = Material(float(youngs_modulus), float(poissons_ratio))
@@ -97,7 +147,18 @@ class TetBlockModel:
 
     def solve(self, nodal_forces) -> np.ndarray:
         """Displacement ``(N, 3)`` for nodal forces ``(N, 3)`` (zero on the fixed face; a
-        force there is taken by the support)."""
+        force there is taken by the support).
+
+        Parameters
+        ----------
+        nodal_forces : array_like, shape (N, 3)
+            Force on each node.
+
+        Returns
+        -------
+        numpy.ndarray, shape (N, 3)
+            The nodal displacement.
+        """
         f = np.asarray(nodal_forces, dtype=np.float64).reshape(-1)
         u = np.zeros(f.shape[0])
         u[self._free] = self.tissue.solve_linear_free(f[self._free])
@@ -105,7 +166,24 @@ class TetBlockModel:
 
     def point_load(self, e: int, lam, force) -> tuple[np.ndarray, np.ndarray]:
         """``(u(X) (3,), u(tracked) (k, 3))`` for the force ``force (3,)`` at the point of
-        element ``e`` with barycentric weights ``lam (4,)``."""
+        element ``e`` with barycentric weights ``lam (4,)``.
+
+        Parameters
+        ----------
+        e : int
+            The element holding the loaded point.
+        lam : array_like, shape (4,)
+            The point's barycentric weights in it.
+        force : array_like, shape (3,)
+            The force.
+
+        Returns
+        -------
+        u_point : numpy.ndarray, shape (3,)
+            The displacement at the loaded point.
+        u_tracked : numpy.ndarray, shape (k, 3)
+            The displacement of the block's tracked points.
+        """
         b = self.block
         lam = np.asarray(lam, dtype=np.float64)
         F = np.zeros((b.n_nodes, 3))

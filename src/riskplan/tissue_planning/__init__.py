@@ -7,10 +7,12 @@ The tissue wing's top: it imports ``scenarios`` and ``control`` and never the ki
 """
 
 from riskplan.tissue_planning.plan import (
+    SELECTIONS,
     STEP_S,
     TissuePlanningResult,
     check_tissue_budget,
     plan_tissue,
+    selection_setup,
 )
 from riskplan.tissue_planning.rrt import (
     RRTOptions,
@@ -38,6 +40,7 @@ from riskplan.tissue_planning.select import (
 
 __all__ = [
     "SATURATED",
+    "SELECTIONS",
     "STEP_S",
     "Calibration",
     "HonestyRow",
@@ -59,5 +62,6 @@ __all__ = [
     "rrt_plans",
     "sampling_bounds",
     "select_plan",
+    "selection_setup",
     "tie_note",
 ]

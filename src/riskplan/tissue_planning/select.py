@@ -111,7 +111,23 @@ class Selection:
         return tie_note(self.n_tied, len(self.ranking), self.score(self.best).p_success)
 
     def score(self, index: int) -> PlanScore:
-        """The score of candidate ``index``."""
+        """The score of candidate ``index``.
+
+        Parameters
+        ----------
+        index : int
+            The candidate's index among the plans evaluated.
+
+        Returns
+        -------
+        PlanScore
+            Its score.
+
+        Raises
+        ------
+        InvalidInputError
+            When no candidate has that index.
+        """
         for s in self.ranking:
             if s.index == index:
                 return s
@@ -288,7 +304,22 @@ def select_plan(
 
 def tie_note(n_tied: int, n_candidates: int, p_best: float) -> str | None:
     """The sentence that reports a tie for the best LQG-MP score (``None`` if ``n_tied``
-    is 1): the selection cannot tell those candidates apart, and takes the first."""
+    is 1): the selection cannot tell those candidates apart, and takes the first.
+
+    Parameters
+    ----------
+    n_tied : int
+        Number of candidates sharing the best score.
+    n_candidates : int
+        Number of candidates.
+    p_best : float
+        The best LQG-MP ``P(success)``.
+
+    Returns
+    -------
+    str or None
+        The sentence, or ``None`` without a tie.
+    """
     if n_tied <= 1:
         return None
     who = "all" if n_tied == n_candidates else f"{n_tied} of"
@@ -299,7 +330,24 @@ def tie_note(n_tied: int, n_candidates: int, p_best: float) -> str | None:
 
 
 def common_draws(sim, distribution, n_samples: int, seed) -> list | None:
-    """The ``n_samples`` parameter draws ``s_i ~ S`` every candidate's ``M_t`` uses."""
+    """The ``n_samples`` parameter draws ``s_i ~ S`` every candidate's ``M_t`` uses.
+
+    Parameters
+    ----------
+    sim : Simulator
+        The simulator (its ``distribution`` is used when ``distribution`` is ``None``).
+    distribution : ParamDistribution, list of SimParams or None
+        The distribution ``S`` to draw from, or the draws themselves (returned as a list).
+    n_samples : int
+        Number of draws (non-negative).
+    seed : int, numpy.random.Generator or None
+        Seeds the draws (a stream apart from the per-plan seeds).
+
+    Returns
+    -------
+    list of SimParams or None
+        The draws, or ``None`` without a distribution.
+    """
     from riskplan.parallel import spawn_seeds
 
     distribution = getattr(sim, "distribution", None) if distribution is None else distribution
@@ -431,7 +479,13 @@ class Calibration:
     meets_goal: bool
 
     def as_dict(self) -> dict:
-        """The fields as a JSON-serialisable dict."""
+        """The fields as a JSON-serialisable dict.
+
+        Returns
+        -------
+        dict
+            The fields by name.
+        """
         from dataclasses import asdict
 
         return asdict(self)
@@ -482,7 +536,20 @@ def calibration_metrics(
 
 def evenly_spaced_ranks(n: int, k: int) -> list[int]:
     """``min(k, n)`` distinct ranks ``0 … n − 1`` evenly spaced over the ranking (the first
-    and the last included): ``round(linspace(0, n − 1, k))``; all ranks when ``k ≥ n``."""
+    and the last included): ``round(linspace(0, n − 1, k))``; all ranks when ``k ≥ n``.
+
+    Parameters
+    ----------
+    n : int
+        Number of ranks (positive).
+    k : int
+        Number of ranks wanted (positive).
+
+    Returns
+    -------
+    list of int
+        The ranks, ascending.
+    """
     if int(n) != n or n < 1 or int(k) != k or k < 1:
         raise InvalidInputError(f"n, k: expected positive integers, got {n!r}, {k!r}")
     if k >= n:

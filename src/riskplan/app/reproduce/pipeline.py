@@ -166,6 +166,34 @@ def reproduce(
         )  # fmt: skip
 
 
+def _sensitivity_stage(scale_name, out, seed, backend, workers, progress) -> dict:
+    """The needle's sensitivity study at the scale's size, as ``results`` stores it: its
+    scale and, per variant and case, the success rate of each method (``None``: not
+    applicable)."""
+    from riskplan.app.reproduce.needle_study import sensitivity
+
+    sscale = _sensitivity_scales().get(scale_name, _sensitivity_scales()["smoke"])
+    sens = sensitivity(
+        sscale,
+        out / "sensitivity",
+        seed=seed,
+        backend=backend,
+        workers=workers,
+        progress=progress,
+    )
+    runs = sens.pop("runs")
+    sens["scale"] = asdict(sscale)
+    # per variant and case the success rate of each method (None: not applicable)
+    sens["cases"] = {
+        tag: {
+            c: {m: (None if v is None else v["rate"]) for m, v in ms.items()}
+            for c, ms in r["cases"].items()
+        }
+        for tag, r in runs.items()
+    }
+    return json.loads(json.dumps(sens))
+
+
 def _reproduce(
     out, paper, scale, backend, ray_address, workers, seed, progress, stages, calibration_scale
 ) -> dict:
@@ -259,31 +287,9 @@ def _reproduce(
                 )
                 timings[f"calibration_{name}_s"] = time.perf_counter() - t0
         if paper in ("deformable", "all") and "sensitivity" in stages:
-            from riskplan.app.reproduce.needle_study import sensitivity
-
-            sscale = _sensitivity_scales().get(scale_name, _sensitivity_scales()["smoke"])
             t0 = time.perf_counter()
-            sens = sensitivity(
-                sscale,
-                out / "sensitivity",
-                seed=seed,
-                backend=backend,
-                workers=workers,
-                progress=progress,
-            )
-            runs = sens.pop("runs")
-            sens["scale"] = asdict(sscale)
-            # per variant and case the success rate of each method (None: not applicable)
-            sens["cases"] = {
-                tag: {
-                    c: {m: (None if v is None else v["rate"]) for m, v in ms.items()}
-                    for c, ms in r["cases"].items()
-                }
-                for tag, r in runs.items()
-            }
-            results.setdefault("deformable", {}).setdefault("needle", {})["sensitivity"] = (
-                json.loads(json.dumps(sens))
-            )
+            sens = _sensitivity_stage(scale_name, out, seed, backend, workers, progress)
+            results.setdefault("deformable", {}).setdefault("needle", {})["sensitivity"] = sens
             timings["sensitivity_needle_s"] = time.perf_counter() - t0
         if paper in ("deformable", "all") and "needle3d" in stages:
             from riskplan.app.reproduce.needle3d import run_needle3d

@@ -27,12 +27,9 @@ KNOWN_LONG_FILES = {
     "app/reproduce/deformable.py": 965,
     "control/linearize.py": 810,
     "deformable/tissue3d.py": 766,
-    "planning/robot_plan.py": 612,
-    "planning/validate.py": 627,
     "robots/batch_kernel.py": 673,
     "robots/params.py": 637,
     "robots/robot.py": 940,
-    "scenarios/files.py": 679,
     "scenarios/manipulation.py": 654,
     "scenarios/needle.py": 841,
 }

@@ -155,12 +155,12 @@ def body_clearance(robot, configurations, environment) -> tuple[np.ndarray, np.n
     without transmission variation (the nominal Cosserat shape, base frame).
 
     The body is the one the cameras saw and the MDN learned: the backbone tube of the backbone
-    radius plus the separator disks (:func:`~riskplan.planning.validate.disk_clearance`), the
+    radius plus the separator disks (:func:`~riskplan.planning.clearance.disk_clearance`), the
     ``body="disks"`` test of :func:`~riskplan.planning.validate.execute_on_robot`.
     Inputs are trusted.
     """
     from riskplan.datasets.generate import to_base_frame
-    from riskplan.planning.validate import disk_clearance, tube_clearance
+    from riskplan.planning.clearance import disk_clearance, tube_clearance
     from riskplan.robots.geometry import BodyGeometry
 
     geom = BodyGeometry.from_params(robot.params)

@@ -35,7 +35,8 @@ Body-in-obstacle test
     backbone and every disk whatever its orientation, so the test is conservative: between
     disks the real body is thinner, and contacts that only the envelope makes are counted
     (pass ``radius=`` the backbone radius for the other extreme, or ``body="disks"`` for the
-    backbone tube plus the disks themselves, :func:`disk_clearance`). The tube enters an obstacle
+    backbone tube plus the disks themselves,
+    :func:`~riskplan.planning.clearance.disk_clearance`). The tube enters an obstacle
     iff ``min_s sd(x(s)) < r`` for the environment's signed distance ``sd`` (negative inside).
     ``sd`` is evaluated at the backbone stations; since ``sd`` is 1-Lipschitz, a chord of
     length ``h`` between stations with distances ``a, b`` has ``sd >= (a + b - h) / 2`` and
@@ -51,7 +52,6 @@ from __future__ import annotations
 import functools
 import hashlib
 import logging
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,6 +69,7 @@ from riskplan.collision.trajectory import trajectory_bound
 from riskplan.errors import InvalidInputError
 from riskplan.gaussian_mixture import as_numpy_mixture
 from riskplan.parallel import BACKENDS, map_tasks, spawn_seeds
+from riskplan.planning.clearance import RESOLUTION, disk_clearance, tube_clearance
 
 log = logging.getLogger(__name__)
 
@@ -85,8 +86,6 @@ __all__ = [
     "validation_table",
 ]
 
-# default spacing of the refinement samples along ambiguous backbone chords (m)
-RESOLUTION = 5e-4
 # executions per parallel task
 CHUNK = 25
 BODIES = ("tube", "disks")
@@ -221,89 +220,6 @@ def simulate_executions(robot, trajectory, seeds, *, return_frames: bool = False
     if return_frames:
         return P, R.reshape(B, T, P.shape[-2], 3, 3)
     return P
-
-
-def tube_clearance(
-    environment: Environment, backbones, radius: float, *, resolution: float = RESOLUTION
-) -> np.ndarray:
-    """Signed clearance of a tube of ``radius`` around backbones ``(..., n, 3)``; ``(...,)`` [m].
-
-    ``min_s sd(x(s)) - radius`` over the polyline (negative: the tube enters an obstacle),
-    exact where it decides the sign up to ``resolution / 2``: ``sd`` at the ``n`` points, and
-    at points ``resolution`` apart on the chords whose Lipschitz lower bound
-    ``(sd_a + sd_b - h) / 2`` falls below ``radius`` (module docstring). Far from obstacles
-    the value is the minimum over the ``n`` points only (an upper estimate, always positive
-    there).
-    """
-    X = as_array(backbones, "backbones", min_ndim=2, last_dim=3)
-    if not (np.isfinite(radius) and radius >= 0):
-        raise InvalidInputError(f"radius: expected a finite length >= 0, got {radius!r}")
-    if not (np.isfinite(resolution) and resolution > 0):
-        raise InvalidInputError(f"resolution: expected a positive length, got {resolution!r}")
-    shape, n = X.shape[:-2], X.shape[-2]
-    X = X.reshape(-1, n, 3)
-    sd = environment.signed_distance(X)  # (N, n)
-    clear = sd.min(axis=1)
-    if n > 1:
-        h = np.linalg.norm(np.diff(X, axis=1), axis=-1)  # (N, n-1)
-        lower = 0.5 * (sd[:, :-1] + sd[:, 1:] - h)
-        amb = (lower < radius) & (clear[:, None] >= radius)
-        i, j = np.nonzero(amb)
-        if i.size:
-            k = max(2, math.ceil(float(h[i, j].max()) / resolution))
-            t = np.arange(1, k)[:, None] / k  # (k-1, 1)
-            a, b = X[i, j], X[i, j + 1]  # (A, 3)
-            pts = a[:, None, :] + t[None] * (b - a)[:, None, :]  # (A, k-1, 3)
-            np.minimum.at(clear, i, environment.signed_distance(pts).min(axis=1))
-    return (clear - radius).reshape(shape)
-
-
-def disk_clearance(
-    environment: Environment, s, positions, rotations, body, *, resolution: float = 1e-3
-) -> np.ndarray:
-    """Signed clearance of the separator disks of ``body`` (:class:`~riskplan.robots.geometry.BodyGeometry`)
-    on backbones ``positions (..., n, 3)``, ``rotations (..., n, 3, 3)`` at arc lengths ``s (n,)``; ``(...,)`` [m].
-
-    Each disk (radius ``R``, thickness ``t``, centred on the backbone at its arc length, plane
-    normal to the body ``z`` axis) is taken as a flat disk of radius ``R - t/2`` swept by a ball
-    of radius ``t/2`` (inside the true cylinder; only its rim corners, less than 0.3 t/2 deep, are
-    left out). A disk whose centre is at least ``sqrt(R^2 + t^2/4) + resolution`` from every
-    obstacle is clear (the value returned for it is the positive lower bound
-    ``sd(centre) - sqrt(R^2 + t^2/4)``); otherwise the signed distance is evaluated on
-    rings ``resolution`` apart over the flat disk and the clearance is ``min sd - t/2`` (negative:
-    the disk enters an obstacle; penetrations shallower than about ``resolution / 2`` can be missed).
-    """
-    from riskplan.robots.geometry import interpolate_frames
-
-    P = np.asarray(positions, dtype=np.float64)
-    shape = P.shape[:-2]
-    n = P.shape[-2]
-    P = P.reshape(-1, n, 3)
-    Rm = np.asarray(rotations, dtype=np.float64).reshape(-1, n, 3, 3)
-    ds = np.asarray(body.disk_s, dtype=np.float64)
-    C, F = interpolate_frames(np.asarray(s, dtype=np.float64), P, Rm, ds)  # (N, D, 3), (N, D, 3, 3)
-    half = 0.5 * body.disk_thickness
-    enclosing = math.hypot(body.disk_radius, half)
-    sd_c = environment.signed_distance(C)  # (N, D)
-    clear = sd_c - enclosing
-    near = np.nonzero(sd_c < enclosing + resolution)  # refined: also the values just above 0
-    if near[0].size:
-        rho_max = body.disk_radius - half
-        k = max(1, math.ceil(rho_max / resolution))
-        pts = [np.zeros(2)]
-        for rho in rho_max * np.arange(1, k + 1) / k:
-            m = max(6, math.ceil(2 * math.pi * rho / resolution))
-            a = 2 * math.pi * np.arange(m) / m
-            pts.extend(np.stack([rho * np.cos(a), rho * np.sin(a)], axis=-1))
-        uv = np.asarray(pts)  # (Q, 2) in the disk plane
-        Fn = F[near]  # (A, 3, 3)
-        X = (
-            C[near][:, None, :]
-            + uv[None, :, 0, None] * Fn[:, None, :, 0]
-            + uv[None, :, 1, None] * Fn[:, None, :, 1]
-        )
-        clear[near] = environment.signed_distance(X).min(axis=1) - half
-    return clear.min(axis=1).reshape(shape)
 
 
 def _task(item):

@@ -188,7 +188,11 @@ def test_non_convergence_raises_with_residual(paper, monkeypatch):
 
 @pytest.mark.parametrize("call", ["single", "small_batch", "kernel_batch", "lengths"])
 def test_local_solve_failure_names_node_and_residual(paper, monkeypatch, call):
+    import riskplan.robots.batch_kernel as batch_module
+
+    # the single-shape path and the batch kernel each read the iteration cap where they run
     monkeypatch.setattr(robot_module, "LOCAL_MAXIT", 1)
+    monkeypatch.setattr(batch_module, "LOCAL_MAXIT", 1)
     tau = np.array([6.0, 0.0, 2.0, 9.0])
     with pytest.raises(ConvergenceError, match=r"failed at s = 0 m .*scaled residual") as info:
         if call == "single":

@@ -294,8 +294,7 @@ def estimate_candidate(args):
 
 def execute_rates(args) -> list[list]:
     """``args = (sim, plan, controller, seeds)``: ``[[success (0/1), outcome], ...]``, one per
-    seed (``outcome`` the execution's outcome where the controller package names one, else
-    ``success``/``collision``/``missed_goal``/``solver_failure``)."""
+    seed (``outcome``: the execution's, one of :data:`riskplan.control.lqg.OUTCOMES`)."""
     from riskplan.control.lqg import execute
 
     sim, plan, controller, seeds = args
@@ -304,18 +303,7 @@ def execute_rates(args) -> list[list]:
         gen = np.random.default_rng(s)
         params = sim.distribution.sample(gen)
         ex = execute(sim, plan, controller, params, seed=gen, keep_states=False)
-        outcome = getattr(ex, "outcome", None)
-        if outcome is None:
-            outcome = (
-                "success"
-                if ex.success
-                else "solver_failure"
-                if ex.error is not None
-                else "collision"
-                if ex.collided
-                else "missed_goal"
-            )
-        out.append([int(ex.success), str(outcome)])
+        out.append([int(ex.success), ex.outcome])
     return out
 
 

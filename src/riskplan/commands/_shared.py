@@ -151,7 +151,7 @@ def add_group(app: typer.Typer, name: str, help: str) -> typer.Typer:
 
 def base_pose_option():
     """``--base-pose`` of the commands that read a mesh file (``collision``, ``plan chest``);
-    parsed by :meth:`riskplan.collision.mesh_files.BasePose.parse`."""
+    parsed by :meth:`riskplan.robots.BasePose.parse`."""
     return typer.Option(
         None,
         "--base-pose",

@@ -13,7 +13,7 @@ parallelepipeds (:class:`riskplan.geometry3d.ConvexBody`) — with the three met
   (:func:`riskplan.geometry3d.nearest_to_origin`; convex obstacles need one each, the 2-D
   polygons' edge-by-edge construction is not needed); ``p_t = Σ_j (1 − Φ(d_j))`` and the
   joint Gaussian of ``ξ_t`` is truncated to each half-space in turn
-  (:func:`riskplan.control.lqgmp_common._truncate`, moment matching), so later steps see only the
+  (``riskplan.control.lqgmp_common._truncate``, moment matching), so later steps see only the
   trajectories that survived; ``P(no collision) = ∏_t (1 − min(1, p_t))``. Obstacles farther
   than ``cutoff`` whitened units are skipped.
 * ``"per-step"`` (the estimate Patil 2012 compares the truncation with): the same

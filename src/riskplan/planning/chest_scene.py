@@ -138,7 +138,7 @@ class Chest:
 
     @property
     def base_pose(self):
-        """The robot base in the world frame (:class:`riskplan.collision.mesh_files.BasePose`)."""
+        """The robot base in the world frame (:class:`riskplan.robots.BasePose`)."""
         from riskplan.collision.mesh_files import BasePose
 
         return BasePose(self.base_position, self.base_rotation)

@@ -20,14 +20,13 @@ from numba import njit
 from riskplan._validation import as_array, check_range
 from riskplan.errors import ConvergenceError, InvalidInputError, RobotDescriptionError
 from riskplan.robots import cosserat
+from riskplan.robots.description import parse_robot_toml, read_robot_text
 from riskplan.robots.params import (
     BaseMotion,
     Disks,
     Gravity,
     RobotParams,
     params_to_toml,
-    parse_robot_toml,
-    read_robot_text,
     rpy_to_matrix,
 )
 from riskplan.robots.pose import BasePose, quaternion_to_matrix

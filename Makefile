@@ -29,6 +29,9 @@ demo: $(STAMP)
 	@echo "open $(OUT)/report.html"
 
 test: $(STAMP) browser lint
+	# warm the kernel cache first (a second or two when it is warm): an emptied cache is then
+	# compiled once, here, instead of by each test worker on its first call
+	$(VENV)/bin/riskplan warm
 	$(PY) -m pytest -n 2 --dist loadfile -q
 
 # ruff (configured in pyproject.toml): lint rules and the formatter; `ruff format src tests` fixes layout.

@@ -18,6 +18,18 @@ from riskplan.commands._shared import add_group, base_pose_option
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
     env_app = add_group(app, "env", "Build obstacle environments (meshes) for planning.")
+    _add_env_chest(env_app)
+    _add_env_from_segmentation(env_app)
+    collision_app = add_group(
+        app, "collision", "P(collision) of the robot's predicted geometry: bound and table."
+    )
+    _add_collision(collision_app)
+    collision_table = _add_collision_table(collision_app)
+    app.command("collision-table", hidden=True)(collision_table)
+
+
+def _add_env_chest(env_app: typer.Typer):
+    """Add ``chest`` to ``env_app``; returns the command function."""
 
     @env_app.command("chest")
     def env_chest(
@@ -67,6 +79,12 @@ def register(app: typer.Typer) -> None:
         if html is not None:
             chest_plotly(chest).write_html(html, include_plotlyjs="cdn")
             typer.echo(f"html: {html}")
+
+    return env_chest
+
+
+def _add_env_from_segmentation(env_app: typer.Typer):
+    """Add ``from-segmentation`` to ``env_app``; returns the command function."""
 
     @env_app.command("from-segmentation")
     def env_from_segmentation(
@@ -134,52 +152,99 @@ def register(app: typer.Typer) -> None:
             f"-> {out} (+ {sidecar_path(out).name})"
         )
 
-    collision_app = add_group(
-        app, "collision", "P(collision) of the robot's predicted geometry: bound and table."
+    return env_from_segmentation
+
+
+def _probability_environment(env, base_pose, seed, model, robot):
+    """The obstacles of ``collision probability`` in the robot's base frame: the procedural
+    chest (``env == "chest"``) or a mesh file, its units judged against the robot checked."""
+    from riskplan.errors import InvalidInputError
+
+    if env == "chest":
+        if base_pose is not None:
+            raise InvalidInputError(
+                "--base-pose applies to mesh files; the procedural chest has its own base frame"
+            )
+        from riskplan.planning.chest_scene import build_chest
+
+        return build_chest(seed).base_environment
+    from riskplan.collision.mesh_files import BasePose, load_environment
+
+    # the mesh's units are judged against the robot whose geometry is checked: the
+    # model's robot, else --robot (also for --arc, whose scale the robot sets)
+    judge = None
+    if model is not None:
+        from riskplan.kinematics import load_model as _load_model
+
+        judge = _load_model(model).robot
+    if judge is None:
+        from riskplan.robots import load_robot as _load_robot
+
+        judge = _load_robot(robot)
+    return load_environment(
+        env,
+        base_pose=None if base_pose is None else BasePose.parse(base_pose),
+        robot_length=judge.params.backbone.length,
+        source=f"--env {env}",
     )
+
+
+# options of the command below
+_COLLISION_ENV = typer.Option(
+    "chest",
+    "--env",
+    help="'chest' (procedural) or a mesh file; its frame comes from the sidecar FILE.json that `riskplan env chest` writes, or from --base-pose.",
+)
+_COLLISION_DISPLACEMENTS = typer.Option(
+    None,
+    "--displacements",
+    "-d",
+    help="Tendon displacements (m), comma-separated; ';' separates configurations.",
+)
+_COLLISION_TENSIONS = typer.Option(
+    None,
+    "--tensions",
+    help="Or tendon tensions (N), like --displacements; converted through the model's "
+    "robot (with --model) or --robot.",
+)
+_COLLISION_MODEL = typer.Option(
+    None,
+    "--model",
+    help="Trained MDN model folder (riskplan model train) or a shipped name ('paper'). Default: robot backbone mixture.",
+)
+_COLLISION_ARC = typer.Option(
+    None,
+    "--arc",
+    help="Constant-curvature geometry instead of a robot: 'kappa,phi' (1/m, rad).",
+)
+_COLLISION_ROBOT = typer.Option(
+    "paper", "--robot", help="Robot name or TOML file for the backbone fallback."
+)
+_COLLISION_METHOD = typer.Option(
+    "bound",
+    help="bound (eq. 9) | union | monte_carlo | monte_carlo_union; the Monte Carlo "
+    "reference column estimates the same event (any of K points, one per component, "
+    "for the union methods).",
+)
+_COLLISION_SAMPLES = typer.Option(
+    20000, min=1, help="Monte Carlo samples (also used for the reference interval)."
+)
+
+
+def _add_collision(collision_app: typer.Typer):
+    """Add ``probability`` to ``collision_app``; returns the command function."""
 
     @collision_app.command("probability")
     def collision(
-        env: str = typer.Option(
-            "chest",
-            "--env",
-            help="'chest' (procedural) or a mesh file; its frame comes from the sidecar FILE.json that `riskplan env chest` writes, or from --base-pose.",
-        ),
+        env: str = _COLLISION_ENV,
         base_pose: str = base_pose_option(),
-        displacements: str = typer.Option(
-            None,
-            "--displacements",
-            "-d",
-            help="Tendon displacements (m), comma-separated; ';' separates configurations.",
-        ),
-        tensions: str = typer.Option(
-            None,
-            "--tensions",
-            help="Or tendon tensions (N), like --displacements; converted through the model's "
-            "robot (with --model) or --robot.",
-        ),
-        model: Path = typer.Option(
-            None,
-            "--model",
-            help="Trained MDN model folder (riskplan model train) or a shipped name ('paper'). Default: robot backbone mixture.",
-        ),
-        arc: str = typer.Option(
-            None,
-            "--arc",
-            help="Constant-curvature geometry instead of a robot: 'kappa,phi' (1/m, rad).",
-        ),
-        robot: str = typer.Option(
-            "paper", "--robot", help="Robot name or TOML file for the backbone fallback."
-        ),
-        method: str = typer.Option(
-            "bound",
-            help="bound (eq. 9) | union | monte_carlo | monte_carlo_union; the Monte Carlo "
-            "reference column estimates the same event (any of K points, one per component, "
-            "for the union methods).",
-        ),
-        samples: int = typer.Option(
-            20000, min=1, help="Monte Carlo samples (also used for the reference interval)."
-        ),
+        displacements: str = _COLLISION_DISPLACEMENTS,
+        tensions: str = _COLLISION_TENSIONS,
+        model: Path = _COLLISION_MODEL,
+        arc: str = _COLLISION_ARC,
+        robot: str = _COLLISION_ROBOT,
+        method: str = _COLLISION_METHOD,
+        samples: int = _COLLISION_SAMPLES,
         seed: int = typer.Option(0, min=0, help="Seed (chest shape and Monte Carlo)."),
         json_out: bool = typer.Option(False, "--json", help="Print JSON."),
     ) -> None:
@@ -228,34 +293,7 @@ def register(app: typer.Typer) -> None:
                 from riskplan.robots import load_robot
 
                 gm = robot_mixture(load_robot(robot), d)
-        if env == "chest":
-            if base_pose is not None:
-                raise InvalidInputError(
-                    "--base-pose applies to mesh files; the procedural chest has its own base frame"
-                )
-            from riskplan.planning.chest_scene import build_chest
-
-            environment = build_chest(seed).base_environment
-        else:
-            from riskplan.collision.mesh_files import BasePose, load_environment
-
-            # the mesh's units are judged against the robot whose geometry is checked: the
-            # model's robot, else --robot (also for --arc, whose scale the robot sets)
-            judge = None
-            if model is not None:
-                from riskplan.kinematics import load_model as _load_model
-
-                judge = _load_model(model).robot
-            if judge is None:
-                from riskplan.robots import load_robot as _load_robot
-
-                judge = _load_robot(robot)
-            environment = load_environment(
-                env,
-                base_pose=None if base_pose is None else BasePose.parse(base_pose),
-                robot_length=judge.params.backbone.length,
-                source=f"--env {env}",
-            )
+        environment = _probability_environment(env, base_pose, seed, model, robot)
         p = probability_of_collision(gm, environment, method, n_samples=samples, seed=seed)
         # the reference estimates the event the chosen method bounds: any point of the
         # mixture (eq. 9) or any of K points, one per component (the union variant)
@@ -290,6 +328,12 @@ def register(app: typer.Typer) -> None:
             )
         Console().print(table)
 
+    return collision
+
+
+def _add_collision_table(collision_app: typer.Typer):
+    """Add ``table`` to ``collision_app``; returns the command function."""
+
     @collision_app.command("table")
     def collision_table(
         out: Path = typer.Option(
@@ -317,5 +361,4 @@ def register(app: typer.Typer) -> None:
             write_text_atomic(out, text)
             typer.echo(f"table: {out}")
 
-    # the spelling before the group
-    app.command("collision-table", hidden=True)(collision_table)
+    return collision_table

@@ -18,6 +18,13 @@ import typer
 from riskplan.commands._shared import workers_option
 
 
+def _get_preset(preset):
+    """The data-set preset named ``preset`` (None if not a preset name)."""
+    from riskplan.datasets import PRESETS
+
+    return PRESETS.get(preset)
+
+
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
     from riskplan.commands._shared import add_group
@@ -27,6 +34,14 @@ def register(app: typer.Typer) -> None:
         "dataset",
         "Point-cloud data sets by the MDN paper's protocol (generate, inspect, import, export).",
     )
+    _add_generate(sub)
+    _add_info(sub)
+    _add_import(sub)
+    _add_export(sub)
+
+
+def _add_generate(sub: typer.Typer):
+    """Add ``generate`` to ``sub``; returns the command function."""
 
     @sub.command("generate")
     def generate(
@@ -70,7 +85,7 @@ def register(app: typer.Typer) -> None:
         rob = load_robot(robot)
         protocol = protocol_for_robot(preset, rob)
         protocol_limits(protocol, rob)  # a custom protocol's limits must fit the robot
-        if protocol is not get_preset(preset):
+        if protocol is not _get_preset(preset):
             typer.echo(
                 f"protocol {protocol.name} for robot {rob.name} ({rob.n_config} configuration "
                 f"variables): {protocol.grid_levels}-level grid, {protocol.n_train} + "
@@ -114,10 +129,11 @@ def register(app: typer.Typer) -> None:
             + ", ".join(str(p) for p in outputs.values())
         )
 
-    def get_preset(preset):
-        from riskplan.datasets import PRESETS
+    return generate
 
-        return PRESETS.get(preset)
+
+def _add_info(sub: typer.Typer):
+    """Add ``info`` to ``sub``; returns the command function."""
 
     @sub.command("info")
     def info(
@@ -142,6 +158,12 @@ def register(app: typer.Typer) -> None:
                 )
             t.add_row(k, str(v))
         Console().print(t)
+
+    return info
+
+
+def _add_import(sub: typer.Typer):
+    """Add ``import`` to ``sub``; returns the command function."""
 
     @sub.command("import")
     def import_(
@@ -184,6 +206,12 @@ def register(app: typer.Typer) -> None:
             f"imported {ds.n_configs} configurations x {ds.n_starts} clouds x {ds.n_points} points -> {path}"
         )
 
+    return import_
+
+
+def _add_export(sub: typer.Typer):
+    """Add ``export`` to ``sub``; returns the command function."""
+
     @sub.command("export")
     def export(
         file: Path = typer.Argument(..., help="Data-set HDF5 file."),
@@ -197,3 +225,5 @@ def register(app: typer.Typer) -> None:
 
         man = export_dataset(file, out, fmt=fmt, overwrite=overwrite)
         typer.echo(f"exported -> {man}")
+
+    return export

@@ -66,6 +66,16 @@ def register(app: typer.Typer) -> None:
     model_app = add_group(
         app, "model", "The mixture density network: train, predict, sweep, evaluate."
     )
+    train = _add_train(model_app)
+    predict = _add_predict(model_app)
+    sweep = _add_sweep(model_app)
+    evaluate = _add_evaluate(model_app)
+    for command in (train, predict, sweep, evaluate):  # the spellings before the group
+        app.command(command.__name__, hidden=True)(command)
+
+
+def _add_train(model_app: typer.Typer):
+    """Add ``train`` to ``model_app``; returns the command function."""
 
     @model_app.command()
     def train(
@@ -148,6 +158,12 @@ def register(app: typer.Typer) -> None:
             f"({len(res.history)} epochs{', stopped early' if res.stopped_early else ''}, {res.skipped_steps} skipped steps); model: {out}"
         )
 
+    return train
+
+
+def _add_predict(model_app: typer.Typer):
+    """Add ``predict`` to ``model_app``; returns the command function."""
+
     @model_app.command()
     def predict(
         model: Path = typer.Option(
@@ -211,6 +227,12 @@ def register(app: typer.Typer) -> None:
                 typer.echo(
                     f"  w={w[c, k]:.3f}  mean=({', '.join(f'{v * 1e3:8.2f}' for v in mu[c, k])}) mm"
                 )
+
+    return predict
+
+
+def _add_sweep(model_app: typer.Typer):
+    """Add ``sweep`` to ``model_app``; returns the command function."""
 
     @model_app.command()
     def sweep(
@@ -278,6 +300,12 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"K={e.n_components:2d}  test NLL {e.test_nll:9.4f}{flag}")
         typer.echo(f"recommended K = {res.recommended} ({res.rule}); results in {out}")
 
+    return sweep
+
+
+def _add_evaluate(model_app: typer.Typer):
+    """Add ``evaluate`` to ``model_app``; returns the command function."""
+
     @model_app.command()
     def evaluate(
         model: Path = typer.Option(
@@ -343,5 +371,4 @@ def register(app: typer.Typer) -> None:
         )
         typer.echo(f"results in {out}")
 
-    for command in (train, predict, sweep, evaluate):  # the spellings before the group
-        app.command(command.__name__, hidden=True)(command)
+    return evaluate

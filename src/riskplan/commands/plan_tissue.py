@@ -12,49 +12,82 @@ from riskplan.commands._shared import progress_bar, workers_option
 
 def register(plan_app: typer.Typer) -> None:
     """Add the ``tissue`` command to the ``riskplan plan`` group."""
+    _add_tissue(plan_app)
+
+
+def _check_choices(case, plans, method, selection) -> None:
+    """``--case``, ``--plans``, ``--method`` and ``--selection`` of ``plan tissue``, checked
+    before any work."""
+    from riskplan.control.lqgmp import METHODS
+    from riskplan.errors import InvalidInputError
+    from riskplan.scenarios.uncertainty import CASE_NAMES
+    from riskplan.tissue_planning.plan import SELECTIONS
+
+    if case not in CASE_NAMES:
+        raise InvalidInputError(f"--case: expected one of {', '.join(CASE_NAMES)}, got {case!r}")
+    if plans < 1:
+        raise InvalidInputError(f"--plans: expected >= 1, got {plans}")
+    if method is not None and method not in METHODS:
+        raise InvalidInputError(f"--method: expected one of {', '.join(METHODS)}, got {method!r}")
+    if selection not in SELECTIONS:
+        raise InvalidInputError(
+            f"--selection: expected one of {', '.join(SELECTIONS)}, got {selection!r}"
+        )
+
+
+# options of the command below
+_TISSUE_SCENARIO = typer.Option(
+    "needle",
+    "--scenario",
+    help="needle | manipulation | a scenario file (.toml, docs/scenarios.md)",
+)
+_TISSUE_PLANS = typer.Option(100, "--plans", help="number of candidate plans (the paper: 100)")
+_TISSUE_CASE = typer.Option(
+    "material-high",
+    "--case",
+    help="nominal | material-low | material-high | actuation | mesh | force",
+)
+_TISSUE_SEED = typer.Option(0, "--seed", min=0, help="master seed (trees, linearisation, checks)")
+_TISSUE_METHOD = typer.Option(
+    None,
+    "--method",
+    help="LQG-MP collision estimate: sigma (paper; conservative) | truncation | "
+    "sampling (trajectories of the linear model); default: the --selection's",
+)
+_TISSUE_SELECTION = typer.Option(
+    "calibrated",
+    "--selection",
+    help="calibrated (default: per scenario the estimator that matched measured success "
+    "best, docs/control.md) | material (needle: material frame with the bias state) | "
+    "paper (sigma on the world-frame LQG)",
+)
+_TISSUE_CHECK_RUNS = typer.Option(
+    1000, "--check-runs", min=0, help="closed-loop executions per checked plan (0: skip)"
+)
+_TISSUE_CHECK_OTHERS = typer.Option(
+    2, "--check-others", min=0, help="plans checked besides the selected one"
+)
+_TISSUE_GIF = typer.Option(
+    True, "--gif/--no-gif", help="write an animation of one closed-loop execution"
+)
+
+
+def _add_tissue(plan_app: typer.Typer):
+    """Add ``tissue`` to ``plan_app``; returns the command function."""
 
     @plan_app.command("tissue")
     def tissue(
-        scenario: str = typer.Option(
-            "needle",
-            "--scenario",
-            help="needle | manipulation | a scenario file (.toml, docs/scenarios.md)",
-        ),
-        plans: int = typer.Option(
-            100, "--plans", help="number of candidate plans (the paper: 100)"
-        ),
-        case: str = typer.Option(
-            "material-high",
-            "--case",
-            help="nominal | material-low | material-high | actuation | mesh | force",
-        ),
+        scenario: str = _TISSUE_SCENARIO,
+        plans: int = _TISSUE_PLANS,
+        case: str = _TISSUE_CASE,
         out: Path = typer.Option(..., "--out", help="output folder (npz, JSON, PNG, GIF)"),
         workers: int = workers_option("worker processes (0: one per core)"),
-        seed: int = typer.Option(
-            0, "--seed", min=0, help="master seed (trees, linearisation, checks)"
-        ),
-        method: str = typer.Option(
-            None,
-            "--method",
-            help="LQG-MP collision estimate: sigma (paper; conservative) | truncation | "
-            "sampling (trajectories of the linear model); default: the --selection's",
-        ),
-        selection: str = typer.Option(
-            "calibrated",
-            "--selection",
-            help="calibrated (default: per scenario the estimator that matched measured success "
-            "best, docs/control.md) | material (needle: material frame with the bias state) | "
-            "paper (sigma on the world-frame LQG)",
-        ),
-        check_runs: int = typer.Option(
-            1000, "--check-runs", min=0, help="closed-loop executions per checked plan (0: skip)"
-        ),
-        check_others: int = typer.Option(
-            2, "--check-others", min=0, help="plans checked besides the selected one"
-        ),
-        gif: bool = typer.Option(
-            True, "--gif/--no-gif", help="write an animation of one closed-loop execution"
-        ),
+        seed: int = _TISSUE_SEED,
+        method: str = _TISSUE_METHOD,
+        selection: str = _TISSUE_SELECTION,
+        check_runs: int = _TISSUE_CHECK_RUNS,
+        check_others: int = _TISSUE_CHECK_OTHERS,
+        gif: bool = _TISSUE_GIF,
     ) -> None:
         """Plan with the simulator RRT, select with LQG-MP, check the estimate, write OUT/."""
         from rich.console import Console
@@ -62,30 +95,12 @@ def register(plan_app: typer.Typer) -> None:
 
         from riskplan.app.outputs.tissue_plan import HONESTY_HEADER, summary_rows, write_outputs
         from riskplan.commands._shared import output_folder
-        from riskplan.control.lqgmp import METHODS
-        from riskplan.errors import InvalidInputError
         from riskplan.io import check_output_folder
         from riskplan.scenarios.registry import make_scenario
-        from riskplan.scenarios.uncertainty import CASE_NAMES
         from riskplan.tissue_planning.plan import check_tissue_budget, plan_tissue
         from riskplan.tissue_planning.rrt import RRTOptions
 
-        if case not in CASE_NAMES:
-            raise InvalidInputError(
-                f"--case: expected one of {', '.join(CASE_NAMES)}, got {case!r}"
-            )
-        if plans < 1:
-            raise InvalidInputError(f"--plans: expected >= 1, got {plans}")
-        if method is not None and method not in METHODS:
-            raise InvalidInputError(
-                f"--method: expected one of {', '.join(METHODS)}, got {method!r}"
-            )
-        from riskplan.tissue_planning.plan import SELECTIONS
-
-        if selection not in SELECTIONS:
-            raise InvalidInputError(
-                f"--selection: expected one of {', '.join(SELECTIONS)}, got {selection!r}"
-            )
+        _check_choices(case, plans, method, selection)
         # a scenario file is read and checked here, before any work
         sim = make_scenario(scenario, case)
         check_output_folder(out, "--out")
@@ -164,3 +179,5 @@ def register(plan_app: typer.Typer) -> None:
             Console().print(table)
         for name, path in files.items():
             typer.echo(f"{name}: {path}")
+
+    return tissue

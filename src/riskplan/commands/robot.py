@@ -44,6 +44,13 @@ def _dumps(value) -> str:
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the top-level app."""
     sub = add_group(app, "robot", "Tendon-driven continuum robots: shapes and descriptions.")
+    _add_shape(sub)
+    _add_info(sub)
+    _add_template(sub)
+
+
+def _add_shape(sub: typer.Typer):
+    """Add ``shape`` to ``sub``; returns the command function."""
 
     @sub.command("shape")
     def shape(
@@ -113,6 +120,12 @@ def register(app: typer.Typer) -> None:
                 fig.savefig(tmp, dpi=110, bbox_inches="tight", format="png")
             if not as_json:
                 typer.echo(f"plot: {plot}")
+
+    return shape
+
+
+def _add_info(sub: typer.Typer):
+    """Add ``info`` to ``sub``; returns the command function."""
 
     @sub.command("info")
     def info(
@@ -195,6 +208,12 @@ def register(app: typer.Typer) -> None:
                 + (", retraction" if bm.retraction else "")
             )
 
+    return info
+
+
+def _add_template(sub: typer.Typer):
+    """Add ``template`` to ``sub``; returns the command function."""
+
     @sub.command("template")
     def template(
         out: Path = typer.Option(
@@ -222,3 +241,5 @@ def register(app: typer.Typer) -> None:
         with atomic_path(out) as tmp:
             Path(tmp).write_text(text, encoding="utf-8")
         typer.echo(f"robot template: {out}")
+
+    return template

@@ -19,6 +19,12 @@ def register(app: typer.Typer) -> None:
     sub = add_group(
         app, "tissue", "Deformable-tissue scenarios (FEM): simulate, render frames and GIFs."
     )
+    _add_step_cost(sub)
+    _add_simulate(sub)
+
+
+def _add_step_cost(sub: typer.Typer):
+    """Add ``step-cost`` to ``sub``; returns the command function."""
 
     @sub.command("step-cost")
     def step_cost(quick: bool = typer.Option(False, "--quick", help="fewer repeats")) -> None:
@@ -29,38 +35,50 @@ def register(app: typer.Typer) -> None:
 
         typer.echo(json.dumps(step_costs(quick)))
 
+    return step_cost
+
+
+# options of the command below
+_SIMULATE_SCENARIO = typer.Option(
+    "needle",
+    "--scenario",
+    help="needle | manipulation | a scenario file (.toml, docs/scenarios.md)",
+)
+_SIMULATE_CONTROLS = typer.Option(
+    "random",
+    "--controls",
+    help="FILE (CSV, JSON or .npy, one (T, q) row per step; or the selected.npz of "
+    "`riskplan plan tissue`) or 'random'",
+)
+_SIMULATE_OUT = typer.Option(..., "--out", help="output folder for frames, GIF and summary.json")
+_SIMULATE_CASE = typer.Option(
+    "nominal",
+    "--case",
+    help="nominal | material-low | material-high | actuation | mesh | force",
+)
+_SIMULATE_STEPS = typer.Option(
+    None,
+    "--steps",
+    help="steps to run (default: all rows of FILE, or 30 needle / 20 manipulation)",
+)
+_SIMULATE_SEED = typer.Option(0, "--seed", help="seed of the parameter draw and of random controls")
+_SIMULATE_MAX_FRAMES = typer.Option(
+    40, "--max-frames", help="at most this many PNG frames / GIF frames"
+)
+
+
+def _add_simulate(sub: typer.Typer):
+    """Add ``simulate`` to ``sub``; returns the command function."""
+
     @sub.command("simulate")
     def simulate(
-        scenario: str = typer.Option(
-            "needle",
-            "--scenario",
-            help="needle | manipulation | a scenario file (.toml, docs/scenarios.md)",
-        ),
-        controls: str = typer.Option(
-            "random",
-            "--controls",
-            help="FILE (CSV, JSON or .npy, one (T, q) row per step; or the selected.npz of "
-            "`riskplan plan tissue`) or 'random'",
-        ),
-        out: Path = typer.Option(
-            ..., "--out", help="output folder for frames, GIF and summary.json"
-        ),
-        case: str = typer.Option(
-            "nominal",
-            "--case",
-            help="nominal | material-low | material-high | actuation | mesh | force",
-        ),
-        steps: int = typer.Option(
-            None,
-            "--steps",
-            help="steps to run (default: all rows of FILE, or 30 needle / 20 manipulation)",
-        ),
-        seed: int = typer.Option(
-            0, "--seed", help="seed of the parameter draw and of random controls"
-        ),
-        max_frames: int = typer.Option(
-            40, "--max-frames", help="at most this many PNG frames / GIF frames"
-        ),
+        scenario: str = _SIMULATE_SCENARIO,
+        controls: str = _SIMULATE_CONTROLS,
+        out: Path = _SIMULATE_OUT,
+        case: str = _SIMULATE_CASE,
+        steps: int = _SIMULATE_STEPS,
+        seed: int = _SIMULATE_SEED,
+        max_frames: int = _SIMULATE_MAX_FRAMES,
     ) -> None:
         """Run one simulation and write PNG frames, an animated GIF and summary.json."""
         import numpy as np
@@ -153,3 +171,5 @@ def register(app: typer.Typer) -> None:
             f"{'collision at steps ' + str(collided[:5]) if collided else 'no collision'}"
             f"{'; FAILED: ' + reason if reason else ''}; wrote {out / gif.name}"
         )
+
+    return simulate

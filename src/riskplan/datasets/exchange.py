@@ -265,7 +265,7 @@ def load_manifest_clouds(
     seeded subset of that many points of every cloud (default: all clouds must have the same
     count). Nothing is written.
     """
-    from riskplan.datasets.storage import REACH_FACTOR, reach_bound
+    from riskplan.datasets.storage import reach_bound
 
     manifest = Path(manifest)
     m = robot.n_tendons
@@ -330,30 +330,7 @@ def load_manifest_clouds(
     clouds = []
     for c in ids:
         for r in by_config[int(c)]:
-            f = (
-                (where / r["file"]).resolve()
-                if not Path(r["file"]).is_absolute()
-                else Path(r["file"])
-            )
-            if not f.is_file():
-                raise InvalidInputError(
-                    f"{manifest}, line {r['line']}, field 'file': {f} not found"
-                )
-            p = read_cloud(f)
-            if scale != 1.0:
-                p = (p.astype(np.float64) * scale).astype(np.float32)
-            if reach is not None:
-                dist = float(np.sqrt((p.astype(np.float64) ** 2).sum(-1)).max())
-                if dist > reach:
-                    hint = (
-                        "; the coordinates look like millimetres where metres are expected (scale 0.001)"
-                        if dist > MILLIMETRE_FACTOR * reach
-                        else "; are the points in the robot base frame?"
-                    )
-                    raise DataFormatError(
-                        f"{f} (manifest line {r['line']}): a point lies {dist:.4g} m from the robot base, "
-                        f"beyond the robot's reach ({reach / REACH_FACTOR:.4g} m, limit {reach:.4g} m){hint}"
-                    )
+            f, p = _read_manifest_cloud(where, r, manifest, scale, reach)
             clouds.append((f, r["line"], p))
     counts = np.array([len(p) for _, _, p in clouds])
     if n_points is None:
@@ -385,6 +362,32 @@ def load_manifest_clouds(
         "tips": "manifest" if present["tip"] else "robot model at the target",
     }
     return ImportedClouds(disp, points, tips, starts, tensions, ids, sources)
+
+
+def _read_manifest_cloud(where, r, manifest, scale, reach):
+    """``(file, points)`` of one manifest row: its cloud file (relative to the manifest's
+    folder), scaled to metres and checked against the robot's reach."""
+    from riskplan.datasets.storage import REACH_FACTOR
+
+    f = (where / r["file"]).resolve() if not Path(r["file"]).is_absolute() else Path(r["file"])
+    if not f.is_file():
+        raise InvalidInputError(f"{manifest}, line {r['line']}, field 'file': {f} not found")
+    p = read_cloud(f)
+    if scale != 1.0:
+        p = (p.astype(np.float64) * scale).astype(np.float32)
+    if reach is not None:
+        dist = float(np.sqrt((p.astype(np.float64) ** 2).sum(-1)).max())
+        if dist > reach:
+            hint = (
+                "; the coordinates look like millimetres where metres are expected (scale 0.001)"
+                if dist > MILLIMETRE_FACTOR * reach
+                else "; are the points in the robot base frame?"
+            )
+            raise DataFormatError(
+                f"{f} (manifest line {r['line']}): a point lies {dist:.4g} m from the robot base, "
+                f"beyond the robot's reach ({reach / REACH_FACTOR:.4g} m, limit {reach:.4g} m){hint}"
+            )
+    return f, p
 
 
 def _check_limits(robot, values, lines, manifest, what, cols):

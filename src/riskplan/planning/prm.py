@@ -364,6 +364,21 @@ class Roadmap:
         return out[0], out[1]
 
 
+def _planner_graph(ob, prm, si, m: int):
+    """``(milestones (V, m), edges (E, 2) with i < j)`` of a grown OMPL PRM: the milestones
+    that have edges (OMPL's planner data)."""
+    pd = ob.PlannerData(si)
+    prm.getPlannerData(pd)  # holds the milestones that have edges
+    nv = pd.numVertices()
+    verts = np.empty((nv, m))
+    edges = []
+    for v in range(nv):
+        s = pd.getVertex(v).getState()
+        verts[v] = [s[i] for i in range(m)]
+        edges.extend((v, w) for w in pd.getEdges(v) if w > v)
+    return verts, np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+
+
 def build_roadmap(
     validity: MeanValidity,
     *,
@@ -460,16 +475,8 @@ def build_roadmap(
             f"roadmap growth stopped after {elapsed:.1f} s (limit {max_seconds} s) with {prm.milestoneCount()} of "
             f"{total} milestones ({stats['drawn']} configurations drawn); free space is too small for the model's means"
         )
-    pd = ob.PlannerData(si)
-    prm.getPlannerData(pd)  # holds the milestones that have edges
-    nv = pd.numVertices()
-    verts = np.empty((nv, m))
-    edges = []
-    for v in range(nv):
-        s = pd.getVertex(v).getState()
-        verts[v] = [s[i] for i in range(m)]
-        edges.extend((v, w) for w in pd.getEdges(v) if w > v)
-    E = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    verts, E = _planner_graph(ob, prm, si, m)
+    nv = len(verts)
     log.info(
         "PRM: %d milestones (%d in OMPL), %d edges in %.2f s",
         nv,

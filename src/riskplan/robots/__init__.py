@@ -7,6 +7,7 @@
 """
 
 from riskplan.robots.description import parse_robot_toml
+from riskplan.robots.loading import PACKAGED_ROBOTS, cached_robot, load_robot, robot_from_toml
 from riskplan.robots.params import (
     Backbone,
     Disks,
@@ -17,14 +18,7 @@ from riskplan.robots.params import (
     params_to_toml,
 )
 from riskplan.robots.pose import BasePose
-from riskplan.robots.robot import (
-    PACKAGED_ROBOTS,
-    RodShape,
-    TendonRobot,
-    cached_robot,
-    load_robot,
-    robot_from_toml,
-)
+from riskplan.robots.robot import RodShape, TendonRobot
 
 __all__ = [
     "PACKAGED_ROBOTS",

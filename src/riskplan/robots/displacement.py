@@ -24,7 +24,7 @@ from riskplan.robots.tendon_lengths import lengths_and_jacobian
 LINE_SEARCH_MAXIT = 30
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack):
     """Newton system ``Jm step = phi`` of the complementarity problem at ``tau`` (see
     :func:`solve_displacement_tensions`) in length units, with ``a_i = tau_i * 1e-3`` (tensions in
@@ -72,7 +72,7 @@ def complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack):
     return res, merit
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def levenberg_marquardt_system(Jm, phi, mu, A, b, m, slack):
     """``A = J^T J + mu I``, ``b = J^T phi`` (Levenberg-Marquardt normal equations) with the
     slack rows scaled to length units (1e-3 m/N) like the residual."""
@@ -91,7 +91,7 @@ def levenberg_marquardt_system(Jm, phi, mu, A, b, m, slack):
         A[i, i] += mu
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def search_direction(Jm, phi, merit, slack, lm, A, step, m):
     """Newton step (``lm`` False) or Levenberg-Marquardt step into ``step``; False if singular."""
     if lm:
@@ -104,7 +104,7 @@ def search_direction(Jm, phi, merit, slack, lm, A, step, m):
     return gauss_solve(A, step, m, 1)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _system_at(d, kinv, l0, tau, rod, tol, maxit, lengths, dl, Jm, phi, fb, slack):
     """Tendon lengths and their Jacobian at ``tau`` (:func:`lengths_and_jacobian`), then the
     Newton system there (:func:`complementarity_system`); returns ``(status, residual, merit)``
@@ -119,7 +119,7 @@ def _system_at(d, kinv, l0, tau, rod, tol, maxit, lengths, dl, Jm, phi, fb, slac
     return OK, res, merit
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def line_search(d, kinv, l0, tau, step, merit, fb, rod, tols, work):
     """Backtracking on the squared residual along ``step`` from ``tau`` (projected on tau >= 0):
     halves the step until it falls by the Armijo factor. Leaves the accepted point in ``trial``
@@ -194,7 +194,9 @@ def solve_displacement_tensions(
         tau[i] = tau0[i]
     info[0] = 0
     info[1] = 1e300
-    fb = False
+    # False, typed as a plain bool: a literal False (and later True) would compile each helper
+    # that takes it once per literal value
+    fb = m < 0
     st, res, merit = _system_at(d, kinv, l0, tau, rod, tol, maxit, lengths, dl, Jm, phi, fb, slack)
     if st != OK:
         return st
@@ -220,7 +222,7 @@ def solve_displacement_tensions(
             # stuck at a stationary point of the min-function merit that is not a solution
             # (it is not smooth): continue with the Fischer-Burmeister form, whose merit has
             # no such points when dg/dtau is positive semidefinite, as a compliance matrix is
-            fb = True
+            fb = not fb  # True, typed as a plain bool (see above)
             st, res, merit = _system_at(
                 d, kinv, l0, tau, rod, tol, maxit, lengths, dl, Jm, phi, fb, slack
             )

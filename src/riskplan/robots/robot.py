@@ -6,96 +6,38 @@ checks inputs once at the boundary and places results in the world by the base p
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
-import os
-from dataclasses import dataclass, replace
-from importlib import resources
-from pathlib import Path
 
 import numpy as np
 from numba import njit
 
 from riskplan._validation import as_array, check_range
-from riskplan.errors import ConvergenceError, InvalidInputError, RobotDescriptionError
+from riskplan.errors import ConvergenceError, InvalidInputError
 from riskplan.robots import cosserat
-from riskplan.robots.description import parse_robot_toml, read_robot_text
-from riskplan.robots.params import (
-    BaseMotion,
-    Disks,
-    Gravity,
-    RobotParams,
-    params_to_toml,
-    rpy_to_matrix,
-)
-from riskplan.robots.pose import BasePose, quaternion_to_matrix
-from riskplan.robots.rod_tables import LOCAL_MAXIT, LOCAL_TOL
+from riskplan.robots import loaded as _loaded
+from riskplan.robots import motion as _motion
+from riskplan.robots.loaded import SHOOT_MAXIT, SHOOT_TOL
+from riskplan.robots.params import BaseMotion, RobotParams, params_to_toml
+from riskplan.robots.rod_tables import DISP_MAXIT, DISP_TOL, LOCAL_MAXIT, LOCAL_TOL
+from riskplan.robots.shape import RodShape, rotation_z, shift_polynomial
 
 __all__ = [
-    "PACKAGED_ROBOTS",
+    "BATCH_KERNEL_MIN",
+    "DISP_MAXIT",
+    "DISP_TOL",
+    "SHOOT_MAXIT",
+    "SHOOT_TOL",
     "RodShape",
     "TendonRobot",
-    "cached_robot",
-    "load_robot",
-    "robot_from_toml",
+    "rotation_z",
+    "shift_polynomial",
 ]
 
 log = logging.getLogger(__name__)
 
-PACKAGED_ROBOTS = {"paper": "paper_robot.toml"}
-
-DISP_TOL = 1e-12  # m, complementarity residual of the displacement -> tension solve
-DISP_MAXIT = 60
-SHOOT_TOL = 1e-11  # N m, tip-moment residual of the shooting solve
-SHOOT_MAXIT = 30
 # Batches at least this large use the configuration-vectorised kernel (faster from ~8 on).
 BATCH_KERNEL_MIN = 8
-
-
-@dataclass(frozen=True, eq=False)
-class RodShape:
-    """Robot shape(s) in the world frame (= base frame for the default base pose).
-
-    Attributes
-    ----------
-    s : (n,) arc length of the stations [m], from the exposed base; ``(..., n)`` for a batch
-        solved with per-configuration ``retraction`` (each exposed length has its own stations)
-    positions : (..., n, 3) backbone points [m]
-    rotations : (..., n, 3, 3) body frames; columns are the body axes (z = backbone tangent
-        direction of the unsheared rod)
-    tensions : (..., m) tendon tensions [N]
-    """
-
-    s: np.ndarray
-    positions: np.ndarray
-    rotations: np.ndarray
-    tensions: np.ndarray
-
-    @property
-    def tip(self) -> np.ndarray:
-        """``(..., 3)`` tip position."""
-        return self.positions[..., -1, :]
-
-    @property
-    def batch_shape(self) -> tuple[int, ...]:
-        return self.tensions.shape[:-1]
-
-    def __getitem__(self, idx) -> RodShape:
-        if not self.batch_shape:
-            raise InvalidInputError("RodShape: a single shape cannot be indexed")
-        s = self.s if self.s.ndim == 1 else self.s[idx]
-        return RodShape(s, self.positions[idx], self.rotations[idx], self.tensions[idx])
-
-    def to_json(self) -> dict:
-        """``{"tip", "backbone", "tensions"}`` of a single shape (plain lists)."""
-        if self.batch_shape:
-            raise InvalidInputError("to_json: expected a single shape; index the batch first")
-        return {
-            "tip": self.tip.tolist(),
-            "backbone": self.positions.tolist(),
-            "tensions": self.tensions.tolist(),
-        }
 
 
 @njit(cache=True)
@@ -112,29 +54,6 @@ def in_limits(values, low, high):
     return True
 
 
-def shift_polynomial(coefficients, offset: float) -> tuple[float, ...]:
-    """Coefficients of ``q(x) = p(x + offset)`` for ``p(x) = sum_k c_k x^k`` (ascending powers).
-
-    A retracted robot's routing ``theta(s)``, ``r(s)`` at absolute arc length ``s = s' + rho``
-    is the same-degree polynomial of the exposed arc length ``s'``.
-    """
-    P = np.polynomial.Polynomial(np.asarray(coefficients, dtype=np.float64))
-    q = P(np.polynomial.Polynomial([float(offset), 1.0])).coef
-    out = np.zeros(len(coefficients))
-    out[: len(q)] = q
-    return tuple(float(v) for v in out)
-
-
-def rotation_z(angle) -> np.ndarray:
-    """``(..., 3, 3)`` rotations about z by ``angle (...)`` [rad] (right-handed)."""
-    a = np.asarray(angle, dtype=np.float64)
-    c, s_ = np.cos(a), np.sin(a)
-    out = np.zeros(a.shape + (3, 3))
-    out[..., 0, 0], out[..., 0, 1], out[..., 1, 0], out[..., 1, 1] = c, -s_, s_, c
-    out[..., 2, 2] = 1.0
-    return out
-
-
 def _poly_table(polys) -> np.ndarray:
     K = max(len(c) for c in polys)
     out = np.zeros((len(polys), K))
@@ -146,6 +65,7 @@ def _poly_table(polys) -> np.ndarray:
 class TendonRobot:
     """A tendon-driven continuum robot described by :class:`RobotParams`.
 
+    >>> from riskplan.robots import load_robot
     >>> robot = load_robot("paper")
     >>> robot.solve_displacements([0.01, 0, 0, 0]).tip.shape
     (3,)
@@ -271,49 +191,53 @@ class TendonRobot:
         """The robot file (TOML) that rebuilds this robot."""
         return self._toml if self._toml is not None else params_to_toml(self.params)
 
+    def __repr__(self) -> str:
+        return f"TendonRobot(name={self.name!r}, tendons={self.n_tendons}, length={self._L})"
+
     def with_base_pose(
         self, position=(0.0, 0.0, 0.0), *, rotation=None, rpy=None, quaternion=None
     ) -> TendonRobot:
         """The same robot with another base pose (give one of rotation matrix, rpy, quaternion)."""
-        given = [
-            k
-            for k, v in (("rotation", rotation), ("rpy", rpy), ("quaternion", quaternion))
-            if v is not None
-        ]
-        if len(given) > 1:
-            raise InvalidInputError(f"with_base_pose: give one orientation, got {given}")
-        pos = as_array(position, "position", shape=(3,))
-        if rotation is not None:
-            Rm = as_array(rotation, "rotation", shape=(3, 3))
-            if not np.allclose(Rm.T @ Rm, np.eye(3), atol=1e-8) or np.linalg.det(Rm) <= 0:
-                raise InvalidInputError(
-                    "rotation: expected a proper rotation matrix (R^T R = I, det R = 1)"
-                )
-        elif quaternion is not None:
-            q = as_array(quaternion, "quaternion", shape=(4,))
-            if np.linalg.norm(q) < 1e-12:
-                raise InvalidInputError("quaternion: must be non-zero")
-            Rm = quaternion_to_matrix(q)
-        else:
-            Rm = rpy_to_matrix(as_array(rpy if rpy is not None else (0, 0, 0), "rpy", shape=(3,)))
-        base = BasePose(tuple(float(v) for v in pos), tuple(tuple(float(v) for v in r) for r in Rm))
-        return TendonRobot(replace(self.params, base=base))
+        return _motion.with_base_pose(
+            self, position, rotation=rotation, rpy=rpy, quaternion=quaternion
+        )
 
     def with_gravity(self, enabled: bool = True, vector=None) -> TendonRobot:
         """The same robot with gravity switched on/off (``vector`` in the world frame, m/s^2)."""
-        if not isinstance(enabled, (bool, np.bool_)):
-            raise InvalidInputError(
-                f"enabled: expected True or False, got {enabled!r} ({type(enabled).__name__})"
-            )
-        vec = (
-            self.params.gravity.vector
-            if vector is None
-            else tuple(as_array(vector, "vector", shape=(3,)).tolist())
-        )
-        return TendonRobot(replace(self.params, gravity=Gravity(bool(enabled), vec)))
+        return _motion.with_gravity(self, enabled, vector)
 
-    def __repr__(self) -> str:
-        return f"TendonRobot(name={self.name!r}, tendons={self.n_tendons}, length={self._L})"
+    def interpolate_configurations(self, a, b, t) -> np.ndarray:
+        """``(..., n_config)`` points ``a + t (b - a)`` of the straight configuration-space motion
+        from ``a`` to ``b`` (``t`` scalar or ``(...)``, in [0, 1]); a base rotation over a full
+        turn takes the short way round and is wrapped into ``[-pi, pi)`` (the lab's
+        ``VoxelEnvironment`` interpolation with ``util::canonical_angle``)."""
+        return _motion.interpolate_configurations(self, a, b, t)
+
+    def configuration_to_displacements(self, q, *, validate: bool = True) -> np.ndarray:
+        """A configuration in tension form ``(..., n_config)`` (tensions [N], then rotation and
+        retraction) in displacement form (tendon displacements [m] that hold the same shape at
+        that retraction, then rotation and retraction unchanged)."""
+        return _motion.configuration_to_displacements(self, q, validate=validate)
+
+    def configuration_to_tensions(self, q, *, validate: bool = True) -> np.ndarray:
+        """The inverse of :meth:`configuration_to_displacements`: displacement form
+        ``(..., n_config)`` to tension form (tensions solved at the configuration's retraction)."""
+        return _motion.configuration_to_tensions(self, q, validate=validate)
+
+    def check_base_motion(self, rotation, retraction, batch_shape) -> tuple:
+        """``(rotation, retraction)`` broadcast to ``batch_shape`` (``None`` stays ``None``),
+        checked against the robot's :class:`BaseMotion` (enabled, within limits)."""
+        return _motion.check_base_motion(self, rotation, retraction, batch_shape)
+
+    def retracted(self, retraction: float) -> TendonRobot:
+        """The exposed part of this robot retracted by ``retraction`` [m], as a robot of its own.
+
+        Length ``L - retraction``, routing polynomials shifted to the exposed arc length
+        (:func:`shift_polynomial`), disks beyond the retraction kept (shifted), the same number
+        of integration steps as the whole robot (so shapes of different retractions stack),
+        identity base pose and no base motion. Cached per value.
+        """
+        return _motion.retracted(self, retraction)
 
     # ---------------------------------------------------------------------- checks
     def _check(self, value, name, low, high):
@@ -358,12 +282,6 @@ class TendonRobot:
             tau.reshape(batch + (self.n_tendons,)),
         )
 
-    def _gravity_base(self) -> np.ndarray:
-        """Distributed force per unit length in the base frame [N/m]."""
-        return self._lam * (
-            self.params.base.matrix.T @ np.asarray(self.params.gravity.vector, dtype=float)
-        )
-
     def _batch_input(self, values, check, validate: bool):
         """``(flat, batch)``: ``values (..., m)``, checked by ``check`` when ``validate``, as a
         C-contiguous float array ``flat (B, m)``, and the leading shape ``batch``."""
@@ -401,7 +319,7 @@ class TendonRobot:
             Backbone positions and frames of batch shape ``(...)``.
         """
         if rotation is not None or retraction is not None:
-            return self._solve_moved(True, tensions, rotation, retraction, validate)
+            return _motion.solve_moved(self, True, tensions, rotation, retraction, validate)
         tau = self.check_tensions(tensions) if validate else np.asarray(tensions, dtype=float)
         if tau.ndim == 1 and not self.loaded:
             return self._solve_single_free(tau)
@@ -417,6 +335,14 @@ class TendonRobot:
             from riskplan.robots.batch_kernel import solve_tensions_batch
 
             P, Rs = solve_tensions_batch(self, flat, parallel=False, validate=False)
+        elif not self.loaded and B == 1:
+            # one configuration given as a batch: the scalar kernel (no batch loop to compile)
+            st = cosserat.shape_free(
+                flat[0], *self.tables, LOCAL_TOL, LOCAL_MAXIT, P[0], Rs[0], np.empty((n, 6)),
+                np.empty(m),
+            )  # fmt: skip
+            if st != cosserat.OK:
+                raise self.local_failure_error(flat[0])
         elif not self.loaded:
             lengths = np.empty((B, m))
             status = np.empty(B, dtype=np.int64)
@@ -452,159 +378,6 @@ class TendonRobot:
             raise ConvergenceError(f"non-finite shape for tensions {tau.tolist()}")
         return self._to_world(P, Rs, tau, ())
 
-    def interpolate_configurations(self, a, b, t) -> np.ndarray:
-        """``(..., n_config)`` points ``a + t (b - a)`` of the straight configuration-space motion
-        from ``a`` to ``b`` (``t`` scalar or ``(...)``, in [0, 1]); a base rotation over a full
-        turn takes the short way round and is wrapped into ``[-pi, pi)`` (the lab's
-        ``VoxelEnvironment`` interpolation with ``util::canonical_angle``)."""
-        a = np.asarray(a, dtype=np.float64)
-        b = np.asarray(b, dtype=np.float64)
-        t = np.asarray(t, dtype=np.float64)[..., None]
-        out = a + t * (b - a)
-        bm = self.base_motion
-        if bm.rotation and bm.rotation_limits[1] - bm.rotation_limits[0] >= 2 * math.pi - 1e-12:
-            j = self.n_tendons
-            diff = np.mod(b[..., j] - a[..., j] + math.pi, 2 * math.pi) - math.pi
-            out[..., j] = np.mod(a[..., j] + t[..., 0] * diff + math.pi, 2 * math.pi) - math.pi
-        return out
-
-    def configuration_to_displacements(self, q, *, validate: bool = True) -> np.ndarray:
-        """A configuration in tension form ``(..., n_config)`` (tensions [N], then rotation and
-        retraction) in displacement form (tendon displacements [m] that hold the same shape at
-        that retraction, then rotation and retraction unchanged)."""
-        return self._convert_tendon_part(q, self.displacements_for_tensions, validate)
-
-    def configuration_to_tensions(self, q, *, validate: bool = True) -> np.ndarray:
-        """The inverse of :meth:`configuration_to_displacements`: displacement form
-        ``(..., n_config)`` to tension form (tensions solved at the configuration's retraction)."""
-        return self._convert_tendon_part(q, self.tensions_for_displacements, validate)
-
-    def _convert_tendon_part(self, q, convert, validate: bool) -> np.ndarray:
-        """``q`` with its tendon part replaced by ``convert(part, retraction=..., validate=...)``
-        at each configuration's own retraction; rotation and retraction unchanged."""
-        q = np.array(q, dtype=np.float64)
-        part, _, ret = self.split_configuration(q, validate=validate)
-        out = q.copy()
-        out[..., : self.n_tendons] = convert(part, retraction=ret, validate=validate)
-        return out
-
-    # ------------------------------------------------------------ base rotation/retraction
-    def check_base_motion(self, rotation, retraction, batch_shape) -> tuple:
-        """``(rotation, retraction)`` broadcast to ``batch_shape`` (``None`` stays ``None``),
-        checked against the robot's :class:`BaseMotion` (enabled, within limits)."""
-        bm = self.base_motion
-        out = []
-        for name, value, enabled, lim, unit in (
-            ("rotation", rotation, bm.rotation, bm.rotation_limits, "rad"),
-            ("retraction", retraction, bm.retraction, bm.retraction_limits, "m"),
-        ):
-            if value is None:
-                out.append(None)
-                continue
-            if not enabled:
-                raise InvalidInputError(
-                    f"{name}: robot {self.name!r} has no base {name} (its file does not enable it)"
-                )
-            arr = as_array(value, name)
-            try:
-                arr = np.broadcast_to(arr, batch_shape)
-            except ValueError:
-                raise InvalidInputError(
-                    f"{name}: expected a scalar or shape {batch_shape}, got {arr.shape}"
-                ) from None
-            check_range(arr, f"{name} [{unit}]", low=lim[0], high=lim[1])
-            out.append(np.ascontiguousarray(arr, dtype=np.float64))
-        return tuple(out)
-
-    def retracted(self, retraction: float) -> TendonRobot:
-        """The exposed part of this robot retracted by ``retraction`` [m], as a robot of its own.
-
-        Length ``L - retraction``, routing polynomials shifted to the exposed arc length
-        (:func:`shift_polynomial`), disks beyond the retraction kept (shifted), the same number
-        of integration steps as the whole robot (so shapes of different retractions stack),
-        identity base pose and no base motion. Cached per value.
-        """
-        rho = float(retraction)
-        cache = self.__dict__.setdefault("_retracted", {})
-        if rho in cache:
-            return cache[rho]
-        p = self.params
-        bb = p.backbone
-        L = bb.length - rho
-        if rho == 0.0:
-            sub_bb = bb
-        else:
-            sub_bb = replace(bb, length=L, step=L / bb.n_steps)
-        tendons = tuple(
-            replace(t, theta=shift_polynomial(t.theta, rho), radius=shift_polynomial(t.radius, rho))
-            for t in p.tendons
-        )
-        kept = tuple(x - rho for x in p.disks.positions if x > rho)
-        disks = Disks(len(kept), p.disks.radius, p.disks.thickness, p.disks.density, kept)
-        sub = TendonRobot(
-            replace(
-                p,
-                backbone=sub_bb,
-                disks=disks,
-                tendons=tendons,
-                base=BasePose(),
-                base_motion=BaseMotion(),
-            )
-        )
-        if len(cache) >= 256:  # bounded: data sets draw many retractions
-            cache.pop(next(iter(cache)))
-        cache[rho] = sub
-        return sub
-
-    def _per_retraction(self, method: str, values, retraction, validate: bool) -> np.ndarray:
-        """``method`` of :meth:`retracted` robots, grouped by retraction value."""
-        by_disp = method == "tensions_for_displacements"
-        check = self.check_displacements if by_disp else self.check_tensions
-        arr = check(values) if validate else np.asarray(values, dtype=float)
-        _, ret = self.check_base_motion(None, retraction, arr.shape[:-1])
-        flat = arr.reshape(-1, self.n_tendons)
-        rflat = ret.reshape(-1)
-        out = np.empty_like(flat)
-        for rho in np.unique(rflat):
-            idx = np.flatnonzero(rflat == rho)
-            out[idx] = getattr(self.retracted(rho), method)(flat[idx], validate=False)
-        return out.reshape(arr.shape)
-
-    def _solve_moved(self, by_tension: bool, values, rotation, retraction, validate) -> RodShape:
-        """Shapes with base rotation and/or retraction (see :meth:`solve_tensions`)."""
-        if self.loaded:
-            raise InvalidInputError(
-                "base rotation/retraction with gravity is not modelled (the exposed part's "
-                "load would depend on the retracted part); switch gravity off"
-            )
-        check = self.check_tensions if by_tension else self.check_displacements
-        arr = check(values) if validate else np.asarray(values, dtype=float)
-        batch = arr.shape[:-1]
-        rot, ret = self.check_base_motion(rotation, retraction, batch)
-        flat = np.ascontiguousarray(arr.reshape(-1, self.n_tendons))
-        B, n, m = flat.shape[0], self._n + 1, self.n_tendons
-        rflat = np.zeros(B) if ret is None else ret.reshape(-1)
-        P = np.empty((B, n, 3))
-        Rs = np.empty((B, n, 3, 3))
-        tau = np.empty((B, m))
-        S = np.empty((B, n))
-        for rho in np.unique(rflat):
-            idx = np.flatnonzero(rflat == rho)
-            sub = self.retracted(rho)
-            solve = sub.solve_tensions if by_tension else sub.solve_displacements
-            shape = solve(flat[idx], validate=False)
-            P[idx], Rs[idx], tau[idx] = shape.positions, shape.rotations, shape.tensions
-            S[idx] = shape.s
-        if rot is not None:
-            Rz = rotation_z(rot.reshape(-1))
-            P = np.einsum("bij,bnj->bni", Rz, P)
-            Rs = np.einsum("bij,bnjk->bnik", Rz, Rs)
-        shape = self._to_world(P, Rs, tau, batch)
-        # without retraction every row holds the whole robot's stations
-        s = S.reshape(batch + (n,)) if (ret is not None and batch) else S[0].copy()
-        s.flags.writeable = False
-        return RodShape(s, shape.positions, shape.rotations, shape.tensions)
-
     def local_failure_error(self, tau) -> ConvergenceError:
         """The error for a failed local strain solve (eqs. 2-3) of the unloaded rod, naming the
         first node where a plain Newton re-solve stops and its scaled residual ``max |F_a / K_aa|``."""
@@ -633,50 +406,7 @@ class TendonRobot:
 
     def _shoot(self, tau) -> np.ndarray:
         """States ``(n+1, 18+m)`` of the loaded rod: ``N(0) = f L`` exactly, ``M(0)`` by Newton."""
-        m, n, L = self.n_tendons, self._n, self._L
-        f = self._gravity_base()
-        N0 = f * L
-        Y = np.empty((n + 1, 18 + m))
-        # start: base moment of the gravity load on the unloaded shape, M(0) = int p' x f (L - s) ds
-        P = np.empty((n + 1, 3))
-        Rs = np.empty((n + 1, 3, 3))
-        X = np.empty((n + 1, 6))
-        lengths = np.empty(m)
-        if (
-            cosserat.shape_free(tau, *self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, X, lengths)
-            != cosserat.OK
-        ):
-            raise self.local_failure_error(tau)
-        mid = 0.5 * (P[1:] + P[:-1])
-        M0 = np.cross(mid - P[0], f).sum(0) * (L / n)
-        scale = max(1e-6, float(np.linalg.norm(f)) * L * L)
-
-        def residual(M):
-            st = cosserat.shape_loaded(tau, *self.tables, f, N0, M, LOCAL_TOL, LOCAL_MAXIT, Y)
-            if st != cosserat.OK:
-                raise ConvergenceError(
-                    f"local strain solve failed while shooting (tensions {tau.tolist()})"
-                )
-            return Y[-1, 15:18].copy()
-
-        res = np.inf
-        for _it in range(SHOOT_MAXIT):
-            r = residual(M0)
-            res = float(np.abs(r).max())
-            if res <= SHOOT_TOL * max(1.0, scale * 1e3):
-                return Y.copy()
-            Jm = np.empty((3, 3))
-            eps = 1e-6 * scale
-            for j in range(3):
-                Mp = M0.copy()
-                Mp[j] += eps
-                Jm[:, j] = (residual(Mp) - r) / eps
-            M0 = M0 - np.linalg.solve(Jm, r)
-        raise ConvergenceError(
-            f"shooting did not converge in {SHOOT_MAXIT} iterations (tip moment residual {res:.3g} N m)",
-            residual=res,
-            iterations=SHOOT_MAXIT,
-        )
+        return _loaded.shoot(self, tau)
 
     def solve_displacements(
         self, displacements, *, rotation=None, retraction=None, validate: bool = True
@@ -710,7 +440,7 @@ class TendonRobot:
             Backbone of batch shape ``(...)``, with the solved ``tensions``.
         """
         if rotation is not None or retraction is not None:
-            return self._solve_moved(False, displacements, rotation, retraction, validate)
+            return _motion.solve_moved(self, False, displacements, rotation, retraction, validate)
         flat, batch = self._batch_input(displacements, self.check_displacements, validate)
         tau = self.tensions_for_displacements(flat, validate=False)
         over = tau > self._tmax * (1 + 1e-9)
@@ -734,14 +464,14 @@ class TendonRobot:
         """Tensions ``(..., m)`` [N] that realise tendon displacements ``(..., m)`` (see
         :meth:`solve_displacements`; with ``retraction`` [m], of the robot retracted by it)."""
         if retraction is not None:
-            return self._per_retraction(
-                "tensions_for_displacements", displacements, retraction, validate
+            return _motion.per_retraction(
+                self, "tensions_for_displacements", displacements, retraction, validate
             )
         flat, batch = self._batch_input(displacements, self.check_displacements, validate)
         B, m = flat.shape
         if self.loaded:
             tau = (
-                np.stack([self._tensions_loaded(flat[b]) for b in range(B)])
+                np.stack([_loaded.tensions_loaded(self, flat[b]) for b in range(B)])
                 if B
                 else np.zeros((0, m))
             )
@@ -751,20 +481,24 @@ class TendonRobot:
         tau = np.empty((B, m))
         infos = np.empty((B, 2))
         status = np.empty(B, dtype=np.int64)
-        cosserat.solve_displacement_batch(
-            flat,
-            self._kinv,
-            self._l0,
-            tau0,
-            *self.tables,
-            LOCAL_TOL,
-            LOCAL_MAXIT,
-            DISP_TOL,
-            DISP_MAXIT,
-            tau,
-            infos,
-            status,
-        )
+        if B == 1:
+            # one configuration: the scalar kernel, so that a first call compiles no batch loop
+            status[0] = self._displacement_tensions(flat[0], tau0[0], tau[0], infos[0])
+        else:
+            cosserat.solve_displacement_batch(
+                flat,
+                self._kinv,
+                self._l0,
+                tau0,
+                *self.tables,
+                LOCAL_TOL,
+                LOCAL_MAXIT,
+                DISP_TOL,
+                DISP_MAXIT,
+                tau,
+                infos,
+                status,
+            )
         bad = np.flatnonzero(status != cosserat.OK)
         if bad.size:
             b = int(bad[0])
@@ -774,6 +508,20 @@ class TendonRobot:
                 iterations=int(infos[b, 0]),
             )
         return tau.reshape(batch + (m,))
+
+    def _displacement_tensions(self, d, tau0, tau, info) -> int:
+        """:func:`cosserat.solve_displacement_tensions` for one configuration, tried once more
+        from the slack state when it fails from ``tau0`` (as :func:`cosserat.solve_displacement_batch`
+        does per configuration); returns the status."""
+        st = cosserat.OUTER_FAIL
+        for start in (tau0, np.zeros(self.n_tendons)):
+            st = cosserat.solve_displacement_tensions(
+                d, self._kinv, self._l0, start, *self.tables, LOCAL_TOL, LOCAL_MAXIT, DISP_TOL,
+                DISP_MAXIT, tau, info,
+            )  # fmt: skip
+            if st == cosserat.OK:
+                break
+        return st
 
     def tendon_lengths(self, tensions, *, validate: bool = True) -> np.ndarray:
         """Tendon path lengths ``l_i = int |v + u x r_i + r_i'| ds`` ``(..., m)`` [m] for tensions ``(..., m)``.
@@ -813,124 +561,8 @@ class TendonRobot:
         """Actuator displacements ``d = l0 - l(tau) + tau / k`` ``(..., m)`` [m] that hold taut
         tendons at ``tensions`` (with ``retraction`` [m], of the robot retracted by it)."""
         if retraction is not None:
-            return self._per_retraction(
-                "displacements_for_tensions", tensions, retraction, validate
+            return _motion.per_retraction(
+                self, "displacements_for_tensions", tensions, retraction, validate
             )
         tau = self.check_tensions(tensions) if validate else np.asarray(tensions, dtype=float)
         return self._l0 - self.tendon_lengths(tau, validate=False) + tau * self._kinv
-
-    def _tensions_loaded(self, d) -> np.ndarray:
-        """Semismooth Newton on ``min(tau, g(tau)) = 0`` with finite differences (gravity on)."""
-        m = self.n_tendons
-        tau = np.maximum(self._A0pinv @ d, 0.0)
-
-        def g(t):
-            return self._l0 - self._shoot(t)[-1, 18:] + t * self._kinv - d
-
-        res = np.inf
-        for _it in range(DISP_MAXIT):
-            gv = g(tau)
-            act = tau > gv
-            phi = np.where(act, gv, tau)
-            res = float(np.abs(np.where(act, gv, tau * 1e-3)).max())
-            if res <= 1e-11:
-                return tau
-            Jm = np.eye(m)
-            for j in range(m):
-                eps = 1e-6 * max(1.0, tau[j])
-                tp = tau.copy()
-                tp[j] += eps
-                col = (g(tp) - gv) / eps
-                Jm[act, j] = col[act]
-            tau = np.maximum(tau - np.linalg.solve(Jm, phi), 0.0)
-        raise ConvergenceError(
-            f"tension solve with gravity did not converge (residual {res:.3g} m)",
-            residual=res,
-            iterations=DISP_MAXIT,
-        )
-
-
-def _robot_text(name_or_path) -> tuple[str, str]:
-    key = str(name_or_path)
-    if key in PACKAGED_ROBOTS:
-        return resources.files("riskplan").joinpath("data", PACKAGED_ROBOTS[key]).read_text(
-            encoding="utf-8"
-        ), key
-    p = Path(key)
-    if not p.is_file():
-        why = "it is a folder" if p.is_dir() else "no such file"
-        raise RobotDescriptionError(
-            f"robot: {key!r} is neither a packaged robot ({', '.join(PACKAGED_ROBOTS)}) "
-            f"nor a TOML file ({why})",
-            key="robot",
-        )
-    return read_robot_text(
-        p
-    ), p.stem  # RobotDescriptionError naming the file if unreadable or not UTF-8
-
-
-def load_robot(name_or_path="paper") -> TendonRobot:
-    """The one resolver of "name | path | robot".
-
-    Parameters
-    ----------
-    name_or_path : str, os.PathLike or TendonRobot
-        A packaged robot's name (``"paper"``), a robot TOML file, or a robot (returned as
-        it is; so is an object with ``solve_displacements`` and ``toml_text``).
-
-    Returns
-    -------
-    TendonRobot
-        The robot.
-
-    Raises
-    ------
-    RobotDescriptionError
-        An unknown name, a missing or unreadable file, an invalid description.
-    InvalidInputError
-        Anything else.
-    """
-    if isinstance(name_or_path, TendonRobot) or (
-        hasattr(name_or_path, "solve_displacements") and hasattr(name_or_path, "toml_text")
-    ):
-        return name_or_path
-    if not isinstance(name_or_path, str | os.PathLike):
-        raise InvalidInputError(
-            f"robot: expected a TendonRobot or a robot name/path, got {type(name_or_path).__name__}"
-        )
-    text, default = _robot_text(name_or_path)
-    return TendonRobot(parse_robot_toml(text, default_name=default), toml_text=text)
-
-
-def robot_from_toml(text: str) -> TendonRobot:
-    """Rebuild a robot from its TOML text (e.g. stored in a data set's metadata).
-
-    Parameters
-    ----------
-    text : str
-        The robot description.
-
-    Returns
-    -------
-    TendonRobot
-        A new robot.
-    """
-    return TendonRobot(parse_robot_toml(text), toml_text=text)
-
-
-@functools.lru_cache(maxsize=8)
-def cached_robot(text: str) -> TendonRobot:
-    """The robot of a TOML text, built once per process (the one cache worker tasks that
-    carry a robot as its text use: data generation, executions on the robot).
-
-    Parameters
-    ----------
-    text : str
-        The robot description.
-
-    Returns
-    -------
-    TendonRobot
-        The same object for the same text (at most 8 texts kept).
-    """
-    return robot_from_toml(text)

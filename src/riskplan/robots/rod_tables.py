@@ -23,6 +23,9 @@ from numba import njit
 # the scalar and the batch kernels' callers
 LOCAL_TOL = 1e-10
 LOCAL_MAXIT = 50
+# the displacement -> tension solve's complementarity residual [m] and iteration cap
+DISP_TOL = 1e-12
+DISP_MAXIT = 60
 
 # status codes returned by the kernels
 OK = 0

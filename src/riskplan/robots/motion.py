@@ -1,0 +1,219 @@
+"""Base pose, gravity switch, base rotation and retraction of a :class:`~riskplan.robots.TendonRobot`.
+
+The bodies of the robot facade's methods that derive a robot (another base pose, gravity on
+or off, the exposed part of a retracted robot) or solve a robot whose base turns about its
+axis and/or retracts (the lab's configuration ``(tendons, rotation, retraction)``). Each
+takes the robot first; the methods of ``TendonRobot`` (documented there) call them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from riskplan._validation import as_array, check_range
+from riskplan.errors import InvalidInputError
+from riskplan.robots.params import BaseMotion, Disks, Gravity, rpy_to_matrix
+from riskplan.robots.pose import BasePose, quaternion_to_matrix
+from riskplan.robots.shape import RodShape, rotation_z, shift_polynomial
+
+__all__ = [
+    "check_base_motion",
+    "configuration_to_displacements",
+    "configuration_to_tensions",
+    "interpolate_configurations",
+    "retracted",
+    "solve_moved",
+    "with_base_pose",
+    "with_gravity",
+]
+
+
+def with_base_pose(robot, position=(0.0, 0.0, 0.0), *, rotation=None, rpy=None, quaternion=None):
+    """:meth:`TendonRobot.with_base_pose` of ``robot``."""
+    given = [
+        k
+        for k, v in (("rotation", rotation), ("rpy", rpy), ("quaternion", quaternion))
+        if v is not None
+    ]
+    if len(given) > 1:
+        raise InvalidInputError(f"with_base_pose: give one orientation, got {given}")
+    pos = as_array(position, "position", shape=(3,))
+    if rotation is not None:
+        Rm = as_array(rotation, "rotation", shape=(3, 3))
+        if not np.allclose(Rm.T @ Rm, np.eye(3), atol=1e-8) or np.linalg.det(Rm) <= 0:
+            raise InvalidInputError(
+                "rotation: expected a proper rotation matrix (R^T R = I, det R = 1)"
+            )
+    elif quaternion is not None:
+        q = as_array(quaternion, "quaternion", shape=(4,))
+        if np.linalg.norm(q) < 1e-12:
+            raise InvalidInputError("quaternion: must be non-zero")
+        Rm = quaternion_to_matrix(q)
+    else:
+        Rm = rpy_to_matrix(as_array(rpy if rpy is not None else (0, 0, 0), "rpy", shape=(3,)))
+    base = BasePose(tuple(float(v) for v in pos), tuple(tuple(float(v) for v in r) for r in Rm))
+    return type(robot)(replace(robot.params, base=base))
+
+
+def with_gravity(robot, enabled: bool = True, vector=None):
+    """:meth:`TendonRobot.with_gravity` of ``robot``."""
+    if not isinstance(enabled, (bool, np.bool_)):
+        raise InvalidInputError(
+            f"enabled: expected True or False, got {enabled!r} ({type(enabled).__name__})"
+        )
+    vec = (
+        robot.params.gravity.vector
+        if vector is None
+        else tuple(as_array(vector, "vector", shape=(3,)).tolist())
+    )
+    return type(robot)(replace(robot.params, gravity=Gravity(bool(enabled), vec)))
+
+
+def interpolate_configurations(robot, a, b, t) -> np.ndarray:
+    """:meth:`TendonRobot.interpolate_configurations` of ``robot``."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)[..., None]
+    out = a + t * (b - a)
+    bm = robot.base_motion
+    if bm.rotation and bm.rotation_limits[1] - bm.rotation_limits[0] >= 2 * math.pi - 1e-12:
+        j = robot.n_tendons
+        diff = np.mod(b[..., j] - a[..., j] + math.pi, 2 * math.pi) - math.pi
+        out[..., j] = np.mod(a[..., j] + t[..., 0] * diff + math.pi, 2 * math.pi) - math.pi
+    return out
+
+
+def configuration_to_displacements(robot, q, *, validate: bool = True) -> np.ndarray:
+    """:meth:`TendonRobot.configuration_to_displacements` of ``robot``."""
+    return _convert_tendon_part(robot, q, robot.displacements_for_tensions, validate)
+
+
+def configuration_to_tensions(robot, q, *, validate: bool = True) -> np.ndarray:
+    """:meth:`TendonRobot.configuration_to_tensions` of ``robot``."""
+    return _convert_tendon_part(robot, q, robot.tensions_for_displacements, validate)
+
+
+def _convert_tendon_part(robot, q, convert, validate: bool) -> np.ndarray:
+    """``q`` with its tendon part replaced by ``convert(part, retraction=..., validate=...)``
+    at each configuration's own retraction; rotation and retraction unchanged."""
+    q = np.array(q, dtype=np.float64)
+    part, _, ret = robot.split_configuration(q, validate=validate)
+    out = q.copy()
+    out[..., : robot.n_tendons] = convert(part, retraction=ret, validate=validate)
+    return out
+
+
+def check_base_motion(robot, rotation, retraction, batch_shape) -> tuple:
+    """:meth:`TendonRobot.check_base_motion` of ``robot``."""
+    bm = robot.base_motion
+    out = []
+    for name, value, enabled, lim, unit in (
+        ("rotation", rotation, bm.rotation, bm.rotation_limits, "rad"),
+        ("retraction", retraction, bm.retraction, bm.retraction_limits, "m"),
+    ):
+        if value is None:
+            out.append(None)
+            continue
+        if not enabled:
+            raise InvalidInputError(
+                f"{name}: robot {robot.name!r} has no base {name} (its file does not enable it)"
+            )
+        arr = as_array(value, name)
+        try:
+            arr = np.broadcast_to(arr, batch_shape)
+        except ValueError:
+            raise InvalidInputError(
+                f"{name}: expected a scalar or shape {batch_shape}, got {arr.shape}"
+            ) from None
+        check_range(arr, f"{name} [{unit}]", low=lim[0], high=lim[1])
+        out.append(np.ascontiguousarray(arr, dtype=np.float64))
+    return tuple(out)
+
+
+def retracted(robot, retraction: float):
+    """:meth:`TendonRobot.retracted` of ``robot``."""
+    rho = float(retraction)
+    cache = robot.__dict__.setdefault("_retracted", {})
+    if rho in cache:
+        return cache[rho]
+    p = robot.params
+    bb = p.backbone
+    L = bb.length - rho
+    if rho == 0.0:
+        sub_bb = bb
+    else:
+        sub_bb = replace(bb, length=L, step=L / bb.n_steps)
+    tendons = tuple(
+        replace(t, theta=shift_polynomial(t.theta, rho), radius=shift_polynomial(t.radius, rho))
+        for t in p.tendons
+    )
+    kept = tuple(x - rho for x in p.disks.positions if x > rho)
+    disks = Disks(len(kept), p.disks.radius, p.disks.thickness, p.disks.density, kept)
+    sub = type(robot)(
+        replace(
+            p,
+            backbone=sub_bb,
+            disks=disks,
+            tendons=tendons,
+            base=BasePose(),
+            base_motion=BaseMotion(),
+        )
+    )
+    if len(cache) >= 256:  # bounded: data sets draw many retractions
+        cache.pop(next(iter(cache)))
+    cache[rho] = sub
+    return sub
+
+
+def per_retraction(robot, method: str, values, retraction, validate: bool) -> np.ndarray:
+    """``method`` of :meth:`retracted` robots, grouped by retraction value."""
+    by_disp = method == "tensions_for_displacements"
+    check = robot.check_displacements if by_disp else robot.check_tensions
+    arr = check(values) if validate else np.asarray(values, dtype=float)
+    _, ret = robot.check_base_motion(None, retraction, arr.shape[:-1])
+    flat = arr.reshape(-1, robot.n_tendons)
+    rflat = ret.reshape(-1)
+    out = np.empty_like(flat)
+    for rho in np.unique(rflat):
+        idx = np.flatnonzero(rflat == rho)
+        out[idx] = getattr(robot.retracted(rho), method)(flat[idx], validate=False)
+    return out.reshape(arr.shape)
+
+
+def solve_moved(robot, by_tension: bool, values, rotation, retraction, validate) -> RodShape:
+    """Shapes with base rotation and/or retraction (see :meth:`solve_tensions`)."""
+    if robot.loaded:
+        raise InvalidInputError(
+            "base rotation/retraction with gravity is not modelled (the exposed part's "
+            "load would depend on the retracted part); switch gravity off"
+        )
+    check = robot.check_tensions if by_tension else robot.check_displacements
+    arr = check(values) if validate else np.asarray(values, dtype=float)
+    batch = arr.shape[:-1]
+    rot, ret = robot.check_base_motion(rotation, retraction, batch)
+    flat = np.ascontiguousarray(arr.reshape(-1, robot.n_tendons))
+    B, n, m = flat.shape[0], robot._n + 1, robot.n_tendons
+    rflat = np.zeros(B) if ret is None else ret.reshape(-1)
+    P = np.empty((B, n, 3))
+    Rs = np.empty((B, n, 3, 3))
+    tau = np.empty((B, m))
+    S = np.empty((B, n))
+    for rho in np.unique(rflat):
+        idx = np.flatnonzero(rflat == rho)
+        sub = robot.retracted(rho)
+        solve = sub.solve_tensions if by_tension else sub.solve_displacements
+        shape = solve(flat[idx], validate=False)
+        P[idx], Rs[idx], tau[idx] = shape.positions, shape.rotations, shape.tensions
+        S[idx] = shape.s
+    if rot is not None:
+        Rz = rotation_z(rot.reshape(-1))
+        P = np.einsum("bij,bnj->bni", Rz, P)
+        Rs = np.einsum("bij,bnjk->bnik", Rz, Rs)
+    shape = robot._to_world(P, Rs, tau, batch)
+    # without retraction every row holds the whole robot's stations
+    s = S.reshape(batch + (n,)) if (ret is not None and batch) else S[0].copy()
+    s.flags.writeable = False
+    return RodShape(s, shape.positions, shape.rotations, shape.tensions)

@@ -64,7 +64,7 @@ def rk4_row(q0, q1, q2, x0, xm, x1, h):
     )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rk4_pose_step(p, R, x0, xm, x1, h, pn, Rn):
     """Classical RK4 step of ``p' = R v``, ``R' = R [u]x`` with strains known at s, s+h/2, s+h.
 

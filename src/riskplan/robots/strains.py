@@ -223,7 +223,7 @@ def local_strains(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, J, rhs):
     return -1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def local_strains_chord(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, L, fac):
     """Like :func:`local_strains`, but reuses the Cholesky factor ``L`` of an earlier Jacobian
     (``fac[0] = 1`` when ``L`` holds one) while the residual falls by at least 4x per step,
@@ -248,7 +248,13 @@ def local_strains_chord(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, L, fac
     return -1
 
 
-@njit(cache=True)
+# The same solve as a function of its own, for lengths_and_jacobian (the displacement solve's
+# inner loop): numba re-types an inline helper at every call site, so a first call compiles
+# faster this way; shape_free, whose speed the bench measures, inlines the one above.
+local_strains_chord_call = njit(cache=True)(local_strains_chord.py_func)
+
+
+@njit(cache=True, inline="always")
 def tendon_speeds(x, rt, drt, out):
     """``|w_i|`` for every tendon (path length per unit s)."""
     m = rt.shape[0]
@@ -257,7 +263,7 @@ def tendon_speeds(x, rt, drt, out):
         out[i] = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def strain_slope(x, tau, rt, drt, ddrt, L, out):
     """``x'(s) = -J^{-1} dF/ds`` at a solution ``x`` of (2)-(3) (implicit function theorem);
     ``L`` is the Cholesky factor of the Jacobian at ``x``. This is R&W's ODE for ``v', u'``."""

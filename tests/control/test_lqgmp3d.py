@@ -172,15 +172,17 @@ class _MovingGoal(_OneStep):
 @pytest.mark.parametrize("alpha", [0.0, 0.3])
 def test_goal_motion_tests_the_tip_against_the_moved_target(alpha):
     """With the target centre moving by α δx, the tip relative to it is (1 − α) δx:
-    P(goal) = F_χ²₃(r² / ((1 − α)² s²)) for N(0, s² I); ``goal_motion=False`` keeps the
-    fixed target's F_χ²₃(r² / s²). Truncation (no obstacles) and sampling both draw it."""
+    P(goal) = F_χ²₃(r² / ((1 − α)² s²)) for N(0, s² I) with ``goal_motion=True``; the
+    default keeps the fixed target's F_χ²₃(r² / s²). Truncation (no obstacles) and sampling both draw it."""
     s2, r, n = 0.01, 0.15, 40000
     plan, ctrl = _one_step(s2 * np.eye(3))
     sim = _MovingGoal(r, alpha)
     exact = float(chi2(3).cdf(r * r / ((1 - alpha) ** 2 * s2)))
     fixed = float(chi2(3).cdf(r * r / s2))
     for method in ("truncation", "sampling"):
-        got = lqgmp_3d(sim, plan, ctrl, method=method, n_goal_samples=n, seed=2).p_goal
+        got = lqgmp_3d(
+            sim, plan, ctrl, method=method, n_goal_samples=n, seed=2, goal_motion=True
+        ).p_goal
         assert abs(got - exact) <= _binomial(exact, n)
-        off = lqgmp_3d(sim, plan, ctrl, method=method, n_goal_samples=n, seed=2, goal_motion=False)
+        off = lqgmp_3d(sim, plan, ctrl, method=method, n_goal_samples=n, seed=2)
         assert abs(off.p_goal - fixed) <= _binomial(fixed, n)

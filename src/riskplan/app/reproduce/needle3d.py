@@ -190,10 +190,14 @@ def plan_needle3d(
     max_iterations: int = 600,
     workers: int | None = None,
     config=None,
+    frame: str = "world",
 ) -> Needle3DResult:
     """Simulator RRT candidates for the 3-D needle, LQG-MP (truncation) selection and, with
     ``check_runs > 0``, closed/open-loop executions of the selected plan and of
-    ``check_plans − 1`` more spread over the ranking."""
+    ``check_plans − 1`` more spread over the ranking. ``frame``: the reduced state the
+    linearisation, the controllers and LQG-MP read (:data:`riskplan.scenarios.needle3d.FRAMES`;
+    the RRT plans in the world frame, its plans are reframed); ``result.plans`` stay in
+    the world frame."""
     from riskplan.scenarios.registry import scenario_from_config
     from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
     from riskplan.tissue_planning.select import evenly_spaced_ranks
@@ -207,7 +211,7 @@ def plan_needle3d(
         # goal bias 0.5 and a target tightened to 0.7 of its radius: with the defaults (0.3,
         # 0.5) trees of 600 iterations found 0-1 plans; with these, 3-5 in 400 (seeds 10, 11).
         # goal_connect: a goal-directed edge is followed by steered edges until blocked
-        # (RRT-Connect); trees 1-3 of seed 0 found 13 plans in 10.2 s of CPU with it,
+        # (RRT-Connect); the trees of seeds 1-3 found 13 plans in 10.2 s of CPU with it,
         # 10 plans in 11.7 s without (docs/scenarios.md)
         options=RRTOptions(
             plans_per_tree=5,
@@ -221,6 +225,10 @@ def plan_needle3d(
     )
     t_rrt = time.perf_counter() - t0
     t0 = time.perf_counter()
+    world_plans = plans
+    if frame != "world":
+        sim = sim.with_frame(frame)
+        plans = [p.reframed(sim) for p in plans]
     ctrls, rows = evaluate_candidates(sim, plans, seed=seed)
     t_sel = time.perf_counter() - t0
     ranked = sorted(rows, key=lambda r: (-r.estimates["truncation"], r.index))
@@ -244,7 +252,7 @@ def plan_needle3d(
         ranked = [by_index.get(r.index, r) for r in ranked]
     t_mc = time.perf_counter() - t0
     return Needle3DResult(
-        plans=plans,
+        plans=world_plans,
         rows=ranked,
         best=best,
         controller=ctrls[best],
@@ -255,6 +263,7 @@ def plan_needle3d(
             seed=seed,
             check_runs=check_runs,
             n_elements=sim.nominal_params.n_elements,
+            frame=frame,
         ),
     )
 
@@ -357,6 +366,8 @@ def write_outputs(result: Needle3DResult, out, *, n_executed: int = 10, seed: in
 
     out = Path(out)
     sim = scenario_from_config("needle3d", None, result.settings["case"])
+    frame = result.settings.get("frame", "world")
+    run_sim = sim.with_frame(frame)  # the frame the controller reads
     plan = result.plans[result.best]
     files = {}
     with atomic_path(out / "selected.npz", suffix=".npz") as tmp:
@@ -375,9 +386,10 @@ def write_outputs(result: Needle3DResult, out, *, n_executed: int = 10, seed: in
     executed = []
     if result.controller is not None:
         gen = np.random.default_rng(seed)
+        run_plan = plan.reframed(run_sim)
         for _ in range(n_executed):
-            ex = execute(sim, plan, result.controller, sim.sample_params(gen), seed=gen)
-            executed.append(ex.x[:, :3])
+            ex = execute(run_sim, run_plan, result.controller, sim.sample_params(gen), seed=gen)
+            executed.append(sim.path(ex.states))
     fig = needle3d_figure(sim, result.plans, executed, highlight=result.best)
     write_text_atomic(out / "needle3d.html", fig.to_html(include_plotlyjs=True))
     files["figure"] = out / "needle3d.html"

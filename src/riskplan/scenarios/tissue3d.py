@@ -115,7 +115,7 @@ class TetBlock:
 
     def locate(self, points) -> tuple[np.ndarray, np.ndarray]:
         """``(elem (k,), lam (k, 4))``: containing tetrahedra (``−1`` outside) and
-        barycentric weights (:func:`riskplan.deformable.tissue3d.find_points`).
+        barycentric weights (:func:`riskplan.deformable.tetlocate.find_points`).
 
         Parameters
         ----------

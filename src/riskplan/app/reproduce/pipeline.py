@@ -42,8 +42,10 @@ SCALE_NAMES = ("smoke", "paper")
 #: deformable paper only, its own sizes: ``calibration_scale``); ``sensitivity``: the
 #: needle's Fig. 6 under actuation-noise and interaction-force scales ×0.5, ×1, ×2 and the
 #: other reading of the cases (:func:`riskplan.app.reproduce.needle_study.sensitivity`, its own
-#: sizes: :func:`_sensitivity_scales`); ``needle3d``: the 3-D needle (beyond the paper).
-STAGES = ("figures", "calibration", "sensitivity", "needle3d")
+#: sizes: :func:`_sensitivity_scales`); ``needle3d``: the 3-D needle (beyond the paper);
+#: ``control-variants``: LQG against the UKF and iLQR on the selected RRT plans
+#: (:mod:`riskplan.app.reproduce.control_variants`, beyond the paper).
+STAGES = ("figures", "calibration", "sensitivity", "needle3d", "control-variants")
 #: the calibration sizes a named scale uses unless ``calibration_scale`` names others
 _CALIBRATION_FOR = {"smoke": "smoke", "paper": "full"}
 SCENARIOS = ("needle", "manipulation")
@@ -297,6 +299,14 @@ def _reproduce(
             t0 = time.perf_counter()
             results["needle3d"] = run_needle3d(out, scale_name, seed=seed)
             timings["needle3d_s"] = time.perf_counter() - t0
+        if paper in ("deformable", "all") and "control-variants" in stages:
+            from riskplan.app.reproduce.control_variants import run_control_variants
+
+            t0 = time.perf_counter()
+            results["control_variants"] = run_control_variants(
+                store, scale_name, seed=seed, progress=progress
+            )
+            timings["control_variants_s"] = time.perf_counter() - t0
         timings["process_pools_started"] = pool.pools_started
     write_json_atomic(out / "results.json", results, sort_keys=True)
     write_json_atomic(out / "timings.json", timings, sort_keys=True)

@@ -194,3 +194,69 @@ def test_bad_control_and_state(sim):
         sim.step(y, [0.5, np.nan])
     with pytest.raises(InvalidInputError, match="mesh"):
         sim.step(y, [0.5, 0.0], SimParams(n_elements=500))
+
+
+@pytest.mark.parametrize("n_elements, E, nu", [(1296, 50.0, 0.4), (5000, 61.3, 0.38)])
+def test_green_columns_equal_the_direct_solve(sim, tol, n_elements, E, nu):
+    """The step's tissue response by cached Green's columns (superposition) against one
+    solve of the whole system, at random points, next to the fixed face, on the planning
+    mesh and a 5k-tetrahedra mesh."""
+    p = SimParams(youngs_modulus=E, poissons_ratio=nu, n_elements=n_elements)
+    model, block = sim.model(p), sim.mesh_data(n_elements).block
+    gen = np.random.default_rng(3)
+    pts = np.vstack([gen.random((20, 3)), [[0.5, 0.5, 0.01], [0.02, 0.97, 0.0]]])
+    largest = 0.0
+    for X in pts:
+        e, lam = block.locate(X)
+        f = gen.standard_normal(3)
+        fast = model.point_load(int(e[0]), lam[0], f)
+        direct = model.point_load_direct(int(e[0]), lam[0], f)
+        for a, b in zip(fast, direct):
+            np.testing.assert_allclose(a, b, **tol["superposition"])
+        largest = max(largest, float(np.abs(direct[1]).max()))
+    assert largest > 1e-3  # responses were compared, not zeros
+
+
+def test_grid_location_equals_the_general_search(sim, tol):
+    """The block's cell lookup finds a tetrahedron holding the point (the general search's
+    interpolation of the node positions, on cell faces and corners too)."""
+    from riskplan.deformable.tetlocate import find_points
+
+    block = sim.mesh_data(sim.nominal_params.n_elements).block
+    gen = np.random.default_rng(4)
+    h = block.size / np.array(block.grid)
+    pts = np.vstack([gen.random((40, 3)), h * gen.integers(0, 7, (10, 3)), [[1.0, 1.0, 1.0]]])
+    for X in pts:
+        e, lam = block.locate(X)
+        e2, _ = find_points(block.mesh, X[None])
+        assert e[0] >= 0 and e2[0] >= 0
+        assert lam[0].min() >= -tol["barycentric"]["atol"]
+        np.testing.assert_allclose(
+            lam[0] @ block.mesh.nodes[block.tets[e[0]]], X, **tol["interpolation"]
+        )
+
+
+def test_gauges_agree_with_the_bodies(sim):
+    """in_collision / in_goal (one batched solve) against the ConvexBody tests."""
+    y = sim.initial_state()
+    seen = set()
+    for u in sim.random_controls(30, seed=5):
+        y = sim.step(y, u)
+        x = y.pose[:3]
+        assert sim.in_collision(y) == any(bool(b.contains(x)) for b in sim.obstacles(y))
+        assert sim.in_goal(y) == bool(sim.goal(y).contains(x))
+        for body in sim._bodies(y):
+            c = body.centre + 0.99 * body.A[:, 0]  # just inside each body
+            g = sim._gauges(
+                type(y)(
+                    t=y.t,
+                    displacement=y.displacement,
+                    n_elements=y.n_elements,
+                    pose=np.concatenate([c, y.pose[3:]]),
+                    material=y.material,
+                    applied=y.applied,
+                )
+            )
+            seen.add(int(np.argmin(g)))
+            assert g.min() <= 1.0
+    assert len(seen) == 4  # every body was probed from inside

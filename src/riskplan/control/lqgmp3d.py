@@ -13,7 +13,7 @@ parallelepipeds (:class:`riskplan.geometry3d.ConvexBody`) — with the three met
   (:func:`riskplan.geometry3d.nearest_to_origin`; convex obstacles need one each, the 2-D
   polygons' edge-by-edge construction is not needed); ``p_t = Σ_j (1 − Φ(d_j))`` and the
   joint Gaussian of ``ξ_t`` is truncated to each half-space in turn
-  (:func:`riskplan.control.lqgmp_common._truncate`, moment matching), so later steps see only the
+  (``riskplan.control.lqgmp_common._truncate``, moment matching), so later steps see only the
   trajectories that survived; ``P(no collision) = ∏_t (1 − min(1, p_t))``. Obstacles farther
   than ``cutoff`` whitened units are skipped.
 * ``"per-step"`` (the estimate Patil 2012 compares the truncation with): the same
@@ -34,7 +34,7 @@ import numpy as np
 from scipy.special import ndtr
 from scipy.stats import chi2
 
-from riskplan._validation import as_generator
+from riskplan._validation import as_generator, check_count
 from riskplan.control.lqgmp_common import (
     METHODS,
     LQGMPResult,
@@ -70,10 +70,7 @@ def _check_arguments(plan, controller, n_goal_samples) -> None:
         raise InvalidInputError(
             "controller: expected the LQGController of this plan (same number of steps)"
         )
-    if int(n_goal_samples) != n_goal_samples or n_goal_samples < 1:
-        raise InvalidInputError(
-            f"n_goal_samples: expected a positive integer, got {n_goal_samples!r}"
-        )
+    check_count(n_goal_samples, "n_goal_samples", 1, integral=True)
 
 
 def lqgmp_3d(

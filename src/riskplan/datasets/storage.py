@@ -69,7 +69,7 @@ def reach_bound(robot_toml: str) -> float | None:
     if not robot_toml:
         return None
     try:
-        from riskplan.robots.params import parse_robot_toml
+        from riskplan.robots.description import parse_robot_toml
 
         p = parse_robot_toml(robot_toml)
     except Exception:  # not a robot description: nothing to compare against

@@ -172,6 +172,22 @@ class MDN(nn.Module):
         return self.weight_head(h), self.mean_head(h), self.chol_head(h)
 
     def forward(self, x: torch.Tensor):
+        """The mixture's parameters at normalised inputs (Fig. 2; eq. 2 builds ``U``).
+
+        Parameters
+        ----------
+        x : torch.Tensor, shape (..., n_inputs)
+            Configurations in normalised coordinates (:class:`Normalisation`).
+
+        Returns
+        -------
+        log_weights : torch.Tensor, shape (..., K)
+            ``log w_k = log_softmax(logits)_k``.
+        means : torch.Tensor, shape (..., K, d)
+            Component means in normalised output coordinates.
+        precision_cholesky : torch.Tensor, shape (..., K, d, d)
+            Upper-triangular ``U_k`` with a positive diagonal, ``Σ_k⁻¹ = U_kᵀ U_k``.
+        """
         logits, mu, u_raw = self.raw(x)
         batch = x.shape[:-1]
         K, d = self.n_components, self.dim

@@ -342,7 +342,7 @@ def load_problem(path, *, robot=None) -> Problem:
     (an :class:`InvalidInputError`) naming the file and the field.
     """
     from riskplan.robots import TendonRobot, load_robot
-    from riskplan.robots.params import read_robot_text
+    from riskplan.robots.description import read_robot_text
 
     p = Path(path)
     text = read_robot_text(p)

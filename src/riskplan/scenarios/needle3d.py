@@ -39,6 +39,7 @@ Noise scaled to the scene as in 2-D: ``σ = 0.01 · max(size)``; actuation
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
@@ -84,7 +85,7 @@ class Needle3DScenario(FEMScenario):
     state_type = Needle3DState
 
     def __init__(
-        self, config: Needle3DConfig | None = None, distribution=None, cache_size: int = 16
+        self, config: Needle3DConfig | None = None, distribution=None, cache_size: int = 40
     ):
         super().__init__(config or Needle3DConfig(), distribution, cache_size)
         cfg = self.config
@@ -349,13 +350,41 @@ class Needle3DScenario(FEMScenario):
         if cached is not None:
             return cached
         d = self._data(state)
-        out = []
-        for kind, c, A, fit, (a, b) in zip(d.kinds, d.centres, d.shapes, d.fit, d.slices):
-            u = state.displacement[a:b]
-            G = (fit @ (u[1:] - u[0])).T  # ∇u ≈ G
-            out.append(ConvexBody(kind, c + u[0], A + G @ A))
+        centres, shapes = self._affine(state)
+        out = [ConvexBody(k, c, A) for k, c, A in zip(d.kinds, centres, shapes)]
         state.__dict__["_bodies"] = out  # a cache on a frozen state: a function of its fields
         return out
+
+    def _affine(self, state: Needle3DState):
+        """``(centres (B, 3), shapes (B, 3, 3))`` of the deformed bodies (obstacles, then
+        the target): ``c + u(c)`` and ``(I + G) A`` with ``G ≈ ∇u`` fitted to the body's
+        samples (module docstring); cached on the state."""
+        cached = state.__dict__.get("_affine")
+        if cached is not None:
+            return cached
+        d = self._data(state)
+        B = len(d.kinds)
+        centres, shapes = np.empty((B, 3)), np.empty((B, 3, 3))
+        for i, (c, A, fit, (a, b)) in enumerate(zip(d.centres, d.shapes, d.fit, d.slices)):
+            u = state.displacement[a:b]
+            G = (fit @ (u[1:] - u[0])).T  # ∇u ≈ G
+            centres[i] = c + u[0]
+            shapes[i] = A + G @ A
+        state.__dict__["_affine"] = out = (centres, shapes)  # a function of the fields
+        return out
+
+    def _gauges(self, state: Needle3DState) -> np.ndarray:
+        """``(B,)`` the world tip's gauge in each deformed body (``≤ 1``: inside;
+        :meth:`riskplan.geometry3d.ConvexBody.norm`), all bodies in one batched solve."""
+        centres, shapes = self._affine(state)
+        s = np.linalg.solve(shapes, (state.pose[:3] - centres)[:, :, None])[:, :, 0]
+        kinds = self._data(state).kinds
+        return np.array(
+            [
+                math.sqrt(float(v @ v)) if k == "ellipsoid" else float(np.abs(v).max())
+                for k, v in zip(kinds, s)
+            ]
+        )
 
     def obstacles(self, state: Needle3DState) -> list[ConvexBody]:
         """The deformed obstacles (ellipsoids, parallelepipeds) in ``state``.
@@ -430,8 +459,7 @@ class Needle3DScenario(FEMScenario):
         bool
             Whether the tip is in collision.
         """
-        x = state.pose[:3]
-        return any(bool(b.contains(x)) for b in self.obstacles(state))
+        return bool(np.any(self._gauges(state)[:-1] <= 1.0))
 
     def in_goal(self, state: Needle3DState) -> bool:
         """The world tip lies in the deformed target.
@@ -446,7 +474,7 @@ class Needle3DScenario(FEMScenario):
         bool
             Whether the tip is in the goal.
         """
-        return bool(self.goal(state).contains(state.pose[:3]))
+        return bool(self._gauges(state)[-1] <= 1.0)
 
     def goal_distance(self, state: Needle3DState) -> float:
         """Distance of the world tip from the deformed target's centre (its tracked sample).

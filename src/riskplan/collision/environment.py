@@ -257,19 +257,18 @@ class Environment:
         """
         import trimesh
 
+        from riskplan.io import read_file_with
+
         if isinstance(paths, (str, Path)):
             paths = [paths]
         meshes, mesh_names = [], []
         for p in paths:
             p = Path(p)
-            if not p.exists():
-                raise InvalidInputError(f"mesh file not found: {p}")
-            try:
-                # unprocessed first: processing drops faces with non-finite vertices, which
-                # would then read as a hole ("not closed") instead of naming the vertex
-                m = trimesh.load(p, force="mesh", process=False)
-            except Exception as exc:  # trimesh raises many types for unreadable files
-                raise InvalidInputError(f"{p}: cannot read mesh ({exc})") from exc
+            # unprocessed first: processing drops faces with non-finite vertices, which would
+            # then read as a hole ("not closed") instead of naming the vertex
+            m = read_file_with(
+                p, lambda q: trimesh.load(q, force="mesh", process=False), "mesh file"
+            )
             if hasattr(m, "vertices"):
                 _check_finite_vertices(np.asarray(m.vertices, dtype=np.float64), str(p))
                 m.process()

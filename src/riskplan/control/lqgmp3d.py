@@ -34,7 +34,7 @@ import numpy as np
 from scipy.special import ndtr
 from scipy.stats import chi2
 
-from riskplan._validation import as_generator
+from riskplan._validation import as_generator, check_count
 from riskplan.control.lqgmp_common import (
     METHODS,
     LQGMPResult,
@@ -70,10 +70,7 @@ def _check_arguments(plan, controller, n_goal_samples) -> None:
         raise InvalidInputError(
             "controller: expected the LQGController of this plan (same number of steps)"
         )
-    if int(n_goal_samples) != n_goal_samples or n_goal_samples < 1:
-        raise InvalidInputError(
-            f"n_goal_samples: expected a positive integer, got {n_goal_samples!r}"
-        )
+    check_count(n_goal_samples, "n_goal_samples", 1, integral=True)
 
 
 def lqgmp_3d(

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from riskplan._validation import as_array, check_range, check_workers
+from riskplan._validation import as_array, check_count, check_range, check_workers
 from riskplan.datasets import storage
 from riskplan.datasets.protocol import (
     SPLITS,
@@ -319,8 +319,7 @@ def generate_dataset(
     split = _check_split(split)
     if backend not in BACKENDS:
         raise InvalidInputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
-    if not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise InvalidInputError(f"seed: expected a non-negative integer, got {seed!r}")
+    check_count(seed, "seed", 0)
     if max_new is not None and max_new < 0:
         raise InvalidInputError(f"max_new: expected >= 0, got {max_new}")
     check_workers(workers)

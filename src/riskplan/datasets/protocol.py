@@ -57,6 +57,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
+from riskplan._validation import check_count
 from riskplan.errors import InvalidInputError
 
 SPLITS = ("train", "test")
@@ -107,17 +108,10 @@ class Protocol:
 
     def __post_init__(self):
         for name in ("grid_levels", "n_starts", "n_points", "path_steps"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, np.integer)) or v < (
-                2 if name in ("grid_levels", "path_steps") else 1
-            ):
-                raise InvalidInputError(
-                    f"protocol.{name}: expected an integer >= {2 if name in ('grid_levels', 'path_steps') else 1}, got {v!r}"
-                )
+            low = 2 if name in ("grid_levels", "path_steps") else 1
+            check_count(getattr(self, name), f"protocol.{name}", low)
         for name in ("n_train", "n_test"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, np.integer)) or v < 0:
-                raise InvalidInputError(f"protocol.{name}: expected an integer >= 0, got {v!r}")
+            check_count(getattr(self, name), f"protocol.{name}", 0)
         if not (np.isfinite(self.surface_spacing) and self.surface_spacing > 0):
             raise InvalidInputError(
                 f"protocol.surface_spacing: expected a positive length, got {self.surface_spacing!r}"

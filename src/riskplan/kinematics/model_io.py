@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from riskplan._validation import check_count
 from riskplan.errors import DataFormatError, InvalidInputError
 from riskplan.io import atomic_path, write_json_atomic
 from riskplan.kinematics.mdn import MDN, MDNModel, Normalisation
@@ -295,12 +296,9 @@ def _check_architecture(path: Path, arch) -> None:
         raise DataFormatError(f"{where}: expected an object, got {type(arch).__name__}")
 
     def count(key, low, high, default=None):
-        v = arch.get(key, default)
-        if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= high:
-            raise DataFormatError(
-                f"{where}: {key} must be an integer in [{low}, {high}], got {v!r}"
-            )
-        return v
+        return check_count(
+            arch.get(key, default), f"{where}: {key}", low, maximum=high, error=DataFormatError
+        )
 
     def widths(key):
         v = arch.get(key)
@@ -309,10 +307,7 @@ def _check_architecture(path: Path, arch) -> None:
                 f"{where}: {key} must be a list of at most {MAX_LAYERS} layer widths, got {v!r}"
             )
         for h in v:
-            if isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= MAX_WIDTH:
-                raise DataFormatError(
-                    f"{where}: {key} widths must be integers in [1, {MAX_WIDTH}], got {h!r}"
-                )
+            check_count(h, f"{where}: {key} width", 1, maximum=MAX_WIDTH, error=DataFormatError)
         return list(v)
 
     m = count("n_inputs", 1, MAX_TENDONS)

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from riskplan._validation import check_count
 from riskplan.errors import InvalidInputError
 from riskplan.gaussian_mixture import (
     FIELDS,
@@ -188,15 +189,10 @@ class GaussianMixture(MixtureBatch):
             raise InvalidInputError(f"n: expected >= 0, got {n}")
         if isinstance(seed, torch.Generator):
             gen = seed
-        elif (
-            seed is None or (isinstance(seed, int | np.integer) and not isinstance(seed, bool))
-        ) and (seed is None or seed >= 0):
+        else:
+            seed = check_count(seed, "seed", 0, none=True, alternatives="a torch.Generator")
             gen = torch.Generator().manual_seed(
                 int(np.random.SeedSequence(seed).generate_state(1)[0])
-            )
-        else:
-            raise InvalidInputError(
-                f"seed: expected None, a non-negative integer or a torch.Generator, got {seed!r}"
             )
         batch = self.batch_shape
         K, d = self.n_components, self.dim

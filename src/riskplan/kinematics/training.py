@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from riskplan._validation import check_count
 from riskplan.errors import ConvergenceError, DataFormatError, InvalidInputError
 from riskplan.kinematics.data import PointCloudData, check_compatible
 from riskplan.kinematics.mdn import MDN, MDNModel, Normalisation, mixture_log_prob
@@ -78,9 +79,7 @@ class TrainConfig:
             "max_bad_steps",
         )
         for name in ints:
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
+            check_count(getattr(self, name), name, 1)
         for name in ("val_fraction", "lr", "lr_factor", "weight_decay", "min_lr"):
             v = getattr(self, name, 0.0)
             if (
@@ -90,9 +89,7 @@ class TrainConfig:
             ):
                 raise InvalidInputError(f"{name}: expected a finite number, got {v!r}")
         for name in ("early_stop_patience", "lr_patience", "seed"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-                raise InvalidInputError(f"{name}: expected a non-negative integer, got {v!r}")
+            check_count(getattr(self, name), name, 0)
         if not 0.0 <= self.val_fraction < 1.0:
             raise InvalidInputError(f"val_fraction: expected in [0, 1), got {self.val_fraction}")
         if not (self.lr > 0 and math.isfinite(self.lr)):
@@ -570,15 +567,16 @@ def save_checkpoint(path, state: dict) -> None:
 
 def load_checkpoint(path) -> dict:
     """Read a training checkpoint; :class:`DataFormatError` if missing or corrupted."""
+    from riskplan.io import read_file_with
+
     path = Path(path)
-    if not path.is_file():
-        raise DataFormatError(f"checkpoint {str(path)!r}: no such file (nothing to resume)")
-    try:
-        ck = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises many types for damaged archives
-        raise DataFormatError(
-            f"checkpoint {str(path)!r} is corrupted or not a riskplan checkpoint ({type(exc).__name__}: {exc})"
-        ) from exc
+    ck = read_file_with(
+        path,
+        lambda p: torch.load(p, map_location="cpu", weights_only=True),
+        "checkpoint",
+        error=DataFormatError,
+        hint=" (nothing to resume)",
+    )
     if not isinstance(ck, dict) or ck.get("format") != CHECKPOINT_FORMAT:
         raise DataFormatError(f"checkpoint {str(path)!r}: not a riskplan MDN checkpoint")
     return ck

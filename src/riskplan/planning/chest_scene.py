@@ -30,7 +30,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from riskplan._validation import as_generator
+from riskplan._validation import as_generator, check_count
 from riskplan.errors import InvalidInputError
 
 
@@ -69,12 +69,10 @@ class ChestParams:
             v = getattr(self, f.name)
             if f.name == "cavity_semi_axes":
                 continue
-            want_int = f.name in ("n_ribs", "subdivisions", "rib_segments", "rib_sides")
-            ok = isinstance(v, numbers.Integral) if want_int else isinstance(v, numbers.Real)
-            if isinstance(v, bool) or not ok or (not want_int and not math.isfinite(v)):
-                raise InvalidInputError(
-                    f"{f.name}: expected a finite {'integer' if want_int else 'number'}, got {v!r}"
-                )
+            if f.name in ("n_ribs", "subdivisions", "rib_segments", "rib_sides"):
+                check_count(v, f.name, None)
+            elif isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
+                raise InvalidInputError(f"{f.name}: expected a finite number, got {v!r}")
         try:
             a = np.asarray(self.cavity_semi_axes, dtype=float)
         except (TypeError, ValueError) as exc:

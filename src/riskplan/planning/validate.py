@@ -133,9 +133,7 @@ def _estimate(hits, n: int, confidence: float) -> MonteCarloEstimate:
 
 
 def _check_seed(seed) -> int:
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise InvalidInputError(f"seed: expected a non-negative integer, got {seed!r}")
-    return int(seed)
+    return check_count(seed, "seed", 0)
 
 
 def _as_robot(robot):

@@ -28,7 +28,6 @@ KNOWN_LONG_FILES = {
     "control/linearize.py": 810,
     "deformable/tissue3d.py": 766,
     "robots/batch_kernel.py": 673,
-    "robots/params.py": 637,
     "robots/robot.py": 940,
     "scenarios/manipulation.py": 654,
     "scenarios/needle.py": 841,
@@ -58,9 +57,7 @@ KNOWN_LONG_FUNCTIONS = {
     "robots/params.py:parse_robot_document": 229,
     "tissue_planning/rrt.py:grow_tree": 167,
 }
-KNOWN_CIRCLES = [
-    ["riskplan.robots.lab_format", "riskplan.robots.params"],
-]
+KNOWN_CIRCLES = []
 
 
 def _files() -> list[Path]:

@@ -1,7 +1,7 @@
 """Compiled kernels: warm numba's on-disk cache once, so that no command compiles.
 
 riskplan's hot loops (the Cosserat solver in :mod:`riskplan.robots`, the collision kernels in
-:mod:`riskplan.collision._kernels`, the planar predicates in :mod:`riskplan.geometry2d`, the
+``riskplan.collision._kernels``, the planar predicates in :mod:`riskplan.geometry2d`, the
 neo-Hookean FEM in :mod:`riskplan.deformable.nhkernels`) are
 numba functions compiled with ``cache=True``: the first call in a fresh environment compiles
 them (tens of seconds of CPU for the robot solver), later processes load machine code from the

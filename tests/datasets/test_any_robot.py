@@ -23,7 +23,7 @@ from riskplan.datasets.protocol import (
 from riskplan.datasets.summary import over_max_tension, summarize
 from riskplan.errors import InvalidInputError
 from riskplan.robots import load_robot
-from riskplan.robots.params import parse_robot_toml
+from riskplan.robots.description import parse_robot_toml
 from riskplan.robots.robot import TendonRobot
 from tests.conftest import TOL
 

@@ -355,3 +355,48 @@ def test_steer_must_be_callable():
 def test_margin_options_validated(field, value):
     with pytest.raises(InvalidInputError, match=field):
         RRTOptions(**{field: value})
+
+
+def test_goal_connect_extends_until_the_goal_in_one_iteration():
+    """goal_connect: after a goal-directed edge, steered edges follow until the goal (one
+    iteration reaches a goal 6 edges away); the plan replays, is collision-free and ends
+    at its first state in the goal; without it the same tree needs one iteration per edge."""
+    robot = PointRobot(goal=(0.7, 0.5), goal_radius=0.05, obstacle=((0.8, 0.0), (0.9, 0.1)))
+
+    def steer(x, target, bounds, k):
+        return np.clip((target - x) / (0.1 * k), bounds[:, 0], bounds[:, 1])
+
+    space = dataclasses.replace(robot.planning_space(), steps_per_extension=1, steer=steer)
+    opts = RRTOptions(n_controls=1, goal_bias=1.0, max_iterations=40, plans_per_tree=1)
+    connected = grow_tree(
+        robot, seed=0, space=space, options=dataclasses.replace(opts, goal_connect=20)
+    )
+    plain = grow_tree(robot, seed=0, space=space, options=opts)
+    assert len(connected.plans) == 1 and connected.iterations == 1
+    assert connected.size == connected.plans[0].n_steps + 1  # one node per steered edge
+    assert plain.plans == [] or plain.iterations > 1
+    plan = connected.plans[0]
+    replay = NominalPlan.from_rollout(robot, robot.initial_state(), plan.controls)
+    assert plan.reduced.tobytes() == replay.reduced.tobytes()
+    assert not any(robot.in_collision(s) for s in plan.states)
+    assert _in_tight_goal(robot, plan.states[-1])
+    assert not any(_in_tight_goal(robot, s) for s in plan.states[:-1])
+
+
+def test_goal_connect_stops_when_blocked():
+    """A connection that would cross an obstacle stops before it: no node in it."""
+    robot = PointRobot(goal=(0.9, 0.1), goal_radius=0.05, obstacle=((0.4, 0.0), (0.5, 0.2)))
+
+    def steer(x, target, bounds, k):
+        return np.clip((target - x) / (0.1 * k), bounds[:, 0], bounds[:, 1])
+
+    space = dataclasses.replace(robot.planning_space(), steps_per_extension=1, steer=steer)
+    opts = RRTOptions(n_controls=1, goal_bias=1.0, max_iterations=5, plans_per_tree=1)
+    tree = grow_tree(robot, seed=0, space=space, options=dataclasses.replace(opts, goal_connect=20))
+    assert tree.plans == [] and tree.size > 1
+    assert np.all(tree.nodes[:, 0] < 0.4)  # every node before the obstacle
+
+
+def test_goal_connect_validates():
+    with pytest.raises(InvalidInputError, match="goal_connect"):
+        RRTOptions(goal_connect=-1)

@@ -10,7 +10,7 @@ import pytest
 
 from riskplan.errors import InvalidInputError, RobotDescriptionError
 from riskplan.robots import load_robot
-from riskplan.robots.params import parse_robot_toml
+from riskplan.robots.description import parse_robot_toml
 from riskplan.robots.robot import TendonRobot, rotation_z, shift_polynomial
 from tests.conftest import TOL
 

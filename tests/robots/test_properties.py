@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from riskplan.robots import load_robot
-from riskplan.robots.params import parse_robot_toml
+from riskplan.robots.description import parse_robot_toml
 from tests.conftest import TOL
 from tests.properties import PROPERTY, any_float, arrays_or_junk, assert_finite, call, junk
 

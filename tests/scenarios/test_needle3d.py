@@ -194,3 +194,144 @@ def test_bad_control_and_state(sim):
         sim.step(y, [0.5, np.nan])
     with pytest.raises(InvalidInputError, match="mesh"):
         sim.step(y, [0.5, 0.0], SimParams(n_elements=500))
+
+
+@pytest.mark.parametrize("n_elements, E, nu", [(1296, 50.0, 0.4), (5000, 61.3, 0.38)])
+def test_green_columns_equal_the_direct_solve(sim, tol, n_elements, E, nu):
+    """The step's tissue response by cached Green's columns (superposition) against one
+    solve of the whole system, at random points, next to the fixed face, on the planning
+    mesh and a 5k-tetrahedra mesh."""
+    p = SimParams(youngs_modulus=E, poissons_ratio=nu, n_elements=n_elements)
+    model, block = sim.model(p), sim.mesh_data(n_elements).block
+    gen = np.random.default_rng(3)
+    pts = np.vstack([gen.random((20, 3)), [[0.5, 0.5, 0.01], [0.02, 0.97, 0.0]]])
+    largest = 0.0
+    for X in pts:
+        e, lam = block.locate(X)
+        f = gen.standard_normal(3)
+        fast = model.point_load(int(e[0]), lam[0], f)
+        direct = model.point_load_direct(int(e[0]), lam[0], f)
+        for a, b in zip(fast, direct):
+            np.testing.assert_allclose(a, b, **tol["superposition"])
+        largest = max(largest, float(np.abs(direct[1]).max()))
+    assert largest > 1e-3  # responses were compared, not zeros
+
+
+def test_grid_location_equals_the_general_search(sim, tol):
+    """The block's cell lookup finds a tetrahedron holding the point (the general search's
+    interpolation of the node positions, on cell faces and corners too)."""
+    from riskplan.deformable.tetlocate import find_points
+
+    block = sim.mesh_data(sim.nominal_params.n_elements).block
+    gen = np.random.default_rng(4)
+    h = block.size / np.array(block.grid)
+    pts = np.vstack([gen.random((40, 3)), h * gen.integers(0, 7, (10, 3)), [[1.0, 1.0, 1.0]]])
+    for X in pts:
+        e, lam = block.locate(X)
+        e2, _ = find_points(block.mesh, X[None])
+        assert e[0] >= 0 and e2[0] >= 0
+        assert lam[0].min() >= -tol["barycentric"]["atol"]
+        np.testing.assert_allclose(
+            lam[0] @ block.mesh.nodes[block.tets[e[0]]], X, **tol["interpolation"]
+        )
+
+
+def test_gauges_agree_with_the_bodies(sim):
+    """in_collision / in_goal (one batched solve) against the ConvexBody tests."""
+    y = sim.initial_state()
+    seen = set()
+    for u in sim.random_controls(30, seed=5):
+        y = sim.step(y, u)
+        x = y.pose[:3]
+        assert sim.in_collision(y) == any(bool(b.contains(x)) for b in sim.obstacles(y))
+        assert sim.in_goal(y) == bool(sim.goal(y).contains(x))
+        for body in sim._bodies(y):
+            c = body.centre + 0.99 * body.A[:, 0]  # just inside each body
+            g = sim._gauges(
+                type(y)(
+                    t=y.t,
+                    displacement=y.displacement,
+                    n_elements=y.n_elements,
+                    pose=np.concatenate([c, y.pose[3:]]),
+                    material=y.material,
+                    applied=y.applied,
+                )
+            )
+            seen.add(int(np.argmin(g)))
+            assert g.min() <= 1.0
+    assert len(seen) == 4  # every body was probed from inside
+
+
+def _pushed(sim, n=14):
+    y = sim.initial_state()
+    for _ in range(n):
+        y = sim.step(y, [0.5, 10.0])
+    return y
+
+
+def _perturbed(sim, y, k):
+    """Material pose moved by 1e-7 along random (position, axis) directions: the tissue
+    response there, ``(δx_world (12,), δc (3,))`` against ``y``."""
+    gen = np.random.default_rng(k)
+    dm = np.zeros(12)
+    dm[[0, 1, 2, 9, 10, 11]] = 1e-7 * gen.standard_normal(6)
+    tracked, pose = sim._tissue_response(y.material + dm, sim.nominal_params)
+    a = sim.mesh_data(y.n_elements).slices[-1][0]
+    return dm, pose - y.pose, tracked[a] - y.displacement[a]
+
+
+def test_goal_jacobian_predicts_the_target_motion(sim, tol):
+    """World frame: δc ≈ J δx for small moves of the tip's material pose (the response is
+    quadratic within an element, so central differences are exact up to the step's
+    second-order term); material frame: J = 0 (the target's material points stay)."""
+    y = _pushed(sim)
+    J = sim.goal_jacobian(y)
+    assert np.abs(J[:, :3]).max() > 0.01  # the target does follow the tip
+    for k in range(3):
+        _, dx, dc = _perturbed(sim, y, k)
+        np.testing.assert_allclose(J @ dx, dc, **tol["fd_quadratic"])
+    assert not np.any(sim.with_frame("material").goal_jacobian(y))
+    assert not np.any(sim.goal_jacobian(sim.initial_state()))
+
+
+def test_material_frame_reads_the_material_pose_and_senses_the_world(sim, tol):
+    """Material frame: x = the material pose, z = the world tip + noise, H = ∂z/∂x (against
+    perturbed responses); world frame: measure = observe(reduced), the same noise draws."""
+    y = _pushed(sim)
+    mat = sim.with_frame("material")
+    np.testing.assert_array_equal(mat.reduced(y), y.material)
+    np.testing.assert_array_equal(sim.reduced(y), y.pose)
+    for k in range(3):
+        dm, dx, _ = _perturbed(sim, y, k)
+        np.testing.assert_allclose(mat.observation_jacobian(y) @ dm, dx[:3], **tol["fd_quadratic"])
+    np.testing.assert_array_equal(sim.observation_jacobian(y), sim.observation_matrix)
+    a = sim.measure(y, rng=np.random.default_rng(7))
+    b = sim.observe(sim.reduced(y), rng=np.random.default_rng(7))
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(mat.measure(y, rng=np.random.default_rng(7)), a)
+    # LQG-MP's bodies in the material frame are the balls and boxes of material points
+    assert [b.kind for b in mat.state_obstacles(y)] == ["ellipsoid", "box", "ellipsoid"]
+    np.testing.assert_array_equal(mat.state_goal(y).centre, sim.config.target_center)
+    with pytest.raises(InvalidInputError, match="frame"):
+        sim.with_frame("tissue")
+
+
+def test_material_frame_sees_a_force_draw_as_no_process_noise():
+    """Case force: a draw of f_int moves the world tip (world frame: M_t > 0, fresh noise
+    at every step) but not the material pose (material frame: M_t = 0; the draw biases
+    the measurement instead)."""
+    import warnings
+
+    from riskplan.control import NominalPlan, linearize
+    from riskplan.scenarios.registry import scenario_from_config
+
+    world = scenario_from_config("needle3d", None, "force")
+    plan = NominalPlan.from_rollout(world, world.initial_state(), np.tile([0.5, 10.0], (8, 1)))
+    mat = world.with_frame("material")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        lw = linearize(world, plan, world.distribution, n_samples=6, seed=0)
+        lm = linearize(mat, plan.reframed(mat), mat.distribution, n_samples=6, seed=0)
+    assert np.trace(lw.M[-1]) > 0.0
+    assert np.abs(lm.M).max() == 0.0
+    assert np.trace(lm.N[-1]) > np.trace(lw.N[-1])  # the bias enters as measurement spread

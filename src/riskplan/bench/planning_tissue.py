@@ -38,7 +38,9 @@ def measure(scenario: str, n_plans: int, *, seed: int = 0, workers: int | None =
     if scenario == "needle3d":  # the options of `riskplan plan needle3d`
         from riskplan.tissue_planning.rrt import RRTOptions
 
-        options = RRTOptions(plans_per_tree=5, max_iterations=600, goal_bias=0.5, goal_depth=0.3)
+        options = RRTOptions(
+            plans_per_tree=5, max_iterations=600, goal_bias=0.5, goal_depth=0.3, goal_connect=20
+        )
     t0 = time.perf_counter()
     plans, trees = rrt_plans(sim, n_plans, seed=seed, workers=workers, options=options)
     t_rrt = time.perf_counter() - t0

@@ -48,7 +48,7 @@ from functools import partial
 
 import numpy as np
 
-from riskplan._validation import as_array, as_generator
+from riskplan._validation import as_array, as_generator, check_count
 from riskplan.control.kalman import kalman_gains
 from riskplan.control.linearize import Linearization
 from riskplan.control.lqr import lqr_gains
@@ -547,9 +547,7 @@ def monte_carlo_success(
     from riskplan.collision import binomial_interval
     from riskplan.parallel import chunk_count, map_tasks, spawn_seeds
 
-    if int(n) != n or n < 1:
-        raise InvalidInputError(f"n: expected a positive integer, got {n!r}")
-    n = int(n)
+    n = check_count(n, "n", 1, integral=True)
     _check_goal_at(goal_at)
     if isinstance(distribution, str):
         if distribution != "nominal":

@@ -69,7 +69,7 @@ def reach_bound(robot_toml: str) -> float | None:
     if not robot_toml:
         return None
     try:
-        from riskplan.robots.params import parse_robot_toml
+        from riskplan.robots.description import parse_robot_toml
 
         p = parse_robot_toml(robot_toml)
     except Exception:  # not a robot description: nothing to compare against
@@ -305,11 +305,28 @@ class Dataset:
         return self._robot
 
     def cloud(self, i: int) -> np.ndarray:
-        """All points of configuration ``i``, ``(S * P, 3)`` float32."""
+        """All points of configuration ``i`` (every start's cloud together).
+
+        Parameters
+        ----------
+        i : int
+            Configuration index, ``0 <= i < C``.
+
+        Returns
+        -------
+        numpy.ndarray of float32, (S * P, 3)
+            Base frame, m.
+        """
         return self.points[i].reshape(-1, 3)
 
     def tip_spread(self) -> np.ndarray:
-        """``(C,)`` RMS distance of the arrival tips from their mean per target (m)."""
+        """Spread of the arrival tips per target: the hysteresis-driven scatter of the data.
+
+        Returns
+        -------
+        numpy.ndarray, (C,)
+            RMS distance of the ``S`` arrival tips from their mean (m).
+        """
         d = self.tips - self.tips.mean(axis=1, keepdims=True)
         return np.sqrt((d**2).sum(-1).mean(-1))
 

@@ -75,7 +75,7 @@ class Interpolator:
     Attributes: ``points (P, d)`` reference positions, ``elements (P,)`` containing
     elements, ``node_index (P, k)`` their nodes, ``weights (P, k)`` barycentric weights
     (rows sum to 1), ``n_nodes``; ``d = 2, k = 3`` for triangles, ``d = 3, k = 4`` for
-    tetrahedra (:func:`riskplan.deformable.tissue3d.locate3d`).
+    tetrahedra (:func:`riskplan.deformable.tetlocate.locate3d`).
     """
 
     points: np.ndarray

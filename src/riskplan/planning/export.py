@@ -28,7 +28,7 @@ timing is not part of the planners' output, so ``t_0 = 0`` and each step takes t
 fastest-moving tendon needs at ``tendon_speed``, ``t_i = t_{i-1} + max_j |d_ij - d_(i-1)j| /
 v``; ranks are 1-based (1 = the selected plan) and candidate indices 0-based, in tables and
 files alike; quaternions are scalar-first ``(w, x, y, z)`` unless written ``xyzw:`` (ROS
-order), see :meth:`riskplan.collision.mesh_files.BasePose.parse`.
+order), see :meth:`riskplan.robots.BasePose.parse`.
 """
 
 from __future__ import annotations

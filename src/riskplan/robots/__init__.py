@@ -6,6 +6,7 @@
 (3,)
 """
 
+from riskplan.robots.description import parse_robot_toml
 from riskplan.robots.params import (
     Backbone,
     Disks,
@@ -14,7 +15,6 @@ from riskplan.robots.params import (
     RobotParams,
     Tendon,
     params_to_toml,
-    parse_robot_toml,
 )
 from riskplan.robots.pose import BasePose
 from riskplan.robots.robot import (

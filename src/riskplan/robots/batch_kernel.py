@@ -25,16 +25,16 @@ configuration's column of ``W``.
 
 Repetition that is deliberate (a duplicate-code scan lists it):
 
-* the 6x6 Cholesky factor and solve on the packed lower triangle (:func:`_factor_column`,
-  :func:`_solve_column`, once each) are unrolled, row after row of the same shape, so that LLVM
+* the 6x6 Cholesky factor and solve on the packed lower triangle (``_factor_column``,
+  ``_solve_column``, once each) are unrolled, row after row of the same shape, so that LLVM
   keeps the 21 entries in registers and vectorises across the chunk; the scalar kernel's
   ``linalg6`` loops do the same operations in the same order;
-* :func:`_jac_chol_slope` repeats the tendon loop of :func:`_jac_chol` because it fuses the
+* ``_jac_chol_slope`` repeats the tendon loop of ``_jac_chol`` because it fuses the
   Jacobian and the slope's right-hand side into one pass over the tendons (calling both
   would evaluate every tendon tangent twice per node);
 * the six rows of a strain vector are written one statement each (``W[row + 0, c] = b0`` ...)
   because the 6x6 solve returns scalars, not an array (no allocation in the loop);
-* :func:`_solve_serial` and :func:`_solve_parallel` differ only in ``range`` / ``prange``:
+* ``_solve_serial`` and ``_solve_parallel`` differ only in ``range`` / ``prange``:
   numba compiles a parallel loop only in a function of its own.
 
 Tendon path lengths are not computed (the shape needs none).

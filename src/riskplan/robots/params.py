@@ -9,12 +9,11 @@ hysteresis (path-dependence) parameters.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
+from riskplan._validation import check_count
 from riskplan.errors import RobotDescriptionError
 from riskplan.robots.pose import BasePose, quaternion_to_matrix
 
@@ -26,9 +25,6 @@ __all__ = [
     "HysteresisParams",
     "RobotParams",
     "Tendon",
-    "load_robot_params",
-    "parse_robot_toml",
-    "read_robot_text",
     "rpy_to_matrix",
     "suggest_key",
 ]
@@ -246,6 +242,18 @@ def _vec(table: dict, key: str, path: str, n: int | None, *, default=None) -> tu
     return out
 
 
+def _integer(value, key: str, low: int, high: int) -> int:
+    """``value`` of ``key`` as an ``int`` in ``[low, high]``, else
+    :class:`RobotDescriptionError` naming the key."""
+    return check_count(
+        value,
+        f"robot description: {key!r}",
+        low,
+        maximum=high,
+        error=lambda msg: RobotDescriptionError(msg, key=key),
+    )
+
+
 def _table(doc: dict, key: str, *, required=True) -> dict:
     if key not in doc:
         if required:
@@ -280,27 +288,6 @@ def _check_unknown(table: dict, allowed: set[str], path: str, *, what="robot des
             raise RobotDescriptionError(
                 f"{what}: unknown key '{full}'{suggest_key(k, allowed)}", key=full
             )
-
-
-def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
-    """Parse and validate a robot TOML document (format: docs/robots.md).
-
-    Raises :class:`RobotDescriptionError` naming the offending key.
-    """
-    if not isinstance(text, str):
-        raise RobotDescriptionError(
-            f"robot description: expected TOML text (str), got {type(text).__name__}; decode bytes as UTF-8 first",
-            key=None,
-        )
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise RobotDescriptionError(f"robot description: not valid TOML ({exc})", key=None) from exc
-    from riskplan.robots import lab_format
-
-    if lab_format.is_lab_layout(doc):
-        return lab_format.parse_lab_document(doc, default_name=default_name)
-    return parse_robot_document(doc, default_name=default_name)
 
 
 #: top-level tables of a problem file that a robot reader skips (riskplan.planning.problem reads them)
@@ -388,12 +375,7 @@ def parse_robot_document(doc: dict, *, default_name: str = "robot") -> RobotPara
 
     d = _table(doc, "disks", required=False)
     _check_unknown(d, {"count", "radius", "thickness", "density", "positions"}, "disks")
-    count = d.get("count", 0)
-    if isinstance(count, bool) or not isinstance(count, int) or not 0 <= count <= MAX_DISKS:
-        raise RobotDescriptionError(
-            f"robot description: 'disks.count' must be an integer in [0, {MAX_DISKS}], got {count!r}",
-            key="disks.count",
-        )
+    count = _integer(d.get("count", 0), "disks.count", 0, MAX_DISKS)
     if "positions" in d:
         pos = _vec(d, "positions", "disks", count if count else None)
         if count == 0:
@@ -551,32 +533,9 @@ def parse_robot_document(doc: dict, *, default_name: str = "robot") -> RobotPara
     )
 
 
-def read_robot_text(path: str | Path) -> str:
-    """Text of the robot TOML file ``path``, decoded as UTF-8 (TOML files are UTF-8 by spec).
-
-    Raises :class:`RobotDescriptionError` naming the file if it cannot be read or is not
-    valid UTF-8.
-    """
-    p = Path(path)
-    try:
-        return p.read_text(encoding="utf-8")
-    except UnicodeDecodeError as exc:
-        raise RobotDescriptionError(
-            f"robot description: {str(p)!r} is not valid UTF-8 text (byte {exc.start}: {exc.reason})"
-        ) from exc
-    except OSError as exc:
-        raise RobotDescriptionError(f"robot description: cannot read {str(p)!r} ({exc})") from exc
-
-
-def load_robot_params(path: str | Path) -> tuple[RobotParams, str]:
-    """Read a robot TOML file (UTF-8); returns ``(params, text)``."""
-    p = Path(path)
-    text = read_robot_text(p)
-    return parse_robot_toml(text, default_name=p.stem), text
-
-
 def params_to_dict(p: RobotParams) -> dict:
-    """The TOML document (as a dict) that :func:`parse_robot_toml` turns back into ``p``."""
+    """The TOML document (as a dict) that :func:`~riskplan.robots.description.parse_robot_toml`
+    turns back into ``p``."""
     b = p.backbone
     return {
         "name": p.name,
@@ -631,7 +590,7 @@ def params_to_dict(p: RobotParams) -> dict:
 
 
 def params_to_toml(p: RobotParams) -> str:
-    """TOML text of ``p`` (round-trips through :func:`parse_robot_toml`)."""
+    """TOML text of ``p`` (round-trips through :func:`~riskplan.robots.description.parse_robot_toml`)."""
     import tomli_w
 
     return tomli_w.dumps(params_to_dict(p))

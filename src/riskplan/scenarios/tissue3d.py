@@ -9,6 +9,22 @@ cached factorisation (``K_ff⁻¹ f_free``) gives the nodal displacement ``u``, 
 displacement ``Σ_a λ_a u_a`` and the tracked points' are P1 interpolations. The solve does
 not touch the tissue's own state, so a step stays a pure function of its inputs.
 
+**Green's columns.** The load touches the four nodes of one element, and a step needs the
+response at those four nodes and at the ``k`` tracked points only. For linear elasticity
+``u = K⁻¹ f`` is exact superposition, so :meth:`TetBlockModel.point_load` uses the columns
+``G_a = K⁻¹ E_a`` (``E_a (3N, 3)`` the unit forces at node ``a``), computed once per node
+and material (one solve with three right-hand sides) and kept with their tracked-point
+interpolation ``C G_a``::
+
+    u(X) = Σ_a Σ_b λ_b G_a[b] λ_a f,     u(tracked) = Σ_a (C G_a) λ_a f
+
+A step then costs a few 3 × 3 products instead of a solve; a needle crossing a few
+dozen elements solves a few dozen times per material (the RRT and the linearisation
+re-use one material for thousands of steps). The result is the direct solve's up to
+round-off (tested against it, float64). Locating the tip uses the block's grid: the six
+tetrahedra of the grid cell holding the point are tried first (the general search only if
+round-off puts it in none of them).
+
 The block rests on a table: its bottom face ``z = 0`` is fixed (a choice: the 2-D square is
 held at its corners; a 3-D point support would be singular).
 """
@@ -53,6 +69,7 @@ class TetBlock:
         from riskplan.deformable.tissue3d import locate3d
 
         self.size = np.asarray(size, dtype=np.float64)
+        self._size_tuple = tuple(float(v) for v in self.size)
         self.mesh = tet_block(self.size, int(n_elements))
         self.grid = grid_for(self.size, n_elements)
         self.tets = self.mesh.tets
@@ -66,6 +83,18 @@ class TetBlock:
             raise InvalidInputError(f"{exc} (they must lie inside the tissue block)") from exc
         self.tracked = tr
         self._base = None
+        # the grid cell of every tetrahedron (its centroid's cell): a point is located by
+        # its cell's tetrahedra (the Kuhn split puts six in each)
+        g = np.asarray(self.grid)
+        cell = np.minimum((self.mesh.centroids / (self.size / g)).astype(np.int64), g - 1)
+        flat = (cell[:, 0] * g[1] + cell[:, 1]) * g[2] + cell[:, 2]
+        order = np.argsort(flat, kind="stable")
+        counts = np.bincount(flat, minlength=int(np.prod(g)))
+        if counts.min() == counts.max():  # a regular split: (cells, 6) table
+            self._cell_tets = order.reshape(len(counts), -1)
+            self._cell_maps = np.ascontiguousarray(self.mesh.barycentric_maps[self._cell_tets])
+        else:  # pragma: no cover - tet_block always splits each cell alike
+            self._cell_tets = None
 
     def contains(self, X) -> bool:
         """Whether the material point ``X (3,)`` lies in the block (closed).
@@ -80,12 +109,13 @@ class TetBlock:
         bool
             Whether it lies in ``[0, size]``.
         """
-        X = np.asarray(X, dtype=np.float64)
-        return bool(np.all(X >= 0.0) and np.all(X <= self.size))
+        x, y, z = (float(v) for v in np.asarray(X, dtype=np.float64).reshape(3))
+        sx, sy, sz = self._size_tuple
+        return 0.0 <= x <= sx and 0.0 <= y <= sy and 0.0 <= z <= sz  # NaN: False
 
     def locate(self, points) -> tuple[np.ndarray, np.ndarray]:
         """``(elem (k,), lam (k, 4))``: containing tetrahedra (``−1`` outside) and
-        barycentric weights (:func:`riskplan.deformable.tissue3d.find_points`).
+        barycentric weights (:func:`riskplan.deformable.tetlocate.find_points`).
 
         Parameters
         ----------
@@ -102,7 +132,28 @@ class TetBlock:
         from riskplan.deformable.tissue3d import find_points
 
         pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        if self._cell_tets is not None and len(pts) == 1 and self.contains(pts[0]):
+            hit = self._locate_in_cell(pts[0])
+            if hit is not None:
+                return hit
         return find_points(self.mesh, pts)
+
+    def _locate_in_cell(self, X: np.ndarray):
+        """The tetrahedron of the grid cell holding ``X`` with the largest smallest
+        barycentric weight, if that weight is ``>= −INSIDE_TOL`` (else ``None``)."""
+        from riskplan.deformable.tetlocate import INSIDE_TOL
+
+        g = self.grid
+        i = [min(int(X[k] * g[k] / self.size[k]), g[k] - 1) for k in range(3)]
+        c = (i[0] * g[1] + i[1]) * g[2] + i[2]
+        cand = self._cell_tets[c]
+        M = self._cell_maps[c]
+        b = M[:, :, :3] @ X + M[:, :, 3]
+        w = b.min(axis=1)
+        j = int(np.argmax(w))
+        if w[j] < -INSIDE_TOL:
+            return None
+        return np.array([cand[j]]), b[j][None, :]
 
     def model(self, youngs_modulus: float, poissons_ratio: float) -> TetBlockModel:
         """The factorised model of one isotropic material (the first material builds the
@@ -144,6 +195,40 @@ class TetBlockModel:
         self.block = block
         self.tissue = tissue
         self._free = tissue.free_dofs
+        self._columns: dict = {}
+        self._elements: dict = {}
+
+    def columns(self, node: int) -> tuple[np.ndarray, np.ndarray]:
+        """Green's columns of ``node`` (module docstring), computed on first use.
+
+        Parameters
+        ----------
+        node : int
+            A node of the block.
+
+        Returns
+        -------
+        G : numpy.ndarray, shape (N, 3, 3)
+            ``G[b, j, i]``: displacement component ``j`` of node ``b`` under a unit force
+            in direction ``i`` at ``node`` (zero for a node of the fixed face).
+        CG : numpy.ndarray, shape (k, 3, 3)
+            The same at the tracked points (their P1 interpolation of ``G``).
+        """
+        hit = self._columns.get(node)
+        if hit is not None:
+            return hit
+        b = self.block
+        n = 3 * b.n_nodes
+        E = np.zeros((n, 3))
+        E[3 * node + np.arange(3), np.arange(3)] = 1.0
+        u = np.zeros((n, 3))
+        if np.any(E[self._free]):
+            u[self._free] = self.tissue.solve_linear_free(np.ascontiguousarray(E[self._free]))
+        G = u.reshape(b.n_nodes, 3, 3)
+        ip = b.interp
+        CG = np.einsum("pcji,pc->pji", G[ip.node_index], ip.weights)
+        self._columns[node] = hit = (G, CG)
+        return hit
 
     def solve(self, nodal_forces) -> np.ndarray:
         """Displacement ``(N, 3)`` for nodal forces ``(N, 3)`` (zero on the fixed face; a
@@ -184,6 +269,29 @@ class TetBlockModel:
         u_tracked : numpy.ndarray, shape (k, 3)
             The displacement of the block's tracked points.
         """
+        lam = np.asarray(lam, dtype=np.float64)
+        Ge, CGe = self._element(int(e))
+        fa = np.outer(lam, np.asarray(force, dtype=np.float64)).reshape(12)  # nodal forces
+        return lam @ (Ge @ fa).reshape(4, 3), (CGe @ fa).reshape(-1, 3)
+
+    def _element(self, e: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(G_e (12, 12), C G_e (3k, 12))``: the response of element ``e``'s nodes and of
+        the tracked points to the twelve nodal force components of ``e`` (the Green's
+        columns of its four nodes, superposed; cached per element)."""
+        hit = self._elements.get(e)
+        if hit is not None:
+            return hit
+        nodes = self.block.tets[e]
+        cols = [self.columns(int(a)) for a in nodes]
+        # G_e[(b, j), (a, i)] = G_a[nodes[b], j, i]
+        Ge = np.stack([G[nodes] for G, _ in cols], axis=2).reshape(12, 12)
+        CGe = np.stack([CG for _, CG in cols], axis=2).reshape(-1, 12)
+        self._elements[e] = hit = (Ge, CGe)
+        return hit
+
+    def point_load_direct(self, e: int, lam, force) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`point_load` by one solve of the whole system (the reference the Green's
+        columns are tested against; same arguments and returns)."""
         b = self.block
         lam = np.asarray(lam, dtype=np.float64)
         F = np.zeros((b.n_nodes, 3))

@@ -3,7 +3,7 @@ Alterovitz, RSS 2011, Fig. 2): simulator RRT candidates → linearisation, LQG a
 selection → the LQG-MP estimate checked against closed-loop executions.
 
 :func:`plan_tissue` is the tissue wing's twin of :func:`riskplan.planning.chest.plan_chest`;
-what ``riskplan plan tissue`` writes is in :mod:`riskplan.app.outputs.tissue_plan`.
+what ``riskplan plan tissue`` writes is in ``riskplan.app.outputs.tissue_plan`` (the application layer).
 """
 
 from __future__ import annotations

@@ -6,7 +6,9 @@
   single executions of Figs. 4, 5 and 7(c-f).
 * ``mdn`` — the MDN paper: Fig. 4 (NLL vs K), Fig. 5, MDN vs Cosserat timing, and Fig. 7
   (Bayesian optimisation of a chest-cavity path, the "about 15 % → below 7 % after 50
-  iterations" claim) (:mod:`riskplan.app.reproduce.mdn`).
+  iterations" claim) (:mod:`riskplan.app.reproduce.mdn`); stage ``robot-risk``: risks from
+  the learned model against the robot's collision rates
+  (:mod:`riskplan.app.reproduce.risk_calibration`).
 
 Every parallel stage runs on one :class:`riskplan.parallel.TaskPool` opened for the whole
 job, so the worker processes (or the Ray connection) start once, not once per stage.
@@ -42,8 +44,10 @@ SCALE_NAMES = ("smoke", "paper")
 #: deformable paper only, its own sizes: ``calibration_scale``); ``sensitivity``: the
 #: needle's Fig. 6 under actuation-noise and interaction-force scales ×0.5, ×1, ×2 and the
 #: other reading of the cases (:func:`riskplan.app.reproduce.needle_study.sensitivity`, its own
-#: sizes: :func:`_sensitivity_scales`); ``needle3d``: the 3-D needle (beyond the paper).
-STAGES = ("figures", "calibration", "sensitivity", "needle3d")
+#: sizes: :func:`_sensitivity_scales`); ``needle3d``: the 3-D needle (beyond the paper);
+#: ``robot-risk``: the chest risks against the robot's collision rates (MDN paper; its sizes:
+#: :data:`riskplan.app.reproduce.robot_risk.ROBOT_RISK_FOR`, or ``robot_risk_scale``).
+STAGES = ("figures", "calibration", "sensitivity", "needle3d", "robot-risk")
 #: the calibration sizes a named scale uses unless ``calibration_scale`` names others
 _CALIBRATION_FOR = {"smoke": "smoke", "paper": "full"}
 SCENARIOS = ("needle", "manipulation")
@@ -123,6 +127,7 @@ def reproduce(
     progress=None,
     stages=("figures",),
     calibration_scale: str | None = None,
+    robot_risk_scale: str | None = None,
 ) -> dict:
     """Run (or continue) the reproduction and write ``out/results.json`` and ``out/report.html``.
 
@@ -144,6 +149,10 @@ def reproduce(
         (:data:`riskplan.app.reproduce.calibration.CALIBRATION_SCALES`: ``smoke``,
         ``reduced``, ``full``); ``None``: ``smoke`` for scale ``smoke``, ``full`` for
         ``paper`` (a dict scale names its own under ``"calibration"``, or gets ``smoke``).
+    robot_risk_scale : sizes of the ``robot-risk`` stage
+        (:data:`riskplan.app.reproduce.risk_calibration.RISK_STUDY_SCALES`: ``smoke``,
+        ``reduced``, ``full``); ``None``: ``smoke`` for scale ``smoke``, ``full`` for ``paper``.
+        The stage runs into ``out/robot-risk`` with a store of its own (resumable).
 
     Returns the results dict (what ``results.json`` holds). Raises
     :class:`~riskplan.errors.InvalidInputError` for bad arguments,
@@ -156,13 +165,21 @@ def reproduce(
     stages = (stages,) if isinstance(stages, str) else tuple(stages)
     if not stages or any(s not in STAGES for s in stages):
         raise InvalidInputError(f"stages: expected names from {', '.join(STAGES)}, got {stages!r}")
+    if robot_risk_scale is not None:
+        from riskplan.app.reproduce.risk_calibration import RISK_STUDY_SCALES
+
+        if robot_risk_scale not in RISK_STUDY_SCALES:
+            raise InvalidInputError(
+                f"robot_risk_scale: expected one of {', '.join(RISK_STUDY_SCALES)}, "
+                f"got {robot_risk_scale!r}"
+            )
     out = check_output_folder(out, "out")
     # one writer per output folder: a second run into it stops at once (the store's own
     # checks keep records consistent, the lock keeps results.json and the report one run's)
     with output_lock(out, "output folder"):
         return _reproduce(
             out, paper, scale, backend, ray_address, workers, seed, progress, stages,
-            calibration_scale,
+            calibration_scale, robot_risk_scale,
         )  # fmt: skip
 
 
@@ -194,9 +211,30 @@ def _sensitivity_stage(scale_name, out, seed, backend, workers, progress) -> dic
     return json.loads(json.dumps(sens))
 
 
+def _robot_risk_stage(
+    results, timings, out, scale_name, seed, progress, backend, workers, rr_scale
+):
+    """The ``robot-risk`` stage into ``results["mdn"]["robot_risk"]`` and its seconds into
+    ``timings["robot_risk_s"]`` (:func:`riskplan.app.reproduce.robot_risk.robot_risk_stage`)."""
+    from riskplan.app.reproduce.robot_risk import robot_risk_stage
+
+    t0 = time.perf_counter()
+    results.setdefault("mdn", {})["robot_risk"] = robot_risk_stage(
+        out,
+        scale_name,
+        seed=seed,
+        progress=progress,
+        backend=backend,
+        workers=workers,
+        robot_risk_scale=rr_scale,
+    )
+    timings["robot_risk_s"] = time.perf_counter() - t0
+
+
 def _reproduce(
-    out, paper, scale, backend, ray_address, workers, seed, progress, stages, calibration_scale
-) -> dict:
+    out, paper, scale, backend, ray_address, workers, seed, progress, stages, calibration_scale,
+    robot_risk_scale=None,
+) -> dict:  # fmt: skip
     import riskplan
     from riskplan.app.reproduce.calibration import CALIBRATION_SCALES
     from riskplan.app.store import ResultStore
@@ -297,6 +335,9 @@ def _reproduce(
             t0 = time.perf_counter()
             results["needle3d"] = run_needle3d(out, scale_name, seed=seed)
             timings["needle3d_s"] = time.perf_counter() - t0
+        if paper in ("mdn", "all") and "robot-risk" in stages:
+            rr_args = (out, scale_name, seed, progress, backend, workers, robot_risk_scale)
+            _robot_risk_stage(results, timings, *rr_args)
         timings["process_pools_started"] = pool.pools_started
     write_json_atomic(out / "results.json", results, sort_keys=True)
     write_json_atomic(out / "timings.json", timings, sort_keys=True)

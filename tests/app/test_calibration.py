@@ -142,6 +142,18 @@ def test_reproduce_stage_is_selectable(tmp_path, monkeypatch):
     assert res["deformable"]["needle"]["calibration"]["sigma"]["n_plans"] >= 1
     html = (out / "report.html").read_text()
     assert "LQG-MP calibration: needle" in html and (out / "calibration_needle.png").exists()
+    # one scenario as its own stage, into the same store: the same numbers, read back
+    one = rep.reproduce(out, paper="deformable", stages=("calibration-needle",), backend="serial")
+    assert set(one["deformable"]) == {"needle"}
+    assert json.dumps(one["deformable"]["needle"], sort_keys=True) == json.dumps(
+        res["deformable"]["needle"], sort_keys=True
+    )
+    # where the time went, in timings.json (not results.json: it differs between runs)
+    cost = json.loads((out / "timings.json").read_text())["calibration_needle_cost"]
+    assert cost["executions_cpu_s"] > 0.0 and cost["sigma_ranking_cpu_s"] > 0.0
+    n_rows = res["deformable"]["needle"]["calibration"]["sigma"]["n_plans"]
+    n_controllers = len(set(CONTROLLER_OF.values()))  # the needle runs all four
+    assert cost["n_executions"] == n_rows * n_controllers * TINY.n_executions
 
 
 def test_a_degenerate_lqgmp_fails_the_candidate_not_the_run(monkeypatch):

@@ -26,18 +26,21 @@ from riskplan.geometry2d import closest_point_on_segment, closest_points_on_segm
 
 
 @nb.njit(cache=True, inline="always")
+def _two_dots(ux, uy, uz, vx, vy, vz, wx, wy, wz):
+    """``(u . w, v . w)``: the two edge projections of one vertex region test of
+    :func:`_closest_tri`."""
+    return ux * wx + uy * wy + uz * wz, vx * wx + vy * wy + vz * wz
+
+
+@nb.njit(cache=True, inline="always")
 def _closest_tri(ax, ay, az, bx, by, bz, cx, cy, cz, px, py, pz):
     """Closest point of triangle ``abc`` to ``p`` (Ericson §5.1.5); returns (x, y, z)."""
     abx, aby, abz = bx - ax, by - ay, bz - az
     acx, acy, acz = cx - ax, cy - ay, cz - az
-    apx, apy, apz = px - ax, py - ay, pz - az
-    d1 = abx * apx + aby * apy + abz * apz
-    d2 = acx * apx + acy * apy + acz * apz
+    d1, d2 = _two_dots(abx, aby, abz, acx, acy, acz, px - ax, py - ay, pz - az)
     if d1 <= 0.0 and d2 <= 0.0:
         return ax, ay, az
-    bpx, bpy, bpz = px - bx, py - by, pz - bz
-    d3 = abx * bpx + aby * bpy + abz * bpz
-    d4 = acx * bpx + acy * bpy + acz * bpz
+    d3, d4 = _two_dots(abx, aby, abz, acx, acy, acz, px - bx, py - by, pz - bz)
     if d3 >= 0.0 and d4 <= d3:
         return bx, by, bz
     vc = d1 * d4 - d3 * d2
@@ -46,9 +49,7 @@ def _closest_tri(ax, ay, az, bx, by, bz, cx, cy, cz, px, py, pz):
         den = d1 - d3
         v = d1 / den if den > 0.0 else 0.0
         return ax + v * abx, ay + v * aby, az + v * abz
-    cpx, cpy, cpz = px - cx, py - cy, pz - cz
-    d5 = abx * cpx + aby * cpy + abz * cpz
-    d6 = acx * cpx + acy * cpy + acz * cpz
+    d5, d6 = _two_dots(abx, aby, abz, acx, acy, acz, px - cx, py - cy, pz - cz)
     if d6 >= 0.0 and d5 <= d6:
         return cx, cy, cz
     vb = d5 * d2 - d1 * d6

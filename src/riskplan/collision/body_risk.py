@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from riskplan._validation import check_counts
 from riskplan.collision.environment import Environment, check_environment
 from riskplan.collision.mixture_bounds import check_mixture
 from riskplan.errors import InvalidInputError
@@ -107,9 +108,7 @@ def cloud_risk(
     env = check_environment(environment) if validate else environment
     gm = check_mixture(mixture, env.dim, validate=validate)
     if validate:
-        for name, v in (("n_points", n_points), ("n_clouds", n_clouds)):
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise InvalidInputError(f"{name}: expected a positive integer, got {v!r}")
+        check_counts({"n_points": n_points, "n_clouds": n_clouds}, 1)
         if not (np.isfinite(coherence) and 0.0 <= coherence <= 1.0):
             raise InvalidInputError(f"coherence: expected a number in [0, 1], got {coherence!r}")
         if not np.isfinite(margin):
@@ -245,9 +244,7 @@ def sampled_body_risk(
             raise InvalidInputError("drawn_means: expected finite values")
         if not (np.isfinite(extent) and extent > 0):
             raise InvalidInputError(f"extent: expected a finite number > 0, got {extent!r}")
-        for name, v in (("n_points", n_points), ("n_directions", n_directions)):
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise InvalidInputError(f"{name}: expected a positive integer, got {v!r}")
+        check_counts({"n_points": n_points, "n_directions": n_directions}, 1)
     S = D.shape[0]
     semi, axes, active = _body_pieces(W, U, D, extent, n_points)
     dirs = sphere_directions(int(n_directions))

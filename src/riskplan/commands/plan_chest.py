@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from riskplan.commands._shared import base_pose_option
+from riskplan.commands._shared import base_pose_option, echo_validation
 
 
 def _check_finite(**values):
@@ -287,12 +287,7 @@ def register(plan_app: typer.Typer) -> None:
             f"nominal {plan.nominal_bound:.4f} -> optimised {res.bound:.4f} "
             f"({100 * res.reduction:.1f} % lower, {len(res.trace) - 1} iterations, {res.evaluations} bound evaluations)"
         )
-        if validation is not None:
-            from riskplan.planning.validate import endpoint_warnings, validation_markdown
-
-            typer.echo(validation_markdown(validation))
-            for line in endpoint_warnings(validation):
-                typer.echo(f"warning: {line}", err=True)
+        echo_validation(validation)
         typer.echo(f"wrote {out}")
 
 

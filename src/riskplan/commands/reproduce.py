@@ -44,9 +44,11 @@ def register(app: typer.Typer) -> None:
             ["figures"],
             "--stage",
             help="figures (the papers' figures) | calibration (LQG-MP predicted vs measured "
-            "success; deformable paper) | sensitivity (the needle's Fig. 6 against noise and "
+            "success; deformable paper; calibration-needle / calibration-manipulation: one scenario) "
+            "| sensitivity (the needle's Fig. 6 against noise and "
             "force scales) | needle3d (the 3-D needle: candidates, LQG-MP estimators, "
-            "executions, interactive figure) | robot-risk (chest risks from the learned model "
+            "executions, interactive figure) | control-variants (LQG against the UKF and "
+            "iLQR on the selected RRT plans) | robot-risk (chest risks from the learned model "
             "against the robot's collision rates; MDN paper). Repeat to run several.",
         ),
         calibration_scale: str = typer.Option(

@@ -104,7 +104,7 @@ from functools import partial
 
 import numpy as np
 
-from riskplan._validation import as_array, as_generator
+from riskplan._validation import as_array, as_generator, check_count
 from riskplan.control.plan import NominalPlan
 from riskplan.errors import InvalidInputError, SimulationError
 
@@ -661,11 +661,8 @@ def linearize(
     if np.any(eps <= 0):
         raise InvalidInputError(f"epsilon: expected > 0, got {eps}")
     n_a_runs = 2 * min(p, q) if n_a_runs is None else n_a_runs
-    if int(n_a_runs) != n_a_runs or n_a_runs < 1:
-        raise InvalidInputError(f"n_a_runs: expected a positive integer, got {n_a_runs!r}")
-    n_a_runs = int(n_a_runs)
-    if int(n_samples) != n_samples or n_samples < 0:
-        raise InvalidInputError(f"n_samples: expected a non-negative integer, got {n_samples!r}")
+    n_a_runs = check_count(n_a_runs, "n_a_runs", 1, integral=True)
+    check_count(n_samples, "n_samples", 0, integral=True)
     H0, N0 = observation_model(sim, H, N)
 
     master = int(seed.integers(2**63)) if isinstance(seed, np.random.Generator) else seed

@@ -47,6 +47,14 @@ from riskplan.deformable.elements import deformation_gradients, determinants_and
 from riskplan.deformable.laws import LAWS, neohookean_energy_and_stress
 from riskplan.deformable.material import Material
 from riskplan.deformable.mesh import TissueMesh
+from riskplan.deformable.nhkernels import (
+    CompiledBandSolver,
+    band_cholesky,
+    band_slots,
+    neohookean_band,
+    neohookean_evaluate,
+    scaled_norm,
+)
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
 from riskplan.threads import one_blas_thread
 
@@ -168,6 +176,12 @@ class HyperelasticModel:
         self.fixed_dofs, self.free_dofs = split_dofs(self.fixed_nodes, self._n)
         self._pattern = _tangent_pattern(self._tri, self.free_dofs, self._n)
         self._starts: OrderedDict = OrderedDict()
+        # the neo-Hookean law runs compiled (riskplan.deformable.nhkernels); ``compiled =
+        # False`` selects the array path (the reference the kernels are tested against)
+        self.compiled = law == "neohookean"
+        self._tri64 = np.ascontiguousarray(mesh.triangles, dtype=np.int64)
+        self._Gc = np.ascontiguousarray(self._G, dtype=np.float64)
+        self._areas_c = np.ascontiguousarray(self._areas, dtype=np.float64)
 
     def __getstate__(self):
         state = self.__dict__.copy()
@@ -200,6 +214,8 @@ class HyperelasticModel:
 
     def _evaluate(self, u_flat: np.ndarray) -> _State:
         """Energy and internal forces at ``u``; ``energy is None`` if an element inverted."""
+        if self.compiled:
+            return self._evaluate_compiled(u_flat)
         st = _State()
         st.u = u_flat
         F = self._F(u_flat)
@@ -223,6 +239,32 @@ class HyperelasticModel:
         st.fint = fint
         return st
 
+    def _evaluate_compiled(self, u_flat: np.ndarray) -> _State:
+        """:meth:`_evaluate` of the neo-Hookean law by :func:`.nhkernels.neohookean_evaluate`
+        (``st.F`` is not kept: the neo-Hookean tangent needs ``F⁻¹`` and ``ln J`` only)."""
+        st = _State()
+        st.u = u_flat
+        T = self._tri64.shape[0]
+        st.fint = np.empty(self._n)
+        st.Finv = np.empty((T, 2, 2))
+        st.lnJ = np.empty(T)
+        st.J = np.empty(T)
+        st.F = None
+        energy, inverted = neohookean_evaluate(
+            np.ascontiguousarray(u_flat, dtype=np.float64),
+            self._tri64,
+            self._Gc,
+            self._areas_c,
+            self._lam,
+            self._mu,
+            st.fint,
+            st.Finv,
+            st.lnJ,
+            st.J,
+        )
+        st.energy = None if inverted else float(energy)
+        return st
+
     def _element_tangents(self, st: _State) -> np.ndarray:
         if self.law == "neohookean":
             return neohookean_element_tangents(
@@ -242,16 +284,33 @@ class HyperelasticModel:
         positive definite."""
         import scipy.linalg
 
-        Ke = self._element_tangents(st).reshape(-1)
-        try:
-            cb = scipy.linalg.cholesky_banded(
-                self._pattern.banded(Ke), lower=False, check_finite=False
+        pattern = self._pattern
+        if self.compiled:
+            slots = getattr(pattern, "_nh_slots", None)
+            if slots is None:
+                slots = pattern._nh_slots = band_slots(pattern, self._tri64.shape[0])
+            ab = np.empty(pattern._band_size)
+            neohookean_band(
+                st.Finv, st.lnJ, self._Gc, self._areas_c, self._lam, self._mu, slots, ab
             )
-        except np.linalg.LinAlgError:
+            cb = ab.reshape(-1, pattern.bandwidth + 1)
+            if band_cholesky(cb) == 0:
+                return CompiledBandSolver(cb, pattern.band_perm)
+            Ke = self._element_tangents(st).reshape(-1)
+            cb = None
+        else:
+            Ke = self._element_tangents(st).reshape(-1)
+            try:
+                cb = scipy.linalg.cholesky_banded(
+                    pattern.banded(Ke), lower=False, check_finite=False
+                )
+            except np.linalg.LinAlgError:
+                cb = None
+        if cb is None:  # not positive definite
             from scipy.sparse.linalg import splu
 
             try:
-                lu = splu(self._pattern.csc(Ke))
+                lu = splu(pattern.csc(Ke))
             except RuntimeError as exc:
                 raise ConvergenceError(f"Newton: singular tangent ({exc})") from exc
             return lu.solve
@@ -311,7 +370,8 @@ class HyperelasticModel:
         tol = self.rtol * fscale + self.atol
         f_free = f[free]
         r = st.fint[free] - f_free
-        rn = _norm(r)
+        norm = scaled_norm if self.compiled else _norm
+        rn = norm(r)
         for it in range(self.max_iter + 1):
             if not np.isfinite(rn):
                 # an overflowed residual would pass any tolerance test as "not above" only by
@@ -347,7 +407,7 @@ class HyperelasticModel:
                     alpha *= 0.5
                     continue
                 r1 = st1.fint[free] - f_free
-                rn1 = _norm(r1)
+                rn1 = norm(r1)
                 # Armijo on Π, or (near the solution, where Π is flat to round-off)
                 # a decrease of the residual norm
                 if st1.energy - float(f @ trial) <= pi0 + 1e-4 * alpha * slope or rn1 < 0.5 * rn:

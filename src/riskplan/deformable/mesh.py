@@ -19,7 +19,7 @@ from functools import cached_property
 
 import numpy as np
 
-from riskplan._validation import as_array
+from riskplan._validation import as_array, as_cells
 from riskplan.deformable import elements
 from riskplan.deformable.elements import boundary_edges, signed_areas
 from riskplan.errors import InvalidInputError, require
@@ -76,21 +76,7 @@ class TissueMesh:
 
     def __post_init__(self):
         nodes = as_array(self.nodes, "nodes", shape=(None, 2))
-        tri = np.asarray(self.triangles)
-        if tri.ndim != 2 or tri.shape[1] != 3 or tri.shape[0] == 0:
-            raise InvalidInputError(f"triangles: expected shape (T>0, 3), got {tri.shape}")
-        if not np.issubdtype(tri.dtype, np.integer):
-            if not np.all(np.isfinite(tri)) or np.any(tri != np.round(tri)):
-                raise InvalidInputError("triangles: expected integer node indices")
-        tri = tri.astype(np.int64)
-        if tri.min() < 0 or tri.max() >= len(nodes):
-            raise InvalidInputError(f"triangles: node indices must lie in [0, {len(nodes) - 1}]")
-        used = np.zeros(len(nodes), dtype=bool)
-        used[tri.ravel()] = True
-        if not used.all():
-            raise InvalidInputError(
-                f"nodes: nodes {np.flatnonzero(~used)[:10].tolist()} belong to no triangle"
-            )
+        tri = as_cells(self.triangles, "triangles", len(nodes), 3, "triangle")
         area = signed_areas(nodes, tri)
         span = np.ptp(nodes, axis=0)
         tol = DEGENERATE_RTOL * float(span[0] * span[1] + np.finfo(float).tiny)

@@ -19,6 +19,7 @@ import logging
 
 import numpy as np
 
+from riskplan._validation import check_count
 from riskplan.collision import mixture_bound, trajectory_probability
 from riskplan.planning.prm import DEFAULT_STEP, Roadmap, check_step, interpolate_path
 
@@ -147,8 +148,7 @@ class SampledBodyRisk:
         extent = DEFAULT_EXTENT if extent is None else extent
         if not (np.isfinite(extent) and extent > 0):
             raise InvalidInputError(f"extent: expected a finite number > 0, got {extent!r}")
-        if isinstance(n_draws, bool) or int(n_draws) != n_draws or n_draws < 2:
-            raise InvalidInputError(f"n_draws: expected an integer >= 2, got {n_draws!r}")
+        check_count(n_draws, "n_draws", 2, integral=True)
         base = getattr(model, "model", model)
         self.robot = getattr(base, "robot", None)
         if self.robot is None:

@@ -40,7 +40,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from riskplan._validation import as_array, as_generator, check_range
+from riskplan._validation import as_array, as_generator, check_count, check_range
 from riskplan.errors import InvalidInputError
 
 __all__ = [
@@ -62,6 +62,16 @@ def frozen_array(value, dtype=np.float64) -> np.ndarray:
     arr = np.array(value, dtype=dtype, copy=True, order="C")
     arr.setflags(write=False)
     return arr
+
+
+def check_material(youngs_modulus, poissons_ratio) -> None:
+    """Raise :class:`~riskplan.errors.InvalidInputError` unless the nominal material of a
+    scenario's configuration is a finite ``youngs_modulus > 0`` and a ``poissons_ratio`` in
+    ``(-1, 0.5)`` (a positive-definite isotropic elastic law)."""
+    if not (0.0 < float(youngs_modulus) < math.inf):
+        raise InvalidInputError(f"youngs_modulus: must be finite and > 0, got {youngs_modulus!r}")
+    if not -1.0 < float(poissons_ratio) < 0.5:
+        raise InvalidInputError(f"poissons_ratio: must lie in (-1, 0.5), got {poissons_ratio!r}")
 
 
 @dataclass(frozen=True)
@@ -109,16 +119,7 @@ class SimParams:
             raise InvalidInputError(f"poissons_ratio: must lie in (-1, 0.5), got {nu:.6g}")
         if f < 0.0:
             raise InvalidInputError(f"force_scale: must be >= 0, got {f:.6g}")
-        try:
-            n = int(self.n_elements)
-        except (TypeError, ValueError) as exc:
-            raise InvalidInputError(
-                f"n_elements: expected an integer, got {self.n_elements!r}"
-            ) from exc
-        if n != self.n_elements or not (8 <= n <= 5000):
-            raise InvalidInputError(
-                f"n_elements: expected an integer in [8, 5000], got {self.n_elements!r}"
-            )
+        n = check_count(self.n_elements, "n_elements", 8, maximum=5000, integral=True)
         object.__setattr__(self, "youngs_modulus", e)
         object.__setattr__(self, "poissons_ratio", nu)
         object.__setattr__(self, "force_scale", f)

@@ -66,6 +66,7 @@ from riskplan.scenarios.base import (
     SimState,
     apply_actuation_noise,
     check_control,
+    check_material,
     frozen_array,
     gaussian_noise,
 )
@@ -131,14 +132,7 @@ class ManipulationConfig:
             a = float(self.actuation_std)
             if not (math.isfinite(a) and a >= 0.0):
                 raise InvalidInputError(f"actuation_std: must be finite and >= 0, got {a!r}")
-        if not (0.0 < float(self.youngs_modulus) < math.inf):
-            raise InvalidInputError(
-                f"youngs_modulus: must be finite and > 0, got {self.youngs_modulus!r}"
-            )
-        if not -1.0 < float(self.poissons_ratio) < 0.5:
-            raise InvalidInputError(
-                f"poissons_ratio: must lie in (-1, 0.5), got {self.poissons_ratio!r}"
-            )
+        check_material(self.youngs_modulus, self.poissons_ratio)
         object.__setattr__(self, "outline", frozen_array(outline))
         if not 0 <= int(self.fixed_edge) < len(outline):
             raise InvalidInputError(

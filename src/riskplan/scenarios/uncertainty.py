@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from riskplan._validation import as_array, as_generator
+from riskplan._validation import as_array, as_generator, check_count
 from riskplan.errors import InvalidInputError
 from riskplan.scenarios.base import SimParams
 
@@ -83,10 +83,9 @@ class ParamDistribution:
 
     def sample_many(self, n: int, seed=None) -> list[SimParams]:
         """``n`` independent draws from one generator seeded by ``seed``."""
-        if int(n) != n or n < 0:
-            raise InvalidInputError(f"n: expected a non-negative integer, got {n!r}")
+        n = check_count(n, "n", 0, integral=True)
         gen = as_generator(seed)
-        return [self._draw(gen) for _ in range(int(n))]
+        return [self._draw(gen) for _ in range(n)]
 
     def _draw(self, gen: np.random.Generator) -> SimParams:
         return self.base

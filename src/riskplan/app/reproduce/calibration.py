@@ -43,6 +43,7 @@ executions are stored as they finish (:class:`riskplan.app.reproduce.deformable.
 from __future__ import annotations
 
 import logging
+import time
 import warnings
 from dataclasses import asdict, dataclass, field
 from functools import partial
@@ -207,8 +208,10 @@ def _scales(n_candidates, n_plans, n_executions, batch_size, **kw):
 #: Named sizes. ``smoke``: minutes, checks the machinery; ``reduced``: needle all 20
 #: candidates × 100 executions × 3 cases × 4 controllers (24,000 executions), manipulation
 #: 10 of 20 candidates × 200 executions × 2 cases × 2 controllers (its linearisations and
-#: executions cost about ten times the needle's); ``full``: the issue's study, 20 of 100
-#: candidates at evenly spaced ranks × 500 executions per case and controller.
+#: executions cost about ten times the needle's); ``full``: the issue's study, ≥ 20 plans
+#: × 500 executions per case and controller — needle 20 of 100 candidates at evenly spaced
+#: ranks, manipulation all 20 candidates (each scenario a stage of about an hour or less on
+#: two cores: ``--stage calibration-needle`` / ``calibration-manipulation``).
 CALIBRATION_SCALES: dict[str, dict[str, CalibrationScale]] = {
     "smoke": _scales(4, 4, 20, 10, lin_samples=6, goal_samples=300, plans_per_tree=2),
     "reduced": {
@@ -219,7 +222,13 @@ CALIBRATION_SCALES: dict[str, dict[str, CalibrationScale]] = {
             20, 10, 200, 50, lin_samples=8, goal_samples=1000, plans_per_tree=5
         ),
     },
-    "full": _scales(100, 20, 500, 50, plans_per_tree=10),
+    "full": {
+        "needle": CalibrationScale(100, 20, 500, 50, plans_per_tree=10),
+        # all 20 candidates measured (the rule's "all of them"): ranking 100 would cost 200
+        # manipulation linearisations (about 30 CPU-minutes) to choose the same number of
+        # plans; the needle's ranking costs about a CPU-minute
+        "manipulation": CalibrationScale(20, 20, 500, 50, plans_per_tree=5),
+    },
 }
 
 
@@ -227,28 +236,39 @@ CALIBRATION_SCALES: dict[str, dict[str, CalibrationScale]] = {
 
 
 def estimate_candidate(args):
-    """``args = (sim, plan, lin_samples, goal_samples, seed, methods)``: the paper's LQG
-    controller and, per method of ``methods`` (a subset of :data:`ESTIMATORS`), its LQG-MP
-    ``P(success)``; ``"disturbance"`` builds the disturbance-state controller too. Returns
-    ``{"p": {method: float}, "lqg": controller, "dist": controller, "error": str | None}``;
-    a failed linearisation gives ``error`` and no controllers."""
+    """``args = (sim, plan, lin_samples, goal_samples, seed, methods[, earlier])``: the
+    paper's LQG controller and, per method of ``methods`` (a subset of :data:`ESTIMATORS`),
+    its LQG-MP ``P(success)``; ``"disturbance"`` builds the disturbance-state controller too.
+    ``earlier``: a result of this function for the same plan, case and seed (the σ
+    ranking's): its paper's controller and estimates are taken, not recomputed (the same
+    seed gives the same linearisation, so the values are those a recomputation gives).
+    Returns ``{"p": {method: float}, "lqg": controller, "dist": controller, "mat": ...,
+    "matdist": ..., "error": str | None, "cpu_s": float}`` (``cpu_s``: this call's CPU
+    seconds, :func:`time.process_time`); a failed linearisation gives ``error`` and no
+    controllers."""
     from riskplan.control import linearize
     from riskplan.control.lqg import lqg_controller
     from riskplan.control.lqgmp import lqgmp
     from riskplan.parallel import spawn_seeds
 
-    sim, plan, lin_samples, goal_samples, seed, methods = args
+    t0 = time.process_time()
+    sim, plan, lin_samples, goal_samples, seed, methods = args[:6]
+    earlier = args[6] if len(args) > 6 else None
     s_lin, s_mp, s_dlin, s_dmp, s_mlin, s_mmp = spawn_seeds(seed, 6)
     out = {"p": {}, "lqg": None, "dist": None, "mat": None, "matdist": None, "error": None}
     with warnings.catch_warnings():
         # rank-deficient X_t along straight stretches is expected and documented by linearize
         warnings.simplefilter("ignore", RuntimeWarning)
         try:
-            lin = linearize(sim, plan, sim.distribution, n_samples=lin_samples, seed=s_lin)
-            ctrl = lqg_controller(lin)
+            if earlier is not None and earlier.get("lqg") is not None:
+                ctrl = earlier["lqg"]
+                out["p"].update(earlier["p"])
+            else:
+                lin = linearize(sim, plan, sim.distribution, n_samples=lin_samples, seed=s_lin)
+                ctrl = lqg_controller(lin)
             out["lqg"] = ctrl
             for m in methods:
-                if m in ("sigma", "truncation", "sampling"):
+                if m in ("sigma", "truncation", "sampling") and m not in out["p"]:
                     r = lqgmp(sim, plan, ctrl, method=m, n_goal_samples=goal_samples, seed=s_mp)
                     out["p"][m] = float(r.p_success)
             if "disturbance" in methods:
@@ -289,14 +309,17 @@ def estimate_candidate(args):
                 out["p"][m] = float(r.p_success)
         except _FAILURES as exc:
             out["error"] = f"{type(exc).__name__}: {exc}"
+    out["cpu_s"] = time.process_time() - t0
     return out
 
 
-def execute_rates(args) -> list[list]:
-    """``args = (sim, plan, controller, seeds)``: ``[[success (0/1), outcome], ...]``, one per
-    seed (``outcome``: the execution's, one of :data:`riskplan.control.lqg.OUTCOMES`)."""
+def execute_rates(args) -> dict:
+    """``args = (sim, plan, controller, seeds)``: ``{"runs": [[success (0/1), outcome], ...],
+    "cpu_s": float}``, one run per seed (``outcome``: the execution's, one of
+    :data:`riskplan.control.lqg.OUTCOMES`; ``cpu_s``: the batch's CPU seconds)."""
     from riskplan.control.lqg import execute
 
+    t0 = time.process_time()
     sim, plan, controller, seeds = args
     out = []
     for s in seeds:
@@ -304,7 +327,18 @@ def execute_rates(args) -> list[list]:
         params = sim.distribution.sample(gen)
         ex = execute(sim, plan, controller, params, seed=gen, keep_states=False)
         out.append([int(ex.success), ex.outcome])
-    return out
+    return {"runs": out, "cpu_s": time.process_time() - t0}
+
+
+def _runs(record) -> list:
+    """The ``[[success, outcome], ...]`` of a stored batch (a list in stores written before
+    batches carried their CPU seconds)."""
+    return record["runs"] if isinstance(record, dict) else record
+
+
+def _cpu(record) -> float:
+    """A stored record's CPU seconds (0 where it predates the field)."""
+    return float(record.get("cpu_s", 0.0)) if isinstance(record, dict) else 0.0
 
 
 def run_calibration(
@@ -318,6 +352,7 @@ def run_calibration(
     ray_address: str | None = None,
     progress=None,
     pool=None,
+    cost: dict | None = None,
 ) -> dict:
     """The calibration study of scenario ``name`` (module docstring).
 
@@ -329,7 +364,10 @@ def run_calibration(
     with ``successes``, ``n``, ``rate``, ``low``, ``high``, ``outcomes``), ``cases``,
     ``rule``, ``scale``, ``n_usable[case]``, ``failed[case]`` (candidates whose
     linearisation failed) and ``best`` (the estimator of lowest mae among those meeting
-    the goal, else ``None``).
+    the goal, else ``None``). ``cost``: a dict filled with where the time went (CPU seconds
+    of the σ ranking, the estimators and the executions, summed over the stored records;
+    the RRT's wall seconds when first computed; counts), kept out of the results because it
+    differs from run to run.
     """
     from riskplan.app.reproduce.deformable import BlobStore, _seed_for
     from riskplan.collision import binomial_interval
@@ -360,6 +398,8 @@ def run_calibration(
     stage = f"{name} calibration: RRT candidates"
     report(stage, 0, 1)
 
+    t_rrt = time.perf_counter()
+
     def compute():
         ps, _ = rrt_plans(
             base,
@@ -377,10 +417,15 @@ def run_calibration(
         return ps
 
     plans = blobs.get_or_compute(f"{pre}.plans", compute)
+    # the RRT's wall seconds when first computed (its CPU runs in the pool's workers)
+    rrt_wall = store.get(f"{pre}.plans_wall_s")
+    if rrt_wall is None:
+        rrt_wall = time.perf_counter() - t_rrt
+        store.put(f"{pre}.plans_wall_s", rrt_wall)
     report(stage, 1, 1)
     sims = {c: case_scenario(name, c) for c in cases}
 
-    def estimates(items, methods, label, tag):
+    def estimates(items, methods, label, tag, earlier=None):
         keys = {it: f"{pre}.{tag}.{it[0]}.{it[1]:03d}" for it in items}
         got = {it: blobs.get(keys[it]) for it in items}
         todo = [it for it in items if got[it] is None]
@@ -394,6 +439,7 @@ def run_calibration(
                 scale.goal_samples,
                 _seed_for(seed, name, "calibration", "estimate", c, j),
                 methods,
+                None if earlier is None else earlier[c, j],
             )
             for c, j in todo
         ]
@@ -424,8 +470,9 @@ def run_calibration(
             else []
         )
 
-    # 3. every estimator on the picked candidates (the σ value is recomputed with the others
-    #    from the same seed: identical to step 2's)
+    # 3. every estimator on the picked candidates; the paper's controller and its σ value
+    #    are step 2's (the same seed: a recomputation gives the same), so only the other
+    #    estimators and controllers are computed
     ests = estimators_for(base)
     ctrls = tuple(k for k in CONTROLLERS if any(CONTROLLER_OF[e] == k for e in ests))
     full = estimates(
@@ -433,6 +480,7 @@ def run_calibration(
         ests,
         f"{name} calibration: estimators",
         "estimate",
+        earlier=sig,
     )
 
     # 4. executions, common draws per case for every plan and both controllers
@@ -441,13 +489,16 @@ def run_calibration(
     case_seeds = {
         c: spawn_seeds(_seed_for(seed, name, "calibration", "execute", c), n) for c in cases
     }
+    # batch-major: every (case, plan, controller) gets its first batch before any gets its
+    # second, so a run stopped part-way holds every plan at the same number of executions
+    # (a run of the same store with a smaller ``n_executions`` reads those batches back)
     items = [
         (c, j, k, b)
+        for b in range(n_batches)
         for c in cases
         for _r, j in picks[c]
         for k in ctrls
         if full[c, j]["error"] is None
-        for b in range(n_batches)
     ]
     bkey = {it: f"{pre}.exec.{it[0]}.{it[1]:03d}.{it[2]}.b{it[3]:05d}" for it in items}
     flags = {it: store.get(bkey[it]) for it in items}
@@ -474,7 +525,7 @@ def run_calibration(
                 continue
             measured = {}
             for k in ctrls:
-                runs = [row for b in range(n_batches) for row in flags[c, j, k, b]]
+                runs = [row for b in range(n_batches) for row in _runs(flags[c, j, k, b])]
                 hits = int(sum(row[0] for row in runs))
                 lo, hi = binomial_interval(hits, len(runs), confidence=0.95)
                 outcomes: dict = {}
@@ -513,6 +564,20 @@ def run_calibration(
         "failed": failed,
         "rows": rows,
     }
+    if cost is not None:
+        # CPU seconds by part, summed over the stored records (each task times itself), and
+        # the RRT's wall seconds: where the stage's time goes (timings, not results: they
+        # differ from run to run)
+        cost.update(
+            {
+                "rrt_wall_s": float(rrt_wall),
+                "sigma_ranking_cpu_s": sum(_cpu(v) for v in sig.values()),
+                "estimators_cpu_s": sum(_cpu(v) for v in full.values()),
+                "executions_cpu_s": sum(_cpu(v) for v in flags.values()),
+                "n_linearised": {"sigma_ranking": len(sig), "estimators": len(full)},
+                "n_executions": len(items) * bs,
+            }
+        )
 
     def metrics(e, sel):
         return calibration_metrics(

@@ -44,10 +44,24 @@ SCALE_NAMES = ("smoke", "paper")
 #: deformable paper only, its own sizes: ``calibration_scale``); ``sensitivity``: the
 #: needle's Fig. 6 under actuation-noise and interaction-force scales ×0.5, ×1, ×2 and the
 #: other reading of the cases (:func:`riskplan.app.reproduce.needle_study.sensitivity`, its own
-#: sizes: :func:`_sensitivity_scales`); ``needle3d``: the 3-D needle (beyond the paper);
+#: sizes: :func:`_sensitivity_scales`); ``needle3d``: the 3-D needle (beyond the paper).
+#: ``calibration-needle`` / ``calibration-manipulation``: the calibration of one scenario
+#: (each a stage of its own that fits an hour at the ``full`` calibration scale; the same
+#: store records as ``calibration``, which then assembles both from the store).
+#: ``control-variants``: LQG against the UKF and iLQR on the selected RRT plans
+#: (:mod:`riskplan.app.reproduce.control_variants`, beyond the paper).
 #: ``robot-risk``: the chest risks against the robot's collision rates (MDN paper; its sizes:
 #: :data:`riskplan.app.reproduce.robot_risk.ROBOT_RISK_FOR`, or ``robot_risk_scale``).
-STAGES = ("figures", "calibration", "sensitivity", "needle3d", "robot-risk")
+STAGES = (
+    "figures",
+    "calibration",
+    "calibration-needle",
+    "calibration-manipulation",
+    "sensitivity",
+    "needle3d",
+    "control-variants",
+    "robot-risk",
+)
 #: the calibration sizes a named scale uses unless ``calibration_scale`` names others
 _CALIBRATION_FOR = {"smoke": "smoke", "paper": "full"}
 SCENARIOS = ("needle", "manipulation")
@@ -211,6 +225,32 @@ def _sensitivity_stage(scale_name, out, seed, backend, workers, progress) -> dic
     return json.loads(json.dumps(sens))
 
 
+def _mdn_figures(
+    results, timings, out, scale, store, seed, workers, backend, ray_address, progress
+) -> None:
+    """The MDN paper's figures (Figs. 4, 5, timing; Fig. 7) into ``results["mdn"]`` and their
+    seconds into ``timings`` (:mod:`riskplan.app.reproduce.mdn`)."""
+    from riskplan.app.reproduce.mdn import run_fig7, run_mdn
+
+    t0 = time.perf_counter()
+    results["mdn"] = run_mdn(
+        out / "mdn",
+        scale,
+        store,
+        seed=seed,
+        workers=workers,
+        backend=backend,
+        ray_address=ray_address,
+        progress=progress,
+    )
+    timings["mdn_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    results["mdn"]["fig7"] = run_fig7(out / "mdn", scale, store, seed=seed, progress=progress)
+    timings["mdn_fig7_s"] = time.perf_counter() - t0
+    first = store.get("mdn.fig7")["seconds"]  # as first computed (a rerun reads them)
+    timings["mdn_fig7_first_run"] = first
+
+
 def _robot_risk_stage(
     results, timings, out, scale_name, seed, progress, backend, workers, rr_scale
 ):
@@ -285,32 +325,16 @@ def _reproduce(
                 )
                 timings[f"deformable_{name}_s"] = time.perf_counter() - t0
         if figures and paper in ("mdn", "all"):
-            from riskplan.app.reproduce.mdn import run_fig7, run_mdn
-
-            t0 = time.perf_counter()
-            results["mdn"] = run_mdn(
-                out / "mdn",
-                scales["mdn"],
-                store,
-                seed=seed,
-                workers=workers,
-                backend=backend,
-                ray_address=ray_address,
-                progress=progress,
-            )
-            timings["mdn_s"] = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            results["mdn"]["fig7"] = run_fig7(
-                out / "mdn", scales["mdn"], store, seed=seed, progress=progress
-            )
-            timings["mdn_fig7_s"] = time.perf_counter() - t0
-            first = store.get("mdn.fig7")["seconds"]  # as first computed (a rerun reads them)
-            timings["mdn_fig7_first_run"] = first
-        if paper in ("deformable", "all") and "calibration" in stages:
+            mdn_args = (out, scales["mdn"], store, seed, workers, backend, ray_address, progress)
+            _mdn_figures(results, timings, *mdn_args)
+        calibrated = [
+            name for name in SCENARIOS if "calibration" in stages or f"calibration-{name}" in stages
+        ]
+        if paper in ("deformable", "all") and calibrated:
             from riskplan.app.reproduce.calibration import run_calibration
 
             results.setdefault("deformable", {})
-            for name in SCENARIOS:
+            for name in calibrated:
                 t0 = time.perf_counter()
                 results["deformable"].setdefault(name, {})["calibration"] = run_calibration(
                     name,
@@ -322,6 +346,7 @@ def _reproduce(
                     ray_address=ray_address,
                     progress=progress,
                     pool=pool,
+                    cost=timings.setdefault(f"calibration_{name}_cost", {}),
                 )
                 timings[f"calibration_{name}_s"] = time.perf_counter() - t0
         if paper in ("deformable", "all") and "sensitivity" in stages:
@@ -335,6 +360,14 @@ def _reproduce(
             t0 = time.perf_counter()
             results["needle3d"] = run_needle3d(out, scale_name, seed=seed)
             timings["needle3d_s"] = time.perf_counter() - t0
+        if paper in ("deformable", "all") and "control-variants" in stages:
+            from riskplan.app.reproduce.control_variants import run_control_variants
+
+            t0 = time.perf_counter()
+            results["control_variants"] = run_control_variants(
+                store, scale_name, seed=seed, progress=progress
+            )
+            timings["control_variants_s"] = time.perf_counter() - t0
         if paper in ("mdn", "all") and "robot-risk" in stages:
             rr_args = (out, scale_name, seed, progress, backend, workers, robot_risk_scale)
             _robot_risk_stage(results, timings, *rr_args)

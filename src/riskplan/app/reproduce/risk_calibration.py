@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from riskplan._validation import check_count
 from riskplan.errors import InvalidInputError
 
 log = logging.getLogger(__name__)
@@ -77,9 +78,7 @@ class RiskStudyScale:
             "pool",
             "draws",
         ):
-            v = getattr(self, name)
-            if isinstance(v, bool) or int(v) != v or v < 1:
-                raise InvalidInputError(f"{name}: expected a positive integer, got {v!r}")
+            check_count(getattr(self, name), name, 1, integral=True)
         if not all(0.0 <= float(c) <= 1.0 for c in self.coherences) or not self.coherences:
             raise InvalidInputError(f"coherences: expected values in [0, 1], got {self.coherences}")
         object.__setattr__(self, "coherences", tuple(float(c) for c in self.coherences))

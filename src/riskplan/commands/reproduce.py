@@ -32,7 +32,8 @@ def register(app: typer.Typer) -> None:
             "success; deformable paper; calibration-needle / calibration-manipulation: one scenario) "
             "| sensitivity (the needle's Fig. 6 against noise and "
             "force scales) | needle3d (the 3-D needle: candidates, LQG-MP estimators, "
-            "executions, interactive figure). Repeat to run several.",
+            "executions, interactive figure) | control-variants (LQG against the UKF and "
+            "iLQR on the selected RRT plans). Repeat to run several.",
         ),
         calibration_scale: str = typer.Option(
             None,

@@ -46,6 +46,8 @@ SCALE_NAMES = ("smoke", "paper")
 #: ``calibration-needle`` / ``calibration-manipulation``: the calibration of one scenario
 #: (each a stage of its own that fits an hour at the ``full`` calibration scale; the same
 #: store records as ``calibration``, which then assembles both from the store).
+#: ``control-variants``: LQG against the UKF and iLQR on the selected RRT plans
+#: (:mod:`riskplan.app.reproduce.control_variants`, beyond the paper).
 STAGES = (
     "figures",
     "calibration",
@@ -53,6 +55,7 @@ STAGES = (
     "calibration-manipulation",
     "sensitivity",
     "needle3d",
+    "control-variants",
 )
 #: the calibration sizes a named scale uses unless ``calibration_scale`` names others
 _CALIBRATION_FOR = {"smoke": "smoke", "paper": "full"}
@@ -311,6 +314,14 @@ def _reproduce(
             t0 = time.perf_counter()
             results["needle3d"] = run_needle3d(out, scale_name, seed=seed)
             timings["needle3d_s"] = time.perf_counter() - t0
+        if paper in ("deformable", "all") and "control-variants" in stages:
+            from riskplan.app.reproduce.control_variants import run_control_variants
+
+            t0 = time.perf_counter()
+            results["control_variants"] = run_control_variants(
+                store, scale_name, seed=seed, progress=progress
+            )
+            timings["control_variants_s"] = time.perf_counter() - t0
         timings["process_pools_started"] = pool.pools_started
     write_json_atomic(out / "results.json", results, sort_keys=True)
     write_json_atomic(out / "timings.json", timings, sort_keys=True)

@@ -24,6 +24,20 @@ import numba as nb
 import numpy as np
 
 
+@nb.njit(cache=True, inline="always")
+def _gradient(u, tri, G, e):
+    """``F = I + Σ_a u_a ⊗ ∇N_a`` of element ``e`` as ``(F00, F01, F10, F11)`` (both passes of
+    :func:`neohookean_evaluate` use it)."""
+    n0, n1, n2 = tri[e, 0], tri[e, 1], tri[e, 2]
+    f00 = u[2 * n0] * G[e, 0, 0] + u[2 * n1] * G[e, 1, 0] + u[2 * n2] * G[e, 2, 0] + 1.0
+    f01 = u[2 * n0] * G[e, 0, 1] + u[2 * n1] * G[e, 1, 1] + u[2 * n2] * G[e, 2, 1]
+    f10 = u[2 * n0 + 1] * G[e, 0, 0] + u[2 * n1 + 1] * G[e, 1, 0] + u[2 * n2 + 1] * G[e, 2, 0]
+    f11 = (
+        u[2 * n0 + 1] * G[e, 0, 1] + u[2 * n1 + 1] * G[e, 1, 1] + u[2 * n2 + 1] * G[e, 2, 1]
+    ) + 1.0
+    return f00, f01, f10, f11
+
+
 @nb.njit(cache=True)
 def neohookean_evaluate(u, tri, G, areas, lam, mu, fint, Finv, lnJ, J):
     """Energy ``Σ_e A_e W(F_e)`` and internal forces of the neo-Hookean model.
@@ -46,13 +60,7 @@ def neohookean_evaluate(u, tri, G, areas, lam, mu, fint, Finv, lnJ, J):
     T = tri.shape[0]
     inverted = False
     for e in range(T):
-        n0, n1, n2 = tri[e, 0], tri[e, 1], tri[e, 2]
-        f00 = u[2 * n0] * G[e, 0, 0] + u[2 * n1] * G[e, 1, 0] + u[2 * n2] * G[e, 2, 0] + 1.0
-        f01 = u[2 * n0] * G[e, 0, 1] + u[2 * n1] * G[e, 1, 1] + u[2 * n2] * G[e, 2, 1]
-        f10 = u[2 * n0 + 1] * G[e, 0, 0] + u[2 * n1 + 1] * G[e, 1, 0] + u[2 * n2 + 1] * G[e, 2, 0]
-        f11 = (
-            u[2 * n0 + 1] * G[e, 0, 1] + u[2 * n1 + 1] * G[e, 1, 1] + u[2 * n2 + 1] * G[e, 2, 1]
-        ) + 1.0
+        f00, f01, f10, f11 = _gradient(u, tri, G, e)
         j = f00 * f11 - f01 * f10
         J[e] = j
         if j <= 0.0:
@@ -67,13 +75,7 @@ def neohookean_evaluate(u, tri, G, areas, lam, mu, fint, Finv, lnJ, J):
     fint[:] = 0.0
     energy = 0.0
     for e in range(T):
-        n0, n1, n2 = tri[e, 0], tri[e, 1], tri[e, 2]
-        f00 = u[2 * n0] * G[e, 0, 0] + u[2 * n1] * G[e, 1, 0] + u[2 * n2] * G[e, 2, 0] + 1.0
-        f01 = u[2 * n0] * G[e, 0, 1] + u[2 * n1] * G[e, 1, 1] + u[2 * n2] * G[e, 2, 1]
-        f10 = u[2 * n0 + 1] * G[e, 0, 0] + u[2 * n1 + 1] * G[e, 1, 0] + u[2 * n2 + 1] * G[e, 2, 0]
-        f11 = (
-            u[2 * n0 + 1] * G[e, 0, 1] + u[2 * n1 + 1] * G[e, 1, 1] + u[2 * n2 + 1] * G[e, 2, 1]
-        ) + 1.0
+        f00, f01, f10, f11 = _gradient(u, tri, G, e)
         l = math.log(J[e])
         lnJ[e] = l
         i1 = f00 * f00 + f01 * f01 + f10 * f10 + f11 * f11

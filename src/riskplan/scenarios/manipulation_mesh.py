@@ -9,7 +9,8 @@ import numpy as np
 
 from riskplan.errors import InvalidInputError
 
-__all__ = ["MeshData"]
+# the scenario's own per-mesh data: handed out by no package
+__all__: list[str] = []
 
 
 def _boundary_loop(edges: np.ndarray) -> np.ndarray:

@@ -109,6 +109,31 @@ BARRIER_SCALE = 1.0
 GOAL_WEIGHT = 10.0
 
 
+def _signed_distances(P, V):
+    """Batched :func:`signed_distance`: points ``P (B, n, 2)`` against polygons
+    ``V (B, m, 2)``; returns ``d (B, n)``, ``normal (B, n, 2)``, ``at_vertex (B, n)``.
+    Inside by the crossing number (even–odd) of a ray in ``+x``."""
+    a = V
+    e = np.roll(V, -1, axis=1) - V  # (B, m, 2)
+    ee = np.maximum(np.einsum("bmi,bmi->bm", e, e), 1e-300)
+    rel = P[:, :, None, :] - a[:, None, :, :]  # (B, n, m, 2)
+    s = np.clip(np.einsum("bnmi,bmi->bnm", rel, e) / ee[:, None, :], 0.0, 1.0)
+    r = rel - s[..., None] * e[:, None, :, :]  # from the nearest point of every edge
+    dist = np.sqrt(np.einsum("bnmi,bnmi->bnm", r, r))
+    j = np.argmin(dist, axis=2)[..., None]
+    dmin = np.take_along_axis(dist, j, axis=2)[..., 0]
+    rj = np.take_along_axis(r, j[..., None], axis=2)[:, :, 0, :]
+    sj = np.take_along_axis(s, j, axis=2)[..., 0]
+    ay, by = a[:, None, :, 1], a[:, None, :, 1] + e[:, None, :, 1]
+    py, px = P[:, :, None, 1], P[:, :, None, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xc = a[:, None, :, 0] + e[:, None, :, 0] * (py - ay) / (by - ay)
+    crosses = ((ay > py) != (by > py)) & (px < xc)
+    sign = np.where(crosses.sum(axis=2) % 2 == 1, -1.0, 1.0)
+    normal = sign[..., None] * rj / np.maximum(dmin, 1e-300)[..., None]
+    return sign * dmin, normal, (sj <= 0.0) | (sj >= 1.0)
+
+
 def signed_distance(points, polygon):
     """Signed distance of 2-D points to a simple polygon and its derivatives.
 
@@ -132,24 +157,10 @@ def signed_distance(points, polygon):
     at_vertex : numpy.ndarray
         ``(n,)`` bool, the nearest boundary point is a vertex (where ``∇²d ≠ 0``).
     """
-    from riskplan.geometry2d import points_in_polygon
-
-    P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    V = np.asarray(polygon, dtype=np.float64).reshape(-1, 2)
-    a, b = V, np.roll(V, -1, axis=0)
-    e = b - a
-    ee = np.maximum(np.einsum("ij,ij->i", e, e), 1e-300)
-    s = np.clip(np.einsum("nij,ij->ni", P[:, None, :] - a[None], e) / ee, 0.0, 1.0)
-    c = a[None] + s[..., None] * e[None]  # (n, m, 2) nearest points of every edge
-    r = P[:, None, :] - c
-    dist = np.sqrt(np.einsum("nmi,nmi->nm", r, r))
-    j = np.argmin(dist, axis=1)
-    idx = np.arange(len(P))
-    dmin = dist[idx, j]
-    sign = np.where(points_in_polygon(P, V), -1.0, 1.0)
-    normal = sign[:, None] * r[idx, j] / np.maximum(dmin, 1e-300)[:, None]
-    sj = s[idx, j]
-    return sign * dmin, normal, (sj <= 0.0) | (sj >= 1.0)
+    P = np.asarray(points, dtype=np.float64).reshape(1, -1, 2)
+    V = np.asarray(polygon, dtype=np.float64).reshape(1, -1, 2)
+    d, n, v = _signed_distances(P, V)
+    return d[0], n[0], v[0]
 
 
 def obstacle_barrier(points, polygons, weight: float = BARRIER_WEIGHT, scale: float = 1.0):
@@ -207,30 +218,68 @@ class _Barrier:
     weight: float
     scale: float
 
-    def terms(self, x):
+    def _stacked(self):
+        """``(steps (B,), V (B, m, 2))``: every (step, polygon) pair, the polygons padded to
+        the most vertices by repeating their last vertex (a zero-length edge changes neither
+        the distance nor the crossing count), for one batched distance call per
+        trajectory; ``None`` when the steps check different numbers of points."""
+        rows = [(t, o) for t in range(1, len(self.obstacles)) for o in self.obstacles[t]]
+        if not rows or len({len(self.base[t]) for t, _ in rows}) != 1:
+            return None
+        m = max(len(o) for _, o in rows)
+        V = np.stack([np.concatenate([o, np.repeat(o[-1:], m - len(o), axis=0)]) for _, o in rows])
+        return np.array([t for t, _ in rows]), V
+
+    def terms(self, x, derivatives: bool = True):
         """``(value, b_x (T + 1, p), b_xx (T + 1, p, p))`` along ``x (T + 1, p)`` (zero at
-        ``t = 0``: the start is not controlled)."""
+        ``t = 0``: the start is not controlled); the value alone with ``derivatives=False``
+        (the line search)."""
         Tp1, p = x.shape
         k = len(self.col)
-        bx, bxx, total = np.zeros((Tp1, p)), np.zeros((Tp1, p, p)), 0.0
         flat = self.col.reshape(-1)
+        dev = x[:, self.col] - self.ref[:, self.col]  # (T + 1, k, 2)
+        stacked = self.__dict__.get("_stack", False)
+        if stacked is False:
+            stacked = self._stacked()
+            object.__setattr__(self, "_stack", stacked)
+        if stacked is not None:
+            steps, V = stacked
+            W = np.stack([self.W[t] for t in steps])  # (B, n, k)
+            pts = np.stack([self.base[t] for t in steps]) + W @ dev[steps]
+            d, nrm, _ = _signed_distances(pts, V)
+            phi = self.weight * np.exp(-d / self.scale)  # (B, n)
+            total = float(phi.sum())
+            if not derivatives:
+                return total
+            g = (-phi / self.scale)[..., None] * nrm  # (B, n, 2)
+            h = (phi / self.scale**2)[..., None, None] * nrm[..., :, None] * nrm[..., None, :]
+            gc = np.einsum("bra,bri->bai", W, g).reshape(len(steps), 2 * k)
+            hc = np.einsum("bra,brc,brij->baicj", W, W, h).reshape(len(steps), 2 * k, 2 * k)
+            bx, bxx = np.zeros((Tp1, p)), np.zeros((Tp1, p, p))
+            gt, ht = np.zeros((Tp1, 2 * k)), np.zeros((Tp1, 2 * k, 2 * k))
+            np.add.at(gt, steps, gc)
+            np.add.at(ht, steps, hc)
+            bx[:, flat] = gt
+            bxx[:, flat[:, None], flat[None, :]] = ht
+            return total, bx, bxx
+        bx, bxx, total = np.zeros((Tp1, p)), np.zeros((Tp1, p, p)), 0.0
         for t in range(1, Tp1):
             if not self.obstacles[t]:
                 continue
             W = self.W[t]
-            pts = self.base[t] + W @ (x[t][self.col] - self.ref[t][self.col])
+            pts = self.base[t] + W @ dev[t]
             v, g, h = obstacle_barrier(pts, self.obstacles[t], self.weight, self.scale)
             total += v
             bx[t, flat] += (W.T @ g).reshape(-1)
             hc = np.einsum("ra,rb,rij->aibj", W, W, h).reshape(2 * k, 2 * k)
             bxx[t][np.ix_(flat, flat)] += hc
-        return total, bx, bxx
+        return total if not derivatives else (total, bx, bxx)
 
 
 def _cost(x, u, ref, Q, R, Qf, goal, Qg, barrier=None):
     dx, du = x[:-1] - ref.reduced[:-1], u - ref.controls
     e, g = x[-1] - ref.reduced[-1], x[-1] - goal
-    b = 0.0 if barrier is None else barrier.terms(x)[0]
+    b = 0.0 if barrier is None else barrier.terms(x, derivatives=False)
     return float(
         np.einsum("ti,ij,tj->", dx, Q, dx)
         + np.einsum("ti,ij,tj->", du, R, du)

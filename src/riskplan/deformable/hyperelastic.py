@@ -64,6 +64,7 @@ from riskplan.deformable.laws import LAWS, neohookean_energy_and_stress
 from riskplan.deformable.material import Material
 from riskplan.deformable.mesh import TissueMesh
 from riskplan.deformable.nhkernels import (
+    LAPACK_BANDWIDTH,
     CompiledBandSolver,
     band_cholesky,
     band_slots,
@@ -311,16 +312,23 @@ class HyperelasticModel:
 
         pattern = self._pattern
         if self.compiled:
+            lapack = pattern.bandwidth > LAPACK_BANDWIDTH
             slots = getattr(pattern, "_nh_slots", None)
             if slots is None:
-                slots = pattern._nh_slots = band_slots(pattern, self._tri64.shape[0])
+                slots = pattern._nh_slots = band_slots(pattern, self._tri64.shape[0], lapack)
             ab = np.empty(pattern._band_size)
             neohookean_band(
                 st.Finv, st.lnJ, self._Gc, self._areas_c, self._lam, self._mu, slots, ab
             )
-            cb = ab.reshape(-1, pattern.bandwidth + 1)
-            if band_cholesky(cb) == 0:
-                return CompiledBandSolver(cb, pattern.band_perm)
+            if lapack:  # wide bands: LAPACK's blocked pbtrf, as scipy's cholesky_banded calls it
+                (pbtrf,) = scipy.linalg.get_lapack_funcs(("pbtrf",), (ab,))
+                cb, info = pbtrf(ab.reshape(pattern.bandwidth + 1, -1), lower=0, overwrite_ab=1)
+                if info == 0:
+                    return BandedCholeskySolver(cb, pattern.band_perm)
+            else:
+                cb = ab.reshape(-1, pattern.bandwidth + 1)
+                if band_cholesky(cb) == 0:
+                    return CompiledBandSolver(cb, pattern.band_perm)
             Ke = self._element_tangents(st).reshape(-1)
             cb = None
         else:

@@ -225,16 +225,7 @@ class HyperelasticModel:
         return deformation_gradients(u_flat.reshape(-1, 2)[self._tri], self._G)
 
     def jacobians(self, u) -> np.ndarray:
-        """``det F`` per element.
-
-        Parameters
-        ----------
-        u : array_like, (N, 2)
-
-        Returns
-        -------
-        numpy.ndarray, (T,)
-        """
+        """``det F`` per element ``(T,)`` for displacements ``u (N, 2)``."""
         F = self._F(np.asarray(u, dtype=np.float64).reshape(-1))
         return F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
 
@@ -361,14 +352,6 @@ class HyperelasticModel:
     def energy(self, u) -> float:
         """Stored energy ``Σ_e A_e W(F_e)``; raises :class:`ElementInversionError` if some
         ``det F ≤ 0`` (for both laws: an inverted element is not a physical state).
-
-        Parameters
-        ----------
-        u : array_like, (N, 2)
-
-        Returns
-        -------
-        float
         """
         return self._evaluate_checked(u).energy
 

@@ -351,7 +351,8 @@ class HyperelasticModel:
 
     def energy(self, u) -> float:
         """Stored energy ``Σ_e A_e W(F_e)``; raises :class:`ElementInversionError` if some
-        ``det F ≤ 0`` (for both laws: an inverted element is not a physical state)."""
+        ``det F ≤ 0`` (for both laws: an inverted element is not a physical state).
+        """
         return self._evaluate_checked(u).energy
 
     def internal_forces(self, u) -> np.ndarray:

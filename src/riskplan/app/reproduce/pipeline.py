@@ -207,6 +207,26 @@ def _sensitivity_stage(scale_name, out, seed, backend, workers, progress) -> dic
     return json.loads(json.dumps(sens))
 
 
+def _beyond_stages(stages, results, timings, out, store, scale_name, seed, progress) -> None:
+    """The stages beyond the deformable paper, into ``results`` and ``timings``:
+    ``needle3d`` (:mod:`riskplan.app.reproduce.needle3d`) and ``control-variants``
+    (:mod:`riskplan.app.reproduce.control_variants`)."""
+    if "needle3d" in stages:
+        from riskplan.app.reproduce.needle3d import run_needle3d
+
+        t0 = time.perf_counter()
+        results["needle3d"] = run_needle3d(out, scale_name, seed=seed)
+        timings["needle3d_s"] = time.perf_counter() - t0
+    if "control-variants" in stages:
+        from riskplan.app.reproduce.control_variants import run_control_variants
+
+        t0 = time.perf_counter()
+        results["control_variants"] = run_control_variants(
+            store, scale_name, seed=seed, progress=progress
+        )
+        timings["control_variants_s"] = time.perf_counter() - t0
+
+
 def _reproduce(
     out, paper, scale, backend, ray_address, workers, seed, progress, stages, calibration_scale
 ) -> dict:
@@ -308,20 +328,8 @@ def _reproduce(
             sens = _sensitivity_stage(scale_name, out, seed, backend, workers, progress)
             results.setdefault("deformable", {}).setdefault("needle", {})["sensitivity"] = sens
             timings["sensitivity_needle_s"] = time.perf_counter() - t0
-        if paper in ("deformable", "all") and "needle3d" in stages:
-            from riskplan.app.reproduce.needle3d import run_needle3d
-
-            t0 = time.perf_counter()
-            results["needle3d"] = run_needle3d(out, scale_name, seed=seed)
-            timings["needle3d_s"] = time.perf_counter() - t0
-        if paper in ("deformable", "all") and "control-variants" in stages:
-            from riskplan.app.reproduce.control_variants import run_control_variants
-
-            t0 = time.perf_counter()
-            results["control_variants"] = run_control_variants(
-                store, scale_name, seed=seed, progress=progress
-            )
-            timings["control_variants_s"] = time.perf_counter() - t0
+        if paper in ("deformable", "all"):
+            _beyond_stages(stages, results, timings, out, store, scale_name, seed, progress)
         timings["process_pools_started"] = pool.pools_started
     write_json_atomic(out / "results.json", results, sort_keys=True)
     write_json_atomic(out / "timings.json", timings, sort_keys=True)

@@ -7,6 +7,33 @@ from __future__ import annotations
 import numpy as np
 
 
+def band_layout(pattern, r: np.ndarray, c: np.ndarray, nf: int):
+    """Reverse Cuthill-McKee order of a symmetric sparsity ``pattern`` ``(nf, nf)`` and where
+    its entries ``(r, c)`` go in LAPACK's upper band layout.
+
+    Returns
+    -------
+    perm : numpy.ndarray
+        ``(nf,)`` the order.
+    bandwidth : int
+        Of ``pattern[perm][:, perm]``.
+    upper : numpy.ndarray
+        ``(len(r),)`` bool: the entries on or above the diagonal after the permutation.
+    slot : numpy.ndarray
+        Their index in the flat ``(bandwidth + 1) * nf`` band (row ``bandwidth + i - j`` of
+        column ``j``).
+    """
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    perm = reverse_cuthill_mckee(pattern.tocsr(), symmetric_mode=True)
+    pos = np.empty(nf, dtype=np.int64)
+    pos[perm] = np.arange(nf)
+    pr, pc = pos[r], pos[c]
+    upper = pr <= pc
+    bw = int(np.max(pc[upper] - pr[upper])) if np.any(upper) else 0
+    return perm, bw, upper, (bw + pr[upper] - pc[upper]) * nf + pc[upper]
+
+
 class BandedCholeskySolver:
     """``r -> K⁻¹ r`` from the upper banded Cholesky factor ``cb`` of ``K[perm][:, perm]``
     (LAPACK ``pbtrs`` called directly: the wrapper's checks cost more than the solve at

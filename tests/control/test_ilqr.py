@@ -190,7 +190,7 @@ def test_barrier_derivatives_against_finite_differences(rng, tol):
 def test_barrier_over_trajectory_chain_rule(rng, tol):
     """The trajectory term with outline weights (points interpolated between collision
     points) against finite differences in the reduced state."""
-    from riskplan.control.ilqr import _Barrier
+    from riskplan.control.ilqr_cost import _Barrier
 
     T, p = 3, 6
     col = np.array([[0, 1], [2, 3]])

@@ -263,7 +263,7 @@ def execution_ukf(sim, plan, controller):
     (plus the bias columns of an augmented ``H_t``) for a simulator without a full-state
     ``measure``; the needle in its material frame: the sensed world position of the
     material pose ``x*_{t+1} + ξ`` through the tissue's response under the plan's parameters
-    (:func:`material_measurement`); else the linear ``H_t ξ``. The covariance starts at
+    (``material_measurement``); else the linear ``H_t ξ``. The covariance starts at
     ``controller.P0``.
 
     Parameters

@@ -225,6 +225,26 @@ def _sensitivity_stage(scale_name, out, seed, backend, workers, progress) -> dic
     return json.loads(json.dumps(sens))
 
 
+def _beyond_stages(stages, results, timings, out, store, scale_name, seed, progress) -> None:
+    """The stages beyond the deformable paper, into ``results`` and ``timings``:
+    ``needle3d`` (:mod:`riskplan.app.reproduce.needle3d`) and ``control-variants``
+    (:mod:`riskplan.app.reproduce.control_variants`)."""
+    if "needle3d" in stages:
+        from riskplan.app.reproduce.needle3d import run_needle3d
+
+        t0 = time.perf_counter()
+        results["needle3d"] = run_needle3d(out, scale_name, seed=seed)
+        timings["needle3d_s"] = time.perf_counter() - t0
+    if "control-variants" in stages:
+        from riskplan.app.reproduce.control_variants import run_control_variants
+
+        t0 = time.perf_counter()
+        results["control_variants"] = run_control_variants(
+            store, scale_name, seed=seed, progress=progress
+        )
+        timings["control_variants_s"] = time.perf_counter() - t0
+
+
 def _mdn_figures(
     results, timings, out, scale, store, seed, workers, backend, ray_address, progress
 ) -> None:
@@ -354,20 +374,8 @@ def _reproduce(
             sens = _sensitivity_stage(scale_name, out, seed, backend, workers, progress)
             results.setdefault("deformable", {}).setdefault("needle", {})["sensitivity"] = sens
             timings["sensitivity_needle_s"] = time.perf_counter() - t0
-        if paper in ("deformable", "all") and "needle3d" in stages:
-            from riskplan.app.reproduce.needle3d import run_needle3d
-
-            t0 = time.perf_counter()
-            results["needle3d"] = run_needle3d(out, scale_name, seed=seed)
-            timings["needle3d_s"] = time.perf_counter() - t0
-        if paper in ("deformable", "all") and "control-variants" in stages:
-            from riskplan.app.reproduce.control_variants import run_control_variants
-
-            t0 = time.perf_counter()
-            results["control_variants"] = run_control_variants(
-                store, scale_name, seed=seed, progress=progress
-            )
-            timings["control_variants_s"] = time.perf_counter() - t0
+        if paper in ("deformable", "all"):
+            _beyond_stages(stages, results, timings, out, store, scale_name, seed, progress)
         if paper in ("mdn", "all") and "robot-risk" in stages:
             rr_args = (out, scale_name, seed, progress, backend, workers, robot_risk_scale)
             _robot_risk_stage(results, timings, *rr_args)

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskplan._validation import as_array
+from riskplan._validation import as_array, check_choice, check_instance
 from riskplan.deformable.assembly import (
     TangentPattern,
     element_forces,
@@ -145,12 +145,9 @@ class HyperelasticModel:
         atol: float = 1e-12,
         max_iter: int = 25,
     ):
-        if not isinstance(mesh, TissueMesh):
-            raise InvalidInputError(f"mesh: expected a TissueMesh, got {type(mesh).__name__}")
-        if not isinstance(material, Material):
-            raise InvalidInputError(f"material: expected a Material, got {type(material).__name__}")
-        if law not in LAWS:
-            raise InvalidInputError(f"law: expected one of {tuple(LAWS)}, got {law!r}")
+        check_instance(mesh, TissueMesh, "mesh")
+        check_instance(material, Material, "material")
+        check_choice(law, LAWS, "law")
         self.mesh = mesh
         self.material = material
         self.law = law

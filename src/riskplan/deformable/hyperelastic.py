@@ -1,13 +1,23 @@
-"""Geometrically nonlinear (hyperelastic) P1 FEM: compressible neo-Hookean and
+r"""Geometrically nonlinear (hyperelastic) P1 FEM: compressible neo-Hookean and
 St Venant-Kirchhoff (paper V-B: "a geometrically nonlinear FEM simulator to accurately
 simulate the large deformations of the object").
 
 Total Lagrangian form. With deformation gradient ``F = I + ∇_X u`` (constant per P1
 element), ``J = det F``, ``I₁ = tr(FᵀF)``, the stored energies (per unit reference area)
 
-* neo-Hookean (2-D, plane strain):  W = μ/2 (I₁ − 2 − 2 ln J) + λ/2 (ln J)²
-  first Piola-Kirchhoff stress  P = μ (F − F⁻ᵀ) + λ ln J F⁻ᵀ
-* St Venant-Kirchhoff:  E = ½(FᵀF − I),  W = μ E:E + λ/2 (tr E)²,  P = F (2 μ E + λ tr E I)
+* neo-Hookean (2-D, plane strain), with its first Piola-Kirchhoff stress:
+
+  .. math::
+
+      W = \tfrac{\mu}{2} (I_1 - 2 - 2 \ln J) + \tfrac{\lambda}{2} (\ln J)^2, \qquad
+      P = \mu (F - F^{-\top}) + \lambda \ln J \, F^{-\top}
+
+* St Venant-Kirchhoff:
+
+  .. math::
+
+      E = \tfrac12 (F^\top F - I), \qquad W = \mu\, E : E + \tfrac{\lambda}{2} (\operatorname{tr} E)^2,
+      \qquad P = F (2 \mu E + \lambda \operatorname{tr} E \, I)
 
 both linearise at ``F = I`` to ``σ = λ tr(ε) I + 2 μ ε``. We use ``(λ, μ) = Material.lame``:
 for ``plane="strain"`` this is the exact plane-strain neo-Hookean model; for
@@ -15,8 +25,14 @@ for ``plane="strain"`` this is the exact plane-strain neo-Hookean model; for
 plane-stress linear elasticity at small strain (a thin-sheet model would need the
 out-of-plane stretch as an extra unknown; we do not model it).
 
-Equilibrium: ``r(u) = f_int(u) − f_ext = 0`` on free DOFs, with
-``f_int,a = Σ_e A_e P_e ∇N_a`` and tangent ``K_{ai,bk} = Σ_e A_e ∂P_iJ/∂F_kL ∇N_aJ ∇N_bL``.
+Equilibrium on the free DOFs (the FEM residual), with its tangent:
+
+.. math::
+
+    r(u) = f_{\mathrm{int}}(u) - f_{\mathrm{ext}} = 0, \qquad
+    f_{\mathrm{int},a} = \sum_e A_e P_e \nabla N_a, \qquad
+    K_{ai,bk} = \sum_e A_e \frac{\partial P_{iJ}}{\partial F_{kL}} \nabla N_{aJ} \nabla N_{bL}
+
 This module is the solver; the pieces are pure functions elsewhere: element kinematics
 (``F``, ``det F``, ``F⁻¹``) in :mod:`.elements`, the laws in :mod:`.laws`, element
 forces/tangents and the sparse layouts in :mod:`.assembly`, banded Cholesky in
@@ -48,6 +64,7 @@ from riskplan.deformable.laws import LAWS, neohookean_energy_and_stress
 from riskplan.deformable.material import Material
 from riskplan.deformable.mesh import TissueMesh
 from riskplan.deformable.nhkernels import (
+    LAPACK_BANDWIDTH,
     CompiledBandSolver,
     band_cholesky,
     band_slots,
@@ -288,16 +305,23 @@ class HyperelasticModel:
 
         pattern = self._pattern
         if self.compiled:
+            lapack = pattern.bandwidth > LAPACK_BANDWIDTH
             slots = getattr(pattern, "_nh_slots", None)
             if slots is None:
-                slots = pattern._nh_slots = band_slots(pattern, self._tri64.shape[0])
+                slots = pattern._nh_slots = band_slots(pattern, self._tri64.shape[0], lapack)
             ab = np.empty(pattern._band_size)
             neohookean_band(
                 st.Finv, st.lnJ, self._Gc, self._areas_c, self._lam, self._mu, slots, ab
             )
-            cb = ab.reshape(-1, pattern.bandwidth + 1)
-            if band_cholesky(cb) == 0:
-                return CompiledBandSolver(cb, pattern.band_perm)
+            if lapack:  # wide bands: LAPACK's blocked pbtrf, as scipy's cholesky_banded calls it
+                (pbtrf,) = scipy.linalg.get_lapack_funcs(("pbtrf",), (ab,))
+                cb, info = pbtrf(ab.reshape(pattern.bandwidth + 1, -1), lower=0, overwrite_ab=1)
+                if info == 0:
+                    return BandedCholeskySolver(cb, pattern.band_perm)
+            else:
+                cb = ab.reshape(-1, pattern.bandwidth + 1)
+                if band_cholesky(cb) == 0:
+                    return CompiledBandSolver(cb, pattern.band_perm)
             Ke = self._element_tangents(st).reshape(-1)
             cb = None
         else:

@@ -259,7 +259,7 @@ class HyperelasticModel:
         return st
 
     def _evaluate_compiled(self, u_flat: np.ndarray) -> _State:
-        """:meth:`_evaluate` of the neo-Hookean law by :func:`.nhkernels.neohookean_evaluate`
+        """``_evaluate`` of the neo-Hookean law by ``nhkernels.neohookean_evaluate``
         (``st.F`` is not kept: the neo-Hookean tangent needs ``F⁻¹`` and ``ln J`` only)."""
         st = _State()
         st.u = u_flat

@@ -2,10 +2,9 @@
 energy and internal forces, and one for the tangent written straight into the banded
 layout that :class:`~riskplan.deformable.hyperelastic.HyperelasticModel` factorises.
 
-They compute what the array path computes (:func:`riskplan.deformable.elements.
-deformation_gradients`, :func:`riskplan.deformable.laws.neohookean_energy_and_stress`,
-:func:`riskplan.deformable.assembly.element_forces`, :func:`riskplan.deformable.assembly.
-neohookean_element_tangents` and :meth:`riskplan.deformable.assembly.TangentPattern.banded`)
+They compute what the array path computes (``elements.deformation_gradients``,
+``laws.neohookean_energy_and_stress``, ``assembly.element_forces``,
+``assembly.neohookean_element_tangents`` and ``TangentPattern.banded``)
 without its temporaries: per element ``F = I + Σ_a u_a ⊗ ∇N_a``, ``J = det F``,
 
     W = μ/2 (I₁ − 2 − 2 ln J) + λ/2 (ln J)²,   P = μ (F − F⁻ᵀ) + λ ln J F⁻ᵀ,
@@ -134,16 +133,16 @@ def neohookean_band(Finv, lnJ, G, areas, lam, mu, slot, out):
 
 
 #: bandwidths above which LAPACK's blocked ``pbtrf`` factorises faster than
-#: :func:`band_cholesky` (measured on the manipulation's meshes, one core: 175 elements,
+#: ``band_cholesky`` (measured on the manipulation's meshes, one core: 175 elements,
 #: bandwidth 27: 0.08 ms against LAPACK's 0.12 ms with its wrapper; 500 elements, 51: 0.59 ms
 #: against 0.32 ms; 1000 elements, 67: 1.74 ms against 0.95 ms)
 LAPACK_BANDWIDTH = 40
 
 
 def band_slots(pattern, n_elements: int, lapack: bool = False) -> np.ndarray:
-    """``(T, 36)`` int64 map of :class:`~riskplan.deformable.assembly.TangentPattern`'s
+    """``(T, 36)`` int64 map of ``TangentPattern``'s
     upper band (in its RCM order): the flat index of each element-matrix entry ``(i, j)``,
-    ``i ≤ j``, in the row storage of :func:`band_cholesky` (``i (kd + 1) + (j − i)``) or,
+    ``i ≤ j``, in the row storage of ``band_cholesky`` (``i (kd + 1) + (j − i)``) or,
     with ``lapack``, in LAPACK's ``(kd + 1, n)`` upper storage (``(kd + i − j) n + j``);
     ``-1`` where the pattern drops the entry."""
     nf, kd = len(pattern.band_perm), pattern.bandwidth
@@ -193,7 +192,7 @@ def band_cholesky(R):
 
 @nb.njit(cache=True)
 def band_cholesky_solve(R, perm, r):
-    """``x = K⁻¹ r`` from :func:`band_cholesky`'s factor ``R`` of ``K[perm][:, perm]``:
+    """``x = K⁻¹ r`` from ``band_cholesky``'s factor ``R`` of ``K[perm][:, perm]``:
     ``Uᵀ y = r[perm]``, ``U z = y``, ``x[perm] = z``."""
     n, w = R.shape
     kd = w - 1
@@ -233,9 +232,9 @@ def scaled_norm(x):
 
 
 class CompiledBandSolver:
-    """``r -> K⁻¹ r`` from :func:`band_cholesky`'s factor ``R (n, kd + 1)`` of
+    """``r -> K⁻¹ r`` from ``band_cholesky``'s factor ``R (n, kd + 1)`` of
     ``K[perm][:, perm]`` (picklable; the compiled twin of
-    :class:`riskplan.deformable.banded.BandedCholeskySolver`)."""
+    ``banded.BandedCholeskySolver``)."""
 
     def __init__(self, R: np.ndarray, perm: np.ndarray):
         self.cb = R

@@ -76,7 +76,7 @@ from riskplan.scenarios.space import BoxSpace
 
 __all__ = ["ManipulationConfig", "ManipulationScenario", "ManipulationState"]
 
-#: results of :meth:`ManipulationScenario.step_near` under parameters without actuation noise,
+#: results of ``ManipulationScenario.step_near`` under parameters without actuation noise,
 #: keyed by the scenario's configuration and every argument (least recently used dropped).
 #: The step is a pure function of them, so a hit changes no result; it spares the
 #: linearisation's control-perturbation runs for ``B_t``, which are the same under every
@@ -461,7 +461,7 @@ class ManipulationScenario(FEMScenario):
         return out
 
     def _memo_key(self, state, control, params, near) -> tuple:
-        """Everything :meth:`step_near`'s result depends on (``_STEP_MEMO``)."""
+        """Everything ``step_near``'s result depends on (``_STEP_MEMO``)."""
 
         def arr(a):
             a = np.asarray(a, dtype=np.float64)

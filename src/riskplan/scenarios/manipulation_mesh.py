@@ -9,7 +9,8 @@ import numpy as np
 
 from riskplan.errors import InvalidInputError
 
-__all__ = ["MeshData"]
+# the scenario's own per-mesh data: handed out by no package
+__all__: list[str] = []
 
 
 def _boundary_loop(edges: np.ndarray) -> np.ndarray:
@@ -72,7 +73,7 @@ def _outline_weights(cfg, ref: np.ndarray):
     """``(a, b, lam)`` for the boundary nodes ``ref (B, 2)`` (reference positions, loop
     order): each node moves with ``(1 − lam) d_a + lam d_b``, ``d_i`` the displacement of
     sensed point ``i``, interpolated by arc length between the two sensed points around it
-    (:meth:`ManipulationConfig.boundary_points` spaces them by arc length); nodes before the
+    (``ManipulationConfig.boundary_points`` spaces them by arc length); nodes before the
     first or after the last sensed point, the fixed edge's included, follow the nearer end
     point (an over-estimate of their motion: the fixed edge does not move)."""
     n = len(cfg.outline)

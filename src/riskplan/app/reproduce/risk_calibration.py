@@ -431,7 +431,10 @@ def _figure(result: dict, path) -> None:
                 ns.append(int((b == j).sum()))
         m = result["metrics"][name]["all"]
         mae = "n/a" if m["mae_mid"] is None else f"{100 * m['mae_mid']:.1f}"
-        ax.plot(xs, ys, "o-", ms=4, label=f"{name} (MAE 5-95 %: {mae} pts, Brier {m['brier']:.3f})")
+        shown = f"{name}, held out" if name.startswith("logistic") else name
+        ax.plot(
+            xs, ys, "o-", ms=4, label=f"{shown} (MAE 5-95 %: {mae} pts, Brier {m['brier']:.3f})"
+        )
     ax.set_xlabel("predicted risk (bin mean)")
     ax.set_ylabel("collision rate on the robot (bin mean)")
     ax.set_xlim(0, 1)

@@ -158,7 +158,7 @@ def robot_risk_section(rep, out, r: dict) -> None:
         ],
         [
             [
-                r[k]["label"],
+                r[k]["label"] + (" (two-fold, held out)" if k.startswith("logistic") else ""),
                 pts(r[k]["mae_band"]),
                 f"{r[k]['n_band']} of {r[k]['n']}",
                 pts(r[k]["mae_all"]),

@@ -167,6 +167,22 @@ def sphere_directions(n: int) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
 
 
+def _check_drawn_bodies(env, D: np.ndarray, shape: tuple, extent, what: str) -> None:
+    """The checks of the sampled bodies' inputs: 3-D obstacles, ``drawn_means (S >= 2,
+    *shape)`` finite, and a finite ``extent > 0``; ``what`` names the caller."""
+    if env.dim != 3:
+        raise InvalidInputError(f"environment: {what} needs 3-D obstacles")
+    if D.ndim != 4 or D.shape[1:] != shape or D.shape[0] < 2:
+        T, K, d = shape
+        raise InvalidInputError(
+            f"drawn_means: expected shape (S >= 2, {T}, {K}, {d}), got {D.shape}"
+        )
+    if not np.all(np.isfinite(D)):
+        raise InvalidInputError("drawn_means: expected finite values")
+    if not (np.isfinite(extent) and extent > 0):
+        raise InvalidInputError(f"extent: expected a finite number > 0, got {extent!r}")
+
+
 def sampled_body_risk(
     nominal,
     drawn_means,
@@ -234,16 +250,7 @@ def sampled_body_risk(
     T, K, d = M.shape
     D = np.asarray(drawn_means, dtype=np.float64)
     if validate:
-        if env.dim != 3:
-            raise InvalidInputError("environment: sampled_body_risk needs 3-D obstacles")
-        if D.ndim != 4 or D.shape[1:] != (T, K, d) or D.shape[0] < 2:
-            raise InvalidInputError(
-                f"drawn_means: expected shape (S >= 2, {T}, {K}, {d}), got {D.shape}"
-            )
-        if not np.all(np.isfinite(D)):
-            raise InvalidInputError("drawn_means: expected finite values")
-        if not (np.isfinite(extent) and extent > 0):
-            raise InvalidInputError(f"extent: expected a finite number > 0, got {extent!r}")
+        _check_drawn_bodies(env, D, (T, K, d), extent, "sampled_body_risk")
         check_counts({"n_points": n_points, "n_directions": n_directions}, 1)
     S = D.shape[0]
     semi, axes, active = _body_pieces(W, U, D, extent, n_points)
@@ -321,16 +328,7 @@ def sampled_body_gaps(
     T, K = W.shape
     D = np.asarray(drawn_means, dtype=np.float64)
     if validate:
-        if env.dim != 3:
-            raise InvalidInputError("environment: sampled_body_gaps needs 3-D obstacles")
-        if D.ndim != 4 or D.shape[1:] != (T, K, 3) or D.shape[0] < 2:
-            raise InvalidInputError(
-                f"drawn_means: expected shape (S >= 2, {T}, {K}, 3), got {D.shape}"
-            )
-        if not np.all(np.isfinite(D)):
-            raise InvalidInputError("drawn_means: expected finite values")
-        if not (np.isfinite(extent) and extent > 0):
-            raise InvalidInputError(f"extent: expected a finite number > 0, got {extent!r}")
+        _check_drawn_bodies(env, D, (T, K, 3), extent, "sampled_body_gaps")
     S = D.shape[0]
     _, axes, active = _body_pieces(W, U, D, extent, n_points)
     gaps = np.full((S, T), np.inf)

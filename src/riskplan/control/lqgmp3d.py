@@ -51,6 +51,7 @@ from riskplan.control.lqgmp_common import (
     METHODS,
     LQGMPResult,
     _check_propagation,
+    _closed_loop_draws,
     _factor,
     _truncate,
     joint_covariances,
@@ -236,13 +237,9 @@ def _goal_map(sim, plan, pos, n2: int, goal_motion: bool) -> np.ndarray:
 
 def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, pos, n, gen, E) -> LQGMPResult:
     T = plan.n_steps
-    nz = F.shape[1] // 2
-    xi = np.zeros((n, 2 * nz))
-    xi[:, :nz] = gen.standard_normal((n, nz)) @ _factor(controller.P0).T
     alive = np.ones(n, dtype=bool)
     free = np.ones(T)
-    for t in range(T):
-        xi = xi @ F[t].T + dm[t] + gen.standard_normal((n, 2 * nz)) @ _factor(Qn[t]).T
+    for t, xi in _closed_loop_draws(gen, n, T, controller.P0, F, dm, Qn):
         before = int(alive.sum())
         if before == 0:
             free[t] = 0.0

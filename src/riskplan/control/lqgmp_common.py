@@ -133,6 +133,19 @@ def _factor(S: np.ndarray) -> np.ndarray:
     return v * np.sqrt(np.clip(w, 0.0, None))
 
 
+def _closed_loop_draws(gen, n: int, T: int, P0, F, dm, Qn):
+    """``n`` draws of the closed loop's joint deviation ``xi = (x - x̄, x̂ - x̄)`` step by step
+    (``method="sampling"`` of both LQG-MP estimators): ``xi_0 = (N(0, P0), 0)``,
+    ``xi_{t+1} = F_t xi_t + dm_t + N(0, Qn_t)``; yields ``(t, xi_{t+1})``, ``xi (n, 2 nz)``,
+    for ``t = 0 .. T-1``, drawing from ``gen`` in that order."""
+    nz = F.shape[1] // 2
+    xi = np.zeros((n, 2 * nz))
+    xi[:, :nz] = gen.standard_normal((n, nz)) @ _factor(P0).T
+    for t in range(T):
+        xi = xi @ F[t].T + dm[t] + gen.standard_normal((n, 2 * nz)) @ _factor(Qn[t]).T
+        yield t, xi
+
+
 def _regularised(Sp: np.ndarray) -> np.ndarray | None:
     """A point's ``(2, 2)`` covariance as both sigma paths use it: ``None`` for a
     deterministic point (largest variance ≤ 1e-24: no risk outside an obstacle), else the

@@ -34,6 +34,21 @@ def band_layout(pattern, r: np.ndarray, c: np.ndarray, nf: int):
     return perm, bw, upper, (bw + pr[upper] - pc[upper]) * nf + pc[upper]
 
 
+def cached_layout(cache, build, cells: np.ndarray, free_dofs: np.ndarray, n_dofs: int, limit: int):
+    """``build(cells, free_dofs, n_dofs)`` (a model's sparsity and band layout) looked up in
+    the least-recently-used ``cache`` (an ``OrderedDict`` of at most ``limit`` layouts), keyed
+    by the cells and free DOFs: models of one mesh with different materials share one."""
+    key = (cells.shape, cells.tobytes(), free_dofs.tobytes(), int(n_dofs))
+    layout = cache.get(key)
+    if layout is None:
+        layout = cache[key] = build(cells, free_dofs, n_dofs)
+        if len(cache) > limit:
+            cache.popitem(last=False)
+    else:
+        cache.move_to_end(key)
+    return layout
+
+
 class BandedCholeskySolver:
     """``r -> K⁻¹ r`` from the upper banded Cholesky factor ``cb`` of ``K[perm][:, perm]``
     (LAPACK ``pbtrs`` called directly: the wrapper's checks cost more than the solve at

@@ -49,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskplan._validation import as_array
+from riskplan._validation import as_array, check_choice, check_instance
 from riskplan.deformable.assembly import (
     TangentPattern,
     element_forces,
@@ -58,7 +58,7 @@ from riskplan.deformable.assembly import (
     neohookean_element_tangents,
     split_dofs,
 )
-from riskplan.deformable.banded import BandedCholeskySolver
+from riskplan.deformable.banded import BandedCholeskySolver, cached_layout
 from riskplan.deformable.elements import deformation_gradients, determinants_and_inverses
 from riskplan.deformable.laws import LAWS, neohookean_energy_and_stress
 from riskplan.deformable.material import Material
@@ -124,16 +124,21 @@ def _norm(x: np.ndarray) -> float:
     return m * float(np.linalg.norm(x / m))
 
 
+def line_search_failure(raise_inverted, J_bad, residual: float, iterations: int):
+    """What a Newton line search that found no acceptable step ends in: ``raise_inverted``
+    raises for the inverted elements of its last trial (``J_bad``, ``None`` if none
+    inverted), else the :class:`~riskplan.errors.ConvergenceError` returned here is raised."""
+    if J_bad is not None:
+        raise_inverted(J_bad, " in every line-search trial")
+    return ConvergenceError(
+        f"Newton line search failed (residual {residual:.3g})",
+        residual=residual,
+        iterations=iterations,
+    )
+
+
 def _tangent_pattern(triangles: np.ndarray, free_dofs: np.ndarray, n_dofs: int) -> TangentPattern:
-    key = (triangles.shape, triangles.tobytes(), free_dofs.tobytes(), int(n_dofs))
-    pattern = _PATTERNS.get(key)
-    if pattern is None:
-        pattern = _PATTERNS[key] = TangentPattern(triangles, free_dofs, n_dofs)
-        if len(_PATTERNS) > _PATTERN_CACHE:
-            _PATTERNS.popitem(last=False)
-    else:
-        _PATTERNS.move_to_end(key)
-    return pattern
+    return cached_layout(_PATTERNS, TangentPattern, triangles, free_dofs, n_dofs, _PATTERN_CACHE)
 
 
 class HyperelasticModel:
@@ -162,12 +167,9 @@ class HyperelasticModel:
         atol: float = 1e-12,
         max_iter: int = 25,
     ):
-        if not isinstance(mesh, TissueMesh):
-            raise InvalidInputError(f"mesh: expected a TissueMesh, got {type(mesh).__name__}")
-        if not isinstance(material, Material):
-            raise InvalidInputError(f"material: expected a Material, got {type(material).__name__}")
-        if law not in LAWS:
-            raise InvalidInputError(f"law: expected one of {tuple(LAWS)}, got {law!r}")
+        check_instance(mesh, TissueMesh, "mesh")
+        check_instance(material, Material, "material")
+        check_choice(law, LAWS, "law")
         self.mesh = mesh
         self.material = material
         self.law = law
@@ -439,11 +441,7 @@ class HyperelasticModel:
                     break
                 alpha *= 0.5
             else:
-                if J_bad is not None:
-                    self._raise_inverted(J_bad, " in every line-search trial")
-                raise ConvergenceError(
-                    f"Newton line search failed (residual {rn:.3g})", residual=rn, iterations=it
-                )
+                raise line_search_failure(self._raise_inverted, J_bad, rn, it)
             st, r, rn = st1, r1, rn1
         raise ConvergenceError(
             f"Newton did not converge in {self.max_iter} iterations (residual {rn:.3g}, tolerance {tol:.3g})",

@@ -13,7 +13,7 @@ from collections import OrderedDict
 
 import numpy as np
 
-from riskplan.deformable.banded import band_layout
+from riskplan.deformable.banded import band_layout, cached_layout
 
 # sparsity layouts by (tets, free DOFs): tissues of one mesh with different materials share one
 _PATTERNS: OrderedDict = OrderedDict()
@@ -176,15 +176,7 @@ class TetPattern:
 
 
 def _pattern(tets: np.ndarray, free_dofs: np.ndarray, n_dofs: int) -> TetPattern:
-    key = (tets.shape, tets.tobytes(), free_dofs.tobytes(), int(n_dofs))
-    p = _PATTERNS.get(key)
-    if p is None:
-        p = _PATTERNS[key] = TetPattern(tets, free_dofs, n_dofs)
-        if len(_PATTERNS) > _PATTERN_CACHE:
-            _PATTERNS.popitem(last=False)
-    else:
-        _PATTERNS.move_to_end(key)
-    return p
+    return cached_layout(_PATTERNS, TetPattern, tets, free_dofs, n_dofs, _PATTERN_CACHE)
 
 
 def _norm(x: np.ndarray) -> float:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+import numbers
 from collections.abc import Sequence
 
 import numpy as np
@@ -82,12 +84,176 @@ def _raise_first(a, bad, limit, name: str, op: str) -> None:
         )
 
 
-def check_count(value, name: str, minimum: int = 0) -> int:
-    """``value`` as an ``int`` if it is an integer (not a bool) ``>= minimum``, else
-    :class:`InvalidInputError` naming ``name``."""
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
-        raise InvalidInputError(f"{name}: expected an integer >= {minimum}, got {value!r}")
-    return int(value)
+def integer_words(minimum: int | None = 0, maximum: int | None = None) -> str:
+    """How riskplan says which integers it accepts: ``"a positive integer"``,
+    ``"a non-negative integer"``, ``"an integer >= 2"``, ``"an integer in [0, 64]"`` or
+    (``minimum=None``) ``"an integer"``."""
+    if minimum is None:
+        return "an integer"
+    if maximum is not None:
+        return f"an integer in [{minimum}, {maximum}]"
+    if minimum == 0:
+        return "a non-negative integer"
+    if minimum == 1:
+        return "a positive integer"
+    return f"an integer >= {minimum}"
+
+
+def check_count(
+    value,
+    name: str,
+    minimum: int | None = 0,
+    *,
+    maximum: int | None = None,
+    integral: bool = False,
+    none: bool = False,
+    noun: str = "",
+    alternatives: str = "",
+    error=InvalidInputError,
+) -> int | None:
+    """``value`` as an ``int`` if it is an integer (not a bool) in ``[minimum, maximum]``.
+
+    The one check of integer arguments (counts, sizes, seeds, indices read from files).
+
+    Parameters
+    ----------
+    value : object
+        The argument.
+    name : str
+        What the message calls it (``"n_samples"``, ``"--seed"``, ``"'disks.count'"``).
+    minimum, maximum : int or None
+        The accepted range; ``None`` is unbounded on that side (``maximum`` is used only with
+        a ``minimum``).
+    integral : bool
+        Also accept a finite real number with an integral value (``640.0``), returned as
+        ``int``.
+    none : bool
+        Accept ``None`` (returned as it is); the message says "or None".
+    noun : str
+        What the integer counts, for the message (``"pixel count"``).
+    alternatives : str
+        Other accepted kinds the caller handles before this check, for the message
+        (``"a torch.Generator"``).
+    error : callable
+        Called with the message to build the exception raised (default
+        :class:`InvalidInputError`; e.g. a :class:`~riskplan.errors.DataFormatError` that
+        names a file).
+
+    Returns
+    -------
+    int or None
+        ``value`` as a Python ``int`` (``None`` when ``none`` and ``value is None``).
+
+    Raises
+    ------
+    InvalidInputError
+        (or what ``error`` builds) ``"{name}: expected a positive integer, got 2.5"``.
+    """
+    if none and value is None:
+        return None
+    ok = False
+    if isinstance(value, bool):
+        ok = False
+    elif isinstance(value, numbers.Integral):
+        ok = True
+    elif integral and isinstance(value, numbers.Real):
+        ok = math.isfinite(float(value)) and float(value).is_integer()
+    if ok:
+        v = int(value)
+        ok = minimum is None or (v >= minimum and (maximum is None or v <= maximum))
+    if not ok:
+        words = integer_words(minimum, maximum) + (f" {noun}" if noun else "")
+        others = [w for w in (alternatives, "None" if none else "") if w]
+        if others:
+            words = ", ".join([words, *others[:-1]]) + f" or {others[-1]}"
+        raise error(f"{name}: expected {words}, got {value!r}")
+    return v
+
+
+def check_counts(values: dict, minimum: int = 0, **kwargs) -> dict[str, int]:
+    """:func:`check_count` on each ``name: value`` of ``values``; returns the ``int`` values."""
+    return {name: check_count(v, name, minimum, **kwargs) for name, v in values.items()}
+
+
+def check_count_list(values, name: str, minimum: int = 1) -> tuple[int, ...]:
+    """A non-empty sequence of integers ``>= minimum`` (integral floats accepted), as a tuple of
+    ``int``; else :class:`InvalidInputError` naming ``name`` and showing the whole sequence."""
+    plural = integer_words(minimum).split(" ", 1)[1].replace("integer", "integers", 1)
+    try:
+        items = () if isinstance(values, str | bytes) else tuple(values)
+        if not items:
+            raise InvalidInputError(name)
+        return tuple(check_count(v, name, minimum, integral=True) for v in items)
+    except (TypeError, InvalidInputError):
+        raise InvalidInputError(
+            f"{name}: expected a non-empty list of {plural}, got {values!r}"
+        ) from None
+
+
+def seed_sequence(seed) -> np.random.SeedSequence:
+    """``np.random.SeedSequence(seed)``, or :class:`InvalidInputError` naming ``seed`` where
+    NumPy cannot seed from it (a negative integer, a float, a string)."""
+    try:
+        return np.random.SeedSequence(seed)
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(
+            f"seed: expected None or {integer_words(0)}, got {seed!r} ({exc})"
+        ) from exc
+
+
+def as_cells(value, name: str, nodes: int, corners: int, cell: str) -> np.ndarray:
+    """A mesh's cells: a ``(T > 0, corners)`` array of node indices in ``[0, nodes)``, every
+    node used by some cell; integral floats are accepted.
+
+    Parameters
+    ----------
+    value : array_like
+        The cells.
+    name : str
+        What the messages call them (``"triangles"``).
+    nodes : int
+        The number of nodes.
+    corners : int
+        Nodes per cell (3 for a triangle, 4 for a tetrahedron).
+    cell : str
+        The cell's name, for the message about unused nodes (``"triangle"``).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(T, corners)`` int64.
+    """
+    c = np.asarray(value)
+    if c.ndim != 2 or c.shape[1] != corners or c.shape[0] == 0:
+        raise InvalidInputError(f"{name}: expected shape (T>0, {corners}), got {c.shape}")
+    if not np.issubdtype(c.dtype, np.integer):
+        if not np.all(np.isfinite(c)) or np.any(c != np.round(c)):
+            raise InvalidInputError(f"{name}: expected integer node indices")
+    c = c.astype(np.int64)
+    if c.min() < 0 or c.max() >= nodes:
+        raise InvalidInputError(f"{name}: node indices must lie in [0, {nodes - 1}]")
+    used = np.zeros(nodes, dtype=bool)
+    used[c.ravel()] = True
+    if not used.all():
+        raise InvalidInputError(
+            f"nodes: nodes {np.flatnonzero(~used)[:10].tolist()} belong to no {cell}"
+        )
+    return c
+
+
+def check_instance(value, cls: type, name: str):
+    """``value`` if it is a ``cls``, else :class:`InvalidInputError`
+    ``"{name}: expected a {cls.__name__}, got {type(value).__name__}"``."""
+    if not isinstance(value, cls):
+        raise InvalidInputError(f"{name}: expected a {cls.__name__}, got {type(value).__name__}")
+    return value
+
+
+def check_choice(value, choices, name: str):
+    """``value`` if it is one of ``choices``, else :class:`InvalidInputError` listing them."""
+    if value not in choices:
+        raise InvalidInputError(f"{name}: expected one of {tuple(choices)}, got {value!r}")
+    return value
 
 
 def check_workers(workers) -> int | None:
@@ -98,7 +264,7 @@ def check_workers(workers) -> int | None:
         return None
     if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
         raise InvalidInputError(
-            f"workers: expected a positive integer (or None for all cores), got {workers!r}"
+            f"workers: expected {integer_words(1)} (or None for all cores), got {workers!r}"
         )
     return int(workers)
 
@@ -115,7 +281,7 @@ def as_generator(seed) -> np.random.Generator:
         return np.random.default_rng(seed)
     except (TypeError, ValueError) as exc:
         raise InvalidInputError(
-            f"seed: expected None, a non-negative integer, a SeedSequence or a Generator, "
+            f"seed: expected None, {integer_words(0)}, a SeedSequence or a Generator, "
             f"got {seed!r} ({exc})"
         ) from exc
 

@@ -53,7 +53,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskplan._validation import as_generator
+from riskplan._validation import as_generator, check_count
 from riskplan.errors import InvalidInputError
 
 #: how far the weights of a mixture may sum from 1
@@ -327,8 +327,7 @@ class NumpyMixture(MixtureBatch):
 
         ``seed``: ``None``, an int, a ``SeedSequence`` or a ``numpy.random.Generator``.
         """
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
-            raise InvalidInputError(f"n: expected an integer >= 0, got {n!r}")
+        check_count(n, "n", 0)
         K, d = self.n_components, self.dim
         from riskplan.budget import check_budget
 

@@ -93,6 +93,49 @@ def read_json_object(path) -> dict:
     return meta
 
 
+def read_file_with(path, read, what: str, *, error=None, hint: str = ""):
+    """``read(path)`` for an existing file, with what can go wrong named in riskplan's terms.
+
+    Third-party readers (trimesh, torch) raise many exception types for damaged files; here
+    each becomes one error that names the file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    read : callable
+        ``read(path: Path)``, the reader.
+    what : str
+        What the file is, for the messages (``"checkpoint"``, ``"mesh file"``).
+    error : type, optional
+        The exception raised (default :class:`~riskplan.errors.InvalidInputError`).
+    hint : str
+        Appended to the message about a missing file (``" (nothing to resume)"``).
+
+    Returns
+    -------
+    object
+        What ``read`` returns.
+
+    Raises
+    ------
+    InvalidInputError
+        (or ``error``) ``"{what} 'path': no such file"``, ``"... is a folder"`` or
+        ``"... cannot read it (TypeName: message)"``.
+    """
+    from riskplan.errors import InvalidInputError
+
+    error = InvalidInputError if error is None else error
+    path = Path(path)
+    if not path.is_file():
+        why = "is a folder" if path.is_dir() else f"no such file{hint}"
+        raise error(f"{what} {str(path)!r}: {why}")
+    try:
+        return read(path)
+    except Exception as exc:  # a third-party reader's many types for unreadable files
+        raise error(f"{what} {str(path)!r}: cannot read it ({type(exc).__name__}: {exc})") from exc
+
+
 def canonical_json(obj) -> str:
     """Deterministic JSON text of ``obj`` (sorted keys, no spaces, non-finite numbers refused):
     the text content hashes are computed on."""

@@ -1,7 +1,8 @@
 """Compiled kernels: warm numba's on-disk cache once, so that no command compiles.
 
 riskplan's hot loops (the Cosserat solver in :mod:`riskplan.robots`, the collision kernels in
-``riskplan.collision._kernels``, the planar predicates in :mod:`riskplan.geometry2d`) are
+``riskplan.collision._kernels``, the planar predicates in :mod:`riskplan.geometry2d`, the
+neo-Hookean FEM in :mod:`riskplan.deformable.nhkernels`) are
 numba functions compiled with ``cache=True``: the first call in a fresh environment compiles
 them (tens of seconds of CPU for the robot solver), later processes load machine code from the
 cache beside each module (``__pycache__``, or ``NUMBA_CACHE_DIR`` when set).
@@ -36,6 +37,7 @@ KERNEL_MODULES = (
     "riskplan.robots.batch_kernel",
     "riskplan.collision._kernels",
     "riskplan.geometry2d",
+    "riskplan.deformable.nhkernels",
 )
 
 
@@ -123,11 +125,32 @@ def _geometry2d() -> None:
     grid.locate_points(pts)
 
 
+def _deformable() -> None:
+    # one P1 triangle with two nodes held (the tissue wing's kernels, called by name: the
+    # core does not import the wing)
+    k = importlib.import_module("riskplan.deformable.nhkernels")
+    tri = np.array([[0, 1, 2]], dtype=np.int64)
+    G = np.array([[[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]]])
+    areas = np.array([0.5])
+    u = np.zeros(6)
+    Finv, lnJ, J = np.empty((1, 2, 2)), np.empty(1), np.empty(1)
+    k.neohookean_evaluate(u, tri, G, areas, 1.0, 1.0, np.empty(6), Finv, lnJ, J)
+    slot = np.full((1, 36), -1, dtype=np.int64)
+    slot[0, 0] = 0
+    R = np.empty(1)
+    k.neohookean_band(Finv, lnJ, G, areas, 1.0, 1.0, slot, R)
+    R = R.reshape(1, 1)
+    k.band_cholesky(R)
+    k.band_cholesky_solve(R, np.zeros(1, dtype=np.int64), np.ones(1))
+    k.scaled_norm(np.ones(1))
+
+
 #: (area, function) in the order :func:`warm` runs them
 AREAS: tuple[tuple[str, Callable[[], None]], ...] = (
     ("robot", _robot),
     ("collision", _collision),
     ("geometry2d", _geometry2d),
+    ("deformable", _deformable),
 )
 
 
@@ -138,7 +161,7 @@ def warm(progress: Callable[[str], None] | None = None) -> dict[str, float]:
     ----------
     progress:
         Called with each area's name before it runs (``"robot"``, ``"collision"``,
-        ``"geometry2d"``).
+        ``"geometry2d"``, ``"deformable"``).
 
     Returns
     -------

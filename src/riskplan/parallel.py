@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from riskplan._validation import check_workers
+from riskplan._validation import check_workers, seed_sequence
 from riskplan.errors import BackendUnavailableError, InvalidInputError, require
 
 log = logging.getLogger(__name__)
@@ -53,12 +53,7 @@ def spawn_seeds(seed: int | None, n: int) -> list[int]:
     A seed NumPy cannot use (a negative integer, a float, a string) raises
     :class:`~riskplan.errors.InvalidInputError` naming ``seed``.
     """
-    try:
-        ss = np.random.SeedSequence(seed)
-    except (TypeError, ValueError) as exc:
-        raise InvalidInputError(
-            f"seed: expected None or a non-negative integer, got {seed!r} ({exc})"
-        ) from exc
+    ss = seed_sequence(seed)
     return [int(c.generate_state(2, dtype=np.uint64)[0] >> np.uint64(1)) for c in ss.spawn(n)]
 
 

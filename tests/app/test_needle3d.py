@@ -77,3 +77,21 @@ def test_plan_needle3d_rejects_a_bad_case(tmp_path):
     )
     assert res.exit_code != 0
     assert "--case" in (res.output + str(res.exception))
+
+
+def test_material_frame_outputs_execute_in_their_frame(straight, tmp_path):
+    """A material-frame controller is executed on the material-frame scenario, and the
+    figure's executed paths are world tip positions (beside the world plan)."""
+    from riskplan.app.reproduce.needle3d import Needle3DResult, needle3d_figure, write_outputs
+
+    sim, plan = straight
+    mat = sim.with_frame("material")
+    ctrls, rows = evaluate_candidates(mat, [plan.reframed(mat)], seed=0, n_goal_samples=200)
+    assert rows[0].estimates["truncation"] > 0.0
+    res = Needle3DResult(
+        [plan], rows, 0, ctrls[0], {"rrt_s": 0.0}, {"case": "actuation", "frame": "material"}
+    )
+    files = write_outputs(res, tmp_path, n_executed=1)
+    assert files["figure"].stat().st_size > 0
+    fig = needle3d_figure(sim, [plan], executed=[sim.path(plan.states)])
+    assert "executed" in [t.name for t in fig.data]

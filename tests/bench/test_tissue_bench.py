@@ -61,3 +61,17 @@ def test_tet_bench_times_one_problem_on_both_sides(tol):
         np.testing.assert_allclose(
             u, u_ref, rtol=0, atol=tol["float64_exact"]["atol"] * np.abs(u).max()
         )
+
+
+def test_step_cost_keys():
+    from riskplan.bench.tissue import step_costs
+
+    out = step_costs(quick=True)
+    for n in (175, 1000):
+        for key in (
+            f"needle_step_us_{n}",
+            f"needle_step_and_collision_us_{n}",
+            f"manipulation_step_ms_{n}",
+            f"manipulation_reduced_us_{n}",
+        ):
+            assert out[key] > 0

@@ -167,7 +167,7 @@ def test_query_dimension_errors(boxes_env):
 
 
 def test_load_errors(tmp_path):
-    with pytest.raises(InvalidInputError, match="not found"):
+    with pytest.raises(InvalidInputError, match="no such file"):
         Environment.load(tmp_path / "missing.stl")
     # an open surface (a single triangle) is rejected on load
     tri = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])

@@ -134,7 +134,7 @@ def test_goal_at_any_stops_at_the_first_goal_state(rng):
     assert not final.success and len(final.x) == plan.n_steps + 1
     anyg = execute(sim, plan, None, plan.params, goal_at="any")
     assert anyg.success and len(anyg.x) == 4
-    mc = monte_carlo_success(sim, plan, None, None, n=3, seed=0, goal_at="any")
+    mc = monte_carlo_success(sim, plan, None, "nominal", n=3, seed=0, goal_at="any")
     assert mc.successes == 3
     with pytest.raises(InvalidInputError, match="goal_at"):
         execute(sim, plan, None, plan.params, goal_at="first")
@@ -173,3 +173,17 @@ def test_memoryless_system_gets_no_feedback(rng, tol):
     plan_m = NominalPlan.from_rollout(sim_m, sim_m.initial_state(), plan.controls)
     lin_m = linearize(sim_m, plan_m, sim_m.distribution, n_samples=32, seed=0)
     assert np.abs(lqg_controller(lin_m).L).max() > 0.1
+
+
+def test_monte_carlo_none_means_the_simulators_distribution(rng):
+    # one rule with linearize and the selection: None reads sim.distribution; "nominal"
+    # runs every execution on the nominal parameters
+    sim, plan = _setup(rng, goal_half=0.05)
+    none = monte_carlo_success(sim, plan, None, None, n=40, seed=5)
+    dist = monte_carlo_success(sim, plan, None, sim.distribution, n=40, seed=5)
+    nominal = monte_carlo_success(sim, plan, None, "nominal", n=40, seed=5)
+    np.testing.assert_array_equal(none.success, dist.success)
+    assert nominal.successes == 40  # open loop on the nominal parameters is the plan
+    assert none.successes < 40  # the actuation noise moves some runs out of the goal
+    with pytest.raises(InvalidInputError, match="nominal"):
+        monte_carlo_success(sim, plan, None, "nominl", n=3)

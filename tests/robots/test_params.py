@@ -9,14 +9,8 @@ import numpy as np
 import pytest
 
 from riskplan.errors import RobotDescriptionError
-from riskplan.robots.params import (
-    load_robot_params,
-    params_to_toml,
-    parse_robot_toml,
-    quaternion_to_matrix,
-    read_robot_text,
-    rpy_to_matrix,
-)
+from riskplan.robots.description import load_robot_params, parse_robot_toml, read_robot_text
+from riskplan.robots.params import params_to_toml, quaternion_to_matrix, rpy_to_matrix
 from tests.conftest import TOL
 
 PAPER = resources.files("riskplan").joinpath("data", "paper_robot.toml").read_text()

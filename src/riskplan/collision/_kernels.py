@@ -26,41 +26,44 @@ from riskplan.geometry2d import closest_point_on_segment, closest_points_on_segm
 
 
 @nb.njit(cache=True, inline="always")
+def _two_dots(ux, uy, uz, vx, vy, vz, wx, wy, wz):
+    """``(u . w, v . w)``: the two edge projections of one vertex region test of
+    :func:`_closest_tri`."""
+    return ux * wx + uy * wy + uz * wz, vx * wx + vy * wy + vz * wz
+
+
+@nb.njit(cache=True, inline="always")
+def _on_edge(ox, oy, oz, ux, uy, uz, num, den):
+    """The point ``o + (num / den) u`` of an edge region of :func:`_closest_tri` (``o`` when
+    ``den <= 0``: a degenerate edge, any point of which is closest)."""
+    t = num / den if den > 0.0 else 0.0
+    return ox + t * ux, oy + t * uy, oz + t * uz
+
+
+@nb.njit(cache=True, inline="always")
 def _closest_tri(ax, ay, az, bx, by, bz, cx, cy, cz, px, py, pz):
     """Closest point of triangle ``abc`` to ``p`` (Ericson §5.1.5); returns (x, y, z)."""
     abx, aby, abz = bx - ax, by - ay, bz - az
     acx, acy, acz = cx - ax, cy - ay, cz - az
-    apx, apy, apz = px - ax, py - ay, pz - az
-    d1 = abx * apx + aby * apy + abz * apz
-    d2 = acx * apx + acy * apy + acz * apz
+    d1, d2 = _two_dots(abx, aby, abz, acx, acy, acz, px - ax, py - ay, pz - az)
     if d1 <= 0.0 and d2 <= 0.0:
         return ax, ay, az
-    bpx, bpy, bpz = px - bx, py - by, pz - bz
-    d3 = abx * bpx + aby * bpy + abz * bpz
-    d4 = acx * bpx + acy * bpy + acz * bpz
+    d3, d4 = _two_dots(abx, aby, abz, acx, acy, acz, px - bx, py - by, pz - bz)
     if d3 >= 0.0 and d4 <= d3:
         return bx, by, bz
     vc = d1 * d4 - d3 * d2
     if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
         # d1 - d3 = |ab|^2 > 0 unless a == b (a degenerate edge: any point of it is closest)
-        den = d1 - d3
-        v = d1 / den if den > 0.0 else 0.0
-        return ax + v * abx, ay + v * aby, az + v * abz
-    cpx, cpy, cpz = px - cx, py - cy, pz - cz
-    d5 = abx * cpx + aby * cpy + abz * cpz
-    d6 = acx * cpx + acy * cpy + acz * cpz
+        return _on_edge(ax, ay, az, abx, aby, abz, d1, d1 - d3)
+    d5, d6 = _two_dots(abx, aby, abz, acx, acy, acz, px - cx, py - cy, pz - cz)
     if d6 >= 0.0 and d5 <= d6:
         return cx, cy, cz
     vb = d5 * d2 - d1 * d6
     if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        den = d2 - d6
-        w = d2 / den if den > 0.0 else 0.0
-        return ax + w * acx, ay + w * acy, az + w * acz
+        return _on_edge(ax, ay, az, acx, acy, acz, d2, d2 - d6)
     va = d3 * d6 - d5 * d4
     if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
-        den = (d4 - d3) + (d5 - d6)
-        w = (d4 - d3) / den if den > 0.0 else 0.0
-        return bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz)
+        return _on_edge(bx, by, bz, cx - bx, cy - by, cz - bz, d4 - d3, (d4 - d3) + (d5 - d6))
     tot = va + vb + vc
     if not tot > 0.0:
         # numerically degenerate (collinear) triangle: the closest point lies on an edge

@@ -130,6 +130,18 @@ def stop_interrupted(bar, how_to_resume: str):
     return typer.Exit(130)
 
 
+def echo_validation(validation) -> None:
+    """Print a plan's robot validation (``None``: none was run) as Markdown, and each endpoint
+    warning on stderr."""
+    if validation is None:
+        return
+    from riskplan.planning.validate import endpoint_warnings, validation_markdown
+
+    typer.echo(validation_markdown(validation))
+    for line in endpoint_warnings(validation):
+        typer.echo(f"warning: {line}", err=True)
+
+
 def add_group(app: typer.Typer, name: str, help: str) -> typer.Typer:
     """A command group ``riskplan NAME ...`` added to ``app`` (``--help`` when called bare)."""
     group = typer.Typer(help=help, no_args_is_help=True)

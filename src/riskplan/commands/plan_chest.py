@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from riskplan.commands._shared import base_pose_option
+from riskplan.commands._shared import base_pose_option, echo_validation
 
 
 def _check_finite(**values):
@@ -287,12 +287,7 @@ def register(plan_app: typer.Typer) -> None:
             f"nominal {plan.nominal_bound:.4f} -> optimised {res.bound:.4f} "
             f"({100 * res.reduction:.1f} % lower, {len(res.trace) - 1} iterations, {res.evaluations} bound evaluations)"
         )
-        if validation is not None:
-            from riskplan.planning.validate import endpoint_warnings, validation_markdown
-
-            typer.echo(validation_markdown(validation))
-            for line in endpoint_warnings(validation):
-                typer.echo(f"warning: {line}", err=True)
+        echo_validation(validation)
         typer.echo(f"wrote {out}")
 
 
@@ -307,7 +302,11 @@ def register_study(plan_app: typer.Typer) -> None:
         scale: str = typer.Option("reduced", help="smoke | reduced | full (docs/validation.md)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the selection and executions."),
     ) -> None:
-        """Calibration of eq. 9/10, the cloud risk and the sampled-body risk against collision rates on the robot."""
+        """Calibration of eq. 9/10, the cloud risk and the sampled-body risk against collision rates on the robot.
+
+        The same study as ``riskplan reproduce --paper mdn --stage robot-risk`` (which also
+        writes its summary to results.json and the report), into OUT of its own.
+        """
         from dataclasses import asdict
 
         from riskplan.app.reproduce.risk_calibration import RISK_STUDY_SCALES, run_risk_study

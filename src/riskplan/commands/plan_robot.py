@@ -96,7 +96,7 @@ def register(plan_app: typer.Typer) -> None:
 
         import numpy as np
 
-        from riskplan.commands._shared import progress_bar
+        from riskplan.commands._shared import echo_validation, progress_bar
         from riskplan.errors import InvalidInputError
         from riskplan.parsing import parse_numbers
         from riskplan.planning.bo import OptimiserConfig
@@ -264,10 +264,5 @@ def register(plan_app: typer.Typer) -> None:
                 f"check on the robot model, {name}: {c['colliding']} of {c['configurations']} configurations collide, "
                 f"{c['above_max_tension']} need more than max_tension"
             )
-        if validation is not None:
-            from riskplan.planning.validate import endpoint_warnings, validation_markdown
-
-            typer.echo(validation_markdown(validation))
-            for line in endpoint_warnings(validation):
-                typer.echo(f"warning: {line}", err=True)
+        echo_validation(validation)
         typer.echo(f"wrote {out}")

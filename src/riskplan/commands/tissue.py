@@ -65,6 +65,7 @@ def register(app: typer.Typer) -> None:
         """Run one simulation and write PNG frames, an animated GIF and summary.json."""
         import numpy as np
 
+        from riskplan._validation import check_count
         from riskplan.commands._shared import output_folder, progress_bar
         from riskplan.errors import InvalidInputError
         from riskplan.io import check_output_folder, write_json_atomic
@@ -75,12 +76,9 @@ def register(app: typer.Typer) -> None:
 
         # a scenario file is read and checked here, before any work
         sim = make_scenario(scenario, case)
-        if steps is not None and steps < 1:
-            raise InvalidInputError(f"--steps: expected >= 1, got {steps}")
-        if max_frames < 1:
-            raise InvalidInputError(f"--max-frames: expected >= 1, got {max_frames}")
-        if seed < 0:
-            raise InvalidInputError(f"--seed: expected a non-negative integer, got {seed}")
+        check_count(steps, "--steps", 1, none=True)
+        check_count(max_frames, "--max-frames", 1)
+        check_count(seed, "--seed", 0)
         check_output_folder(out, "--out")
         params = sim.sample_params(seed)
         if controls == "random":

@@ -48,7 +48,7 @@ from functools import partial
 
 import numpy as np
 
-from riskplan._validation import as_array, as_generator
+from riskplan._validation import as_array, as_generator, check_count
 from riskplan.control.kalman import kalman_gains
 from riskplan.control.linearize import Linearization
 from riskplan.control.lqr import lqr_gains
@@ -523,9 +523,11 @@ def monte_carlo_success(
     ----------
     sim, plan, controller
         As in :func:`execute`, for every run.
-    distribution : object with ``sample(gen)``, optional
-        Each run's ``s ~ distribution``; ``None``: every run on ``sim.nominal_params`` (only
-        the sensing noise differs).
+    distribution : object with ``sample(gen)``, ``"nominal"`` or None
+        Each run's ``s ~ distribution``. ``None``: ``sim.distribution``, the rule of
+        :func:`riskplan.control.linearize` and the plan selection (and every run on
+        ``sim.nominal_params`` when the simulator has none). ``"nominal"``: every run on
+        ``sim.nominal_params`` (only the sensing noise differs).
     n : int
         Number of executions.
     seed : int, numpy.random.Generator or None
@@ -545,10 +547,16 @@ def monte_carlo_success(
     from riskplan.collision import binomial_interval
     from riskplan.parallel import chunk_count, map_tasks, spawn_seeds
 
-    if int(n) != n or n < 1:
-        raise InvalidInputError(f"n: expected a positive integer, got {n!r}")
-    n = int(n)
+    n = check_count(n, "n", 1, integral=True)
     _check_goal_at(goal_at)
+    if isinstance(distribution, str):
+        if distribution != "nominal":
+            raise InvalidInputError(
+                f"distribution: expected a distribution, 'nominal' or None, got {distribution!r}"
+            )
+        distribution = None
+    elif distribution is None:
+        distribution = getattr(sim, "distribution", None)
     if isinstance(seed, np.random.Generator):
         seed = int(seed.integers(2**63))
     seeds = spawn_seeds(seed, n)

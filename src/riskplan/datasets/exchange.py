@@ -55,6 +55,7 @@ from pathlib import Path
 
 import numpy as np
 
+from riskplan._validation import check_count
 from riskplan.errors import DataFormatError, InvalidInputError, MissingDependencyError
 
 log = logging.getLogger(__name__)
@@ -225,11 +226,11 @@ def read_manifest(path, m: int) -> tuple[list[dict], dict, dict]:
         row = {"line": n}
         for key in ("config_id", "start_id"):
             try:
-                row[key] = int(str(raw[key]).strip())
+                value = int(str(raw[key]).strip())
             except (TypeError, ValueError):
-                raise DataFormatError(
-                    f"{path}, line {n}, field {key!r}: expected an integer, got {raw[key]!r}"
-                ) from None
+                value = raw[key]  # not an integer: check_count names it
+            where = f"{path}, line {n}, field {key!r}"
+            row[key] = check_count(value, where, None, error=DataFormatError)
         row["file"] = str(raw["file"] or "").strip()
         if not row["file"]:
             raise DataFormatError(f"{path}, line {n}, field 'file': empty")
@@ -365,9 +366,7 @@ def load_manifest_clouds(
                 "give n_points (--points) to keep that many of every cloud"
             )
     else:
-        P = int(n_points)
-        if P < 1:
-            raise InvalidInputError(f"n_points: expected a positive integer, got {n_points!r}")
+        P = check_count(n_points, "n_points", 1, integral=True)
         short = np.flatnonzero(counts < P)
         if short.size:
             f, line, p = clouds[int(short[0])]

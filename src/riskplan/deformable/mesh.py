@@ -19,7 +19,7 @@ from functools import cached_property
 
 import numpy as np
 
-from riskplan._validation import as_array
+from riskplan._validation import as_array, as_cells
 from riskplan.deformable import elements
 from riskplan.deformable.elements import boundary_edges, signed_areas
 from riskplan.errors import InvalidInputError, require
@@ -76,21 +76,7 @@ class TissueMesh:
 
     def __post_init__(self):
         nodes = as_array(self.nodes, "nodes", shape=(None, 2))
-        tri = np.asarray(self.triangles)
-        if tri.ndim != 2 or tri.shape[1] != 3 or tri.shape[0] == 0:
-            raise InvalidInputError(f"triangles: expected shape (T>0, 3), got {tri.shape}")
-        if not np.issubdtype(tri.dtype, np.integer):
-            if not np.all(np.isfinite(tri)) or np.any(tri != np.round(tri)):
-                raise InvalidInputError("triangles: expected integer node indices")
-        tri = tri.astype(np.int64)
-        if tri.min() < 0 or tri.max() >= len(nodes):
-            raise InvalidInputError(f"triangles: node indices must lie in [0, {len(nodes) - 1}]")
-        used = np.zeros(len(nodes), dtype=bool)
-        used[tri.ravel()] = True
-        if not used.all():
-            raise InvalidInputError(
-                f"nodes: nodes {np.flatnonzero(~used)[:10].tolist()} belong to no triangle"
-            )
+        tri = as_cells(self.triangles, "triangles", len(nodes), 3, "triangle")
         area = signed_areas(nodes, tri)
         span = np.ptp(nodes, axis=0)
         tol = DEGENERATE_RTOL * float(span[0] * span[1] + np.finfo(float).tiny)
@@ -164,8 +150,20 @@ class TissueMesh:
         return float(np.sqrt((e**2).sum(-1)).max())
 
     def nodes_near(self, points, tol: float = 1e-9) -> np.ndarray:
-        """Index ``(P,)`` of the node closest to each point ``(P, 2)``; raises
-        :class:`InvalidInputError` if some point is farther than ``tol`` from every node."""
+        """Index of the node closest to each point.
+
+        Parameters
+        ----------
+        points : array_like, (P, 2)
+            Reference positions.
+        tol : float
+            Largest accepted distance; a point farther from every node raises
+            :class:`InvalidInputError`.
+
+        Returns
+        -------
+        numpy.ndarray of int, (P,)
+        """
         pts = as_array(points, "points", last_dim=2).reshape(-1, 2)
         d2 = ((pts[:, None, :] - self.nodes[None]) ** 2).sum(-1)
         idx = d2.argmin(1)
@@ -275,17 +273,26 @@ def mesh_polygon(
 
     Parameters
     ----------
-    vertices:
-        ``(n, 2)`` polygon corners in order (either orientation); they become mesh nodes.
-    n_elements:
+    vertices : array_like, (n, 2)
+        Polygon corners in order (either orientation); they become mesh nodes.
+    n_elements : int
         Requested triangle count (the paper's range is 50-1000; anything from the
         coarsest constrained triangulation up to 200 000 is accepted).
-    keep_points:
-        Optional ``(k, 2)`` points that must be mesh nodes (inside the polygon or on its
+    keep_points : array_like, (k, 2), optional
+        Points that must be mesh nodes (inside the polygon or on its
         boundary); their node indices are ``mesh.kept_nodes``.
-    min_angle:
+    min_angle : float
         Minimum angle in degrees for Triangle's quality refinement (0-33).
+    max_iter : int
+        Bisection steps on the maximum triangle area.
 
+    Returns
+    -------
+    TissueMesh
+        ``n_elements`` triangles (see Notes), the corners and ``keep_points`` among its nodes.
+
+    Notes
+    -----
     Method: Triangle with switches ``p q<min_angle> a<A>``; the element count decreases
     (not strictly) as the maximum area ``A`` grows, so ``A`` is bisected in log scale and
     the largest count not above the request is kept. For a triangulation
@@ -369,6 +376,18 @@ def mesh_polygon(
 
 
 def rectangle(width: float = 1.0, height: float = 1.0, origin=(0.0, 0.0)) -> np.ndarray:
-    """``(4, 2)`` counter-clockwise corners of an axis-aligned rectangle."""
+    """Counter-clockwise corners of an axis-aligned rectangle.
+
+    Parameters
+    ----------
+    width, height : float
+        Side lengths.
+    origin : array_like, (2,)
+        Lower-left corner.
+
+    Returns
+    -------
+    numpy.ndarray, (4, 2)
+    """
     x0, y0 = float(origin[0]), float(origin[1])
     return rectangle_polygon((x0, y0), (x0 + width, y0 + height))

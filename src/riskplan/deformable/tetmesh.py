@@ -34,7 +34,7 @@ from functools import cached_property
 
 import numpy as np
 
-from riskplan._validation import as_array
+from riskplan._validation import as_array, as_cells
 from riskplan.errors import InvalidInputError, require
 
 #: Default least element quality q (volume-length ratio) a mesh may have. The Kuhn split of a
@@ -128,21 +128,7 @@ class TetMesh:
 
     def __post_init__(self):
         nodes = as_array(self.nodes, "nodes", shape=(None, 3))
-        t = np.asarray(self.tets)
-        if t.ndim != 2 or t.shape[1] != 4 or t.shape[0] == 0:
-            raise InvalidInputError(f"tets: expected shape (T>0, 4), got {t.shape}")
-        if not np.issubdtype(t.dtype, np.integer):
-            if not np.all(np.isfinite(t)) or np.any(t != np.round(t)):
-                raise InvalidInputError("tets: expected integer node indices")
-        t = t.astype(np.int64)
-        if t.min() < 0 or t.max() >= len(nodes):
-            raise InvalidInputError(f"tets: node indices must lie in [0, {len(nodes) - 1}]")
-        used = np.zeros(len(nodes), dtype=bool)
-        used[t.ravel()] = True
-        if not used.all():
-            raise InvalidInputError(
-                f"nodes: nodes {np.flatnonzero(~used)[:10].tolist()} belong to no tetrahedron"
-            )
+        t = as_cells(self.tets, "tets", len(nodes), 4, "tetrahedron")
         mq = float(self.min_quality)
         if not 0.0 <= mq < 1.0:
             raise InvalidInputError(f"min_quality: expected 0 <= min_quality < 1, got {mq!r}")

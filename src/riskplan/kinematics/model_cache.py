@@ -33,7 +33,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from riskplan.errors import InvalidInputError
+from riskplan._validation import check_count
 
 log = logging.getLogger(__name__)
 
@@ -167,8 +167,7 @@ def ensure_model(
     from riskplan.kinematics.model_io import load_model
     from riskplan.kinematics.training import train
 
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise InvalidInputError(f"seed: expected an integer >= 0, got {seed!r}")
+    check_count(seed, "seed", 0)
     protocol = protocol_for_robot(preset, robot)
     protocol_limits(protocol, robot)
     cfg = train_config or dataclasses.replace(_default_train_config(), seed=seed)

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from riskplan._validation import check_count
 from riskplan.errors import DataFormatError, InvalidInputError
 from riskplan.io import atomic_path, write_json_atomic
 from riskplan.kinematics.mdn import MDN, MDNModel, Normalisation
@@ -64,7 +65,20 @@ def _versions() -> dict:
 
 
 def save_model(model: MDNModel, path) -> Path:
-    """Write ``path/weights.pt`` and ``path/model.json`` (atomically); returns ``path``."""
+    """Write ``path/weights.pt`` and ``path/model.json``, atomically.
+
+    Parameters
+    ----------
+    model : MDNModel
+        The trained model (network, normalisation, robot description, metadata).
+    path : str or path
+        The model folder (created if missing).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     buf = io.BytesIO()
@@ -111,7 +125,13 @@ def _shipped_root() -> Path:
 
 
 def shipped_models() -> tuple[str, ...]:
-    """Names of the models shipped with riskplan (folders under ``riskplan/data/models``), sorted."""
+    """Names of the models shipped with riskplan (folders under ``riskplan/data/models``).
+
+    Returns
+    -------
+    tuple of str
+        Sorted names, each loadable by :func:`~riskplan.kinematics.load_model`.
+    """
     root = _shipped_root()
     if not root.is_dir():
         return ()
@@ -276,12 +296,9 @@ def _check_architecture(path: Path, arch) -> None:
         raise DataFormatError(f"{where}: expected an object, got {type(arch).__name__}")
 
     def count(key, low, high, default=None):
-        v = arch.get(key, default)
-        if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= high:
-            raise DataFormatError(
-                f"{where}: {key} must be an integer in [{low}, {high}], got {v!r}"
-            )
-        return v
+        return check_count(
+            arch.get(key, default), f"{where}: {key}", low, maximum=high, error=DataFormatError
+        )
 
     def widths(key):
         v = arch.get(key)
@@ -290,10 +307,7 @@ def _check_architecture(path: Path, arch) -> None:
                 f"{where}: {key} must be a list of at most {MAX_LAYERS} layer widths, got {v!r}"
             )
         for h in v:
-            if isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= MAX_WIDTH:
-                raise DataFormatError(
-                    f"{where}: {key} widths must be integers in [1, {MAX_WIDTH}], got {h!r}"
-                )
+            check_count(h, f"{where}: {key} width", 1, maximum=MAX_WIDTH, error=DataFormatError)
         return list(v)
 
     m = count("n_inputs", 1, MAX_TENDONS)

@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from riskplan._validation import as_generator
-from riskplan.errors import InvalidInputError, require
+from riskplan._validation import as_generator, check_counts
+from riskplan.errors import require
+from riskplan.robots.plotting import equal_axes_3d
 
 
 def fig_nll_vs_components(result):
@@ -46,9 +47,7 @@ def fig_nll_vs_components(result):
 
 
 def _fig5_data(model, data, n_configs: int, n_samples: int, seed: int):
-    for name, v in (("n_configs", n_configs), ("n_samples", n_samples)):
-        if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
-            raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
+    check_counts({"n_configs": n_configs, "n_samples": n_samples}, 1)
     rng = as_generator(seed)
     idx = np.sort(rng.choice(data.n_configs, size=min(n_configs, data.n_configs), replace=False))
     gm = model.predict(data.displacements[idx])
@@ -74,13 +73,7 @@ def fig_samples_vs_truth(model, data, n_configs: int = 2, n_samples: int = 2000,
         ax.scatter(g[:, 0], g[:, 1], g[:, 2], s=1, c="tab:blue", alpha=0.35, label="ground truth")
         ax.scatter(s[:, 0], s[:, 1], s[:, 2], s=1, c="tab:red", alpha=0.35, label="MDN samples")
         allp = np.concatenate([g, s])
-        c, r = allp.mean(0), (allp.max(0) - allp.min(0)).max() / 2
-        ax.set_xlim(c[0] - r, c[0] + r)
-        ax.set_ylim(c[1] - r, c[1] + r)
-        ax.set_zlim(c[2] - r, c[2] + r)
-        ax.set_xlabel("x [mm]")
-        ax.set_ylabel("y [mm]")
-        ax.set_zlabel("z [mm]")
+        equal_axes_3d(ax, allp.mean(0), (allp.max(0) - allp.min(0)).max() / 2, "mm")
         disp = ", ".join(f"{v * 1e3:.1f}" for v in data.displacements[i])
         ax.set_title(f"config {i}: d = ({disp}) mm", fontsize=9)
         if j == 0:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from riskplan._validation import check_workers
+from riskplan._validation import check_count_list, check_workers
 from riskplan.errors import InvalidInputError
 from riskplan.kinematics.training import TrainConfig
 from riskplan.threads import one_torch_thread
@@ -50,9 +50,7 @@ def parse_components(spec: str) -> list[int]:
         raise InvalidInputError(
             f"components: expected e.g. '1-10' or '1,3,5', got {spec!r}"
         ) from exc
-    if not out or min(out) < 1:
-        raise InvalidInputError(f"components: expected positive integers, got {spec!r}")
-    return sorted(out)
+    return list(check_count_list(sorted(out), f"components {spec!r}"))
 
 
 @dataclass
@@ -194,10 +192,8 @@ def sweep(
     components = (
         parse_components(components)
         if isinstance(components, str)
-        else sorted(set(int(k) for k in components))
+        else sorted(set(check_count_list(components, "components")))
     )
-    if not components or components[0] < 1:
-        raise InvalidInputError(f"components: expected positive integers, got {components}")
     if not 0.0 < collapse_threshold < 1.0:
         raise InvalidInputError(f"collapse_threshold: expected in (0, 1), got {collapse_threshold}")
     if not nll_tolerance >= 0.0:

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from riskplan._validation import check_count
 from riskplan.errors import ConvergenceError, DataFormatError, InvalidInputError
 from riskplan.kinematics.data import PointCloudData, check_compatible
 from riskplan.kinematics.mdn import MDN, MDNModel, Normalisation, mixture_log_prob
@@ -78,9 +79,7 @@ class TrainConfig:
             "max_bad_steps",
         )
         for name in ints:
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise InvalidInputError(f"{name}: expected an integer >= 1, got {v!r}")
+            check_count(getattr(self, name), name, 1)
         for name in ("val_fraction", "lr", "lr_factor", "weight_decay", "min_lr"):
             v = getattr(self, name, 0.0)
             if (
@@ -90,9 +89,7 @@ class TrainConfig:
             ):
                 raise InvalidInputError(f"{name}: expected a finite number, got {v!r}")
         for name in ("early_stop_patience", "lr_patience", "seed"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-                raise InvalidInputError(f"{name}: expected a non-negative integer, got {v!r}")
+            check_count(getattr(self, name), name, 0)
         if not 0.0 <= self.val_fraction < 1.0:
             raise InvalidInputError(f"val_fraction: expected in [0, 1), got {self.val_fraction}")
         if not (self.lr > 0 and math.isfinite(self.lr)):
@@ -103,12 +100,30 @@ class TrainConfig:
             raise InvalidInputError(f"dtype: expected 'float32' or 'float64', got {self.dtype!r}")
 
     def to_json(self) -> dict:
+        """The options as JSON types (tuples as lists), as stored in ``model.json``.
+
+        Returns
+        -------
+        dict
+            One entry per field.
+        """
         d = dataclasses.asdict(self)
         d["hidden"], d["head_hidden"] = list(self.hidden), list(self.head_hidden)
         return d
 
     @classmethod
     def from_json(cls, obj: dict) -> TrainConfig:
+        """Inverse of :meth:`to_json`; unknown keys are ignored, missing ones take their defaults.
+
+        Parameters
+        ----------
+        obj : dict
+            Options by field name.
+
+        Returns
+        -------
+        TrainConfig
+        """
         names = {f.name for f in dataclasses.fields(cls)}
         kw = {k: v for k, v in obj.items() if k in names}
         for k in ("hidden", "head_hidden"):
@@ -119,6 +134,9 @@ class TrainConfig:
 
 @dataclass
 class EpochRecord:
+    """One epoch of :func:`train`: NLLs in nats per point (positions in metres), the learning
+    rate, the optimiser steps skipped for a non-finite loss or gradient, and the epoch's wall time (s)."""
+
     epoch: int
     train_nll: float
     val_nll: float
@@ -241,22 +259,45 @@ def train(
     on_step: Callable[[int, int, float], None] | None = None,
     max_seconds: float | None = None,
 ) -> TrainResult:
-    """Fit an MDN to ``data``; returns the best-validation model.
+    """Fit an MDN to ``data`` by minimising the negative log-likelihood (the loss after eq. 7).
 
-    ``out``: folder for ``checkpoint.pt`` (written atomically after every epoch) and the
-    best model (``weights.pt`` + ``model.json``, see :mod:`riskplan.kinematics.model_io`).
-    ``resume``: continue from ``out/checkpoint.pt`` (the data set must be the same, by
-    content hash). A folder that already holds a checkpoint or a model is refused unless
-    ``resume`` or ``overwrite`` (a rerun must not silently discard an interrupted run). Models
-    saved during training carry ``"finished": false`` in their metadata, the final one
-    ``"finished": true``; :func:`~riskplan.kinematics.load_model` warns about unfinished ones.
-    ``on_epoch(record)`` and ``on_step(step, steps_per_epoch, loss)``
-    report progress. ``max_seconds``: stop after the first epoch that ends past this
-    wall-clock budget (the result is still the best model so far). Reported NLLs are
-    nats per point with positions in metres.
+    Each step draws ``points_per_config`` points of each configuration in a batch and minimises
+    the mean of ``-log p(x | u)`` (eq. 1 with eqs. 4-6) with Adam; the learning rate falls by
+    ``lr_factor`` when the validation NLL stalls, and training stops early after
+    ``early_stop_patience`` epochs without improvement. Models saved during training carry
+    ``"finished": false`` in their metadata, the final one ``"finished": true``;
+    :func:`~riskplan.kinematics.load_model` warns about unfinished ones.
 
     Raises :class:`DataFormatError` for unusable data or a mismatched checkpoint, before
     any training, and :class:`ConvergenceError` if training keeps producing non-finite losses.
+
+    Parameters
+    ----------
+    data : PointCloudData
+        Displacements ``(N, m)`` and point clouds ``(N, P, 3)`` (m) of one robot.
+    config : TrainConfig, optional
+        Architecture and optimiser options (default ``TrainConfig()``).
+    out : str or path, optional
+        Folder for ``checkpoint.pt`` (written atomically after every epoch) and the best model
+        (``weights.pt`` + ``model.json``, see :mod:`riskplan.kinematics.model_io`).
+    resume : bool
+        Continue from ``out/checkpoint.pt`` (the data set must be the same, by content hash).
+    overwrite : bool
+        Allow a folder that already holds a checkpoint or a model (refused otherwise, so a rerun
+        does not silently discard an interrupted run).
+    on_epoch : callable, optional
+        ``on_epoch(record)`` after each epoch, with an :class:`EpochRecord`.
+    on_step : callable, optional
+        ``on_step(step, steps_per_epoch, loss)`` after each optimiser step.
+    max_seconds : float, optional
+        Stop after the first epoch that ends past this wall-clock budget (the result is still
+        the best model so far).
+
+    Returns
+    -------
+    TrainResult
+        The best-validation model and the history; reported NLLs are nats per point with
+        positions in metres.
     """
     from riskplan.kinematics import model_io
 
@@ -526,15 +567,16 @@ def save_checkpoint(path, state: dict) -> None:
 
 def load_checkpoint(path) -> dict:
     """Read a training checkpoint; :class:`DataFormatError` if missing or corrupted."""
+    from riskplan.io import read_file_with
+
     path = Path(path)
-    if not path.is_file():
-        raise DataFormatError(f"checkpoint {str(path)!r}: no such file (nothing to resume)")
-    try:
-        ck = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises many types for damaged archives
-        raise DataFormatError(
-            f"checkpoint {str(path)!r} is corrupted or not a riskplan checkpoint ({type(exc).__name__}: {exc})"
-        ) from exc
+    ck = read_file_with(
+        path,
+        lambda p: torch.load(p, map_location="cpu", weights_only=True),
+        "checkpoint",
+        error=DataFormatError,
+        hint=" (nothing to resume)",
+    )
     if not isinstance(ck, dict) or ck.get("format") != CHECKPOINT_FORMAT:
         raise DataFormatError(f"checkpoint {str(path)!r}: not a riskplan MDN checkpoint")
     return ck

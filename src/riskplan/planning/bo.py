@@ -50,7 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
-from riskplan._validation import as_array, check_range
+from riskplan._validation import as_array, check_count, check_range
 from riskplan.collision import trajectory_probability
 from riskplan.errors import DataFormatError, InvalidInputError
 from riskplan.planning.prm import DEFAULT_RESOLUTION
@@ -114,6 +114,14 @@ class OptimisationResult:
         return 0.0 if self.initial_bound <= 0 else 1.0 - self.bound / self.initial_bound
 
     def to_json(self) -> dict:
+        """The result's figures as JSON types (arrays as lists).
+
+        Returns
+        -------
+        dict
+            ``method``, ``bound``, ``initial_bound``, ``reduction``, ``trace``, ``chosen``,
+            ``accepted``, ``evaluations``, ``seconds`` and the ``extra`` entries.
+        """
         return {
             "method": self.method,
             "bound": self.bound,
@@ -240,10 +248,9 @@ def read_checkpoint(path, fp: str, traj: np.ndarray, lim: np.ndarray, config) ->
         )
 
     def integer(key, lo, hi=None):
-        v = state.get(key)
-        if isinstance(v, bool) or not isinstance(v, int) or v < lo or (hi is not None and v > hi):
-            raise _bad(path, f"{key!r} = {v!r} is not an integer in [{lo}, {hi}]")
-        return v
+        return check_count(
+            state.get(key), repr(key), lo, maximum=hi, error=lambda msg: _bad(path, msg)
+        )
 
     def number(key, lo, hi):
         v = state.get(key)
@@ -398,8 +405,7 @@ def optimise_trajectory(
     config.validate()
     traj, lim = check_trajectory_limits(trajectory, limits)
     T, m = traj.shape
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise InvalidInputError(f"seed: expected an integer >= 0, got {seed!r}")
+    check_count(seed, "seed", 0)
     if bounds is not None:
         bounds = as_array(bounds, "bounds", shape=(T,))
         check_range(bounds, "bounds", 0.0, 1.0)

@@ -30,18 +30,13 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from riskplan._validation import as_array, as_generator
+from riskplan._validation import as_array, as_generator, check_count
 from riskplan.errors import InvalidInputError
 
 
 def _pixel_count(value, name: str) -> int:
     """``value`` as a positive ``int`` (integral floats such as ``640.0`` are accepted)."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise InvalidInputError(f"{name}: expected a positive integer pixel count, got {value!r}")
-    v = float(value)
-    if not math.isfinite(v) or not v.is_integer() or v < 1:
-        raise InvalidInputError(f"{name}: expected a positive integer pixel count, got {value!r}")
-    return int(v)
+    return check_count(value, name, 1, integral=True, noun="pixel count")
 
 
 def _real(value, name: str, what: str = "a finite number") -> float:
@@ -344,9 +339,7 @@ def capture(points, normals, cameras, n_points: int | None = 512, seed=None) -> 
     ``n_points=None`` keeps every point. Returns ``(n_points, 3)`` float64 in the base frame.
     """
     points, normals = _check_samples(points, normals)
-    bad_n = isinstance(n_points, bool) or not isinstance(n_points, numbers.Integral) or n_points < 1
-    if n_points is not None and bad_n:
-        raise InvalidInputError(f"n_points: expected a positive integer or None, got {n_points!r}")
+    check_count(n_points, "n_points", 1, none=True)
     cams = (cameras,) if isinstance(cameras, PinholeCamera) else cameras
     try:
         cameras = tuple(cams)

@@ -1,7 +1,7 @@
 """Reading robot descriptions: a TOML file or text to :class:`~riskplan.robots.params.RobotParams`.
 
 The one entry for robot files of either layout: the native one (docs/robots.md,
-:func:`riskplan.robots.params.parse_robot_document`) and the Kuntz lab's two layouts
+``riskplan.robots.params.parse_robot_document``) and the Kuntz lab's two layouts
 (:mod:`riskplan.robots.lab_format`, which translates them into the native document). It sits
 above both readers, so that neither imports the other's dispatcher.
 """
@@ -22,6 +22,17 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
     """Parse and validate a robot TOML document (format: docs/robots.md).
 
     Raises :class:`RobotDescriptionError` naming the offending key.
+
+    Parameters
+    ----------
+    text : str
+        The TOML document.
+    default_name : str
+        The robot's name when the document gives none.
+
+    Returns
+    -------
+    RobotParams
     """
     if not isinstance(text, str):
         raise RobotDescriptionError(

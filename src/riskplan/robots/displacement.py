@@ -105,6 +105,21 @@ def search_direction(Jm, phi, merit, slack, lm, A, step, m):
 
 
 @njit(cache=True, inline="always")
+def _system_at(d, kinv, l0, tau, rod, tol, maxit, lengths, dl, Jm, phi, fb, slack):
+    """Tendon lengths and their Jacobian at ``tau`` (:func:`lengths_and_jacobian`), then the
+    Newton system there (:func:`complementarity_system`); returns ``(status, residual, merit)``
+    (residual and merit 0 when the length solve failed)."""
+    st = lengths_and_jacobian(
+        tau, rod.offsets, rod.offset_slopes, rod.offset_curvatures, rod.kse, rod.kbt, rod.length, rod.n_steps,
+        tol, maxit, lengths, dl,
+    )  # fmt: skip
+    if st != OK:
+        return st, 0.0, 0.0
+    res, merit = complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack)
+    return OK, res, merit
+
+
+@njit(cache=True, inline="always")
 def line_search(d, kinv, l0, tau, step, merit, fb, rod, tols, work):
     """Backtracking on the squared residual along ``step`` from ``tau`` (projected on tau >= 0):
     halves the step until it falls by the Armijo factor. Leaves the accepted point in ``trial``
@@ -117,16 +132,11 @@ def line_search(d, kinv, l0, tau, step, merit, fb, rod, tols, work):
     for _ls in range(LINE_SEARCH_MAXIT):
         for i in range(m):
             trial[i] = max(tau[i] + alpha * step[i, 0], 0.0)
-        st = lengths_and_jacobian(
-            trial, rod.offsets, rod.offset_slopes, rod.offset_curvatures, rod.kse, rod.kbt, rod.length, rod.n_steps,
-            tol, maxit, lengths, dl,
-        )  # fmt: skip
-        if st == OK:
-            res_t, merit_t = complementarity_system(
-                d, kinv, l0, trial, lengths, dl, Jt, pt, fb, slack_t
-            )
-            if merit_t <= (1.0 - 1e-4 * alpha) * merit or res_t <= dtol:
-                return True, res_t, merit_t
+        st, res_t, merit_t = _system_at(
+            d, kinv, l0, trial, rod, tol, maxit, lengths, dl, Jt, pt, fb, slack_t
+        )
+        if st == OK and (merit_t <= (1.0 - 1e-4 * alpha) * merit or res_t <= dtol):
+            return True, res_t, merit_t
         alpha *= 0.5
     return False, 0.0, 0.0
 
@@ -185,12 +195,9 @@ def solve_displacement_tensions(
     info[0] = 0
     info[1] = 1e300
     fb = False
-    st = lengths_and_jacobian(
-        tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl
-    )
+    st, res, merit = _system_at(d, kinv, l0, tau, rod, tol, maxit, lengths, dl, Jm, phi, fb, slack)
     if st != OK:
         return st
-    res, merit = complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack)
     for it in range(outer_maxit):
         info[0] = it
         info[1] = res
@@ -214,12 +221,11 @@ def solve_displacement_tensions(
             # (it is not smooth): continue with the Fischer-Burmeister form, whose merit has
             # no such points when dg/dtau is positive semidefinite, as a compliance matrix is
             fb = True
-            st = lengths_and_jacobian(
-                tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl
+            st, res, merit = _system_at(
+                d, kinv, l0, tau, rod, tol, maxit, lengths, dl, Jm, phi, fb, slack
             )
             if st != OK:
                 return LOCAL_FAIL
-            res, merit = complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack)
             continue
         for i in range(m):
             tau[i] = trial[i]

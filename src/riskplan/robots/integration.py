@@ -4,9 +4,10 @@ loaded case (gravity, tip loads) that integrates the resultants ``N, M`` too
 (:func:`shape_loaded`, shot on the base values by ``TendonRobot``). Equations: module
 docstring of :mod:`riskplan.robots.cosserat`.
 
-:func:`rk4_row` writes the four RK4 stages out one after the other (four blocks of the same
-shape) on purpose: the twelve stage values stay scalars in registers, with no stage loop or
-temporary array, and the same inline function serves the scalar pass (:func:`rk4_pose_step`)
+:func:`rk4_row` takes the four RK4 stages as four calls of one inline rate function: the
+twelve stage values stay scalars in registers, with no stage loop or temporary array (the
+operations and their order are those of the stages written out), and the same inline
+function serves the scalar pass (:func:`rk4_pose_step`)
 and the lockstep kernel of :mod:`riskplan.robots.batch_kernel`, which vectorises it across
 configurations. The entry points called from Python (:func:`shape_free`,
 :func:`shape_free_batch`, :func:`shape_loaded`) list the seven
@@ -32,37 +33,28 @@ from riskplan.robots.strains import (
 
 
 @njit(cache=True, inline="always")
+def _row_rate(s0, s1, s2, x):
+    """The rates of one row ``q = (s0, s1, s2)`` of ``R`` at strains ``x = (v, u)``: the row of
+    ``R [u]x`` and the position component ``q . v``, as four scalars."""
+    return (
+        s1 * x[5] - s2 * x[4],
+        -s0 * x[5] + s2 * x[3],
+        s0 * x[4] - s1 * x[3],
+        s0 * x[0] + s1 * x[1] + s2 * x[2],
+    )
+
+
+@njit(cache=True, inline="always")
 def rk4_row(q0, q1, q2, x0, xm, x1, h):
     """One classical RK4 step of one row ``q`` of ``R`` under ``q' = q [u]x`` and of the matching
     position component under ``p_a' = q . v``, with strains ``x0, xm, x1`` (indexable, 6) at
     ``s, s + h/2, s + h``. Returns the new row and the position increment. Shared by
     :func:`rk4_pose_step` and the lockstep kernel."""
-    # k1 (row of R [u]x and row . v)
-    k10 = q1 * x0[5] - q2 * x0[4]
-    k11 = -q0 * x0[5] + q2 * x0[3]
-    k12 = q0 * x0[4] - q1 * x0[3]
-    kp1 = q0 * x0[0] + q1 * x0[1] + q2 * x0[2]
-    s0 = q0 + 0.5 * h * k10
-    s1 = q1 + 0.5 * h * k11
-    s2 = q2 + 0.5 * h * k12
-    k20 = s1 * xm[5] - s2 * xm[4]
-    k21 = -s0 * xm[5] + s2 * xm[3]
-    k22 = s0 * xm[4] - s1 * xm[3]
-    kp2 = s0 * xm[0] + s1 * xm[1] + s2 * xm[2]
-    s0 = q0 + 0.5 * h * k20
-    s1 = q1 + 0.5 * h * k21
-    s2 = q2 + 0.5 * h * k22
-    k30 = s1 * xm[5] - s2 * xm[4]
-    k31 = -s0 * xm[5] + s2 * xm[3]
-    k32 = s0 * xm[4] - s1 * xm[3]
-    kp3 = s0 * xm[0] + s1 * xm[1] + s2 * xm[2]
-    s0 = q0 + h * k30
-    s1 = q1 + h * k31
-    s2 = q2 + h * k32
-    k40 = s1 * x1[5] - s2 * x1[4]
-    k41 = -s0 * x1[5] + s2 * x1[3]
-    k42 = s0 * x1[4] - s1 * x1[3]
-    kp4 = s0 * x1[0] + s1 * x1[1] + s2 * x1[2]
+    k10, k11, k12, kp1 = _row_rate(q0, q1, q2, x0)
+    a = 0.5 * h
+    k20, k21, k22, kp2 = _row_rate(q0 + a * k10, q1 + a * k11, q2 + a * k12, xm)
+    k30, k31, k32, kp3 = _row_rate(q0 + a * k20, q1 + a * k21, q2 + a * k22, xm)
+    k40, k41, k42, kp4 = _row_rate(q0 + h * k30, q1 + h * k31, q2 + h * k32, x1)
     c = h / 6.0
     return (
         q0 + c * (k10 + 2.0 * k20 + 2.0 * k30 + k40),

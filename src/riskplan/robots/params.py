@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from riskplan._validation import check_count
 from riskplan.errors import RobotDescriptionError
 from riskplan.robots.pose import BasePose, quaternion_to_matrix
 
@@ -241,6 +242,18 @@ def _vec(table: dict, key: str, path: str, n: int | None, *, default=None) -> tu
     return out
 
 
+def _integer(value, key: str, low: int, high: int) -> int:
+    """``value`` of ``key`` as an ``int`` in ``[low, high]``, else
+    :class:`RobotDescriptionError` naming the key."""
+    return check_count(
+        value,
+        f"robot description: {key!r}",
+        low,
+        maximum=high,
+        error=lambda msg: RobotDescriptionError(msg, key=key),
+    )
+
+
 def _table(doc: dict, key: str, *, required=True) -> dict:
     if key not in doc:
         if required:
@@ -362,12 +375,7 @@ def parse_robot_document(doc: dict, *, default_name: str = "robot") -> RobotPara
 
     d = _table(doc, "disks", required=False)
     _check_unknown(d, {"count", "radius", "thickness", "density", "positions"}, "disks")
-    count = d.get("count", 0)
-    if isinstance(count, bool) or not isinstance(count, int) or not 0 <= count <= MAX_DISKS:
-        raise RobotDescriptionError(
-            f"robot description: 'disks.count' must be an integer in [0, {MAX_DISKS}], got {count!r}",
-            key="disks.count",
-        )
+    count = _integer(d.get("count", 0), "disks.count", 0, MAX_DISKS)
     if "positions" in d:
         pos = _vec(d, "positions", "disks", count if count else None)
         if count == 0:

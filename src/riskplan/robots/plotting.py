@@ -5,6 +5,14 @@ from __future__ import annotations
 import numpy as np
 
 
+def equal_axes_3d(ax, center, half: float, unit: str) -> None:
+    """Give the 3-D axes ``ax`` the cube ``center ± half`` (equal scales, so shapes are not
+    distorted) and ``x/y/z [unit]`` labels."""
+    for k, axis in enumerate("xyz"):
+        getattr(ax, f"set_{axis}lim")(center[k] - half, center[k] + half)
+        getattr(ax, f"set_{axis}label")(f"{axis} [{unit}]")
+
+
 def plot_shape(
     shapes, robot=None, *, ax=None, title: str | None = None, color="C0", alpha: float = 1.0
 ):
@@ -40,12 +48,7 @@ def plot_shape(
     pts = P.reshape(-1, 3)
     ctr = 0.5 * (pts.max(0) + pts.min(0))
     half = max(0.5 * float((pts.max(0) - pts.min(0)).max()), 0.02) + 0.01
-    ax.set_xlim(ctr[0] - half, ctr[0] + half)
-    ax.set_ylim(ctr[1] - half, ctr[1] + half)
-    ax.set_zlim(ctr[2] - half, ctr[2] + half)
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_zlabel("z [m]")
+    equal_axes_3d(ax, ctr, half, "m")
     if title:
         ax.set_title(title)
     return fig

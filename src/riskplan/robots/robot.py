@@ -472,23 +472,20 @@ class TendonRobot:
         """A configuration in tension form ``(..., n_config)`` (tensions [N], then rotation and
         retraction) in displacement form (tendon displacements [m] that hold the same shape at
         that retraction, then rotation and retraction unchanged)."""
-        q = np.array(q, dtype=np.float64)
-        tau, _, ret = self.split_configuration(q, validate=validate)
-        out = q.copy()
-        out[..., : self.n_tendons] = self.displacements_for_tensions(
-            tau, retraction=ret, validate=validate
-        )
-        return out
+        return self._convert_tendon_part(q, self.displacements_for_tensions, validate)
 
     def configuration_to_tensions(self, q, *, validate: bool = True) -> np.ndarray:
         """The inverse of :meth:`configuration_to_displacements`: displacement form
         ``(..., n_config)`` to tension form (tensions solved at the configuration's retraction)."""
+        return self._convert_tendon_part(q, self.tensions_for_displacements, validate)
+
+    def _convert_tendon_part(self, q, convert, validate: bool) -> np.ndarray:
+        """``q`` with its tendon part replaced by ``convert(part, retraction=..., validate=...)``
+        at each configuration's own retraction; rotation and retraction unchanged."""
         q = np.array(q, dtype=np.float64)
-        d, _, ret = self.split_configuration(q, validate=validate)
+        part, _, ret = self.split_configuration(q, validate=validate)
         out = q.copy()
-        out[..., : self.n_tendons] = self.tensions_for_displacements(
-            d, retraction=ret, validate=validate
-        )
+        out[..., : self.n_tendons] = convert(part, retraction=ret, validate=validate)
         return out
 
     # ------------------------------------------------------------ base rotation/retraction

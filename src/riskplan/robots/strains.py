@@ -114,9 +114,7 @@ def local_residual(x, tau, rt, drt, nb, mb, kse, kbt, F):
         ti = tau[i]
         if ti == 0.0:
             continue
-        r0 = rt[i, 0]
-        r1 = rt[i, 1]
-        r2 = rt[i, 2]
+        r0, r1, r2 = rt[i, 0], rt[i, 1], rt[i, 2]
         w0, w1, w2 = tendon_tangent(x, row3(rt, i), row3(drt, i))
         sc = ti / math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
         F[0] += sc * w0
@@ -149,9 +147,7 @@ def local_jacobian(x, tau, rt, drt, kse, kbt, J):
         ti = tau[i]
         if ti == 0.0:
             continue
-        r0 = rt[i, 0]
-        r1 = rt[i, 1]
-        r2 = rt[i, 2]
+        r0, r1, r2 = rt[i, 0], rt[i, 1], rt[i, 2]
         nw, t0, t1, t2 = unit_tangent(x, row3(rt, i), row3(drt, i))
         sc = ti / nw
         a00, a11, a22, a01, a02, a12, b00, b01, b02, b10, b11, b12, b20, b21, b22 = (
@@ -196,6 +192,16 @@ def local_jacobian(x, tau, rt, drt, kse, kbt, J):
         J[5, 5] -= -r1 * b02 + r0 * b12
 
 
+@njit(cache=True, inline="always")
+def _newton_update(x, F, L):
+    """``x += -J^{-1} F`` with the Cholesky factor ``L`` of ``J`` (``F`` is overwritten)."""
+    for a in range(6):
+        F[a] = -F[a]
+    chol_solve6(L, F)
+    for a in range(6):
+        x[a] += F[a]
+
+
 @njit(cache=True)
 def local_strains(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, J, rhs):
     """Newton solve of eqs. (2)-(3) for ``x = (v, u)`` in place (``x`` is the warm start).
@@ -213,11 +219,7 @@ def local_strains(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, J, rhs):
         local_jacobian(x, tau, rt, drt, kse, kbt, J)
         if not chol_factor6(J):
             return -1
-        for a in range(6):
-            F[a] = -F[a]
-        chol_solve6(J, F)
-        for a in range(6):
-            x[a] += F[a]
+        _newton_update(x, F, J)
     return -1
 
 
@@ -242,11 +244,7 @@ def local_strains_chord(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, L, fac
                 return -1
             fac[0] = 1
         e_prev = e
-        for a in range(6):
-            F[a] = -F[a]
-        chol_solve6(L, F)
-        for a in range(6):
-            x[a] += F[a]
+        _newton_update(x, F, L)
     return -1
 
 

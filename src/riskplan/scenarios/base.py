@@ -40,7 +40,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from riskplan._validation import as_array, as_generator, check_range
+from riskplan._validation import as_array, as_generator, check_count, check_range
 from riskplan.errors import InvalidInputError
 
 __all__ = [
@@ -62,6 +62,16 @@ def frozen_array(value, dtype=np.float64) -> np.ndarray:
     arr = np.array(value, dtype=dtype, copy=True, order="C")
     arr.setflags(write=False)
     return arr
+
+
+def check_material(youngs_modulus, poissons_ratio) -> None:
+    """Raise :class:`~riskplan.errors.InvalidInputError` unless the nominal material of a
+    scenario's configuration is a finite ``youngs_modulus > 0`` and a ``poissons_ratio`` in
+    ``(-1, 0.5)`` (a positive-definite isotropic elastic law)."""
+    if not (0.0 < float(youngs_modulus) < math.inf):
+        raise InvalidInputError(f"youngs_modulus: must be finite and > 0, got {youngs_modulus!r}")
+    if not -1.0 < float(poissons_ratio) < 0.5:
+        raise InvalidInputError(f"poissons_ratio: must lie in (-1, 0.5), got {poissons_ratio!r}")
 
 
 @dataclass(frozen=True)
@@ -109,16 +119,7 @@ class SimParams:
             raise InvalidInputError(f"poissons_ratio: must lie in (-1, 0.5), got {nu:.6g}")
         if f < 0.0:
             raise InvalidInputError(f"force_scale: must be >= 0, got {f:.6g}")
-        try:
-            n = int(self.n_elements)
-        except (TypeError, ValueError) as exc:
-            raise InvalidInputError(
-                f"n_elements: expected an integer, got {self.n_elements!r}"
-            ) from exc
-        if n != self.n_elements or not (8 <= n <= 5000):
-            raise InvalidInputError(
-                f"n_elements: expected an integer in [8, 5000], got {self.n_elements!r}"
-            )
+        n = check_count(self.n_elements, "n_elements", 8, maximum=5000, integral=True)
         object.__setattr__(self, "youngs_modulus", e)
         object.__setattr__(self, "poissons_ratio", nu)
         object.__setattr__(self, "force_scale", f)
@@ -160,10 +161,23 @@ class SimParams:
 
 
 def actuation_noise(params: SimParams, t: int, m: int) -> np.ndarray | None:
-    """The actuation noise ``w_t (m,)`` of step ``t`` under ``params`` (``None`` if none).
+    """The actuation noise ``w_t (m,)`` of step ``t`` under ``params``.
 
     Drawn from ``default_rng([params.actuation_seed, t])``: a pure function of the
     parameters and the step index, which keeps ``step`` deterministic (paper eq. 1).
+
+    Parameters
+    ----------
+    params : SimParams
+    t : int
+        Step index.
+    m : int
+        Control dimension.
+
+    Returns
+    -------
+    numpy.ndarray, (m,), or None
+        ``None`` if the parameters carry no actuation noise.
     """
     factor = params.actuation_factor
     if factor is None:
@@ -410,32 +424,100 @@ class Simulator(Protocol):
         ...
 
     def initial_state(self, params: SimParams | None = None) -> SimState:
-        """The start state ``y_0`` (undeformed tissue, robot at its start)."""
+        """The start state ``y_0`` (undeformed tissue, robot at its start).
+
+        Parameters
+        ----------
+        params : SimParams, optional
+            Default: the nominal parameters.
+
+        Returns
+        -------
+        SimState
+        """
         ...
 
     def step(self, state: SimState, control, params: SimParams | None = None) -> SimState:
-        """``y_{t+1} = g(y_t, u_t, s)`` (paper eq. 1); deterministic, never mutates ``state``."""
+        """``y_{t+1} = g(y_t, u_t, s)`` (paper eq. 1); deterministic, never mutates ``state``.
+
+        Parameters
+        ----------
+        state : SimState
+        control : array_like, (q,)
+            ``u_t`` within the control bounds.
+        params : SimParams, optional
+            ``s`` (default: the nominal parameters).
+
+        Returns
+        -------
+        SimState
+        """
         ...
 
     def reduced(self, state: SimState) -> np.ndarray:
-        """The reduced state ``x (p,)`` of ``state`` (paper section III)."""
+        """The reduced state ``x (p,)`` of ``state`` (paper section III).
+
+        Parameters
+        ----------
+        state : SimState
+
+        Returns
+        -------
+        numpy.ndarray, (p,)
+        """
         ...
 
     def observe(self, x, noise=None, rng=None) -> np.ndarray:
-        """``z = h(x) + n`` (paper eq. 3)."""
+        """``z = h(x) + n`` (paper eq. 3).
+
+        Parameters
+        ----------
+        x : array_like, (p,)
+            Reduced state.
+        noise : array_like, (r,), optional
+            ``n`` given explicitly; else drawn with ``rng``, or zero without one.
+        rng : numpy.random.Generator, optional
+
+        Returns
+        -------
+        numpy.ndarray, (r,)
+        """
         ...
 
     def sample_params(self, seed=None) -> SimParams:
-        """One draw ``s ~ S`` from the scenario's parameter distribution."""
+        """One draw ``s ~ S`` from the scenario's parameter distribution.
+
+        Parameters
+        ----------
+        seed : int, numpy.random.Generator or None
+
+        Returns
+        -------
+        SimParams
+        """
         ...
 
 
 def rollout(
     sim: Simulator, state: SimState, controls, params: SimParams | None = None, *, on_step=None
 ) -> list[SimState]:
-    """Apply ``controls (T, q)`` from ``state``; returns the ``T + 1`` states ``[y_0, ..., y_T]``.
+    """Apply controls from ``state``: ``y_{t+1} = g(y_t, u_t, s)`` for ``t = 0 .. T-1``.
 
-    ``on_step(new_state)``, if given, is called after each step (progress display)."""
+    Parameters
+    ----------
+    sim : Simulator
+    state : SimState
+        ``y_0``.
+    controls : array_like, (T, q)
+    params : SimParams, optional
+    on_step : callable, optional
+        ``on_step(new_state)`` after each step (progress display).
+
+    Returns
+    -------
+    list of SimState
+        The ``T + 1`` states ``[y_0, ..., y_T]``.
+    """
     u = as_array(controls, "controls", shape=(None, sim.control_dim))
     states = [state]
     for k in range(u.shape[0]):
@@ -474,6 +556,17 @@ def apply_actuation_noise(
 
     Clipping models saturation (e.g. a car without reverse cannot drive at negative
     speed, however noisy its actuation).
+
+    Parameters
+    ----------
+    u : numpy.ndarray, (m,)
+    params : SimParams
+    t : int
+    bounds : numpy.ndarray, (m, 2)
+
+    Returns
+    -------
+    numpy.ndarray, (m,)
     """
     w = actuation_noise(params, t, u.shape[0])
     if w is None:

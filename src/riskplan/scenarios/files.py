@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from riskplan import geometry2d as geo
+from riskplan._validation import check_count
 from riskplan.errors import InvalidInputError
 from riskplan.scenarios.tissue_files import _NO_HOLES, _needle_tissue, _read_tissue_mesh
 
@@ -65,7 +66,16 @@ _MANIP_SOLVER = {"load_steps"}
 
 
 def shipped_path(name: str) -> Path:
-    """Path of the shipped scenario file of a built-in name (:data:`SHIPPED_SCENARIOS`)."""
+    """Path of the shipped scenario file of a built-in name (:data:`SHIPPED_SCENARIOS`).
+
+    Parameters
+    ----------
+    name : str
+
+    Returns
+    -------
+    pathlib.Path
+    """
     if name not in SHIPPED_SCENARIOS:
         raise InvalidInputError(
             f"scenario: expected one of {', '.join(SHIPPED_SCENARIOS)}, got {name!r}"
@@ -126,9 +136,7 @@ class _Reader:
         return v
 
     def integer(self, v, field: str, low: int) -> int:
-        if isinstance(v, bool) or not isinstance(v, int) or v < low:
-            self.fail(field, f"expected an integer >= {low}, got {v!r}")
-        return int(v)
+        return check_count(v, f"{self.path}: {field}", low)
 
     def length_(self, v, field: str, **kw) -> float:
         return self.number(v, field, **kw) * self.length
@@ -236,6 +244,12 @@ def _read_obstacles(r: _Reader) -> list[tuple[str, np.ndarray]]:
     return out
 
 
+def _sensing_std(r: _Reader, noise: dict):
+    """``noise.sensing_std`` (a length, > 0), or ``None`` where the file leaves it out."""
+    sensing = noise.get("sensing_std")
+    return None if sensing is None else r.length_(sensing, "noise.sensing_std", positive=True)
+
+
 def _needle_config(r: _Reader):
     from riskplan.scenarios.needle import NeedleConfig
 
@@ -262,9 +276,7 @@ def _needle_config(r: _Reader):
     if phi_max >= math.pi / 2:
         r.fail("controls.phi_max", f"must be below 90 degrees, got {math.degrees(phi_max)} degrees")
     n = r.table("noise", _NEEDLE_NOISE, required=False)
-    sensing = n.get("sensing_std")
-    if sensing is not None:
-        sensing = r.length_(sensing, "noise.sensing_std", positive=True)
+    sensing = _sensing_std(r, n)
     act = n.get("actuation_std")
     if act is not None:
         if not isinstance(act, list) or len(act) != 2:
@@ -379,9 +391,7 @@ def _manipulation_config(r: _Reader):
         r.get(c, "controls", "df_max", required=True), "controls.df_max", positive=True
     )
     n = r.table("noise", _MANIP_NOISE, required=False)
-    sensing = n.get("sensing_std")
-    if sensing is not None:
-        sensing = r.length_(sensing, "noise.sensing_std", positive=True)
+    sensing = _sensing_std(r, n)
     act = n.get("actuation_std")
     if act is not None:
         act = r.number(act, "noise.actuation_std", nonneg=True)
@@ -417,13 +427,21 @@ def _manipulation_config(r: _Reader):
 
 
 def read_scenario_config(path) -> tuple[str, object]:
-    """``(kind, config)`` of a scenario file: ``"needle"`` and a
-    :class:`~riskplan.scenarios.needle.NeedleConfig`, or ``"manipulation"`` and a
-    :class:`~riskplan.scenarios.manipulation.ManipulationConfig`.
+    """``(kind, config)`` of a scenario file.
 
-    Lengths are multiplied by the factor of ``units.length`` (:data:`LENGTH_UNITS`),
-    angles converted from degrees when ``units.angle = "deg"``. Raises
+    Lengths are multiplied by the factor of ``units.length`` (:data:`LENGTH_UNITS`), angles
+    converted from degrees when ``units.angle = "deg"``. Raises
     :class:`~riskplan.errors.InvalidInputError` naming the file and the field.
+
+    Parameters
+    ----------
+    path : str or path
+        The TOML file.
+
+    Returns
+    -------
+    tuple
+        ``("needle", NeedleConfig)`` or ``("manipulation", ManipulationConfig)``.
     """
     path = Path(path)
     if not path.is_file():

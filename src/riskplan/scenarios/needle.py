@@ -90,6 +90,7 @@ from riskplan.scenarios.base import (
     SimState,
     apply_actuation_noise,
     check_control,
+    check_material,
     frozen_array,
     gaussian_noise,
 )
@@ -346,14 +347,7 @@ class NeedleConfig:
         if not (np.all(np.isfinite(std)) and np.all(std >= 0.0)):
             raise InvalidInputError(f"actuation_std: must be finite and >= 0, got {std.tolist()}")
         object.__setattr__(self, "actuation_std", (float(std[0]), float(std[1])))
-        if not (0.0 < float(self.youngs_modulus) < math.inf):
-            raise InvalidInputError(
-                f"youngs_modulus: must be finite and > 0, got {self.youngs_modulus!r}"
-            )
-        if not -1.0 < float(self.poissons_ratio) < 0.5:
-            raise InvalidInputError(
-                f"poissons_ratio: must lie in (-1, 0.5), got {self.poissons_ratio!r}"
-            )
+        check_material(self.youngs_modulus, self.poissons_ratio)
         for name in (
             "width",
             "height",

@@ -32,6 +32,18 @@ deformed target at the end, never inside a deformed obstacle, never outside the 
 **Reduced state** ``x (12,)`` = (world position, ``e₁``, ``e₂``, ``e₃``); sensing
 ``z = x[:3] + n``, ``n ~ N(0, σ² I₃)`` (the tip position, as from 3-D ultrasound or CT).
 
+**Frames** (as the 2-D needle, :data:`FRAMES`; ``frame=`` or :meth:`Needle3DScenario.with_frame`):
+``"world"`` (the default) reads ``x`` as above; ``"material"`` reads the tip's material
+pose ``(X, e₁, e₂, e₃)``. In the material frame a material, mesh or force draw does not
+move ``x`` at all (the tip cuts its way through the material whatever its stiffness): it
+moves what is *sensed*, ``z = X + u(X; s) + n``, the same way at every step. The
+linearisation then sees the draw as a measurement bias (``H_t = ∂z/∂x`` by central
+differences, :meth:`Needle3DScenario.observation_jacobian`) instead of fresh process
+noise at every step, and LQG-MP checks ``X`` against the bodies of material points
+(balls and boxes, :meth:`Needle3DScenario.state_obstacles` / :meth:`state_goal`), which
+the tissue carries along with the tip. Simulation, collision and goal tests are the same
+in both frames.
+
 Noise scaled to the scene as in 2-D: ``σ = 0.01 · max(size)``; actuation
 ``(0.1 v_max, 0.1 ω_max[, 0.1])``.
 """
@@ -58,6 +70,7 @@ from riskplan.scenarios.needle3d_config import Needle3DConfig, Needle3DState, _M
 from riskplan.scenarios.needle3d_space import Needle3DSpace, needle3d_steer
 
 __all__ = [
+    "FRAMES",
     "PLANNING_ELEMENTS",
     "Needle3DConfig",
     "Needle3DScenario",
@@ -67,6 +80,14 @@ __all__ = [
 
 #: Tetrahedra of the planning mesh (a 6 × 6 × 6 grid of cubes, 6 tetrahedra each).
 PLANNING_ELEMENTS = 1296
+
+#: Reduced-state frames (module docstring).
+FRAMES = ("world", "material")
+
+#: Central-difference step of :meth:`Needle3DScenario.observation_jacobian` and
+#: :meth:`Needle3DScenario.goal_jacobian` (the response is piecewise linear in the
+#: material pose, so a small step stays inside one element).
+JACOBIAN_STEP = 1e-6
 
 
 class Needle3DScenario(FEMScenario):
@@ -85,9 +106,16 @@ class Needle3DScenario(FEMScenario):
     state_type = Needle3DState
 
     def __init__(
-        self, config: Needle3DConfig | None = None, distribution=None, cache_size: int = 40
+        self,
+        config: Needle3DConfig | None = None,
+        distribution=None,
+        cache_size: int = 40,
+        frame: str = "world",
     ):
         super().__init__(config or Needle3DConfig(), distribution, cache_size)
+        if frame not in FRAMES:
+            raise InvalidInputError(f"frame: expected one of {FRAMES}, got {frame!r}")
+        self.frame = frame
         cfg = self.config
         self.control_dim = 3 if cfg.duty_cycle else 2
         b = [[0.0, cfg.v_max], [-cfg.omega_max, cfg.omega_max], [0.0, 1.0]]
@@ -308,8 +336,32 @@ class Needle3DScenario(FEMScenario):
         cfg = self.config
         return pose_step_jacobian(u[0], u[1], tau=cfg.tau, kappa=cfg.curvature, rho=self._rho(u))
 
+    def with_frame(self, frame: str) -> Needle3DScenario:
+        """This scenario (same configuration, distribution and FEM caches) with the reduced
+        state in ``frame`` (:data:`FRAMES`, module docstring); plans made in another frame
+        follow with :meth:`riskplan.control.NominalPlan.reframed`.
+
+        Parameters
+        ----------
+        frame : str
+            ``"world"`` or ``"material"``.
+
+        Returns
+        -------
+        Needle3DScenario
+            A shallow copy reading ``x`` in ``frame``.
+        """
+        import copy
+
+        if frame not in FRAMES:
+            raise InvalidInputError(f"frame: expected one of {FRAMES}, got {frame!r}")
+        out = copy.copy(self)
+        out.frame = frame
+        return out
+
     def reduced(self, state: Needle3DState) -> np.ndarray:
-        """``x (12,)``: world position and the material frame (a copy).
+        """``x (12,)`` (a copy): the world position and the material frame, or in the
+        material frame the material pose (module docstring).
 
         Parameters
         ----------
@@ -321,7 +373,122 @@ class Needle3DScenario(FEMScenario):
         numpy.ndarray, shape (12,)
             The reduced state ``x``.
         """
-        return np.array(state.pose)
+        return np.array(state.pose if self.frame == "world" else state.material)
+
+    def measure(self, state: Needle3DState, noise=None, rng=None) -> np.ndarray:
+        """``z = x_world + n``, the sensed world tip position of ``state`` (both frames; in
+        the world frame equal to ``observe(reduced(state))``, the same noise draws).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+        noise : array_like, shape (3,), optional
+            The sensing noise to add; drawn with ``rng`` when ``None``.
+        rng : int, numpy.random.Generator or None
+            Seeds the drawn noise.
+
+        Returns
+        -------
+        numpy.ndarray, shape (3,)
+            The measured tip position.
+        """
+        return np.array(state.pose[:3]) + gaussian_noise(self.sensing_cov, noise, rng, 3)
+
+    def observation_jacobian(
+        self, state: Needle3DState, params: SimParams | None = None
+    ) -> np.ndarray:
+        """``H (3, 12)`` of the measurement with respect to the reduced state.
+
+        World frame: the constant ``[I₃ 0]``. Material frame: ``∂(X + u(X; e₃, s))/∂x`` by
+        central differences (:data:`JACOBIAN_STEP`) of the tissue response at perturbed
+        material positions and axes (``e₁``, ``e₂`` do not enter the push: zero columns);
+        ``[I₃ 0]`` where nothing pushes (``t = 0``, no force, the tip outside the block).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+        params : SimParams or None
+            The simulation parameters (``None``: :attr:`nominal_params`).
+
+        Returns
+        -------
+        numpy.ndarray, shape (3, 12)
+            The observation Jacobian.
+        """
+        if self.frame == "world":
+            return np.array(self.observation_matrix)
+        params = params or self.nominal_params
+        H = np.array(self.observation_matrix)
+        diff = self._material_differences(state, params)
+        if diff is not None:
+            H[:, (0, 1, 2, 9, 10, 11)] = diff[1]
+        return H
+
+    def _material_differences(self, state: Needle3DState, params: SimParams):
+        """``(∂c/∂m (3, 6), ∂x/∂m (3, 6))``: central differences of the deformed target
+        centre and of the world tip position in the material position and axis
+        ``m = (X, e₃)``; ``None`` where nothing pushes or a step leaves the block."""
+        self._check_state(state, params)
+        mat = np.array(state.material, dtype=np.float64)
+        d = self.mesh_data(params.n_elements)
+        if state.t == 0 or params.force_scale == 0.0 or not d.block.contains(mat[:3]):
+            return None
+        a = d.slices[-1][0]
+        h = JACOBIAN_STEP
+        Jc, Jx = np.zeros((3, 6)), np.zeros((3, 6))
+        for k, i in enumerate((0, 1, 2, 9, 10, 11)):
+            resp = []
+            for sgn in (1.0, -1.0):
+                m = mat.copy()
+                m[i] += sgn * h
+                if not d.block.contains(m[:3]):
+                    return None  # on the block's surface: no two-sided difference
+                tracked, pose = self._tissue_response(m, params)
+                resp.append((tracked[a], pose[:3]))
+            Jc[:, k] = (resp[0][0] - resp[1][0]) / (2 * h)
+            Jx[:, k] = (resp[0][1] - resp[1][1]) / (2 * h)
+        return Jc, Jx
+
+    def state_obstacles(self, state: Needle3DState) -> list[ConvexBody]:
+        """The obstacles in the reduced state's coordinates (what LQG-MP checks ``x[:3]``
+        against): the deformed bodies (world frame, :meth:`obstacles`) or the balls and
+        boxes of material points (material frame).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        list of ConvexBody
+            The obstacles.
+        """
+        if self.frame == "world":
+            return self.obstacles(state)
+        d = self._data(state)
+        return [ConvexBody(k, c, A) for k, c, A in zip(d.kinds, d.centres, d.shapes)][:-1]
+
+    def state_goal(self, state: Needle3DState) -> ConvexBody:
+        """The target in the reduced state's coordinates: the deformed ellipsoid (world
+        frame, :meth:`goal`) or the ball of material points (material frame).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state.
+
+        Returns
+        -------
+        ConvexBody
+            The target.
+        """
+        if self.frame == "world":
+            return self.goal(state)
+        d = self._data(state)
+        return ConvexBody(d.kinds[-1], d.centres[-1], d.shapes[-1])
 
     def observe(self, x, noise=None, rng=None) -> np.ndarray:
         """``z = x[:3] + n`` (the tip position).
@@ -493,6 +660,48 @@ class Needle3DScenario(FEMScenario):
         a = d.slices[-1][0]
         c = d.centres[-1] + state.displacement[a]
         return float(np.linalg.norm(state.pose[:3] - c))
+
+    def goal_jacobian(self, state: Needle3DState, params: SimParams | None = None) -> np.ndarray:
+        """``J (3, 12)``: how the target's centre, in the reduced state's coordinates, moves
+        with the reduced state, ``δc ≈ J δx`` (for :func:`riskplan.control.lqgmp3d.lqgmp_3d`'s
+        goal test).
+
+        World frame: the push sits at the tip's material point ``X`` along its axis ``e₃``,
+        so the deformed target's displacement is a function of ``m = (X, e₃)``, and the
+        world position one of ``m`` too, ``x = X + u(X)``. By central differences
+        (:data:`JACOBIAN_STEP`) of the tissue response::
+
+            J_m = ∂c/∂m (3, 6),   D = ∂(x, e₃)/∂m = [[∂x/∂X, ∂x/∂e₃], [0, I]],
+            J[:, (0, 1, 2, 9, 10, 11)] = J_m D⁻¹,
+
+        zero for ``e₁``, ``e₂`` (the push does not depend on them), and zero where nothing
+        pushes. Material frame: zero (the target's material points do not move).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The full state (its material pose is differentiated at).
+        params : SimParams or None
+            The simulation parameters (``None``: :attr:`nominal_params`).
+
+        Returns
+        -------
+        numpy.ndarray, shape (3, 12)
+            ``∂c/∂x``.
+        """
+        params = params or self.nominal_params
+        J = np.zeros((3, 12))
+        if self.frame == "material":
+            self._check_state(state, params)
+            return J
+        diff = self._material_differences(state, params)
+        if diff is None:
+            return J
+        Jm, Jx = diff
+        D = np.eye(6)
+        D[:3] = Jx
+        J[:, (0, 1, 2, 9, 10, 11)] = np.linalg.solve(D.T, Jm.T).T
+        return J
 
     def path(self, states) -> np.ndarray:
         """World tip positions ``(T, 3)``.

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from riskplan._validation import check_count
 from riskplan.errors import (
     ConvergenceError,
     ElementInversionError,
@@ -355,8 +356,7 @@ def common_draws(sim, distribution, n_samples: int, seed) -> list | None:
         return None
     if isinstance(distribution, (list, tuple)):
         return list(distribution)
-    if int(n_samples) != n_samples or n_samples < 0:
-        raise InvalidInputError(f"n_samples: expected a non-negative integer, got {n_samples!r}")
+    n_samples = check_count(n_samples, "n_samples", 0, integral=True)
     s = spawn_seeds(seed, 1)[0] ^ 0x5EED  # apart from the per-plan seeds
     return list(distribution.sample_many(int(n_samples), s))
 
@@ -408,10 +408,8 @@ def honesty_check(
     from riskplan.control.lqg import monte_carlo_success
     from riskplan.parallel import spawn_seeds
 
-    if int(n) != n or n < 1:
-        raise InvalidInputError(f"n: expected a positive integer, got {n!r}")
-    if int(others) != others or others < 0:
-        raise InvalidInputError(f"others: expected a non-negative integer, got {others!r}")
+    n = check_count(n, "n", 1, integral=True)
+    others = check_count(others, "others", 0, integral=True)
     distribution = getattr(sim, "distribution", None) if distribution is None else distribution
     usable = [s for s in selection.ranking if s.error is None]
     # the selected plan, then ``others`` ranks at even quantiles of the rest (the last one the worst)
@@ -550,8 +548,7 @@ def evenly_spaced_ranks(n: int, k: int) -> list[int]:
     list of int
         The ranks, ascending.
     """
-    if int(n) != n or n < 1 or int(k) != k or k < 1:
-        raise InvalidInputError(f"n, k: expected positive integers, got {n!r}, {k!r}")
+    n, k = check_count(n, "n", 1, integral=True), check_count(k, "k", 1, integral=True)
     if k >= n:
         return list(range(int(n)))
     return sorted(set(np.linspace(0, n - 1, int(k)).round().astype(int).tolist()))

@@ -29,13 +29,11 @@ def run_demo(
     ``progress(done, total, stage, seconds)`` is called before each stage (``seconds=None``) and
     after it (with its run time), whatever the stages are.
     """
-    from riskplan._validation import check_workers
-    from riskplan.errors import InvalidInputError
+    from riskplan._validation import check_count, check_workers
     from riskplan.io import check_output_folder
 
     out = check_output_folder(out, "out")
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise InvalidInputError(f"seed: expected a non-negative integer, got {seed!r}")
+    check_count(seed, "seed", 0)
     check_workers(workers)
     stages = tuple(stages)
     report = Report(out, title="riskplan demo")

@@ -309,26 +309,9 @@ def execute_batch(args) -> list[list]:
     """``args = (sim, plan, controller or None, seeds)``: one batch of executions:
     ``[[success, collided, reached_goal, solver_failed, left_tissue, reason], ...]`` (flags
     0/1; ``reason`` the solver's message for a solver failure, else ``None``;
-    :func:`riskplan.control.lqg.execute`)."""
-    from riskplan.control.lqg import execute
-
+    :func:`riskplan.control.lqg.execute`): :func:`execute_methods` with one run."""
     sim, plan, controller, seeds = args
-    out = []
-    for s in seeds:
-        gen = np.random.default_rng(s)
-        params = sim.distribution.sample(gen)
-        ex = execute(sim, plan, controller, params, seed=gen, keep_states=False)
-        out.append(
-            [
-                int(ex.success),
-                int(ex.collided),
-                int(ex.reached_goal),
-                int(ex.outcome == "solver_failure"),
-                int(ex.left_tissue),
-                ex.error if ex.outcome == "solver_failure" else None,
-            ]
-        )
-    return out
+    return execute_methods((sim, [(plan, controller)], seeds))[0]
 
 
 def execute_methods(args) -> list[list[list]]:
@@ -346,7 +329,7 @@ def execute_methods(args) -> list[list[list]]:
     for s in seeds:
         for k, (plan, controller) in enumerate(runs):
             # a fresh generator per run: the sensing noise of each starts where the draw of
-            # s leaves it, as in execute_batch
+            # s leaves it, so that a run's executions do not depend on the other runs
             gen = np.random.default_rng(s)
             params = sim.distribution.sample(gen)
             ex = execute(sim, plan, controller, params, seed=gen, keep_states=False)
@@ -493,10 +476,10 @@ def run_scenario(
         plans[set_name] = blobs.get_or_compute(key, compute)
         report(f"{name}: RRT candidates ({set_name})", k + 1, len(sets))
 
-    # 2. per case and candidate: linearisation, LQG controller, LQG-MP
+    # 2. per candidate, case by case (a worker's cases share B_t's runs): linearise, LQG, LQG-MP
     sims = {c: make(name, c) for c in cases}
     selected_sets = [s for s in plans if s in SELECTED_SETS]
-    sel_items = [(c, s, j) for c in cases for s in selected_sets for j in range(len(plans[s]))]
+    sel_items = [(c, s, j) for s in selected_sets for j in range(len(plans[s])) for c in cases]
     pre = f"fig6d.{name}" if disturbance else f"fig6.{name}"
     sel_key = {it: f"{pre}.select.{it[0]}.{it[1]}.{it[2]:03d}" for it in sel_items}
     selection: dict = {it: blobs.get(sel_key[it]) for it in sel_items}

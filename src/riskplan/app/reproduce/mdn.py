@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from riskplan._validation import check_count, check_count_list
 from riskplan.app.demo.kinematics import TRAIN
 from riskplan.errors import InvalidInputError
 from riskplan.threads import one_torch_thread
@@ -60,16 +61,10 @@ class MDNScale:
     robot_executions: int = 200
 
     def __post_init__(self):
-        if not self.components or min(self.components) < 1:
-            raise InvalidInputError(
-                f"components: expected positive integers, got {self.components!r}"
-            )
-        object.__setattr__(self, "components", tuple(int(k) for k in self.components))
+        object.__setattr__(self, "components", check_count_list(self.components, "components"))
         for name in ("bo_iterations", "bo_candidates", "milestones", "robot_executions"):
-            v = getattr(self, name)
             low = 0 if name in ("bo_iterations", "robot_executions") else 1
-            if isinstance(v, bool) or int(v) != v or v < low:
-                raise InvalidInputError(f"{name}: expected a non-negative integer, got {v!r}")
+            check_count(getattr(self, name), name, low, integral=True)
 
 
 MDN_SCALES = {

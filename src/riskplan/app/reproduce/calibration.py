@@ -241,7 +241,6 @@ def run_calibration(
     differs from run to run.
     """
     from riskplan.app.reproduce.deformable import BlobStore, _seed_for
-    from riskplan.collision import binomial_interval
     from riskplan.parallel import imap_tasks, spawn_seeds
     from riskplan.scenarios.registry import SCENARIO_NAMES, make_scenario
     from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
@@ -289,10 +288,8 @@ def run_calibration(
 
     plans = blobs.get_or_compute(f"{pre}.plans", compute)
     # the RRT's wall seconds when first computed (its CPU runs in the pool's workers)
-    rrt_wall = store.get(f"{pre}.plans_wall_s")
-    if rrt_wall is None:
-        rrt_wall = time.perf_counter() - t_rrt
-        store.put(f"{pre}.plans_wall_s", rrt_wall)
+    if store.get(f"{pre}.plans_wall_s") is None:
+        store.put(f"{pre}.plans_wall_s", time.perf_counter() - t_rrt)
     report(stage, 1, 1)
     sims = {c: case_scenario(name, c) for c in cases}
 
@@ -341,9 +338,7 @@ def run_calibration(
             else []
         )
 
-    # 3. every estimator on the picked candidates; the paper's controller and its σ value
-    #    are step 2's (the same seed: a recomputation gives the same), so only the other
-    #    estimators and controllers are computed
+    # 3. every estimator on the picked candidates (the paper's controller and σ: step 2's)
     ests = estimators_for(base)
     ctrls = tuple(k for k in CONTROLLERS if any(CONTROLLER_OF[e] == k for e in ests))
     full = estimates(
@@ -360,9 +355,7 @@ def run_calibration(
     case_seeds = {
         c: spawn_seeds(_seed_for(seed, name, "calibration", "execute", c), n) for c in cases
     }
-    # batch-major: every (case, plan, controller) gets its first batch before any gets its
-    # second, so a run stopped part-way holds every plan at the same number of executions
-    # (a run of the same store with a smaller ``n_executions`` reads those batches back)
+    # batch-major: a run stopped part-way holds every plan at the same number of executions
     items = [
         (c, j, k, b)
         for b in range(n_batches)
@@ -394,22 +387,10 @@ def run_calibration(
             est = full[c, j]
             if est["error"] is not None:
                 continue
-            measured = {}
-            for k in ctrls:
-                runs = [row for b in range(n_batches) for row in _runs(flags[c, j, k, b])]
-                hits = int(sum(row[0] for row in runs))
-                lo, hi = binomial_interval(hits, len(runs), confidence=0.95)
-                outcomes: dict = {}
-                for row in runs:
-                    outcomes[row[1]] = outcomes.get(row[1], 0) + 1
-                measured[k] = {
-                    "successes": hits,
-                    "n": len(runs),
-                    "rate": hits / len(runs),
-                    "low": float(lo),
-                    "high": float(hi),
-                    "outcomes": outcomes,
-                }
+            measured = {
+                k: _rate([row for b in range(n_batches) for row in _runs(flags[c, j, k, b])])
+                for k in ctrls
+            }
             rows.append(
                 {
                     "case": c,
@@ -436,19 +417,7 @@ def run_calibration(
         "rows": rows,
     }
     if cost is not None:
-        # CPU seconds by part, summed over the stored records (each task times itself), and
-        # the RRT's wall seconds: where the stage's time goes (timings, not results: they
-        # differ from run to run)
-        cost.update(
-            {
-                "rrt_wall_s": float(rrt_wall),
-                "sigma_ranking_cpu_s": sum(_cpu(v) for v in sig.values()),
-                "estimators_cpu_s": sum(_cpu(v) for v in full.values()),
-                "executions_cpu_s": sum(_cpu(v) for v in flags.values()),
-                "n_linearised": {"sigma_ranking": len(sig), "estimators": len(full)},
-                "n_executions": len(items) * bs,
-            }
-        )
+        cost.update(_cost(store, pre, sig, full, flags, len(items) * bs))
 
     def metrics(e, sel):
         return calibration_metrics(
@@ -476,6 +445,41 @@ def run_calibration(
             best = e
     out["best"] = best
     return out
+
+
+def _rate(runs) -> dict:
+    """A (case, plan, controller)'s measured rate from its ``[[success, outcome], ...]``:
+    ``successes``, ``n``, ``rate``, its 95 % Wilson interval ``low``/``high`` and the count
+    of each ``outcome``."""
+    from riskplan.collision import binomial_interval
+
+    hits = int(sum(row[0] for row in runs))
+    lo, hi = binomial_interval(hits, len(runs), confidence=0.95)
+    outcomes: dict = {}
+    for row in runs:
+        outcomes[row[1]] = outcomes.get(row[1], 0) + 1
+    return {
+        "successes": hits,
+        "n": len(runs),
+        "rate": hits / len(runs),
+        "low": float(lo),
+        "high": float(hi),
+        "outcomes": outcomes,
+    }
+
+
+def _cost(store, pre, sig, full, flags, n_executions) -> dict:
+    """Where the stage's time went: CPU seconds summed over the stored records (each task
+    times itself) of the σ ranking, the estimators and the executions, and the RRT's wall
+    seconds when first computed (timings, not results: they differ from run to run)."""
+    return {
+        "rrt_wall_s": float(store.get(f"{pre}.plans_wall_s") or 0.0),
+        "sigma_ranking_cpu_s": sum(_cpu(v) for v in sig.values()),
+        "estimators_cpu_s": sum(_cpu(v) for v in full.values()),
+        "executions_cpu_s": sum(_cpu(v) for v in flags.values()),
+        "n_linearised": {"sigma_ranking": len(sig), "estimators": len(full)},
+        "n_executions": n_executions,
+    }
 
 
 # ---- figure -------------------------------------------------------------------------------

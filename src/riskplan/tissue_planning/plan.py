@@ -26,10 +26,10 @@ __all__ = [
 #: How ``plan tissue`` selects (``selection=``): ``"paper"`` is the paper's σ-distance on
 #: the world-frame LQG; ``"calibrated"`` (the default outside the paper reproduction) is,
 #: per scenario, the estimator with the lowest mean absolute error against measured
-#: closed-loop success in the calibration study at the reduced scale (docs/control.md,
-#: "Calibration": needle Patil truncation on the paper's LQG, mae 0.009, ρ 0.82;
-#: manipulation sampling with the persistent-disturbance state, mae 0.066, ρ 0.89);
-#: ``"material"``: the needle in its material frame with the bias state (mae 0.012, ρ 0.88,
+#: closed-loop success in the calibration study at the full scale's plans (docs/control.md,
+#: "Calibration": needle Patil truncation on the paper's LQG, mae 0.023, ρ 0.92;
+#: manipulation sampling with the persistent-disturbance state, mae 0.049, ρ 0.91);
+#: ``"material"``: the needle in its material frame with the bias state (mae 0.023, ρ 0.96,
 #: and the controller that does not lose runs at force ×2; ``frame``: the needle's
 #: reduced-state frame, ``NeedleScenario.with_frame``).
 SELECTIONS = {

@@ -296,6 +296,43 @@ def _check_sim(sim) -> None:
             )
 
 
+class _Tree:
+    """A growing tree: reduced states ``X`` (doubled when full), full states, edges, goals."""
+
+    def __init__(self, root, x0, u0, q: int, cap: int = 1024):
+        self.X = np.empty((cap, x0.shape[0]))
+        self.X[0] = x0
+        self.is_goal = np.zeros(cap, dtype=bool)
+        self.goal_fails = np.zeros(cap, dtype=np.int64)
+        self.parents = [-1]
+        self.node_state = [root]  # full state y of every node; edge_states: after each step
+        self.edge_states: list[tuple] = [()]
+        self.edge_controls: list[np.ndarray] = [np.empty((0, q))]
+        self.node_control = [u0]
+        self.has_goal_child = [False]
+        self.goal_nodes: list[int] = []
+        self.n = 1
+
+    def add(self, sim, parent: int, seq, u, at_goal: bool) -> None:
+        n = self.n  # the node reached by the edge ``seq`` (states) under control ``u``
+        if n == self.X.shape[0]:
+            self.X = np.concatenate([self.X, np.empty_like(self.X)])
+            self.is_goal = np.concatenate([self.is_goal, np.zeros_like(self.is_goal)])
+            self.goal_fails = np.concatenate([self.goal_fails, np.zeros_like(self.goal_fails)])
+        self.X[n] = np.asarray(sim.reduced(seq[-1]), dtype=np.float64)
+        self.parents.append(parent)
+        self.node_state.append(seq[-1])
+        self.edge_states.append(tuple(seq))
+        self.edge_controls.append(np.tile(u, (len(seq), 1)))
+        self.node_control.append(u)
+        self.has_goal_child.append(False)
+        if at_goal:
+            self.has_goal_child[parent] = True
+            self.is_goal[n] = True
+            self.goal_nodes.append(n)
+        self.n = n + 1
+
+
 def grow_tree(
     sim, *, seed, params=None, space: PlanningSpace | None = None, options: RRTOptions | None = None
 ) -> TreeResult:
@@ -328,20 +365,12 @@ def grow_tree(
 
     root = sim.initial_state(params)
     x0 = np.asarray(sim.reduced(root), dtype=np.float64)
-    cap = 1024
-    X = np.empty((cap, space.dim))
-    X[0] = x0
-    parents = [-1]
-    node_state = [root]  # full state y of every node
-    edge_states: list[tuple] = [()]  # states after each step of the edge into the node
-    edge_controls: list[np.ndarray] = [np.empty((0, q))]
-    node_control = [0.5 * (bounds[:, 0] + bounds[:, 1])]
-    has_goal_child = [False]
-    is_goal = np.zeros(cap, dtype=bool)
-    goal_fails = np.zeros(cap, dtype=np.int64)
+    tree = _Tree(root, x0, 0.5 * (bounds[:, 0] + bounds[:, 1]), q)
+    X, is_goal, goal_fails, n = tree.X, tree.is_goal, tree.goal_fails, tree.n
+    parents, node_state, node_control = tree.parents, tree.node_state, tree.node_control
+    edge_states, edge_controls = tree.edge_states, tree.edge_controls
+    has_goal_child, goal_nodes = tree.has_goal_child, tree.goal_nodes
     steer = space.steer if options.goal_steer else None
-    goal_nodes: list[int] = []
-    n = 1
     n_steps = 0
     it = 0
 
@@ -418,22 +447,8 @@ def grow_tree(
                 if has_goal_child[near]:
                     break  # one goal child per node keeps the plans of a tree distinct
                 seq = seq[: goal_at + 1]
-            if n == X.shape[0]:
-                X = np.concatenate([X, np.empty_like(X)])
-                is_goal = np.concatenate([is_goal, np.zeros_like(is_goal)])
-                goal_fails = np.concatenate([goal_fails, np.zeros_like(goal_fails)])
-            X[n] = np.asarray(sim.reduced(seq[-1]), dtype=np.float64)
-            parents.append(near)
-            node_state.append(seq[-1])
-            edge_states.append(tuple(seq))
-            edge_controls.append(np.tile(U[c], (len(seq), 1)))
-            node_control.append(U[c])
-            has_goal_child.append(False)
-            if goal_at is not None:
-                has_goal_child[near] = True
-                is_goal[n] = True
-                goal_nodes.append(n)
-            n += 1
+            tree.add(sim, near, seq, U[c], goal_at is not None)
+            X, is_goal, goal_fails, n = tree.X, tree.is_goal, tree.goal_fails, tree.n
             added = True
             break
         first_new = n - 1
@@ -447,22 +462,8 @@ def grow_tree(
                 n_steps += taken
                 if seq is None:
                     break
-                if n == X.shape[0]:
-                    X = np.concatenate([X, np.empty_like(X)])
-                    is_goal = np.concatenate([is_goal, np.zeros_like(is_goal)])
-                    goal_fails = np.concatenate([goal_fails, np.zeros_like(goal_fails)])
-                X[n] = np.asarray(sim.reduced(seq[-1]), dtype=np.float64)
-                parents.append(node)
-                node_state.append(seq[-1])
-                edge_states.append(tuple(seq))
-                edge_controls.append(np.tile(u_c, (len(seq), 1)))
-                node_control.append(u_c)
-                has_goal_child.append(False)
-                if at_goal:
-                    has_goal_child[node] = True
-                    is_goal[n] = True
-                    goal_nodes.append(n)
-                n += 1
+                tree.add(sim, node, seq, u_c, at_goal)
+                X, is_goal, goal_fails, n = tree.X, tree.is_goal, tree.goal_fails, tree.n
                 if at_goal:
                     break
         if to_goal:

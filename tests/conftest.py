@@ -66,6 +66,7 @@ TOL = {
     "convergence_ratio": dict(rtol=0.1, atol=0.0),  # error ratio per refinement
     "interpolation": dict(rtol=0.0, atol=1e-9),  # P1 interpolation, either element on an edge
     "superposition": dict(rtol=1e-10, atol=1e-16),  # K⁻¹ f by cached columns vs one solve
+    "fd_quadratic": dict(rtol=1e-5, atol=0.0),  # central differences, step 1e-7, quadratic
     "patch_centroid": dict(rtol=0.0, atol=2e-3),  # centroid of discretised bump weights
     "small_load_linear": dict(rtol=1e-3, atol=0.0),  # neo-Hookean vs linear FEM at 1e-3 of a load
     # tissue scenarios (quasi-static FEM steps)

@@ -15,8 +15,8 @@ becomes one line unlike any other, so that the code around it does not join into
   ``__all__`` lists;
 * decorators, and ``typer.Option`` / ``typer.Argument`` calls (typer reads a command's options
   from its signature, so they cannot come from a table);
-* the arguments of a call, and the entries of a dict, written one per line, that only hand a
-  value on (``seed=seed,``, ``workers=cfg.workers,``, ``"name": r.name,``): the tool sees every
+* the arguments of a call, and the entries of a dict, list, tuple or set, written one per
+  line, that only hand a value on (``seed=seed,``, ``workers=cfg.workers,``, ``"name": r.name,``): the tool sees every
   such line as the same shape, so two calls that forward six arguments each make a pair though
   they share no logic.
 
@@ -41,10 +41,10 @@ from pathlib import Path
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 ROW = re.compile(r"^D\d+ (\S+):(\d+)-(\d+) ~ (\S+):(\d+)-(\d+)(.*)$")
-#: one argument (or dict entry) on its own line that hands a name, an attribute or a constant
-#: on (``seed=seed,``, ``n_samples=cfg.n_samples,``, ``workers,``, ``**goal,``, ``"name": r.name,``):
-#: every such line has the same shape, so any two calls with six of them form a pair of "same
-#: shape" lines
+#: one argument (or dict, list, tuple or set entry) on its own line that hands a name, an
+#: attribute or a constant on (``seed=seed,``, ``n_samples=cfg.n_samples,``, ``workers,``,
+#: ``**goal,``, ``"name": r.name,``): every such line has the same shape, so any two calls with
+#: six of them form a pair of "same shape" lines
 FORWARD = re.compile(
     r"(?:\w+=|\*\*|(?:'[^']*'|\"[^\"]*\"): )?(?:[\w.]+|'[^']*'|\"[^\"]*\"|-?\d[\d.e_+-]*),?"
 )
@@ -124,7 +124,7 @@ def declaration_lines(path: str) -> frozenset[int]:
             # the tool passes over import lines, but not the continuation lines of a
             # parenthesised import; `__all__` is the module's list of names
             lines.update(span(node))
-        elif isinstance(node, ast.Dict):
+        elif isinstance(node, ast.Dict | ast.List | ast.Tuple | ast.Set):
             lines.update(
                 n
                 for n in range(node.lineno + 1, node.end_lineno)

@@ -158,3 +158,14 @@ def test_as_cells():
     ):
         with pytest.raises(InvalidInputError, match=what):
             as_cells(bad, "triangles", 3, 3, "triangle")
+
+
+def test_check_instance_and_choice():
+    from riskplan._validation import check_choice, check_instance
+
+    assert check_instance(3, int, "n") == 3
+    with pytest.raises(InvalidInputError, match=r"^mesh: expected a int, got str$"):
+        check_instance("x", int, "mesh")
+    assert check_choice("a", {"a": 1, "b": 2}, "law") == "a"
+    with pytest.raises(InvalidInputError, match=r"^law: expected one of \('a', 'b'\), got 'c'$"):
+        check_choice("c", {"a": 1, "b": 2}, "law")

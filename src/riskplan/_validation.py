@@ -241,6 +241,21 @@ def as_cells(value, name: str, nodes: int, corners: int, cell: str) -> np.ndarra
     return c
 
 
+def check_instance(value, cls: type, name: str):
+    """``value`` if it is a ``cls``, else :class:`InvalidInputError`
+    ``"{name}: expected a {cls.__name__}, got {type(value).__name__}"``."""
+    if not isinstance(value, cls):
+        raise InvalidInputError(f"{name}: expected a {cls.__name__}, got {type(value).__name__}")
+    return value
+
+
+def check_choice(value, choices, name: str):
+    """``value`` if it is one of ``choices``, else :class:`InvalidInputError` listing them."""
+    if value not in choices:
+        raise InvalidInputError(f"{name}: expected one of {tuple(choices)}, got {value!r}")
+    return value
+
+
 def check_workers(workers) -> int | None:
     """``workers`` as riskplan reads it everywhere: ``None`` (one per core, capped at the
     cores by :func:`riskplan.parallel.effective_workers`) or an integer ``>= 1``; anything

@@ -77,3 +77,44 @@ def test_plan_needle3d_rejects_a_bad_case(tmp_path):
     )
     assert res.exit_code != 0
     assert "--case" in (res.output + str(res.exception))
+
+
+def test_material_frame_outputs_execute_in_their_frame(straight, tmp_path):
+    """A material-frame controller is executed on the material-frame scenario, and the
+    figure's executed paths are world tip positions (beside the world plan)."""
+    from riskplan.app.reproduce.needle3d import Needle3DResult, needle3d_figure, write_outputs
+
+    sim, plan = straight
+    mat = sim.with_frame("material")
+    ctrls, rows = evaluate_candidates(mat, [plan.reframed(mat)], seed=0, n_goal_samples=200)
+    assert rows[0].estimates["truncation"] > 0.0
+    res = Needle3DResult(
+        [plan], rows, 0, ctrls[0], {"rrt_s": 0.0}, {"case": "actuation", "frame": "material"}
+    )
+    files = write_outputs(res, tmp_path, n_executed=1)
+    assert files["figure"].stat().st_size > 0
+    fig = needle3d_figure(sim, [plan], executed=[sim.path(plan.states)])
+    assert "executed" in [t.name for t in fig.data]
+
+
+def test_report_section_shows_intervals_and_speed(tmp_path):
+    """The report's 3-D needle table: the Wilson interval, whether the truncation lies in
+    it, and the CPU speed ratio of the estimate against the closed-loop executions."""
+    from riskplan.app.report import Report
+    from riskplan.app.reproduce.needle3d import PlanRow
+    from riskplan.app.reproduce.report_deformable import _needle3d_section
+
+    est = dict.fromkeys(ESTIMATORS, 0.9)
+    checked = PlanRow(0, 20, est, {}, n=100, closed=93, closed_ci=(0.86, 0.97))
+    checked.estimate_cpu_s = {"truncation": 0.05, "truncation+linearise": 0.2}
+    checked.closed_cpu_s = 10.0
+    unchecked = PlanRow(1, 22, est, {})
+    r = {
+        "settings": {"case": "actuation", "n_plans": 2, "n_elements": 1296, "check_runs": 100},
+        "figure": "needle3d/needle3d.html",
+        "rows": [checked.as_dict(), unchecked.as_dict()],
+    }
+    rep = Report(tmp_path)
+    _needle3d_section(rep, r)
+    text = " ".join(str(b) for sec in rep.sections for b in sec.blocks)
+    assert "93/100 [0.860, 0.970]" in text and "200× (50×)" in text and "world frame" in text

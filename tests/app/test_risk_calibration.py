@@ -12,6 +12,7 @@ from riskplan.app.reproduce.risk_calibration import (
     RISK_STUDY_SCALES,
     RiskStudyScale,
     calibration_metrics,
+    cross_fitted_logistic,
     run_risk_study,
 )
 from riskplan.app.store import ResultStore
@@ -33,6 +34,30 @@ def test_metrics_closed_form():
     # a perfect predictor of deterministic outcomes scores 0; a coin toss 0.25
     assert calibration_metrics([0.0, 1.0], [0.0, 1.0])["brier"] == 0.0
     assert calibration_metrics([0.5, 0.5], [0.0, 1.0])["brier"] == 0.25
+
+
+def test_cross_fitted_logistic_recovers_the_map_and_never_sees_the_item():
+    """Rates drawn from a known logistic map of the clearances: the held-out predictions
+    follow the true probabilities (within the binomial noise of 200 executions and the fit's
+    own error), and an item's prediction does not move when its own count changes."""
+    from scipy.special import expit
+
+    rng = np.random.default_rng(4)
+    n_items, s, execs = 300, 64, 200
+    centre = rng.uniform(-1.5, 1.5, n_items)  # mm
+    gaps = (centre[:, None] + 0.4 * rng.standard_normal((n_items, s))) * 1e-3  # m
+    a, b = 0.5, 3.0
+    truth = expit(a - b * gaps * 1e3).mean(axis=1)
+    rates = rng.binomial(execs, truth) / execs
+    groups = np.arange(n_items) < 250
+    held, fits = cross_fitted_logistic(gaps, rates, execs, groups, seed=0)
+    # binomial sd at p = 1/2 and n = 200 is 0.035 per item; the fitted map is far closer
+    assert np.abs(held - truth).mean() < 0.02
+    assert len(fits) == 2 and all(abs(f["b"] - b) < 0.5 for f in fits)
+    flipped = rates.copy()
+    flipped[0] = 1.0 - flipped[0]
+    again, _ = cross_fitted_logistic(gaps, flipped, execs, groups, seed=0)
+    assert again[0] == held[0] and not np.array_equal(again, held)
 
 
 def test_scale_errors():
@@ -62,7 +87,7 @@ def test_study_records(study):
     for pr in r["predicted"].values():
         p = np.r_[pr["configurations"], pr["trajectories"]]
         assert p.shape == (n_c + n_t,) and np.all((p >= 0) & (p <= 1))
-    assert set(r["predicted"]) == {"eq9 / eq10", "cloud ρ=0.5", "bodies c=2"}
+    assert set(r["predicted"]) == {"eq9 / eq10", "cloud ρ=0.5", "bodies c=2", "logistic c=2"}
     # stratified: two thirds of the configurations were near contact (|clearance| < band)
     c = np.abs(r["nominal_clearance"])
     assert (c < SMOKE.band).sum() >= 2 * n_c // 3
@@ -118,3 +143,52 @@ def test_transmission_mechanism_all_sources_is_the_robot():
     assert 0.0 < m["rates"]["all sources"][0] < 1.0
     assert set(m["mae_mid"]) == {"all sources", "start history", "offsets"}
     assert 0.0 <= m["pattern_share_median"] <= 1.0
+
+
+def test_reproduce_robot_risk_stage_resumes(tmp_path, monkeypatch):
+    """``reproduce --paper mdn --stage robot-risk`` at smoke size: the study's summary in
+    results.json (``mdn.robot_risk.<risk>``) and the report; a rerun reads every finished
+    record (no robot execution, no risk recomputed) and a removed record alone is redone."""
+    import riskplan.planning.validate as validate
+    from riskplan.app.reproduce import pipeline as rep
+    from riskplan.errors import InvalidInputError
+
+    with pytest.raises(InvalidInputError, match="robot_risk_scale"):
+        rep.reproduce(tmp_path / "bad", paper="mdn", stages=("robot-risk",), robot_risk_scale="x")
+    out = tmp_path / "out"
+    first = rep.reproduce(out, paper="mdn", stages=("robot-risk",), backend="serial")
+    saved = json.loads((out / "results.json").read_text())
+    assert set(saved["mdn"]) == {"robot_risk"}  # the figures did not run
+    rr = saved["mdn"]["robot_risk"]
+    keys = ["eq9", "cloud_rho=0.5", "bodies_c=2", "logistic_c=2"]
+    assert rr["scale"] == "smoke" and rr["risks"] == keys
+    study = json.loads((out / "robot-risk" / "risk_calibration.json").read_text())
+    labels = ("eq9 / eq10", "cloud ρ=0.5", "bodies c=2", "logistic c=2")
+    for key, label in zip(rr["risks"], labels):
+        m = rr[key]
+        assert set(m) >= {"mae_band", "brier", "n_band", "n", "spearman"}
+        assert m["n"] == SMOKE.configurations + SMOKE.trajectories
+        assert m["brier"] == study["metrics"][label]["all"]["brier"]
+        assert 0 <= m["n_band"] <= m["n"]
+    html = (out / "report.html").read_text()
+    assert "a risk the robot agrees with" in html and (out / rr["figure"]).stat().st_size > 0
+
+    def refuse(*a, **k):
+        raise AssertionError("finished work must be read from the store")
+
+    monkeypatch.setattr(validate, "execute_on_robot", refuse)
+    monkeypatch.setattr("riskplan.planning.risk.SampledBodyRisk", refuse)
+    (out / "robot-risk" / "store" / "records" / "risk.cloud.0.5.json").unlink()
+    calls = []
+    import riskplan.collision.body_risk as body_risk
+
+    real = body_risk.cloud_risk
+
+    def counted(*a, **k):
+        calls.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(body_risk, "cloud_risk", counted)
+    again = rep.reproduce(out, paper="mdn", stages=("robot-risk",), backend="serial")
+    assert len(calls) == SMOKE.configurations + SMOKE.trajectories  # the removed record only
+    assert again["mdn"]["robot_risk"] == first["mdn"]["robot_risk"]

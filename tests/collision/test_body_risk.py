@@ -9,10 +9,16 @@ import pytest
 from scipy.stats import norm
 
 from riskplan.collision import Environment
-from riskplan.collision.body_risk import allocate_points, cloud_risk, sampled_body_risk
+from riskplan.collision.body_risk import (
+    allocate_points,
+    cloud_risk,
+    sampled_body_gaps,
+    sampled_body_risk,
+)
 from riskplan.errors import InvalidInputError
 from riskplan.gaussian_mixture import NumpyMixture
 from tests.collision.conftest import box_mesh
+from tests.conftest import TOL
 
 SIGMA = 0.1
 B = 2.0  # the mean is B standard deviations from the box face x = 0
@@ -182,3 +188,19 @@ def test_sampled_bodies_errors(floor, kw, match):
     drawn = kw.pop("drawn", drawn)
     with pytest.raises(InvalidInputError, match=match):
         sampled_body_risk(nominal, drawn, floor, **kw)
+
+
+def test_sampled_body_gaps_closed_form(floor):
+    """Below a flat face the clearance of a sampled body is exact: the depth of its centre
+    less the piece's reach along the normal, ``extent * sqrt(Σ_zz - var_s μ_z)`` (the
+    executions' share removed); ``g < 0`` is the collision decision of sampled_body_risk."""
+    nominal, drawn, z = body_case(1.0, 2000, seed=8)
+    g = sampled_body_gaps(nominal, drawn, floor, extent=EXTENT)
+    mz = drawn[:, 0, 0, 2]
+    reach = EXTENT * np.sqrt(BODY_SD**2 + EXEC_SD**2 - mz.var(ddof=1))
+    np.testing.assert_allclose(g[:, 0], -mz - reach, **TOL["float64_exact"])
+    r = sampled_body_risk(nominal, drawn, floor, extent=EXTENT, n_directions=4096)
+    sure = np.abs(z - 1.0) > 0.05  # away from the boundary lattice's resolution
+    assert np.array_equal((g[:, 0] < 0)[sure], r.hits[sure, 0])
+    with pytest.raises(InvalidInputError, match="drawn_means"):
+        sampled_body_gaps(nominal, drawn[:1], floor)

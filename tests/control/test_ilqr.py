@@ -190,7 +190,7 @@ def test_barrier_derivatives_against_finite_differences(rng, tol):
 def test_barrier_over_trajectory_chain_rule(rng, tol):
     """The trajectory term with outline weights (points interpolated between collision
     points) against finite differences in the reduced state."""
-    from riskplan.control.ilqr import _Barrier
+    from riskplan.control.ilqr_cost import _Barrier
 
     T, p = 3, 6
     col = np.array([[0, 1], [2, 3]])
@@ -208,6 +208,11 @@ def test_barrier_over_trajectory_chain_rule(rng, tol):
             e[t, i] = 1e-6
             gfd[t, i] = (bar.terms(x + e)[0] - bar.terms(x - e)[0]) / 2e-6
     np.testing.assert_allclose(bx, gfd, **tol["fd_jacobian"])
+    # the batched evaluation (equal vertex counts) against the per-step loop
+    loop = _Barrier(tuple(obst), col, tuple(base), tuple(W), ref, 1.5, 0.7)
+    object.__setattr__(loop, "_stack", None)
+    for a, b in zip(loop.terms(x), bar.terms(x)):
+        np.testing.assert_allclose(a, b, **tol["float64_exact"])
     assert np.all(bx[:, 4:] == 0) and np.all(bx[0] == 0)
     assert all(np.all(np.linalg.eigvalsh(h) >= -tol["float64_abs"]["atol"]) for h in bxx)
 

@@ -15,6 +15,7 @@ from riskplan.control import NominalPlan
 from riskplan.control.linearize import Linearization
 from riskplan.control.lqg import LQGController
 from riskplan.control.lqgmp import lqgmp
+from riskplan.control.lqgmp3d import lqgmp_3d
 from riskplan.geometry3d import ConvexBody, nearest_to_origin
 from riskplan.scenarios.base import SimParams
 
@@ -150,3 +151,38 @@ def test_mean_inside_an_obstacle_gives_zero():
     ball = ConvexBody("ellipsoid", np.zeros(3), 0.1 * np.eye(3))
     for method in ("sigma", "truncation"):
         assert lqgmp(_OneStep([ball]), plan, ctrl, method=method, seed=0).p_collision_free == 0.0
+
+
+class _MovingGoal(_OneStep):
+    """A target ball of radius r at the origin whose centre follows the tip: c = α x."""
+
+    def __init__(self, r, alpha):
+        super().__init__([])
+        self.r, self.alpha = r, alpha
+
+    def goal(self, state):
+        return ConvexBody("ellipsoid", np.zeros(3), self.r * np.eye(3))
+
+    def goal_jacobian(self, state, params):
+        J = np.zeros((3, 12))
+        J[:, :3] = self.alpha * np.eye(3)
+        return J
+
+
+@pytest.mark.parametrize("alpha", [0.0, 0.3])
+def test_goal_motion_tests_the_tip_against_the_moved_target(alpha):
+    """With the target centre moving by α δx, the tip relative to it is (1 − α) δx:
+    P(goal) = F_χ²₃(r² / ((1 − α)² s²)) for N(0, s² I) with ``goal_motion=True``; the
+    default keeps the fixed target's F_χ²₃(r² / s²). Truncation (no obstacles) and sampling both draw it."""
+    s2, r, n = 0.01, 0.15, 40000
+    plan, ctrl = _one_step(s2 * np.eye(3))
+    sim = _MovingGoal(r, alpha)
+    exact = float(chi2(3).cdf(r * r / ((1 - alpha) ** 2 * s2)))
+    fixed = float(chi2(3).cdf(r * r / s2))
+    for method in ("truncation", "sampling"):
+        got = lqgmp_3d(
+            sim, plan, ctrl, method=method, n_goal_samples=n, seed=2, goal_motion=True
+        ).p_goal
+        assert abs(got - exact) <= _binomial(exact, n)
+        off = lqgmp_3d(sim, plan, ctrl, method=method, n_goal_samples=n, seed=2)
+        assert abs(off.p_goal - fixed) <= _binomial(fixed, n)

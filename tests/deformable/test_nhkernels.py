@@ -157,3 +157,29 @@ def test_scaled_norm():
     assert scaled_norm(np.zeros(3)) == 0.0
     assert np.isnan(scaled_norm(np.array([1.0, np.nan])))
     assert scaled_norm(np.array([1.0, -np.inf])) == np.inf
+
+
+def test_wide_band_uses_lapack_and_matches_array_path(body):
+    # a finer mesh (bandwidth above LAPACK_BANDWIDTH): the compiled assembly in LAPACK's
+    # storage, factorised by pbtrf, against the array path
+    from riskplan.deformable.banded import BandedCholeskySolver
+    from riskplan.deformable.nhkernels import LAPACK_BANDWIDTH
+
+    _, mat, _, _ = body
+    verts = np.array([[0.0, 0.0], [0.7, 0.0], [1.0, 0.3], [1.0, 1.0], [0.0, 1.0]])
+    mesh = mesh_polygon(verts, 800)
+    nb = mesh.nodes
+    fixed = np.flatnonzero(np.isclose(nb[:, 0] - nb[:, 1], 0.7, **TOL["float64_abs"]))
+    f = patch_load(mesh, [0.0, 0.5], 0.15, [0.6, 0.2])
+    fast = NeoHookeanModel(mesh, mat, fixed)
+    slow = NeoHookeanModel(mesh, mat, fixed)
+    slow.compiled = False
+    assert fast._pattern.bandwidth > LAPACK_BANDWIDTH
+    ua = fast.solve(f)
+    ub = slow.solve(f)
+    np.testing.assert_allclose(ua, ub, **TOL["newton_paths"])
+    st = fast._evaluate(ua.reshape(-1).copy())
+    assert isinstance(fast._factor(st), BandedCholeskySolver)
+    r = np.random.default_rng(3).standard_normal(len(fast.free_dofs))
+    x = fast._factor(st)(r)  # 850 unknowns: round-off accumulates past float64_exact
+    np.testing.assert_allclose(slow.tangent(ua) @ x, r, **TOL["float64_accumulated"])

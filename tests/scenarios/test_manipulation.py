@@ -61,6 +61,30 @@ def test_step_near_equals_step_within_solver_tolerance(manip):
     assert fallback.identical(manip.step(states[2], u[2], p))
 
 
+def test_step_near_memo_returns_what_a_fresh_solve_returns(manip):
+    # the memo of noise-free step_near results (shared by copies of one configuration, as
+    # the cases of one Fig. 6 candidate are) changes no result, bit for bit
+    from riskplan.scenarios import manipulation as mod
+
+    p = SimParams()
+    u = _controls(manip, 3, 2)
+    states = rollout(manip, manip.initial_state(p), u, p)
+    du = np.array([0.01, 0.0, -0.02, 0.0, 0.0, 0.01])
+    mod._STEP_MEMO.clear()
+    first = manip.step_near(states[1], u[1] + du, p, states[2])
+    assert len(mod._STEP_MEMO) == 1
+    copy = ManipulationScenario(manip.config)  # another object, same configuration
+    assert copy.step_near(states[1], u[1] + du, p, states[2]) is first
+    mod._STEP_MEMO.clear()
+    fresh = copy.step_near(states[1], u[1] + du, p, states[2])
+    assert fresh is not first and fresh.identical(first)
+    # under actuation noise (a per-step draw) nothing is kept
+    noisy = p.replace(actuation_cov=tuple(tuple(0.01 * r) for r in np.eye(6)))
+    mod._STEP_MEMO.clear()
+    manip.step_near(states[1], u[1], noisy, states[2])
+    assert len(mod._STEP_MEMO) == 0
+
+
 def test_equilibrium_residual_after_each_step(manip):
     p = SimParams()
     states = rollout(manip, manip.initial_state(p), _controls(manip, 6, 3), p)

@@ -260,3 +260,78 @@ def test_gauges_agree_with_the_bodies(sim):
             seen.add(int(np.argmin(g)))
             assert g.min() <= 1.0
     assert len(seen) == 4  # every body was probed from inside
+
+
+def _pushed(sim, n=14):
+    y = sim.initial_state()
+    for _ in range(n):
+        y = sim.step(y, [0.5, 10.0])
+    return y
+
+
+def _perturbed(sim, y, k):
+    """Material pose moved by 1e-7 along random (position, axis) directions: the tissue
+    response there, ``(δx_world (12,), δc (3,))`` against ``y``."""
+    gen = np.random.default_rng(k)
+    dm = np.zeros(12)
+    dm[[0, 1, 2, 9, 10, 11]] = 1e-7 * gen.standard_normal(6)
+    tracked, pose = sim._tissue_response(y.material + dm, sim.nominal_params)
+    a = sim.mesh_data(y.n_elements).slices[-1][0]
+    return dm, pose - y.pose, tracked[a] - y.displacement[a]
+
+
+def test_goal_jacobian_predicts_the_target_motion(sim, tol):
+    """World frame: δc ≈ J δx for small moves of the tip's material pose (the response is
+    quadratic within an element, so central differences are exact up to the step's
+    second-order term); material frame: J = 0 (the target's material points stay)."""
+    y = _pushed(sim)
+    J = sim.goal_jacobian(y)
+    assert np.abs(J[:, :3]).max() > 0.01  # the target does follow the tip
+    for k in range(3):
+        _, dx, dc = _perturbed(sim, y, k)
+        np.testing.assert_allclose(J @ dx, dc, **tol["fd_quadratic"])
+    assert not np.any(sim.with_frame("material").goal_jacobian(y))
+    assert not np.any(sim.goal_jacobian(sim.initial_state()))
+
+
+def test_material_frame_reads_the_material_pose_and_senses_the_world(sim, tol):
+    """Material frame: x = the material pose, z = the world tip + noise, H = ∂z/∂x (against
+    perturbed responses); world frame: measure = observe(reduced), the same noise draws."""
+    y = _pushed(sim)
+    mat = sim.with_frame("material")
+    np.testing.assert_array_equal(mat.reduced(y), y.material)
+    np.testing.assert_array_equal(sim.reduced(y), y.pose)
+    for k in range(3):
+        dm, dx, _ = _perturbed(sim, y, k)
+        np.testing.assert_allclose(mat.observation_jacobian(y) @ dm, dx[:3], **tol["fd_quadratic"])
+    np.testing.assert_array_equal(sim.observation_jacobian(y), sim.observation_matrix)
+    a = sim.measure(y, rng=np.random.default_rng(7))
+    b = sim.observe(sim.reduced(y), rng=np.random.default_rng(7))
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(mat.measure(y, rng=np.random.default_rng(7)), a)
+    # LQG-MP's bodies in the material frame are the balls and boxes of material points
+    assert [b.kind for b in mat.state_obstacles(y)] == ["ellipsoid", "box", "ellipsoid"]
+    np.testing.assert_array_equal(mat.state_goal(y).centre, sim.config.target_center)
+    with pytest.raises(InvalidInputError, match="frame"):
+        sim.with_frame("tissue")
+
+
+def test_material_frame_sees_a_force_draw_as_no_process_noise():
+    """Case force: a draw of f_int moves the world tip (world frame: M_t > 0, fresh noise
+    at every step) but not the material pose (material frame: M_t = 0; the draw biases
+    the measurement instead)."""
+    import warnings
+
+    from riskplan.control import NominalPlan, linearize
+    from riskplan.scenarios.registry import scenario_from_config
+
+    world = scenario_from_config("needle3d", None, "force")
+    plan = NominalPlan.from_rollout(world, world.initial_state(), np.tile([0.5, 10.0], (8, 1)))
+    mat = world.with_frame("material")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        lw = linearize(world, plan, world.distribution, n_samples=6, seed=0)
+        lm = linearize(mat, plan.reframed(mat), mat.distribution, n_samples=6, seed=0)
+    assert np.trace(lw.M[-1]) > 0.0
+    assert np.abs(lm.M).max() == 0.0
+    assert np.trace(lm.N[-1]) > np.trace(lw.N[-1])  # the bias enters as measurement spread

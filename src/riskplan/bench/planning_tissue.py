@@ -15,7 +15,8 @@ idle cores the wall time would be about half the CPU sum plus start-up). And the
 actually found, the CPU model and the core count. ``--quick``: 10 needle,
 4 manipulation and 2 needle3d plans (keys ``..._rrt_10_s`` / ``..._rrt_4_s`` /
 ``..._rrt_2_s``), for a smoke test. The 3-D needle plans on its 1296-tetrahedron planning
-mesh (:data:`riskplan.scenarios.needle3d.PLANNING_ELEMENTS`).
+mesh (:data:`riskplan.scenarios.needle3d.PLANNING_ELEMENTS`) with the options of
+``riskplan plan needle3d`` (goal connection included).
 """
 
 from __future__ import annotations

@@ -61,19 +61,43 @@ def probability_of_collision(
     seed=None,
     validate: bool = True,
 ) -> np.ndarray:
-    """Collision probability of a mixture batch; ``(...,)`` in [0, 1].
-
-    ``mixture``: a :class:`~riskplan.gaussian_mixture.NumpyMixture` or a torch
-    :class:`~riskplan.kinematics.GaussianMixture` (converted by its ``to_numpy()``).
+    r"""Collision probability of a mixture batch.
 
     ``method``:
 
-    * ``"bound"`` — eq. 9: ``sum_i w_i sum_j (1 - Phi(b_ij))``, an upper bound on the probability
-      that a point drawn from the geometry distribution lies outside free space.
+    * ``"bound"`` — eq. 9 of the MDN paper, an upper bound on the probability that a point drawn
+      from the geometry distribution lies outside free space:
+
+      .. math:: P(\text{collision}) \le \sum_i w_i \sum_j \bigl(1 - \Phi(b_{ij})\bigr)
+
     * ``"union"`` — ``min(1, sum_i sum_j (1 - Phi(b_ij)))``: ignores the weights; bounds the
       probability that any of the components (one point from each) is in collision.
     * ``"monte_carlo"`` / ``"monte_carlo_union"`` — sampling estimates of the two quantities
       (``n_samples``, ``seed``); use :func:`monte_carlo_probability` for intervals.
+
+    Parameters
+    ----------
+    mixture : NumpyMixture or GaussianMixture
+        A :class:`~riskplan.gaussian_mixture.NumpyMixture` with batch shape ``(...)``, ``K``
+        components in ``d`` dimensions, or a torch :class:`~riskplan.kinematics.GaussianMixture`
+        (converted by its ``to_numpy()``).
+    environment : Environment
+        Obstacles of the same dimension ``d``, in the mixture's frame.
+    method : str
+        One of :data:`METHODS` (above).
+    cutoff : float
+        Whitened radius beyond which faces are not visited (:func:`gaussian_bound`).
+    n_samples : int
+        Draws per mixture for the sampling methods.
+    seed : int, numpy.random.Generator or None
+        Seed of the sampling methods.
+    validate : bool
+        Check the mixture's shapes and values (skip for inputs checked already).
+
+    Returns
+    -------
+    numpy.ndarray, (...,)
+        Probabilities (or bounds) in [0, 1].
     """
     if method == "bound":
         return mixture_bound(

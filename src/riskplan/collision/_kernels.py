@@ -33,6 +33,14 @@ def _two_dots(ux, uy, uz, vx, vy, vz, wx, wy, wz):
 
 
 @nb.njit(cache=True, inline="always")
+def _on_edge(ox, oy, oz, ux, uy, uz, num, den):
+    """The point ``o + (num / den) u`` of an edge region of :func:`_closest_tri` (``o`` when
+    ``den <= 0``: a degenerate edge, any point of which is closest)."""
+    t = num / den if den > 0.0 else 0.0
+    return ox + t * ux, oy + t * uy, oz + t * uz
+
+
+@nb.njit(cache=True, inline="always")
 def _closest_tri(ax, ay, az, bx, by, bz, cx, cy, cz, px, py, pz):
     """Closest point of triangle ``abc`` to ``p`` (Ericson §5.1.5); returns (x, y, z)."""
     abx, aby, abz = bx - ax, by - ay, bz - az
@@ -46,22 +54,16 @@ def _closest_tri(ax, ay, az, bx, by, bz, cx, cy, cz, px, py, pz):
     vc = d1 * d4 - d3 * d2
     if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
         # d1 - d3 = |ab|^2 > 0 unless a == b (a degenerate edge: any point of it is closest)
-        den = d1 - d3
-        v = d1 / den if den > 0.0 else 0.0
-        return ax + v * abx, ay + v * aby, az + v * abz
+        return _on_edge(ax, ay, az, abx, aby, abz, d1, d1 - d3)
     d5, d6 = _two_dots(abx, aby, abz, acx, acy, acz, px - cx, py - cy, pz - cz)
     if d6 >= 0.0 and d5 <= d6:
         return cx, cy, cz
     vb = d5 * d2 - d1 * d6
     if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        den = d2 - d6
-        w = d2 / den if den > 0.0 else 0.0
-        return ax + w * acx, ay + w * acy, az + w * acz
+        return _on_edge(ax, ay, az, acx, acy, acz, d2, d2 - d6)
     va = d3 * d6 - d5 * d4
     if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
-        den = (d4 - d3) + (d5 - d6)
-        w = (d4 - d3) / den if den > 0.0 else 0.0
-        return bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz)
+        return _on_edge(bx, by, bz, cx - bx, cy - by, cz - bz, d4 - d3, (d4 - d3) + (d5 - d6))
     tot = va + vb + vc
     if not tot > 0.0:
         # numerically degenerate (collinear) triangle: the closest point lies on an edge

@@ -46,6 +46,7 @@ __all__ = [
     "CloudRisk",
     "allocate_points",
     "cloud_risk",
+    "sampled_body_gaps",
     "sampled_body_risk",
     "sphere_directions",
 ]
@@ -166,6 +167,22 @@ def sphere_directions(n: int) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
 
 
+def _check_drawn_bodies(env, D: np.ndarray, shape: tuple, extent, what: str) -> None:
+    """The checks of the sampled bodies' inputs: 3-D obstacles, ``drawn_means (S >= 2,
+    *shape)`` finite, and a finite ``extent > 0``; ``what`` names the caller."""
+    if env.dim != 3:
+        raise InvalidInputError(f"environment: {what} needs 3-D obstacles")
+    if D.ndim != 4 or D.shape[1:] != shape or D.shape[0] < 2:
+        T, K, d = shape
+        raise InvalidInputError(
+            f"drawn_means: expected shape (S >= 2, {T}, {K}, {d}), got {D.shape}"
+        )
+    if not np.all(np.isfinite(D)):
+        raise InvalidInputError("drawn_means: expected finite values")
+    if not (np.isfinite(extent) and extent > 0):
+        raise InvalidInputError(f"extent: expected a finite number > 0, got {extent!r}")
+
+
 def sampled_body_risk(
     nominal,
     drawn_means,
@@ -233,26 +250,10 @@ def sampled_body_risk(
     T, K, d = M.shape
     D = np.asarray(drawn_means, dtype=np.float64)
     if validate:
-        if env.dim != 3:
-            raise InvalidInputError("environment: sampled_body_risk needs 3-D obstacles")
-        if D.ndim != 4 or D.shape[1:] != (T, K, d) or D.shape[0] < 2:
-            raise InvalidInputError(
-                f"drawn_means: expected shape (S >= 2, {T}, {K}, {d}), got {D.shape}"
-            )
-        if not np.all(np.isfinite(D)):
-            raise InvalidInputError("drawn_means: expected finite values")
-        if not (np.isfinite(extent) and extent > 0):
-            raise InvalidInputError(f"extent: expected a finite number > 0, got {extent!r}")
+        _check_drawn_bodies(env, D, (T, K, d), extent, "sampled_body_risk")
         check_counts({"n_points": n_points, "n_directions": n_directions}, 1)
     S = D.shape[0]
-    L = np.linalg.inv(U)
-    sigma = L @ np.swapaxes(L, -1, -2)  # (T, K, 3, 3)
-    dev = D - D.mean(axis=0)
-    execution = np.einsum("stki,stkj->tkij", dev, dev) / (S - 1)
-    lam, V = np.linalg.eigh(sigma - execution)
-    semi = extent * np.sqrt(np.clip(lam, 0.0, None))  # (T, K, 3) semi-axes
-    axes = V * semi[..., None, :]  # columns: the ellipsoid's semi-axis vectors
-    active = allocate_points(W, n_points) > 0  # (T, K)
+    semi, axes, active = _body_pieces(W, U, D, extent, n_points)
     dirs = sphere_directions(int(n_directions))
     hits = np.zeros((S, T), dtype=bool)
     for t in range(T):
@@ -268,3 +269,77 @@ def sampled_body_risk(
             np.logical_or.at(hit, s_idx[touch], True)
         hits[:, t] = hit
     return CloudRisk(hits.mean(axis=0), float(hits.any(axis=1).mean()), hits)
+
+
+def _body_pieces(W, U, D, extent, n_points):
+    """Semi-axes ``(T, K, 3)``, semi-axis vectors ``(T, K, 3, 3)`` (columns) and the body
+    components ``(T, K)`` of :func:`sampled_body_risk` (its docstring has the law)."""
+    S = D.shape[0]
+    L = np.linalg.inv(U)
+    sigma = L @ np.swapaxes(L, -1, -2)  # (T, K, 3, 3)
+    dev = D - D.mean(axis=0)
+    execution = np.einsum("stki,stkj->tkij", dev, dev) / (S - 1)
+    lam, V = np.linalg.eigh(sigma - execution)
+    semi = extent * np.sqrt(np.clip(lam, 0.0, None))  # (T, K, 3) semi-axes
+    axes = V * semi[..., None, :]  # columns: the ellipsoid's semi-axis vectors
+    active = allocate_points(W, n_points) > 0  # (T, K)
+    return semi, axes, active
+
+
+def sampled_body_gaps(
+    nominal,
+    drawn_means,
+    environment: Environment,
+    *,
+    extent: float = DEFAULT_EXTENT,
+    n_points: int = 512,
+    validate: bool = True,
+) -> np.ndarray:
+    r"""Clearance of each sampled body of :func:`sampled_body_risk`, per execution and configuration.
+
+    For execution ``s`` at configuration ``t`` the smallest, over its body pieces ``k``
+    (the ellipsoids ``E_{kst}`` of :func:`sampled_body_risk`), of the piece's clearance in the
+    tangent-plane approximation
+
+    .. math:: g_{st} = \min_k \Big[\, \mathrm{sd}(\mu_{kst}) - \lVert A_k^\top n_{kst} \rVert \Big],
+
+    with ``sd`` the signed distance of the piece's centre to the obstacles (negative inside),
+    ``n`` the unit direction from the closest obstacle point to the centre and ``A_k`` the
+    piece's semi-axis vectors (``‖A^T n‖`` is the ellipsoid's reach along ``n``): exact when
+    the obstacle is a half-space there, otherwise a signed distance of the body that is
+    negative whenever the piece's centre is inside. ``g < 0`` is the tangent-plane version of
+    :func:`sampled_body_risk`'s collision decision; the distribution of ``g`` over the
+    executions is what a calibrated map (docs/validation.md) turns into a risk.
+
+    Parameters
+    ----------
+    nominal, drawn_means, environment, extent, n_points, validate
+        As in :func:`sampled_body_risk`.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(S, T)`` clearances [m] (``inf`` where no component is body).
+    """
+    env = check_environment(environment) if validate else environment
+    gm = check_mixture(nominal, env.dim, validate=validate)
+    W = gm.weights.reshape(-1, gm.weights.shape[-1])
+    U = gm.precision_cholesky.reshape(-1, *gm.precision_cholesky.shape[-3:])
+    T, K = W.shape
+    D = np.asarray(drawn_means, dtype=np.float64)
+    if validate:
+        _check_drawn_bodies(env, D, (T, K, 3), extent, "sampled_body_gaps")
+    S = D.shape[0]
+    _, axes, active = _body_pieces(W, U, D, extent, n_points)
+    gaps = np.full((S, T), np.inf)
+    for t in range(T):
+        ks = np.nonzero(active[t])[0]
+        if not len(ks):
+            continue
+        C = D[:, t, ks]  # (S, k, 3)
+        dist, closest, _ = env.closest_points(C)
+        sd = np.where(env.contains(C), -dist, dist)
+        n = (C - closest) / np.maximum(dist, 1e-12)[..., None]  # (S, k, 3), unit (sign free)
+        reach = np.linalg.norm(np.einsum("kij,ski->skj", axes[t, ks], n), axis=-1)
+        gaps[:, t] = (sd - reach).min(axis=1)
+    return gaps

@@ -115,11 +115,22 @@ class Environment:
     # ------------------------------------------------------------ constructors
     @classmethod
     def from_meshes(cls, meshes, names=None, *, fix_orientation: bool = True) -> Environment:
-        """One obstacle per mesh; a mesh is a ``trimesh.Trimesh`` or a ``(vertices (V,3), faces (F,3))`` pair.
+        """One obstacle per closed triangle mesh.
 
         Each mesh must be closed (watertight), edge-manifold, consistently oriented and free of
-        degenerate triangles, else :class:`InvalidInputError`. A mesh with negative enclosed volume
-        (inward normals) is flipped when ``fix_orientation``.
+        degenerate triangles, else :class:`InvalidInputError`.
+
+        Parameters
+        ----------
+        meshes : sequence of trimesh.Trimesh or (vertices (V, 3), faces (F, 3)) pairs
+        names : sequence of str, optional
+            One per mesh (default ``obstacle0``, ``obstacle1``, ...).
+        fix_orientation : bool
+            Flip a mesh with negative enclosed volume (inward normals) instead of raising.
+
+        Returns
+        -------
+        Environment
         """
         meshes = list(meshes)
         if not meshes:
@@ -167,12 +178,22 @@ class Environment:
 
     @classmethod
     def from_polygons(cls, polygons, names=None, *, validate: bool = True) -> Environment:
-        """2-D environment: one solid obstacle per simple polygon ``(k, 2)`` (any orientation).
+        """2-D environment: one solid obstacle per simple polygon (re-oriented counter-clockwise).
 
-        Polygons are re-oriented counter-clockwise. Self-intersecting, degenerate or
-        zero-area polygons raise :class:`InvalidInputError`. ``validate=False`` skips the
-        (quadratic) self-intersection and finiteness checks for polygons known to be simple,
-        e.g. the deformed obstacles of a tissue state, rebuilt at every plan step.
+        Self-intersecting, degenerate or zero-area polygons raise :class:`InvalidInputError`.
+
+        Parameters
+        ----------
+        polygons : sequence of array_like, each (k, 2)
+        names : sequence of str, optional
+        validate : bool
+            ``False`` skips the (quadratic) self-intersection and finiteness checks for polygons
+            known to be simple, e.g. the deformed obstacles of a tissue state, rebuilt at every
+            plan step.
+
+        Returns
+        -------
+        Environment
         """
         polygons = list(polygons)
         if not polygons:
@@ -200,9 +221,20 @@ class Environment:
 
     @classmethod
     def from_arrays(cls, vertices, faces, face_obstacle=None, names=None) -> Environment:
-        """From raw arrays: ``vertices (V, d)``, ``faces (F, d)`` (triangles for d=3, edges for d=2).
+        """From raw arrays; every obstacle is checked to be closed.
 
-        Every obstacle (``face_obstacle``, default all one obstacle) is checked to be closed.
+        Parameters
+        ----------
+        vertices : array_like, (V, d)
+        faces : array_like of int, (F, d)
+            Triangles for d = 3, directed edges for d = 2; outward-oriented.
+        face_obstacle : array_like of int, (F,), optional
+            Obstacle of each face (default: all one obstacle).
+        names : sequence of str, optional
+
+        Returns
+        -------
+        Environment
         """
         return cls(vertices, faces, face_obstacle, names, validate=True)
 
@@ -210,8 +242,18 @@ class Environment:
     def load(cls, paths, *, split: bool = False, names=None) -> Environment:
         """Load STL/OBJ/PLY/OFF file(s) with trimesh; one obstacle per file.
 
-        ``split=True`` makes each connected component its own obstacle (do not use it for
-        hollow bodies whose inner shell is a separate component).
+        Parameters
+        ----------
+        paths : str or path or sequence of them
+        split : bool
+            Make each connected component its own obstacle (do not use it for hollow bodies whose
+            inner shell is a separate component).
+        names : sequence of str, optional
+            Default: the file stems (``stem_j`` for split components).
+
+        Returns
+        -------
+        Environment
         """
         import trimesh
 
@@ -321,7 +363,17 @@ class Environment:
     def whitened(self, mean, precision_cholesky) -> Environment:
         """The environment in the whitened frame ``y = U (x - mu)`` of one Gaussian (eq. 8).
 
-        ``mean (d,)``, ``precision_cholesky (d, d)``. Orientation is preserved (det U > 0).
+        Orientation is preserved (det U > 0).
+
+        Parameters
+        ----------
+        mean : array_like, (d,)
+        precision_cholesky : array_like, (d, d)
+            Upper triangular ``U``, ``Sigma^{-1} = U^T U``.
+
+        Returns
+        -------
+        Environment
         """
         mu = _as_point(mean, "mean", self.dim)
         u = np.asarray(precision_cholesky, dtype=np.float64)
@@ -391,10 +443,18 @@ class Environment:
 
     # ------------------------------------------------------------- queries
     def winding_number(self, points) -> np.ndarray:
-        """Integer winding number of points ``(..., d)`` = number of obstacles containing them; ``(...,)``.
+        """Integer winding number of points = number of obstacles containing them.
 
         Points exactly on a 2-D edge follow the half-open crossing rule of
         :func:`riskplan.geometry2d.winding_numbers`; :meth:`contains` counts them as inside.
+
+        Parameters
+        ----------
+        points : array_like, (..., d)
+
+        Returns
+        -------
+        numpy.ndarray of int, (...,)
         """
         P, shape = _as_points(points, self.dim)
         if self.dim == 3:
@@ -409,10 +469,18 @@ class Environment:
         return w.reshape(shape)
 
     def contains(self, points) -> np.ndarray:
-        """``(...,)`` bool: True where a point ``(..., d)`` lies inside at least one obstacle.
+        """True where a point lies inside at least one obstacle.
 
         In 2-D obstacles are closed sets (a point on an edge is inside; the convention of
         :mod:`riskplan.geometry2d`); in 3-D a point exactly on a face may go either way.
+
+        Parameters
+        ----------
+        points : array_like, (..., d)
+
+        Returns
+        -------
+        numpy.ndarray of bool, (...,)
         """
         if self.dim == 2:
             P, shape = _as_points(points, 2)
@@ -420,7 +488,17 @@ class Environment:
         return self.winding_number(points) > 0
 
     def closest_points(self, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Closest surface points: ``(distance (...,), closest (..., d), face (...,))``."""
+        """Closest surface points.
+
+        Parameters
+        ----------
+        points : array_like, (..., d)
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+            ``(distance (...,), closest (..., d), face (...,))``.
+        """
         P, shape = _as_points(points, self.dim)
         if self.dim == 3 and len(P):
             sq, face, closest = self._aabb.squared_distance(self.vertices, self.faces, P)
@@ -435,9 +513,15 @@ class Environment:
         return np.where(self.contains(points), -dist, dist)
 
     def segments_collide(self, start, end) -> np.ndarray:
-        """``(...,)`` bool: True where the segment ``start -> end`` (each ``(..., d)``) touches an obstacle.
+        """True where the segment ``start -> end`` has an endpoint inside or crosses a surface.
 
-        A segment collides if an endpoint is inside an obstacle or it crosses a surface.
+        Parameters
+        ----------
+        start, end : array_like, (..., d)
+
+        Returns
+        -------
+        numpy.ndarray of bool, (...,)
         """
         P0, shape = _as_points(start, self.dim, "start")
         P1, shape1 = _as_points(end, self.dim, "end")

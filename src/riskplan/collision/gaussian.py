@@ -76,9 +76,19 @@ class GaussianBoundTerms:
 
 
 def precision_cholesky_from_covariance(covariance) -> np.ndarray:
-    """``U`` (upper triangular, ``Sigma^{-1} = U^T U``) from covariances ``(..., d, d)``.
+    """``U`` (upper triangular, ``Sigma^{-1} = U^T U``) from covariances.
 
     Raises :class:`InvalidInputError` for non-finite, non-symmetric or non-positive-definite input.
+
+    Parameters
+    ----------
+    covariance : array_like, (..., d, d)
+        Covariances ``Sigma``.
+
+    Returns
+    -------
+    numpy.ndarray, (..., d, d)
+        Upper triangular ``U`` with a positive diagonal.
     """
     cov = as_array(covariance, "covariance", finite=False)
     if cov.ndim < 2 or cov.shape[-1] != cov.shape[-2]:
@@ -146,7 +156,27 @@ def gaussian_bound_terms(
     cutoff: float = DEFAULT_CUTOFF,
     validate: bool = True,
 ) -> GaussianBoundTerms:
-    """The Patil-2012 bound for a batch of Gaussians, with its pieces. See :func:`gaussian_bound`."""
+    """The Patil-2012 bound for a batch of Gaussians, with its pieces. See :func:`gaussian_bound`.
+
+    Parameters
+    ----------
+    means : array_like, (..., d)
+        Gaussian means.
+    precision_cholesky : array_like, (..., d, d)
+        Upper triangular ``U`` with ``Sigma^{-1} = U^T U``.
+    environment : Environment
+        Obstacles of the same dimension ``d``.
+    cutoff : float
+        Whitened radius beyond which faces are not visited.
+    validate : bool
+        Check shapes and values.
+
+    Returns
+    -------
+    GaussianBoundTerms
+        ``bound``, ``halfspace_sum``, ``n_constraints``, ``tail`` and ``mean_in_collision``,
+        each ``(...,)``.
+    """
     if not isinstance(environment, Environment):
         raise InvalidInputError(
             f"environment: expected an Environment, got {type(environment).__name__}"
@@ -192,20 +222,32 @@ def gaussian_bound(
     cutoff: float = DEFAULT_CUTOFF,
     validate: bool = True,
 ) -> np.ndarray:
-    """Upper bound on ``P(x in obstacles)`` for ``x ~ N(mu, (U^T U)^{-1})`` (Patil et al. 2012).
+    r"""Upper bound on ``P(x in obstacles)`` for ``x ~ N(mu, (U^T U)^{-1})`` (Patil et al. 2012).
+
+    In the whitened frame ``y = U (x - mu)`` each face nearer than ``cutoff`` adds the
+    half-space of its nearest point at whitened distance ``b_j``; the region they leave free is
+    convex and contains the mean, so
+
+    .. math:: P(x \in \mathcal{O}) \le \min\Bigl(1, \sum_j \bigl(1 - \Phi(b_j)\bigr)
+       + P(\lVert y \rVert \ge \text{cutoff})\Bigr)
 
     Parameters
     ----------
-    means : (..., d)
-    precision_cholesky : (..., d, d)
+    means : array_like, (..., d)
+        Gaussian means.
+    precision_cholesky : array_like, (..., d, d)
         Upper triangular ``U`` with ``Sigma^{-1} = U^T U`` (MDN paper eq. 3).
-    environment : Environment of the same dimension ``d`` (2 or 3).
-    cutoff : whitened radius beyond which faces are not visited (see module docstring).
+    environment : Environment
+        Obstacles of the same dimension ``d`` (2 or 3).
+    cutoff : float
+        Whitened radius beyond which faces are not visited (see the module docstring).
+    validate : bool
+        Check shapes, finiteness and the triangle of ``U`` (skip for inputs checked already).
 
     Returns
     -------
-    (...,) float64 in [0, 1]: ``min(1, sum_j (1 - Phi(b_j)) + P(|y| >= cutoff))``, or 1 where
-    the mean is in collision.
+    numpy.ndarray, (...,)
+        float64 in [0, 1]; 1 where the mean is in collision.
     """
     return gaussian_bound_terms(
         means, precision_cholesky, environment, cutoff=cutoff, validate=validate
@@ -233,9 +275,27 @@ class FreeRegion:
 def free_region(
     mean, precision_cholesky, environment: Environment, *, cutoff: float = DEFAULT_CUTOFF
 ) -> FreeRegion:
-    """Half-spaces of the Patil construction for one Gaussian (``mean (d,)``, ``U (d, d)``).
+    r"""Half-spaces of the Patil construction for one Gaussian.
 
-    World form: ``a . U (x - mu) <= b``  <=>  ``(U^T a) . x <= b + (U^T a) . mu``.
+    World form of a whitened half-space ``a . y <= b``:
+
+    .. math:: a^\top \bar U (x - \mu) \le b \iff (\bar U^\top a)^\top x \le b + (\bar U^\top a)^\top \mu
+
+    Parameters
+    ----------
+    mean : array_like, (d,)
+        The Gaussian's mean ``mu``.
+    precision_cholesky : array_like, (d, d)
+        Upper triangular ``U``.
+    environment : Environment
+        Obstacles of dimension ``d``.
+    cutoff : float
+        Whitened radius beyond which faces are not visited.
+
+    Returns
+    -------
+    FreeRegion
+        ``J`` half-spaces in world and whitened form, with their distances ``b_j``.
     """
     mu, u = check_gaussians(
         np.asarray(mean)[None], np.asarray(precision_cholesky)[None], environment.dim
@@ -248,10 +308,25 @@ def free_region(
 def gaussian_bound_covariance(
     means, covariances, environment: Environment, *, cutoff: float = DEFAULT_CUTOFF
 ) -> np.ndarray:
-    """:func:`gaussian_bound` for Gaussians given by covariances ``(..., d, d)`` (e.g. LQG-MP state
-    distributions, deformable-planning paper section IV-D); returns ``(...,)``.
+    """:func:`gaussian_bound` for Gaussians given by covariances.
 
-    Raises :class:`InvalidInputError` for non-finite, non-symmetric or non-positive-definite covariances.
+    For example the LQG-MP state distributions of the deformable-planning paper (section IV-D).
+
+    Parameters
+    ----------
+    means : array_like, (..., d)
+        Gaussian means.
+    covariances : array_like, (..., d, d)
+        Symmetric positive-definite covariances; :class:`InvalidInputError` otherwise.
+    environment : Environment
+        Obstacles of dimension ``d``.
+    cutoff : float
+        Whitened radius beyond which faces are not visited.
+
+    Returns
+    -------
+    numpy.ndarray, (...,)
+        Bounds in [0, 1].
     """
     return gaussian_bound(
         means, precision_cholesky_from_covariance(covariances), environment, cutoff=cutoff

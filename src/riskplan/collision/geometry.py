@@ -16,9 +16,21 @@ from riskplan.errors import InvalidInputError
 
 
 def whiten(points, mean, precision_cholesky) -> np.ndarray:
-    """``y = U (x - mu)`` (eq. 8) for points ``(..., N, d)``, mean ``(..., d)``, ``U (..., d, d)``.
+    """The whitening map of eq. 8 (MDN paper), ``y = U (x - mu)``.
 
-    Returns ``(..., N, d)``. Leading axes broadcast.
+    Parameters
+    ----------
+    points : array_like, (..., N, d)
+        Points ``x``.
+    mean : array_like, (..., d)
+        Means ``mu``; leading axes broadcast.
+    precision_cholesky : array_like, (..., d, d)
+        Upper triangular ``U`` with ``Sigma^{-1} = U^T U``.
+
+    Returns
+    -------
+    numpy.ndarray, (..., N, d)
+        Whitened points ``y`` (standard-normal units).
     """
     x = np.asarray(points, dtype=np.float64)
     mu = np.asarray(mean, dtype=np.float64)
@@ -27,7 +39,22 @@ def whiten(points, mean, precision_cholesky) -> np.ndarray:
 
 
 def unwhiten(points, mean, precision_cholesky) -> np.ndarray:
-    """Inverse of :func:`whiten`: ``x = mu + U^{-1} y``; shapes as in :func:`whiten`."""
+    """Inverse of :func:`whiten`: ``x = mu + U^{-1} y``.
+
+    Parameters
+    ----------
+    points : array_like, (..., N, d)
+        Whitened points ``y``.
+    mean : array_like, (..., d)
+        Means ``mu``.
+    precision_cholesky : array_like, (..., d, d)
+        Upper triangular ``U``.
+
+    Returns
+    -------
+    numpy.ndarray, (..., N, d)
+        Points ``x`` in the original frame.
+    """
     y = np.asarray(points, dtype=np.float64)
     u = np.asarray(precision_cholesky, dtype=np.float64)
     sol = np.linalg.solve(u[..., None, :, :], y[..., :, :, None])[..., 0]
@@ -35,7 +62,22 @@ def unwhiten(points, mean, precision_cholesky) -> np.ndarray:
 
 
 def mahalanobis(points, mean, precision_cholesky) -> np.ndarray:
-    """``sqrt((x - mu)^T U^T U (x - mu))`` for points ``(..., N, d)``; returns ``(..., N)``."""
+    """Mahalanobis distance ``sqrt((x - mu)^T U^T U (x - mu)) = ||U (x - mu)||``.
+
+    Parameters
+    ----------
+    points : array_like, (..., N, d)
+        Points ``x``.
+    mean : array_like, (..., d)
+        Means ``mu``.
+    precision_cholesky : array_like, (..., d, d)
+        Upper triangular ``U``.
+
+    Returns
+    -------
+    numpy.ndarray, (..., N)
+        Distances in standard deviations.
+    """
     return np.linalg.norm(whiten(points, mean, precision_cholesky), axis=-1)
 
 

@@ -32,8 +32,22 @@ FRAMES = ("world", "base")
 
 
 def environment_in_base_frame(environment: Environment, pose: BasePose) -> Environment:
-    """A world-frame 3-D environment expressed in the robot base frame of ``pose`` (a rigid motion:
-    faces, obstacles and orientation are unchanged)."""
+    """A world-frame 3-D environment expressed in the robot base frame of ``pose``.
+
+    A rigid motion ``x_base = R^T (x_world - p)``: faces, obstacles and orientation are unchanged.
+
+    Parameters
+    ----------
+    environment : Environment
+        3-D obstacles in the world frame (m).
+    pose : BasePose
+        The robot base in the world frame (position ``p``, rotation ``R``).
+
+    Returns
+    -------
+    Environment
+        The same obstacles in the base frame.
+    """
     check_environment(environment)
     if not isinstance(pose, BasePose):
         raise InvalidInputError(f"pose: expected a BasePose, got {type(pose).__name__}")
@@ -60,11 +74,24 @@ def save_environment(
     base_pose: BasePose | None = None,
     metadata: dict | None = None,
 ) -> Path:
-    """Write a mesh file (world frame) and its sidecar ``<path>.json`` naming the frame, atomically.
+    """Write a mesh file and its sidecar ``<path>.json`` naming the frame, atomically.
 
-    With ``base_pose`` the sidecar says ``"frame": "world"`` and stores the pose; without it the
-    mesh is declared to be in the robot base frame (``"frame": "base"``). ``metadata`` entries
-    (seed, parameters, ...) are added to the sidecar.
+    Parameters
+    ----------
+    environment : Environment
+        3-D obstacles (m).
+    path : str or path
+        The mesh file; the format follows the suffix.
+    base_pose : BasePose, optional
+        With it the sidecar says ``"frame": "world"`` and stores the pose; without it the mesh
+        is declared to be in the robot base frame (``"frame": "base"``).
+    metadata : dict, optional
+        Entries (seed, parameters, ...) added to the sidecar.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
     """
     from riskplan.io import write_json_atomic
 
@@ -98,6 +125,18 @@ def mesh_base_pose(path, base_pose: BasePose | None = None) -> BasePose:
 
     Without either, :class:`InvalidInputError` says how to name the frame, so a world-frame mesh is
     never silently read as base frame.
+
+    Parameters
+    ----------
+    path : str or path
+        The mesh file (its sidecar is ``<path>.json``).
+    base_pose : BasePose, optional
+        An explicit pose.
+
+    Returns
+    -------
+    BasePose
+        The robot base in the mesh's frame (identity for a base-frame mesh).
     """
     path = Path(path)
     if not path.exists():
@@ -143,13 +182,30 @@ def load_environment(
     robot_length: float | None = None,
     source: str | None = None,
 ) -> Environment:
-    """Load a mesh file as a robot-base-frame :class:`Environment`; the frame is resolved by
-    :func:`mesh_base_pose` (explicit ``base_pose``, else the sidecar, else a named error).
+    """Load a mesh file as a robot-base-frame :class:`Environment`.
 
-    With ``robot_length`` (m) the mesh's extent is judged against the robot's length by
-    :func:`~riskplan.collision.geometry.check_metre_scale` before anything else is done:
-    a mesh more than ``MILLIMETRE_FACTOR`` robot lengths across is refused as millimetres.
-    ``source`` names the option or field in that error (default: the path).
+    The frame is resolved by :func:`mesh_base_pose` (explicit ``base_pose``, else the sidecar,
+    else a named error).
+
+    Parameters
+    ----------
+    path : str or path
+        Mesh file (STL/OBJ/PLY/OFF), in metres.
+    base_pose : BasePose, optional
+        The robot base in the mesh's (world) frame; wins over a pose in the sidecar.
+    split : bool
+        One obstacle per connected component (:meth:`Environment.load`).
+    robot_length : float, optional
+        The robot's length (m): the mesh's extent is first judged against it by
+        :func:`~riskplan.collision.geometry.check_metre_scale`, and a mesh more than
+        ``MILLIMETRE_FACTOR`` robot lengths across is refused as millimetres.
+    source : str, optional
+        The option or field named in that error (default: the path).
+
+    Returns
+    -------
+    Environment
+        The obstacles in the robot base frame.
     """
     env = Environment.load(path, split=split)
     if robot_length is not None:

@@ -146,12 +146,35 @@ def monte_carlo_probability(
     interval: str = "wilson",
     validate: bool = True,
 ) -> MonteCarloEstimate:
-    """Estimate the collision probability of a mixture batch ``(...)`` by sampling.
+    """Estimate the collision probability of a mixture batch by sampling.
 
     ``combine="weighted"``: fraction of points drawn from the mixture that lie inside obstacles
     (what eq. 9 bounds). ``combine="union"``: fraction of trials in which at least one of K
     points, one per component drawn independently, lies inside (what the union bound bounds).
-    ``seed``: int, ``None`` or ``numpy.random.Generator``. Returns a :class:`MonteCarloEstimate`.
+
+    Parameters
+    ----------
+    mixture : NumpyMixture or GaussianMixture
+        Batch shape ``(...)``, ``K`` components in ``d`` dimensions.
+    environment : Environment
+        Obstacles of dimension ``d``.
+    n_samples : int
+        Trials per mixture.
+    combine : str
+        ``"weighted"`` or ``"union"``.
+    seed : int, numpy.random.Generator or None
+        Seed of the draws.
+    confidence : float
+        Two-sided confidence of the interval, in (0, 1).
+    interval : str
+        ``"wilson"`` or ``"clopper-pearson"`` (:func:`binomial_interval`).
+    validate : bool
+        Check the mixture's shapes and values.
+
+    Returns
+    -------
+    MonteCarloEstimate
+        ``probability``, ``low``, ``high`` and ``hits``, each ``(...,)``.
     """
     if combine not in COMBINES:
         raise InvalidInputError(f"combine: expected one of {COMBINES}, got {combine!r}")
@@ -174,8 +197,21 @@ def monte_carlo_probability(
 
 
 def paths_collide(paths, environment: Environment, *, segments: bool = True) -> np.ndarray:
-    """``(...,)`` bool: True where a path ``(..., T, d)`` has a point inside an obstacle or
-    (``segments``) a segment between consecutive points crossing one."""
+    """Whether each path has a point inside an obstacle or (``segments``) a segment crossing one.
+
+    Parameters
+    ----------
+    paths : array_like, (..., T, d)
+        ``T`` points per path.
+    environment : Environment
+        Obstacles of dimension ``d``.
+    segments : bool
+        Also check the straight segments between consecutive points.
+
+    Returns
+    -------
+    numpy.ndarray of bool, (...,)
+    """
     x = np.asarray(paths, dtype=np.float64)
     d = check_environment(environment).dim
     if x.ndim < 2 or x.shape[-1] != d:
@@ -198,11 +234,37 @@ def monte_carlo_trajectory(
     interval: str = "wilson",
     validate: bool = True,
 ) -> MonteCarloEstimate:
-    """Estimate ``P(exists t: x_t in collision)`` for mixtures with batch shape ``(..., T)``.
+    """Estimate ``P(exists t: x_t in collision)`` for a batch of trajectories of mixtures.
 
     Each trial draws every state independently (``combine`` as in
     :func:`monte_carlo_probability`); with ``segments`` the straight segments between
-    consecutive draws are checked as well. Returns estimates of shape ``(...,)``.
+    consecutive draws are checked as well.
+
+    Parameters
+    ----------
+    mixtures : NumpyMixture or GaussianMixture
+        Batch shape ``(..., T)``: ``T`` states along each trajectory.
+    environment : Environment
+        Obstacles of the mixtures' dimension.
+    n_samples : int
+        Trials per trajectory.
+    combine : str
+        ``"weighted"`` or ``"union"``.
+    segments : bool
+        Also check the segments between consecutive draws.
+    seed : int, numpy.random.Generator or None
+        Seed of the draws.
+    confidence : float
+        Two-sided confidence of the interval.
+    interval : str
+        ``"wilson"`` or ``"clopper-pearson"``.
+    validate : bool
+        Check the mixtures' shapes and values.
+
+    Returns
+    -------
+    MonteCarloEstimate
+        Estimates of shape ``(...,)``.
     """
     if combine not in COMBINES:
         raise InvalidInputError(f"combine: expected one of {COMBINES}, got {combine!r}")

@@ -365,7 +365,11 @@ def register_study(plan_app: typer.Typer) -> None:
         scale: str = typer.Option("reduced", help="smoke | reduced | full (docs/validation.md)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the selection and executions."),
     ) -> None:
-        """Calibration of eq. 9/10, the cloud risk and the sampled-body risk against collision rates on the robot."""
+        """Calibration of eq. 9/10, the cloud risk and the sampled-body risk against collision rates on the robot.
+
+        The same study as ``riskplan reproduce --paper mdn --stage robot-risk`` (which also
+        writes its summary to results.json and the report), into OUT of its own.
+        """
         from dataclasses import asdict
 
         from riskplan.app.reproduce.risk_calibration import RISK_STUDY_SCALES, run_risk_study

@@ -37,6 +37,11 @@ def register(plan_app: typer.Typer) -> None:
         max_iterations: int = typer.Option(
             600, "--max-iterations", min=1, help="RRT iterations per tree"
         ),
+        frame: str = typer.Option(
+            "world",
+            "--frame",
+            help="reduced state of the controller and LQG-MP: world | material",
+        ),
     ) -> None:
         """Plan the 3-D needle, select with LQG-MP, optionally check, write OUT/."""
         from rich.console import Console
@@ -52,6 +57,10 @@ def register(plan_app: typer.Typer) -> None:
             raise InvalidInputError(
                 f"--case: expected one of {', '.join(CASE_NAMES)}, got {case!r}"
             )
+        from riskplan.scenarios.needle3d import FRAMES
+
+        if frame not in FRAMES:
+            raise InvalidInputError(f"--frame: expected one of {', '.join(FRAMES)}, got {frame!r}")
         check_output_folder(out, "--out")
         with output_folder(out):
             result = plan_needle3d(
@@ -62,6 +71,7 @@ def register(plan_app: typer.Typer) -> None:
                 check_plans=check_plans,
                 max_iterations=max_iterations,
                 workers=workers or None,
+                frame=frame,
             )
             files = write_outputs(result, out, seed=seed)
         t = result.timings

@@ -10,6 +10,21 @@ import typer
 from riskplan.commands._shared import workers_option
 
 
+def _echo_robot_risk(rr) -> None:
+    """One line for the ``robot-risk`` stage's summary (``None``: the stage did not run)."""
+    if rr is None:
+        return
+    typer.echo(
+        f"mdn robot risk ({rr['scale']}, {100 * rr['share_band']:.0f} % of items in 5-95 %): "
+        + "; ".join(
+            f"{rr[k]['label']} mae "
+            + ("n/a" if rr[k]["mae_band"] is None else f"{100 * rr[k]['mae_band']:.1f}")
+            + f" points, Brier {rr[k]['brier']:.3f}"
+            for k in rr["risks"]
+        )
+    )
+
+
 def register(app: typer.Typer) -> None:
     @app.command()
     def reproduce(
@@ -32,11 +47,18 @@ def register(app: typer.Typer) -> None:
             "success; deformable paper; calibration-needle / calibration-manipulation: one scenario) "
             "| sensitivity (the needle's Fig. 6 against noise and "
             "force scales) | needle3d (the 3-D needle: candidates, LQG-MP estimators, "
-            "executions, interactive figure). Repeat to run several.",
+            "executions, interactive figure) | control-variants (LQG against the UKF and "
+            "iLQR on the selected RRT plans) | robot-risk (chest risks from the learned model "
+            "against the robot's collision rates; MDN paper). Repeat to run several.",
         ),
         calibration_scale: str = typer.Option(
             None,
             "--calibration-scale",
+            help="smoke | reduced | full (default: smoke with --scale smoke, full with --scale paper).",
+        ),
+        robot_risk_scale: str = typer.Option(
+            None,
+            "--robot-risk-scale",
             help="smoke | reduced | full (default: smoke with --scale smoke, full with --scale paper).",
         ),
         out: Path = typer.Option(
@@ -73,6 +95,7 @@ def register(app: typer.Typer) -> None:
                 progress=progress,
                 stages=tuple(stage),
                 calibration_scale=calibration_scale,
+                robot_risk_scale=robot_risk_scale,
             )
         for name, sc in results.get("deformable", {}).items():
             cal = sc.get("calibration")
@@ -114,5 +137,6 @@ def register(app: typer.Typer) -> None:
                 f"{c['paper_iterations']}: "
                 f"{verdict[c['below_after_paper_iterations']]}"
             )
+        _echo_robot_risk(results.get("mdn", {}).get("robot_risk"))
         typer.echo(f"results: {Path(out) / 'results.json'}")
         typer.echo(f"report: {Path(out) / 'report.html'}")

@@ -21,13 +21,13 @@ The last term is the obstacle barrier (optional, ``obstacles``): ``P_j x_t`` the
 ``collision_point_indices``), ``𝒪_t`` the obstacle polygons of step ``t`` in the reduced
 state's coordinates (the reference plan's: held fixed while iterating, as LQG-MP reads them
 at ``y*_t``), ``d_O`` the signed distance to polygon ``O`` (negative inside), ``w`` the
-weight and ``δ`` the length over which it decays (:func:`obstacle_barrier`). Its gradient is
+weight and ``δ`` the length over which it decays (``obstacle_barrier``). Its gradient is
 ``φ'(d) n`` with ``n = ∇d`` the unit normal from the nearest boundary point and
 ``φ'(d) = −φ(d)/δ``; its Hessian is taken in the Gauss–Newton form ``φ''(d) n nᵀ``
 (``φ'' = φ/δ² ≥ 0``, so ``Q_xx`` stays positive semi-definite), which omits
 ``φ'(d) ∇²d = φ'(d) (I − n nᵀ)/|P_j x_t − c|`` where the nearest boundary point ``c`` is a
 vertex (zero along an edge; negative semi-definite since ``φ' < 0``). The goal enters as
-the terminal ``(x_T − g)ᵀ Q_goal (x_T − g)`` (:func:`scenario_terms` builds ``g``,
+the terminal ``(x_T − g)ᵀ Q_goal (x_T − g)`` (``scenario_terms`` (:mod:`riskplan.control.ilqr_cost`) builds ``g``,
 ``Q_goal`` and the obstacles from a scenario).
 
 The expected cost under the linearised noise, ``x_{t+1} = A_t x_t + B_t u_t + m_t``,
@@ -62,6 +62,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from riskplan.control.ilqr_cost import (
+    BARRIER_SCALE,
+    BARRIER_WEIGHT,
+    GOAL_WEIGHT,
+    _make_barrier,
+    obstacle_barrier,
+    scenario_terms,
+    signed_distance,
+)
 from riskplan.control.plan import NominalPlan
 from riskplan.errors import ConvergenceError, InvalidInputError, SimulationError
 
@@ -97,140 +106,10 @@ class ILQRResult:
     n_linearizations: int
 
 
-#: Default barrier weight ``w``: touching an obstacle (``d = 0``) costs as much per step as a
-#: deviation of one Bryson scale from the plan (the tracking cost's unit).
-BARRIER_WEIGHT = 1.0
-#: Default decay length ``δ`` of the barrier, in units of the collision point's Bryson
-#: scale (the deviation the tracking cost tolerates): at ``d = 3 δ`` the barrier is 5 % of
-#: ``w``, so it acts only on plans that pass within a few tolerated deviations of an obstacle.
-BARRIER_SCALE = 1.0
-#: Default goal weight: ``Q_goal = GOAL_WEIGHT / r² I`` on the goal point, ``r`` the goal's
-#: radius, so ending one radius from the goal's centre costs as much as ten Bryson deviations.
-GOAL_WEIGHT = 10.0
-
-
-def signed_distance(points, polygon):
-    """Signed distance of 2-D points to a simple polygon and its derivatives.
-
-    ``d(p) = ± min_e |p − c_e(p)|``, ``c_e`` the nearest point of edge ``e``, negative inside
-    (crossing-number test). Away from the medial axis ``∇d = n = ±(p − c)/|p − c|`` and
-    ``∇²d = (I − n nᵀ)/d`` where the nearest boundary point is a vertex, ``0`` along an edge.
-
-    Parameters
-    ----------
-    points : array_like
-        ``(n, 2)`` points.
-    polygon : array_like
-        ``(m, 2)`` vertices of a simple polygon, in order, not repeated.
-
-    Returns
-    -------
-    d : numpy.ndarray
-        ``(n,)`` signed distances.
-    normal : numpy.ndarray
-        ``(n, 2)`` gradients ``∇d`` (unit vectors).
-    at_vertex : numpy.ndarray
-        ``(n,)`` bool, the nearest boundary point is a vertex (where ``∇²d ≠ 0``).
-    """
-    from riskplan.geometry2d import points_in_polygon
-
-    P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    V = np.asarray(polygon, dtype=np.float64).reshape(-1, 2)
-    a, b = V, np.roll(V, -1, axis=0)
-    e = b - a
-    ee = np.maximum(np.einsum("ij,ij->i", e, e), 1e-300)
-    s = np.clip(np.einsum("nij,ij->ni", P[:, None, :] - a[None], e) / ee, 0.0, 1.0)
-    c = a[None] + s[..., None] * e[None]  # (n, m, 2) nearest points of every edge
-    r = P[:, None, :] - c
-    dist = np.sqrt(np.einsum("nmi,nmi->nm", r, r))
-    j = np.argmin(dist, axis=1)
-    idx = np.arange(len(P))
-    dmin = dist[idx, j]
-    sign = np.where(points_in_polygon(P, V), -1.0, 1.0)
-    normal = sign[:, None] * r[idx, j] / np.maximum(dmin, 1e-300)[:, None]
-    sj = s[idx, j]
-    return sign * dmin, normal, (sj <= 0.0) | (sj >= 1.0)
-
-
-def obstacle_barrier(points, polygons, weight: float = BARRIER_WEIGHT, scale: float = 1.0):
-    """The barrier ``Σ_j Σ_O w exp(−d_O(p_j)/δ)`` of points against obstacle polygons, with
-    its gradient and Gauss–Newton Hessian (module docstring).
-
-    Parameters
-    ----------
-    points : array_like
-        ``(n, 2)`` points ``p_j``.
-    polygons : sequence of array_like
-        Obstacle polygons ``(m_k, 2)``.
-    weight : float
-        ``w`` (cost at ``d = 0``).
-    scale : float
-        ``δ > 0``, the decay length.
-
-    Returns
-    -------
-    value : float
-        The barrier.
-    grad : numpy.ndarray
-        ``(n, 2)``, ``Σ_O φ'(d_O) n_O`` per point.
-    hess : numpy.ndarray
-        ``(n, 2, 2)``, ``Σ_O φ''(d_O) n_O n_Oᵀ`` per point (Gauss–Newton: positive
-        semi-definite; the omitted ``φ'(d) ∇²d`` is :func:`signed_distance`'s curvature).
-    """
-    P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    if not (np.isfinite(scale) and scale > 0 and np.isfinite(weight) and weight >= 0):
-        raise InvalidInputError(
-            f"barrier: expected weight >= 0 and scale > 0, got {weight}, {scale}"
-        )
-    value, grad, hess = 0.0, np.zeros_like(P), np.zeros((len(P), 2, 2))
-    for poly in polygons:
-        d, n, _ = signed_distance(P, poly)
-        phi = weight * np.exp(-d / scale)
-        value += float(phi.sum())
-        grad += (-phi / scale)[:, None] * n
-        hess += (phi / scale**2)[:, None, None] * n[:, :, None] * n[:, None, :]
-    return value, grad, hess
-
-
-@dataclass(frozen=True, eq=False)
-class _Barrier:
-    """The obstacle term over a trajectory: ``obstacles[t]`` the polygons of step ``t``;
-    ``col (k, 2)`` the reduced state's indices of the collision points; the checked points
-    of step ``t`` are ``base[t] + W[t] (x_t[col] − x*_t[col])`` (``base[t] (n, 2)``,
-    ``W[t] (n, k)``; by default the collision points themselves); ``w``, ``δ``."""
-
-    obstacles: tuple
-    col: np.ndarray
-    base: tuple
-    W: tuple
-    ref: np.ndarray
-    weight: float
-    scale: float
-
-    def terms(self, x):
-        """``(value, b_x (T + 1, p), b_xx (T + 1, p, p))`` along ``x (T + 1, p)`` (zero at
-        ``t = 0``: the start is not controlled)."""
-        Tp1, p = x.shape
-        k = len(self.col)
-        bx, bxx, total = np.zeros((Tp1, p)), np.zeros((Tp1, p, p)), 0.0
-        flat = self.col.reshape(-1)
-        for t in range(1, Tp1):
-            if not self.obstacles[t]:
-                continue
-            W = self.W[t]
-            pts = self.base[t] + W @ (x[t][self.col] - self.ref[t][self.col])
-            v, g, h = obstacle_barrier(pts, self.obstacles[t], self.weight, self.scale)
-            total += v
-            bx[t, flat] += (W.T @ g).reshape(-1)
-            hc = np.einsum("ra,rb,rij->aibj", W, W, h).reshape(2 * k, 2 * k)
-            bxx[t][np.ix_(flat, flat)] += hc
-        return total, bx, bxx
-
-
 def _cost(x, u, ref, Q, R, Qf, goal, Qg, barrier=None):
     dx, du = x[:-1] - ref.reduced[:-1], u - ref.controls
     e, g = x[-1] - ref.reduced[-1], x[-1] - goal
-    b = 0.0 if barrier is None else barrier.terms(x)[0]
+    b = 0.0 if barrier is None else barrier.terms(x, derivatives=False)
     return float(
         np.einsum("ti,ij,tj->", dx, Q, dx)
         + np.einsum("ti,ij,tj->", du, R, du)
@@ -277,6 +156,42 @@ def _rollout(sim, plan, x, u, k, K, alpha, lo, hi):
         states.append(y)
         xs.append(xt)
     return NominalPlan(states=tuple(states), controls=us, reduced=np.stack(xs), params=plan.params)
+
+
+def _nominal_linearizer(sim):
+    """``A_t``, ``B_t`` of :func:`~riskplan.control.linearize` on a plan's own parameters."""
+    from riskplan.control.linearize import linearize
+
+    def lin(pl):
+        res = linearize(sim, pl, [pl.params], seed=0)
+        return res.A, res.B
+
+    return lin
+
+
+def _search(sim, cur, A, B, weights, bterms, cost, c_prev, mu, lo, hi):
+    """One iteration's backward passes and line searches (module docstring): the first
+    ``(candidate, its cost, K, μ)`` that lowers the cost below ``c_prev``, raising ``μ``
+    ×10 until one does; ``(None, None, K, μ)`` once ``μ`` reaches :data:`MU_MAX`."""
+    x, u = np.asarray(cur.reduced), np.asarray(cur.controls)
+    T, q = u.shape
+    K = np.zeros((T, q, x.shape[1]))
+    while mu < MU_MAX:
+        bw = _backward(A, B, x, u, *weights, mu, *bterms)
+        if bw is None:
+            mu *= 10.0
+            continue
+        k, K = bw
+        for alpha in 0.5 ** np.arange(6):
+            try:
+                cand = _rollout(sim, cur, x, u, k, K, alpha, lo, hi)
+            except (ConvergenceError, SimulationError):
+                continue
+            c = cost(cand)
+            if c < c_prev:
+                return cand, c, K, max(mu / 10.0, 1e-12)
+        mu *= 10.0
+    return None, None, K, mu
 
 
 def ilqr(
@@ -345,8 +260,6 @@ def ilqr(
     ILQRResult
         Plan, feedback, cost history, iterations, convergence flag.
     """
-    from riskplan.control.linearize import linearize
-
     if not isinstance(plan, NominalPlan):
         raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
     T, q = plan.controls.shape
@@ -356,47 +269,13 @@ def ilqr(
     Qf = Q if Q_final is None else np.asarray(Q_final, dtype=np.float64).reshape(p, p)
     Qg = np.zeros((p, p)) if Q_goal is None else np.asarray(Q_goal, dtype=np.float64).reshape(p, p)
     goal = plan.reduced[-1] if goal is None else np.asarray(goal, dtype=np.float64).reshape(p)
-    if linearizer is None:
-
-        def linearizer(pl):
-            lin = linearize(sim, pl, [pl.params], seed=0)
-            return lin.A, lin.B
-
+    linearizer = linearizer or _nominal_linearizer(sim)
     barrier = None
     if obstacles is not None:
-        obstacles = tuple(
-            tuple(np.asarray(o, dtype=np.float64).reshape(-1, 2) for o in step)
-            for step in obstacles
-        )
-        idx = np.asarray(points, dtype=np.int64).reshape(-1, 2)
-        if len(obstacles) != T + 1 or idx.min() < 0 or idx.max() >= p:
-            raise InvalidInputError(
-                f"obstacles/points: expected {T + 1} steps of polygons and indices in [0, {p})"
-            )
-        k = len(idx)
-        if body is None:
-            body = [(plan.reduced[t][idx], np.eye(k)) for t in range(T + 1)]
-        if len(body) != T + 1:
-            raise InvalidInputError(f"body: expected {T + 1} steps, got {len(body)}")
-        base = tuple(np.asarray(b, dtype=np.float64).reshape(-1, 2) for b, _ in body)
-        Ws = tuple(
-            np.asarray(w, dtype=np.float64).reshape(len(b_), k) for b_, (_, w) in zip(base, body)
-        )
-        barrier = _Barrier(
-            obstacles,
-            idx,
-            base,
-            Ws,
-            np.asarray(plan.reduced),
-            float(barrier_weight),
-            float(barrier_scale),
-        )
-        obstacle_barrier(np.zeros((1, 2)), (), barrier.weight, barrier.scale)  # checks w, δ
+        barrier = _make_barrier(plan, obstacles, points, body, barrier_weight, barrier_scale)
 
-    def terms(x):
-        if barrier is None:
-            return np.zeros((T + 1, p)), np.zeros((T + 1, p, p))
-        return barrier.terms(x)[1:]
+    def terms(x):  # the barrier's gradient and Hessian along x
+        return barrier.terms(x)[1:] if barrier else (np.zeros((T + 1, p)), np.zeros((T + 1, p, p)))
 
     def cost(pl):
         return _cost(pl.reduced, pl.controls, ref, Q, R, Qf, goal, Qg, barrier)
@@ -409,26 +288,11 @@ def ilqr(
     for _ in range(max_iter):
         A, B = linearizer(cur)
         n_lin += 1
-        x, u = np.asarray(cur.reduced), np.asarray(cur.controls)
-        bx, bxx = terms(x)
-        accepted = False
-        while mu < MU_MAX and not accepted:
-            bw = _backward(A, B, x, u, ref, Q, R, Qf, goal, Qg, mu, bx, bxx)
-            if bw is None:
-                mu *= 10.0
-                continue
-            k, K = bw
-            for alpha in 0.5 ** np.arange(6):
-                try:
-                    cand = _rollout(sim, cur, x, u, k, K, alpha, lo, hi)
-                except (ConvergenceError, SimulationError):
-                    continue
-                c = cost(cand)
-                if c < costs[-1]:
-                    accepted = True
-                    break
-            mu = max(mu / 10.0, 1e-12) if accepted else mu * 10.0
-        if not accepted:
+        x = np.asarray(cur.reduced)
+        cand, c, K, mu = _search(
+            sim, cur, A, B, (ref, Q, R, Qf, goal, Qg), terms(x), cost, costs[-1], mu, lo, hi
+        )
+        if cand is None:
             converged = True  # no descent direction left at any regularisation
             break
         cur = cand
@@ -443,70 +307,6 @@ def ilqr(
         iterations=n_lin,
         converged=converged,
         n_linearizations=n_lin,
-    )
-
-
-def scenario_terms(
-    sim,
-    plan: NominalPlan,
-    *,
-    goal_weight: float = GOAL_WEIGHT,
-    barrier_weight: float = BARRIER_WEIGHT,
-    barrier_scale: float = BARRIER_SCALE,
-) -> dict:
-    """The goal and obstacle terms of :func:`ilqr` read from a 2-D scenario, in the reduced
-    state's coordinates as LQG-MP reads them (:mod:`riskplan.control.lqgmp`).
-
-    * goal ``g``: ``x*_T`` with the goal point (``goal_point_indices``) moved to the centre
-      of the goal polygon at ``y*_T`` (``state_goal``, else ``goal``; the mean of its
-      vertices), ``Q_goal = goal_weight / r² I`` on the goal point, ``r`` the polygon's mean
-      vertex distance from that centre (the goal disk's radius);
-    * obstacles of every step ``t`` at ``y*_t`` (``state_obstacles``, else ``obstacles``),
-      checked at the body's points (:func:`~riskplan.control.lqgmp.body_points`: the
-      collision points, or the outline a scenario declares), ``w = barrier_weight``,
-      ``δ = barrier_scale ×`` the mean Bryson scale of the collision points
-      (``sim.state_scale``; 1 where none is declared).
-
-    Parameters
-    ----------
-    sim : Simulator
-        A 2-D scenario.
-    plan : NominalPlan
-        The reference plan.
-    goal_weight, barrier_weight, barrier_scale : float
-        :data:`GOAL_WEIGHT`, :data:`BARRIER_WEIGHT`, :data:`BARRIER_SCALE`.
-
-    Returns
-    -------
-    dict
-        Keyword arguments of :func:`ilqr`: ``goal``, ``Q_goal``, ``obstacles``, ``points``,
-        ``body``, ``barrier_weight``, ``barrier_scale``.
-    """
-    from riskplan.control.lqgmp import _weights, body_points, point_indices
-
-    col, gidx = point_indices(sim)
-    p = plan.reduced.shape[1]
-    hook = getattr(sim, "state_goal", None) or sim.goal
-    poly = np.asarray(hook(plan.states[-1]), dtype=np.float64).reshape(-1, 2)
-    centre = poly.mean(axis=0)
-    r = float(np.mean(np.linalg.norm(poly - centre, axis=1)))
-    goal = np.array(plan.reduced[-1], dtype=np.float64)
-    goal[gidx] = centre
-    Qg = np.zeros((p, p))
-    Qg[gidx, gidx] = goal_weight / r**2
-    ohook = getattr(sim, "state_obstacles", None) or sim.obstacles
-    obstacles = [ohook(y) for y in plan.states]
-    body = [_weights(body_points(sim, plan, t, col), len(col))[:2] for t in range(plan.n_steps + 1)]
-    scale = getattr(sim, "state_scale", None)
-    unit = 1.0 if scale is None else float(np.mean(np.asarray(scale)[col]))
-    return dict(
-        goal=goal,
-        Q_goal=Qg,
-        obstacles=obstacles,
-        points=col,
-        body=body,
-        barrier_weight=float(barrier_weight),
-        barrier_scale=float(barrier_scale) * unit,
     )
 
 
@@ -541,7 +341,7 @@ def tracking_controller(
         The goal term of :func:`ilqr`.
     terms : dict, optional
         More keyword arguments of :func:`ilqr` (the goal and obstacle terms of
-        :func:`scenario_terms`; they take precedence over ``goal``, ``Q_goal``).
+        ``scenario_terms`` (:mod:`riskplan.control.ilqr_cost`); they take precedence over ``goal``, ``Q_goal``).
     max_iter : int
         iLQR iterations at most.
     n_samples : int

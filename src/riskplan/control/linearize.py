@@ -1,10 +1,13 @@
-"""Numerical linearisation of a simulator along a nominal plan (deformable-planning paper,
+r"""Numerical linearisation of a simulator along a nominal plan (deformable-planning paper,
 Patil, van den Berg & Alterovitz, RSS 2011, section IV-B, eq. 4).
 
 Deviation model, ``t = 0 .. T-1`` with ``T = ℓ`` the number of plan steps:
 
-    x̄_{t+1} = A_t x̄_t + B_t ū_t + m_t,      m_t ~ N(0, M_t)
-    z̄_{t+1} = H_t x̄_{t+1} + n_t,           n_t ~ N(0, N_t)
+.. math::
+
+    \bar x_{t+1} = A_t \bar x_t + B_t \bar u_t + m_t, \qquad m_t \sim \mathcal N(0, M_t)
+
+    \bar z_{t+1} = H_t \bar x_{t+1} + n_t, \qquad n_t \sim \mathcal N(0, N_t)
 
 with ``x̄_t = x_t − x*_t``, ``ū_t = u_t − u*_t``; ``H[t]`` is the observation matrix of the
 measurement taken after step ``t`` (the same indexing as :func:`~riskplan.control.kalman_gains`).
@@ -16,7 +19,7 @@ Estimation, per step ``t`` (each run restarts the simulator from a stored plan s
   (giving ``x*_t + x̄^k_t``), then ``u*_t`` (giving ``x*_{t+1} + x̄^k_{t+1}``). With the
   deviations as columns of ``X_t (p, K)`` and ``X_{t+1} (p, K)``,
 
-      A_t = A_prior + (X_{t+1} − A_prior X_t) X_t⁺
+  .. math:: A_t = A_{\mathrm{prior}} + (X_{t+1} - A_{\mathrm{prior}} X_t)\, X_t^{+}
 
   (``X_t⁺`` the Moore–Penrose pseudo-inverse, singular values below ``rcond · σ_max``
   dropped). With ``a_prior="zero"`` this is the paper's ``A_t = X_{t+1} X_t⁺``; the default

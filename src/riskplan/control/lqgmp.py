@@ -92,7 +92,7 @@ from riskplan.control.lqgmp_common import (
     METHODS,
     LQGMPResult,
     _check_propagation,
-    _factor,
+    _closed_loop_draws,
     _mix,
     _sigma_step,
     _truncation_step,
@@ -327,14 +327,10 @@ def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, col, goal_idx, n, seed
 
     gen = as_generator(seed)
     T = plan.n_steps
-    nz = F.shape[1] // 2
     n = int(n)
-    xi = np.zeros((n, 2 * nz))
-    xi[:, :nz] = gen.standard_normal((n, nz)) @ _factor(controller.P0).T
     alive = np.ones(n, dtype=bool)
     free = np.ones(T)
-    for t in range(T):
-        xi = xi @ F[t].T + dm[t] + gen.standard_normal((n, 2 * nz)) @ _factor(Qn[t]).T
+    for t, xi in _closed_loop_draws(gen, n, T, controller.P0, F, dm, Qn):
         polys = _obstacles(sim, plan.states[t + 1])
         if not len(polys):
             continue

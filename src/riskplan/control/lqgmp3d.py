@@ -26,6 +26,18 @@ parallelepipeds (:class:`riskplan.geometry3d.ConvexBody`) — with the three met
 
 ``P(goal)``: draws of the final position in the deformed target (after truncation for
 ``"truncation"``). ``P(success) = P(no collision) · P(goal)``.
+
+**A target that moves with the robot** (``goal_motion=True``, where ``sim`` has
+``goal_jacobian(state, params) (3, p)``; off by default): the needle pushes the tissue where its tip is,
+so the deformed target's centre is itself a function of the final state, ``c(x_T) ≈
+c* + J δx_T``. Success is the tip in the target *as deformed in that execution*, so the
+goal test draws the tip's position relative to the moved centre, ``x*_T + (P − J) δx_T``
+(``P`` picks the position), against the plan's deformed target (its shape change, second
+order, is left out). Off: the target fixed where the plan leaves it. Measured on the 3-D
+needle (docs/results.md): the co-motion is real (``J`` matches a regression of the
+executions' target centres on their tips), but switched on it made the estimates
+optimistic on 4 of 6 plans, because the linear model also under-predicts the tip's final
+spread by about as much as the co-motion takes off; off, the two cancel.
 """
 
 from __future__ import annotations
@@ -39,6 +51,7 @@ from riskplan.control.lqgmp_common import (
     METHODS,
     LQGMPResult,
     _check_propagation,
+    _closed_loop_draws,
     _factor,
     _truncate,
     joint_covariances,
@@ -83,11 +96,15 @@ def lqgmp_3d(
     cutoff: float | None = None,
     drift: bool = False,
     seed=None,
+    goal_motion: bool = False,
 ) -> LQGMPResult:
     """LQG-MP ``P(success)`` of ``plan`` under ``controller`` against 3-D convex obstacles
     (module docstring). ``sim`` provides ``obstacles(state)`` and ``goal(state)`` as
-    :class:`~riskplan.geometry3d.ConvexBody` and ``goal_point_indices`` (3 indices of x, the
-    position; also the collision point). Arguments as :func:`riskplan.control.lqgmp.lqgmp`."""
+    :class:`~riskplan.geometry3d.ConvexBody` (``state_obstacles`` / ``state_goal`` in the
+    reduced state's coordinates where it has them: the needle's material frame) and ``goal_point_indices`` (3 indices of x, the
+    position; also the collision point). Arguments as :func:`riskplan.control.lqgmp.lqgmp`;
+    ``goal_motion``: the target moves with the final state where ``sim`` has
+    ``goal_jacobian`` (module docstring)."""
     from riskplan.collision import DEFAULT_CUTOFF
 
     cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
@@ -106,12 +123,15 @@ def lqgmp_3d(
     cov[0, :nz, :nz] = controller.P0
     mu = np.zeros(2 * nz)
     S = cov[0].copy()
+    E = _goal_map(sim, plan, pos, 2 * nz, goal_motion)
     if method == "sampling":
         for t in range(T):
             mean[t + 1] = F[t] @ mean[t] + dm[t]
             cov[t + 1] = F[t] @ cov[t] @ F[t].T + Qn[t]
         _check_propagation(mean, cov)
-        return _sampled(sim, plan, controller, F, Qn, dm, mean, cov, pos, int(n_goal_samples), gen)
+        return _sampled(
+            sim, plan, controller, F, Qn, dm, mean, cov, pos, int(n_goal_samples), gen, E
+        )
     free = np.ones(T)
     k3 = chi2(3)
     for t in range(T):
@@ -120,7 +140,7 @@ def lqgmp_3d(
         S = 0.5 * (S + S.T)
         _check_propagation(mu[None], S[None], t + 1)
         y = plan.states[t + 1]
-        bodies = sim.obstacles(y)
+        bodies = _obstacles(sim, y)
         centre = plan.reduced[t + 1][pos] + mu[pos]
         Sp = _point_cov(S, pos)
         if not bodies:
@@ -169,13 +189,13 @@ def lqgmp_3d(
         mean[t + 1], cov[t + 1] = mu, S
     _check_propagation(mean, cov)
     p_free = float(np.prod(free))
-    Sx = cov[T][np.ix_(pos, pos)]
+    Sx = E @ cov[T] @ E.T
     xT = (
         plan.reduced[T][pos]
-        + mean[T][pos]
-        + gen.standard_normal((int(n_goal_samples), 3)) @ _factor(Sx).T
+        + E @ mean[T]
+        + gen.standard_normal((int(n_goal_samples), 3)) @ _factor(0.5 * (Sx + Sx.T)).T
     )
-    p_goal = float(sim.goal(plan.states[T]).contains(xT).mean())
+    p_goal = float(_goal(sim, plan.states[T]).contains(xT).mean())
     return LQGMPResult(
         p_success=p_free * p_goal,
         p_collision_free=p_free,
@@ -187,27 +207,51 @@ def lqgmp_3d(
     )
 
 
-def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, pos, n, gen) -> LQGMPResult:
+def _obstacles(sim, state):
+    """The obstacles in the reduced state's coordinates: ``sim.state_obstacles`` where the
+    simulator defines it (the needle's material frame), else ``sim.obstacles``."""
+    hook = getattr(sim, "state_obstacles", None)
+    return hook(state) if callable(hook) else sim.obstacles(state)
+
+
+def _goal(sim, state):
+    """The target in the reduced state's coordinates (``sim.state_goal`` where defined)."""
+    hook = getattr(sim, "state_goal", None)
+    return hook(state) if callable(hook) else sim.goal(state)
+
+
+def _goal_map(sim, plan, pos, n2: int, goal_motion: bool) -> np.ndarray:
+    """``E (3, 2n)``: the final tip position relative to the (moving) target centre as a
+    function of the joint deviation, ``P − J`` on the state block (module docstring)."""
+    E = np.zeros((3, n2))
+    E[np.arange(3), pos] = 1.0
+    jac = getattr(sim, "goal_jacobian", None) if goal_motion else None
+    if jac is not None:
+        J = np.asarray(jac(plan.states[-1], plan.params), dtype=np.float64)
+        p = plan.reduced.shape[1]
+        if J.shape != (3, p) or not np.all(np.isfinite(J)):
+            raise InvalidInputError(f"sim.goal_jacobian: expected a finite (3, {p}) matrix")
+        E[:, :p] -= J
+    return E
+
+
+def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, pos, n, gen, E) -> LQGMPResult:
     T = plan.n_steps
-    nz = F.shape[1] // 2
-    xi = np.zeros((n, 2 * nz))
-    xi[:, :nz] = gen.standard_normal((n, nz)) @ _factor(controller.P0).T
     alive = np.ones(n, dtype=bool)
     free = np.ones(T)
-    for t in range(T):
-        xi = xi @ F[t].T + dm[t] + gen.standard_normal((n, 2 * nz)) @ _factor(Qn[t]).T
+    for t, xi in _closed_loop_draws(gen, n, T, controller.P0, F, dm, Qn):
         before = int(alive.sum())
         if before == 0:
             free[t] = 0.0
             continue
         x = plan.reduced[t + 1][pos] + xi[:, pos]
         hit = np.zeros(n, dtype=bool)
-        for b in sim.obstacles(plan.states[t + 1]):
+        for b in _obstacles(sim, plan.states[t + 1]):
             hit |= b.contains(x)
         alive &= ~hit
         free[t] = float(alive.sum()) / before
-    xT = plan.reduced[T][pos] + xi[:, pos]
-    in_goal = sim.goal(plan.states[T]).contains(xT)
+    xT = plan.reduced[T][pos] + xi @ E.T
+    in_goal = _goal(sim, plan.states[T]).contains(xT)
     n_free = int(alive.sum())
     p_goal = float(in_goal[alive].mean()) if n_free else float(in_goal.mean())
     return LQGMPResult(

@@ -1,8 +1,22 @@
-"""What LQG-MP's 2-D and 3-D estimates share: the methods, the result, the joint
+r"""What LQG-MP's 2-D and 3-D estimates share: the methods, the result, the joint
 recursion of true and estimated state, and the Gaussian helpers (truncation by a half-space,
 the propagation check, the eigen-factor), and the 2-D per-step helpers of the sigma and
 truncation methods. :mod:`riskplan.control.lqgmp` and :mod:`riskplan.control.lqgmp3d` both
-build on it."""
+build on it.
+
+The truncation method (Patil, van den Berg & Alterovitz, RSS 2011, section IV-D) conditions
+the joint Gaussian ``N(μ, Σ)`` on each half-space ``cᵀξ ≤ b`` in turn by moment matching of
+the truncated normal (``_truncate``): with ``σ² = cᵀΣc``, ``α = (b − cᵀμ)/σ`` and
+``λ = φ(α)/Φ(α)``,
+
+.. math::
+
+    \mu' = \mu - \frac{\lambda}{\sigma} \Sigma c, \qquad
+    \Sigma' = \Sigma - \frac{\alpha \lambda + \lambda^2}{\sigma^2} \Sigma c c^\top \Sigma
+
+so later steps see only the trajectories that survived. Each step's bound is
+``p_t = Σ_j (1 − Φ(b_j))`` over the half-spaces of the body points' free regions (taken before
+the step's truncations), and ``P(collision free) = ∏_t (1 − min(1, p_t))``."""
 
 from __future__ import annotations
 
@@ -117,6 +131,19 @@ def _factor(S: np.ndarray) -> np.ndarray:
     """``V`` with ``V Vᵀ = S`` for a symmetric positive semi-definite ``S`` (eigen-factor)."""
     w, v = np.linalg.eigh(0.5 * (S + S.T))
     return v * np.sqrt(np.clip(w, 0.0, None))
+
+
+def _closed_loop_draws(gen, n: int, T: int, P0, F, dm, Qn):
+    """``n`` draws of the closed loop's joint deviation ``xi = (x - x̄, x̂ - x̄)`` step by step
+    (``method="sampling"`` of both LQG-MP estimators): ``xi_0 = (N(0, P0), 0)``,
+    ``xi_{t+1} = F_t xi_t + dm_t + N(0, Qn_t)``; yields ``(t, xi_{t+1})``, ``xi (n, 2 nz)``,
+    for ``t = 0 .. T-1``, drawing from ``gen`` in that order."""
+    nz = F.shape[1] // 2
+    xi = np.zeros((n, 2 * nz))
+    xi[:, :nz] = gen.standard_normal((n, nz)) @ _factor(P0).T
+    for t in range(T):
+        xi = xi @ F[t].T + dm[t] + gen.standard_normal((n, 2 * nz)) @ _factor(Qn[t]).T
+        yield t, xi
 
 
 def _regularised(Sp: np.ndarray) -> np.ndarray | None:

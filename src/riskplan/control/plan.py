@@ -115,9 +115,19 @@ class NominalPlan:
         return cls(states=tuple(states), controls=u, reduced=np.stack(xs), params=params)
 
     def reframed(self, sim) -> NominalPlan:
-        """The same plan (states, controls, parameters) with ``reduced`` recomputed by
-        ``sim.reduced``: for a simulator whose reduced state is another frame of the same
-        states (:meth:`riskplan.scenarios.needle.NeedleScenario.with_frame`)."""
+        """The same plan (states, controls, parameters) with ``reduced`` recomputed by ``sim.reduced``.
+
+        For a simulator whose reduced state is another frame of the same states
+        (:meth:`riskplan.scenarios.needle.NeedleScenario.with_frame`).
+
+        Parameters
+        ----------
+        sim : Simulator
+
+        Returns
+        -------
+        NominalPlan
+        """
         xs = np.stack([np.asarray(sim.reduced(y), dtype=np.float64) for y in self.states])
         return NominalPlan(
             states=self.states, controls=self.controls, reduced=xs, params=self.params

@@ -49,6 +49,7 @@ __all__ = [
     "BETA",
     "KAPPA",
     "execution_ukf",
+    "material_measurement",
     "sigma_points",
     "ukf_step",
     "unscented_transform",
@@ -214,6 +215,44 @@ def ukf_step(
     return x, Pn
 
 
+def material_measurement(sim, plan):
+    """The measurement of a simulator whose reduced state is the material pose (the needle
+    with ``frame="material"``), as a function of the reduced state, or ``None`` for others.
+
+    ``h_t(ξ) = measure(y(x*_t + ξ)) − measure(y*_t)``, ``y(X)`` the full state whose material
+    pose is ``X`` at step ``t``, its tissue response recomputed under ``plan.params``
+    (``sim.transfer_state``): the world position ``X + u(X; s)`` the sensor sees, nonlinear
+    in ``X`` through the deformation (the EKF uses its Jacobian ``H_t`` at ``ξ = 0``,
+    :meth:`~riskplan.scenarios.needle.NeedleScenario.observation_jacobian`).
+
+    Parameters
+    ----------
+    sim : Simulator
+        The simulator.
+    plan : NominalPlan
+        The plan ``(y*, x*)``.
+
+    Returns
+    -------
+    callable or None
+        ``h(t, xi (p,)) -> (m,)`` for ``1 ≤ t ≤ T``.
+    """
+    import dataclasses
+
+    transfer = getattr(sim, "transfer_state", None)
+    if getattr(sim, "frame", None) != "material" or not callable(transfer):
+        return None
+    zero = np.zeros(sim.obs_dim)
+
+    def h(t, xi):
+        y = plan.states[t]
+        moved = dataclasses.replace(y, material=np.asarray(plan.reduced[t]) + xi)
+        z = sim.measure(transfer(moved, plan.params), noise=zero)
+        return np.asarray(z, dtype=np.float64) - np.asarray(sim.measure(y, noise=zero))
+
+    return h
+
+
 def execution_ukf(sim, plan, controller):
     """The UKF update of :func:`~riskplan.control.execute` (``estimator="ukf"``).
 
@@ -222,7 +261,10 @@ def execution_ukf(sim, plan, controller):
     projection, so it cannot move sigma points of the reduced state). Measurement: the
     simulator's ``h`` about the plan, ``h_t(ξ) = observe(x*_{t+1} + ξ_x) − observe(x*_{t+1})``
     (plus the bias columns of an augmented ``H_t``) for a simulator without a full-state
-    ``measure``, else the linear ``H_t ξ``. The covariance starts at ``controller.P0``.
+    ``measure``; the needle in its material frame: the sensed world position of the
+    material pose ``x*_{t+1} + ξ`` through the tissue's response under the plan's parameters
+    (``material_measurement``); else the linear ``H_t ξ``. The covariance starts at
+    ``controller.P0``.
 
     Parameters
     ----------
@@ -244,6 +286,7 @@ def execution_ukf(sim, plan, controller):
     N = np.broadcast_to(N, (T,) + N.shape[-2:])
     p = plan.reduced.shape[1]
     nonlinear = getattr(sim, "measure", None) is None
+    material = material_measurement(sim, plan)
     state = {"P": np.asarray(controller.P0, dtype=np.float64)}
 
     def observe(x):
@@ -255,6 +298,10 @@ def execution_ukf(sim, plan, controller):
 
             def h(xi):
                 return observe(plan.reduced[t + 1] + xi[:p]) - z0 + H[t][:, p:] @ xi[p:]
+        elif material is not None:
+
+            def h(xi):
+                return material(t + 1, xi[:p]) + H[t][:, p:] @ xi[p:]
         else:
 
             def h(xi):

@@ -113,21 +113,35 @@ def simulate_target(
     robot_toml: str | None = None,
     return_shapes: bool = False,
 ):
-    """The ``S`` clouds of one target configuration.
+    """The ``S`` clouds of one target configuration (MDN paper section III).
+
+    From each of ``S`` random starts the robot moves along a straight path to the target
+    (hysteresis acting on the way); the arrival shape is sampled on its surface and seen by the
+    protocol's cameras with noise.
 
     Parameters
     ----------
-    robot: :class:`~riskplan.robots.TendonRobot`.
-    protocol: the protocol (starts, points, path steps, cameras, surface spacing).
-    target: ``(n_config,)`` target configuration (tendon displacements [m], then rotation [rad]
-        and retraction [m] where the robot has them), within the protocol's limits.
-    seed: int or ``SeedSequence`` of this target.
+    robot : TendonRobot
+        The robot.
+    protocol : Protocol
+        Starts, points, path steps, cameras, surface spacing.
+    target : array_like, (n_config,)
+        Target configuration (tendon displacements [m], then rotation [rad] and retraction [m]
+        where the robot has them), within the protocol's limits.
+    seed : int or numpy.random.SeedSequence
+        Seed of this target.
+    robot_toml : str, optional
+        The robot's TOML text; when given, the body surface geometry is built from it through
+        a per-process cache (workers reuse it across targets).
+    return_shapes : bool
+        Also return the arrival shapes.
 
     Returns
     -------
-    dict with ``points (S, P, 3) float32`` (base frame, m), ``tips (S, 3)``,
-    ``starts (S, n_config)``, ``tensions (S, m)`` (N, on arrival)
-    and, with ``return_shapes``, the arrival ``shape`` (RodShape batch, base frame).
+    dict
+        ``points (S, P, 3) float32`` (base frame, m), ``tips (S, 3)``, ``starts (S, n_config)``,
+        ``tensions (S, m)`` (N, on arrival) and, with ``return_shapes``, the arrival ``shape``
+        (a batch of rod shapes, base frame).
     """
     from riskplan.robots.cameras import capture
     from riskplan.robots.geometry import BodyGeometry, sample_surface
@@ -259,29 +273,44 @@ def generate_dataset(
 ) -> Path:
     """Generate (or resume) one split of a data set into the HDF5 file ``out``.
 
+    Resuming needs the same robot, protocol, split and seed, else :class:`DataFormatError`.
+
     Parameters
     ----------
-    robot: a :class:`~riskplan.robots.TendonRobot` or a robot name/path for ``load_robot``.
-    preset: preset name (``"paper"``, ``"small"``, ``"tiny"``; adapted to the robot by
+    robot : TendonRobot or str or path
+        A :class:`~riskplan.robots.TendonRobot` or a robot name/path for ``load_robot``.
+    preset : str or Protocol
+        Preset name (``"paper"``, ``"small"``, ``"tiny"``; adapted to the robot by
         :func:`~riskplan.datasets.protocol.protocol_for_robot`), a :class:`Protocol` or its JSON
         (taken as given).
-    out: output file. Work in progress lives in ``<out>.partial`` and is renamed onto ``out``
+    out : str or path
+        Output file. Work in progress lives in ``<out>.partial`` and is renamed onto ``out``
         when every configuration is done.
-    split: ``"train"`` or ``"test"`` (disjoint sets of targets of the same protocol).
-    seed: master seed of the starts, hysteresis variation and camera noise.
-    workers, backend, ray_address: parallel map (:func:`riskplan.parallel.imap_tasks`).
-    progress: ``progress(done, total)`` after each finished configuration.
-    overwrite: replace an existing ``out`` / ``<out>.partial`` made with other settings.
-    max_new: compute at most this many configurations in this call and leave the rest for a
+    split : str
+        ``"train"`` or ``"test"`` (disjoint sets of targets of the same protocol).
+    seed : int
+        Master seed of the starts, hysteresis variation and camera noise.
+    workers, backend, ray_address
+        Parallel map (:func:`riskplan.parallel.imap_tasks`).
+    progress : callable, optional
+        ``progress(done, total)`` after each finished configuration.
+    overwrite : bool
+        Replace an existing ``out`` / ``<out>.partial`` made with other settings.
+    max_new : int, optional
+        Compute at most this many configurations in this call and leave the rest for a
         later call (time-boxing; a call without it resumes and finishes).
-    min_parallel_clouds: with ``backend="local"``, less work than this many clouds runs in
-        this process: starting a worker pool (process start, imports, compiled kernels) costs
-        several seconds, more than a few hundred clouds take. The data are the same either way.
+    chunksize : int, optional
+        Configurations per task of the parallel map (default: decided by
+        :mod:`riskplan.parallel`).
+    min_parallel_clouds : int
+        With ``backend="local"``, less work than this many clouds runs in this process:
+        starting a worker pool (process start, imports, compiled kernels) costs several seconds,
+        more than a few hundred clouds take. The data are the same either way.
 
     Returns
     -------
-    The path of the finished file, or of the partial file if ``max_new`` stopped early.
-    Resuming needs the same robot, protocol, split and seed, else :class:`DataFormatError`.
+    pathlib.Path
+        The finished file, or the partial file if ``max_new`` stopped early.
     """
     from riskplan.robots import load_robot
 

@@ -129,6 +129,18 @@ class Protocol:
             object.__setattr__(self, "limits", tuple(tuple(float(v) for v in r) for r in lim))
 
     def n_configs(self, split: str) -> int:
+        """Number of target configurations of a split.
+
+        Parameters
+        ----------
+        split : str
+            ``"train"`` or ``"test"``.
+
+        Returns
+        -------
+        int
+            ``n_train`` or ``n_test``.
+        """
         return {"train": self.n_train, "test": self.n_test}[_check_split(split)]
 
     def camera_objects(self):
@@ -137,6 +149,12 @@ class Protocol:
         return tuple(PinholeCamera.from_dict(c) for c in self.cameras)
 
     def to_json(self) -> str:
+        """The protocol as compact JSON (keys sorted; defaults that older files lack are left out).
+
+        Returns
+        -------
+        str
+        """
         d = asdict(self)
         d["cameras"] = [dict(c) for c in self.cameras]
         if not self.scale_by_exposure:
@@ -149,6 +167,17 @@ class Protocol:
 
     @classmethod
     def from_json(cls, text: str) -> Protocol:
+        """Inverse of :meth:`to_json`; unknown keys raise :class:`InvalidInputError` with a suggestion.
+
+        Parameters
+        ----------
+        text : str
+            A JSON object of protocol fields.
+
+        Returns
+        -------
+        Protocol
+        """
         try:
             d = json.loads(text)
         except (TypeError, json.JSONDecodeError) as exc:
@@ -169,12 +198,28 @@ class Protocol:
         return cls(**d)
 
     def example_json(self) -> str:
-        """A compact JSON text of this protocol without the cameras (they default), for help texts."""
+        """A compact JSON text of this protocol without the cameras (they default), for help texts.
+
+        Returns
+        -------
+        str
+        """
         d = json.loads(self.to_json())
         del d["cameras"]
         return json.dumps(d, sort_keys=False)
 
     def replace(self, **changes) -> Protocol:
+        """A copy with some fields changed (validated again).
+
+        Parameters
+        ----------
+        **changes
+            Field values.
+
+        Returns
+        -------
+        Protocol
+        """
         return replace(self, **changes)
 
 
@@ -325,8 +370,20 @@ def _check_split(split: str) -> str:
 
 
 def grid(limits, levels: int) -> np.ndarray:
-    """All grid configurations ``(levels^m, m)``: ``linspace(low_i, high_i, levels)`` per tendon,
-    lexicographic order (last tendon fastest). ``limits``: ``(m, 2)`` [low, high] (m)."""
+    """All grid configurations: ``linspace(low_i, high_i, levels)`` per variable.
+
+    Parameters
+    ----------
+    limits : array_like, (m, 2)
+        ``[low, high]`` per configuration variable (m; rad for a rotation).
+    levels : int
+        Grid points per variable.
+
+    Returns
+    -------
+    numpy.ndarray, (levels**m, m)
+        Lexicographic order (last variable fastest).
+    """
     lim = np.asarray(limits, dtype=np.float64)
     if lim.ndim != 2 or lim.shape[1] != 2 or np.any(lim[:, 1] < lim[:, 0]):
         raise InvalidInputError(
@@ -338,10 +395,24 @@ def grid(limits, levels: int) -> np.ndarray:
 
 
 def target_configurations(protocol: Protocol, limits, split: str) -> np.ndarray:
-    """Target configurations ``(C, m)`` of ``split`` (sorted in grid order).
+    """Target configurations of ``split``.
 
     A random subset (seed ``protocol.split_seed``) of ``n_train + n_test`` grid points: the
     first ``n_train`` of the permutation are the training split, the next ``n_test`` the test split.
+
+    Parameters
+    ----------
+    protocol : Protocol
+        Grid levels, split sizes and seed.
+    limits : array_like, (m, 2)
+        ``[low, high]`` per configuration variable.
+    split : str
+        ``"train"`` or ``"test"``.
+
+    Returns
+    -------
+    numpy.ndarray, (C, m)
+        Sorted in grid order.
     """
     _check_split(split)
     g = grid(limits, protocol.grid_levels)
@@ -362,14 +433,40 @@ def target_configurations(protocol: Protocol, limits, split: str) -> np.ndarray:
 
 
 def random_starts(limits, n: int, rng) -> np.ndarray:
-    """``n`` starting configurations ``(n, m)``, uniform within ``limits (m, 2)``."""
+    """Starting configurations, uniform within ``limits``.
+
+    Parameters
+    ----------
+    limits : array_like, (m, 2)
+        ``[low, high]`` per configuration variable.
+    n : int
+        Number of starts.
+    rng : numpy.random.Generator
+        Source of the draws.
+
+    Returns
+    -------
+    numpy.ndarray, (n, m)
+    """
     lim = np.asarray(limits, dtype=np.float64)
     return lim[:, 0] + (lim[:, 1] - lim[:, 0]) * rng.random((n, lim.shape[0]))
 
 
 def straight_path(start, target, steps: int) -> np.ndarray:
-    """``(steps, m)`` points of the straight line ``d(t) = start + t (target - start)``, ``t in [0, 1]``;
-    the first row is ``start`` and the last exactly ``target``."""
+    """Points of the straight line ``d(t) = start + t (target - start)``, ``t in [0, 1]``.
+
+    Parameters
+    ----------
+    start, target : array_like, (m,)
+        End configurations.
+    steps : int
+        Number of points.
+
+    Returns
+    -------
+    numpy.ndarray, (steps, m)
+        The first row is ``start`` and the last exactly ``target``.
+    """
     start = np.asarray(start, dtype=np.float64)
     target = np.asarray(target, dtype=np.float64)
     t = np.linspace(0.0, 1.0, steps)[:, None]

@@ -305,11 +305,28 @@ class Dataset:
         return self._robot
 
     def cloud(self, i: int) -> np.ndarray:
-        """All points of configuration ``i``, ``(S * P, 3)`` float32."""
+        """All points of configuration ``i`` (every start's cloud together).
+
+        Parameters
+        ----------
+        i : int
+            Configuration index, ``0 <= i < C``.
+
+        Returns
+        -------
+        numpy.ndarray of float32, (S * P, 3)
+            Base frame, m.
+        """
         return self.points[i].reshape(-1, 3)
 
     def tip_spread(self) -> np.ndarray:
-        """``(C,)`` RMS distance of the arrival tips from their mean per target (m)."""
+        """Spread of the arrival tips per target: the hysteresis-driven scatter of the data.
+
+        Returns
+        -------
+        numpy.ndarray, (C,)
+            RMS distance of the ``S`` arrival tips from their mean (m).
+        """
         d = self.tips - self.tips.mean(axis=1, keepdims=True)
         return np.sqrt((d**2).sum(-1).mean(-1))
 

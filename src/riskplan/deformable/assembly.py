@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from riskplan.deformable.banded import band_layout
 from riskplan.deformable.mesh import TissueMesh
 from riskplan.errors import InvalidInputError, require
 
@@ -101,7 +102,6 @@ class TangentPattern:
 
     def __init__(self, triangles: np.ndarray, free_dofs: np.ndarray, n_dofs: int):
         from scipy import sparse
-        from scipy.sparse.csgraph import reverse_cuthill_mckee
 
         dofs = (2 * triangles[:, :, None] + np.arange(2)[None, None, :]).reshape(-1, 6)  # (T, 6)
         self.element_dofs = dofs
@@ -124,16 +124,9 @@ class TangentPattern:
         pattern = sparse.csc_matrix(
             (np.ones(self._nnz), self._csc_indices, self._csc_indptr), shape=self._csc_shape
         )
-        perm = reverse_cuthill_mckee(pattern.tocsr(), symmetric_mode=True)
-        pos = np.empty(nf, dtype=np.int64)
-        pos[perm] = np.arange(nf)
-        pr, pc = pos[r], pos[c]
-        upper = pr <= pc
-        bw = int(np.max(pc[upper] - pr[upper])) if np.any(upper) else 0
-        self.band_perm = perm
+        self.band_perm, bw, upper, self._band_slot = band_layout(pattern, r, c, nf)
         self.bandwidth = bw
         self._band_sel = self._keep[upper]
-        self._band_slot = (bw + pr[upper] - pc[upper]) * nf + pc[upper]
         self._band_size = (bw + 1) * nf
 
     def csc(self, Ke_flat: np.ndarray):

@@ -7,6 +7,48 @@ from __future__ import annotations
 import numpy as np
 
 
+def band_layout(pattern, r: np.ndarray, c: np.ndarray, nf: int):
+    """Reverse Cuthill-McKee order of a symmetric sparsity ``pattern`` ``(nf, nf)`` and where
+    its entries ``(r, c)`` go in LAPACK's upper band layout.
+
+    Returns
+    -------
+    perm : numpy.ndarray
+        ``(nf,)`` the order.
+    bandwidth : int
+        Of ``pattern[perm][:, perm]``.
+    upper : numpy.ndarray
+        ``(len(r),)`` bool: the entries on or above the diagonal after the permutation.
+    slot : numpy.ndarray
+        Their index in the flat ``(bandwidth + 1) * nf`` band (row ``bandwidth + i - j`` of
+        column ``j``).
+    """
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    perm = reverse_cuthill_mckee(pattern.tocsr(), symmetric_mode=True)
+    pos = np.empty(nf, dtype=np.int64)
+    pos[perm] = np.arange(nf)
+    pr, pc = pos[r], pos[c]
+    upper = pr <= pc
+    bw = int(np.max(pc[upper] - pr[upper])) if np.any(upper) else 0
+    return perm, bw, upper, (bw + pr[upper] - pc[upper]) * nf + pc[upper]
+
+
+def cached_layout(cache, build, cells: np.ndarray, free_dofs: np.ndarray, n_dofs: int, limit: int):
+    """``build(cells, free_dofs, n_dofs)`` (a model's sparsity and band layout) looked up in
+    the least-recently-used ``cache`` (an ``OrderedDict`` of at most ``limit`` layouts), keyed
+    by the cells and free DOFs: models of one mesh with different materials share one."""
+    key = (cells.shape, cells.tobytes(), free_dofs.tobytes(), int(n_dofs))
+    layout = cache.get(key)
+    if layout is None:
+        layout = cache[key] = build(cells, free_dofs, n_dofs)
+        if len(cache) > limit:
+            cache.popitem(last=False)
+    else:
+        cache.move_to_end(key)
+    return layout
+
+
 class BandedCholeskySolver:
     """``r -> K⁻¹ r`` from the upper banded Cholesky factor ``cb`` of ``K[perm][:, perm]``
     (LAPACK ``pbtrs`` called directly: the wrapper's checks cost more than the solve at

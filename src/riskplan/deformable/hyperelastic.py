@@ -1,13 +1,23 @@
-"""Geometrically nonlinear (hyperelastic) P1 FEM: compressible neo-Hookean and
+r"""Geometrically nonlinear (hyperelastic) P1 FEM: compressible neo-Hookean and
 St Venant-Kirchhoff (paper V-B: "a geometrically nonlinear FEM simulator to accurately
 simulate the large deformations of the object").
 
 Total Lagrangian form. With deformation gradient ``F = I + ∇_X u`` (constant per P1
 element), ``J = det F``, ``I₁ = tr(FᵀF)``, the stored energies (per unit reference area)
 
-* neo-Hookean (2-D, plane strain):  W = μ/2 (I₁ − 2 − 2 ln J) + λ/2 (ln J)²
-  first Piola-Kirchhoff stress  P = μ (F − F⁻ᵀ) + λ ln J F⁻ᵀ
-* St Venant-Kirchhoff:  E = ½(FᵀF − I),  W = μ E:E + λ/2 (tr E)²,  P = F (2 μ E + λ tr E I)
+* neo-Hookean (2-D, plane strain), with its first Piola-Kirchhoff stress:
+
+  .. math::
+
+      W = \tfrac{\mu}{2} (I_1 - 2 - 2 \ln J) + \tfrac{\lambda}{2} (\ln J)^2, \qquad
+      P = \mu (F - F^{-\top}) + \lambda \ln J \, F^{-\top}
+
+* St Venant-Kirchhoff:
+
+  .. math::
+
+      E = \tfrac12 (F^\top F - I), \qquad W = \mu\, E : E + \tfrac{\lambda}{2} (\operatorname{tr} E)^2,
+      \qquad P = F (2 \mu E + \lambda \operatorname{tr} E \, I)
 
 both linearise at ``F = I`` to ``σ = λ tr(ε) I + 2 μ ε``. We use ``(λ, μ) = Material.lame``:
 for ``plane="strain"`` this is the exact plane-strain neo-Hookean model; for
@@ -15,8 +25,14 @@ for ``plane="strain"`` this is the exact plane-strain neo-Hookean model; for
 plane-stress linear elasticity at small strain (a thin-sheet model would need the
 out-of-plane stretch as an extra unknown; we do not model it).
 
-Equilibrium: ``r(u) = f_int(u) − f_ext = 0`` on free DOFs, with
-``f_int,a = Σ_e A_e P_e ∇N_a`` and tangent ``K_{ai,bk} = Σ_e A_e ∂P_iJ/∂F_kL ∇N_aJ ∇N_bL``.
+Equilibrium on the free DOFs (the FEM residual), with its tangent:
+
+.. math::
+
+    r(u) = f_{\mathrm{int}}(u) - f_{\mathrm{ext}} = 0, \qquad
+    f_{\mathrm{int},a} = \sum_e A_e P_e \nabla N_a, \qquad
+    K_{ai,bk} = \sum_e A_e \frac{\partial P_{iJ}}{\partial F_{kL}} \nabla N_{aJ} \nabla N_{bL}
+
 This module is the solver; the pieces are pure functions elsewhere: element kinematics
 (``F``, ``det F``, ``F⁻¹``) in :mod:`.elements`, the laws in :mod:`.laws`, element
 forces/tangents and the sparse layouts in :mod:`.assembly`, banded Cholesky in
@@ -33,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskplan._validation import as_array
+from riskplan._validation import as_array, check_choice, check_instance
 from riskplan.deformable.assembly import (
     TangentPattern,
     element_forces,
@@ -42,12 +58,13 @@ from riskplan.deformable.assembly import (
     neohookean_element_tangents,
     split_dofs,
 )
-from riskplan.deformable.banded import BandedCholeskySolver
+from riskplan.deformable.banded import BandedCholeskySolver, cached_layout
 from riskplan.deformable.elements import deformation_gradients, determinants_and_inverses
 from riskplan.deformable.laws import LAWS, neohookean_energy_and_stress
 from riskplan.deformable.material import Material
 from riskplan.deformable.mesh import TissueMesh
 from riskplan.deformable.nhkernels import (
+    LAPACK_BANDWIDTH,
     CompiledBandSolver,
     band_cholesky,
     band_slots,
@@ -107,16 +124,21 @@ def _norm(x: np.ndarray) -> float:
     return m * float(np.linalg.norm(x / m))
 
 
+def line_search_failure(raise_inverted, J_bad, residual: float, iterations: int):
+    """What a Newton line search that found no acceptable step ends in: ``raise_inverted``
+    raises for the inverted elements of its last trial (``J_bad``, ``None`` if none
+    inverted), else the :class:`~riskplan.errors.ConvergenceError` returned here is raised."""
+    if J_bad is not None:
+        raise_inverted(J_bad, " in every line-search trial")
+    return ConvergenceError(
+        f"Newton line search failed (residual {residual:.3g})",
+        residual=residual,
+        iterations=iterations,
+    )
+
+
 def _tangent_pattern(triangles: np.ndarray, free_dofs: np.ndarray, n_dofs: int) -> TangentPattern:
-    key = (triangles.shape, triangles.tobytes(), free_dofs.tobytes(), int(n_dofs))
-    pattern = _PATTERNS.get(key)
-    if pattern is None:
-        pattern = _PATTERNS[key] = TangentPattern(triangles, free_dofs, n_dofs)
-        if len(_PATTERNS) > _PATTERN_CACHE:
-            _PATTERNS.popitem(last=False)
-    else:
-        _PATTERNS.move_to_end(key)
-    return pattern
+    return cached_layout(_PATTERNS, TangentPattern, triangles, free_dofs, n_dofs, _PATTERN_CACHE)
 
 
 class HyperelasticModel:
@@ -145,12 +167,9 @@ class HyperelasticModel:
         atol: float = 1e-12,
         max_iter: int = 25,
     ):
-        if not isinstance(mesh, TissueMesh):
-            raise InvalidInputError(f"mesh: expected a TissueMesh, got {type(mesh).__name__}")
-        if not isinstance(material, Material):
-            raise InvalidInputError(f"material: expected a Material, got {type(material).__name__}")
-        if law not in LAWS:
-            raise InvalidInputError(f"law: expected one of {tuple(LAWS)}, got {law!r}")
+        check_instance(mesh, TissueMesh, "mesh")
+        check_instance(material, Material, "material")
+        check_choice(law, LAWS, "law")
         self.mesh = mesh
         self.material = material
         self.law = law
@@ -240,7 +259,7 @@ class HyperelasticModel:
         return st
 
     def _evaluate_compiled(self, u_flat: np.ndarray) -> _State:
-        """:meth:`_evaluate` of the neo-Hookean law by :func:`.nhkernels.neohookean_evaluate`
+        """``_evaluate`` of the neo-Hookean law by ``nhkernels.neohookean_evaluate``
         (``st.F`` is not kept: the neo-Hookean tangent needs ``F⁻¹`` and ``ln J`` only)."""
         st = _State()
         st.u = u_flat
@@ -286,16 +305,23 @@ class HyperelasticModel:
 
         pattern = self._pattern
         if self.compiled:
+            lapack = pattern.bandwidth > LAPACK_BANDWIDTH
             slots = getattr(pattern, "_nh_slots", None)
             if slots is None:
-                slots = pattern._nh_slots = band_slots(pattern, self._tri64.shape[0])
+                slots = pattern._nh_slots = band_slots(pattern, self._tri64.shape[0], lapack)
             ab = np.empty(pattern._band_size)
             neohookean_band(
                 st.Finv, st.lnJ, self._Gc, self._areas_c, self._lam, self._mu, slots, ab
             )
-            cb = ab.reshape(-1, pattern.bandwidth + 1)
-            if band_cholesky(cb) == 0:
-                return CompiledBandSolver(cb, pattern.band_perm)
+            if lapack:  # wide bands: LAPACK's blocked pbtrf, as scipy's cholesky_banded calls it
+                (pbtrf,) = scipy.linalg.get_lapack_funcs(("pbtrf",), (ab,))
+                cb, info = pbtrf(ab.reshape(pattern.bandwidth + 1, -1), lower=0, overwrite_ab=1)
+                if info == 0:
+                    return BandedCholeskySolver(cb, pattern.band_perm)
+            else:
+                cb = ab.reshape(-1, pattern.bandwidth + 1)
+                if band_cholesky(cb) == 0:
+                    return CompiledBandSolver(cb, pattern.band_perm)
             Ke = self._element_tangents(st).reshape(-1)
             cb = None
         else:
@@ -327,7 +353,8 @@ class HyperelasticModel:
 
     def energy(self, u) -> float:
         """Stored energy ``Σ_e A_e W(F_e)``; raises :class:`ElementInversionError` if some
-        ``det F ≤ 0`` (for both laws: an inverted element is not a physical state)."""
+        ``det F ≤ 0`` (for both laws: an inverted element is not a physical state).
+        """
         return self._evaluate_checked(u).energy
 
     def internal_forces(self, u) -> np.ndarray:
@@ -414,11 +441,7 @@ class HyperelasticModel:
                     break
                 alpha *= 0.5
             else:
-                if J_bad is not None:
-                    self._raise_inverted(J_bad, " in every line-search trial")
-                raise ConvergenceError(
-                    f"Newton line search failed (residual {rn:.3g})", residual=rn, iterations=it
-                )
+                raise line_search_failure(self._raise_inverted, J_bad, rn, it)
             st, r, rn = st1, r1, rn1
         raise ConvergenceError(
             f"Newton did not converge in {self.max_iter} iterations (residual {rn:.3g}, tolerance {tol:.3g})",

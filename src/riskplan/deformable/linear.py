@@ -106,7 +106,17 @@ class LinearElasticModel:
 
     # ---- construction helpers -------------------------------------------------------
     def with_material(self, material: Material) -> LinearElasticModel:
-        """The same mesh and supports with another material (re-uses the assembly)."""
+        """The same mesh and supports with another material (re-uses the assembly).
+
+        Parameters
+        ----------
+        material : Material
+            Young's modulus and Poisson ratio of the new model.
+
+        Returns
+        -------
+        LinearElasticModel
+        """
         return LinearElasticModel(self.mesh, material, self.fixed_nodes, _parts=self._parts)
 
     @property
@@ -115,25 +125,53 @@ class LinearElasticModel:
 
     # ---- solves ---------------------------------------------------------------------
     def solve_free(self, f_free: np.ndarray) -> np.ndarray:
-        """``K_ff⁻¹ f_free`` for ``f_free (n_free,)`` or ``(n_free, k)`` (no validation)."""
+        """``K_ff⁻¹ f_free``: the free DOFs' displacements (no validation: hot path).
+
+        Parameters
+        ----------
+        f_free : numpy.ndarray, (n_free,) or (n_free, k)
+            Forces at the free DOFs (N), one column per load case.
+
+        Returns
+        -------
+        numpy.ndarray, same shape as ``f_free``
+        """
         if self._inv is not None:
             return self._inv @ f_free
         return self._lu_solve(f_free)
 
     def solve_flat(self, f: np.ndarray) -> np.ndarray:
-        """Displacement ``(2N,)`` for nodal forces ``f (2N,)`` (interleaved), zero
-        displacement at the fixed nodes. Hot path: no validation."""
+        """Displacement for interleaved nodal forces, zero at the fixed nodes (no validation: hot path).
+
+        Parameters
+        ----------
+        f : numpy.ndarray, (2N,)
+            Nodal forces ``(f_x0, f_y0, f_x1, ...)`` (N).
+
+        Returns
+        -------
+        numpy.ndarray, (2N,)
+        """
         u = np.zeros(self._n)
         u[self.free_dofs] = self.solve_free(f[self.free_dofs])
         return u
 
     def solve(self, nodal_forces, fixed_values=None) -> np.ndarray:
-        """Solve ``K u = f`` for ``u (N, 2)``.
+        r"""Solve ``K u = f`` with prescribed displacements at the fixed nodes.
 
-        ``nodal_forces (N, 2)``: forces at all nodes (entries at fixed nodes are ignored;
-        see :meth:`reactions`). ``fixed_values (F, 2)``: prescribed displacements of
-        ``fixed_nodes`` (in sorted node order), default zero:
-        ``u_f = K_ff⁻¹ (f_f − K_fc ū)``.
+        .. math:: u_f = K_{ff}^{-1} (f_f - K_{fc} \bar u)
+
+        Parameters
+        ----------
+        nodal_forces : array_like, (N, 2)
+            Forces at all nodes (entries at fixed nodes are ignored; see :meth:`reactions`).
+        fixed_values : array_like, (F, 2), optional
+            Prescribed displacements ``ū`` of ``fixed_nodes`` (in sorted node order), default zero.
+
+        Returns
+        -------
+        numpy.ndarray, (N, 2)
+            Displacements ``u``.
         """
         f = as_array(nodal_forces, "nodal_forces", shape=(self.mesh.n_nodes, 2)).reshape(-1)
         u = np.zeros(self._n)
@@ -155,8 +193,20 @@ class LinearElasticModel:
         return u.reshape(-1, 2)
 
     def residual(self, u, nodal_forces) -> np.ndarray:
-        """Out-of-balance forces ``(K u − f)`` at the free DOFs, as ``(N, 2)`` with zeros
-        at the fixed nodes."""
+        """Out-of-balance forces ``K u − f`` at the free DOFs.
+
+        Parameters
+        ----------
+        u : array_like, (N, 2)
+            Displacements.
+        nodal_forces : array_like, (N, 2)
+            External forces ``f``.
+
+        Returns
+        -------
+        numpy.ndarray, (N, 2)
+            Zeros at the fixed nodes.
+        """
         r = self.K @ np.asarray(u, dtype=np.float64).reshape(-1) - np.asarray(
             nodal_forces, dtype=np.float64
         ).reshape(-1)
@@ -164,26 +214,75 @@ class LinearElasticModel:
         return r.reshape(-1, 2)
 
     def reactions(self, u) -> np.ndarray:
-        """Support reactions ``(F, 2)`` at the fixed nodes: ``(K u)`` there."""
+        """Support reactions at the fixed nodes: ``(K u)`` there.
+
+        Parameters
+        ----------
+        u : array_like, (N, 2)
+            Displacements.
+
+        Returns
+        -------
+        numpy.ndarray, (F, 2)
+            In sorted fixed-node order.
+        """
         return (self.K @ np.asarray(u, dtype=np.float64).reshape(-1))[self.fixed_dofs].reshape(
             -1, 2
         )
 
     def energy(self, u) -> float:
-        """Strain energy ``½ uᵀ K u``."""
+        """Strain energy ``½ uᵀ K u``.
+
+        Parameters
+        ----------
+        u : array_like, (N, 2)
+            Displacements.
+
+        Returns
+        -------
+        float
+        """
         x = np.asarray(u, dtype=np.float64).reshape(-1)
         return 0.5 * float(x @ (self.K @ x))
 
 
 def element_strains(mesh: TissueMesh, u) -> np.ndarray:
-    """Small strains ``ε = sym ∇u`` ``(T, 2, 2)`` (constant per P1 element) for ``u (N, 2)``."""
+    """Small strains ``ε = sym ∇u`` (constant per P1 element).
+
+    Parameters
+    ----------
+    mesh : TissueMesh
+        The triangle mesh (``T`` elements, ``N`` nodes).
+    u : array_like, (N, 2)
+        Nodal displacements.
+
+    Returns
+    -------
+    numpy.ndarray, (T, 2, 2)
+    """
     G = mesh.shape_gradients  # (T, 3, 2)
     grad = np.einsum("tai,taj->tij", np.asarray(u, dtype=np.float64)[mesh.triangles], G)
     return 0.5 * (grad + np.swapaxes(grad, 1, 2))
 
 
 def element_stresses(mesh: TissueMesh, material: Material, u) -> np.ndarray:
-    """Linear stresses ``σ = λ₂ tr(ε) I + 2 μ ε`` ``(T, 2, 2)`` for ``u (N, 2)``."""
+    r"""Linear stresses per element.
+
+    .. math:: \sigma = \lambda_2 \operatorname{tr}(\varepsilon) I + 2 \mu \varepsilon
+
+    Parameters
+    ----------
+    mesh : TissueMesh
+        The triangle mesh.
+    material : Material
+        Its Lamé parameters ``(λ₂, μ)`` (plane stress or strain).
+    u : array_like, (N, 2)
+        Nodal displacements.
+
+    Returns
+    -------
+    numpy.ndarray, (T, 2, 2)
+    """
     eps = element_strains(mesh, u)
     lam, mu = material.lame
     tr = eps[:, 0, 0] + eps[:, 1, 1]

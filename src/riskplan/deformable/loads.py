@@ -78,10 +78,24 @@ def _scatter(n_nodes: int, idx: np.ndarray, vals: np.ndarray) -> np.ndarray:
 
 
 def point_load(mesh: TissueMesh, points, forces) -> np.ndarray:
-    """Consistent nodal forces ``(N, 2)`` of point forces ``forces (P, 2)`` at reference
-    points ``points (P, 2)`` (P1 shape functions at the points). Points outside the body
-    raise :class:`InvalidInputError`. For repeated loads at the same points use
-    :func:`riskplan.deformable.locate` once and ``Interpolator.spread``."""
+    """Consistent nodal forces of point forces at reference points (P1 shape functions there).
+
+    Points outside the body raise :class:`InvalidInputError`. For repeated loads at the same
+    points use :func:`riskplan.deformable.locate` once and ``Interpolator.spread``.
+
+    Parameters
+    ----------
+    mesh : TissueMesh
+        The triangle mesh.
+    points : array_like, (P, 2)
+        Reference positions.
+    forces : array_like, (P, 2)
+        Forces.
+
+    Returns
+    -------
+    numpy.ndarray, (N, 2)
+    """
     pts = as_array(points, "points", last_dim=2).reshape(-1, 2)
     f = as_array(forces, "forces", last_dim=2).reshape(-1, 2)
     if len(f) != len(pts):
@@ -90,11 +104,24 @@ def point_load(mesh: TissueMesh, points, forces) -> np.ndarray:
 
 
 def body_load(mesh: TissueMesh, body_force, *, refine: int = 1) -> np.ndarray:
-    """Consistent nodal forces ``f_a = ∫ N_a b dx`` ``(N, 2)`` of a body force.
+    r"""Consistent nodal forces of a body force.
 
-    ``body_force`` is a constant ``(2,)`` or a callable ``b(x (Q, 2)) -> (Q, 2)``
-    (force per unit area). Degree-4 quadrature on each element (``refine`` subdivides
-    each element ``refine × refine`` times for rough integrands).
+    .. math:: f_a = \int N_a\, b \,\mathrm{d}x
+
+    Degree-4 quadrature on each element.
+
+    Parameters
+    ----------
+    mesh : TissueMesh
+        The triangle mesh.
+    body_force : array_like, (2,), or callable
+        A constant, or ``b(x (Q, 2)) -> (Q, 2)``; force per unit area.
+    refine : int
+        Subdivide each element ``refine × refine`` times for rough integrands.
+
+    Returns
+    -------
+    numpy.ndarray, (N, 2)
     """
     _check_mesh(mesh)
     bary, w = subdivided_triangle_rule(int(refine))
@@ -113,12 +140,25 @@ def body_load(mesh: TissueMesh, body_force, *, refine: int = 1) -> np.ndarray:
 
 
 def traction_load(mesh: TissueMesh, traction, *, edges=None) -> np.ndarray:
-    """Consistent nodal forces ``f_a = ∫ N_a t ds`` ``(N, 2)`` of a boundary traction.
+    r"""Consistent nodal forces of a boundary traction.
 
-    ``traction`` is a constant ``(2,)`` or a callable ``t(x (Q, 2), n (Q, 2)) -> (Q, 2)``
-    of position and outward unit normal (e.g. ``σ n`` for a stress field ``σ``).
-    ``edges (E, 2)`` restricts the load to some boundary edges (default: all of them).
+    .. math:: f_a = \int N_a\, t \,\mathrm{d}s
+
     3-point Gauss-Legendre per edge (exact for tractions up to degree 4 in arc length).
+
+    Parameters
+    ----------
+    mesh : TissueMesh
+        The triangle mesh.
+    traction : array_like, (2,), or callable
+        A constant, or ``t(x (Q, 2), n (Q, 2)) -> (Q, 2)`` of position and outward unit normal
+        (e.g. ``σ n`` for a stress field ``σ``).
+    edges : array_like of int, (E, 2), optional
+        Restrict the load to these boundary edges (default: all of them).
+
+    Returns
+    -------
+    numpy.ndarray, (N, 2)
     """
     _check_mesh(mesh)
     e = mesh.boundary_edges if edges is None else np.asarray(edges, dtype=np.int64).reshape(-1, 2)
@@ -143,13 +183,30 @@ def _bump(r2: np.ndarray, radius: float) -> np.ndarray:
 
 
 def patch_weights(mesh: TissueMesh, center, radius: float, *, on: str = "boundary") -> np.ndarray:
-    """Nodal weights ``(N,)`` (summing to 1) of a unit force spread over a patch.
+    r"""Nodal weights of a unit force spread over a patch.
 
-    ``w_a = ∫ N_a φ / ∫ φ`` with the bump ``φ(x) = (1 − |x − c|²/R²)²`` for
-    ``|x − c| < R``, integrated over the boundary curve (``on="boundary"``) or over the
-    body (``on="area"``), with edges / elements subdivided so the bump is resolved
-    (at least 4 sub-intervals per radius). Raises :class:`InvalidInputError` when the
-    patch contains no boundary (or no body).
+    .. math:: w_a = \frac{\int N_a \varphi}{\int \varphi}, \qquad
+       \varphi(x) = \bigl(1 - |x - c|^2 / R^2\bigr)^2 \ \text{for}\ |x - c| < R
+
+    integrated over the boundary curve (``on="boundary"``) or over the body (``on="area"``),
+    with edges / elements subdivided so the bump is resolved (at least 4 sub-intervals per
+    radius). Raises :class:`InvalidInputError` when the patch contains no boundary (or no body).
+
+    Parameters
+    ----------
+    mesh : TissueMesh
+        The triangle mesh.
+    center : array_like, (2,)
+        Patch centre ``c`` (reference frame).
+    radius : float
+        Patch radius ``R``.
+    on : str
+        ``"boundary"`` or ``"area"``.
+
+    Returns
+    -------
+    numpy.ndarray, (N,)
+        Weights summing to 1.
     """
     _check_mesh(mesh)
     c = as_array(center, "center", shape=(2,))
@@ -204,7 +261,25 @@ def patch_weights(mesh: TissueMesh, center, radius: float, *, on: str = "boundar
 def patch_load(
     mesh: TissueMesh, center, radius: float, force, *, on: str = "boundary"
 ) -> np.ndarray:
-    """Nodal forces ``(N, 2)`` of a total force ``force (2,)`` spread over a patch
-    (see :func:`patch_weights`); they sum to ``force``."""
+    """Nodal forces of a total force spread over a patch (:func:`patch_weights`).
+
+    Parameters
+    ----------
+    mesh : TissueMesh
+        The triangle mesh.
+    center : array_like, (2,)
+        Patch centre.
+    radius : float
+        Patch radius.
+    force : array_like, (2,)
+        Total force.
+    on : str
+        ``"boundary"`` or ``"area"``.
+
+    Returns
+    -------
+    numpy.ndarray, (N, 2)
+        Summing to ``force``.
+    """
     f = as_array(force, "force", shape=(2,))
     return np.outer(patch_weights(mesh, center, radius, on=on), f)

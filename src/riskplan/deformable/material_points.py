@@ -89,17 +89,46 @@ class Interpolator:
         return int(self.points.shape[0])
 
     def interpolate(self, u: np.ndarray) -> np.ndarray:
-        """Nodal field ``u (..., N, d)`` at the points → ``(..., P, d)``; exact for fields
-        linear in each element (no validation: hot path)."""
+        """A nodal field at the located points; exact for fields linear in each element (hot path).
+
+        Parameters
+        ----------
+        u : numpy.ndarray, (..., N, d)
+            Nodal values.
+
+        Returns
+        -------
+        numpy.ndarray, (..., P, d)
+            ``Σ_a λ_a u_{n_a}`` with the points' barycentric weights ``λ``.
+        """
         return np.einsum("...pad,pa->...pd", u[..., self.node_index, :], self.weights)
 
     def positions(self, u: np.ndarray) -> np.ndarray:
-        """Deformed positions ``X_p + u(X_p)`` ``(..., P, 2)`` for displacements ``u (..., N, 2)``."""
+        """Deformed positions ``X_p + u(X_p)`` of the located points.
+
+        Parameters
+        ----------
+        u : numpy.ndarray, (..., N, 2)
+            Nodal displacements.
+
+        Returns
+        -------
+        numpy.ndarray, (..., P, 2)
+        """
         return self.points + self.interpolate(u)
 
     def spread(self, forces: np.ndarray) -> np.ndarray:
-        """Consistent nodal forces ``(N, d)`` of point forces ``forces (P, d)`` (transpose
-        of :meth:`interpolate`: ``f_{n_a} += λ_a F_p``)."""
+        """Consistent nodal forces of point forces (transpose of :meth:`interpolate`: ``f_{n_a} += λ_a F_p``).
+
+        Parameters
+        ----------
+        forces : numpy.ndarray, (P, d)
+            Forces at the located points.
+
+        Returns
+        -------
+        numpy.ndarray, (N, d)
+        """
         forces = np.asarray(forces, dtype=np.float64)
         d = forces.shape[-1]
         out = np.zeros((self.n_nodes, d))
@@ -122,11 +151,21 @@ class Interpolator:
 
 
 def locate(mesh: TissueMesh, points) -> Interpolator:
-    """Locate material points ``(P, 2)`` (or one point ``(2,)``) in ``mesh`` and precompute
-    their barycentric weights.
+    """Locate material points in ``mesh`` and precompute their barycentric weights.
 
     Raises :class:`InvalidInputError` naming the points that lie outside the mesh
     (a point on the boundary, within ``INSIDE_TOL`` in barycentric terms, is inside).
+
+    Parameters
+    ----------
+    mesh : TissueMesh
+        The triangle mesh (reference configuration).
+    points : array_like, (P, 2) or (2,)
+        Reference positions.
+
+    Returns
+    -------
+    Interpolator
     """
     if not isinstance(mesh, TissueMesh):
         raise InvalidInputError(f"mesh: expected a TissueMesh, got {type(mesh).__name__}")
@@ -151,7 +190,19 @@ def locate(mesh: TissueMesh, points) -> Interpolator:
 
 
 def contains(mesh: TissueMesh, points) -> np.ndarray:
-    """``(P,)`` bool: which reference points ``(P, 2)`` lie in the mesh (no error)."""
+    """Which reference points lie in the mesh (no error for those outside).
+
+    Parameters
+    ----------
+    mesh : TissueMesh
+        The triangle mesh.
+    points : array_like, (P, 2)
+        Reference positions.
+
+    Returns
+    -------
+    numpy.ndarray of bool, (P,)
+    """
     pts = np.ascontiguousarray(as_array(points, "points", last_dim=2).reshape(-1, 2))
     elem, _ = mesh.locator.locate_points(pts)
     return elem >= 0

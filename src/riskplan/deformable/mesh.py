@@ -150,8 +150,20 @@ class TissueMesh:
         return float(np.sqrt((e**2).sum(-1)).max())
 
     def nodes_near(self, points, tol: float = 1e-9) -> np.ndarray:
-        """Index ``(P,)`` of the node closest to each point ``(P, 2)``; raises
-        :class:`InvalidInputError` if some point is farther than ``tol`` from every node."""
+        """Index of the node closest to each point.
+
+        Parameters
+        ----------
+        points : array_like, (P, 2)
+            Reference positions.
+        tol : float
+            Largest accepted distance; a point farther from every node raises
+            :class:`InvalidInputError`.
+
+        Returns
+        -------
+        numpy.ndarray of int, (P,)
+        """
         pts = as_array(points, "points", last_dim=2).reshape(-1, 2)
         d2 = ((pts[:, None, :] - self.nodes[None]) ** 2).sum(-1)
         idx = d2.argmin(1)
@@ -261,17 +273,26 @@ def mesh_polygon(
 
     Parameters
     ----------
-    vertices:
-        ``(n, 2)`` polygon corners in order (either orientation); they become mesh nodes.
-    n_elements:
+    vertices : array_like, (n, 2)
+        Polygon corners in order (either orientation); they become mesh nodes.
+    n_elements : int
         Requested triangle count (the paper's range is 50-1000; anything from the
         coarsest constrained triangulation up to 200 000 is accepted).
-    keep_points:
-        Optional ``(k, 2)`` points that must be mesh nodes (inside the polygon or on its
+    keep_points : array_like, (k, 2), optional
+        Points that must be mesh nodes (inside the polygon or on its
         boundary); their node indices are ``mesh.kept_nodes``.
-    min_angle:
+    min_angle : float
         Minimum angle in degrees for Triangle's quality refinement (0-33).
+    max_iter : int
+        Bisection steps on the maximum triangle area.
 
+    Returns
+    -------
+    TissueMesh
+        ``n_elements`` triangles (see Notes), the corners and ``keep_points`` among its nodes.
+
+    Notes
+    -----
     Method: Triangle with switches ``p q<min_angle> a<A>``; the element count decreases
     (not strictly) as the maximum area ``A`` grows, so ``A`` is bisected in log scale and
     the largest count not above the request is kept. For a triangulation
@@ -355,6 +376,18 @@ def mesh_polygon(
 
 
 def rectangle(width: float = 1.0, height: float = 1.0, origin=(0.0, 0.0)) -> np.ndarray:
-    """``(4, 2)`` counter-clockwise corners of an axis-aligned rectangle."""
+    """Counter-clockwise corners of an axis-aligned rectangle.
+
+    Parameters
+    ----------
+    width, height : float
+        Side lengths.
+    origin : array_like, (2,)
+        Lower-left corner.
+
+    Returns
+    -------
+    numpy.ndarray, (4, 2)
+    """
     x0, y0 = float(origin[0]), float(origin[1])
     return rectangle_polygon((x0, y0), (x0 + width, y0 + height))

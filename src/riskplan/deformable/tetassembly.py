@@ -13,6 +13,8 @@ from collections import OrderedDict
 
 import numpy as np
 
+from riskplan.deformable.banded import band_layout, cached_layout
+
 # sparsity layouts by (tets, free DOFs): tissues of one mesh with different materials share one
 _PATTERNS: OrderedDict = OrderedDict()
 _PATTERN_CACHE = 8
@@ -100,7 +102,6 @@ class TetPattern:
 
     def __init__(self, tets: np.ndarray, free_dofs: np.ndarray, n_dofs: int):
         from scipy import sparse
-        from scipy.sparse.csgraph import reverse_cuthill_mckee
 
         T = len(tets)
         N = n_dofs // 3
@@ -143,16 +144,9 @@ class TetPattern:
         pattern = sparse.csc_matrix(
             (np.ones(len(r)), self._indices, self._indptr), shape=self._shape
         )
-        perm = reverse_cuthill_mckee(pattern.tocsr(), symmetric_mode=True)
-        pos = np.empty(nf, dtype=np.int64)
-        pos[perm] = np.arange(nf)
-        pr, pc = pos[r], pos[c]
-        upper = pr <= pc
-        bw = int(np.max(pc[upper] - pr[upper])) if np.any(upper) else 0
-        self.band_perm = perm
+        self.band_perm, bw, upper, self._band_slot = band_layout(pattern, r, c, nf)
         self.bandwidth = bw
         self._band_sel = np.flatnonzero(upper)
-        self._band_slot = (bw + pr[upper] - pc[upper]) * nf + pc[upper]
         self._band_size = (bw + 1) * nf
 
     def _full_data(self, Ke_flat: np.ndarray) -> np.ndarray:
@@ -182,15 +176,7 @@ class TetPattern:
 
 
 def _pattern(tets: np.ndarray, free_dofs: np.ndarray, n_dofs: int) -> TetPattern:
-    key = (tets.shape, tets.tobytes(), free_dofs.tobytes(), int(n_dofs))
-    p = _PATTERNS.get(key)
-    if p is None:
-        p = _PATTERNS[key] = TetPattern(tets, free_dofs, n_dofs)
-        if len(_PATTERNS) > _PATTERN_CACHE:
-            _PATTERNS.popitem(last=False)
-    else:
-        _PATTERNS.move_to_end(key)
-    return p
+    return cached_layout(_PATTERNS, TetPattern, tets, free_dofs, n_dofs, _PATTERN_CACHE)
 
 
 def _norm(x: np.ndarray) -> float:

@@ -13,7 +13,7 @@ import logging
 
 import numpy as np
 
-from riskplan.deformable.hyperelastic import SolveInfo
+from riskplan.deformable.hyperelastic import SolveInfo, line_search_failure
 from riskplan.deformable.tetassembly import _norm, element_stiffness
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
 
@@ -127,11 +127,7 @@ def _newton(t, u: np.ndarray, f: np.ndarray, fscale: float):
                 break
             alpha *= 0.5
         else:
-            if J_bad is not None:
-                t._raise_inverted(J_bad, " in every line-search trial")
-            raise ConvergenceError(
-                f"Newton line search failed (residual {rn:.3g})", residual=rn, iterations=it
-            )
+            raise line_search_failure(t._raise_inverted, J_bad, rn, it)
         u, energy, fint, J, Finv, lnJ = trial, e1, fint1, J1, Finv1, lnJ1
         r, rn = r1, rn1
     raise ConvergenceError(

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskplan._validation import as_array
+from riskplan._validation import as_array, check_choice, check_instance
 from riskplan.deformable.banded import BandedCholeskySolver
 from riskplan.deformable.hyperelastic import SolveInfo
 from riskplan.deformable.material import Material
@@ -174,12 +174,9 @@ class TetTissue:
         max_iter: int = 25,
         _parts=None,
     ):
-        if not isinstance(mesh, TetMesh):
-            raise InvalidInputError(f"mesh: expected a TetMesh, got {type(mesh).__name__}")
-        if not isinstance(material, Material):
-            raise InvalidInputError(f"material: expected a Material, got {type(material).__name__}")
-        if law not in LAWS3D:
-            raise InvalidInputError(f"law: expected one of {LAWS3D}, got {law!r}")
+        check_instance(mesh, TetMesh, "mesh")
+        check_instance(material, Material, "material")
+        check_choice(law, LAWS3D, "law")
         self.rtol, self.atol, self.max_iter = float(rtol), float(atol), int(max_iter)
         if not (0.0 < self.rtol < 1.0) or not (0.0 <= self.atol < np.inf) or self.max_iter < 1:
             raise InvalidInputError(

@@ -143,6 +143,13 @@ class MDN(nn.Module):
                 head[-1].bias.zero_()
 
     def architecture(self) -> dict:
+        """The constructor's arguments, as stored in ``model.json``.
+
+        Returns
+        -------
+        dict
+            ``MDN(**architecture())`` rebuilds the network (``angle_inputs`` only when there are any).
+        """
         arch = {
             "n_inputs": self.n_inputs,
             "n_components": self.n_components,
@@ -156,8 +163,16 @@ class MDN(nn.Module):
         return arch
 
     def features(self, x: torch.Tensor) -> torch.Tensor:
-        """``(..., n_inputs + len(angle_inputs))``: ``x`` with each angle input ``a`` replaced
-        by ``cos a`` and ``sin a`` appended (``x`` itself without angle inputs)."""
+        """``x`` with each angle input ``a`` replaced by ``cos a`` and ``sin a`` appended.
+
+        Parameters
+        ----------
+        x : torch.Tensor, (..., n_inputs)
+
+        Returns
+        -------
+        torch.Tensor, (..., n_inputs + len(angle_inputs))
+        """
         if not self.angle_inputs:
             return x
         idx = list(self.angle_inputs)
@@ -167,26 +182,27 @@ class MDN(nn.Module):
         return torch.cat([f, torch.sin(ang)], dim=-1)
 
     def raw(self, x: torch.Tensor):
-        """Head outputs ``(logits (..., K), means (..., K*d), u_raw (..., K*T))``."""
+        """Head outputs ``(logits (..., K), means (..., K*d), u_raw (..., K*T))``, before eq. 2.
+
+        Parameters
+        ----------
+        x : torch.Tensor, (..., n_inputs)
+        """
         h = self.trunk(self.features(x))
         return self.weight_head(h), self.mean_head(h), self.chol_head(h)
 
     def forward(self, x: torch.Tensor):
-        """The mixture's parameters at normalised inputs (Fig. 2; eq. 2 builds ``U``).
+        """The mixture at normalised inputs (Fig. 2; eq. 2 builds ``U``).
 
         Parameters
         ----------
-        x : torch.Tensor, shape (..., n_inputs)
-            Configurations in normalised coordinates (:class:`Normalisation`).
+        x : torch.Tensor, (..., n_inputs)
 
         Returns
         -------
-        log_weights : torch.Tensor, shape (..., K)
-            ``log w_k = log_softmax(logits)_k``.
-        means : torch.Tensor, shape (..., K, d)
-            Component means in normalised output coordinates.
-        precision_cholesky : torch.Tensor, shape (..., K, d, d)
-            Upper-triangular ``U_k`` with a positive diagonal, ``Σ_k⁻¹ = U_kᵀ U_k``.
+        tuple of torch.Tensor
+            ``log_weights (..., K)`` (log-softmax of the logits), ``means (..., K, d)`` and
+            ``precision_cholesky (..., K, d, d)``, ``Sigma_k^{-1} = U_k^T U_k``.
         """
         logits, mu, u_raw = self.raw(x)
         batch = x.shape[:-1]
@@ -259,7 +275,18 @@ class Normalisation:
     @classmethod
     def fit(cls, displacements: np.ndarray, points: np.ndarray, angle_columns=()) -> Normalisation:
         """Inputs: mean/std per tendon (identity for ``angle_columns``: the network takes their
-        cos and sin); points: mean/std per axis over all points."""
+        cos and sin); points: mean/std per axis over all points.
+
+        Parameters
+        ----------
+        displacements : numpy.ndarray, (N, m)
+        points : numpy.ndarray, (N, P, d)
+        angle_columns : sequence of int
+
+        Returns
+        -------
+        Normalisation
+        """
         im = displacements.mean(0)
         isd = displacements.std(0)
         isd = np.where(isd > 0, isd, 1.0)
@@ -348,7 +375,19 @@ class MDNModel:
 
     # ----------------------------------------------------------- validation
     def check_displacements(self, displacements, name: str = "displacements") -> np.ndarray:
-        """Validate ``(..., m)`` displacements: tendon count, finite, within the robot's limits."""
+        """Validate ``(..., m)`` displacements: tendon count, finite, within the robot's limits.
+
+        Parameters
+        ----------
+        displacements : array_like, (..., m)
+        name : str
+            The argument's name in the error message.
+
+        Returns
+        -------
+        numpy.ndarray, (..., m)
+            float64; :class:`InvalidInputError` when they are not valid.
+        """
         try:
             d = np.asarray(displacements, dtype=np.float64)
         except (TypeError, ValueError) as exc:

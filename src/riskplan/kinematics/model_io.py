@@ -65,7 +65,20 @@ def _versions() -> dict:
 
 
 def save_model(model: MDNModel, path) -> Path:
-    """Write ``path/weights.pt`` and ``path/model.json`` (atomically); returns ``path``."""
+    """Write ``path/weights.pt`` and ``path/model.json``, atomically.
+
+    Parameters
+    ----------
+    model : MDNModel
+        The trained model (network, normalisation, robot description, metadata).
+    path : str or path
+        The model folder (created if missing).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     buf = io.BytesIO()
@@ -112,7 +125,13 @@ def _shipped_root() -> Path:
 
 
 def shipped_models() -> tuple[str, ...]:
-    """Names of the models shipped with riskplan (folders under ``riskplan/data/models``), sorted."""
+    """Names of the models shipped with riskplan (folders under ``riskplan/data/models``).
+
+    Returns
+    -------
+    tuple of str
+        Sorted names, each loadable by :func:`~riskplan.kinematics.load_model`.
+    """
     root = _shipped_root()
     if not root.is_dir():
         return ()

@@ -216,7 +216,18 @@ class GaussianMixture(MixtureBatch):
 
     # ------------------------------------------------------------ conversion
     def to(self, *args, **kwargs) -> GaussianMixture:
-        """Like ``torch.Tensor.to`` (dtype and/or device) for all parameters."""
+        """Like ``torch.Tensor.to`` (dtype and/or device) for all parameters.
+
+        Parameters
+        ----------
+        *args, **kwargs
+            Passed to ``torch.Tensor.to`` for each tensor.
+
+        Returns
+        -------
+        GaussianMixture
+            Not validated again.
+        """
         return GaussianMixture(
             self.weights.to(*args, **kwargs),
             self.means.to(*args, **kwargs),
@@ -225,6 +236,12 @@ class GaussianMixture(MixtureBatch):
         )
 
     def detach(self) -> GaussianMixture:
+        """The mixture with its tensors detached from the autograd graph.
+
+        Returns
+        -------
+        GaussianMixture
+        """
         return GaussianMixture(
             self.weights.detach(),
             self.means.detach(),
@@ -233,12 +250,28 @@ class GaussianMixture(MixtureBatch):
         )
 
     def numpy(self) -> dict[str, np.ndarray]:
-        """``{"weights", "means", "precision_cholesky"}`` as NumPy arrays (detached, on CPU)."""
+        """The parameters as NumPy arrays (detached, on CPU, in the tensors' dtype).
+
+        Returns
+        -------
+        dict of str to numpy.ndarray
+            ``weights (..., K)``, ``means (..., K, d)``, ``precision_cholesky (..., K, d, d)``.
+        """
         return {name: getattr(self, name).detach().cpu().numpy() for name in FIELDS}
 
     def to_numpy(self, *, validate: bool = True) -> NumpyMixture:
-        """This mixture as a float64 :class:`~riskplan.gaussian_mixture.NumpyMixture` (detached,
-        on CPU; no copy for float64 CPU tensors), checked again when ``validate``."""
+        """This mixture as a float64 :class:`~riskplan.gaussian_mixture.NumpyMixture`.
+
+        Parameters
+        ----------
+        validate : bool
+            Check the arrays again (weights sum to one, ``U`` upper triangular, finite).
+
+        Returns
+        -------
+        NumpyMixture
+            Detached, on CPU; no copy for float64 CPU tensors.
+        """
         return NumpyMixture(
             *(_host_array(getattr(self, name)) for name in FIELDS), validate=validate
         )
@@ -247,6 +280,23 @@ class GaussianMixture(MixtureBatch):
     def from_numpy(
         cls, weights, means, precision_cholesky, *, validate: bool = True
     ) -> GaussianMixture:
+        """Build from NumPy arrays (or anything ``numpy.asarray`` takes).
+
+        Parameters
+        ----------
+        weights : array_like, (..., K)
+            Component weights, summing to one.
+        means : array_like, (..., K, d)
+            Component means.
+        precision_cholesky : array_like, (..., K, d, d)
+            Upper triangular ``U`` with ``Sigma^{-1} = U^T U``.
+        validate : bool
+            Check shapes and values.
+
+        Returns
+        -------
+        GaussianMixture
+        """
         return cls(
             np.asarray(weights),
             np.asarray(means),
@@ -258,18 +308,45 @@ class GaussianMixture(MixtureBatch):
     def from_numpy_mixture(
         cls, mixture: NumpyMixture, *, validate: bool = False
     ) -> GaussianMixture:
-        """The torch mixture (float64 tensors sharing the arrays' memory) of a ``NumpyMixture``."""
+        """The torch mixture of a :class:`~riskplan.gaussian_mixture.NumpyMixture`.
+
+        Parameters
+        ----------
+        mixture : NumpyMixture
+            The mixture; its float64 arrays become tensors sharing their memory.
+        validate : bool
+            Check again (the NumPy mixture was checked when built).
+
+        Returns
+        -------
+        GaussianMixture
+        """
         return cls(*(getattr(mixture, name) for name in FIELDS), validate=validate)
 
     @classmethod
     def from_covariances(
         cls, weights, means, covariances, *, validate: bool = True
     ) -> GaussianMixture:
-        """Build from covariances ``(..., K, d, d)``: ``U = chol(Sigma^{-1})^T``.
+        """Build from covariances: ``U = chol(Sigma^{-1})^T``.
 
         The factor is computed in float64 by
         :func:`riskplan.gaussian_mixture.precision_cholesky_from_covariances` (not
         differentiable) and returned in the covariances' dtype and device.
+
+        Parameters
+        ----------
+        weights : torch.Tensor or array_like, (..., K)
+            Component weights, summing to one.
+        means : torch.Tensor or array_like, (..., K, d)
+            Component means.
+        covariances : torch.Tensor or array_like, (..., K, d, d)
+            Symmetric positive-definite covariances.
+        validate : bool
+            Check shapes and values.
+
+        Returns
+        -------
+        GaussianMixture
         """
         cov = covariances
         if isinstance(cov, torch.Tensor):

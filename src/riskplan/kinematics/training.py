@@ -100,12 +100,30 @@ class TrainConfig:
             raise InvalidInputError(f"dtype: expected 'float32' or 'float64', got {self.dtype!r}")
 
     def to_json(self) -> dict:
+        """The options as JSON types (tuples as lists), as stored in ``model.json``.
+
+        Returns
+        -------
+        dict
+            One entry per field.
+        """
         d = dataclasses.asdict(self)
         d["hidden"], d["head_hidden"] = list(self.hidden), list(self.head_hidden)
         return d
 
     @classmethod
     def from_json(cls, obj: dict) -> TrainConfig:
+        """Inverse of :meth:`to_json`; unknown keys are ignored, missing ones take their defaults.
+
+        Parameters
+        ----------
+        obj : dict
+            Options by field name.
+
+        Returns
+        -------
+        TrainConfig
+        """
         names = {f.name for f in dataclasses.fields(cls)}
         kw = {k: v for k, v in obj.items() if k in names}
         for k in ("hidden", "head_hidden"):
@@ -116,6 +134,9 @@ class TrainConfig:
 
 @dataclass
 class EpochRecord:
+    """One epoch of :func:`train`: NLLs in nats per point (positions in metres), the learning
+    rate, the optimiser steps skipped for a non-finite loss or gradient, and the epoch's wall time (s)."""
+
     epoch: int
     train_nll: float
     val_nll: float
@@ -238,22 +259,45 @@ def train(
     on_step: Callable[[int, int, float], None] | None = None,
     max_seconds: float | None = None,
 ) -> TrainResult:
-    """Fit an MDN to ``data``; returns the best-validation model.
+    """Fit an MDN to ``data`` by minimising the negative log-likelihood (the loss after eq. 7).
 
-    ``out``: folder for ``checkpoint.pt`` (written atomically after every epoch) and the
-    best model (``weights.pt`` + ``model.json``, see :mod:`riskplan.kinematics.model_io`).
-    ``resume``: continue from ``out/checkpoint.pt`` (the data set must be the same, by
-    content hash). A folder that already holds a checkpoint or a model is refused unless
-    ``resume`` or ``overwrite`` (a rerun must not silently discard an interrupted run). Models
-    saved during training carry ``"finished": false`` in their metadata, the final one
-    ``"finished": true``; :func:`~riskplan.kinematics.load_model` warns about unfinished ones.
-    ``on_epoch(record)`` and ``on_step(step, steps_per_epoch, loss)``
-    report progress. ``max_seconds``: stop after the first epoch that ends past this
-    wall-clock budget (the result is still the best model so far). Reported NLLs are
-    nats per point with positions in metres.
+    Each step draws ``points_per_config`` points of each configuration in a batch and minimises
+    the mean of ``-log p(x | u)`` (eq. 1 with eqs. 4-6) with Adam; the learning rate falls by
+    ``lr_factor`` when the validation NLL stalls, and training stops early after
+    ``early_stop_patience`` epochs without improvement. Models saved during training carry
+    ``"finished": false`` in their metadata, the final one ``"finished": true``;
+    :func:`~riskplan.kinematics.load_model` warns about unfinished ones.
 
     Raises :class:`DataFormatError` for unusable data or a mismatched checkpoint, before
     any training, and :class:`ConvergenceError` if training keeps producing non-finite losses.
+
+    Parameters
+    ----------
+    data : PointCloudData
+        Displacements ``(N, m)`` and point clouds ``(N, P, 3)`` (m) of one robot.
+    config : TrainConfig, optional
+        Architecture and optimiser options (default ``TrainConfig()``).
+    out : str or path, optional
+        Folder for ``checkpoint.pt`` (written atomically after every epoch) and the best model
+        (``weights.pt`` + ``model.json``, see :mod:`riskplan.kinematics.model_io`).
+    resume : bool
+        Continue from ``out/checkpoint.pt`` (the data set must be the same, by content hash).
+    overwrite : bool
+        Allow a folder that already holds a checkpoint or a model (refused otherwise, so a rerun
+        does not silently discard an interrupted run).
+    on_epoch : callable, optional
+        ``on_epoch(record)`` after each epoch, with an :class:`EpochRecord`.
+    on_step : callable, optional
+        ``on_step(step, steps_per_epoch, loss)`` after each optimiser step.
+    max_seconds : float, optional
+        Stop after the first epoch that ends past this wall-clock budget (the result is still
+        the best model so far).
+
+    Returns
+    -------
+    TrainResult
+        The best-validation model and the history; reported NLLs are nats per point with
+        positions in metres.
     """
     from riskplan.kinematics import model_io
 

@@ -114,6 +114,14 @@ class OptimisationResult:
         return 0.0 if self.initial_bound <= 0 else 1.0 - self.bound / self.initial_bound
 
     def to_json(self) -> dict:
+        """The result's figures as JSON types (arrays as lists).
+
+        Returns
+        -------
+        dict
+            ``method``, ``bound``, ``initial_bound``, ``reduction``, ``trace``, ``chosen``,
+            ``accepted``, ``evaluations``, ``seconds`` and the ``extra`` entries.
+        """
         return {
             "method": self.method,
             "bound": self.bound,

@@ -73,22 +73,57 @@ def plan_chest(
     optimise_progress=None,
     risk_progress=None,
 ) -> ChestPlan:
-    """Plan a nominal trajectory with a PRM and lower its eq.-10 bound (paper section V).
+    r"""Plan a nominal trajectory with a PRM and lower its eq.-10 bound (MDN paper section V).
 
-    ``model``: an :class:`~riskplan.kinematics.MDNModel`; ``environment``: base-frame
-    :class:`~riskplan.collision.Environment`; ``start``/``goal`` ``(m,)`` displacements (start
-    default: zeros clipped to the limits), or ``goal_tip (3,)`` base frame (the valid
-    configuration whose predicted tip is closest, :func:`~riskplan.planning.prm.goal_from_tip`);
-    when neither is given, :data:`DEFAULT_GOAL` (the :func:`recess_goal` rule, for the ``paper``
-    robot in ``build_chest(0)``; other models with 4 tendons get it too, others need a goal).
-    ``least_risk``: also search the roadmap for the least-risk path (edge cost
-    ``-log(1 - p)``) and report both paths' bounds. ``risk``: the per-configuration risk
-    optimised, ``"eq9"`` (the paper's bound, the default), ``"cloud"``
-    (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact) or ``"bodies"``
-    (:class:`~riskplan.planning.risk.SampledBodyRisk`, body contact over sampled executions);
-    combined along the trajectory by eq. 10 either way.
-    The chest's use of :func:`riskplan.planning.robot_plan.plan_robot` (the paper robot has
-    no base motion: planning coordinates are the displacements).
+    The chest's use of :func:`riskplan.planning.robot_plan.plan_robot` (the paper robot has no
+    base motion: planning coordinates are the displacements). Per configuration the risk
+    ``p_t`` (eq. 9 by default); along the trajectory eq. 10:
+
+    .. math:: P(\text{collision}) \le 1 - \prod_t (1 - p_t)
+
+    Parameters
+    ----------
+    model : MDNModel
+        The learned kinematics (inputs ``(m,)`` tendon displacements, m).
+    environment : Environment
+        3-D obstacles in the robot base frame (m).
+    start, goal : array_like, (m,), optional
+        Displacements; start default: zeros clipped to the limits. When neither ``goal`` nor
+        ``goal_tip`` is given, :data:`DEFAULT_GOAL` (the :func:`recess_goal` rule, for the
+        ``paper`` robot in ``build_chest(0)``; other models with 4 tendons get it too, others
+        need a goal).
+    goal_tip : array_like, (3,), optional
+        A base-frame tip target: the valid configuration whose predicted tip is closest
+        (:func:`~riskplan.planning.prm.goal_from_tip`), within ``tip_tolerance``.
+    tip_tolerance : float
+        Largest accepted distance of the predicted tip from ``goal_tip`` (m).
+    n_milestones : int
+        PRM milestones (:func:`build_roadmap`).
+    step, resolution : float
+        Trajectory step and motion-check spacing (m of displacement).
+    optimiser : OptimiserConfig, optional
+        Settings of :func:`optimise_trajectory`.
+    seed : int
+        Seed of the roadmap and the optimiser.
+    least_risk : bool
+        Also search the roadmap for the least-risk path (edge cost ``-log(1 - p)``) and report
+        both paths' bounds.
+    risk : str
+        The per-configuration risk optimised: ``"eq9"`` (the paper's bound, the default),
+        ``"cloud"`` (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact) or
+        ``"bodies"`` (:class:`~riskplan.planning.risk.SampledBodyRisk`, body contact over
+        sampled executions).
+    checkpoint : str or path, optional
+        JSON file of the optimiser's state, written atomically after every iteration.
+    resume : bool
+        Continue from ``checkpoint``.
+    roadmap_progress, optimise_progress, risk_progress : callable, optional
+        Progress callbacks of the three stages.
+
+    Returns
+    -------
+    ChestPlan
+        The nominal and optimised trajectories ``(T, m)`` with their bounds.
     """
     if risk not in RISKS:  # before the goal: a bad option is named first
         raise InvalidInputError(f"risk: expected one of {RISKS}, got {risk!r}")
@@ -183,7 +218,7 @@ def recess_goal(
     refine: int = 128,
     seed: int = 0,
 ) -> RecessGoal:
-    """The default goal rule: reach the recess, with the most room.
+    r"""The default goal rule: reach the recess, with the most room.
 
     Clinical intent: the tip in the posterior costophrenic recess, where a pleural effusion
     pools -- caudal (base ``x < 0``) and posterior (base ``y < 0``) of the port and within
@@ -191,11 +226,33 @@ def recess_goal(
     configurations within the displacement and tension limits whose simulated tip lies there,
     the one maximising the body's smallest clearance to every obstacle (:func:`body_clearance`):
 
-    .. math:: d^* = \\arg\\max_{d:\\ \\mathrm{tip}(d) \\in \\mathcal{R}} \\min_{x \\in \\mathrm{body}(d)} \\mathrm{sd}(x)
+    .. math:: d^* = \arg\max_{d:\ \mathrm{tip}(d) \in \mathcal{R}} \min_{x \in \mathrm{body}(d)} \mathrm{sd}(x)
 
     Search on the robot model itself (no learned model): ``n_samples`` seeded uniform draws,
     then four rounds of ``refine`` Gaussian perturbations (4, 2, 1, 0.5 mm) around the best.
     :class:`~riskplan.errors.PlanningError` if no draw reaches the recess.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The simulated robot.
+    environment : Environment
+        3-D obstacles in its base frame, one of them named ``floor``.
+    floor : str
+        Name of the recess floor obstacle.
+    depth : float
+        Largest distance of the tip from the floor (m).
+    n_samples : int
+        Uniform draws in the displacement box.
+    refine : int
+        Perturbations per refinement round.
+    seed : int
+        Seed of the draws.
+
+    Returns
+    -------
+    RecessGoal
+        The goal ``(m,)``, its tip ``(3,)``, the body's clearance and the tip's floor distance (m).
     """
     from riskplan.errors import PlanningError
 

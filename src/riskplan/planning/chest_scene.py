@@ -127,11 +127,33 @@ class Chest:
         return self.environment.n_faces
 
     def to_world(self, points_base) -> np.ndarray:
-        """Base-frame points ``(..., 3)`` to world: ``p + R x``."""
+        """Base-frame points to world: ``p + R x``.
+
+        Parameters
+        ----------
+        points_base : array_like, (..., 3)
+            Points in the robot base frame (m).
+
+        Returns
+        -------
+        numpy.ndarray, (..., 3)
+            World points (m).
+        """
         return self.base_position + np.asarray(points_base, dtype=np.float64) @ self.base_rotation.T
 
     def to_base(self, points_world) -> np.ndarray:
-        """World points ``(..., 3)`` to the robot base frame: ``R^T (x - p)``."""
+        """World points to the robot base frame: ``R^T (x - p)``.
+
+        Parameters
+        ----------
+        points_world : array_like, (..., 3)
+            World points (m).
+
+        Returns
+        -------
+        numpy.ndarray, (..., 3)
+            Base-frame points (m).
+        """
         return (
             np.asarray(points_world, dtype=np.float64) - self.base_position
         ) @ self.base_rotation
@@ -144,9 +166,22 @@ class Chest:
         return BasePose(self.base_position, self.base_rotation)
 
     def save(self, path):
-        """Write all obstacles to one mesh file (STL/OBJ/PLY by suffix), world frame, and the sidecar
-        ``<path>.json`` with the frame, the robot base pose and :meth:`metadata`, so that
-        :func:`riskplan.collision.mesh_files.load_environment` gives back :attr:`base_environment`."""
+        """Write the chest as a world-frame mesh file with its sidecar.
+
+        The sidecar ``<path>.json`` holds the frame, the robot base pose and :meth:`metadata`, so
+        that :func:`riskplan.collision.mesh_files.load_environment` gives back
+        :attr:`base_environment`.
+
+        Parameters
+        ----------
+        path : str or path
+            The mesh file; STL/OBJ/PLY by suffix.
+
+        Returns
+        -------
+        pathlib.Path
+            ``path``.
+        """
         from riskplan.collision.mesh_files import save_environment
 
         return save_environment(
@@ -154,6 +189,14 @@ class Chest:
         )
 
     def metadata(self) -> dict:
+        """What the sidecar records to rebuild and place the chest.
+
+        Returns
+        -------
+        dict
+            ``seed``, ``params`` (the :class:`ChestParams` fields), ``triangles``,
+            ``base_position (3,)``, ``base_rotation (3, 3)`` and ``insertion_point (3,)`` (m).
+        """
         return {
             "seed": self.seed,
             "params": asdict(self.params),
@@ -211,7 +254,19 @@ def _tube_loop(curve, radius, sides):
 def build_chest(seed: int = 0, params: ChestParams | None = None, **overrides) -> Chest:
     """Build the procedural chest cavity; same ``seed`` and parameters give the same mesh.
 
-    ``overrides`` replace fields of ``params`` (e.g. ``subdivisions=4`` for a finer mesh).
+    Parameters
+    ----------
+    seed : int
+        Seed of the anatomy's random perturbations.
+    params : ChestParams, optional
+        Sizes and mesh resolution (default ``ChestParams()``).
+    **overrides
+        Fields of ``params`` to replace (e.g. ``subdivisions=4`` for a finer mesh).
+
+    Returns
+    -------
+    Chest
+        World-frame and base-frame environments, the robot base pose and the insertion point.
     """
     import trimesh
 

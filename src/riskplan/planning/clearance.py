@@ -22,14 +22,31 @@ RESOLUTION = 5e-4
 def tube_clearance(
     environment: Environment, backbones, radius: float, *, resolution: float = RESOLUTION
 ) -> np.ndarray:
-    """Signed clearance of a tube of ``radius`` around backbones ``(..., n, 3)``; ``(...,)`` [m].
+    r"""Signed clearance of a tube of ``radius`` around backbones (negative: the tube enters an obstacle).
 
-    ``min_s sd(x(s)) - radius`` over the polyline (negative: the tube enters an obstacle),
-    exact where it decides the sign up to ``resolution / 2``: ``sd`` at the ``n`` points, and
-    at points ``resolution`` apart on the chords whose Lipschitz lower bound
-    ``(sd_a + sd_b - h) / 2`` falls below ``radius`` (:mod:`riskplan.planning.validate`). Far from obstacles
-    the value is the minimum over the ``n`` points only (an upper estimate, always positive
-    there).
+    .. math:: c = \min_s \mathrm{sd}(x(s)) - r
+
+    over the polyline, exact where it decides the sign up to ``resolution / 2``: ``sd`` at the
+    ``n`` points, and at points ``resolution`` apart on the chords whose Lipschitz lower bound
+    ``(sd_a + sd_b - h) / 2`` falls below ``radius`` (:mod:`riskplan.planning.validate`). Far
+    from obstacles the value is the minimum over the ``n`` points only (an upper estimate,
+    always positive there).
+
+    Parameters
+    ----------
+    environment : Environment
+        3-D obstacles in the backbones' frame.
+    backbones : array_like, (..., n, 3)
+        Backbone polylines (m).
+    radius : float
+        Tube radius ``r`` (m).
+    resolution : float
+        Sample spacing on refined chords (m).
+
+    Returns
+    -------
+    numpy.ndarray, (...,)
+        Clearance (m).
     """
     X = as_array(backbones, "backbones", min_ndim=2, last_dim=3)
     if not (np.isfinite(radius) and radius >= 0):

@@ -288,16 +288,41 @@ class Problem:
         return lim
 
     def interpolate(self, a, b, t) -> np.ndarray:
-        """Configurations along the straight motion from ``a`` to ``b``
-        (:meth:`TendonRobot.interpolate_configurations`; rotation the short way round)."""
+        """Configurations along the straight motion from ``a`` to ``b``.
+
+        :meth:`TendonRobot.interpolate_configurations`: rotation the short way round.
+
+        Parameters
+        ----------
+        a, b : array_like, (n_config,)
+            End configurations.
+        t : float or array_like, (...)
+            Fractions of the motion in [0, 1].
+
+        Returns
+        -------
+        numpy.ndarray, (..., n_config)
+        """
         return self.robot.interpolate_configurations(a, b, t)
 
     def split(self, q):
-        """``(tensions, rotation, retraction)`` of a configuration (None where not enabled)."""
+        """``(tensions, rotation, retraction)`` of a configuration (None where not enabled).
+
+        Parameters
+        ----------
+        q : array_like, (..., n_config)
+            Configurations (N of tension, then rad and m).
+        """
         return self.robot.split_configuration(q)
 
     def shape(self, q):
-        """The robot's :class:`~riskplan.robots.RodShape` at configuration ``q (..., n_config)``."""
+        """The robot's :class:`~riskplan.robots.RodShape` at a configuration.
+
+        Parameters
+        ----------
+        q : array_like, (..., n_config)
+            Configurations (N of tension, then rad and m).
+        """
         tau, rot, ret = self.split(q)
         if rot is None and ret is None:
             return self.robot.solve_tensions(tau)
@@ -306,9 +331,12 @@ class Problem:
     def load_meshes(self, *, check_units: bool = True):
         """The environment meshes as one ``trimesh.Trimesh`` (robot frame, m), or None.
 
-        With ``check_units``, a mesh whose bounding box is more than ``MILLIMETRE_FACTOR``
-        robot lengths across is refused (:func:`~riskplan.collision.geometry.check_metre_scale`):
-        its units are most likely millimetres where metres are expected.
+        Parameters
+        ----------
+        check_units : bool
+            Refuse a mesh whose bounding box is more than ``MILLIMETRE_FACTOR`` robot lengths across
+            (:func:`~riskplan.collision.geometry.check_metre_scale`): its units are most likely
+            millimetres where metres are expected.
         """
         if not self.meshes:
             return None

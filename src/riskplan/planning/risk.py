@@ -174,9 +174,9 @@ class SampledBodyRisk:
         to_planning = getattr(self.model, "to_planning", None)
         return configs if to_planning is None else to_planning(configs)
 
-    def _risk(self, trajectory):
-        """:class:`~riskplan.collision.body_risk.CloudRisk` of ``trajectory (T, m)`` (planning coordinates)."""
-        from riskplan.collision.body_risk import sampled_body_risk
+    def _draws(self, trajectory):
+        """Nominal mixtures ``(T,)`` and the sampled executions' component means ``(S, T, K, 3)``
+        of ``trajectory (T, m)`` (planning coordinates)."""
         from riskplan.gaussian_mixture import as_numpy_mixture
         from riskplan.planning.executions import execution_displacements
 
@@ -186,8 +186,37 @@ class SampledBodyRisk:
         S, T, m = eff.shape
         nominal = as_numpy_mixture(self.model.predict(y))
         drawn = as_numpy_mixture(self.model.predict(self._to_planning(eff.reshape(S * T, m))))
-        means = drawn.means.reshape(S, T, *drawn.means.shape[-2:])
+        return nominal, drawn.means.reshape(S, T, *drawn.means.shape[-2:])
+
+    def _risk(self, trajectory):
+        """:class:`~riskplan.collision.body_risk.CloudRisk` of ``trajectory (T, m)`` (planning coordinates)."""
+        from riskplan.collision.body_risk import sampled_body_risk
+
+        nominal, means = self._draws(trajectory)
         return sampled_body_risk(
+            nominal, means, self.environment, extent=self.extent, validate=False
+        )
+
+    def gaps(self, trajectory) -> np.ndarray:
+        """Clearance of each sampled execution's body along a trajectory
+        (:func:`riskplan.collision.body_risk.sampled_body_gaps`).
+
+        Parameters
+        ----------
+        trajectory : array_like
+            ``(T, m)`` configurations (planning coordinates of ``model``); one configuration
+            alone is a trajectory of ``T = 1``.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(S, T)`` clearances [m] of the ``S = n_draws`` sampled executions, each keeping
+            its draw along the trajectory.
+        """
+        from riskplan.collision.body_risk import sampled_body_gaps
+
+        nominal, means = self._draws(trajectory)
+        return sampled_body_gaps(
             nominal, means, self.environment, extent=self.extent, validate=False
         )
 

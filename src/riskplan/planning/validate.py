@@ -267,28 +267,39 @@ def execute_on_robot(
     workers: int | None = None,
     chunk: int = CHUNK,
 ) -> RobotMonteCarlo:
-    """Execute ``trajectory (T, m)`` ``n`` times on the simulated robot and count body collisions.
+    """Execute ``trajectory`` ``n`` times on the simulated robot and count body collisions.
 
     Parameters
     ----------
-    robot: :class:`~riskplan.robots.TendonRobot` or a robot name/path (``"paper"``).
-    trajectory: ``(T, m)`` commanded tendon displacements [m], within the robot's limits; or
-        ``(T, n_config)`` configurations of a robot with base rotation/retraction.
-    environment: 3-D obstacles in the robot's base frame (e.g. ``build_chest(seed).base_environment``).
-    n, seed: number of executions and their seed (module docstring: protocol and seeding).
-    body: ``"tube"`` (default): the backbone swept by a ball of ``radius`` (module docstring);
+    robot : TendonRobot or str or path
+        The robot, or a robot name/path (``"paper"``).
+    trajectory : array_like, (T, m) or (T, n_config)
+        Commanded tendon displacements [m] within the robot's limits, or configurations of a
+        robot with base rotation/retraction.
+    environment : Environment
+        3-D obstacles in the robot's base frame (e.g. ``build_chest(seed).base_environment``).
+    n, seed : int
+        Number of executions and their seed (module docstring: protocol and seeding).
+    body : str
+        ``"tube"`` (default): the backbone swept by a ball of ``radius`` (module docstring);
         ``"disks"``: the point-cloud geometry itself, the backbone tube of the backbone radius
         (3 mm) plus the separator disks (:func:`disk_clearance`).
-    radius: tube radius [m]; default the disk radius of the point-cloud geometry (10 mm) for
+    radius : float, optional
+        Tube radius [m]; default the disk radius of the point-cloud geometry (10 mm) for
         ``"tube"``, the backbone radius for ``"disks"``.
-    resolution: sample spacing on refined backbone chords [m] (:func:`tube_clearance`).
-    backend, workers, chunk: :func:`riskplan.parallel.map_tasks` over chunks of ``chunk`` runs;
-        the result does not depend on them.
+    resolution : float
+        Sample spacing on refined backbone chords [m] (:func:`tube_clearance`).
+    confidence : float
+        Two-sided confidence of the Wilson intervals.
+    backend, workers, chunk
+        :func:`riskplan.parallel.map_tasks` over chunks of ``chunk`` runs; the result does not
+        depend on them.
 
     Returns
     -------
-    :class:`RobotMonteCarlo`: ``P(exists t: body in an obstacle)`` with a Wilson interval
-    at ``confidence``, the per-configuration rates, and the clearances ``(n, T)``.
+    RobotMonteCarlo
+        ``P(exists t: body in an obstacle)`` with a Wilson interval at ``confidence``, the
+        per-configuration rates, and the clearances ``(n, T)``.
     """
     robot = _as_robot(robot)
     traj = _check_trajectory(trajectory, robot)
@@ -352,13 +363,34 @@ def mixture_monte_carlo(
     *,
     confidence: float = 0.95,
 ) -> MixtureMonteCarlo:
-    """Monte Carlo of the model's mixtures along ``trajectory (T, m)``.
+    """Monte Carlo of the model's mixtures along a trajectory.
 
     Each trial draws one point from every configuration's mixture independently
     (:func:`~riskplan.collision.monte_carlo_trajectory`, ``combine="weighted"``) and counts a
     collision if any lies inside an obstacle: the quantity eq. 10 bounds under the paper's
-    independence assumption. ``per_configuration``: :func:`~riskplan.collision.monte_carlo_probability`
-    per configuration (what eq. 9 bounds). Wilson intervals at ``confidence``.
+    independence assumption.
+
+    Parameters
+    ----------
+    model : MDNModel
+        The learned kinematics.
+    trajectory : array_like, (T, m)
+        Model inputs along the trajectory.
+    environment : Environment
+        3-D obstacles in the base frame.
+    n : int
+        Trials.
+    seed : int
+        Seed of the draws.
+    confidence : float
+        Two-sided confidence of the Wilson intervals.
+
+    Returns
+    -------
+    MixtureMonteCarlo
+        ``trajectory`` (shape ``()``) and ``per_configuration`` (``(T,)``,
+        :func:`~riskplan.collision.monte_carlo_probability` per configuration: what eq. 9
+        bounds).
     """
     env = _check_environment(environment)
     n = check_count(n, "n", 1)

@@ -22,6 +22,17 @@ def parse_robot_toml(text: str, *, default_name: str = "robot") -> RobotParams:
     """Parse and validate a robot TOML document (format: docs/robots.md).
 
     Raises :class:`RobotDescriptionError` naming the offending key.
+
+    Parameters
+    ----------
+    text : str
+        The TOML document.
+    default_name : str
+        The robot's name when the document gives none.
+
+    Returns
+    -------
+    RobotParams
     """
     if not isinstance(text, str):
         raise RobotDescriptionError(

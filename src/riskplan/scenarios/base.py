@@ -161,10 +161,23 @@ class SimParams:
 
 
 def actuation_noise(params: SimParams, t: int, m: int) -> np.ndarray | None:
-    """The actuation noise ``w_t (m,)`` of step ``t`` under ``params`` (``None`` if none).
+    """The actuation noise ``w_t (m,)`` of step ``t`` under ``params``.
 
     Drawn from ``default_rng([params.actuation_seed, t])``: a pure function of the
     parameters and the step index, which keeps ``step`` deterministic (paper eq. 1).
+
+    Parameters
+    ----------
+    params : SimParams
+    t : int
+        Step index.
+    m : int
+        Control dimension.
+
+    Returns
+    -------
+    numpy.ndarray, (m,), or None
+        ``None`` if the parameters carry no actuation noise.
     """
     factor = params.actuation_factor
     if factor is None:
@@ -411,32 +424,100 @@ class Simulator(Protocol):
         ...
 
     def initial_state(self, params: SimParams | None = None) -> SimState:
-        """The start state ``y_0`` (undeformed tissue, robot at its start)."""
+        """The start state ``y_0`` (undeformed tissue, robot at its start).
+
+        Parameters
+        ----------
+        params : SimParams, optional
+            Default: the nominal parameters.
+
+        Returns
+        -------
+        SimState
+        """
         ...
 
     def step(self, state: SimState, control, params: SimParams | None = None) -> SimState:
-        """``y_{t+1} = g(y_t, u_t, s)`` (paper eq. 1); deterministic, never mutates ``state``."""
+        """``y_{t+1} = g(y_t, u_t, s)`` (paper eq. 1); deterministic, never mutates ``state``.
+
+        Parameters
+        ----------
+        state : SimState
+        control : array_like, (q,)
+            ``u_t`` within the control bounds.
+        params : SimParams, optional
+            ``s`` (default: the nominal parameters).
+
+        Returns
+        -------
+        SimState
+        """
         ...
 
     def reduced(self, state: SimState) -> np.ndarray:
-        """The reduced state ``x (p,)`` of ``state`` (paper section III)."""
+        """The reduced state ``x (p,)`` of ``state`` (paper section III).
+
+        Parameters
+        ----------
+        state : SimState
+
+        Returns
+        -------
+        numpy.ndarray, (p,)
+        """
         ...
 
     def observe(self, x, noise=None, rng=None) -> np.ndarray:
-        """``z = h(x) + n`` (paper eq. 3)."""
+        """``z = h(x) + n`` (paper eq. 3).
+
+        Parameters
+        ----------
+        x : array_like, (p,)
+            Reduced state.
+        noise : array_like, (r,), optional
+            ``n`` given explicitly; else drawn with ``rng``, or zero without one.
+        rng : numpy.random.Generator, optional
+
+        Returns
+        -------
+        numpy.ndarray, (r,)
+        """
         ...
 
     def sample_params(self, seed=None) -> SimParams:
-        """One draw ``s ~ S`` from the scenario's parameter distribution."""
+        """One draw ``s ~ S`` from the scenario's parameter distribution.
+
+        Parameters
+        ----------
+        seed : int, numpy.random.Generator or None
+
+        Returns
+        -------
+        SimParams
+        """
         ...
 
 
 def rollout(
     sim: Simulator, state: SimState, controls, params: SimParams | None = None, *, on_step=None
 ) -> list[SimState]:
-    """Apply ``controls (T, q)`` from ``state``; returns the ``T + 1`` states ``[y_0, ..., y_T]``.
+    """Apply controls from ``state``: ``y_{t+1} = g(y_t, u_t, s)`` for ``t = 0 .. T-1``.
 
-    ``on_step(new_state)``, if given, is called after each step (progress display)."""
+    Parameters
+    ----------
+    sim : Simulator
+    state : SimState
+        ``y_0``.
+    controls : array_like, (T, q)
+    params : SimParams, optional
+    on_step : callable, optional
+        ``on_step(new_state)`` after each step (progress display).
+
+    Returns
+    -------
+    list of SimState
+        The ``T + 1`` states ``[y_0, ..., y_T]``.
+    """
     u = as_array(controls, "controls", shape=(None, sim.control_dim))
     states = [state]
     for k in range(u.shape[0]):
@@ -475,6 +556,17 @@ def apply_actuation_noise(
 
     Clipping models saturation (e.g. a car without reverse cannot drive at negative
     speed, however noisy its actuation).
+
+    Parameters
+    ----------
+    u : numpy.ndarray, (m,)
+    params : SimParams
+    t : int
+    bounds : numpy.ndarray, (m, 2)
+
+    Returns
+    -------
+    numpy.ndarray, (m,)
     """
     w = actuation_noise(params, t, u.shape[0])
     if w is None:

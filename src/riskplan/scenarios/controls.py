@@ -26,13 +26,24 @@ __all__ = ["read_controls"]
 
 
 def read_controls(path, control_dim: int, bounds=None) -> np.ndarray:
-    """Read a ``(T, control_dim)`` float64 controls table (module docstring).
+    """Read a float64 controls table (module docstring).
 
-    ``bounds (control_dim, 2)``: when given, every row is checked against them here, before
-    any simulation, and the first offending row and column are named (counted from 1).
     Raises :class:`~riskplan.errors.DataFormatError` (a missing or unreadable file, rows of
     different lengths, non-numbers, NaN or inf, the wrong column count, a value outside
     ``bounds``).
+
+    Parameters
+    ----------
+    path : str or path
+    control_dim : int
+        Columns expected (the scenario's ``q``).
+    bounds : array_like, (control_dim, 2), optional
+        When given, every row is checked against them here, before any simulation, and the
+        first offending row and column are named (counted from 1).
+
+    Returns
+    -------
+    numpy.ndarray, (T, control_dim)
     """
     path = Path(path)
     arr = read_table(path, "controls", key="controls")

@@ -66,7 +66,16 @@ _MANIP_SOLVER = {"load_steps"}
 
 
 def shipped_path(name: str) -> Path:
-    """Path of the shipped scenario file of a built-in name (:data:`SHIPPED_SCENARIOS`)."""
+    """Path of the shipped scenario file of a built-in name (:data:`SHIPPED_SCENARIOS`).
+
+    Parameters
+    ----------
+    name : str
+
+    Returns
+    -------
+    pathlib.Path
+    """
     if name not in SHIPPED_SCENARIOS:
         raise InvalidInputError(
             f"scenario: expected one of {', '.join(SHIPPED_SCENARIOS)}, got {name!r}"
@@ -418,13 +427,21 @@ def _manipulation_config(r: _Reader):
 
 
 def read_scenario_config(path) -> tuple[str, object]:
-    """``(kind, config)`` of a scenario file: ``"needle"`` and a
-    :class:`~riskplan.scenarios.needle.NeedleConfig`, or ``"manipulation"`` and a
-    :class:`~riskplan.scenarios.manipulation.ManipulationConfig`.
+    """``(kind, config)`` of a scenario file.
 
-    Lengths are multiplied by the factor of ``units.length`` (:data:`LENGTH_UNITS`),
-    angles converted from degrees when ``units.angle = "deg"``. Raises
+    Lengths are multiplied by the factor of ``units.length`` (:data:`LENGTH_UNITS`), angles
+    converted from degrees when ``units.angle = "deg"``. Raises
     :class:`~riskplan.errors.InvalidInputError` naming the file and the field.
+
+    Parameters
+    ----------
+    path : str or path
+        The TOML file.
+
+    Returns
+    -------
+    tuple
+        ``("needle", NeedleConfig)`` or ``("manipulation", ManipulationConfig)``.
     """
     path = Path(path)
     if not path.is_file():

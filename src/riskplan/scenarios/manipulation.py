@@ -53,6 +53,7 @@ inside the other).
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -70,9 +71,18 @@ from riskplan.scenarios.base import (
     frozen_array,
     gaussian_noise,
 )
+from riskplan.scenarios.manipulation_mesh import MeshData
 from riskplan.scenarios.space import BoxSpace
 
 __all__ = ["ManipulationConfig", "ManipulationScenario", "ManipulationState"]
+
+#: results of ``ManipulationScenario.step_near`` under parameters without actuation noise,
+#: keyed by the scenario's configuration and every argument (least recently used dropped).
+#: The step is a pure function of them, so a hit changes no result; it spares the
+#: linearisation's control-perturbation runs for ``B_t``, which are the same under every
+#: uncertainty case of a candidate (Fig. 6 linearises one candidate under five cases).
+_STEP_MEMO: OrderedDict = OrderedDict()
+_STEP_MEMO_SIZE = 512
 
 
 def _default_outline():
@@ -194,93 +204,6 @@ class ManipulationState(SimState):
     def __post_init__(self):
         super().__post_init__()
         object.__setattr__(self, "forces", frozen_array(self.forces))
-
-
-def _boundary_loop(edges: np.ndarray) -> np.ndarray:
-    """Node indices of the boundary cycle, in edge order (counter-clockwise)."""
-    nxt = {int(a): int(b) for a, b in edges}
-    start = int(edges[0, 0])
-    loop = [start]
-    while True:
-        n = nxt[loop[-1]]
-        if n == start:
-            break
-        loop.append(n)
-        if len(loop) > len(edges):  # pragma: no cover - a valid mesh has one boundary cycle
-            raise InvalidInputError("mesh: boundary is not a single cycle")
-    return np.asarray(loop, dtype=np.int64)
-
-
-def _nodes_on_segment(nodes: np.ndarray, seg: np.ndarray, tol: float) -> np.ndarray:
-    a, b = seg
-    ab = b - a
-    t = np.clip(((nodes - a) @ ab) / (ab @ ab), 0.0, 1.0)
-    d = np.sqrt(((nodes - (a + t[:, None] * ab)) ** 2).sum(1))
-    return np.flatnonzero(d <= tol)
-
-
-class _MeshData:
-    """Cached per element count: mesh, fixed nodes, patch weights ``W (n_nodes, 3)``,
-    interpolator for [target, sensed boundary points, manipulators], boundary loop."""
-
-    def __init__(self, cfg: ManipulationConfig, n_elements: int):
-        from riskplan.deformable import locate, mesh_polygon, patch_weights
-
-        mesh = mesh_polygon(cfg.outline, n_elements, keep_points=cfg.manipulators)
-        scale = float(np.ptp(cfg.outline, axis=0).max())
-        self.mesh = mesh
-        self.fixed = _nodes_on_segment(mesh.nodes, cfg.fixed_segment, 1e-9 * scale)
-        W = np.stack(
-            [patch_weights(mesh, c, cfg.patch_radius, on="boundary") for c in cfg.manipulators],
-            axis=1,
-        )
-        W[self.fixed] = 0.0  # load on the support is taken by it
-        self.W = W
-        pts = np.concatenate(
-            [
-                np.asarray(cfg.target, dtype=np.float64)[None],
-                cfg.boundary_points(),
-                cfg.manipulators,
-            ]
-        )
-        self.interp = locate(mesh, pts)
-        self.loop = _boundary_loop(mesh.boundary_edges)
-        nb = cfg.n_boundary
-        self.target_index = 0
-        self.boundary_slice = slice(1, 1 + nb)
-        self.manipulator_slice = slice(1 + nb, 1 + nb + len(cfg.manipulators))
-        self.outline_weights = _outline_weights(cfg, mesh.nodes[self.loop])
-
-
-def _outline_weights(cfg: ManipulationConfig, ref: np.ndarray):
-    """``(a, b, lam)`` for the boundary nodes ``ref (B, 2)`` (reference positions, loop
-    order): each node moves with ``(1 − lam) d_a + lam d_b``, ``d_i`` the displacement of
-    sensed point ``i``, interpolated by arc length between the two sensed points around it
-    (:meth:`ManipulationConfig.boundary_points` spaces them by arc length); nodes before the
-    first or after the last sensed point, the fixed edge's included, follow the nearer end
-    point (an over-estimate of their motion: the fixed edge does not move)."""
-    n = len(cfg.outline)
-    i0 = (int(cfg.fixed_edge) + 1) % n
-    k0 = int(np.argmin(((ref - cfg.outline[i0]) ** 2).sum(1)))
-    order = np.roll(np.arange(len(ref)), -k0)
-    r = ref[order]
-    s = np.concatenate([[0.0], np.cumsum(np.sqrt((np.diff(r, axis=0) ** 2).sum(1)))])
-    edges = np.roll(cfg.outline, -i0, axis=0)
-    free_len = float(np.sqrt((np.diff(edges, axis=0) ** 2).sum(1)).sum())
-    nb = int(cfg.n_boundary)
-    sp = (np.arange(nb) + 0.5) / nb * free_len
-    a = np.zeros(len(ref), dtype=np.int64)
-    b = np.zeros(len(ref), dtype=np.int64)
-    lam = np.zeros(len(ref))
-    total = s[-1] + float(np.sqrt(((r[-1] - r[0]) ** 2).sum()))
-    for q, sq in zip(order, s):
-        if nb > 1 and sp[0] <= sq <= sp[-1]:
-            k = min(int(np.searchsorted(sp, sq, side="right")) - 1, nb - 2)
-            a[q], b[q], lam[q] = k, k + 1, (sq - sp[k]) / (sp[k + 1] - sp[k])
-        else:
-            end = nb - 1 if sp[-1] < sq <= 0.5 * (free_len + total) else 0
-            a[q] = b[q] = end
-    return a, b, lam
 
 
 class ManipulationScenario(FEMScenario):
@@ -432,8 +355,8 @@ class ManipulationScenario(FEMScenario):
         J = np.einsum("pa,pacq->pcq", w, du[idx])  # (P, 2, q)
         return J.reshape(2 * np_, q)
 
-    def _make_mesh_data(self, n_elements: int) -> _MeshData:
-        return _MeshData(self.config, n_elements)
+    def _make_mesh_data(self, n_elements: int) -> MeshData:
+        return MeshData(self.config, n_elements)
 
     def _make_model(self, params: SimParams):
         """The neo-Hookean model of the object for ``params``."""
@@ -517,12 +440,43 @@ class ManipulationScenario(FEMScenario):
         another mesh) is :meth:`step`.
         """
         params = params or self.nominal_params
+        key = None
+        if params.actuation_cov is None:
+            key = self._memo_key(state, control, params, near)
+            hit = _STEP_MEMO.get(key)
+            if hit is not None:
+                _STEP_MEMO.move_to_end(key)
+                return hit
         if near is None or near.n_elements != params.n_elements:
-            return self._step(state, control, params, None)
-        try:
-            return self._step(state, control, params, near.displacement)
-        except (ConvergenceError, ElementInversionError):
-            return self._step(state, control, params, None)
+            out = self._step(state, control, params, None)
+        else:
+            try:
+                out = self._step(state, control, params, near.displacement)
+            except (ConvergenceError, ElementInversionError):
+                out = self._step(state, control, params, None)
+        if key is not None:
+            _STEP_MEMO[key] = out
+            if len(_STEP_MEMO) > _STEP_MEMO_SIZE:
+                _STEP_MEMO.popitem(last=False)
+        return out
+
+    def _memo_key(self, state, control, params, near) -> tuple:
+        """Everything ``step_near``'s result depends on (``_STEP_MEMO``)."""
+
+        def arr(a):
+            a = np.asarray(a, dtype=np.float64)
+            return a.shape, a.tobytes()
+
+        return (
+            self._content_key(),
+            params,
+            state.t,
+            state.n_elements,
+            arr(state.displacement),
+            arr(state.forces),
+            arr(control),
+            None if near is None else (near.n_elements, arr(near.displacement)),
+        )
 
     def next_forces(self, state: ManipulationState, control, params: SimParams) -> np.ndarray:
         """``(3, 2)`` the forces applied after ``control`` from ``state`` (module docstring):

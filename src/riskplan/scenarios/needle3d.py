@@ -32,6 +32,18 @@ deformed target at the end, never inside a deformed obstacle, never outside the 
 **Reduced state** ``x (12,)`` = (world position, ``e₁``, ``e₂``, ``e₃``); sensing
 ``z = x[:3] + n``, ``n ~ N(0, σ² I₃)`` (the tip position, as from 3-D ultrasound or CT).
 
+**Frames** (as the 2-D needle, :data:`FRAMES`; ``frame=`` or :meth:`Needle3DScenario.with_frame`):
+``"world"`` (the default) reads ``x`` as above; ``"material"`` reads the tip's material
+pose ``(X, e₁, e₂, e₃)``. In the material frame a material, mesh or force draw does not
+move ``x`` at all (the tip cuts its way through the material whatever its stiffness): it
+moves what is *sensed*, ``z = X + u(X; s) + n``, the same way at every step. The
+linearisation then sees the draw as a measurement bias (``H_t = ∂z/∂x`` by central
+differences, :meth:`Needle3DScenario.observation_jacobian`) instead of fresh process
+noise at every step, and LQG-MP checks ``X`` against the bodies of material points
+(balls and boxes, :meth:`Needle3DScenario.state_obstacles` / :meth:`state_goal`), which
+the tissue carries along with the tip. Simulation, collision and goal tests are the same
+in both frames.
+
 Noise scaled to the scene as in 2-D: ``σ = 0.01 · max(size)``; actuation
 ``(0.1 v_max, 0.1 ω_max[, 0.1])``.
 """
@@ -39,7 +51,6 @@ Noise scaled to the scene as in 2-D: ``σ = 0.01 · max(size)``; actuation
 from __future__ import annotations
 
 import functools
-import math
 
 import numpy as np
 
@@ -55,9 +66,12 @@ from riskplan.scenarios.base import (
 )
 from riskplan.scenarios.bevel import needle_step, pose_step_jacobian
 from riskplan.scenarios.needle3d_config import Needle3DConfig, Needle3DState, _MeshData3D
+from riskplan.scenarios.needle3d_frames import FRAMES, JACOBIAN_STEP, Needle3DFrames
 from riskplan.scenarios.needle3d_space import Needle3DSpace, needle3d_steer
 
 __all__ = [
+    "FRAMES",
+    "JACOBIAN_STEP",
     "PLANNING_ELEMENTS",
     "Needle3DConfig",
     "Needle3DScenario",
@@ -69,7 +83,7 @@ __all__ = [
 PLANNING_ELEMENTS = 1296
 
 
-class Needle3DScenario(FEMScenario):
+class Needle3DScenario(Needle3DFrames, FEMScenario):
     """The 3-D needle as a :class:`~riskplan.scenarios.base.Simulator` (module docstring).
 
     Dimensions: controls ``(v, ω)`` (q = 2; ``(v, ω, ρ)`` with duty cycling), reduced state
@@ -85,9 +99,16 @@ class Needle3DScenario(FEMScenario):
     state_type = Needle3DState
 
     def __init__(
-        self, config: Needle3DConfig | None = None, distribution=None, cache_size: int = 40
+        self,
+        config: Needle3DConfig | None = None,
+        distribution=None,
+        cache_size: int = 40,
+        frame: str = "world",
     ):
         super().__init__(config or Needle3DConfig(), distribution, cache_size)
+        if frame not in FRAMES:
+            raise InvalidInputError(f"frame: expected one of {FRAMES}, got {frame!r}")
+        self.frame = frame
         cfg = self.config
         self.control_dim = 3 if cfg.duty_cycle else 2
         b = [[0.0, cfg.v_max], [-cfg.omega_max, cfg.omega_max], [0.0, 1.0]]
@@ -309,7 +330,8 @@ class Needle3DScenario(FEMScenario):
         return pose_step_jacobian(u[0], u[1], tau=cfg.tau, kappa=cfg.curvature, rho=self._rho(u))
 
     def reduced(self, state: Needle3DState) -> np.ndarray:
-        """``x (12,)``: world position and the material frame (a copy).
+        """``x (12,)`` (a copy): the world position and the material frame, or in the
+        material frame the material pose (module docstring).
 
         Parameters
         ----------
@@ -321,7 +343,7 @@ class Needle3DScenario(FEMScenario):
         numpy.ndarray, shape (12,)
             The reduced state ``x``.
         """
-        return np.array(state.pose)
+        return np.array(state.pose if self.frame == "world" else state.material)
 
     def observe(self, x, noise=None, rng=None) -> np.ndarray:
         """``z = x[:3] + n`` (the tip position).
@@ -354,37 +376,6 @@ class Needle3DScenario(FEMScenario):
         out = [ConvexBody(k, c, A) for k, c, A in zip(d.kinds, centres, shapes)]
         state.__dict__["_bodies"] = out  # a cache on a frozen state: a function of its fields
         return out
-
-    def _affine(self, state: Needle3DState):
-        """``(centres (B, 3), shapes (B, 3, 3))`` of the deformed bodies (obstacles, then
-        the target): ``c + u(c)`` and ``(I + G) A`` with ``G ≈ ∇u`` fitted to the body's
-        samples (module docstring); cached on the state."""
-        cached = state.__dict__.get("_affine")
-        if cached is not None:
-            return cached
-        d = self._data(state)
-        B = len(d.kinds)
-        centres, shapes = np.empty((B, 3)), np.empty((B, 3, 3))
-        for i, (c, A, fit, (a, b)) in enumerate(zip(d.centres, d.shapes, d.fit, d.slices)):
-            u = state.displacement[a:b]
-            G = (fit @ (u[1:] - u[0])).T  # ∇u ≈ G
-            centres[i] = c + u[0]
-            shapes[i] = A + G @ A
-        state.__dict__["_affine"] = out = (centres, shapes)  # a function of the fields
-        return out
-
-    def _gauges(self, state: Needle3DState) -> np.ndarray:
-        """``(B,)`` the world tip's gauge in each deformed body (``≤ 1``: inside;
-        :meth:`riskplan.geometry3d.ConvexBody.norm`), all bodies in one batched solve."""
-        centres, shapes = self._affine(state)
-        s = np.linalg.solve(shapes, (state.pose[:3] - centres)[:, :, None])[:, :, 0]
-        kinds = self._data(state).kinds
-        return np.array(
-            [
-                math.sqrt(float(v @ v)) if k == "ellipsoid" else float(np.abs(v).max())
-                for k, v in zip(kinds, s)
-            ]
-        )
 
     def obstacles(self, state: Needle3DState) -> list[ConvexBody]:
         """The deformed obstacles (ellipsoids, parallelepipeds) in ``state``.

@@ -42,7 +42,15 @@ def _limits(sim):
 
 
 def figure_for(sim, size: float = 4.8):
-    """A square figure and axes sized for ``sim``'s scene."""
+    """A square figure and axes sized for ``sim``'s scene.
+
+    Parameters
+    ----------
+    sim : Simulator
+        A 2-D tissue scenario.
+    size : float
+        Figure side (inches).
+    """
     plt = require("matplotlib.pyplot", "viz")
     fig, ax = plt.subplots(figsize=(size, size))
     return fig, ax
@@ -57,6 +65,18 @@ def draw_frame(
     grey), the goal (green), and for the needle the robot (red arrow) and its path, for
     the manipulation scenario the target (blue) and its path, the manipulators (red) and
     the traces of the manipulator positions.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+    sim : Simulator
+    states : sequence of SimState
+        A rollout ``[y_0, ..., y_T]``.
+    k : int, optional
+        The state drawn; the paths run up to it.
+    title : str, optional
+    show_undeformed : bool
+        Draw the undeformed outline.
     """
     from matplotlib.patches import Polygon
 
@@ -122,7 +142,17 @@ def draw_frame(
 
 
 def frame_indices(n_states: int, max_frames: int) -> list[int]:
-    """At most ``max_frames`` evenly spaced state indices, always including the last."""
+    """At most ``max_frames`` evenly spaced state indices, always including the last.
+
+    Parameters
+    ----------
+    n_states : int
+    max_frames : int
+
+    Returns
+    -------
+    list of int
+    """
     if n_states <= max_frames:
         return list(range(n_states))
     idx = np.unique(np.linspace(0, n_states - 1, max_frames).round().astype(int))
@@ -139,7 +169,23 @@ def save_frames(
     dpi: int = 90,
     on_frame=None,
 ) -> list[Path]:
-    """Write PNG frames ``out_dir/{prefix}_{k:04d}.png`` of (at most ``max_frames``) states."""
+    """Write PNG frames ``out_dir/{prefix}_{k:04d}.png`` of (at most ``max_frames``) states.
+
+    Parameters
+    ----------
+    sim : Simulator
+    states : sequence of SimState
+    out_dir : str or path
+    prefix : str
+    max_frames : int
+    dpi : int
+    on_frame : callable, optional
+        ``on_frame(k)`` after state ``k``'s frame is written (progress display).
+
+    Returns
+    -------
+    list of pathlib.Path
+    """
     plt = require("matplotlib.pyplot", "viz")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -159,7 +205,21 @@ def save_frames(
 
 
 def save_gif(sim, states, path, *, max_frames: int = 60, fps: int = 8, dpi: int = 70) -> Path:
-    """Animated GIF of the states (matplotlib ``PillowWriter``), written atomically."""
+    """Animated GIF of the states (matplotlib ``PillowWriter``), written atomically.
+
+    Parameters
+    ----------
+    sim : Simulator
+    states : sequence of SimState
+    path : str or path
+    max_frames : int
+    fps : int
+    dpi : int
+
+    Returns
+    -------
+    pathlib.Path
+    """
     plt = require("matplotlib.pyplot", "viz")
     from matplotlib.animation import PillowWriter
 

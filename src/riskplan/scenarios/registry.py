@@ -18,10 +18,18 @@ SCENARIO_NAMES = ("needle", "manipulation", "needle3d")
 
 
 def make_scenario(name: str, case: str = "nominal"):
-    """The scenario ``name`` (:data:`SCENARIO_NAMES`, or the path of a scenario file,
-    :mod:`riskplan.scenarios.files`) with the parameter distribution of uncertainty
-    ``case`` (:data:`riskplan.scenarios.uncertainty.CASE_NAMES`) as its S; each scenario
-    gets its own actuation covariance (``sim.actuation_cov()``)."""
+    """The scenario ``name`` with the parameter distribution of uncertainty ``case`` as its S.
+
+    Each scenario gets its own actuation covariance (``sim.actuation_cov()``).
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`SCENARIO_NAMES`, or the path of a scenario file
+        (:mod:`riskplan.scenarios.files`).
+    case : str
+        One of :data:`riskplan.scenarios.uncertainty.CASE_NAMES`.
+    """
     if name == "needle":
         from riskplan.scenarios.needle import NeedleConfig
 
@@ -41,10 +49,18 @@ def make_scenario(name: str, case: str = "nominal"):
 
 
 def scenario_from_config(kind: str, config, case: str = "nominal"):
-    """The scenario of ``kind`` (``"needle"``, ``"manipulation"`` or ``"needle3d"``) built on
-    ``config`` (``None``: the default),
-    with the distribution of ``case`` around its nominal parameters and its own actuation
-    covariance."""
+    """The scenario of ``kind`` built on ``config``, with the distribution of ``case`` around its
+    nominal parameters and its own actuation covariance.
+
+    Parameters
+    ----------
+    kind : str
+        ``"needle"``, ``"manipulation"`` or ``"needle3d"``.
+    config : object or None
+        The kind's configuration (``None``: the default).
+    case : str
+        An uncertainty case name.
+    """
     from riskplan.scenarios.uncertainty import get_case
 
     if kind == "needle":
@@ -74,8 +90,16 @@ def scenario_from_config(kind: str, config, case: str = "nominal"):
 
 
 def load_scenario_file(path, case: str = "nominal"):
-    """The scenario of a file (:func:`~riskplan.scenarios.files.read_scenario_config`) with
-    the parameter distribution of uncertainty ``case`` as its S (as :func:`make_scenario`)."""
+    """The scenario of a file (:func:`~riskplan.scenarios.files.read_scenario_config`) with the
+    parameter distribution of uncertainty ``case`` as its S (as :func:`make_scenario`).
+
+    Parameters
+    ----------
+    path : str or path
+        A scenario TOML file.
+    case : str
+        An uncertainty case name.
+    """
     from riskplan.scenarios.files import read_scenario_config
 
     kind, cfg = read_scenario_config(path)

@@ -152,15 +152,42 @@ class PlanningScenario(Simulator, Protocol):
         ...
 
     def in_collision(self, state) -> bool:
-        """Whether the full state ``state`` collides with the (deformed) obstacles."""
+        """Whether the full state collides with the (deformed) obstacles.
+
+        Parameters
+        ----------
+        state : SimState
+
+        Returns
+        -------
+        bool
+        """
         ...
 
     def in_goal(self, state) -> bool:
-        """Whether the goal point of ``state`` lies in the (deformed) goal region."""
+        """Whether the goal point of ``state`` lies in the (deformed) goal region.
+
+        Parameters
+        ----------
+        state : SimState
+
+        Returns
+        -------
+        bool
+        """
         ...
 
     def goal_distance(self, state) -> float:
-        """Distance from the goal point of ``state`` to the (deformed) goal centre."""
+        """Distance from the goal point of ``state`` to the (deformed) goal centre.
+
+        Parameters
+        ----------
+        state : SimState
+
+        Returns
+        -------
+        float
+        """
         ...
 
 
@@ -253,8 +280,21 @@ class BoxSpace:
         return int(self.low.shape[0])
 
     def sample(self, gen: np.random.Generator, goal_bias: float = 0.0) -> tuple[np.ndarray, bool]:
-        """The goal point with probability ``goal_bias``, else uniform in the box; ``p + 1``
-        uniforms of ``gen`` per call (:meth:`PlanningSpace.sample`)."""
+        """The goal point with probability ``goal_bias``, else uniform in the box.
+
+        ``p + 1`` uniforms of ``gen`` per call (:meth:`PlanningSpace.sample`).
+
+        Parameters
+        ----------
+        gen : numpy.random.Generator
+        goal_bias : float
+            In [0, 1].
+
+        Returns
+        -------
+        tuple
+            ``(point (p,), is_goal)``.
+        """
         u = gen.random(self.dim + 1)
         if u[-1] < goal_bias:
             return self.goal.copy(), True
@@ -303,7 +343,16 @@ class BoxSpace:
         return np.sqrt(np.einsum("ij,ij->i", d, d))
 
     def contains(self, x: np.ndarray) -> bool:
-        """Whether the weighted, non-periodic components of ``x (p,)`` lie in the box
-        (:meth:`PlanningSpace.contains`)."""
+        """Whether the weighted, non-periodic components of ``x`` lie in the box
+        (:meth:`PlanningSpace.contains`).
+
+        Parameters
+        ----------
+        x : numpy.ndarray, (p,)
+
+        Returns
+        -------
+        bool
+        """
         b = self._bounded
         return bool(np.all(x[b] >= self.low[b]) and np.all(x[b] <= self.high[b]))

@@ -291,7 +291,24 @@ class TetBlockModel:
 
     def point_load_direct(self, e: int, lam, force) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`point_load` by one solve of the whole system (the reference the Green's
-        columns are tested against; same arguments and returns)."""
+        columns are tested against).
+
+        Parameters
+        ----------
+        e : int
+            The element holding the loaded point.
+        lam : array_like, shape (4,)
+            The point's barycentric weights in it.
+        force : array_like, shape (3,)
+            The force.
+
+        Returns
+        -------
+        u_point : numpy.ndarray, shape (3,)
+            The displacement at the loaded point.
+        u_tracked : numpy.ndarray, shape (k, 3)
+            The displacement of the block's tracked points.
+        """
         b = self.block
         lam = np.asarray(lam, dtype=np.float64)
         F = np.zeros((b.n_nodes, 3))

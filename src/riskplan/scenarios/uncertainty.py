@@ -58,7 +58,13 @@ NEEDLE_ACTUATION_STD = (0.05, math.radians(5.0))
 
 
 def needle_actuation_cov() -> tuple[tuple[float, float], tuple[float, float]]:
-    """The needle's actuation covariance ``diag(0.05², (5°)²)`` (see module docstring)."""
+    """The needle's actuation covariance ``diag(0.05², (5°)²)`` (see module docstring).
+
+    Returns
+    -------
+    tuple of tuple of float
+        The 2 x 2 matrix, row by row.
+    """
     sv, sp = NEEDLE_ACTUATION_STD
     return ((sv * sv, 0.0), (0.0, sp * sp))
 
@@ -76,13 +82,32 @@ class ParamDistribution:
         return self.base
 
     def sample(self, seed=None) -> SimParams:
-        """One draw ``s ~ S``; the same seed gives the same draw."""
+        """One draw ``s ~ S``; the same seed gives the same draw.
+
+        Parameters
+        ----------
+        seed : int, numpy.random.Generator or None
+
+        Returns
+        -------
+        SimParams
+        """
         return self._draw(as_generator(seed))
 
     sample_params = sample
 
     def sample_many(self, n: int, seed=None) -> list[SimParams]:
-        """``n`` independent draws from one generator seeded by ``seed``."""
+        """``n`` independent draws from one generator seeded by ``seed``.
+
+        Parameters
+        ----------
+        n : int
+        seed : int, numpy.random.Generator or None
+
+        Returns
+        -------
+        list of SimParams
+        """
         n = check_count(n, "n", 0, integral=True)
         gen = as_generator(seed)
         return [self._draw(gen) for _ in range(n)]
@@ -147,15 +172,36 @@ class MaterialUncertainty(ParamDistribution):
 
     @classmethod
     def low(cls, base: SimParams | None = None) -> MaterialUncertainty:
-        """Paper case 1: E ~ N(50, 5), ν ~ N(0.4, 1e-4); around another nominal
-        material ``base`` (a scenario file's): E ~ N(E₀, 5 (E₀/50)²) (the same relative
-        spread), ν ~ N(ν₀, 1e-4)."""
+        """Paper case 1: E ~ N(50, 5), ν ~ N(0.4, 1e-4).
+
+        Around another nominal material ``base`` (a scenario file's): E ~ N(E₀, 5 (E₀/50)²) (the
+        same relative spread), ν ~ N(ν₀, 1e-4).
+
+        Parameters
+        ----------
+        base : SimParams, optional
+            The nominal parameters (default: the paper's E = 50, ν = 0.4).
+
+        Returns
+        -------
+        MaterialUncertainty
+        """
         return cls._around(base, "material-low", 5.0, 1e-4)
 
     @classmethod
     def high(cls, base: SimParams | None = None) -> MaterialUncertainty:
-        """Paper case 2: E ~ N(50, 75), ν ~ N(0.4, 4e-4); around another nominal
-        material as :meth:`low` (variance 75 (E₀/50)²)."""
+        """Paper case 2: E ~ N(50, 75), ν ~ N(0.4, 4e-4); around another nominal material as
+        :meth:`low` (variance 75 (E₀/50)²).
+
+        Parameters
+        ----------
+        base : SimParams, optional
+            The nominal parameters.
+
+        Returns
+        -------
+        MaterialUncertainty
+        """
         return cls._around(base, "material-high", 75.0, 4e-4)
 
     @classmethod
@@ -293,8 +339,19 @@ class WithActuation(ParamDistribution):
 def get_case(name: str, base: SimParams | None = None, actuation_cov=None) -> ParamDistribution:
     """The distribution of one named case (:data:`CASE_NAMES`) around ``base``.
 
-    ``actuation_cov`` overrides the needle's default actuation covariance (needed for a
-    scenario whose control dimension is not 2; the scenarios pass their own).
+    Parameters
+    ----------
+    name : str
+        A case name.
+    base : SimParams, optional
+        The nominal parameters.
+    actuation_cov : array_like, (q, q), optional
+        Overrides the needle's default actuation covariance (needed for a scenario whose
+        control dimension is not 2; the scenarios pass their own).
+
+    Returns
+    -------
+    ParamDistribution
     """
     base = base or SimParams()
     if name == "nominal":

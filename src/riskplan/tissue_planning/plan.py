@@ -26,10 +26,10 @@ __all__ = [
 #: How ``plan tissue`` selects (``selection=``): ``"paper"`` is the paper's σ-distance on
 #: the world-frame LQG; ``"calibrated"`` (the default outside the paper reproduction) is,
 #: per scenario, the estimator with the lowest mean absolute error against measured
-#: closed-loop success in the calibration study at the reduced scale (docs/control.md,
-#: "Calibration": needle Patil truncation on the paper's LQG, mae 0.009, ρ 0.82;
-#: manipulation sampling with the persistent-disturbance state, mae 0.066, ρ 0.89);
-#: ``"material"``: the needle in its material frame with the bias state (mae 0.012, ρ 0.88,
+#: closed-loop success in the calibration study at the full scale's plans (docs/control.md,
+#: "Calibration": needle Patil truncation on the paper's LQG, mae 0.023, ρ 0.92;
+#: manipulation sampling with the persistent-disturbance state, mae 0.049, ρ 0.91);
+#: ``"material"``: the needle in its material frame with the bias state (mae 0.023, ρ 0.96,
 #: and the controller that does not lose runs at force ×2; ``frame``: the needle's
 #: reduced-state frame, ``NeedleScenario.with_frame``).
 SELECTIONS = {
@@ -113,18 +113,34 @@ def plan_tissue(
     on_check=None,
     selection: str = "calibrated",
 ) -> TissuePlanningResult:
-    """Run the method on one scenario (``"needle"`` or ``"manipulation"``) and uncertainty
-    ``case`` (:data:`riskplan.scenarios.uncertainty.CASE_NAMES`).
+    """Run the method on one scenario and uncertainty case (deformable paper, Fig. 2).
 
     ``n_plans`` candidates from :func:`~riskplan.tissue_planning.rrt.rrt_plans`, selection by
-    :func:`~riskplan.tissue_planning.select.select_plan` (``method``, ``n_samples`` parameter draws
-    per step for ``M_t``), then ``check_runs`` closed-loop executions for the selected plan
-    and ``check_others`` more (``check_runs = 0`` skips the check). ``on_tree(i, tree)``,
-    ``on_plan(i, score)``, ``on_check(row)`` report progress. The trees, the selection and
-    the check draw from three streams ``spawn_seeds(seed, 3)``
-    (:func:`riskplan.parallel.spawn_seeds`). ``selection``: ``"calibrated"`` (default),
-    ``"material"`` or ``"paper"`` (:data:`SELECTIONS`); ``method`` overrides its LQG-MP
-    method.
+    :func:`~riskplan.tissue_planning.select.select_plan`, then ``check_runs`` closed-loop
+    executions for the selected plan and ``check_others`` more (``check_runs = 0`` skips the
+    check). Trees, selection and check draw from ``spawn_seeds(seed, 3)``.
+
+    Parameters
+    ----------
+    scenario : str
+        ``"needle"`` or ``"manipulation"``.
+    n_plans, check_runs, check_others : int
+    case : str
+        Uncertainty case (:data:`riskplan.scenarios.uncertainty.CASE_NAMES`).
+    seed, workers, backend
+    rrt_options : RRTOptions, optional
+    method : str, optional
+        Overrides the selection's LQG-MP method.
+    n_samples : int
+        Parameter draws per step for ``M_t``.
+    on_tree, on_plan, on_check : callable, optional
+        ``on_tree(i, tree)``, ``on_plan(i, score)``, ``on_check(row)`` report progress.
+    selection : str
+        ``"calibrated"`` (default), ``"material"`` or ``"paper"`` (:data:`SELECTIONS`).
+
+    Returns
+    -------
+    TissuePlanningResult
     """
     from riskplan._validation import check_count
     from riskplan.control.lqgmp import METHODS
@@ -207,10 +223,22 @@ STEP_S = 1.65e-6
 
 
 def check_tissue_budget(sim, *, n_plans: int, check_runs: int, check_others: int) -> None:
-    """Refuse a run whose work exceeds the budget (:mod:`riskplan.budget`) before any work:
-    the candidates (``--plans``: each keeps at least two simulator states, the mesh
+    """Refuse a run whose work exceeds the budget (:mod:`riskplan.budget`) before any work.
+
+    The candidates (``--plans``: each keeps at least two simulator states, the mesh
     displacement at 2 float64 per node) and the Monte Carlo check (``--check-runs``
-    executions of each checked plan, each at least one simulator step)."""
+    executions of each checked plan, each at least one simulator step).
+
+    Parameters
+    ----------
+    sim : Simulator
+    n_plans : int
+        Candidate plans.
+    check_runs : int
+        Executions per checked plan.
+    check_others : int
+        Checked plans besides the selected one.
+    """
     from riskplan.budget import check_budget
 
     nodes = sim.mesh_data(sim.nominal_params.n_elements).mesh.n_nodes

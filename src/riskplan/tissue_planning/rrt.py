@@ -77,13 +77,16 @@ import numpy as np
 
 from riskplan._validation import as_array, as_generator, check_count
 from riskplan.errors import (
-    ConvergenceError,
-    ElementInversionError,
     InvalidInputError,
     PlanningError,
-    SimulationError,
 )
 from riskplan.scenarios.space import PlanningSpace
+from riskplan.tissue_planning.rrt_connect import (
+    _SIM_FAILURES,
+    _connect_edge,
+    _goal_radius,
+    _in_goal,
+)
 
 log = logging.getLogger(__name__)
 
@@ -100,9 +103,6 @@ __all__ = [
 #: Goal-directed extensions of a node's lineage after which it is no longer picked for the
 #: goal (a car facing away from the goal would otherwise be picked again and again).
 _MAX_GOAL_FAILS = 3
-
-#: Errors a simulator may raise for one candidate control; such a candidate is discarded.
-_SIM_FAILURES = (ConvergenceError, ElementInversionError, SimulationError, FloatingPointError)
 
 
 def planning_space(sim) -> PlanningSpace:
@@ -175,17 +175,8 @@ class RRTOptions:
     steering: 1 of 11; docs/planning.md). ``goal_entry = goal_steer = False,
     goal_depth = control_margin = 0``: the plans of the original tree, bit for bit.
 
-    ``goal_connect`` (default 0: off): after a goal-directed extension added a node (not a
-    goal node), keep extending from the newest node with the steering rule's control alone
-    (``PlanningSpace.steer``; no random candidates) for up to ``goal_connect`` more edges,
-    until one ends in the goal, is blocked (leaves the space or touches an obstacle) or
-    gets no closer to the goal point: the "extend until blocked" of RRT-Connect (Kuffner &
-    LaValle, ICRA 2000) towards the goal. Each edge is checked as any other (every state
-    in the space and collision-free, the goal entry); the connection draws no random
-    numbers and counts as the one goal-directed attempt that started it. Without it a
-    lineage reaches the goal by at most ``_MAX_GOAL_FAILS`` goal-directed extensions, so a
-    goal farther than that many edges from every node is reached only by chance; the 3-D
-    needle, 0.8 from its target in edges of at most 0.3, plans with it.
+    ``goal_connect`` (default 0: off): up to that many steered edges after a goal-directed
+    one, "extend until blocked" (:mod:`riskplan.tissue_planning.rrt_connect`).
     """
 
     n_controls: int = 4
@@ -289,26 +280,6 @@ def sampling_bounds(sim, options: RRTOptions) -> np.ndarray:
     return out
 
 
-def _goal_radius(sim, options: RRTOptions) -> float:
-    """``(1 − goal_depth) · sim.goal_radius``, or ``inf`` when ``goal_depth`` is 0."""
-    if options.goal_depth == 0.0:
-        return math.inf
-    r = getattr(sim, "goal_radius", None)
-    if r is None:
-        raise InvalidInputError(
-            f"options.goal_depth: {type(sim).__name__} has no goal_radius; use goal_depth=0"
-        )
-    return (1.0 - options.goal_depth) * float(r)
-
-
-def _in_goal(sim, st, r_tight: float) -> bool:
-    """Whether ``st`` ends an edge: in ``sim``'s goal and within ``r_tight`` of its centre
-    (the cheaper distance test first)."""
-    if r_tight == math.inf:
-        return bool(sim.in_goal(st))
-    return bool(sim.goal_distance(st) <= r_tight and sim.in_goal(st))
-
-
 def _check_sim(sim) -> None:
     for name in (
         "step",
@@ -323,6 +294,43 @@ def _check_sim(sim) -> None:
             raise InvalidInputError(
                 f"sim: {type(sim).__name__} lacks {name!r}, which the simulator RRT needs"
             )
+
+
+class _Tree:
+    """A growing tree: reduced states ``X`` (doubled when full), full states, edges, goals."""
+
+    def __init__(self, root, x0, u0, q: int, cap: int = 1024):
+        self.X = np.empty((cap, x0.shape[0]))
+        self.X[0] = x0
+        self.is_goal = np.zeros(cap, dtype=bool)
+        self.goal_fails = np.zeros(cap, dtype=np.int64)
+        self.parents = [-1]
+        self.node_state = [root]  # full state y of every node; edge_states: after each step
+        self.edge_states: list[tuple] = [()]
+        self.edge_controls: list[np.ndarray] = [np.empty((0, q))]
+        self.node_control = [u0]
+        self.has_goal_child = [False]
+        self.goal_nodes: list[int] = []
+        self.n = 1
+
+    def add(self, sim, parent: int, seq, u, at_goal: bool) -> None:
+        n = self.n  # the node reached by the edge ``seq`` (states) under control ``u``
+        if n == self.X.shape[0]:
+            self.X = np.concatenate([self.X, np.empty_like(self.X)])
+            self.is_goal = np.concatenate([self.is_goal, np.zeros_like(self.is_goal)])
+            self.goal_fails = np.concatenate([self.goal_fails, np.zeros_like(self.goal_fails)])
+        self.X[n] = np.asarray(sim.reduced(seq[-1]), dtype=np.float64)
+        self.parents.append(parent)
+        self.node_state.append(seq[-1])
+        self.edge_states.append(tuple(seq))
+        self.edge_controls.append(np.tile(u, (len(seq), 1)))
+        self.node_control.append(u)
+        self.has_goal_child.append(False)
+        if at_goal:
+            self.has_goal_child[parent] = True
+            self.is_goal[n] = True
+            self.goal_nodes.append(n)
+        self.n = n + 1
 
 
 def grow_tree(
@@ -357,20 +365,12 @@ def grow_tree(
 
     root = sim.initial_state(params)
     x0 = np.asarray(sim.reduced(root), dtype=np.float64)
-    cap = 1024
-    X = np.empty((cap, space.dim))
-    X[0] = x0
-    parents = [-1]
-    node_state = [root]  # full state y of every node
-    edge_states: list[tuple] = [()]  # states after each step of the edge into the node
-    edge_controls: list[np.ndarray] = [np.empty((0, q))]
-    node_control = [0.5 * (bounds[:, 0] + bounds[:, 1])]
-    has_goal_child = [False]
-    is_goal = np.zeros(cap, dtype=bool)
-    goal_fails = np.zeros(cap, dtype=np.int64)
+    tree = _Tree(root, x0, 0.5 * (bounds[:, 0] + bounds[:, 1]), q)
+    X, is_goal, goal_fails, n = tree.X, tree.is_goal, tree.goal_fails, tree.n
+    parents, node_state, node_control = tree.parents, tree.node_state, tree.node_control
+    edge_states, edge_controls = tree.edge_states, tree.edge_controls
+    has_goal_child, goal_nodes = tree.has_goal_child, tree.goal_nodes
     steer = space.steer if options.goal_steer else None
-    goal_nodes: list[int] = []
-    n = 1
     n_steps = 0
     it = 0
 
@@ -447,61 +447,23 @@ def grow_tree(
                 if has_goal_child[near]:
                     break  # one goal child per node keeps the plans of a tree distinct
                 seq = seq[: goal_at + 1]
-            if n == X.shape[0]:
-                X = np.concatenate([X, np.empty_like(X)])
-                is_goal = np.concatenate([is_goal, np.zeros_like(is_goal)])
-                goal_fails = np.concatenate([goal_fails, np.zeros_like(goal_fails)])
-            X[n] = np.asarray(sim.reduced(seq[-1]), dtype=np.float64)
-            parents.append(near)
-            node_state.append(seq[-1])
-            edge_states.append(tuple(seq))
-            edge_controls.append(np.tile(U[c], (len(seq), 1)))
-            node_control.append(U[c])
-            has_goal_child.append(False)
-            if goal_at is not None:
-                has_goal_child[near] = True
-                is_goal[n] = True
-                goal_nodes.append(n)
-            n += 1
+            tree.add(sim, near, seq, U[c], goal_at is not None)
+            X, is_goal, goal_fails, n = tree.X, tree.is_goal, tree.goal_fails, tree.n
             added = True
             break
         first_new = n - 1
         if to_goal and added and steer is not None and not is_goal[n - 1]:
+            ctx = (sim, params, space, steer, bounds, k_steps, r_tight)
             for _ in range(options.goal_connect):
                 node = n - 1
-                grown = _connect_edge(
-                    sim,
-                    params,
-                    space,
-                    steer,
-                    bounds,
-                    k_steps,
-                    r_tight,
-                    node_state[node],
-                    X[node],
-                    node_control[node],
-                    x_s,
+                seq, u_c, taken, at_goal = _connect_edge(
+                    *ctx, node_state[node], X[node], node_control[node], x_s
                 )
-                seq, u_c, taken, at_goal = grown
                 n_steps += taken
                 if seq is None:
                     break
-                if n == X.shape[0]:
-                    X = np.concatenate([X, np.empty_like(X)])
-                    is_goal = np.concatenate([is_goal, np.zeros_like(is_goal)])
-                    goal_fails = np.concatenate([goal_fails, np.zeros_like(goal_fails)])
-                X[n] = np.asarray(sim.reduced(seq[-1]), dtype=np.float64)
-                parents.append(node)
-                node_state.append(seq[-1])
-                edge_states.append(tuple(seq))
-                edge_controls.append(np.tile(u_c, (len(seq), 1)))
-                node_control.append(u_c)
-                has_goal_child.append(False)
-                if at_goal:
-                    has_goal_child[node] = True
-                    is_goal[n] = True
-                    goal_nodes.append(n)
-                n += 1
+                tree.add(sim, node, seq, u_c, at_goal)
+                X, is_goal, goal_fails, n = tree.X, tree.is_goal, tree.goal_fails, tree.n
                 if at_goal:
                     break
         if to_goal:
@@ -531,42 +493,6 @@ def grow_tree(
         n_sim_steps=n_steps,
         cpu_s=time.process_time() - cpu0,
     )
-
-
-def _connect_edge(sim, params, space, steer, bounds, k_steps, r_tight, y, x, u_node, x_goal):
-    """One edge of the goal connection (:class:`RRTOptions` ``goal_connect``) from the node
-    with full state ``y`` and reduced state ``x``: the steering rule's control held for
-    ``k_steps``. Returns ``(states, control, steps, ends_in_goal)``: the states cut at the
-    goal entry, and the simulator steps taken; ``states`` is ``None`` when the steering
-    rule or the simulator gives up, or the edge is blocked or gets no closer to
-    ``x_goal``."""
-    u = steer(x.copy(), x_goal, bounds, k_steps)
-    if u is None:
-        return None, None, 0, False
-    u = as_array(u, "space.steer(...)", shape=(bounds.shape[0],))
-    if space.max_control_change is not None:
-        d = space.max_control_change
-        u = np.clip(u, u_node - d, u_node + d)
-    u = np.clip(u, bounds[:, 0], bounds[:, 1])
-    d0 = float(space.distance(x[None, :], x_goal, to_goal=True)[0])
-    seq, st = [], y
-    try:
-        for _ in range(k_steps):
-            st = sim.step(st, u, params)
-            seq.append(st)
-    except _SIM_FAILURES as exc:
-        log.debug("rrt: goal connection stopped (%s)", exc)
-        return None, None, len(seq) + 1, False
-    for j, st in enumerate(seq):
-        xj = np.asarray(sim.reduced(st), dtype=np.float64)
-        if not (np.all(np.isfinite(xj)) and space.contains(xj)) or sim.in_collision(st):
-            return None, None, k_steps, False
-        if _in_goal(sim, st, r_tight):
-            return seq[: j + 1], u, k_steps, True
-    xe = np.asarray(sim.reduced(seq[-1]), dtype=np.float64)
-    if not float(space.distance(xe[None, :], x_goal, to_goal=True)[0]) < d0:
-        return None, None, k_steps, False
-    return seq, u, k_steps, False
 
 
 def _extract(sim, params, root, x0, parents, edge_states, edge_controls, leaf: int):

@@ -44,20 +44,20 @@ from __future__ import annotations
 
 import logging
 import time
-import warnings
 from dataclasses import asdict, dataclass, field
 from functools import partial
 
 import numpy as np
 
 from riskplan._validation import check_count
-from riskplan.errors import (
-    ConvergenceError,
-    ElementInversionError,
-    InvalidInputError,
-    NumericalError,
-    SimulationError,
+from riskplan.app.reproduce.calibration_tasks import (
+    _cpu,
+    _framed,
+    _runs,
+    estimate_candidate,
+    execute_rates,
 )
+from riskplan.errors import InvalidInputError
 
 log = logging.getLogger(__name__)
 
@@ -112,16 +112,6 @@ def estimators_for(sim) -> tuple:
     return tuple(e for e in ESTIMATORS if framed or e not in FRAMED)
 
 
-def _framed(sim, plan, controller: str):
-    """``(sim, plan)`` as the executions of ``controller`` see them: the material frame's
-    (:meth:`~riskplan.scenarios.needle.NeedleScenario.with_frame`,
-    :meth:`~riskplan.control.NominalPlan.reframed`) for ``"mat"``/``"matdist"``."""
-    if controller in ("mat", "matdist"):
-        m = sim.with_frame("material")
-        return m, plan.reframed(m)
-    return sim, plan
-
-
 #: The cases measured per scenario: those of the paper's single-execution figures (Figs. 4,
 #: 5: needle; 7(c-f): manipulation), where the paper shows what feedback does.
 CALIBRATION_CASES = {
@@ -150,16 +140,6 @@ def case_scenario(name: str, case: str):
         inner, kw = CASE_VARIANTS[case]
         return needle_variant(**kw)(name, inner)
     return make_scenario(name, case)
-
-
-#: a candidate whose linearisation fails with one of these is counted and left out
-_FAILURES = (
-    ConvergenceError,
-    ElementInversionError,
-    NumericalError,
-    SimulationError,
-    np.linalg.LinAlgError,
-)
 
 
 @dataclass(frozen=True)
@@ -232,115 +212,6 @@ CALIBRATION_SCALES: dict[str, dict[str, CalibrationScale]] = {
 }
 
 
-# ---- tasks (module level: picklable) ----------------------------------------------------
-
-
-def estimate_candidate(args):
-    """``args = (sim, plan, lin_samples, goal_samples, seed, methods[, earlier])``: the
-    paper's LQG controller and, per method of ``methods`` (a subset of :data:`ESTIMATORS`),
-    its LQG-MP ``P(success)``; ``"disturbance"`` builds the disturbance-state controller too.
-    ``earlier``: a result of this function for the same plan, case and seed (the σ
-    ranking's): its paper's controller and estimates are taken, not recomputed (the same
-    seed gives the same linearisation, so the values are those a recomputation gives).
-    Returns ``{"p": {method: float}, "lqg": controller, "dist": controller, "mat": ...,
-    "matdist": ..., "error": str | None, "cpu_s": float}`` (``cpu_s``: this call's CPU
-    seconds, :func:`time.process_time`); a failed linearisation gives ``error`` and no
-    controllers."""
-    from riskplan.control import linearize
-    from riskplan.control.lqg import lqg_controller
-    from riskplan.control.lqgmp import lqgmp
-    from riskplan.parallel import spawn_seeds
-
-    t0 = time.process_time()
-    sim, plan, lin_samples, goal_samples, seed, methods = args[:6]
-    earlier = args[6] if len(args) > 6 else None
-    s_lin, s_mp, s_dlin, s_dmp, s_mlin, s_mmp = spawn_seeds(seed, 6)
-    out = {"p": {}, "lqg": None, "dist": None, "mat": None, "matdist": None, "error": None}
-    with warnings.catch_warnings():
-        # rank-deficient X_t along straight stretches is expected and documented by linearize
-        warnings.simplefilter("ignore", RuntimeWarning)
-        try:
-            if earlier is not None and earlier.get("lqg") is not None:
-                ctrl = earlier["lqg"]
-                out["p"].update(earlier["p"])
-            else:
-                lin = linearize(sim, plan, sim.distribution, n_samples=lin_samples, seed=s_lin)
-                ctrl = lqg_controller(lin)
-            out["lqg"] = ctrl
-            for m in methods:
-                if m in ("sigma", "truncation", "sampling") and m not in out["p"]:
-                    r = lqgmp(sim, plan, ctrl, method=m, n_goal_samples=goal_samples, seed=s_mp)
-                    out["p"][m] = float(r.p_success)
-            if "disturbance" in methods:
-                dlin = linearize(
-                    sim,
-                    plan,
-                    sim.distribution,
-                    n_samples=lin_samples,
-                    seed=s_dlin,
-                    disturbance=True,
-                )
-                dctrl = lqg_controller(dlin, disturbance=True)
-                out["dist"] = dctrl
-                r = lqgmp(
-                    sim, plan, dctrl, method="sampling", n_goal_samples=goal_samples, seed=s_dmp
-                )
-                out["p"]["disturbance"] = float(r.p_success)
-            for m, key, dist in (
-                ("material", "mat", False),
-                ("material-disturbance", "matdist", True),
-            ):
-                if m not in methods:
-                    continue
-                msim, mplan = _framed(sim, plan, key)
-                mlin = linearize(
-                    msim,
-                    mplan,
-                    sim.distribution,
-                    n_samples=lin_samples,
-                    seed=s_mlin,
-                    disturbance=dist,
-                )
-                mctrl = lqg_controller(mlin, disturbance=dist)
-                out[key] = mctrl
-                r = lqgmp(
-                    msim, mplan, mctrl, method="sampling", n_goal_samples=goal_samples, seed=s_mmp
-                )
-                out["p"][m] = float(r.p_success)
-        except _FAILURES as exc:
-            out["error"] = f"{type(exc).__name__}: {exc}"
-    out["cpu_s"] = time.process_time() - t0
-    return out
-
-
-def execute_rates(args) -> dict:
-    """``args = (sim, plan, controller, seeds)``: ``{"runs": [[success (0/1), outcome], ...],
-    "cpu_s": float}``, one run per seed (``outcome``: the execution's, one of
-    :data:`riskplan.control.lqg.OUTCOMES`; ``cpu_s``: the batch's CPU seconds)."""
-    from riskplan.control.lqg import execute
-
-    t0 = time.process_time()
-    sim, plan, controller, seeds = args
-    out = []
-    for s in seeds:
-        gen = np.random.default_rng(s)
-        params = sim.distribution.sample(gen)
-        ex = execute(sim, plan, controller, params, seed=gen, keep_states=False)
-        out.append([int(ex.success), ex.outcome])
-    return {"runs": out, "cpu_s": time.process_time() - t0}
-
-
-def _runs(record) -> list:
-    """The ``[[success, outcome], ...]`` of a stored batch (a list in stores written before
-    batches carried their CPU seconds)."""
-    return record["runs"] if isinstance(record, dict) else record
-
-
-def _cpu(record) -> float:
-    """A stored record's CPU seconds (0 where it predates the field)."""
-    return float(record.get("cpu_s", 0.0)) if isinstance(record, dict) else 0.0
-
-
 def run_calibration(
     name: str,
     scale: CalibrationScale,
@@ -370,7 +241,6 @@ def run_calibration(
     differs from run to run.
     """
     from riskplan.app.reproduce.deformable import BlobStore, _seed_for
-    from riskplan.collision import binomial_interval
     from riskplan.parallel import imap_tasks, spawn_seeds
     from riskplan.scenarios.registry import SCENARIO_NAMES, make_scenario
     from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
@@ -418,10 +288,8 @@ def run_calibration(
 
     plans = blobs.get_or_compute(f"{pre}.plans", compute)
     # the RRT's wall seconds when first computed (its CPU runs in the pool's workers)
-    rrt_wall = store.get(f"{pre}.plans_wall_s")
-    if rrt_wall is None:
-        rrt_wall = time.perf_counter() - t_rrt
-        store.put(f"{pre}.plans_wall_s", rrt_wall)
+    if store.get(f"{pre}.plans_wall_s") is None:
+        store.put(f"{pre}.plans_wall_s", time.perf_counter() - t_rrt)
     report(stage, 1, 1)
     sims = {c: case_scenario(name, c) for c in cases}
 
@@ -470,9 +338,7 @@ def run_calibration(
             else []
         )
 
-    # 3. every estimator on the picked candidates; the paper's controller and its σ value
-    #    are step 2's (the same seed: a recomputation gives the same), so only the other
-    #    estimators and controllers are computed
+    # 3. every estimator on the picked candidates (the paper's controller and σ: step 2's)
     ests = estimators_for(base)
     ctrls = tuple(k for k in CONTROLLERS if any(CONTROLLER_OF[e] == k for e in ests))
     full = estimates(
@@ -489,9 +355,7 @@ def run_calibration(
     case_seeds = {
         c: spawn_seeds(_seed_for(seed, name, "calibration", "execute", c), n) for c in cases
     }
-    # batch-major: every (case, plan, controller) gets its first batch before any gets its
-    # second, so a run stopped part-way holds every plan at the same number of executions
-    # (a run of the same store with a smaller ``n_executions`` reads those batches back)
+    # batch-major: a run stopped part-way holds every plan at the same number of executions
     items = [
         (c, j, k, b)
         for b in range(n_batches)
@@ -523,22 +387,10 @@ def run_calibration(
             est = full[c, j]
             if est["error"] is not None:
                 continue
-            measured = {}
-            for k in ctrls:
-                runs = [row for b in range(n_batches) for row in _runs(flags[c, j, k, b])]
-                hits = int(sum(row[0] for row in runs))
-                lo, hi = binomial_interval(hits, len(runs), confidence=0.95)
-                outcomes: dict = {}
-                for row in runs:
-                    outcomes[row[1]] = outcomes.get(row[1], 0) + 1
-                measured[k] = {
-                    "successes": hits,
-                    "n": len(runs),
-                    "rate": hits / len(runs),
-                    "low": float(lo),
-                    "high": float(hi),
-                    "outcomes": outcomes,
-                }
+            measured = {
+                k: _rate([row for b in range(n_batches) for row in _runs(flags[c, j, k, b])])
+                for k in ctrls
+            }
             rows.append(
                 {
                     "case": c,
@@ -565,19 +417,7 @@ def run_calibration(
         "rows": rows,
     }
     if cost is not None:
-        # CPU seconds by part, summed over the stored records (each task times itself), and
-        # the RRT's wall seconds: where the stage's time goes (timings, not results: they
-        # differ from run to run)
-        cost.update(
-            {
-                "rrt_wall_s": float(rrt_wall),
-                "sigma_ranking_cpu_s": sum(_cpu(v) for v in sig.values()),
-                "estimators_cpu_s": sum(_cpu(v) for v in full.values()),
-                "executions_cpu_s": sum(_cpu(v) for v in flags.values()),
-                "n_linearised": {"sigma_ranking": len(sig), "estimators": len(full)},
-                "n_executions": len(items) * bs,
-            }
-        )
+        cost.update(_cost(store, pre, sig, full, flags, len(items) * bs))
 
     def metrics(e, sel):
         return calibration_metrics(
@@ -605,6 +445,41 @@ def run_calibration(
             best = e
     out["best"] = best
     return out
+
+
+def _rate(runs) -> dict:
+    """A (case, plan, controller)'s measured rate from its ``[[success, outcome], ...]``:
+    ``successes``, ``n``, ``rate``, its 95 % Wilson interval ``low``/``high`` and the count
+    of each ``outcome``."""
+    from riskplan.collision import binomial_interval
+
+    hits = int(sum(row[0] for row in runs))
+    lo, hi = binomial_interval(hits, len(runs), confidence=0.95)
+    outcomes: dict = {}
+    for row in runs:
+        outcomes[row[1]] = outcomes.get(row[1], 0) + 1
+    return {
+        "successes": hits,
+        "n": len(runs),
+        "rate": hits / len(runs),
+        "low": float(lo),
+        "high": float(hi),
+        "outcomes": outcomes,
+    }
+
+
+def _cost(store, pre, sig, full, flags, n_executions) -> dict:
+    """Where the stage's time went: CPU seconds summed over the stored records (each task
+    times itself) of the σ ranking, the estimators and the executions, and the RRT's wall
+    seconds when first computed (timings, not results: they differ from run to run)."""
+    return {
+        "rrt_wall_s": float(store.get(f"{pre}.plans_wall_s") or 0.0),
+        "sigma_ranking_cpu_s": sum(_cpu(v) for v in sig.values()),
+        "estimators_cpu_s": sum(_cpu(v) for v in full.values()),
+        "executions_cpu_s": sum(_cpu(v) for v in flags.values()),
+        "n_linearised": {"sigma_ranking": len(sig), "estimators": len(full)},
+        "n_executions": n_executions,
+    }
 
 
 # ---- figure -------------------------------------------------------------------------------

@@ -476,10 +476,10 @@ def run_scenario(
         plans[set_name] = blobs.get_or_compute(key, compute)
         report(f"{name}: RRT candidates ({set_name})", k + 1, len(sets))
 
-    # 2. per case and candidate: linearisation, LQG controller, LQG-MP
+    # 2. per candidate, case by case (a worker's cases share B_t's runs): linearise, LQG, LQG-MP
     sims = {c: make(name, c) for c in cases}
     selected_sets = [s for s in plans if s in SELECTED_SETS]
-    sel_items = [(c, s, j) for c in cases for s in selected_sets for j in range(len(plans[s]))]
+    sel_items = [(c, s, j) for s in selected_sets for j in range(len(plans[s])) for c in cases]
     pre = f"fig6d.{name}" if disturbance else f"fig6.{name}"
     sel_key = {it: f"{pre}.select.{it[0]}.{it[1]}.{it[2]:03d}" for it in sel_items}
     selection: dict = {it: blobs.get(sel_key[it]) for it in sel_items}

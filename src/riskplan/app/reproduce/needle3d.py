@@ -47,7 +47,11 @@ class PlanRow:
     the deformed target centre (Hauser et al.'s targeting error; the plan's own end lies up
     to 0.7 target radii from the centre); ``end_error_closed``/``end_error_open``: mean
     distance of the final tip from the plan's end, both relative to the deformed target
-    centre (what feedback corrects); ``mc_s``: seconds of the closed-loop executions."""
+    centre (what feedback corrects); ``mc_s``: seconds of the closed- and open-loop
+    executions; ``estimate_cpu_s``: CPU seconds of the linearisation + truncation estimate
+    and of the truncation estimate alone (given the controller); ``closed_cpu_s``: CPU
+    seconds of the ``n`` closed-loop executions (the process's own time, so the speed
+    ratio does not count other jobs' load)."""
 
     index: int
     n_steps: int
@@ -65,6 +69,8 @@ class PlanRow:
     end_error_closed: float = float("nan")
     end_error_open: float = float("nan")
     mc_s: float = 0.0
+    estimate_cpu_s: dict = field(default_factory=dict)
+    closed_cpu_s: float = 0.0
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -80,7 +86,7 @@ def evaluate_candidates(sim, plans, *, seed=0, n_samples: int = 16, n_goal_sampl
 
     ctrls, rows = [], []
     for i, (plan, s) in enumerate(zip(plans, spawn_seeds(seed, len(plans)))):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         try:
             ctrl, res = evaluate_plan(
                 sim,
@@ -99,6 +105,10 @@ def evaluate_candidates(sim, plans, *, seed=0, n_samples: int = 16, n_goal_sampl
             {"truncation": res.p_success},
             {"truncation+linearise": time.perf_counter() - t0},
         )
+        cpu = {"truncation+linearise": time.process_time() - c0}
+        c0 = time.process_time()
+        lqgmp_3d(sim, plan, ctrl, method="truncation", n_goal_samples=n_goal_samples, seed=s)
+        cpu["truncation"] = time.process_time() - c0
         for m in ESTIMATORS[1:]:
             t0 = time.perf_counter()
             est[m] = lqgmp_3d(
@@ -106,7 +116,7 @@ def evaluate_candidates(sim, plans, *, seed=0, n_samples: int = 16, n_goal_sampl
             ).p_success
             secs[m] = time.perf_counter() - t0
         ctrls.append(ctrl)
-        rows.append(PlanRow(i, plan.n_steps, est, secs))
+        rows.append(PlanRow(i, plan.n_steps, est, secs, estimate_cpu_s=cpu))
     return ctrls, rows
 
 
@@ -121,13 +131,17 @@ def measure_plan(sim, plan, controller, row: PlanRow, *, n: int, seed=0) -> Plan
 
     t0 = time.perf_counter()
     res = {"closed": [], "open": []}
+    closed_cpu = 0.0
     y_T = plan.states[-1]
     rel_plan = plan.reduced[-1][:3] - sim.goal(y_T).centre
     for s in spawn_seeds(seed, n):
         for mode, ctrl in (("closed", controller), ("open", None)):
+            c0 = time.process_time()
             gen = np.random.default_rng(s)
             params = sim.sample_params(gen)
             ex = execute(sim, plan, ctrl, params, seed=gen, keep_states=False)
+            if mode == "closed":
+                closed_cpu += time.process_time() - c0
             last = ex.states[-1]
             rel = last.pose[:3] - sim.goal(last).centre
             res[mode].append(
@@ -144,7 +158,13 @@ def measure_plan(sim, plan, controller, row: PlanRow, *, n: int, seed=0) -> Plan
         setattr(row, f"end_error_{mode}", float(np.mean([e for *_, e in res[mode]])))
     row.n = n
     row.mc_s = time.perf_counter() - t0
+    row.closed_cpu_s = closed_cpu
     return row
+
+
+def _measure_task(args) -> PlanRow:
+    sim, plan, controller, row, n, seed = args
+    return measure_plan(sim, plan, controller, row, n=n, seed=seed)
 
 
 @dataclass
@@ -170,10 +190,14 @@ def plan_needle3d(
     max_iterations: int = 600,
     workers: int | None = None,
     config=None,
+    frame: str = "world",
 ) -> Needle3DResult:
     """Simulator RRT candidates for the 3-D needle, LQG-MP (truncation) selection and, with
     ``check_runs > 0``, closed/open-loop executions of the selected plan and of
-    ``check_plans − 1`` more spread over the ranking."""
+    ``check_plans − 1`` more spread over the ranking. ``frame``: the reduced state the
+    linearisation, the controllers and LQG-MP read (:data:`riskplan.scenarios.needle3d.FRAMES`;
+    the RRT plans in the world frame, its plans are reframed); ``result.plans`` stay in
+    the world frame."""
     from riskplan.scenarios.registry import scenario_from_config
     from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
     from riskplan.tissue_planning.select import evenly_spaced_ranks
@@ -187,7 +211,7 @@ def plan_needle3d(
         # goal bias 0.5 and a target tightened to 0.7 of its radius: with the defaults (0.3,
         # 0.5) trees of 600 iterations found 0-1 plans; with these, 3-5 in 400 (seeds 10, 11).
         # goal_connect: a goal-directed edge is followed by steered edges until blocked
-        # (RRT-Connect); trees 1-3 of seed 0 found 13 plans in 10.2 s of CPU with it,
+        # (RRT-Connect); the trees of seeds 1-3 found 13 plans in 10.2 s of CPU with it,
         # 10 plans in 11.7 s without (docs/scenarios.md)
         options=RRTOptions(
             plans_per_tree=5,
@@ -201,19 +225,34 @@ def plan_needle3d(
     )
     t_rrt = time.perf_counter() - t0
     t0 = time.perf_counter()
+    world_plans = plans
+    if frame != "world":
+        sim = sim.with_frame(frame)
+        plans = [p.reframed(sim) for p in plans]
     ctrls, rows = evaluate_candidates(sim, plans, seed=seed)
     t_sel = time.perf_counter() - t0
     ranked = sorted(rows, key=lambda r: (-r.estimates["truncation"], r.index))
     best = ranked[0].index
     t0 = time.perf_counter()
     if check_runs:
+        from riskplan.parallel import map_tasks
+
         usable = [r for r in ranked if ctrls[r.index] is not None]
-        for rank in evenly_spaced_ranks(len(usable), min(check_plans, len(usable))):
-            r = usable[rank]
-            measure_plan(sim, plans[r.index], ctrls[r.index], r, n=check_runs, seed=seed + 1)
+        chosen = [
+            usable[k] for k in evenly_spaced_ranks(len(usable), min(check_plans, len(usable)))
+        ]
+        # one task per checked plan (the same draws for each: seed + 1)
+        done = map_tasks(
+            _measure_task,
+            [(sim, plans[r.index], ctrls[r.index], r, check_runs, seed + 1) for r in chosen],
+            backend="local" if (workers or 0) != 1 else "serial",
+            workers=workers,
+        )
+        by_index = {r.index: r for r in done}
+        ranked = [by_index.get(r.index, r) for r in ranked]
     t_mc = time.perf_counter() - t0
     return Needle3DResult(
-        plans=plans,
+        plans=world_plans,
         rows=ranked,
         best=best,
         controller=ctrls[best],
@@ -224,6 +263,7 @@ def plan_needle3d(
             seed=seed,
             check_runs=check_runs,
             n_elements=sim.nominal_params.n_elements,
+            frame=frame,
         ),
     )
 
@@ -326,6 +366,8 @@ def write_outputs(result: Needle3DResult, out, *, n_executed: int = 10, seed: in
 
     out = Path(out)
     sim = scenario_from_config("needle3d", None, result.settings["case"])
+    frame = result.settings.get("frame", "world")
+    run_sim = sim.with_frame(frame)  # the frame the controller reads
     plan = result.plans[result.best]
     files = {}
     with atomic_path(out / "selected.npz", suffix=".npz") as tmp:
@@ -344,9 +386,10 @@ def write_outputs(result: Needle3DResult, out, *, n_executed: int = 10, seed: in
     executed = []
     if result.controller is not None:
         gen = np.random.default_rng(seed)
+        run_plan = plan.reframed(run_sim)
         for _ in range(n_executed):
-            ex = execute(sim, plan, result.controller, sim.sample_params(gen), seed=gen)
-            executed.append(ex.x[:, :3])
+            ex = execute(run_sim, run_plan, result.controller, sim.sample_params(gen), seed=gen)
+            executed.append(sim.path(ex.states))
     fig = needle3d_figure(sim, result.plans, executed, highlight=result.best)
     write_text_atomic(out / "needle3d.html", fig.to_html(include_plotlyjs=True))
     files["figure"] = out / "needle3d.html"
@@ -356,7 +399,7 @@ def write_outputs(result: Needle3DResult, out, *, n_executed: int = 10, seed: in
 #: sizes of the ``reproduce`` stage ``needle3d`` by scale name
 NEEDLE3D_SCALES = {
     "smoke": dict(n_plans=2, check_runs=0, check_plans=1, max_iterations=400),
-    "paper": dict(n_plans=10, check_runs=200, check_plans=6, max_iterations=600),
+    "paper": dict(n_plans=30, check_runs=1000, check_plans=6, max_iterations=600),
 }
 
 

@@ -6,7 +6,9 @@
   single executions of Figs. 4, 5 and 7(c-f).
 * ``mdn`` — the MDN paper: Fig. 4 (NLL vs K), Fig. 5, MDN vs Cosserat timing, and Fig. 7
   (Bayesian optimisation of a chest-cavity path, the "about 15 % → below 7 % after 50
-  iterations" claim) (:mod:`riskplan.app.reproduce.mdn`).
+  iterations" claim) (:mod:`riskplan.app.reproduce.mdn`); stage ``robot-risk``: risks from
+  the learned model against the robot's collision rates
+  (:mod:`riskplan.app.reproduce.risk_calibration`).
 
 Every parallel stage runs on one :class:`riskplan.parallel.TaskPool` opened for the whole
 job, so the worker processes (or the Ray connection) start once, not once per stage.
@@ -46,6 +48,10 @@ SCALE_NAMES = ("smoke", "paper")
 #: ``calibration-needle`` / ``calibration-manipulation``: the calibration of one scenario
 #: (each a stage of its own that fits an hour at the ``full`` calibration scale; the same
 #: store records as ``calibration``, which then assembles both from the store).
+#: ``control-variants``: LQG against the UKF and iLQR on the selected RRT plans
+#: (:mod:`riskplan.app.reproduce.control_variants`, beyond the paper).
+#: ``robot-risk``: the chest risks against the robot's collision rates (MDN paper; its sizes:
+#: :data:`riskplan.app.reproduce.robot_risk.ROBOT_RISK_FOR`, or ``robot_risk_scale``).
 STAGES = (
     "figures",
     "calibration",
@@ -53,6 +59,8 @@ STAGES = (
     "calibration-manipulation",
     "sensitivity",
     "needle3d",
+    "control-variants",
+    "robot-risk",
 )
 #: the calibration sizes a named scale uses unless ``calibration_scale`` names others
 _CALIBRATION_FOR = {"smoke": "smoke", "paper": "full"}
@@ -133,6 +141,7 @@ def reproduce(
     progress=None,
     stages=("figures",),
     calibration_scale: str | None = None,
+    robot_risk_scale: str | None = None,
 ) -> dict:
     """Run (or continue) the reproduction and write ``out/results.json`` and ``out/report.html``.
 
@@ -154,6 +163,10 @@ def reproduce(
         (:data:`riskplan.app.reproduce.calibration.CALIBRATION_SCALES`: ``smoke``,
         ``reduced``, ``full``); ``None``: ``smoke`` for scale ``smoke``, ``full`` for
         ``paper`` (a dict scale names its own under ``"calibration"``, or gets ``smoke``).
+    robot_risk_scale : sizes of the ``robot-risk`` stage
+        (:data:`riskplan.app.reproduce.risk_calibration.RISK_STUDY_SCALES`: ``smoke``,
+        ``reduced``, ``full``); ``None``: ``smoke`` for scale ``smoke``, ``full`` for ``paper``.
+        The stage runs into ``out/robot-risk`` with a store of its own (resumable).
 
     Returns the results dict (what ``results.json`` holds). Raises
     :class:`~riskplan.errors.InvalidInputError` for bad arguments,
@@ -166,13 +179,21 @@ def reproduce(
     stages = (stages,) if isinstance(stages, str) else tuple(stages)
     if not stages or any(s not in STAGES for s in stages):
         raise InvalidInputError(f"stages: expected names from {', '.join(STAGES)}, got {stages!r}")
+    if robot_risk_scale is not None:
+        from riskplan.app.reproduce.risk_calibration import RISK_STUDY_SCALES
+
+        if robot_risk_scale not in RISK_STUDY_SCALES:
+            raise InvalidInputError(
+                f"robot_risk_scale: expected one of {', '.join(RISK_STUDY_SCALES)}, "
+                f"got {robot_risk_scale!r}"
+            )
     out = check_output_folder(out, "out")
     # one writer per output folder: a second run into it stops at once (the store's own
     # checks keep records consistent, the lock keeps results.json and the report one run's)
     with output_lock(out, "output folder"):
         return _reproduce(
             out, paper, scale, backend, ray_address, workers, seed, progress, stages,
-            calibration_scale,
+            calibration_scale, robot_risk_scale,
         )  # fmt: skip
 
 
@@ -204,9 +225,76 @@ def _sensitivity_stage(scale_name, out, seed, backend, workers, progress) -> dic
     return json.loads(json.dumps(sens))
 
 
+def _beyond_stages(stages, results, timings, out, store, scale_name, seed, progress) -> None:
+    """The stages beyond the deformable paper, into ``results`` and ``timings``:
+    ``needle3d`` (:mod:`riskplan.app.reproduce.needle3d`) and ``control-variants``
+    (:mod:`riskplan.app.reproduce.control_variants`)."""
+    if "needle3d" in stages:
+        from riskplan.app.reproduce.needle3d import run_needle3d
+
+        t0 = time.perf_counter()
+        results["needle3d"] = run_needle3d(out, scale_name, seed=seed)
+        timings["needle3d_s"] = time.perf_counter() - t0
+    if "control-variants" in stages:
+        from riskplan.app.reproduce.control_variants import run_control_variants
+
+        t0 = time.perf_counter()
+        results["control_variants"] = run_control_variants(
+            store, scale_name, seed=seed, progress=progress
+        )
+        timings["control_variants_s"] = time.perf_counter() - t0
+
+
+def _mdn_figures(
+    results, timings, out, scale, store, seed, workers, backend, ray_address, progress
+) -> None:
+    """The MDN paper's figures (Figs. 4, 5, timing; Fig. 7) into ``results["mdn"]`` and their
+    seconds into ``timings`` (:mod:`riskplan.app.reproduce.mdn`)."""
+    from riskplan.app.reproduce.mdn import run_fig7, run_mdn
+
+    t0 = time.perf_counter()
+    results["mdn"] = run_mdn(
+        out / "mdn",
+        scale,
+        store,
+        seed=seed,
+        workers=workers,
+        backend=backend,
+        ray_address=ray_address,
+        progress=progress,
+    )
+    timings["mdn_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    results["mdn"]["fig7"] = run_fig7(out / "mdn", scale, store, seed=seed, progress=progress)
+    timings["mdn_fig7_s"] = time.perf_counter() - t0
+    first = store.get("mdn.fig7")["seconds"]  # as first computed (a rerun reads them)
+    timings["mdn_fig7_first_run"] = first
+
+
+def _robot_risk_stage(
+    results, timings, out, scale_name, seed, progress, backend, workers, rr_scale
+):
+    """The ``robot-risk`` stage into ``results["mdn"]["robot_risk"]`` and its seconds into
+    ``timings["robot_risk_s"]`` (:func:`riskplan.app.reproduce.robot_risk.robot_risk_stage`)."""
+    from riskplan.app.reproduce.robot_risk import robot_risk_stage
+
+    t0 = time.perf_counter()
+    results.setdefault("mdn", {})["robot_risk"] = robot_risk_stage(
+        out,
+        scale_name,
+        seed=seed,
+        progress=progress,
+        backend=backend,
+        workers=workers,
+        robot_risk_scale=rr_scale,
+    )
+    timings["robot_risk_s"] = time.perf_counter() - t0
+
+
 def _reproduce(
-    out, paper, scale, backend, ray_address, workers, seed, progress, stages, calibration_scale
-) -> dict:
+    out, paper, scale, backend, ray_address, workers, seed, progress, stages, calibration_scale,
+    robot_risk_scale=None,
+) -> dict:  # fmt: skip
     import riskplan
     from riskplan.app.reproduce.calibration import CALIBRATION_SCALES
     from riskplan.app.store import ResultStore
@@ -257,27 +345,8 @@ def _reproduce(
                 )
                 timings[f"deformable_{name}_s"] = time.perf_counter() - t0
         if figures and paper in ("mdn", "all"):
-            from riskplan.app.reproduce.mdn import run_fig7, run_mdn
-
-            t0 = time.perf_counter()
-            results["mdn"] = run_mdn(
-                out / "mdn",
-                scales["mdn"],
-                store,
-                seed=seed,
-                workers=workers,
-                backend=backend,
-                ray_address=ray_address,
-                progress=progress,
-            )
-            timings["mdn_s"] = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            results["mdn"]["fig7"] = run_fig7(
-                out / "mdn", scales["mdn"], store, seed=seed, progress=progress
-            )
-            timings["mdn_fig7_s"] = time.perf_counter() - t0
-            first = store.get("mdn.fig7")["seconds"]  # as first computed (a rerun reads them)
-            timings["mdn_fig7_first_run"] = first
+            mdn_args = (out, scales["mdn"], store, seed, workers, backend, ray_address, progress)
+            _mdn_figures(results, timings, *mdn_args)
         calibrated = [
             name for name in SCENARIOS if "calibration" in stages or f"calibration-{name}" in stages
         ]
@@ -305,12 +374,11 @@ def _reproduce(
             sens = _sensitivity_stage(scale_name, out, seed, backend, workers, progress)
             results.setdefault("deformable", {}).setdefault("needle", {})["sensitivity"] = sens
             timings["sensitivity_needle_s"] = time.perf_counter() - t0
-        if paper in ("deformable", "all") and "needle3d" in stages:
-            from riskplan.app.reproduce.needle3d import run_needle3d
-
-            t0 = time.perf_counter()
-            results["needle3d"] = run_needle3d(out, scale_name, seed=seed)
-            timings["needle3d_s"] = time.perf_counter() - t0
+        if paper in ("deformable", "all"):
+            _beyond_stages(stages, results, timings, out, store, scale_name, seed, progress)
+        if paper in ("mdn", "all") and "robot-risk" in stages:
+            rr_args = (out, scale_name, seed, progress, backend, workers, robot_risk_scale)
+            _robot_risk_stage(results, timings, *rr_args)
         timings["process_pools_started"] = pool.pools_started
     write_json_atomic(out / "results.json", results, sort_keys=True)
     write_json_atomic(out / "timings.json", timings, sort_keys=True)

@@ -201,4 +201,8 @@ def write_report(out, results: dict, store, timings: dict, *, seed: int = 0) -> 
         )
     if "fig7" in results.get("mdn", {}):
         _fig7_section(rep, out, results["mdn"]["fig7"])
+    if "robot_risk" in results.get("mdn", {}):
+        from riskplan.app.reproduce.robot_risk import robot_risk_section
+
+        robot_risk_section(rep, out, results["mdn"]["robot_risk"])
     return rep.write()

@@ -266,7 +266,9 @@ def _needle3d_section(rep: Report, r: dict) -> None:
         sec,
         f"Case {st['case']}, {st['n_plans']} candidates of the simulator RRT on the "
         f"{st['n_elements']}-tetrahedron planning mesh, {st['check_runs']} closed- and open-loop "
-        "executions per checked plan on common draws.",
+        "executions per checked plan on common draws, the controller and LQG-MP in the "
+        f"{st.get('frame', 'world')} frame. Speed: CPU seconds of the truncation estimate "
+        "(and with its linearisation) against those of the closed-loop executions.",
     )
     sec.blocks.append(
         f'<p><a href="{html.escape(r["figure"])}">tissue block, obstacles, target, candidate '
@@ -274,11 +276,20 @@ def _needle3d_section(rep: Report, r: dict) -> None:
     )
     rows = []
     for row in r["rows"]:
-        e = row["estimates"]
+        e, n = row["estimates"], row["n"]
+        lo, hi = row.get("closed_ci", (0.0, 0.0))
+        cpu = row.get("estimate_cpu_s", {})
+        speed = "-"
+        if n and cpu.get("truncation"):
+            speed = (
+                f"{row['closed_cpu_s'] / cpu['truncation']:.0f}× "
+                f"({row['closed_cpu_s'] / cpu['truncation+linearise']:.0f}×)"
+            )
         rows.append(
             [row["index"], row["n_steps"], e["truncation"], e["per-step"], e["sigma"], e["sampling"],
-             f"{row['closed']}/{row['n']}" if row["n"] else "-",
-             f"{row['open']}/{row['n']}" if row["n"] else "-"]
+             f"{row['closed']}/{n} [{lo:.3f}, {hi:.3f}]" if n else "-",
+             ("yes" if lo <= e["truncation"] <= hi else "no") if n else "-",
+             f"{row['open']}/{n}" if n else "-", speed]
         )  # fmt: skip
     Report.table(
         sec,
@@ -289,8 +300,10 @@ def _needle3d_section(rep: Report, r: dict) -> None:
             "per-step",
             "sigma",
             "sampling",
-            "closed loop",
+            "closed loop [95 % Wilson]",
+            "inside",
             "open loop",
+            "speed",
         ],
         rows,
         caption="LQG-MP P(success) by estimator (ranked by the truncation) and measured successes",

@@ -1,5 +1,6 @@
 """Does a collision risk computed from the learned model predict the robot's collision rate?
-(beyond the MDN paper; issue 18, item 11; ``riskplan plan chest-risk-study``.)
+(beyond the MDN paper; ``riskplan reproduce --paper mdn --stage robot-risk``, or
+``riskplan plan chest-risk-study``, the same study into a folder of its own.)
 
 Eq. 9/10 measure the mixture's mass inside obstacles. This study puts that number and the
 body-contact cloud risk (:mod:`riskplan.collision.body_risk`, for several coherences ``ρ``)
@@ -20,6 +21,9 @@ body of backbone and disks) for configurations and trajectories in the procedura
 
 Every piece is a record of a :class:`~riskplan.app.store.ResultStore` (chunks of robot
 executions, one record per risk), so an interrupted study continues where it stopped.
+
+The ``robot-risk`` stage of ``riskplan reproduce`` (:mod:`riskplan.app.reproduce.robot_risk`)
+runs this study and puts its summary into ``results.json`` and the report.
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ __all__ = [
     "RISK_STUDY_SCALES",
     "RiskStudyScale",
     "calibration_metrics",
+    "cross_fitted_logistic",
     "run_risk_study",
     "transmission_mechanism",
 ]
@@ -100,8 +105,24 @@ RISK_STUDY_SCALES = {
 }
 
 
+def _spearman(p, r):
+    """Spearman's rank correlation (ties by average rank); ``None`` when undefined (fewer than
+    three items or a constant side)."""
+    import warnings
+
+    from scipy.stats import spearmanr
+
+    if len(p) < 3 or np.ptp(p) == 0 or np.ptp(r) == 0:
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rho = float(spearmanr(p, r).statistic)
+    return rho if np.isfinite(rho) else None
+
+
 def calibration_metrics(predicted, measured, *, low: float = 0.05, high: float = 0.95) -> dict:
-    """MAE on the items measured in ``[low, high]``, MAE on all, and the execution-level Brier score."""
+    """MAE on the items measured in ``[low, high]``, MAE on all, the execution-level Brier
+    score and Spearman's rank correlation on the ``[low, high]`` items (``None``: undefined)."""
     p = np.asarray(predicted, dtype=np.float64)
     r = np.asarray(measured, dtype=np.float64)
     mid = (r >= low) & (r <= high)
@@ -111,7 +132,86 @@ def calibration_metrics(predicted, measured, *, low: float = 0.05, high: float =
         "mae_all": float(np.abs(p - r).mean()),
         "brier": float(np.mean(r * (1 - p) ** 2 + (1 - r) * p**2)),
         "n": len(r),
+        "spearman_mid": _spearman(p[mid], r[mid]),
     }
+
+
+#: folds of the cross-fitted logistic map (each item is predicted by the fit on the others)
+FOLDS = 2
+
+
+def _logistic_fit(gaps, k, n):
+    """Maximum-likelihood ``(a, b)`` of ``p_i = mean_s σ(a - b g_is)`` (``g`` in mm, ``b > 0``)
+    for ``k_i`` collisions in ``n`` executions; ``(a, b)``."""
+    from scipy.optimize import minimize
+    from scipy.special import expit
+
+    g = np.where(np.isfinite(gaps), gaps, 1.0) * 1e3  # mm; a body-free sample is far away
+
+    def nll(theta):
+        p = expit(theta[0] - np.exp(theta[1]) * g).mean(axis=1)
+        p = np.clip(p, 1e-12, 1 - 1e-12)
+        return -float(np.sum(k * np.log(p) + (n - k) * np.log1p(-p)))
+
+    res = minimize(
+        nll,
+        np.array([0.0, 0.0]),
+        method="Nelder-Mead",
+        options={"xatol": 1e-6, "fatol": 1e-9, "maxiter": 4000},
+    )
+    return float(res.x[0]), float(np.exp(res.x[1]))
+
+
+def cross_fitted_logistic(gaps, measured, executions, groups, *, seed: int = 0, folds: int = FOLDS):
+    r"""Held-out predictions of a logistic map of the sampled bodies' clearances.
+
+    The risk of item ``i`` is :math:`p_i = \frac1S \sum_s \sigma(a - b\, g_{is})`, ``g_is``
+    the clearance of sampled execution ``s`` (:meth:`~riskplan.planning.risk.SampledBodyRisk.gaps`,
+    in mm; the smallest along a trajectory). ``a`` (an offset of the learned body's
+    geometry, ``a / b`` mm) and ``b`` (how sharply a clearance decides, per mm) are fitted
+    by maximum likelihood on the binomial counts of the training items; the items are split
+    into ``folds`` folds by a seeded permutation within each group (``groups``: configurations
+    and trajectories), and every item is predicted by the fit on the other folds, so no
+    item's own execution counts enter its prediction.
+
+    Parameters
+    ----------
+    gaps : array_like
+        ``(N, S)`` clearances [m] (``inf``: no body component).
+    measured : array_like
+        ``(N,)`` collision rates on the robot.
+    executions : int
+        Executions behind each rate.
+    groups : array_like
+        ``(N,)`` labels split separately (e.g. True for trajectories).
+
+    Returns
+    -------
+    held_out : numpy.ndarray
+        ``(N,)`` predictions, each from the fit that did not see the item.
+    fits : list of dict
+        Per fold ``{"a", "b", "n_train"}``.
+    """
+    from scipy.special import expit
+
+    G = np.asarray(gaps, dtype=np.float64)
+    r = np.asarray(measured, dtype=np.float64)
+    k = np.round(r * executions)
+    groups = np.asarray(groups)
+    rng = np.random.default_rng(seed)
+    fold = np.empty(len(r), dtype=int)
+    for lab in np.unique(groups):
+        idx = np.nonzero(groups == lab)[0]
+        fold[idx[rng.permutation(len(idx))]] = np.arange(len(idx)) % folds
+    held_out = np.empty(len(r))
+    fits = []
+    g_mm = np.where(np.isfinite(G), G, 1.0) * 1e3
+    for f in range(folds):
+        train = fold != f
+        a, b = _logistic_fit(G[train], k[train], executions)
+        held_out[~train] = expit(a - b * g_mm[~train]).mean(axis=1)
+        fits.append({"a": a, "b": b, "n_train": int(train.sum())})
+    return held_out, fits
 
 
 def _select(robot, model, env, n, pool, band, rng):
@@ -132,7 +232,9 @@ def _select(robot, model, env, n, pool, band, rng):
     return q[idx], c[idx]
 
 
-def _robot_rates(store, key, robot, env, trajectories, executions, seed, progress, label):
+def _robot_rates(
+    store, key, robot, env, trajectories, executions, seed, progress, label, backend, workers
+):
     from riskplan.parallel import spawn_seeds
     from riskplan.planning.validate import execute_on_robot
 
@@ -141,6 +243,8 @@ def _robot_rates(store, key, robot, env, trajectories, executions, seed, progres
     for k in range(0, len(trajectories), CHUNK):
 
         def compute(k=k):
+            # the executions of one item run as chunks on the pool (``backend``); the rates do
+            # not depend on it (execute_on_robot's seeding)
             return [
                 execute_on_robot(
                     robot,
@@ -149,7 +253,8 @@ def _robot_rates(store, key, robot, env, trajectories, executions, seed, progres
                     executions,
                     int(seeds[i]),
                     body="disks",
-                    backend="serial",
+                    backend=backend,
+                    workers=workers,
                 ).trajectory.probability.item()
                 for i in range(k, min(k + CHUNK, len(trajectories)))
             ]
@@ -159,8 +264,50 @@ def _robot_rates(store, key, robot, env, trajectories, executions, seed, progres
     return np.asarray(out)
 
 
-def run_risk_study(out, scale: RiskStudyScale, store, *, seed: int = 0, progress=None) -> dict:
-    """Run (or continue) the study; writes ``out/risk_calibration.{png,json}``, returns the JSON."""
+def _logistic_risks(risks, store, model, env, Q, trajs, measured, scale, seed, report) -> dict:
+    """Add the held-out logistic map of the sampled bodies' clearances (one per extent) to
+    ``risks``; the clearances are a record per extent (``risk.gaps.<c>``). Returns the fits."""
+    from riskplan.planning.risk import SampledBodyRisk
+
+    fits = {}
+    is_traj = np.r_[np.zeros(len(Q), bool), np.ones(len(trajs), bool)]
+    for c in scale.extents:
+
+        def compute(c=c):
+            risk = SampledBodyRisk(model, env, n_draws=scale.draws, extent=c, seed=seed)
+            return {
+                "configurations": [risk.gaps(x[None])[:, 0].tolist() for x in Q],
+                "trajectories": [risk.gaps(t).min(axis=1).tolist() for t in trajs],
+            }
+
+        g = store.get_or_compute(f"risk.gaps.{c:g}", compute)
+        gaps = np.r_[np.asarray(g["configurations"]), np.asarray(g["trajectories"])]
+        held_out, fits[f"logistic c={c:g}"] = cross_fitted_logistic(
+            gaps, measured, scale.executions, is_traj, seed=seed
+        )
+        risks[f"logistic c={c:g}"] = (held_out[: len(Q)].tolist(), held_out[len(Q) :].tolist())
+        report(
+            "robot risk: clearance distributions", scale.extents.index(c) + 1, len(scale.extents)
+        )
+    return fits
+
+
+def run_risk_study(
+    out,
+    scale: RiskStudyScale,
+    store,
+    *,
+    seed: int = 0,
+    progress=None,
+    backend: str = "serial",
+    workers: int | None = None,
+) -> dict:
+    """Run (or continue) the study; writes ``out/risk_calibration.{png,json}``, returns the JSON.
+
+    ``backend``, ``workers``: where the robot executions run (:mod:`riskplan.parallel`; inside
+    a :class:`~riskplan.parallel.TaskPool` of that backend, on its workers); the results do not
+    depend on them.
+    """
     from riskplan.collision import mixture_bound, trajectory_bound
     from riskplan.collision.body_risk import cloud_risk
     from riskplan.gaussian_mixture import as_numpy_mixture
@@ -192,11 +339,11 @@ def run_risk_study(out, scale: RiskStudyScale, store, *, seed: int = 0, progress
     trajs = [np.linspace(np.zeros(len(x)), x, scale.steps) for x in ends]
     r_conf = _robot_rates(
         store, "risk.robot.conf", robot, env, [x[None] for x in Q], scale.executions, s_conf,
-        report, "risk study: robot, configurations",
+        report, "robot risk: robot executions, configurations", backend, workers,
     )  # fmt: skip
     r_traj = _robot_rates(
         store, "risk.robot.traj", robot, env, trajs, scale.executions, s_traj,
-        report, "risk study: robot, trajectories",
+        report, "robot risk: robot executions, trajectories", backend, workers,
     )  # fmt: skip
     risks = {}
     gm = as_numpy_mixture(model.predict(Q))
@@ -224,7 +371,7 @@ def run_risk_study(out, scale: RiskStudyScale, store, *, seed: int = 0, progress
             return [conf, traj]
 
         risks[f"cloud ρ={rho:g}"] = tuple(store.get_or_compute(f"risk.cloud.{rho:g}", compute))
-        report("risk study: cloud risks", scale.coherences.index(rho) + 1, len(scale.coherences))
+        report("robot risk: cloud risks", scale.coherences.index(rho) + 1, len(scale.coherences))
     for c in scale.extents:
 
         def compute(c=c):
@@ -232,7 +379,10 @@ def run_risk_study(out, scale: RiskStudyScale, store, *, seed: int = 0, progress
             return [risk(Q).tolist(), [risk.trajectory(t) for t in trajs]]
 
         risks[f"bodies c={c:g}"] = tuple(store.get_or_compute(f"risk.bodies.{c:g}", compute))
-        report("risk study: sampled-body risks", scale.extents.index(c) + 1, len(scale.extents))
+        report("robot risk: sampled-body risks", scale.extents.index(c) + 1, len(scale.extents))
+    fits = _logistic_risks(
+        risks, store, model, env, Q, trajs, np.r_[r_conf, r_traj], scale, seed, report
+    )
     measured = np.r_[r_conf, r_traj]
     metrics = {
         name: {
@@ -250,6 +400,7 @@ def run_risk_study(out, scale: RiskStudyScale, store, *, seed: int = 0, progress
         "nominal_clearance": sel["clearance"],
         "metrics": metrics,
         "share_measured_5_95": float(np.mean((measured >= 0.05) & (measured <= 0.95))),
+        "logistic_fits": fits,
         "seconds": time.perf_counter() - t0,
     }
     write_json_atomic(out / "risk_calibration.json", result)
@@ -280,7 +431,10 @@ def _figure(result: dict, path) -> None:
                 ns.append(int((b == j).sum()))
         m = result["metrics"][name]["all"]
         mae = "n/a" if m["mae_mid"] is None else f"{100 * m['mae_mid']:.1f}"
-        ax.plot(xs, ys, "o-", ms=4, label=f"{name} (MAE 5-95 %: {mae} pts, Brier {m['brier']:.3f})")
+        shown = f"{name}, held out" if name.startswith("logistic") else name
+        ax.plot(
+            xs, ys, "o-", ms=4, label=f"{shown} (MAE 5-95 %: {mae} pts, Brier {m['brier']:.3f})"
+        )
     ax.set_xlabel("predicted risk (bin mean)")
     ax.set_ylabel("collision rate on the robot (bin mean)")
     ax.set_xlim(0, 1)

@@ -350,22 +350,8 @@ def train(
         0,
     )
     if resume:
-        ck = load_checkpoint(out / CHECKPOINT_NAME)
-        _check_resume(ck, data, config)
-        net.load_state_dict(ck["net"])
-        opt.load_state_dict(ck["optimizer"])
-        sched.load_state_dict(ck["scheduler"])
-        norm = Normalisation.from_json(ck["normalisation"])
-        history = [EpochRecord(**h) for h in ck["history"]]
-        start_epoch = ck["epoch"] + 1
-        best_val, best_epoch, since_best = ck["best_val"], ck["best_epoch"], ck["since_best"]
-        best_state = ck["best_state"]
-        total_skipped = ck["skipped_steps"]
-        log.info(
-            "resuming at epoch %d (best validation NLL %.4f at epoch %d)",
-            start_epoch,
-            best_val,
-            best_epoch,
+        norm, history, start_epoch, best_val, best_epoch, since_best, best_state, total_skipped = (
+            _resume(out, data, config, net, opt, sched)
         )
 
     val = _Evaluator(data, val_idx, norm, config.val_points, config.seed, dtype)
@@ -450,27 +436,10 @@ def train(
         if out is not None:
             if improved:
                 _save_best(net, norm, data, config, history, out, model_io)
+            counters = (epoch, best_val, best_epoch, since_best, best_state, total_skipped)
             save_checkpoint(
                 out / CHECKPOINT_NAME,
-                {
-                    "format": CHECKPOINT_FORMAT,
-                    "format_version": 1,
-                    "net": net.state_dict(),
-                    "optimizer": opt.state_dict(),
-                    "scheduler": sched.state_dict(),
-                    "normalisation": norm.to_json(),
-                    "config": config.to_json(),
-                    "history": [dataclasses.asdict(h) for h in history],
-                    "epoch": epoch,
-                    "best_val": best_val,
-                    "best_epoch": best_epoch,
-                    "since_best": since_best,
-                    "best_state": best_state,
-                    "skipped_steps": total_skipped,
-                    "data_hash": data.content_hash,
-                    "robot_toml": data.robot_toml,
-                    "n_tendons": data.n_tendons,
-                },
+                _checkpoint(net, opt, sched, norm, config, data, history, counters),
             )
         if on_epoch is not None:
             on_epoch(rec)
@@ -493,6 +462,46 @@ def train(
     if out is not None:
         model_io.save_model(model, out)
     return TrainResult(model, history, best_epoch, best_val, stopped_early, total_skipped)
+
+
+def _resume(out, data, config, net, opt, sched):
+    """Load ``out``'s checkpoint into ``net``, ``opt`` and ``sched``; the loop's counters."""
+    ck = load_checkpoint(out / CHECKPOINT_NAME)
+    _check_resume(ck, data, config)
+    net.load_state_dict(ck["net"])
+    opt.load_state_dict(ck["optimizer"])
+    sched.load_state_dict(ck["scheduler"])
+    norm = Normalisation.from_json(ck["normalisation"])
+    history = [EpochRecord(**h) for h in ck["history"]]
+    start_epoch = ck["epoch"] + 1
+    best_val, best_epoch, since_best = ck["best_val"], ck["best_epoch"], ck["since_best"]
+    log.info("resuming at epoch %d (best NLL %.4f at epoch %d)", start_epoch, best_val, best_epoch)
+    rest = (ck["best_state"], ck["skipped_steps"])
+    return (norm, history, start_epoch, best_val, best_epoch, since_best, *rest)
+
+
+def _checkpoint(net, opt, sched, norm, config, data, history, counters):
+    """The checkpoint written after each epoch (what ``_resume`` reads back)."""
+    epoch, best_val, best_epoch, since_best, best_state, total_skipped = counters
+    return {
+        "format": CHECKPOINT_FORMAT,
+        "format_version": 1,
+        "net": net.state_dict(),
+        "optimizer": opt.state_dict(),
+        "scheduler": sched.state_dict(),
+        "normalisation": norm.to_json(),
+        "config": config.to_json(),
+        "history": [dataclasses.asdict(h) for h in history],
+        "epoch": epoch,
+        "best_val": best_val,
+        "best_epoch": best_epoch,
+        "since_best": since_best,
+        "best_state": best_state,
+        "skipped_steps": total_skipped,
+        "data_hash": data.content_hash,
+        "robot_toml": data.robot_toml,
+        "n_tendons": data.n_tendons,
+    }
 
 
 def _model_with_history(net, norm, data, config, history, best_epoch, *, finished: bool):

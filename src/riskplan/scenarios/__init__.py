@@ -61,6 +61,7 @@ _HOME = {
     "Needle3DScenario": "needle3d",
     "Needle3DState": "needle3d_config",
     "needle3d_steer": "needle3d_space",
+    "JACOBIAN_STEP": "needle3d_frames",
     "draw_frame": "plotting",
     "figure_for": "plotting",
     "frame_indices": "plotting",

@@ -17,7 +17,7 @@ from riskplan.geometry3d import ConvexBody
 from riskplan.scenarios.base import SimParams, gaussian_noise
 from riskplan.scenarios.needle3d_config import Needle3DState
 
-__all__ = ["FRAMES", "JACOBIAN_STEP", "Needle3DFrames"]
+__all__ = ["FRAMES", "JACOBIAN_STEP"]
 
 #: Reduced-state frames (:mod:`riskplan.scenarios.needle3d` module docstring).
 FRAMES = ("world", "material")

@@ -304,11 +304,10 @@ class _Tree:
         self.X[0] = x0
         self.is_goal = np.zeros(cap, dtype=bool)
         self.goal_fails = np.zeros(cap, dtype=np.int64)
-        self.parents = [-1]
+        self.parents, self.node_control = [-1], [u0]
         self.node_state = [root]  # full state y of every node; edge_states: after each step
         self.edge_states: list[tuple] = [()]
         self.edge_controls: list[np.ndarray] = [np.empty((0, q))]
-        self.node_control = [u0]
         self.has_goal_child = [False]
         self.goal_nodes: list[int] = []
         self.n = 1

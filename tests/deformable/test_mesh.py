@@ -136,6 +136,7 @@ def test_deformable_modules_import_without_cycles():
         "mesh",
         "material",
         "laws",
+        "nhkernels",
         "banded",
         "assembly",
         "material_points",

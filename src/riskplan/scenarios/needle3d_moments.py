@@ -1,0 +1,195 @@
+r"""The 3-D needle's step and tip maps for moment propagation beyond first order
+(:func:`riskplan.control.lqgmp3d_moments.second_order_model`, for
+:func:`riskplan.control.lqgmp3d.lqgmp_3d` ``moments=``).
+
+**The step in the material pose.** With the reduced material pose ``m = (X, e₁, e₂, e₃)``
+(12,), the screw step ``g_{t+1} = g_t exp(τ ξ̂(u))`` is *linear in m* for a fixed control:
+``m' = K(u) m`` with ``K(u)`` :func:`riskplan.scenarios.bevel.pose_step_jacobian`. The only
+nonlinearity of the kinematics is in the control, which carries the actuation noise and the
+feedback. ``Needle3DMoments.material_step_derivatives`` returns ``K(u*)``, ``∂K/∂u_k``
+and ``∂²K/∂u_k∂u_l`` (central differences of the closed form, step :data:`riskplan.scenarios.CONTROL_STEP`), so
+
+.. math::
+
+    \delta m' = K \delta m + \sum_k K_k m^* \delta u_k + \sum_k K_k \delta u_k \delta m
+        + \tfrac12 \sum_{kl} K_{kl} m^* \delta u_k \delta u_l + O(\delta^3)
+
+is exact to second order (the bilinear term is the roll of the noise about the *actual*
+axis, not the planned one).
+
+**The tip through the tissue.** The world tip is ``x = X + u(X; e₃)``, the quasi-static push
+at the material point: within a tetrahedron a quadratic function of ``X`` (barycentric
+weights on both the load and the read-out), with a gradient that jumps from element to
+element (``‖∂u/∂X‖`` from 0.1 to 0.7 along a plan on the planning mesh). A predicted spread
+of a few hundredths covers several tetrahedra, so the gradient at the plan's point is not the
+slope the spread sees. ``Needle3DMoments.tip_moments`` gives the statistical
+linearisation over ``N(m* + μ, Σ)`` instead: the unscented points ``m̄ ± √n σ_i v_i`` on the
+``n ≤ 6`` non-degenerate principal directions of the ``(X, e₃)`` block (the push does not
+depend on ``e₁``, ``e₂``), weights ``1/(2n)``, and
+
+.. math::
+
+    \Phi = C_{xm} \Sigma^{+}, \qquad \Delta = \bar x - x(m^*) - \Phi \mu, \qquad
+    R = C_{xx} - \Phi \Sigma \Phi^\top
+
+(``x(m* + δ) ≈ x(m*) + Δ + Φ δ + ε``, ``ε ~ N(0, R)`` the part no affine map explains).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from riskplan._validation import as_array
+from riskplan.errors import InvalidInputError
+from riskplan.scenarios.base import SimParams
+from riskplan.scenarios.bevel import pose_step_jacobian
+from riskplan.scenarios.needle3d_config import Needle3DState
+
+__all__ = ["CONTROL_STEP", "TIP_KINDS"]
+
+#: Central-difference step in the control for ``∂K/∂u`` and ``∂²K/∂u²`` (``K(u)`` is smooth:
+#: its entries are trigonometric in ``τ ω`` and polynomial in ``τ κ v``)
+CONTROL_STEP = 1e-4
+
+#: What ``Needle3DMoments.tip_moments`` linearises: the sensed world tip, the position
+#: the reduced state reads (world tip, or ``X`` in the material frame), or that position
+#: relative to the target's (deformed) centre
+TIP_KINDS = ("measured", "position", "relative")
+
+#: the material coordinates the push depends on: X and e₃
+_PUSHED = np.array([0, 1, 2, 9, 10, 11])
+
+
+class Needle3DMoments:
+    """Second-order step derivatives and statistically linearised tip maps of the 3-D
+    needle (module docstring); a mixin of :class:`riskplan.scenarios.needle3d.Needle3DScenario`."""
+
+    @property
+    def position_is_measured(self) -> bool:
+        """Whether the position the reduced state reads is the sensed world tip (the world
+        frame), so that ``tip_moments`` of kinds ``"position"`` and ``"measured"`` agree."""
+        return self.frame == "world"
+
+    def _pose_jacobian(self, u) -> np.ndarray:
+        cfg = self.config
+        return pose_step_jacobian(u[0], u[1], tau=cfg.tau, kappa=cfg.curvature, rho=self._rho(u))
+
+    def material_step_derivatives(self, state: Needle3DState, control):
+        """``m' = K(u) m`` and its control derivatives at ``u = control`` (module docstring).
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The state ``y_t`` (its material pose is ``m*``).
+        control : array_like, shape (q,)
+            The nominal control ``u*_t``.
+
+        Returns
+        -------
+        m : numpy.ndarray, shape (12,)
+            The material pose ``m*``.
+        K : numpy.ndarray, shape (12, 12)
+            ``K(u*)``.
+        dK : numpy.ndarray, shape (q, 12, 12)
+            ``∂K/∂u_k``.
+        d2K : numpy.ndarray, shape (q, q, 12, 12)
+            ``∂²K/∂u_k∂u_l``.
+        """
+        if not isinstance(state, Needle3DState):
+            raise InvalidInputError(f"state: expected a Needle3DState, got {type(state).__name__}")
+        u = as_array(control, "control", shape=(self.control_dim,))
+        q, h = u.shape[0], CONTROL_STEP
+        K = self._pose_jacobian(u)
+        dK = np.zeros((q, 12, 12))
+        d2K = np.zeros((q, q, 12, 12))
+        eye = np.eye(q) * h
+        for k in range(q):
+            Kp, Km = self._pose_jacobian(u + eye[k]), self._pose_jacobian(u - eye[k])
+            dK[k] = (Kp - Km) / (2 * h)
+            d2K[k, k] = (Kp - 2 * K + Km) / (h * h)
+            for j in range(k + 1, q):
+                mixed = (
+                    self._pose_jacobian(u + eye[k] + eye[j])
+                    - self._pose_jacobian(u + eye[k] - eye[j])
+                    - self._pose_jacobian(u - eye[k] + eye[j])
+                    + self._pose_jacobian(u - eye[k] - eye[j])
+                ) / (4 * h * h)
+                d2K[k, j] = d2K[j, k] = mixed
+        return np.array(state.material, dtype=np.float64), K, dK, d2K
+
+    def _tip_function(self, state: Needle3DState, params: SimParams, kind: str):
+        """``f(m) (3,)`` for ``kind`` (:data:`riskplan.scenarios.TIP_KINDS`), or ``None`` where it is the
+        identity on ``X`` (no push yet, or the material frame's reduced position)."""
+        if kind != "measured" and self.frame == "material":
+            return None  # X itself; the material target does not move
+        if state.t == 0:
+            return None
+        a = self.mesh_data(params.n_elements).slices[-1][0]
+
+        def f(m):
+            tracked, pose = self._tissue_response(m, params)
+            return pose[:3] - tracked[a] if kind == "relative" else pose[:3]
+
+        return f
+
+    def tip_moments(
+        self, state: Needle3DState, mean, cov, params: SimParams | None = None, kind="measured"
+    ):
+        """Statistical linearisation of the tip over ``m ~ N(m* + mean, cov)`` (module
+        docstring): ``f(m* + δ) ≈ f(m*) + Δ + Φ δ + ε``, ``ε ~ N(0, R)``.
+
+        Parameters
+        ----------
+        state : Needle3DState
+            The plan's state (``m*`` its material pose).
+        mean : array_like, shape (12,)
+            The mean deviation ``μ`` of the material pose.
+        cov : array_like, shape (12, 12)
+            Its covariance ``Σ``.
+        params : SimParams or None
+            The simulation parameters (``None``: :attr:`nominal_params`).
+        kind : str
+            One of :data:`riskplan.scenarios.TIP_KINDS`.
+
+        Returns
+        -------
+        Phi : numpy.ndarray, shape (3, 12)
+            The slope (zero on ``e₁``, ``e₂``).
+        offset : numpy.ndarray, shape (3,)
+            ``Δ``.
+        resid : numpy.ndarray, shape (3, 3)
+            ``R``.
+        """
+        if kind not in TIP_KINDS:
+            raise InvalidInputError(f"kind: expected one of {TIP_KINDS}, got {kind!r}")
+        params = params or self.nominal_params
+        self._check_state(state, params)
+        mu = as_array(mean, "mean", shape=(12,))
+        S = as_array(cov, "cov", shape=(12, 12))
+        Phi = np.zeros((3, 12))
+        Phi[:, :3] = np.eye(3)
+        f = self._tip_function(state, params, kind)
+        S6 = 0.5 * (S[np.ix_(_PUSHED, _PUSHED)] + S[np.ix_(_PUSHED, _PUSHED)].T)
+        w, V = np.linalg.eigh(S6)
+        keep = w > 1e-12 * max(float(w[-1]), 0.0)
+        if f is None or not keep.any():
+            return Phi, np.zeros(3), np.zeros((3, 3))
+        n = int(keep.sum())
+        cols = V[:, keep] * np.sqrt(w[keep] * n)  # (6, n): the points' offsets
+        m0 = np.array(state.material, dtype=np.float64)
+        centre = m0 + mu
+        D = np.concatenate([cols.T, -cols.T])  # (2n, 6)
+        pts = np.empty((2 * n, 3))
+        for i, d in enumerate(D):
+            m = centre.copy()
+            m[_PUSHED] += d
+            pts[i] = f(m)
+        xbar = pts.mean(axis=0)
+        Cxm = (pts - xbar).T @ D / (2 * n)
+        Cxx = (pts - xbar).T @ (pts - xbar) / (2 * n)
+        Phi6 = Cxm @ np.linalg.pinv(S6, rcond=1e-12, hermitian=True)
+        Phi = np.zeros((3, 12))
+        Phi[:, _PUSHED] = Phi6
+        R = Cxx - Phi6 @ S6 @ Phi6.T
+        offset = xbar - f(m0) - Phi @ mu
+        return Phi, offset, 0.5 * (R + R.T)

@@ -10,7 +10,7 @@ import pytest
 
 from riskplan.control.lqgmp3d_moments import _second_order_mean
 from riskplan.errors import InvalidInputError
-from riskplan.scenarios.bevel import se3_exp_batch
+from riskplan.scenarios.bevel import pose_step_jacobian, se3_exp_batch
 from riskplan.scenarios.needle3d import Needle3DScenario
 
 #: z-score of the Monte Carlo checks (two-sided, about 6e-5 per comparison)
@@ -53,6 +53,12 @@ def test_step_derivatives_give_the_taylor_expansion(sim, pushed, tol):
     closed-form step, for steps of 1e-3 in the control (third-order rest below 1e-8)."""
     u = np.array([0.3, 1.5])
     m, K, dK, d2K = sim.material_step_derivatives(pushed, u)
+    cfg = sim.config
+    np.testing.assert_allclose(
+        K,
+        pose_step_jacobian(u[0], u[1], tau=cfg.tau, kappa=cfg.curvature),
+        **tol["float64_exact"],
+    )
     gen = np.random.default_rng(0)
     D = gen.standard_normal((5, 2)) * np.array([1e-3, 1e-3])
     exact = _steps(sim, np.tile(m, (5, 1)), u + D)

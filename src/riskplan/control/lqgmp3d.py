@@ -42,6 +42,7 @@ spread by about as much as the co-motion takes off; off, the two cancel.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -156,7 +157,7 @@ def lqgmp_3d(
             # 2-D sigma method does; the spread direction keeps its distances
             Sp = Sp + 1e-9 * ev[-1] * np.eye(3)
         L = np.linalg.cholesky(Sp)
-        found = [nearest_to_origin(b, L, centre) for b in bodies]
+        found = _nearest(bodies, L, centre, None if method == "sigma" else cutoff)
         if method == "sigma":
             c = min(d for d, _ in found)
             free[t] = float(k3.cdf(c * c))
@@ -186,6 +187,23 @@ def lqgmp_3d(
         cov=cov,
         method=method,
     )
+
+
+def _nearest(bodies, L, centre, cutoff) -> list:
+    """``nearest_to_origin`` of each body in the whitened frame; with a ``cutoff``, a body
+    whose lower bound ``‖L⁻¹(c − centre)‖ − ‖L⁻¹A‖_F r`` (``r = 1`` for an ellipsoid, ``√3``
+    for a box: the largest ``|s|`` of its unit set) already exceeds it gets ``(inf, None)``
+    without the search (the half-spaces stop at the cutoff)."""
+    out = []
+    for b in bodies:
+        if cutoff is not None:
+            a = np.linalg.norm(np.linalg.solve(L, b.centre - centre))
+            r = 1.0 if b.kind == "ellipsoid" else math.sqrt(3.0)
+            if a - np.linalg.norm(np.linalg.solve(L, b.A)) * r > cutoff:
+                out.append((math.inf, None))
+                continue
+        out.append(nearest_to_origin(b, L, centre))
+    return out
 
 
 def _half_spaces(bodies, found, L, centre, cutoff) -> list:

@@ -42,7 +42,7 @@ import numpy as np
 from riskplan._validation import as_array
 from riskplan.errors import InvalidInputError
 from riskplan.scenarios.base import SimParams
-from riskplan.scenarios.bevel import pose_step_jacobian
+from riskplan.scenarios.bevel import se3_exp_batch
 from riskplan.scenarios.needle3d_config import Needle3DState
 
 __all__ = ["CONTROL_STEP", "TIP_KINDS"]
@@ -70,9 +70,26 @@ class Needle3DMoments:
         frame), so that ``tip_moments`` of kinds ``"position"`` and ``"measured"`` agree."""
         return self.frame == "world"
 
-    def _pose_jacobian(self, u) -> np.ndarray:
+    def _pose_jacobians(self, U: np.ndarray) -> np.ndarray:
+        """``K(u) (n, 12, 12)`` for each row of ``U (n, q)``: the structure of
+        :func:`riskplan.scenarios.bevel.pose_step_jacobian` filled from one batched screw
+        exponential."""
         cfg = self.config
-        return pose_step_jacobian(u[0], u[1], tau=cfg.tau, kappa=cfg.curvature, rho=self._rho(u))
+        n = U.shape[0]
+        rho = U[:, 2] if U.shape[1] == 3 else np.ones(n)
+        xi = np.zeros((n, 6))
+        xi[:, 2] = cfg.tau * U[:, 0]
+        xi[:, 3] = cfg.tau * rho * cfg.curvature * U[:, 0]
+        xi[:, 5] = cfg.tau * U[:, 1]
+        E, d = se3_exp_batch(xi)
+        K = np.zeros((n, 12, 12))
+        i3 = np.arange(3)
+        K[:, i3, i3] = 1.0
+        for j in range(3):
+            K[:, i3, 3 + 3 * j + i3] = d[:, j, None]
+            for k in range(3):
+                K[:, 3 + 3 * k + i3, 3 + 3 * j + i3] = E[:, j, k, None]
+        return K
 
     def material_step_derivatives(self, state: Needle3DState, control):
         """``m' = K(u) m`` and its control derivatives at ``u = control`` (module docstring).
@@ -99,22 +116,22 @@ class Needle3DMoments:
             raise InvalidInputError(f"state: expected a Needle3DState, got {type(state).__name__}")
         u = as_array(control, "control", shape=(self.control_dim,))
         q, h = u.shape[0], CONTROL_STEP
-        K = self._pose_jacobian(u)
+        eye = np.eye(q) * h
+        # the control points: u, u ± h e_k, u ± h e_k ± h e_j (k < j)
+        pairs = [(k, j) for k in range(q) for j in range(k + 1, q)]
+        pts = [u] + [u + s * eye[k] for k in range(q) for s in (1.0, -1.0)]
+        pts += [u + a * eye[k] + b * eye[j] for k, j in pairs for a in (1, -1) for b in (1, -1)]
+        Ks = self._pose_jacobians(np.array(pts))
+        K = Ks[0]
         dK = np.zeros((q, 12, 12))
         d2K = np.zeros((q, q, 12, 12))
-        eye = np.eye(q) * h
         for k in range(q):
-            Kp, Km = self._pose_jacobian(u + eye[k]), self._pose_jacobian(u - eye[k])
+            Kp, Km = Ks[1 + 2 * k], Ks[2 + 2 * k]
             dK[k] = (Kp - Km) / (2 * h)
             d2K[k, k] = (Kp - 2 * K + Km) / (h * h)
-            for j in range(k + 1, q):
-                mixed = (
-                    self._pose_jacobian(u + eye[k] + eye[j])
-                    - self._pose_jacobian(u + eye[k] - eye[j])
-                    - self._pose_jacobian(u - eye[k] + eye[j])
-                    + self._pose_jacobian(u - eye[k] - eye[j])
-                ) / (4 * h * h)
-                d2K[k, j] = d2K[j, k] = mixed
+        for i, (k, j) in enumerate(pairs):
+            pp, pm, mp, mm = Ks[1 + 2 * q + 4 * i : 5 + 2 * q + 4 * i]
+            d2K[k, j] = d2K[j, k] = (pp - pm - mp + mm) / (4 * h * h)
         return np.array(state.material, dtype=np.float64), K, dK, d2K
 
     def _tip_function(self, state: Needle3DState, params: SimParams, kind: str):

@@ -13,7 +13,11 @@ import pytest
 from riskplan.control import NominalPlan, linearize
 from riskplan.control.lqg import execute, lqg_controller
 from riskplan.control.lqgmp3d import _model, _truncate_step, lqgmp_3d
-from riskplan.control.lqgmp3d_moments import SecondOrderModel, second_order_model
+from riskplan.control.lqgmp3d_moments import (
+    SecondOrderModel,
+    second_order_model,
+    structured_linearization,
+)
 from riskplan.errors import InvalidInputError
 from riskplan.parallel import spawn_seeds
 from riskplan.scenarios.registry import scenario_from_config
@@ -109,3 +113,17 @@ def test_bad_input(needle):
     with pytest.raises(InvalidInputError, match="moments"):
         lqgmp_3d(sim, plan, ctrl, moments="second-order")
     assert mo.n_steps == plan.n_steps
+
+
+def test_structured_linearization_is_the_fitted_one_where_the_fit_is_exact(needle, tol):
+    """The structured model's ``B`` against the fitted linearisation's forward differences
+    (``ε = 10⁻³`` of the control range: first-order error), its scales as linearize sets
+    them; a simulator without ``linear_model`` is rejected."""
+    sim, plan, ctrl, _ = needle
+    lin = structured_linearization(sim, plan, np.array(sim.distribution.cov))
+    np.testing.assert_allclose(lin.B, ctrl.lin.B, **tol["fd_forward_force"])
+    np.testing.assert_allclose(lin.state_scale, ctrl.lin.state_scale, **tol["float64_exact"])
+    np.testing.assert_allclose(lin.control_scale, ctrl.lin.control_scale, **tol["float64_exact"])
+    assert np.all(lin.rank == 12)
+    with pytest.raises(InvalidInputError, match="linear_model"):
+        structured_linearization(object(), plan, np.eye(2))

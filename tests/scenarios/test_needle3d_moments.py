@@ -8,10 +8,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from riskplan.control import NominalPlan
 from riskplan.control.lqgmp3d_moments import _second_order_mean
 from riskplan.errors import InvalidInputError
 from riskplan.scenarios.bevel import pose_step_jacobian, se3_exp_batch
-from riskplan.scenarios.needle3d import Needle3DScenario
+from riskplan.scenarios.needle3d import Needle3DScenario, Needle3DState
 
 #: z-score of the Monte Carlo checks (two-sided, about 6e-5 per comparison)
 Z = 4.0
@@ -154,3 +155,49 @@ def test_tip_moments_kinds_and_frames(sim, pushed, tol):
         sim.tip_moments(pushed, np.zeros(12), S, kind="tip")
     with pytest.raises(InvalidInputError, match="cov"):
         sim.tip_moments(pushed, np.zeros(12), np.eye(3))
+
+
+def _perturbed_state(sim, y, dm):
+    """``y`` with its material pose moved by ``dm (12,)`` and the push recomputed there."""
+    mat = np.array(y.material) + dm
+    disp, pose = sim._tissue_response(mat, sim.nominal_params)
+    return Needle3DState(
+        t=y.t,
+        displacement=disp,
+        n_elements=y.n_elements,
+        pose=pose,
+        material=mat,
+        applied=y.applied,
+    )
+
+
+@pytest.mark.parametrize("frame", ["world", "material"])
+def test_linear_model_against_central_differences_of_the_simulator(sim, tol, frame):
+    """``A_t``, ``B_t`` of the structured model against central differences of the full
+    step (kinematics and tissue) at a plan's states: perturbed controls for ``B``, perturbed
+    material poses (the reduced state moved by ``P_t δm``) for ``A``; ``M = B Σ_w Bᵀ``."""
+    s = sim.with_frame(frame)
+    controls = np.tile([[0.3, 1.5]], (7, 1))
+    plan = NominalPlan.from_rollout(s, s.initial_state(), controls).reframed(s)
+    W = np.diag([0.05, 1.0]) ** 2
+    A, B, M, H, N = s.linear_model(plan, W)
+    np.testing.assert_array_equal(N[0], s.sensing_cov)
+    h = 1e-6
+    for t in (3, 5):
+        y, u = plan.states[t], plan.controls[t]
+        for k in range(2):
+            e = np.zeros(2)
+            e[k] = h
+            fd = (s.reduced(s.step(y, u + e)) - s.reduced(s.step(y, u - e))) / (2 * h)
+            np.testing.assert_allclose(B[t][:, k], fd, **tol["fd_jacobian"])
+        for i in (0, 2, 4, 10):
+            dm = np.zeros(12)
+            dm[i] = h
+            yp, ym = _perturbed_state(s, y, dm), _perturbed_state(s, y, -dm)
+            dx = (s.reduced(yp) - s.reduced(ym)) / 2
+            fd = (s.reduced(s.step(yp, u)) - s.reduced(s.step(ym, u))) / 2
+            np.testing.assert_allclose(A[t] @ dx / h, fd / h, **tol["fd_jacobian"])
+    np.testing.assert_allclose(M, np.einsum("tik,kl,tjl->tij", B, W, B), **tol["float64_exact"])
+    np.testing.assert_allclose(
+        H[-1], s.observation_jacobian(plan.states[-1]), **tol["float64_exact"]
+    )

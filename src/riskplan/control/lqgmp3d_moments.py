@@ -46,7 +46,7 @@ import numpy as np
 from riskplan._validation import as_array
 from riskplan.errors import InvalidInputError
 
-__all__ = ["SecondOrderModel", "second_order_model"]
+__all__ = ["SecondOrderModel", "second_order_model", "structured_linearization"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -187,4 +187,47 @@ def second_order_model(sim, plan, controller, actuation_cov) -> SecondOrderModel
         goal_offset=Dg,
         goal_resid=Rg,
         P0=P0,
+    )
+
+
+def structured_linearization(sim, plan, actuation_cov):
+    """The :class:`~riskplan.control.linearize.Linearization` of ``plan`` from the
+    simulator's ``linear_model(plan, actuation_cov)`` (the 3-D needle: the material step's
+    closed form and the tissue's Jacobian, no fit) instead of
+    :func:`~riskplan.control.linearize.linearize`'s simulator runs, for the actuation case.
+
+    Parameters
+    ----------
+    sim : Simulator
+        Provides ``linear_model``, ``state_scale`` and ``control_bounds``.
+    plan : NominalPlan
+        The plan, in the simulator's frame.
+    actuation_cov : array_like, shape (q, q)
+        ``Σ_w``.
+
+    Returns
+    -------
+    Linearization
+        ``rank`` the state dimension (nothing fitted), no drift; the Bryson scales as
+        :func:`~riskplan.control.linearize.linearize` sets them.
+    """
+    from riskplan.control.linearize import Linearization
+    from riskplan.control.plan import NominalPlan
+
+    if not isinstance(plan, NominalPlan):
+        raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
+    if not callable(getattr(sim, "linear_model", None)):
+        raise InvalidInputError("sim: has no linear_model() (see riskplan.scenarios.needle3d)")
+    A, B, M, H, N = sim.linear_model(plan, actuation_cov)
+    bounds = np.asarray(sim.control_bounds, dtype=np.float64)
+    scale = getattr(sim, "state_scale", None)
+    return Linearization(
+        A=A,
+        B=B,
+        M=M,
+        H=H,
+        N=N,
+        rank=np.full(A.shape[0], A.shape[1], dtype=np.int64),
+        state_scale=None if scale is None else np.asarray(scale, dtype=np.float64),
+        control_scale=0.5 * (bounds[:, 1] - bounds[:, 0]),
     )

@@ -210,3 +210,52 @@ class Needle3DMoments:
         R = Cxx - Phi6 @ S6 @ Phi6.T
         offset = xbar - f(m0) - Phi @ mu
         return Phi, offset, 0.5 * (R + R.T)
+
+    def _frame_map(self, state: Needle3DState, params: SimParams) -> np.ndarray:
+        """``∂x/∂m (12, 12)``: the reduced state against the material pose at ``state`` —
+        the identity in the material frame, where nothing pushes, and at the start; else the
+        tip's tissue Jacobian in ``(X, e₃)`` on the position rows."""
+        P = np.eye(12)
+        if self.frame == "world":
+            diff = self._material_differences(state, params)
+            if diff is not None:
+                P[:3, _PUSHED] = diff[1]
+        return P
+
+    def linear_model(self, plan, actuation_cov):
+        """The linear model of ``plan`` from the step's structure instead of simulator runs
+        (the actuation case): ``A_t = P_{t+1} K(u*_t) P_t⁻¹``, ``B_t = P_{t+1} B_m``,
+        ``M_t = B_t Σ_w B_tᵀ`` with ``P_t = ∂x/∂m`` at ``y*_t`` (the tissue's central
+        differences on the tip's rows, world frame; the identity in the material frame),
+        ``K`` and ``B_m = ∂(K(u) m*)/∂u`` of ``material_step_derivatives``, ``H_t`` the
+        observation Jacobian and ``N`` the sensing covariance. One step costs the 12 tissue
+        responses of the central differences and one batched screw exponential, where
+        :func:`riskplan.control.linearize` runs the simulator ``2K + q + n_samples`` times
+        (:func:`riskplan.control.lqgmp3d_moments.structured_linearization` wraps it).
+
+        Parameters
+        ----------
+        plan : NominalPlan
+            The plan, in this scenario's frame.
+        actuation_cov : array_like, shape (q, q)
+            ``Σ_w``.
+
+        Returns
+        -------
+        A, B, M, H, N : numpy.ndarray
+            Shapes ``(T, 12, 12)``, ``(T, 12, q)``, ``(T, 12, 12)``, ``(T, 3, 12)``,
+            ``(T, 3, 3)``.
+        """
+        q = self.control_dim
+        W = as_array(actuation_cov, "actuation_cov", shape=(q, q))
+        params = plan.params
+        T = plan.n_steps
+        frames = [self._frame_map(y, params) for y in plan.states]
+        A, B = np.empty((T, 12, 12)), np.empty((T, 12, q))
+        for t in range(T):
+            m, K, dK, _ = self.material_step_derivatives(plan.states[t], plan.controls[t])
+            A[t] = frames[t + 1] @ K @ np.linalg.inv(frames[t])
+            B[t] = frames[t + 1] @ np.einsum("kij,j->ik", dK, m)
+        H = np.stack([self.observation_jacobian(y, params) for y in plan.states[1:]])
+        M = np.einsum("tik,kl,tjl->tij", B, W, B)
+        return A, B, M, H, np.broadcast_to(self.sensing_cov, (T, 3, 3)).copy()

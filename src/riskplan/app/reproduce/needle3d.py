@@ -182,6 +182,17 @@ def measure_plan(sim, plan, controller, row: PlanRow, *, n: int, seed=0) -> Plan
     return row
 
 
+def _distinct(rows, plans) -> list:
+    """``rows`` without those whose plan repeats the controls of an earlier one."""
+    seen, out = set(), []
+    for r in rows:
+        key = plans[r.index].controls.tobytes()
+        if key not in seen:
+            seen.add(key)
+            out.append(r)
+    return out
+
+
 def _measure_task(args) -> PlanRow:
     sim, plan, controller, row, n, seed = args
     return measure_plan(sim, plan, controller, row, n=n, seed=seed)
@@ -257,7 +268,9 @@ def plan_needle3d(
     if check_runs:
         from riskplan.parallel import map_tasks
 
-        usable = [r for r in ranked if ctrls[r.index] is not None]
+        # distinct plans only: the RRT's trees return the same goal-connected path more than
+        # once (11 distinct of 30 at the paper's sizes), and a copy checks nothing new
+        usable = _distinct([r for r in ranked if ctrls[r.index] is not None], plans)
         chosen = [
             usable[k] for k in evenly_spaced_ranks(len(usable), min(check_plans, len(usable)))
         ]

@@ -26,7 +26,6 @@ MAX_FUNCTION_LINES = 120
 KNOWN_LONG_FILES = {
     "app/reproduce/deformable.py": 965,
     "control/linearize.py": 810,
-    "deformable/tissue3d.py": 766,
     "robots/batch_kernel.py": 673,
     "scenarios/manipulation.py": 654,
     "scenarios/needle.py": 841,

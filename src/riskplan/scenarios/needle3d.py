@@ -64,7 +64,7 @@ from riskplan.scenarios.base import (
     check_control,
     gaussian_noise,
 )
-from riskplan.scenarios.bevel import needle_step, pose_step_jacobian
+from riskplan.scenarios.bevel import _pose_vector_step, pose_step_jacobian
 from riskplan.scenarios.needle3d_config import Needle3DConfig, Needle3DState, _MeshData3D
 from riskplan.scenarios.needle3d_frames import FRAMES, JACOBIAN_STEP, Needle3DFrames
 from riskplan.scenarios.needle3d_space import Needle3DSpace, needle3d_steer
@@ -248,12 +248,10 @@ class Needle3DScenario(Needle3DFrames, FEMScenario):
         u = check_control(control, self._bounds)
         u = apply_actuation_noise(u, params, state.t, self._bounds)
         cfg = self.config
-        m = state.material
-        R = m[3:12].reshape(3, 3).T
-        R1, p1 = needle_step(
-            R, m[:3], u[0], u[1], tau=cfg.tau, kappa=cfg.curvature, rho=self._rho(u)
+        # needle_step on the pose vector, compiled (equal to rounding)
+        mat = _pose_vector_step(
+            state.material, float(u[0]), float(u[1]), cfg.tau, cfg.curvature, self._rho(u)
         )
-        mat = np.concatenate([p1, R1.T.ravel()])
         disp, pose = self._tissue_response(mat, params)
         return Needle3DState(
             t=state.t + 1,

@@ -84,3 +84,22 @@ def test_step_on_5k_tetrahedra_equals_the_direct_solve():
         scale = float(np.abs(tracked).max())
         np.testing.assert_allclose(y.displacement / scale, tracked / scale, **TOL["float64_exact"])
         np.testing.assert_allclose(y.pose[:3], y.material[:3] + u_tip, **TOL["float64_exact"])
+
+
+@pytest.mark.parametrize("n_elements", [1296, 5000])
+def test_point_location_by_grid_cell_holds_the_point(n_elements):
+    """``locate_point`` (the compiled cell lookup) returns a tetrahedron holding the point
+    whose weights reproduce it, inside cells, on cell faces and corners, as the general
+    search's does."""
+    from riskplan.deformable.tetlocate import find_points
+
+    block = Needle3DScenario().mesh_data(n_elements).block
+    gen = np.random.default_rng(5)
+    h = block.size / np.array(block.grid)
+    pts = np.vstack([gen.random((60, 3)), h * gen.integers(0, 7, (20, 3)), [[1.0, 1.0, 1.0]]])
+    for X in pts:
+        e, lam = block.locate_point(X)
+        e_ref, _ = find_points(block.mesh, X[None, :])
+        assert e >= 0 and e_ref[0] >= 0
+        assert lam.min() >= -TOL["barycentric"]["atol"]
+        np.testing.assert_allclose(lam @ block.mesh.nodes[block.tets[e]], X, **TOL["interpolation"])

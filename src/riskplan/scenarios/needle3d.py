@@ -177,11 +177,11 @@ class Needle3DScenario(Needle3DFrames, FEMScenario):
         n_elements : int
             Requested number of tetrahedra (rounded to a grid by :func:`~riskplan.scenarios.tissue3d.grid_for`).
         """
+        d = self._meshes.get(n_elements)
+        if d is not None:  # the hot path: before any import
+            return d
         from riskplan.scenarios.tissue3d import grid_for
 
-        d = self._meshes.get(n_elements)
-        if d is not None:
-            return d
         key = grid_for(self.config.size, n_elements)
         d = self._meshes.get(key)
         if d is not None:
@@ -267,9 +267,9 @@ class Needle3DScenario(Needle3DFrames, FEMScenario):
         k = d.block.tracked.shape[0]
         if params.force_scale == 0.0 or not d.block.contains(mat[:3]):
             return np.zeros((k, 3)), mat.copy()
-        elem, lam = d.block.locate(mat[:3])
+        elem, lam = d.block.locate_point(mat[:3])
         model = self.model(params)
-        u_tip, tracked = model.point_load(int(elem[0]), lam[0], params.force_scale * mat[9:12])
+        u_tip, tracked = model.point_load(elem, lam, params.force_scale * mat[9:12])
         pose = mat.copy()
         pose[:3] += u_tip
         return tracked, pose

@@ -114,9 +114,9 @@ class TetBlock:
         bool
             Whether it lies in ``[0, size]``.
         """
-        x, y, z = (float(v) for v in np.asarray(X, dtype=np.float64).reshape(3))
+        X = np.asarray(X, dtype=np.float64).reshape(3)
         sx, sy, sz = self._size_tuple
-        return 0.0 <= x <= sx and 0.0 <= y <= sy and 0.0 <= z <= sz  # NaN: False
+        return bool(0.0 <= X[0] <= sx and 0.0 <= X[1] <= sy and 0.0 <= X[2] <= sz)  # NaN: False
 
     def locate(self, points) -> tuple[np.ndarray, np.ndarray]:
         """``(elem (k,), lam (k, 4))``: containing tetrahedra (``−1`` outside) and
@@ -142,6 +142,31 @@ class TetBlock:
             if hit is not None:
                 return hit
         return find_points(self.mesh, pts)
+
+    def locate_point(self, X) -> tuple[int, np.ndarray]:
+        """``(elem, lam (4,))`` of one material point inside the block (a simulator step's
+        hot path: :meth:`locate` without its checks; the point must lie in the block,
+        :meth:`contains`).
+
+        Parameters
+        ----------
+        X : numpy.ndarray, shape (3,)
+            The material point.
+
+        Returns
+        -------
+        elem : int
+            The containing tetrahedron (``−1`` if none: only for a point outside).
+        lam : numpy.ndarray, shape (4,)
+            Its barycentric weights.
+        """
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        if self._cell_tets is not None:
+            hit = self._locate_in_cell(X)
+            if hit is not None:
+                return int(hit[0][0]), hit[1][0]
+        elem, lam = self.locate(X)
+        return int(elem[0]), lam[0]
 
     def _locate_in_cell(self, X: np.ndarray):
         """The tetrahedron of the grid cell holding ``X`` with the largest smallest

@@ -103,3 +103,12 @@ def test_point_location_by_grid_cell_holds_the_point(n_elements):
         assert e >= 0 and e_ref[0] >= 0
         assert lam.min() >= -TOL["barycentric"]["atol"]
         np.testing.assert_allclose(lam @ block.mesh.nodes[block.tets[e]], X, **TOL["interpolation"])
+
+
+def test_point_location_refuses_points_outside_the_block():
+    from riskplan.errors import InvalidInputError
+
+    block = Needle3DScenario().mesh_data(1296).block
+    for X in ([-0.01, 0.5, 0.5], [0.5, 1.01, 0.5], [0.5, 0.5, np.nan]):
+        with pytest.raises(InvalidInputError, match="outside"):
+            block.locate_point(np.array(X))

@@ -86,7 +86,7 @@ def locate_in_grid(X, size, grid, cell_tets, cell_maps, tol):
     Parameters
     ----------
     X : numpy.ndarray, shape (3,)
-        The point, inside ``[0, size]``.
+        The point (outside ``[0, size]`` or NaN: element ``−1``).
     size : numpy.ndarray, shape (3,)
         The block's edge lengths.
     grid : numpy.ndarray, shape (3,)
@@ -101,12 +101,16 @@ def locate_in_grid(X, size, grid, cell_tets, cell_maps, tol):
     Returns
     -------
     element : int
-        The tetrahedron, ``−1`` if the point lies in none of the cell's (round-off).
+        The tetrahedron, ``−1`` if the point lies outside the block or in none of the
+        cell's tetrahedra (round-off).
     lam : numpy.ndarray, shape (4,)
         Its barycentric weights.
     """
+    lam = np.zeros(4)
     c = 0
     for k in range(3):
+        if not 0.0 <= X[k] <= size[k]:  # outside the block, or NaN
+            return -1, lam
         i = min(int(X[k] * grid[k] / size[k]), grid[k] - 1)
         c = c * grid[k] + i
     best, jb = -np.inf, 0
@@ -117,7 +121,6 @@ def locate_in_grid(X, size, grid, cell_tets, cell_maps, tol):
             w = min(w, M[0] * X[0] + M[1] * X[1] + M[2] * X[2] + M[3])
         if w > best:
             best, jb = w, j
-    lam = np.empty(4)
     for r in range(4):
         M = cell_maps[c, jb, r]
         lam[r] = M[0] * X[0] + M[1] * X[1] + M[2] * X[2] + M[3]

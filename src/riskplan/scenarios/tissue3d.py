@@ -146,7 +146,7 @@ class TetBlock:
     def locate_point(self, X) -> tuple[int, np.ndarray]:
         """``(elem, lam (4,))`` of one material point inside the block (a simulator step's
         hot path: :meth:`locate` without its checks; the point must lie in the block,
-        :meth:`contains`).
+        :meth:`contains`; a point outside raises :class:`~riskplan.errors.InvalidInputError`).
 
         Parameters
         ----------
@@ -156,7 +156,7 @@ class TetBlock:
         Returns
         -------
         elem : int
-            The containing tetrahedron (``−1`` if none: only for a point outside).
+            The containing tetrahedron.
         lam : numpy.ndarray, shape (4,)
             Its barycentric weights.
         """
@@ -165,7 +165,10 @@ class TetBlock:
             hit = self._locate_in_cell(X)
             if hit is not None:
                 return int(hit[0][0]), hit[1][0]
-        elem, lam = self.locate(X)
+        # round-off between the cell's tetrahedra (rare), or a point outside
+        elem, lam = self.locate(X) if self.contains(X) else (np.array([-1]), None)
+        if elem[0] < 0:
+            raise InvalidInputError(f"X: {X.tolist()} lies outside the tissue block")
         return int(elem[0]), lam[0]
 
     def _locate_in_cell(self, X: np.ndarray):

@@ -31,8 +31,6 @@ KNOWN_LONG_FILES = {
     "scenarios/needle.py": 841,
 }
 KNOWN_LONG_FUNCTIONS = {
-    "app/reproduce/calibration.py:run_calibration": 233,
-    "app/reproduce/mdn.py:run_mdn": 122,
     "control/linearize.py:linearize": 226,
     "control/lqg.py:execute": 140,
     "control/lqgmp.py:lqgmp": 203,

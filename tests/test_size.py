@@ -25,7 +25,6 @@ MAX_FUNCTION_LINES = 120
 # or appeared in those merges; each is to be split)
 KNOWN_LONG_FILES = {
     "app/reproduce/deformable.py": 965,
-    "control/linearize.py": 810,
     "deformable/tissue3d.py": 766,
     "robots/batch_kernel.py": 673,
     "scenarios/manipulation.py": 654,
@@ -35,7 +34,6 @@ KNOWN_LONG_FUNCTIONS = {
     "app/reproduce/calibration.py:run_calibration": 233,
     "app/reproduce/deformable.py:run_scenario": 254,
     "app/reproduce/mdn.py:run_mdn": 122,
-    "control/linearize.py:linearize": 226,
     "control/lqg.py:execute": 140,
     "control/lqgmp.py:lqgmp": 203,
     "kinematics/training.py:train": 222,

@@ -34,15 +34,12 @@ KNOWN_LONG_FUNCTIONS = {
     "app/reproduce/calibration.py:run_calibration": 233,
     "app/reproduce/deformable.py:run_scenario": 254,
     "app/reproduce/mdn.py:run_mdn": 122,
-    "control/lqg.py:execute": 140,
-    "control/lqgmp.py:lqgmp": 203,
     "kinematics/training.py:train": 222,
     "planning/bo.py:optimise_trajectory": 169,
     "planning/problem.py:load_problem": 201,
     "planning/robot_plan.py:plan_robot": 184,
     "robots/batch_kernel.py:_factor_column": 143,
     "robots/params.py:parse_robot_document": 229,
-    "tissue_planning/rrt.py:grow_tree": 167,
 }
 KNOWN_CIRCLES = []
 

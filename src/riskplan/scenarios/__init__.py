@@ -14,13 +14,13 @@ import importlib
 #: public name -> the module of this package that defines it
 _HOME = {
     "FEMScenario": "base",
-    "SimParams": "base",
-    "SimState": "base",
+    "SimParams": "values",
+    "SimState": "values",
     "Simulator": "base",
-    "actuation_noise": "base",
+    "actuation_noise": "values",
     "apply_actuation_noise": "base",
     "check_control": "base",
-    "frozen_array": "base",
+    "frozen_array": "values",
     "gaussian_noise": "base",
     "rollout": "base",
     "BoxSpace": "space",

@@ -90,11 +90,11 @@ from riskplan.scenarios.base import (
     SimState,
     apply_actuation_noise,
     check_control,
-    check_material,
     frozen_array,
     gaussian_noise,
 )
 from riskplan.scenarios.space import BoxSpace
+from riskplan.scenarios.values import check_material
 
 __all__ = [
     "FRAMES",

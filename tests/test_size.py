@@ -28,8 +28,6 @@ KNOWN_LONG_FILES = {
     "control/linearize.py": 810,
     "deformable/tissue3d.py": 766,
     "robots/batch_kernel.py": 673,
-    "scenarios/manipulation.py": 654,
-    "scenarios/needle.py": 841,
 }
 KNOWN_LONG_FUNCTIONS = {
     "app/reproduce/calibration.py:run_calibration": 233,

@@ -26,8 +26,6 @@ MAX_FUNCTION_LINES = 120
 KNOWN_LONG_FILES = {
     "deformable/tissue3d.py": 766,
     "robots/batch_kernel.py": 673,
-    "scenarios/manipulation.py": 654,
-    "scenarios/needle.py": 841,
 }
 KNOWN_LONG_FUNCTIONS = {
     "kinematics/training.py:train": 222,

@@ -199,7 +199,24 @@ class Linearization:
 
 
 def observation_model(sim, H=None, N=None) -> tuple[np.ndarray, np.ndarray]:
-    """``H (m, p)`` and ``N (m, m)`` from the arguments or ``sim.observation_matrix`` / ``sim.sensing_cov``."""
+    """The observation model of ``sim``.
+
+    Parameters
+    ----------
+    sim : Simulator
+        The simulator (``observation_matrix``, ``sensing_cov``, ``state_dim``).
+    H : numpy.ndarray, optional
+        ``(m, p)`` the observation matrix (default ``sim.observation_matrix``).
+    N : numpy.ndarray, optional
+        ``(m, m)`` the measurement noise covariance (default ``sim.sensing_cov``).
+
+    Returns
+    -------
+    H : numpy.ndarray
+        ``(m, p)``.
+    N : numpy.ndarray
+        ``(m, m)``.
+    """
     if H is None:
         H = getattr(sim, "observation_matrix", None)
     if N is None:

@@ -90,12 +90,34 @@ def _stepper(sim):
 def control_jacobian(
     sim, state, control, params, epsilon, x_next=None, t: int = 0, near=None
 ) -> np.ndarray:
-    """``B (p, q)``: forward differences of ``sim.reduced(sim.step(state, u, params))`` in ``u``.
+    """``B (p, q)``: forward differences of ``sim.reduced(sim.step(state, u, params))`` in ``u``
+    (paper IV-B, ``B_t``): column ``j`` is ``(x(u + ε_j e_j) − x(u)) / ε_j``.
 
-    ``epsilon (q,)`` per component (sign flipped where ``u + ε`` leaves the upper bound);
-    ``x_next (p,)`` is the unperturbed result (computed if not given); ``near``: the
-    unperturbed next state, the solver's start for simulators with ``step_near``. Paper
-    IV-B, ``B_t``.
+    Parameters
+    ----------
+    sim : Simulator
+        The simulator (``step``, or ``step_near`` where it has one; ``reduced``).
+    state : object
+        The full state ``y`` the step starts from.
+    control : numpy.ndarray
+        ``(q,)`` the unperturbed control ``u``.
+    params : SimParams
+        The parameters of the runs.
+    epsilon : numpy.ndarray
+        ``(q,)`` the step per component (sign flipped where ``u + ε`` leaves the upper
+        bound).
+    x_next : numpy.ndarray, optional
+        ``(p,)`` the unperturbed result (computed if not given).
+    t : int
+        The plan step, named in the error of a non-finite state.
+    near : object, optional
+        The unperturbed next state, the solver's start for simulators with ``step_near``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(p, q)`` the control Jacobian. Raises :class:`~riskplan.errors.SimulationError`
+        when a run returns a non-finite reduced state.
     """
     run = _stepper(sim)
     bounds = np.asarray(sim.control_bounds, dtype=np.float64)

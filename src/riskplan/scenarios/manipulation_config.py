@@ -103,11 +103,13 @@ class ManipulationConfig:
 
     @property
     def fixed_segment(self) -> np.ndarray:
+        """``(2, 2)`` the fixed edge ``outline[i] → outline[i+1]``, ``i = fixed_edge``."""
         i = int(self.fixed_edge)
         return np.stack([self.outline[i], self.outline[(i + 1) % len(self.outline)]])
 
     @property
     def goal_polygon(self) -> np.ndarray:
+        """``(24, 2)`` the goal disk as a 24-gon (static, world frame)."""
         return geo.circle_polygon(self.goal_center, self.goal_radius, 24)
 
     def boundary_points(self) -> np.ndarray:

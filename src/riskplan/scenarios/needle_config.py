@@ -222,4 +222,5 @@ class NeedleConfig:
 
     @property
     def goal_polygon(self) -> np.ndarray:
+        """``(24, 2)`` the goal disk as a 24-gon of material points (reference configuration)."""
         return geo.circle_polygon(self.goal_center, self.goal_radius, 24)

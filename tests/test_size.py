@@ -38,12 +38,7 @@ KNOWN_LONG_FUNCTIONS = {
     "control/linearize.py:linearize": 226,
     "control/lqg.py:execute": 140,
     "control/lqgmp.py:lqgmp": 203,
-    "kinematics/training.py:train": 222,
-    "planning/bo.py:optimise_trajectory": 169,
-    "planning/problem.py:load_problem": 201,
-    "planning/robot_plan.py:plan_robot": 184,
     "robots/batch_kernel.py:_factor_column": 143,
-    "robots/params.py:parse_robot_document": 229,
     "tissue_planning/rrt.py:grow_tree": 167,
 }
 KNOWN_CIRCLES = []

@@ -402,30 +402,11 @@ def optimise_trajectory(
             x_new = _propose(i, cur, p, X, pX, lim, best, rng, state, validity, config)
         if x_new is not None:
             chosen = i
-            p_new = float(bound(x_new[None])[0])
-            state["evaluations"] += 1
-            X.append(x_new)
-            pX.append(p_new)
-            trial = p.copy()
-            trial[i] = p_new
-            if float(trajectory_probability(trial)) < best:
-                cur = cur.copy()
-                cur[i] = x_new
-                p = trial
-                accepted = True
+            cur, p, accepted = _evaluate_move(i, x_new, bound, cur, p, X, pX, best, state)
         if config.method == "trust_region":
             _update_trust_region(state, accepted)
-        state.update(
-            iteration=it + 1,
-            trajectory=cur.tolist(),
-            bounds=p.tolist(),
-            X=[x.tolist() for x in X],
-            p=pX,
-            seconds=elapsed0 + time.perf_counter() - t0,
-        )
-        state["trace"].append(float(trajectory_probability(p)))
-        state["chosen"].append(chosen)
-        state["accepted"].append(accepted)
+        seconds = elapsed0 + time.perf_counter() - t0
+        _record_iteration(state, it, cur, p, X, pX, chosen, accepted, seconds)
         if checkpoint is not None:
             state.pop("sha256", None)
             state["sha256"] = _digest(state)
@@ -522,6 +503,37 @@ def _propose(i, cur, p, X, pX, lim, best, rng, state, validity, config) -> np.nd
         if ok.any():
             return blk[int(np.argmax(ok))]
     return None
+
+
+def _evaluate_move(i, x_new, bound, cur, p, X, pX, best, state):
+    """Evaluate eq. 9 at ``x_new`` (one evaluation, kept for the surrogate) and keep the move
+    of configuration ``i`` when eq. 10 decreases; (trajectory, bounds, accepted)."""
+    p_new = float(bound(x_new[None])[0])
+    state["evaluations"] += 1
+    X.append(x_new)
+    pX.append(p_new)
+    trial = p.copy()
+    trial[i] = p_new
+    if float(trajectory_probability(trial)) < best:
+        cur = cur.copy()
+        cur[i] = x_new
+        return cur, trial, True
+    return cur, p, False
+
+
+def _record_iteration(state, it, cur, p, X, pX, chosen, accepted, seconds) -> None:
+    """The state after iteration ``it`` (what the checkpoint holds)."""
+    state.update(
+        iteration=it + 1,
+        trajectory=cur.tolist(),
+        bounds=p.tolist(),
+        X=[x.tolist() for x in X],
+        p=pX,
+        seconds=seconds,
+    )
+    state["trace"].append(float(trajectory_probability(p)))
+    state["chosen"].append(chosen)
+    state["accepted"].append(accepted)
 
 
 def _update_trust_region(state: dict, accepted: bool) -> None:

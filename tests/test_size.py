@@ -28,12 +28,7 @@ KNOWN_LONG_FILES = {
     "robots/batch_kernel.py": 673,
 }
 KNOWN_LONG_FUNCTIONS = {
-    "kinematics/training.py:train": 222,
-    "planning/bo.py:optimise_trajectory": 169,
-    "planning/problem.py:load_problem": 201,
-    "planning/robot_plan.py:plan_robot": 184,
     "robots/batch_kernel.py:_factor_column": 143,
-    "robots/params.py:parse_robot_document": 229,
 }
 KNOWN_CIRCLES = []
 

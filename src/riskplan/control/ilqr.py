@@ -242,11 +242,14 @@ def ilqr(
         Initial regularisation ``μ``.
     obstacles : sequence, optional
         ``T + 1`` lists of obstacle polygons ``(m, 2)`` in the reduced state's coordinates,
-        one per step (entry 0 unused): the barrier term (default none).
+        one per step (entry 0 unused): the barrier term (default none). Lists of 3-D
+        :class:`~riskplan.geometry3d.ConvexBody` (ellipsoids, parallelepipeds) give the
+        3-D barrier of :mod:`riskplan.control.ilqr_cost3d`.
     points : array_like
-        ``(k, 2)`` indices of the reduced state's 2-D collision points (default ``x[:2]``).
+        ``(k, 2)`` indices of the reduced state's 2-D collision points (default ``x[:2]``;
+        ``(k, 3)`` against 3-D bodies).
     body : sequence, optional
-        ``T + 1`` pairs ``(base (n, 2), W (n, k))``: the points checked at step ``t`` are
+        ``T + 1`` pairs ``(base (n, 2), W (n, k))`` (``(n, 3)`` in 3-D): the points checked at step ``t`` are
         ``base + W (x_t[points] − x*_t[points])`` (a body wider than its collision points,
         e.g. :func:`~riskplan.control.lqgmp.body_points`' outline); default the collision
         points themselves.

@@ -180,13 +180,16 @@ class Needle3DScenario(Needle3DFrames, FEMScenario):
         from riskplan.scenarios.tissue3d import grid_for
 
         d = self._meshes.get(n_elements)
-        if d is None:
-            key = grid_for(self.config.size, n_elements)
-            d = self._meshes.get(key)
-            if d is None:
-                d = self._meshes[key] = _MeshData3D(self.config, n_elements)
-                d.model_count = n_elements  # the count this grid's models are keyed by
+        if d is not None:
+            return d
+        key = grid_for(self.config.size, n_elements)
+        d = self._meshes.get(key)
+        if d is not None:
             self._meshes[n_elements] = d
+            return d
+        if d is None:
+            d = self._meshes[key] = self._meshes[n_elements] = _MeshData3D(self.config, n_elements)
+            d.model_count = n_elements  # the count this grid's models are keyed by
         return d
 
     def _make_model(self, params: SimParams):

@@ -189,10 +189,13 @@ class Needle3DScenario(Needle3DFrames, FEMScenario):
             return d
         if d is None:
             d = self._meshes[key] = self._meshes[n_elements] = _MeshData3D(self.config, n_elements)
+            d.model_count = n_elements  # the count this grid's models are keyed by
         return d
 
     def _make_model(self, params: SimParams):
         d = self.mesh_data(params.n_elements)
+        if d.model_count != params.n_elements:  # counts on one grid share the first's model
+            return self.model(params.replace(n_elements=d.model_count))
         return d.block.model(params.youngs_modulus, params.poissons_ratio)
 
     # ---- protocol -----------------------------------------------------------------

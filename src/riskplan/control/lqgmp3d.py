@@ -38,6 +38,13 @@ needle (docs/results.md): the co-motion is real (``J`` matches a regression of t
 executions' target centres on their tips), but switched on it made the estimates
 optimistic on 4 of 6 plans, because the linear model also under-predicts the tip's final
 spread by about as much as the co-motion takes off; off, the two cancel.
+
+**Beyond the linear model** (``moments=``, a
+:class:`~riskplan.control.lqgmp3d_moments.SecondOrderModel`): every method runs on that
+model's recursion instead, the checked position ``x*_{t+1} + offset_t + P_t ξ + ε_t`` with a
+residual ``ε_t`` of its own (truncated jointly with ``ξ``, then dropped), and the goal test on
+the tip relative to the moving target that the model carries (its spread now right, the
+co-motion belongs in it).
 """
 
 from __future__ import annotations

@@ -217,6 +217,37 @@ def test_green_columns_equal_the_direct_solve(sim, tol, n_elements, E, nu):
     assert largest > 1e-3  # responses were compared, not zeros
 
 
+@pytest.mark.parametrize("n_elements", [1296, 5000])
+def test_point_load_switches_from_columns_to_blocks_at_the_break_even(sim, tol, n_elements):
+    """A fresh model answers by per-node Green's columns until it has been asked for more
+    than ``switch_nodes`` distinct nodes, then by every element's block of ``K⁻¹``; both
+    paths equal the direct solve, and the same load gives the same answer either side of
+    the switch."""
+    block = sim.mesh_data(n_elements).block
+    model = block.model(57.0, 0.41)
+    gen = np.random.default_rng(11)
+    seen: set = set()
+    first = None
+    paths = set()
+    while not model.uses_blocks:
+        X = gen.random(3)
+        e, lam = block.locate(X)
+        e, f = int(e[0]), gen.standard_normal(3)
+        if first is None:
+            first = (e, lam[0], f, model.point_load(e, lam[0], f))
+        seen |= set(block.tets[e].tolist())
+        got = model.point_load(e, lam[0], f)
+        # the switch happens exactly when the distinct nodes pass the break-even
+        assert model.uses_blocks == (len(seen) > model.switch_nodes)
+        paths.add(model.uses_blocks)
+        for a, b in zip(got, model.point_load_direct(e, lam[0], f)):
+            np.testing.assert_allclose(a, b, **tol["superposition"])
+    assert paths == {False, True}
+    e, lam, f, before = first
+    for a, b in zip(model.point_load(e, lam, f), before):
+        np.testing.assert_allclose(a, b, **tol["superposition"])
+
+
 def test_grid_location_equals_the_general_search(sim, tol):
     """The block's cell lookup finds a tetrahedron holding the point (the general search's
     interpolation of the node positions, on cell faces and corners too)."""

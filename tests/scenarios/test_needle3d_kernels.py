@@ -112,3 +112,20 @@ def test_point_location_refuses_points_outside_the_block():
     for X in ([-0.01, 0.5, 0.5], [0.5, 1.01, 0.5], [0.5, 0.5, np.nan]):
         with pytest.raises(InvalidInputError, match="outside"):
             block.locate_point(np.array(X))
+
+
+def test_point_location_failing_inside_the_block_is_a_simulator_failure(monkeypatch):
+    """A point inside the block (``contains``) that round-off puts in no tetrahedron raises
+    :class:`SimulationError`, one of the RRT's counted simulator failures (it discards the
+    edge), not the caller's :class:`InvalidInputError`."""
+    from riskplan.errors import InvalidInputError, SimulationError
+    from riskplan.tissue_planning.rrt_connect import _SIM_FAILURES
+
+    block = Needle3DScenario().mesh_data(1296).block
+    X = np.array([0.3, 0.4, 0.5])
+    monkeypatch.setattr(block, "_locate_in_cell", lambda X: None)
+    monkeypatch.setattr(block, "locate", lambda X: (np.array([-1]), np.full((1, 4), np.nan)))
+    with pytest.raises(SimulationError, match="no tetrahedron") as info:
+        block.locate_point(X)
+    assert not isinstance(info.value, InvalidInputError)
+    assert isinstance(info.value, _SIM_FAILURES)

@@ -22,8 +22,20 @@ interpolation; one solve with ``3k`` right-hand sides)::
 (``W[e]`` the rows of the element's twelve DOFs; ``C K⁻¹ = (K⁻¹ Cᵀ)ᵀ`` by the symmetry of
 ``K``). A step then costs two small products instead of a solve, on any element, and a new
 material costs two factorisation-sized passes. The result is the direct solve's up to
-round-off (tested against it, float64). :meth:`TetBlockModel.columns` gives the Green's
-columns of one node by a solve. Locating the tip uses the block's grid: the six
+round-off (tested against it, float64).
+
+**Choice by use.** The block pass pays off only for a model asked about many nodes (the RRT
+and the selection re-use one material over the whole tree); a single execution with its own
+material draw touches a few dozen nodes once. So a model starts with the Green's columns of
+each node it is asked about (:meth:`TetBlockModel.columns`, one solve with three right-hand
+sides, cached) and builds the blocks once it has been asked for more than
+``switch_nodes`` distinct nodes, the measured break-even ``1.2 N^{2/3}`` (``N`` nodes):
+the block pass and one node's columns cost 19.6 ms and 0.36 ms on the 1296-tetrahedra mesh
+(343 nodes, break-even 55), 183 ms and 1.36 ms at 5040 (1144 nodes, 134), CPU time, medians
+of three materials, 2-core AMD EPYC shared with other jobs; both grow with the band, the
+block pass by one power of it more. Switching at the break-even costs at most twice the
+better of the two for any number of nodes. Both paths give the direct solve's result up to
+round-off (tested). Locating the tip uses the block's grid: the six
 tetrahedra of the grid cell holding the point are tried first (the general search only if
 round-off puts it in none of them).
 
@@ -36,7 +48,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from riskplan.errors import InvalidInputError
+from riskplan.errors import InvalidInputError, SimulationError
 
 __all__ = ["TetBlock", "TetBlockModel", "grid_for"]
 
@@ -60,6 +72,24 @@ def grid_for(size, n_elements: int) -> tuple[int, int, int]:
     from riskplan.deformable.tetmesh import grid_shape
 
     return tuple(int(n) for n in grid_shape(np.asarray(size, dtype=np.float64), int(n_elements)))
+
+
+def _switch_nodes(n_nodes: int) -> int:
+    """Distinct loaded nodes after which a :class:`TetBlockModel` builds every element's
+    block of ``K⁻¹`` instead of per-node Green's columns: the measured break-even
+    ``round(1.2 N^{2/3})`` (module docstring; 59 on the 1296-tetrahedra mesh, 131 at 5040).
+
+    Parameters
+    ----------
+    n_nodes : int
+        Nodes ``N`` of the block mesh.
+
+    Returns
+    -------
+    int
+        The number of distinct nodes.
+    """
+    return round(1.2 * float(n_nodes) ** (2.0 / 3.0))
 
 
 class TetBlock:
@@ -146,7 +176,9 @@ class TetBlock:
     def locate_point(self, X) -> tuple[int, np.ndarray]:
         """``(elem, lam (4,))`` of one material point inside the block (a simulator step's
         hot path: :meth:`locate` without its checks; the point must lie in the block,
-        :meth:`contains`; a point outside raises :class:`~riskplan.errors.InvalidInputError`).
+        :meth:`contains`; a point outside raises :class:`~riskplan.errors.InvalidInputError`,
+        a point inside that round-off puts in no tetrahedron
+        :class:`~riskplan.errors.SimulationError`, a simulator failure the RRT counts).
 
         Parameters
         ----------
@@ -166,9 +198,13 @@ class TetBlock:
             if hit is not None:
                 return int(hit[0][0]), hit[1][0]
         # round-off between the cell's tetrahedra (rare), or a point outside
-        elem, lam = self.locate(X) if self.contains(X) else (np.array([-1]), None)
-        if elem[0] < 0:
+        if not self.contains(X):
             raise InvalidInputError(f"X: {X.tolist()} lies outside the tissue block")
+        elem, lam = self.locate(X)
+        if elem[0] < 0:
+            # inside by `contains` but in no tetrahedron by round-off: a failed simulator
+            # step (the RRT discards the edge, an execution ends), not a caller's error
+            raise SimulationError(f"X: {X.tolist()} lies in the block but in no tetrahedron")
         return int(elem[0]), lam[0]
 
     def _locate_in_cell(self, X: np.ndarray):
@@ -225,8 +261,11 @@ class TetBlockModel:
         self.tissue = tissue
         self._free = tissue.free_dofs
         self._columns: dict = {}
+        self._elements: dict = {}
         self._fast = None
         self._edofs = block.element_dofs
+        #: distinct loaded nodes after which :meth:`point_load` switches to the blocks
+        self.switch_nodes = _switch_nodes(block.n_nodes)
 
     def columns(self, node: int) -> tuple[np.ndarray, np.ndarray]:
         """Green's columns of ``node`` (module docstring), computed on first use.
@@ -281,8 +320,9 @@ class TetBlockModel:
 
     def point_load(self, e: int, lam, force) -> tuple[np.ndarray, np.ndarray]:
         """``(u(X) (3,), u(tracked) (k, 3))`` for the force ``force (3,)`` at the point of
-        element ``e`` with barycentric weights ``lam (4,)`` (module docstring: the element's
-        block of ``K⁻¹`` and the tracked points' response ``W = K⁻¹ Cᵀ``).
+        element ``e`` with barycentric weights ``lam (4,)`` (module docstring: the Green's
+        columns of its nodes, or, past ``switch_nodes`` distinct nodes, the element's block of
+        ``K⁻¹`` and the tracked points' response ``W = K⁻¹ Cᵀ``).
 
         Parameters
         ----------
@@ -300,11 +340,46 @@ class TetBlockModel:
         u_tracked : numpy.ndarray, shape (k, 3)
             The displacement of the block's tracked points.
         """
-        G, W = self._green()
         lam = np.ascontiguousarray(lam, dtype=np.float64).reshape(4)
         f = np.ascontiguousarray(force, dtype=np.float64).reshape(3)
-        u, tracked = _point_load_kernel(G, W, self._edofs, int(e), lam, f)
+        e = int(e)
+        if self._fast is None and not self._past_break_even(e):
+            Ge, CGe = self._element(e)
+            fa = np.outer(lam, f).reshape(12)  # nodal forces λ_a f
+            return lam @ (Ge @ fa).reshape(4, 3), (CGe @ fa).reshape(-1, 3)
+        G, W = self._green()
+        u, tracked = _point_load_kernel(G, W, self._edofs, e, lam, f)
         return u, tracked.reshape(-1, 3)
+
+    @property
+    def uses_blocks(self) -> bool:
+        """Whether :meth:`point_load` has switched to every element's block of ``K⁻¹``."""
+        return self._fast is not None
+
+    def _past_break_even(self, e: int) -> bool:
+        """Whether loading element ``e`` takes the distinct nodes asked for past
+        ``switch_nodes`` (then the per-node caches are dropped)."""
+        new = sum(int(a) not in self._columns for a in self.block.tets[e])
+        if len(self._columns) + new <= self.switch_nodes:
+            return False
+        self._columns.clear()
+        self._elements.clear()
+        return True
+
+    def _element(self, e: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(G_e (12, 12), C G_e (3k, 12))``: the response of element ``e``'s nodes and of
+        the tracked points to its twelve nodal force components (the Green's columns of its
+        four nodes, superposed; cached per element)."""
+        hit = self._elements.get(e)
+        if hit is not None:
+            return hit
+        nodes = self.block.tets[e]
+        cols = [self.columns(int(a)) for a in nodes]
+        # G_e[(b, j), (a, i)] = G_a[nodes[b], j, i]
+        Ge = np.stack([G[nodes] for G, _ in cols], axis=2).reshape(12, 12)
+        CGe = np.stack([CG for _, CG in cols], axis=2).reshape(-1, 12)
+        self._elements[e] = hit = (Ge, CGe)
+        return hit
 
     def _green(self) -> tuple[np.ndarray, np.ndarray]:
         """``(G (T, 12, 12), W (3N, 3k))``: every element's block of ``K⁻¹``

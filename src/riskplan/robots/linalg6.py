@@ -9,7 +9,7 @@ import math
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def gauss_solve(A, b, n, nrhs):
     """Solve ``A X = b`` in place (partial pivoting); ``A (n, n)``, ``b (n, nrhs)``. Returns False if singular."""
     for k in range(n):
@@ -47,7 +47,7 @@ def gauss_solve(A, b, n, nrhs):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def chol_factor6(J):
     """Cholesky factor (lower, in place) of a symmetric positive definite ``J (6, 6)``.
 
@@ -70,7 +70,7 @@ def chol_factor6(J):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def chol_solve6(L, b):
     """Solve ``L L^T x = b`` in place with the factor from :func:`chol_factor6`."""
     for i in range(6):

@@ -145,10 +145,11 @@ def local_jacobian(x, tau, rt, drt, kse, kbt, J):
         if ti == 0.0:
             continue
         r0, r1, r2 = rt[i, 0], rt[i, 1], rt[i, 2]
-        nw, t0, t1, t2 = unit_tangent(x, row3(rt, i), row3(drt, i))
+        r = row3(rt, i)
+        nw, t0, t1, t2 = unit_tangent(x, r, row3(drt, i))
         sc = ti / nw
         a00, a11, a22, a01, a02, a12, b00, b01, b02, b10, b11, b12, b20, b21, b22 = (
-            tendon_stiffness(sc, t0, t1, t2, row3(rt, i))
+            tendon_stiffness(sc, t0, t1, t2, r)
         )
         # the blocks as loops over tuples (LLVM unrolls them; numba types a loop body once,
         # so a first call compiles this faster than the 45 statements written out)
@@ -240,10 +241,10 @@ def strain_slope(x, tau, rt, drt, ddrt, L, out):
         ti = tau[i]
         if ti == 0.0:
             continue
-        nw, t0, t1, t2 = unit_tangent(x, row3(rt, i), row3(drt, i))
-        c0, c1, c2, c3, c4, c5 = tendon_slope_source(
-            ti, nw, t0, t1, t2, x, row3(rt, i), row3(drt, i), row3(ddrt, i)
-        )
+        r = row3(rt, i)
+        dr = row3(drt, i)
+        nw, t0, t1, t2 = unit_tangent(x, r, dr)
+        c0, c1, c2, c3, c4, c5 = tendon_slope_source(ti, nw, t0, t1, t2, x, r, dr, row3(ddrt, i))
         out[0] -= c0
         out[1] -= c1
         out[2] -= c2

@@ -27,7 +27,6 @@ KNOWN_LONG_FILES = {
     "app/reproduce/deformable.py": 965,
     "control/linearize.py": 810,
     "deformable/tissue3d.py": 766,
-    "robots/batch_kernel.py": 673,
     "scenarios/manipulation.py": 654,
     "scenarios/needle.py": 841,
 }
@@ -42,7 +41,6 @@ KNOWN_LONG_FUNCTIONS = {
     "planning/bo.py:optimise_trajectory": 169,
     "planning/problem.py:load_problem": 201,
     "planning/robot_plan.py:plan_robot": 184,
-    "robots/batch_kernel.py:_factor_column": 143,
     "robots/params.py:parse_robot_document": 229,
     "tissue_planning/rrt.py:grow_tree": 167,
 }

@@ -55,6 +55,8 @@ TOL = {
     "fd_law": dict(rtol=1e-7, atol=1e-7),  # material law derivatives, h = 1e-6
     "fd_force_jacobian": dict(rtol=0.0, atol=1e-6),  # central differences h = 1e-4 of Newton solves
     "fd_forward_force": dict(rtol=0.0, atol=1e-3),  # forward differences h = 1e-4 of a step
+    "fd_hessian_scaled": dict(rtol=1e-6, atol=1e-6),  # h = 1e-6 of a gradient (atol x max |H|)
+    "fd_kink_margin": dict(rtol=0.0, atol=1e-4),  # points this far from a kink, h = 1e-6
     "linearize_second_order": dict(rtol=0.0, atol=1e-2),  # A_t fit, perturbations 1 % of range
     "feedback_null": dict(rtol=0.0, atol=1e-4),  # feedback through A_t's second-order fit residue
     # FEM

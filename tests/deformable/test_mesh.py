@@ -142,6 +142,7 @@ def test_deformable_modules_import_without_cycles():
         "material_points",
         "loads",
         "linear",
+        "newton",
         "hyperelastic",
         "tetmesh",
         "tetassembly",

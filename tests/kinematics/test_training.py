@@ -73,6 +73,47 @@ def test_resume_continues_identically(synth_small, tmp_path):
         assert torch.equal(ca["net"][k], cb["net"][k]), k
 
 
+def test_training_is_the_seeded_adam_loop(synth_small, tmp_path):
+    """Oracle for the loop's structure: three epochs of ``train`` give, bit for bit, the weights
+    and training NLLs of the plain loop the module describes (shuffle and point draws from
+    ``default_rng([seed, epoch])``, Adam on the mean NLL of the normalised points), so a
+    restructuring of ``train`` that changes what it computes fails here."""
+    from riskplan.kinematics.data import angle_columns
+    from riskplan.kinematics.mdn import MDN, Normalisation, mixture_log_prob
+    from riskplan.kinematics.training import split_indices
+
+    data = read_point_clouds(synth_small)
+    cfg = TrainConfig(n_components=2, epochs=3, seed=5, dtype="float64", lr_patience=10, **FAST)
+    res = train(data, cfg, out=tmp_path)
+    tr, _ = split_indices(data.n_configs, cfg.val_fraction, cfg.seed)
+    angles = angle_columns(data.robot_toml)
+    norm = Normalisation.fit(data.displacements[tr], data.points[tr], angles)
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(cfg.seed)
+        net = MDN(data.n_tendons, 2, 3, cfg.hidden, cfg.head_hidden, cfg.activation, angles)
+    net = net.double()
+    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    x_all = (data.displacements - norm.input_mean) / norm.input_scale
+    for epoch in range(cfg.epochs):
+        rng = np.random.default_rng([cfg.seed, epoch])
+        perm = rng.permutation(tr)
+        total = 0.0
+        for s in range(0, perm.size, cfg.batch_size):
+            idx = perm[s : s + cfg.batch_size]
+            pidx = rng.integers(0, data.n_points, size=(idx.size, cfg.points_per_config))
+            pts = (data.points[idx[:, None], pidx] - norm.output_centre) / norm.output_scale
+            opt.zero_grad()
+            x = torch.as_tensor(x_all[idx])
+            loss = -mixture_log_prob(*net(x), torch.as_tensor(pts)).mean()
+            loss.backward()
+            opt.step()
+            total += float(loss.detach()) * idx.size
+        assert res.history[epoch].train_nll == total / tr.size + norm.log_scale_sum
+    last = torch.load(tmp_path / CHECKPOINT_NAME, weights_only=True)["net"]
+    for k, v in net.state_dict().items():
+        assert torch.equal(last[k], v), k
+
+
 def test_nan_loss_skips_step_and_keeps_parameters(synth_small, monkeypatch):
     data = read_point_clouds(synth_small)
     real = training_mod._batch_loss

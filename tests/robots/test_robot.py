@@ -7,6 +7,7 @@ import pytest
 
 from riskplan.errors import ConvergenceError, InvalidInputError, RobotDescriptionError
 from riskplan.robots import RodShape, load_robot, robot_from_toml
+from riskplan.robots import actuation as actuation_module
 from riskplan.robots import robot as robot_module
 from tests.conftest import TOL
 
@@ -180,7 +181,7 @@ def test_single_equals_batch_with_base_pose(paper, rng):
 
 
 def test_non_convergence_raises_with_residual(paper, monkeypatch):
-    monkeypatch.setattr(robot_module, "DISP_MAXIT", 1)
+    monkeypatch.setattr(actuation_module, "DISP_MAXIT", 1)
     with pytest.raises(ConvergenceError) as info:
         paper.solve_displacements([0.03, 0.0, 0.01, 0.02])
     assert info.value.residual is not None and info.value.residual > 0
@@ -191,7 +192,7 @@ def test_local_solve_failure_names_node_and_residual(paper, monkeypatch, call):
     import riskplan.robots.batch_kernel as batch_module
 
     # the single-shape path and the batch kernel each read the iteration cap where they run
-    monkeypatch.setattr(robot_module, "LOCAL_MAXIT", 1)
+    monkeypatch.setattr(actuation_module, "LOCAL_MAXIT", 1)
     monkeypatch.setattr(batch_module, "LOCAL_MAXIT", 1)
     tau = np.array([6.0, 0.0, 2.0, 9.0])
     with pytest.raises(ConvergenceError, match=r"failed at s = 0 m .*scaled residual") as info:

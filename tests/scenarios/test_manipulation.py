@@ -64,7 +64,7 @@ def test_step_near_equals_step_within_solver_tolerance(manip):
 def test_step_near_memo_returns_what_a_fresh_solve_returns(manip):
     # the memo of noise-free step_near results (shared by copies of one configuration, as
     # the cases of one Fig. 6 candidate are) changes no result, bit for bit
-    from riskplan.scenarios import manipulation as mod
+    from riskplan.scenarios import manipulation_step as mod
 
     p = SimParams()
     u = _controls(manip, 3, 2)

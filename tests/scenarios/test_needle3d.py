@@ -335,3 +335,21 @@ def test_material_frame_sees_a_force_draw_as_no_process_noise():
     assert np.trace(lw.M[-1]) > 0.0
     assert np.abs(lm.M).max() == 0.0
     assert np.trace(lm.N[-1]) > np.trace(lw.N[-1])  # the bias enters as measurement spread
+
+
+def test_element_counts_on_one_grid_share_a_model(sim):
+    """Two drawn element counts that round to the same grid get the same model object, and
+    a step on either is the same (the mesh case's cache); another grid, another model."""
+    a, b = SimParams(n_elements=4313), SimParams(n_elements=4300)
+    assert sim.mesh_data(4313) is sim.mesh_data(4300)
+    assert sim.model(a) is sim.model(b)
+    ys = []
+    for p in (a, b):
+        y = sim.initial_state(p)
+        for u in ([0.5, 1.0], [0.5, -2.0]):
+            y = sim.step(y, u, p)
+        ys.append(y)
+    np.testing.assert_array_equal(ys[0].pose, ys[1].pose)
+    np.testing.assert_array_equal(ys[0].displacement, ys[1].displacement)
+    assert np.any(ys[0].displacement)
+    assert sim.model(SimParams(n_elements=4253)) is not sim.model(a)

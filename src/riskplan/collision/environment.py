@@ -20,11 +20,15 @@ from pathlib import Path
 
 import numpy as np
 
-from riskplan._validation import as_array
 from riskplan.collision import _kernels as K
 from riskplan.collision.geometry import (
+    as_point,
+    as_points,
     check_closed_mesh,
+    check_closed_polyline,
+    check_finite_vertices,
     extrude_polygon,
+    polygon_order,
     signed_volume,
     whiten,
 )
@@ -41,16 +45,6 @@ from riskplan.geometry2d import (
 )
 
 log = logging.getLogger(__name__)
-
-
-def _check_finite_vertices(V: np.ndarray, name: str) -> None:
-    """Name the first vertex with a NaN or infinite coordinate."""
-    bad = ~np.isfinite(V).all(axis=-1)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise InvalidInputError(
-            f"{name}: vertex {i} is not finite (NaN or inf: {V[i].tolist()}); {int(bad.sum())} such vertices"
-        )
 
 
 class Environment:
@@ -106,7 +100,7 @@ class Environment:
                 if d == 3:
                     check_closed_mesh(V, sel, f"obstacle {names[i]!r}")
                 else:
-                    _check_closed_polyline(V, sel, f"obstacle {names[i]!r}")
+                    check_closed_polyline(V, sel, f"obstacle {names[i]!r}")
         self.vertices = V
         self.faces = F
         self.face_obstacle = fo
@@ -155,7 +149,7 @@ class Environment:
                 raise InvalidInputError(
                     f"meshes[{i}] ({names[i]!r}): vertices must have shape (V, 3), got {V.shape}"
                 )
-            _check_finite_vertices(V, f"meshes[{i}] ({names[i]!r})")
+            check_finite_vertices(V, f"meshes[{i}] ({names[i]!r})")
             if F.ndim != 2 or F.shape[1] != 3:
                 raise InvalidInputError(
                     f"meshes[{i}] ({names[i]!r}): faces must have shape (F, 3) triangles, got {F.shape}"
@@ -270,7 +264,7 @@ class Environment:
                 p, lambda q: trimesh.load(q, force="mesh", process=False), "mesh file"
             )
             if hasattr(m, "vertices"):
-                _check_finite_vertices(np.asarray(m.vertices, dtype=np.float64), str(p))
+                check_finite_vertices(np.asarray(m.vertices, dtype=np.float64), str(p))
                 m.process()
             if len(m.faces) == 0:
                 raise InvalidInputError(f"{p}: mesh has no faces")
@@ -303,13 +297,36 @@ class Environment:
         return f"Environment(d={self.dim}, obstacles={self.n_obstacles}, {kind}={self.n_faces})"
 
     def obstacle(self, i: int) -> tuple[np.ndarray, np.ndarray]:
-        """``(vertices, faces)`` of obstacle ``i`` (faces re-indexed)."""
+        """One obstacle's own mesh (3-D) or polygon (2-D).
+
+        Parameters
+        ----------
+        i : int
+            The obstacle's index.
+
+        Returns
+        -------
+        vertices : numpy.ndarray, shape (n, d)
+            Its vertices (m).
+        faces : numpy.ndarray, shape (F, d)
+            Its faces (triangles, or directed edges in 2-D), indices into ``vertices``.
+        """
         F = self.faces[self.face_obstacle == i]
         used, inv = np.unique(F, return_inverse=True)
         return self.vertices[used], inv.reshape(F.shape)
 
     def subset(self, obstacles) -> Environment:
-        """A new environment with only the named (or indexed) obstacles."""
+        """A new environment with only the named (or indexed) obstacles.
+
+        Parameters
+        ----------
+        obstacles : iterable of str or int
+            Obstacle names or indices, in the new environment's order.
+
+        Returns
+        -------
+        Environment
+        """
         idx = [self.names.index(o) if isinstance(o, str) else int(o) for o in obstacles]
         parts = [self.obstacle(i) for i in idx]
         if self.dim == 3:
@@ -341,7 +358,18 @@ class Environment:
         return trimesh.Trimesh(self.vertices, self.faces, process=False)
 
     def save(self, path) -> Path:
-        """Write all obstacles to one mesh file (format from the suffix: .stl, .obj, .ply), atomically."""
+        """Write all obstacles to one mesh file, atomically (3-D).
+
+        Parameters
+        ----------
+        path : str or path
+            The file; its suffix names the format (.stl, .obj, .ply; .stl without one).
+
+        Returns
+        -------
+        pathlib.Path
+            ``path``.
+        """
         from riskplan.io import atomic_path
 
         path = Path(path)
@@ -350,13 +378,24 @@ class Environment:
         return path
 
     def extrude(self, z0: float = -1.0, z1: float = 1.0) -> Environment:
-        """3-D environment of the prisms ``polygon x [z0, z1]`` (2-D environments of convex polygons)."""
+        """The 3-D environment of the prisms ``polygon x [z0, z1]`` (from a 2-D one).
+
+        Parameters
+        ----------
+        z0, z1 : float
+            The prisms' bottom and top (m).
+
+        Returns
+        -------
+        Environment
+            One closed prism per obstacle, with the same names.
+        """
         if self.dim != 2:
             raise InvalidInputError("extrude: environment is already 3-D")
         meshes = []
         for i in range(self.n_obstacles):
             V, F = self.obstacle(i)
-            order = _polygon_order(F)
+            order = polygon_order(F)
             meshes.append(extrude_polygon(V[order], z0, z1))
         return Environment.from_meshes(meshes, names=self.names)
 
@@ -375,7 +414,7 @@ class Environment:
         -------
         Environment
         """
-        mu = _as_point(mean, "mean", self.dim)
+        mu = as_point(mean, "mean", self.dim)
         u = np.asarray(precision_cholesky, dtype=np.float64)
         if u.shape != (self.dim, self.dim):
             raise InvalidInputError(
@@ -456,7 +495,7 @@ class Environment:
         -------
         numpy.ndarray of int, (...,)
         """
-        P, shape = _as_points(points, self.dim)
+        P, shape = as_points(points, self.dim)
         if self.dim == 3:
             Vr, origin, cell, shape_g, start, items = self._ray_grid
             with np.errstate(
@@ -483,7 +522,7 @@ class Environment:
         numpy.ndarray of bool, (...,)
         """
         if self.dim == 2:
-            P, shape = _as_points(points, 2)
+            P, shape = as_points(points, 2)
             return contains_points(self._segments, P).reshape(shape)
         return self.winding_number(points) > 0
 
@@ -499,7 +538,7 @@ class Environment:
         tuple of numpy.ndarray
             ``(distance (...,), closest (..., d), face (...,))``.
         """
-        P, shape = _as_points(points, self.dim)
+        P, shape = as_points(points, self.dim)
         if self.dim == 3 and len(P):
             sq, face, closest = self._aabb.squared_distance(self.vertices, self.faces, P)
             dist = np.sqrt(np.maximum(sq, 0.0))
@@ -508,7 +547,18 @@ class Environment:
         return dist.reshape(shape), closest.reshape(shape + (self.dim,)), face.reshape(shape)
 
     def signed_distance(self, points) -> np.ndarray:
-        """Distance to the nearest surface, negative inside an obstacle; ``(...,)``."""
+        """Distance to the nearest surface, negative inside an obstacle.
+
+        Parameters
+        ----------
+        points : array_like, shape (..., d)
+            Query points (m).
+
+        Returns
+        -------
+        numpy.ndarray, shape (...,)
+            Signed distances (m).
+        """
         dist, _, _ = self.closest_points(points)
         return np.where(self.contains(points), -dist, dist)
 
@@ -523,8 +573,8 @@ class Environment:
         -------
         numpy.ndarray of bool, (...,)
         """
-        P0, shape = _as_points(start, self.dim, "start")
-        P1, shape1 = _as_points(end, self.dim, "end")
+        P0, shape = as_points(start, self.dim, "start")
+        P1, shape1 = as_points(end, self.dim, "end")
         if shape != shape1:
             raise InvalidInputError(f"start and end: shapes differ ({shape} vs {shape1})")
         inside = self.contains(P0) | self.contains(P1)
@@ -545,54 +595,3 @@ def check_environment(environment, name: str = "environment") -> Environment:
             f"{name}: expected an Environment, got {type(environment).__name__}"
         )
     return environment
-
-
-def _as_points(points, d: int, name: str = "points") -> tuple[np.ndarray, tuple]:
-    arr = as_array(points, name, finite=False)
-    if arr.ndim == 0 or arr.shape[-1] != d:
-        raise InvalidInputError(
-            f"{name}: expected shape (..., {d}) for a {d}-D environment, got {arr.shape}"
-        )
-    if not np.all(np.isfinite(arr)):
-        raise InvalidInputError(f"{name}: contains NaN or inf")
-    return np.ascontiguousarray(arr.reshape(-1, d)), arr.shape[:-1]
-
-
-def _as_point(p, name: str, d: int) -> np.ndarray:
-    arr = as_array(p, name, finite=False)
-    if arr.shape != (d,):
-        raise InvalidInputError(f"{name}: expected shape ({d},), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise InvalidInputError(f"{name}: contains NaN or inf")
-    return arr
-
-
-def _check_closed_polyline(V: np.ndarray, F: np.ndarray, name: str) -> None:
-    if len(F) < 3:
-        raise InvalidInputError(f"{name}: a polygon needs at least 3 edges, got {len(F)}")
-    if F.min() < 0 or F.max() >= len(V):
-        raise InvalidInputError(f"{name}: edge indices out of range [0, {len(V)})")
-    if np.any(F[:, 0] == F[:, 1]):
-        raise InvalidInputError(f"{name}: degenerate edge (repeated vertex index)")
-    out = np.bincount(F[:, 0], minlength=len(V))
-    inn = np.bincount(F[:, 1], minlength=len(V))
-    used = (out + inn) > 0
-    if np.any(out[used] != 1) or np.any(inn[used] != 1):
-        raise InvalidInputError(
-            f"{name}: edges do not form closed, simple, consistently oriented loops"
-        )
-    lengths = np.linalg.norm(V[F[:, 1]] - V[F[:, 0]], axis=1)
-    if np.any(lengths <= 1e-12 * (float(np.ptp(V[used], axis=0).max()) or 1.0)):
-        raise InvalidInputError(f"{name}: zero-length edge")
-
-
-def _polygon_order(F: np.ndarray) -> np.ndarray:
-    """Vertex order of one closed loop of directed edges."""
-    nxt = dict(zip(F[:, 0].tolist(), F[:, 1].tolist()))
-    start = int(F[0, 0])
-    order = [start]
-    v = nxt[start]
-    while v != start:
-        order.append(v)
-        v = nxt[v]
-    return np.asarray(order)

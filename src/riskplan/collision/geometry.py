@@ -1,4 +1,5 @@
-"""Pure array helpers for obstacle geometry: whitening, closed-mesh checks, extrusion.
+"""Pure array helpers for obstacle geometry: whitening, closed-mesh and closed-polyline
+checks, extrusion, and the checks of query points.
 
 Polygon checks and every other planar query live in :mod:`riskplan.geometry2d`.
 
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from riskplan._validation import as_array
 from riskplan.errors import InvalidInputError
 
 
@@ -196,3 +198,69 @@ def check_metre_scale(
             f"{remedy}"
         )
     return diag
+
+
+def check_finite_vertices(V: np.ndarray, name: str) -> None:
+    """Name the first vertex with a NaN or infinite coordinate."""
+    bad = ~np.isfinite(V).all(axis=-1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise InvalidInputError(
+            f"{name}: vertex {i} is not finite (NaN or inf: {V[i].tolist()}); {int(bad.sum())} such vertices"
+        )
+
+
+def as_points(points, d: int, name: str = "points") -> tuple[np.ndarray, tuple]:
+    """``points (..., d)`` checked (finite) as a C-contiguous ``(N, d)`` array, and the
+    leading shape ``(...)``."""
+    arr = as_array(points, name, finite=False)
+    if arr.ndim == 0 or arr.shape[-1] != d:
+        raise InvalidInputError(
+            f"{name}: expected shape (..., {d}) for a {d}-D environment, got {arr.shape}"
+        )
+    if not np.all(np.isfinite(arr)):
+        raise InvalidInputError(f"{name}: contains NaN or inf")
+    return np.ascontiguousarray(arr.reshape(-1, d)), arr.shape[:-1]
+
+
+def as_point(p, name: str, d: int) -> np.ndarray:
+    """One finite point ``(d,)``."""
+    arr = as_array(p, name, finite=False)
+    if arr.shape != (d,):
+        raise InvalidInputError(f"{name}: expected shape ({d},), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InvalidInputError(f"{name}: contains NaN or inf")
+    return arr
+
+
+def check_closed_polyline(V: np.ndarray, F: np.ndarray, name: str) -> None:
+    """Directed edges ``F (E, 2)`` into ``V (n, 2)`` form closed, simple, consistently oriented
+    loops without degenerate or zero-length edges (the 2-D twin of :func:`check_closed_mesh`)."""
+    if len(F) < 3:
+        raise InvalidInputError(f"{name}: a polygon needs at least 3 edges, got {len(F)}")
+    if F.min() < 0 or F.max() >= len(V):
+        raise InvalidInputError(f"{name}: edge indices out of range [0, {len(V)})")
+    if np.any(F[:, 0] == F[:, 1]):
+        raise InvalidInputError(f"{name}: degenerate edge (repeated vertex index)")
+    out = np.bincount(F[:, 0], minlength=len(V))
+    inn = np.bincount(F[:, 1], minlength=len(V))
+    used = (out + inn) > 0
+    if np.any(out[used] != 1) or np.any(inn[used] != 1):
+        raise InvalidInputError(
+            f"{name}: edges do not form closed, simple, consistently oriented loops"
+        )
+    lengths = np.linalg.norm(V[F[:, 1]] - V[F[:, 0]], axis=1)
+    if np.any(lengths <= 1e-12 * (float(np.ptp(V[used], axis=0).max()) or 1.0)):
+        raise InvalidInputError(f"{name}: zero-length edge")
+
+
+def polygon_order(F: np.ndarray) -> np.ndarray:
+    """Vertex order of one closed loop of directed edges."""
+    nxt = dict(zip(F[:, 0].tolist(), F[:, 1].tolist()))
+    start = int(F[0, 0])
+    order = [start]
+    v = nxt[start]
+    while v != start:
+        order.append(v)
+        v = nxt[v]
+    return np.asarray(order)

@@ -28,7 +28,9 @@ weight and ``δ`` the length over which it decays (``obstacle_barrier``). Its gr
 ``φ'(d) ∇²d = φ'(d) (I − n nᵀ)/|P_j x_t − c|`` where the nearest boundary point ``c`` is a
 vertex (zero along an edge; negative semi-definite since ``φ' < 0``). The goal enters as
 the terminal ``(x_T − g)ᵀ Q_goal (x_T − g)`` (``scenario_terms`` (:mod:`riskplan.control.ilqr_cost`) builds ``g``,
-``Q_goal`` and the obstacles from a scenario).
+``Q_goal`` and the obstacles from a scenario). Against 3-D convex bodies (the 3-D needle's
+deformed ellipsoids and parallelepipeds) the same term uses the exact Euclidean signed
+distance of :mod:`riskplan.control.ilqr_cost3d`.
 
 The expected cost under the linearised noise, ``x_{t+1} = A_t x_t + B_t u_t + m_t``,
 ``m_t ~ N(0, M_t)``, adds ``Σ_t tr(S_{t+1} M_t)``; with ``M_t`` held at the plan's (not
@@ -242,11 +244,14 @@ def ilqr(
         Initial regularisation ``μ``.
     obstacles : sequence, optional
         ``T + 1`` lists of obstacle polygons ``(m, 2)`` in the reduced state's coordinates,
-        one per step (entry 0 unused): the barrier term (default none).
+        one per step (entry 0 unused): the barrier term (default none). Lists of 3-D
+        :class:`~riskplan.geometry3d.ConvexBody` (ellipsoids, parallelepipeds) give the
+        3-D barrier of :mod:`riskplan.control.ilqr_cost3d`.
     points : array_like
-        ``(k, 2)`` indices of the reduced state's 2-D collision points (default ``x[:2]``).
+        ``(k, 2)`` indices of the reduced state's 2-D collision points (default ``x[:2]``;
+        ``(k, 3)`` against 3-D bodies).
     body : sequence, optional
-        ``T + 1`` pairs ``(base (n, 2), W (n, k))``: the points checked at step ``t`` are
+        ``T + 1`` pairs ``(base (n, 2), W (n, k))`` (``(n, 3)`` in 3-D): the points checked at step ``t`` are
         ``base + W (x_t[points] − x*_t[points])`` (a body wider than its collision points,
         e.g. :func:`~riskplan.control.lqgmp.body_points`' outline); default the collision
         points themselves.

@@ -211,8 +211,15 @@ class _Barrier:
 
 def _make_barrier(plan, obstacles, points, body, weight, scale) -> _Barrier:
     """The barrier of :mod:`riskplan.control.ilqr`'s ``ilqr`` from its arguments,
-    checked: ``T + 1`` steps of polygons, point indices inside the reduced state, ``T + 1``
+    checked (3-D convex bodies: ``make_barrier_3d`` of :mod:`riskplan.control.ilqr_cost3d`):
+    ``T + 1`` steps of polygons, point indices inside the reduced state, ``T + 1``
     body steps (default the collision points themselves), ``w ≥ 0``, ``δ > 0``."""
+    from riskplan.geometry3d import ConvexBody
+
+    if any(isinstance(o, ConvexBody) for step in obstacles for o in step):
+        from riskplan.control.ilqr_cost3d import make_barrier_3d
+
+        return make_barrier_3d(plan, obstacles, points, body, weight, scale)
     T, p = plan.n_steps, plan.reduced.shape[1]
     obstacles = tuple(
         tuple(np.asarray(o, dtype=np.float64).reshape(-1, 2) for o in step) for step in obstacles
@@ -244,7 +251,9 @@ def scenario_terms(
     barrier_scale: float = BARRIER_SCALE,
 ) -> dict:
     """The goal and obstacle terms of :func:`ilqr` read from a 2-D scenario, in the reduced
-    state's coordinates as LQG-MP reads them (:mod:`riskplan.control.lqgmp`).
+    state's coordinates as LQG-MP reads them (:mod:`riskplan.control.lqgmp`); a 3-D
+    scenario (``workspace_dim = 3``) is handed to
+    :func:`~riskplan.control.ilqr_cost3d.scenario_terms_3d`.
 
     * goal ``g``: ``x*_T`` with the goal point (``goal_point_indices``) moved to the centre
       of the goal polygon at ``y*_T`` (``state_goal``, else ``goal``; the mean of its
@@ -259,7 +268,7 @@ def scenario_terms(
     Parameters
     ----------
     sim : Simulator
-        A 2-D scenario.
+        A 2-D scenario (or a 3-D one, above).
     plan : NominalPlan
         The reference plan.
     goal_weight, barrier_weight, barrier_scale : float
@@ -271,6 +280,16 @@ def scenario_terms(
         Keyword arguments of :func:`ilqr`: ``goal``, ``Q_goal``, ``obstacles``, ``points``,
         ``body``, ``barrier_weight``, ``barrier_scale``.
     """
+    if getattr(sim, "workspace_dim", 2) == 3:
+        from riskplan.control.ilqr_cost3d import scenario_terms_3d
+
+        return scenario_terms_3d(
+            sim,
+            plan,
+            goal_weight=goal_weight,
+            barrier_weight=barrier_weight,
+            barrier_scale=barrier_scale,
+        )
     from riskplan.control.lqgmp import _weights, body_points, point_indices
 
     col, gidx = point_indices(sim)

@@ -103,13 +103,21 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
-from functools import partial
 
 import numpy as np
 
-from riskplan._validation import as_array, as_generator, check_count
+from riskplan._validation import as_array, check_count
+from riskplan.control.disturbance_fit import Disturbance, fit_disturbance, fit_measurement_bias
+from riskplan.control.linearize_runs import (
+    _callable_prior,
+    _fixed_prior,
+    _param_draws,
+    _run_chunk,
+    _Step,
+    control_jacobian,
+)
 from riskplan.control.plan import NominalPlan
-from riskplan.errors import InvalidInputError, SimulationError
+from riskplan.errors import InvalidInputError
 
 __all__ = [
     "Disturbance",
@@ -127,53 +135,6 @@ A_PRIORS = ("identity", "zero")
 
 class RankDeficiencyWarning(RuntimeWarning):
     """The deviations ``X_t`` of the A-estimation runs do not span the reduced state space."""
-
-
-@dataclass(frozen=True, eq=False)
-class Disturbance:
-    """The persistent part of the parameter uncertainty as a constant input disturbance
-    (module docstring, ``disturbance=True``).
-
-    Attributes
-    ----------
-    cov : (q, q) ``Σ_d = (1/n) Σ_i d_i d_iᵀ``, the prior of ``d`` (second moment about zero).
-    M : (T, p, p) the residual process noise ``M^r_t`` (what ``B_t d_i`` does not explain,
-        plus the per-step actuation noise).
-    fits : (n, q) the fitted ``d_i``, one row per parameter draw.
-    weights : (p,) the state weights ``w`` of the least-squares fit.
-    C : (T, m, r) or None, the directions of a persistent *measurement* bias
-        ``b_t = C_t e`` with ``e ~ N(0, Σ_e)`` constant (simulators whose parameters move
-        the measurement, not the reduced state: the needle in its material frame;
-        :func:`fit_measurement_bias`). ``None`` (or ``r = 0``): no bias state.
-    bias_cov : (r, r) ``Σ_e`` (None without ``C``).
-    N : (T, m, m) or None, the residual measurement noise ``N^r_t`` with the bias state.
-    bias_fits : (n, r) or None, the fitted ``e_i``.
-    """
-
-    cov: np.ndarray
-    M: np.ndarray
-    fits: np.ndarray
-    weights: np.ndarray
-    C: np.ndarray | None = None
-    bias_cov: np.ndarray | None = None
-    N: np.ndarray | None = None
-    bias_fits: np.ndarray | None = None
-
-    def __post_init__(self):
-        for name in ("cov", "M", "fits", "weights", "C", "bias_cov", "N", "bias_fits"):
-            v = getattr(self, name)
-            if v is None:
-                continue
-            arr = np.array(v, dtype=np.float64, copy=True)
-            arr.setflags(write=False)
-            object.__setattr__(self, name, arr)
-        if self.C is not None and (self.bias_cov is None or self.N is None):
-            raise InvalidInputError("Disturbance: C needs bias_cov (r, r) and N (T, m, m)")
-
-    @property
-    def n_bias(self) -> int:
-        """``r``, the dimension of the measurement-bias state (0 without one)."""
-        return 0 if self.C is None else int(self.C.shape[2])
 
 
 @dataclass(frozen=True, eq=False)
@@ -238,7 +199,24 @@ class Linearization:
 
 
 def observation_model(sim, H=None, N=None) -> tuple[np.ndarray, np.ndarray]:
-    """``H (m, p)`` and ``N (m, m)`` from the arguments or ``sim.observation_matrix`` / ``sim.sensing_cov``."""
+    """The observation model of ``sim``.
+
+    Parameters
+    ----------
+    sim : Simulator
+        The simulator (``observation_matrix``, ``sensing_cov``, ``state_dim``).
+    H : numpy.ndarray, optional
+        ``(m, p)`` the observation matrix (default ``sim.observation_matrix``).
+    N : numpy.ndarray, optional
+        ``(m, m)`` the measurement noise covariance (default ``sim.sensing_cov``).
+
+    Returns
+    -------
+    H : numpy.ndarray
+        ``(m, p)``.
+    N : numpy.ndarray
+        ``(m, m)``.
+    """
     if H is None:
         H = getattr(sim, "observation_matrix", None)
     if N is None:
@@ -250,320 +228,6 @@ def observation_model(sim, H=None, N=None) -> tuple[np.ndarray, np.ndarray]:
     H = as_array(H, "H", shape=(None, sim.state_dim))
     N = as_array(N, "N", shape=(H.shape[0], H.shape[0]))
     return H, N
-
-
-def _checked(sim, state, t: int, what: str) -> np.ndarray:
-    x = np.asarray(sim.reduced(state), dtype=np.float64)
-    if not np.all(np.isfinite(x)):
-        raise SimulationError(f"linearize: non-finite reduced state at step {t} ({what})")
-    return x
-
-
-def _finite(X: np.ndarray, t: int, what: str) -> None:
-    if not np.isfinite(X).all():
-        raise SimulationError(f"linearize: non-finite reduced state at step {t} ({what})")
-
-
-def _mirror(u: np.ndarray, w: np.ndarray, bounds: np.ndarray) -> np.ndarray:
-    v = u + w
-    out = (v < bounds[:, 0]) | (v > bounds[:, 1])
-    v = np.where(out, u - w, v)
-    return np.clip(v, bounds[:, 0], bounds[:, 1])
-
-
-def _fixed_prior(a_prior: str, p: int) -> np.ndarray:
-    return np.eye(p) if a_prior == "identity" else np.zeros((p, p))
-
-
-def _callable_prior(a_prior, plan: NominalPlan, t: int, p: int) -> np.ndarray:
-    """``a_prior(y*_{t+1}, params) (p, p)``: a simulator's own structure of ``A_t``."""
-    prior = np.asarray(a_prior(plan.states[t + 1], plan.params), dtype=np.float64)
-    if prior.shape != (p, p) or not np.all(np.isfinite(prior)):
-        raise InvalidInputError(
-            f"a_prior: expected a finite ({p}, {p}) matrix from the callable, got shape {prior.shape}"
-        )
-    return prior
-
-
-def _stepper(sim):
-    """``run(state, u, params, near)``: ``sim.step_near`` where the simulator has one (its
-    solver starts from ``near``, a state expected close to the result), else ``sim.step``."""
-    step_near = getattr(sim, "step_near", None)
-    if step_near is None:
-        return lambda state, u, params, near: sim.step(state, u, params)
-    return step_near
-
-
-def control_jacobian(
-    sim, state, control, params, epsilon, x_next=None, t: int = 0, near=None
-) -> np.ndarray:
-    """``B (p, q)``: forward differences of ``sim.reduced(sim.step(state, u, params))`` in ``u``.
-
-    ``epsilon (q,)`` per component (sign flipped where ``u + ε`` leaves the upper bound);
-    ``x_next (p,)`` is the unperturbed result (computed if not given); ``near``: the
-    unperturbed next state, the solver's start for simulators with ``step_near``. Paper
-    IV-B, ``B_t``.
-    """
-    run = _stepper(sim)
-    bounds = np.asarray(sim.control_bounds, dtype=np.float64)
-    u = np.asarray(control, dtype=np.float64)
-    if x_next is None:
-        x_next = _checked(sim, run(state, u, params, near), t + 1, "nominal control")
-    eps = np.asarray(epsilon, dtype=np.float64)
-    q = u.shape[0]
-    B = np.empty((x_next.shape[0], q))
-    for j in range(q):
-        e = eps[j] if u[j] + eps[j] <= bounds[j, 1] else -eps[j]
-        du = u.copy()
-        du[j] += e
-        B[:, j] = (
-            _checked(sim, run(state, du, params, near), t + 1, f"control component {j} perturbed")
-            - x_next
-        ) / e
-    return B
-
-
-def _persistent(params, plan_params):
-    """``params`` without its actuation noise, or ``None`` if that is the plan's own
-    parameters (then the persistent deviation is zero without a run)."""
-    quiet = params.replace(actuation_cov=None, actuation_seed=plan_params.actuation_seed)
-    return None if quiet == plan_params else quiet
-
-
-def _draw_state(sim, run, plan: NominalPlan, t: int, s_i):
-    """Full state after ``u*_t`` from ``y*_t`` under the draw ``s_i``; a draw on another
-    mesh (only with ``sim.transfer_state``) runs on its own mesh."""
-    y_t = plan.states[t]
-    if s_i.n_elements != plan.params.n_elements:
-        y_i = sim.transfer_state(y_t, s_i)
-        return run(y_i, plan.controls[t], s_i, None)
-    return run(y_t, plan.controls[t], s_i, plan.states[t + 1])
-
-
-def _draw_step(sim, run, plan: NominalPlan, t: int, s_i) -> np.ndarray:
-    """Reduced state after ``u*_t`` from ``y*_t`` under the draw ``s_i``."""
-    return sim.reduced(_draw_state(sim, run, plan, t, s_i))
-
-
-def _measured(sim, state) -> np.ndarray:
-    return np.asarray(sim.measure(state, noise=np.zeros(sim.obs_dim)), dtype=np.float64)
-
-
-def _steps(
-    sim,
-    plan: NominalPlan,
-    draws,
-    W_factor,
-    eps,
-    a_prior,
-    rcond,
-    K,
-    seeds,
-    ts,
-    disturbance=False,
-    measuring=False,
-) -> list:
-    """(A_t or None, B_t, M_t, drift_t, rank_t, D_t, P_t, H_t, b_t, c_t) for each t in
-    ``ts``; ``D_t (n, p)`` the draws' deviations and ``P_t (n, p)`` those without actuation
-    noise (both ``None`` unless ``disturbance``). With ``measuring`` (a simulator with
-    ``observation_jacobian`` and ``measure``): ``H_t (m, p)`` at ``y*_{t+1}``, the draws'
-    measurement biases ``b_t (n, m)`` (the part of ``measure(y^i_{t+1}) − measure(y*_{t+1})``
-    that ``H_t`` does not explain) and ``c_t (n, m)`` those without actuation noise
-    (``None`` unless ``disturbance``); else ``None``."""
-    bounds = np.asarray(sim.control_bounds, dtype=np.float64)
-    params = plan.params
-    p = plan.reduced.shape[1]
-    fixed = None if callable(a_prior) else _fixed_prior(a_prior, p)
-    max_rank = getattr(sim, "a_max_rank", None)
-    run = _stepper(sim)
-    out = []
-    for t, seed in zip(ts, seeds):
-        prior = fixed if fixed is not None else _callable_prior(a_prior, plan, t, p)
-        y_t = plan.states[t]
-        u_t = plan.controls[t]
-        x_next = plan.reduced[t + 1]
-        A = None
-        rank = -1
-        if t >= 1:
-            gen = np.random.default_rng(seed)
-            y_prev, u_prev = plan.states[t - 1], plan.controls[t - 1]
-            Z = gen.standard_normal((K, W_factor.shape[1])) @ W_factor.T
-            X0 = np.empty((p, K))
-            X1 = np.empty((p, K))
-            for k in range(K):
-                yk = run(y_prev, _mirror(u_prev, Z[k], bounds), params, y_t)
-                X0[:, k] = sim.reduced(yk)
-                X1[:, k] = sim.reduced(run(yk, u_t, params, plan.states[t + 1]))
-            _finite(X0, t, "A runs")
-            _finite(X1, t + 1, "A runs")
-            X0 -= plan.reduced[t][:, None]
-            X1 -= x_next[:, None]
-            U, s, Vt = np.linalg.svd(X0, full_matrices=False)
-            keep = s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
-            if fixed is None:
-                # a declared (exact) prior: fit only the q first-order directions; beyond
-                # them X_t holds second-order parts, whose pseudo-inverse would replace the
-                # exact prior by a fit of curvature divided by tiny singular values
-                keep[W_factor.shape[0] :] = False
-            if max_rank is not None:
-                keep[max_rank:] = False  # singular values are sorted: keep the largest
-            rank = int(keep.sum())
-            if rank == 0:
-                A = prior.copy()
-            else:
-                pinv = (Vt[keep].T / s[keep]) @ U[:, keep].T  # (K, p)
-                A = prior + (X1 - prior @ X0) @ pinv
-        B = control_jacobian(
-            sim, y_t, u_t, params, eps, x_next=x_next, t=t, near=plan.states[t + 1]
-        )
-        M = np.zeros((p, p))
-        drift = np.zeros(p)
-        D = Pd = Ht = Bm = Pb = None
-        if measuring:
-            Ht = np.asarray(sim.observation_jacobian(plan.states[t + 1], params), dtype=np.float64)
-            z_next = _measured(sim, plan.states[t + 1])
-        if draws:
-            D = np.empty((len(draws), p))
-            Y = []
-            for i, s_i in enumerate(draws):
-                y_i = _draw_state(sim, run, plan, t, s_i)
-                D[i] = sim.reduced(y_i)
-                if measuring:
-                    Y.append(_measured(sim, y_i))
-            _finite(D, t + 1, "parameter draws")
-            D -= x_next
-            M = D.T @ D / len(draws)
-            drift = D.mean(axis=0)
-            if measuring:
-                Bm = np.asarray(Y) - z_next - D @ Ht.T
-                _finite(Bm, t + 1, "measurements of the parameter draws")
-            if disturbance:
-                Pd = D.copy()
-                Pb = None if Bm is None else Bm.copy()
-                for i, s_i in enumerate(draws):
-                    if s_i.actuation_cov is None:
-                        continue  # no per-step part: the persistent deviation is D[i]
-                    quiet = _persistent(s_i, params)
-                    if quiet is None:
-                        Pd[i] = 0.0
-                        if Pb is not None:
-                            Pb[i] = 0.0
-                        continue
-                    y_q = _draw_state(sim, run, plan, t, quiet)
-                    Pd[i] = sim.reduced(y_q) - x_next
-                    if Pb is not None:
-                        Pb[i] = _measured(sim, y_q) - z_next - Ht @ Pd[i]
-                _finite(Pd, t + 1, "parameter draws without actuation noise")
-        out.append((A, B, M, drift, rank, D, Pd, Ht, Bm, Pb))
-    return out
-
-
-def fit_disturbance(B, P, D, weights, rcond: float = 1e-8) -> Disturbance:
-    """Least-squares constant input disturbance of each parameter draw (module docstring).
-
-    Parameters
-    ----------
-    B : (T, p, q) control matrices along the plan.
-    P : (T, n, p) persistent one-step deviations ``p_{i,t}`` of the ``n`` draws.
-    D : (T, n, p) full one-step deviations ``δ_{i,t}`` (actuation noise included).
-    weights : (p,) state weights ``w`` of the fit.
-    rcond : relative cut-off of the singular values of the stacked ``diag(w) B_t``; a
-        direction of ``d`` that no ``B_t`` moves gets 0 (minimum-norm solution).
-
-    Returns
-    -------
-    :class:`Disturbance` with ``d_i = argmin Σ_t ‖diag(w)(p_{i,t} − B_t d)‖²``,
-    ``Σ_d = (1/n) Σ_i d_i d_iᵀ`` and ``M^r_t = (1/n) Σ_i r_{i,t} r_{i,t}ᵀ``,
-    ``r_{i,t} = δ_{i,t} − B_t d_i``.
-    """
-    B = np.asarray(B, dtype=np.float64)
-    P = np.asarray(P, dtype=np.float64)
-    D = np.asarray(D, dtype=np.float64)
-    w = np.asarray(weights, dtype=np.float64)
-    T, p, q = B.shape
-    n = P.shape[1]
-    G = (w[None, :, None] * B).reshape(T * p, q)
-    Y = (w[None, None, :] * P).transpose(0, 2, 1).reshape(T * p, n)
-    fits = np.linalg.lstsq(G, Y, rcond=rcond)[0].T  # (n, q)
-    R = D - np.einsum("tpq,nq->tnp", B, fits)
-    M = np.einsum("tni,tnj->tij", R, R) / n
-    return Disturbance(
-        cov=fits.T @ fits / n, M=0.5 * (M + np.swapaxes(M, 1, 2)), fits=fits, weights=w
-    )
-
-
-#: share of the draws' squared measurement bias the bias state must explain
-#: (:func:`fit_measurement_bias`): the fewest principal directions reaching it are kept
-BIAS_ENERGY = 0.99
-
-
-def fit_measurement_bias(Pb, Bm, N, energy: float = BIAS_ENERGY, max_rank: int | None = None):
-    """A persistent measurement bias ``b_{i,t} ≈ C_t e_i`` of the parameter draws (beyond the
-    paper; the measurement-side twin of :func:`fit_disturbance`).
-
-    A draw that moves what is *measured* but not the reduced state (the needle in its
-    material frame: the tissue's displacement under the robot depends on E, ν and the
-    force; the robot's material pose does not) biases every measurement of an execution
-    in the same way. With ``c_i = vec_t(Pb[t, i]) (T m,)`` the persistent biases of draw
-    ``i`` along the plan, the principal directions of ``Y = [c_1 … c_n]ᵀ = U S Vᵀ`` give
-
-        C_t = V[:, :r] (rows of step t, (m, r)),   e_i = U[i, :r] S[:r],
-        Σ_e = (1/n) Σ_i e_i e_iᵀ,   N^r_t = N_t + (1/n) Σ_i (b_{i,t} − C_t e_i)(…)ᵀ
-
-    with ``r`` the fewest directions holding ``energy`` of ``Σ S²`` (at most ``max_rank``).
-    ``Bm[t, i]``, the full bias (per-step noise included), fills the residual.
-
-    Parameters
-    ----------
-    Pb : (T, n, m) persistent biases (without actuation noise).
-    Bm : (T, n, m) full biases.
-    N : (T, m, m) the sensing noise covariances.
-
-    Returns
-    -------
-    ``(C (T, m, r), Σ_e (r, r), N^r (T, m, m), fits (n, r))``; ``r = 0`` when the draws
-    do not bias the measurement.
-    """
-    Pb = np.asarray(Pb, dtype=np.float64)
-    Bm = np.asarray(Bm, dtype=np.float64)
-    N = np.asarray(N, dtype=np.float64)
-    T, n, m = Pb.shape
-    Y = Pb.transpose(1, 0, 2).reshape(n, T * m)
-    U, S, Vt = np.linalg.svd(Y, full_matrices=False)
-    total = float((S**2).sum())
-    if total <= 0.0:
-        r = 0
-    else:
-        r = int(np.searchsorted(np.cumsum(S**2) / total, energy) + 1)
-        r = min(r, len(S), n if max_rank is None else int(max_rank))
-    C = Vt[:r].T.reshape(T, m, r)
-    fits = U[:, :r] * S[:r]
-    R = Bm - np.einsum("tmr,nr->tnm", C, fits)
-    Nr = N + np.einsum("tni,tnj->tij", R, R) / n
-    return C, fits.T @ fits / n, 0.5 * (Nr + np.swapaxes(Nr, 1, 2)), fits
-
-
-def _param_draws(sim, plan: NominalPlan, params_distribution, n_samples: int, seed) -> list:
-    if params_distribution is None:
-        params_distribution = getattr(sim, "distribution", None)
-    if params_distribution is None or n_samples == 0:
-        return []
-    if isinstance(params_distribution, (list, tuple)):
-        draws = list(params_distribution)
-    elif hasattr(params_distribution, "sample_many"):
-        draws = params_distribution.sample_many(n_samples, seed)
-    elif hasattr(params_distribution, "sample"):
-        gen = as_generator(seed)
-        draws = [params_distribution.sample(gen) for _ in range(n_samples)]
-    else:
-        raise InvalidInputError(
-            f"params_distribution: expected a distribution with sample_many/sample or a list of SimParams, "
-            f"got {type(params_distribution).__name__}"
-        )
-    if callable(getattr(sim, "transfer_state", None)):
-        return list(draws)  # mesh draws run on their own meshes (_steps)
-    n_el = plan.params.n_elements
-    return [d if d.n_elements == n_el else d.replace(n_elements=n_el) for d in draws]
 
 
 def linearize(
@@ -625,8 +289,64 @@ def linearize(
     ``H (T, m, p)``, ``N (T, m, m)`` (and ``disturbance`` with ``disturbance=True``). Raises :class:`~riskplan.errors.SimulationError` naming
     the step when the simulator returns a non-finite state.
     """
-    from riskplan.parallel import chunk_count, map_tasks, spawn_seeds
 
+    from riskplan.parallel import spawn_seeds
+
+    a_prior, W_factor, eps, n_a_runs = _checked_arguments(
+        sim, plan, W, epsilon, n_samples, n_a_runs, a_prior, rcond
+    )
+    H0, N0 = observation_model(sim, H, N)
+    p, q, T = sim.state_dim, sim.control_dim, plan.n_steps
+    master = int(seed.integers(2**63)) if isinstance(seed, np.random.Generator) else seed
+    step_seeds = spawn_seeds(master, T + 1)
+    draws = _param_draws(sim, plan, params_distribution, int(n_samples), step_seeds[T])
+    # a measurement that depends on the full state (the needle in its material frame):
+    # H_t per step and the draws' measurement biases; an explicit H keeps the constant one
+    measuring = (
+        H is None
+        and callable(getattr(sim, "observation_jacobian", None))
+        and callable(getattr(sim, "measure", None))
+    )
+    steps = _run_steps(
+        sim,
+        plan,
+        draws,
+        W_factor,
+        eps,
+        a_prior,
+        float(rcond),
+        n_a_runs,
+        step_seeds,
+        bool(disturbance),
+        measuring,
+        backend,
+        workers,
+    )
+    A, B, M, drift, rank = _stacked(steps, plan, a_prior, p, q)
+    _warn_rank_deficient(rank, p, q, n_a_runs, a_prior)
+    Hs, Ns = _observation_along(steps, H0, N0, p, measuring, len(draws))
+    scale = getattr(sim, "state_scale", None)
+    dist = None
+    if disturbance:
+        dist = _disturbance_model(steps, B, N0, scale, len(draws), measuring, float(rcond))
+    bounds = np.asarray(sim.control_bounds, dtype=np.float64)
+    return Linearization(
+        A=A,
+        B=B,
+        M=M,
+        H=Hs,
+        N=Ns,
+        rank=rank,
+        drift=drift,
+        state_scale=None if scale is None else np.array(scale, dtype=np.float64),
+        control_scale=0.5 * (bounds[:, 1] - bounds[:, 0]),
+        disturbance=dist,
+    )
+
+
+def _checked_arguments(sim, plan, W, epsilon, n_samples, n_a_runs, a_prior, rcond):
+    """The arguments of :func:`linearize`, checked once: ``(a_prior, W_factor (q, q), eps
+    (q,), n_a_runs)`` with ``W_factor W_factorᵀ = W`` (defaults filled in)."""
     if not isinstance(plan, NominalPlan):
         raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
     if a_prior is None:
@@ -666,19 +386,31 @@ def linearize(
     n_a_runs = 2 * min(p, q) if n_a_runs is None else n_a_runs
     n_a_runs = check_count(n_a_runs, "n_a_runs", 1, integral=True)
     check_count(n_samples, "n_samples", 0, integral=True)
-    H0, N0 = observation_model(sim, H, N)
+    return a_prior, W_factor, eps, n_a_runs
 
-    master = int(seed.integers(2**63)) if isinstance(seed, np.random.Generator) else seed
-    step_seeds = spawn_seeds(master, T + 1)
-    draws = _param_draws(sim, plan, params_distribution, int(n_samples), step_seeds[T])
 
-    # a measurement that depends on the full state (the needle in its material frame):
-    # H_t per step and the draws' measurement biases; an explicit H keeps the constant one
-    measuring = (
-        H is None
-        and callable(getattr(sim, "observation_jacobian", None))
-        and callable(getattr(sim, "measure", None))
-    )
+def _run_steps(
+    sim,
+    plan,
+    draws,
+    W_factor,
+    eps,
+    a_prior,
+    rcond,
+    K,
+    step_seeds,
+    disturbance,
+    measuring,
+    backend,
+    workers,
+) -> list[_Step]:
+    """The runs of every step (``riskplan.control.linearize_runs``), in chunks of steps on
+    :func:`riskplan.parallel.map_tasks`; returned in step order."""
+    from functools import partial
+
+    from riskplan.parallel import chunk_count, map_tasks
+
+    T = plan.n_steps
     ts = list(range(T))
     n_chunks = chunk_count(T, backend, workers)
     chunks = [ts[k::n_chunks] for k in range(n_chunks)]
@@ -690,27 +422,32 @@ def linearize(
         W_factor,
         eps,
         a_prior,
-        float(rcond),
-        n_a_runs,
+        rcond,
+        K,
         step_seeds,
-        bool(disturbance),
+        disturbance,
         measuring,
     )
     results = map_tasks(fn, chunks, backend=backend, workers=workers, chunksize=1)
     per_t = {}
     for chunk, res in zip(chunks, results):
         per_t.update(zip(chunk, res))
+    return [per_t[t] for t in range(T)]
 
+
+def _stacked(steps: list[_Step], plan, a_prior, p: int, q: int):
+    """``A (T, p, p)``, ``B (T, p, q)``, ``M (T, p, p)``, ``drift (T, p)``, ``rank (T,)``
+    of the steps; ``A_0 = A_1`` (module docstring), the prior if ``T = 1``."""
+    T = len(steps)
     A = np.empty((T, p, p))
     B = np.empty((T, p, q))
     M = np.empty((T, p, p))
     rank = np.empty(T, dtype=int)
     drift = np.empty((T, p))
-    for t in range(T):
-        a, b, m_, dr, r = per_t[t][:5]
-        if a is not None:
-            A[t] = a
-        B[t], M[t], drift[t], rank[t] = b, m_, dr, r
+    for t, s in enumerate(steps):
+        if s.A is not None:
+            A[t] = s.A
+        B[t], M[t], drift[t], rank[t] = s.B, s.M, s.drift, s.rank
     if T >= 2:
         A[0], rank[0] = A[1], rank[1]
     else:
@@ -718,11 +455,17 @@ def linearize(
             _callable_prior(a_prior, plan, 0, p) if callable(a_prior) else _fixed_prior(a_prior, p),
             0,
         )
+    return A, B, M, drift, rank
+
+
+def _warn_rank_deficient(rank, p: int, q: int, n_a_runs: int, a_prior) -> None:
+    """One :class:`RankDeficiencyWarning` naming the steps whose ``X_t`` has rank < p
+    (attributed to the caller of :func:`linearize`)."""
+    T = len(rank)
     deficient = [t for t in range(1, T) if rank[t] < p]
     prior_name = "simulator's" if callable(a_prior) else a_prior
     if deficient:
         low = int(rank[deficient].min())
-        q = B.shape[2]
         why = (
             f"expected: one control step excites at most q = {q} directions"
             if low >= min(q, n_a_runs)
@@ -732,79 +475,59 @@ def linearize(
             f"linearize: X_t has rank < p = {p} at steps {deficient[:10]}{' ...' if len(deficient) > 10 else ''} "
             f"(lowest rank {low}; {why}); A_t keeps the {prior_name!r} prior on the unexcited directions",
             RankDeficiencyWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
+
+
+def _observation_along(steps: list[_Step], H0, N0, p: int, measuring: bool, n_draws: int):
+    """``H (T, m, p)`` and ``N (T, m, m)`` along the plan: constant, or with ``measuring``
+    ``H_t`` per step and ``N_t`` widened by the draws' measurement biases."""
+    T = len(steps)
     m = H0.shape[0]
     Hs = np.broadcast_to(H0, (T, m, p))
     Ns = np.broadcast_to(N0, (T, m, m))
     if measuring:
-        Hs = np.stack([per_t[t][7] for t in range(T)])
-        if draws:
+        Hs = np.stack([s.H for s in steps])
+        if n_draws:
             # the paper's zero-mean reading on the measurement side: the draws' spread of
             # what H_t does not explain is measurement noise, as M_t is on the state side
-            Bm = np.stack([per_t[t][8] for t in range(T)])
-            Ns = N0 + np.einsum("tni,tnj->tij", Bm, Bm) / len(draws)
-    scale = getattr(sim, "state_scale", None)
-    dist = None
-    if disturbance:
-        weights = np.ones(p) if scale is None else 1.0 / np.asarray(scale, dtype=np.float64)
-        if draws:
-            dist = fit_disturbance(
-                B,
-                np.stack([per_t[t][6] for t in range(T)]),
-                np.stack([per_t[t][5] for t in range(T)]),
-                weights,
-                rcond=float(rcond),
-            )
-            if measuring:
-                C, Se, Nr, ef = fit_measurement_bias(
-                    np.stack([per_t[t][9] for t in range(T)]),
-                    np.stack([per_t[t][8] for t in range(T)]),
-                    np.broadcast_to(N0, (T, m, m)),
-                )
-                if C.shape[2]:
-                    dist = Disturbance(
-                        cov=dist.cov,
-                        M=dist.M,
-                        fits=dist.fits,
-                        weights=dist.weights,
-                        C=C,
-                        bias_cov=Se,
-                        N=Nr,
-                        bias_fits=ef,
-                    )
-        else:
+            Bm = np.stack([s.bias for s in steps])
+            Ns = N0 + np.einsum("tni,tnj->tij", Bm, Bm) / n_draws
+    return Hs, Ns
+
+
+def _disturbance_model(steps: list[_Step], B, N0, scale, n_draws: int, measuring: bool, rcond):
+    """The :class:`~riskplan.control.Disturbance` of the draws (module docstring,
+    ``disturbance=True``): zeros without draws."""
+    T, p, q = B.shape
+    m = N0.shape[0]
+    weights = np.ones(p) if scale is None else 1.0 / np.asarray(scale, dtype=np.float64)
+    if not n_draws:
+        return Disturbance(
+            cov=np.zeros((q, q)), M=np.zeros((T, p, p)), fits=np.zeros((0, q)), weights=weights
+        )
+    dist = fit_disturbance(
+        B,
+        np.stack([s.P for s in steps]),
+        np.stack([s.D for s in steps]),
+        weights,
+        rcond=rcond,
+    )
+    if measuring:
+        C, Se, Nr, ef = fit_measurement_bias(
+            np.stack([s.bias_persistent for s in steps]),
+            np.stack([s.bias for s in steps]),
+            np.broadcast_to(N0, (T, m, m)),
+        )
+        if C.shape[2]:
             dist = Disturbance(
-                cov=np.zeros((q, q)), M=np.zeros((T, p, p)), fits=np.zeros((0, q)), weights=weights
+                cov=dist.cov,
+                M=dist.M,
+                fits=dist.fits,
+                weights=dist.weights,
+                C=C,
+                bias_cov=Se,
+                N=Nr,
+                bias_fits=ef,
             )
-    return Linearization(
-        A=A,
-        B=B,
-        M=M,
-        H=Hs,
-        N=Ns,
-        rank=rank,
-        drift=drift,
-        state_scale=None if scale is None else np.array(scale, dtype=np.float64),
-        control_scale=0.5 * (bounds[:, 1] - bounds[:, 0]),
-        disturbance=dist,
-    )
-
-
-def _run_chunk(
-    sim, plan, draws, W_factor, eps, a_prior, rcond, K, step_seeds, disturbance, measuring, ts
-):
-    return _steps(
-        sim,
-        plan,
-        draws,
-        W_factor,
-        eps,
-        a_prior,
-        rcond,
-        K,
-        [step_seeds[t] for t in ts],
-        ts,
-        disturbance,
-        measuring,
-    )
+    return dist

@@ -385,6 +385,68 @@ def _goal_probability(sim, plan, mean_x, cov_x, goal_idx, n_goal_samples, seed) 
     return float(goal_env.contains(xT[:, goal_idx]).mean())
 
 
+def _joint_start(controller, drift: bool, T: int):
+    """``F (T, 2n, 2n)``, ``Q (T, 2n, 2n)``, ``d (T, 2n)`` of the joint recursion
+    (:func:`~riskplan.control.lqgmp_common.joint_covariances`) and the arrays ``mean (T + 1, 2n)``,
+    ``cov (T + 1, 2n, 2n)`` it fills, with ``μ_0 = 0`` and ``Σ_0 = diag(P_0, 0)``."""
+    F, Qn, dm = joint_covariances(controller, drift)
+    nz = F.shape[1] // 2  # p, or p + q with the disturbance state
+    mean = np.zeros((T + 1, 2 * nz))
+    cov = np.zeros((T + 1, 2 * nz, 2 * nz))
+    cov[0, :nz, :nz] = controller.P0
+    return F, Qn, dm, mean, cov
+
+
+def _propagate(F, Qn, dm, mean, cov) -> None:
+    """The joint recursion ``μ_{t+1} = F_t μ_t + d_t``, ``Σ_{t+1} = F_t Σ_t F_tᵀ + Q_t``
+    (symmetrised) along the whole plan, written into ``mean (T + 1, 2n)`` and ``cov
+    (T + 1, 2n, 2n)`` from their rows 0, and checked."""
+    mu = np.zeros(mean.shape[1])
+    S = cov[0].copy()
+    for t in range(len(F)):
+        mean[t + 1] = mu = F[t] @ mu + dm[t]
+        S = F[t] @ S @ F[t].T + Qn[t]
+        cov[t + 1] = S = 0.5 * (S + S.T)
+    _check_propagation(mean, cov)
+
+
+def _step_by_step(sim, plan, F, Qn, dm, mean, cov, col, p, truncating, cutoff) -> np.ndarray:
+    """The per-step factors ``(T,)`` of ``P(no collision)``, step by step: the recursion
+    (as :func:`_propagate`, into ``mean`` and ``cov``), the body's points against the
+    obstacles of the deformed state ``y*_{t+1}`` (a mean point inside one: factor 0), and
+    the sigma factor or, with ``truncating``, the truncation of the distribution by the
+    nearest half-space (Patil 2012)."""
+    T = plan.n_steps
+    free = np.ones(T)
+    mu = np.zeros(F.shape[1])
+    S = cov[0].copy()
+    for t in range(T):
+        mu = F[t] @ mu + dm[t]
+        S = F[t] @ S @ F[t].T + Qn[t]
+        S = 0.5 * (S + S.T)
+        _check_propagation(mu[None], S[None], t + 1)  # before any geometry sees it
+        y = plan.states[t + 1]
+        polys = _obstacles(sim, y)
+        if not len(polys):
+            mean[t + 1], cov[t + 1] = mu, S
+            continue
+        env = polygon_environment(polys)
+        bd = body_points(sim, plan, t + 1, col)
+        outline = bd[4]
+        base, W, nv = _weights(bd, len(col))
+        pts, covs = _mix(col, W, base, mu[:p], S)  # (n, 2), (n, 2, 2)
+        if bool(env.contains(pts).any()) or (outline and _outline_meets(polys, pts[:nv])):
+            free[t] = 0.0
+            mean[t + 1], cov[t + 1] = mu, S
+            continue
+        if truncating:
+            mu, S, free[t] = _truncation_step(col, W, base, mu, S, p, env, t, cutoff)
+        else:
+            free[t] = _sigma_step(pts, covs, env, t, cutoff)
+        mean[t + 1], cov[t + 1] = mu, S
+    return free
+
+
 def lqgmp(
     sim,
     plan: NominalPlan,
@@ -473,55 +535,19 @@ def lqgmp(
     col, goal_idx = point_indices(sim)
     T = plan.n_steps
     p = plan.reduced.shape[1]
-    F, Qn, dm = joint_covariances(controller, drift)
-    nz = F.shape[1] // 2  # p, or p + q with the disturbance state
-    mean = np.zeros((T + 1, 2 * nz))
-    cov = np.zeros((T + 1, 2 * nz, 2 * nz))
-    cov[0, :nz, :nz] = controller.P0
-    free = np.ones(T)
+    F, Qn, dm, mean, cov = _joint_start(controller, drift, T)
     truncating = method == "truncation"
     fast = None
-    mu = np.zeros(2 * nz)
-    S = cov[0].copy()
     if not truncating:
-        for t in range(T):
-            mean[t + 1] = mu = F[t] @ mu + dm[t]
-            S = F[t] @ S @ F[t].T + Qn[t]
-            cov[t + 1] = S = 0.5 * (S + S.T)
-        _check_propagation(mean, cov)
+        _propagate(F, Qn, dm, mean, cov)
         if method == "sampling":
             rest = (F, Qn, dm, mean, cov, col, goal_idx, n_goal_samples, seed)
             return _sampled(sim, plan, controller, *rest)
         fast = _sigma_free(sim, plan, mean, cov, col, p)
-        S = cov[0].copy()
-        mu = np.zeros(2 * nz)
-    for t in range(T if truncating or fast is None else 0):
-        mu = F[t] @ mu + dm[t]
-        S = F[t] @ S @ F[t].T + Qn[t]
-        S = 0.5 * (S + S.T)
-        _check_propagation(mu[None], S[None], t + 1)  # before any geometry sees it
-        y = plan.states[t + 1]
-        polys = _obstacles(sim, y)
-        if not len(polys):
-            mean[t + 1], cov[t + 1] = mu, S
-            continue
-        env = polygon_environment(polys)
-        bd = body_points(sim, plan, t + 1, col)
-        outline = bd[4]
-        base, W, nv = _weights(bd, len(col))
-        pts, covs = _mix(col, W, base, mu[:p], S)  # (n, 2), (n, 2, 2)
-        if bool(env.contains(pts).any()) or (outline and _outline_meets(polys, pts[:nv])):
-            free[t] = 0.0
-            mean[t + 1], cov[t + 1] = mu, S
-            continue
-        if truncating:
-            mu, S, free[t] = _truncation_step(col, W, base, mu, S, p, env, t, cutoff)
-        else:
-            free[t] = _sigma_step(pts, covs, env, t, cutoff)
-        mean[t + 1], cov[t + 1] = mu, S
+    free = fast
+    if fast is None:
+        free = _step_by_step(sim, plan, F, Qn, dm, mean, cov, col, p, truncating, cutoff)
     _check_propagation(mean, cov)
-    if not truncating and fast is not None:
-        free = fast
     p_free = float(np.prod(free))
     p_goal = _goal_probability(
         sim, plan, mean[T, :p], cov[T, :p, :p], goal_idx, n_goal_samples, seed

@@ -11,7 +11,8 @@ geometry and kinematics, pure arrays), ``mesh`` (``TissueMesh`` with its cached 
 arrays, polygon meshing), ``material``, ``laws`` (hyperelastic energies, stresses,
 tangents), ``banded`` (RCM + banded Cholesky), ``assembly`` (element forces/tangents,
 DOF bookkeeping, sparse layouts), ``locate`` (material points), ``loads``, ``linear``
-(linear model), ``hyperelastic`` (hyperelastic model, Newton solver); 3-D tissue:
+(linear model), ``newton`` (Newton with a line search, load stepping), ``hyperelastic``
+(hyperelastic model); 3-D tissue:
 ``tetmesh`` (tetrahedral meshes, quality check), ``tissue3d`` (``TetTissue``: linear and
 neo-Hookean P1 tetrahedra).
 """

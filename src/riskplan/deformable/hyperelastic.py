@@ -33,19 +33,18 @@ Equilibrium on the free DOFs (the FEM residual), with its tangent:
     f_{\mathrm{int},a} = \sum_e A_e P_e \nabla N_a, \qquad
     K_{ai,bk} = \sum_e A_e \frac{\partial P_{iJ}}{\partial F_{kL}} \nabla N_{aJ} \nabla N_{bL}
 
-This module is the solver; the pieces are pure functions elsewhere: element kinematics
-(``F``, ``det F``, ``F⁻¹``) in :mod:`.elements`, the laws in :mod:`.laws`, element
-forces/tangents and the sparse layouts in :mod:`.assembly`, banded Cholesky in
-:mod:`.banded`. Newton's method with a backtracking line search on the total potential energy
-``Π(u) = Σ_e A_e W(F_e) − f_ext·u``, that also rejects steps inverting an element
-(``det F ≤ 0``), load stepping (adaptive halving) and warm starts.
+This module is the model (evaluations at a displacement, warm starts, the solve's checks);
+the pieces are pure functions elsewhere: element kinematics (``F``, ``det F``, ``F⁻¹``) in
+:mod:`.elements`, the laws in :mod:`.laws`, element forces/tangents and the sparse layouts in
+:mod:`.assembly`, banded Cholesky in :mod:`.banded`, and Newton's method in :mod:`.newton`:
+a backtracking line search on the total potential energy ``Π(u) = Σ_e A_e W(F_e) − f_ext·u``
+that also rejects steps inverting an element (``det F ≤ 0``), and load stepping (adaptive
+halving).
 """
 
 from __future__ import annotations
 
-import logging
 from collections import OrderedDict
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -58,35 +57,25 @@ from riskplan.deformable.assembly import (
     neohookean_element_tangents,
     split_dofs,
 )
-from riskplan.deformable.banded import BandedCholeskySolver, cached_layout
+from riskplan.deformable.banded import cached_layout
 from riskplan.deformable.elements import deformation_gradients, determinants_and_inverses
 from riskplan.deformable.laws import LAWS, neohookean_energy_and_stress
 from riskplan.deformable.material import Material
 from riskplan.deformable.mesh import TissueMesh
-from riskplan.deformable.nhkernels import (
-    LAPACK_BANDWIDTH,
-    CompiledBandSolver,
-    band_cholesky,
-    band_slots,
-    neohookean_band,
-    neohookean_evaluate,
-    scaled_norm,
+from riskplan.deformable.newton import (
+    SolveInfo,
+    factor_tangent,
+    line_search_failure,
+    load_path,
+    stable_norm,
 )
-from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
+from riskplan.deformable.nhkernels import neohookean_evaluate
+from riskplan.errors import ElementInversionError, InvalidInputError
 from riskplan.threads import one_blas_thread
 
-logger = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class SolveInfo:
-    """What a nonlinear solve did: Newton iterations (all load steps), load steps taken,
-    final residual norm (free DOFs), minimum ``det F``."""
-
-    iterations: int
-    load_steps: int
-    residual: float
-    min_jacobian: float
+# SolveInfo and line_search_failure are defined in riskplan.deformable.newton and handed on
+# from here (the 3-D tissue's solver takes them from this module)
+__all__ = ["HyperelasticModel", "NeoHookeanModel", "SolveInfo", "line_search_failure"]
 
 
 class _State:
@@ -113,28 +102,6 @@ START_CACHE = 4
 # (a parameter distribution's draws) share one; a layout is never modified after it is built
 _PATTERNS: OrderedDict = OrderedDict()
 _PATTERN_CACHE = 8
-
-
-def _norm(x: np.ndarray) -> float:
-    """Euclidean norm that does not overflow for finite entries up to ``1e308`` (scaled by the
-    largest magnitude first); ``inf`` or ``nan`` only when an entry is."""
-    m = float(np.max(np.abs(x), initial=0.0))  # nan if an entry is
-    if m == 0.0 or not np.isfinite(m):
-        return m
-    return m * float(np.linalg.norm(x / m))
-
-
-def line_search_failure(raise_inverted, J_bad, residual: float, iterations: int):
-    """What a Newton line search that found no acceptable step ends in: ``raise_inverted``
-    raises for the inverted elements of its last trial (``J_bad``, ``None`` if none
-    inverted), else the :class:`~riskplan.errors.ConvergenceError` returned here is raised."""
-    if J_bad is not None:
-        raise_inverted(J_bad, " in every line-search trial")
-    return ConvergenceError(
-        f"Newton line search failed (residual {residual:.3g})",
-        residual=residual,
-        iterations=iterations,
-    )
 
 
 def _tangent_pattern(triangles: np.ndarray, free_dofs: np.ndarray, n_dofs: int) -> TangentPattern:
@@ -227,7 +194,18 @@ class HyperelasticModel:
         return deformation_gradients(u_flat.reshape(-1, 2)[self._tri], self._G)
 
     def jacobians(self, u) -> np.ndarray:
-        """``det F`` per element ``(T,)`` for displacements ``u (N, 2)``."""
+        r"""``J = det F`` per element, ``F = I + \sum_a u_a \otimes \nabla N_a``.
+
+        Parameters
+        ----------
+        u : array_like, shape (N, 2)
+            Nodal displacements (``N = mesh.n_nodes``).
+
+        Returns
+        -------
+        numpy.ndarray, shape (T,)
+            One per triangle; ``≤ 0`` where an element is inverted.
+        """
         F = self._F(np.asarray(u, dtype=np.float64).reshape(-1))
         return F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
 
@@ -295,52 +273,8 @@ class HyperelasticModel:
     def _factor(self, st: _State):
         """A solver ``r -> K⁻¹ r`` for the reduced tangent at ``st`` (kept on ``st``)."""
         if st.solver is None:
-            st.solver = self._new_factor(st)
+            st.solver = factor_tangent(self, st)
         return st.solver
-
-    def _new_factor(self, st: _State):
-        """Banded Cholesky in the pattern's RCM order, sparse LU when the tangent is not
-        positive definite."""
-        import scipy.linalg
-
-        pattern = self._pattern
-        if self.compiled:
-            lapack = pattern.bandwidth > LAPACK_BANDWIDTH
-            slots = getattr(pattern, "_nh_slots", None)
-            if slots is None:
-                slots = pattern._nh_slots = band_slots(pattern, self._tri64.shape[0], lapack)
-            ab = np.empty(pattern._band_size)
-            neohookean_band(
-                st.Finv, st.lnJ, self._Gc, self._areas_c, self._lam, self._mu, slots, ab
-            )
-            if lapack:  # wide bands: LAPACK's blocked pbtrf, as scipy's cholesky_banded calls it
-                (pbtrf,) = scipy.linalg.get_lapack_funcs(("pbtrf",), (ab,))
-                cb, info = pbtrf(ab.reshape(pattern.bandwidth + 1, -1), lower=0, overwrite_ab=1)
-                if info == 0:
-                    return BandedCholeskySolver(cb, pattern.band_perm)
-            else:
-                cb = ab.reshape(-1, pattern.bandwidth + 1)
-                if band_cholesky(cb) == 0:
-                    return CompiledBandSolver(cb, pattern.band_perm)
-            Ke = self._element_tangents(st).reshape(-1)
-            cb = None
-        else:
-            Ke = self._element_tangents(st).reshape(-1)
-            try:
-                cb = scipy.linalg.cholesky_banded(
-                    pattern.banded(Ke), lower=False, check_finite=False
-                )
-            except np.linalg.LinAlgError:
-                cb = None
-        if cb is None:  # not positive definite
-            from scipy.sparse.linalg import splu
-
-            try:
-                lu = splu(pattern.csc(Ke))
-            except RuntimeError as exc:
-                raise ConvergenceError(f"Newton: singular tangent ({exc})") from exc
-            return lu.solve
-        return BandedCholeskySolver(cb, self._pattern.band_perm)
 
     def _check_u(self, u, name="u") -> np.ndarray:
         return as_array(u, name, shape=(self.mesh.n_nodes, 2)).reshape(-1).copy()
@@ -352,26 +286,84 @@ class HyperelasticModel:
         return st
 
     def energy(self, u) -> float:
-        """Stored energy ``Σ_e A_e W(F_e)``; raises :class:`ElementInversionError` if some
-        ``det F ≤ 0`` (for both laws: an inverted element is not a physical state).
+        r"""Stored energy; raises :class:`ElementInversionError` if some ``det F ≤ 0`` (for
+        both laws: an inverted element is not a physical state).
+
+        .. math::
+
+            E(u) = \sum_e A_e\, W(F_e)
+
+        Parameters
+        ----------
+        u : array_like, shape (N, 2)
+            Nodal displacements (``N = mesh.n_nodes``).
+
+        Returns
+        -------
+        float
+            In energy units of the material (``E`` times area).
         """
         return self._evaluate_checked(u).energy
 
     def internal_forces(self, u) -> np.ndarray:
-        """Internal nodal forces ``f_int (N, 2)`` (all nodes, reactions included)."""
+        r"""Internal nodal forces (all nodes, reactions included):
+
+        .. math::
+
+            f_{\mathrm{int},a} = \sum_e A_e P(F_e) \nabla N_a
+
+        Parameters
+        ----------
+        u : array_like, shape (N, 2)
+            Nodal displacements (``N = mesh.n_nodes``).
+
+        Returns
+        -------
+        numpy.ndarray, shape (N, 2)
+        """
         return self._evaluate_checked(u).fint.reshape(-1, 2)
 
     def residual(self, u, nodal_forces) -> np.ndarray:
-        """``f_int(u) − f_ext`` ``(N, 2)``, zero at fixed nodes."""
+        """The FEM residual ``r = f_int(u) − f_ext``, zero at fixed nodes.
+
+        Parameters
+        ----------
+        u : array_like, shape (N, 2)
+            Nodal displacements (``N = mesh.n_nodes``).
+        nodal_forces : array_like, shape (N, 2)
+            External nodal loads ``f_ext``.
+
+        Returns
+        -------
+        numpy.ndarray, shape (N, 2)
+        """
         f = as_array(nodal_forces, "nodal_forces", shape=(self.mesh.n_nodes, 2)).reshape(-1)
         r = self.internal_forces(u).reshape(-1) - f
         r[self.fixed_dofs] = 0.0
         return r.reshape(-1, 2)
 
     def tangent(self, u, *, full: bool = False):
-        """Tangent stiffness ``∂f_int/∂u`` at ``u (N, 2)``: the reduced ``(n_free, n_free)``
-        CSC matrix over ``free_dofs`` (default) or, with ``full=True``, the ``(2N, 2N)``
-        CSR matrix over all DOFs."""
+        r"""Tangent stiffness ``K = ∂f_int/∂u`` at ``u``:
+
+        .. math::
+
+            K_{ai,bk} = \sum_e A_e \frac{\partial P_{iJ}}{\partial F_{kL}}
+            \nabla N_{aJ} \nabla N_{bL}
+
+        Parameters
+        ----------
+        u : array_like, shape (N, 2)
+            Nodal displacements (``N = mesh.n_nodes``).
+        full : bool, optional
+            Return the matrix over all DOFs instead of the free ones.
+
+        Returns
+        -------
+        scipy.sparse matrix
+            The reduced ``(n_free, n_free)`` CSC matrix over ``free_dofs`` (default) or,
+            with ``full=True``, the ``(2N, 2N)`` CSR matrix over all DOFs (DOF ``2a + i``:
+            node ``a``, component ``i``).
+        """
         st = self._evaluate_checked(u)
         Ke = self._element_tangents(st)
         if not full:
@@ -388,81 +380,6 @@ class HyperelasticModel:
         )
 
     # ---- Newton -------------------------------------------------------------------
-    def _newton(self, st: _State, f: np.ndarray, fscale: float):
-        """Newton + backtracking on Π from the evaluated state ``st`` for the load ``f``
-        (flat). Returns (state, iterations, residual) or raises."""
-        free = self.free_dofs
-        if st.energy is None:
-            self._raise_inverted(st.J, " at the start of a load step")
-        tol = self.rtol * fscale + self.atol
-        f_free = f[free]
-        r = st.fint[free] - f_free
-        norm = scaled_norm if self.compiled else _norm
-        rn = norm(r)
-        for it in range(self.max_iter + 1):
-            if not np.isfinite(rn):
-                # an overflowed residual would pass any tolerance test as "not above" only by
-                # accident; it is never an equilibrium
-                raise ConvergenceError(
-                    f"Newton: non-finite residual ({rn}) after {it} iteration(s)",
-                    residual=rn,
-                    iterations=it,
-                )
-            if rn <= tol:
-                return st, it, rn
-            if it == self.max_iter:
-                break
-            try:
-                du = -self._factor(st)(r)
-            except ConvergenceError as exc:
-                exc.residual, exc.iterations = rn, it
-                raise
-            pi0 = st.energy - float(f @ st.u)
-            slope = float(r @ du)  # directional derivative of Π along du
-            if not slope < 0.0:
-                # not a descent direction (indefinite tangent): steepest descent instead
-                du = -r
-                slope = -rn * rn
-            alpha = 1.0
-            J_bad = None
-            for _ in range(40):
-                trial = st.u.copy()
-                trial[free] += alpha * du
-                st1 = self._evaluate(trial)
-                if st1.energy is None:
-                    J_bad = st1.J
-                    alpha *= 0.5
-                    continue
-                r1 = st1.fint[free] - f_free
-                rn1 = norm(r1)
-                # Armijo on Π, or (near the solution, where Π is flat to round-off)
-                # a decrease of the residual norm
-                if st1.energy - float(f @ trial) <= pi0 + 1e-4 * alpha * slope or rn1 < 0.5 * rn:
-                    break
-                alpha *= 0.5
-            else:
-                raise line_search_failure(self._raise_inverted, J_bad, rn, it)
-            st, r, rn = st1, r1, rn1
-        raise ConvergenceError(
-            f"Newton did not converge in {self.max_iter} iterations (residual {rn:.3g}, tolerance {tol:.3g})",
-            residual=rn,
-            iterations=self.max_iter,
-        )
-
-    def _dirichlet_predictor(self, st: _State, dub: np.ndarray) -> np.ndarray:
-        """Move the fixed DOFs by ``dub`` and the free ones by the linearised response
-        ``−K_ff⁻¹ K_fc dub`` (tangent at the evaluated state ``st``), so a prescribed
-        motion does not crush the elements next to the supports."""
-        u = st.u
-        if st.energy is None:
-            self._raise_inverted(st.J, " before a prescribed-displacement increment")
-        Kfull = self.tangent(u.reshape(-1, 2), full=True)
-        rhs = Kfull[self.free_dofs][:, self.fixed_dofs] @ dub
-        out = u.copy()
-        out[self.fixed_dofs] += dub
-        out[self.free_dofs] -= self._factor(st)(rhs)
-        return out
-
     @one_blas_thread
     def solve_with_info(
         self,
@@ -485,6 +402,26 @@ class HyperelasticModel:
         converge in at most 4 iterations. Raises :class:`ElementInversionError` (names
         the elements) or :class:`ConvergenceError` (carries the residual).
         Deterministic: the result depends only on the arguments.
+
+        Parameters
+        ----------
+        nodal_forces : array_like, shape (N, 2)
+            Dead external loads ``f_ext`` (their values at fixed nodes are ignored).
+        u0 : array_like, shape (N, 2), optional
+            Warm start; default the undeformed body.
+        fixed_values : array_like, shape (F, 2), optional
+            Prescribed displacements of the fixed nodes; default zero.
+        load_steps : int, optional
+            Equal increments of the load path (>= 1).
+        max_halvings : int, optional
+            Most halvings of a failed increment per solve.
+
+        Returns
+        -------
+        u : numpy.ndarray, shape (N, 2)
+            The equilibrium, ``‖r_free‖ ≤ rtol · f_ref + atol``.
+        info : SolveInfo
+            Newton iterations, load steps taken, final residual norm, minimum ``det F``.
         """
         f = as_array(nodal_forces, "nodal_forces", shape=(self.mesh.n_nodes, 2)).reshape(-1).copy()
         f[self.fixed_dofs] = 0.0
@@ -520,7 +457,7 @@ class HyperelasticModel:
             f0[self.fixed_dofs] = 0.0
         ub0 = u[self.fixed_dofs].copy()
         moving = bool(np.any(ub != ub0))
-        fscale = max(_norm(f[self.free_dofs]), _norm(f0[self.free_dofs]))
+        fscale = max(stable_norm(f[self.free_dofs]), stable_norm(f0[self.free_dofs]))
         if not np.isfinite(fscale):  # finite entries, but the tolerance would overflow
             raise InvalidInputError(
                 f"nodal_forces: the load's norm overflows float64 ({fscale}); no equilibrium "
@@ -535,45 +472,32 @@ class HyperelasticModel:
                 fscale = max(fscale, float(np.linalg.norm(st.fint[self.fixed_dofs])))
         if fscale == 0.0:
             fscale = 1.0
-        s, ds = 0.0, 1.0 / int(load_steps)
-        iters, steps, halvings = 0, 0, 0
-        rn = 0.0
-        while s < 1.0 - 1e-15:
-            s1 = min(1.0, s + ds)
-            fs = f if s1 == 1.0 else f0 + s1 * (f - f0)
-            try:
-                start = cur
-                if moving:
-                    target = ub if s1 == 1.0 else ub0 + s1 * (ub - ub0)
-                    start = self._evaluate(
-                        self._dirichlet_predictor(cur, target - u[self.fixed_dofs])
-                    )
-                st_new, it, rn = self._newton(start, fs, fscale)
-            except (ConvergenceError, ElementInversionError) as exc:
-                if halvings >= max_halvings:
-                    raise exc
-                halvings += 1
-                ds *= 0.5
-                logger.debug("load step %.3g -> %.3g failed (%s); halving", s, s1, exc)
-                continue
-            iters += it
-            steps += 1
-            cur, u, s = st_new, st_new.u, s1
-            if it <= 4:  # an easy increment: let the next one grow back towards 1/load_steps
-                ds = min(2.0 * ds, 1.0 / int(load_steps))
-        if not (np.isfinite(rn) and np.all(np.isfinite(u))):  # never hand back a silent failure
-            raise ConvergenceError(
-                f"nonlinear solve ended on a non-finite state (residual {rn})",
-                residual=rn,
-                iterations=iters,
-            )
+        cur, u, rn, iters, steps = load_path(
+            self, cur, u, f, f0, ub, ub0, moving, fscale, load_steps, max_halvings
+        )
         # a copy: ``u`` may be a cached start's (private) array
         return u.reshape(-1, 2).copy(), SolveInfo(
             iterations=iters, load_steps=steps, residual=rn, min_jacobian=float(cur.J.min())
         )
 
     def solve(self, nodal_forces, u0=None, *, fixed_values=None, load_steps: int = 1) -> np.ndarray:
-        """Equilibrium displacement ``(N, 2)``; see :meth:`solve_with_info`."""
+        """Equilibrium displacement under dead nodal loads; see :meth:`solve_with_info`.
+
+        Parameters
+        ----------
+        nodal_forces : array_like, shape (N, 2)
+            Dead external loads ``f_ext``.
+        u0 : array_like, shape (N, 2), optional
+            Warm start; default the undeformed body.
+        fixed_values : array_like, shape (F, 2), optional
+            Prescribed displacements of the fixed nodes; default zero.
+        load_steps : int, optional
+            Equal increments of the load path (>= 1).
+
+        Returns
+        -------
+        numpy.ndarray, shape (N, 2)
+        """
         return self.solve_with_info(
             nodal_forces, u0, fixed_values=fixed_values, load_steps=load_steps
         )[0]

@@ -1,7 +1,8 @@
 """Element kinematics, laws and sparse assembly of P1 tetrahedra (the pure parts of
 :mod:`riskplan.deformable.tissue3d`): deformation gradients, the compressible neo-Hookean
-stress, element stiffness matrices of both laws, and the sparsity layout
-(``TetPattern``) that the banded Cholesky factorisation fills.
+stress, element stiffness matrices of both laws, the sparsity layout (``TetPattern``) that
+the banded Cholesky factorisation fills, and the held and free DOFs of the supports
+(``support_dofs``, checked to hold every rigid motion).
 
 Element matrices are in local DOF order ``(a, i)`` (node ``a`` of the tetrahedron,
 component ``i``); DOFs are interleaved ``[u_x0, u_y0, u_z0, u_x1, …]``.
@@ -14,6 +15,7 @@ from collections import OrderedDict
 import numpy as np
 
 from riskplan.deformable.banded import band_layout, cached_layout
+from riskplan.errors import InvalidInputError
 
 # sparsity layouts by (tets, free DOFs): tissues of one mesh with different materials share one
 _PATTERNS: OrderedDict = OrderedDict()
@@ -185,3 +187,73 @@ def _norm(x: np.ndarray) -> float:
     if m == 0.0 or not np.isfinite(m):
         return m
     return m * float(np.linalg.norm(x / m))
+
+
+def support_dofs(mesh, fixed_nodes, fixed_dofs):
+    """The held and free DOFs of supports on a tetrahedral mesh, checked to hold every rigid
+    motion (else the stiffness is singular whatever the law).
+
+    Parameters
+    ----------
+    mesh : TetMesh
+        The mesh.
+    fixed_nodes : array_like of int or None
+        Nodes held in all three components; at least three not on one line unless
+        ``fixed_dofs`` is given.
+    fixed_dofs : array_like of int or None
+        Further held DOFs, flat interleaved indices ``3 a + i``.
+
+    Returns
+    -------
+    fixed_nodes : numpy.ndarray
+        Sorted unique held nodes (read-only).
+    extra : numpy.ndarray
+        Sorted unique further held DOFs.
+    fixed : numpy.ndarray
+        Every held DOF, sorted.
+    free : numpy.ndarray
+        The free DOFs, sorted.
+
+    Raises
+    ------
+    InvalidInputError
+        Indices out of range, every DOF held, or a rigid motion left free.
+    """
+    n = 3 * mesh.n_nodes
+    fixed = np.unique(
+        np.asarray([] if fixed_nodes is None else fixed_nodes, dtype=np.int64).reshape(-1)
+    )
+    if fixed.size and (fixed.min() < 0 or fixed.max() >= mesh.n_nodes):
+        raise InvalidInputError(f"fixed_nodes: indices must lie in [0, {mesh.n_nodes - 1}]")
+    extra = np.unique(
+        np.asarray([] if fixed_dofs is None else fixed_dofs, dtype=np.int64).reshape(-1)
+    )
+    if extra.size and (extra.min() < 0 or extra.max() >= n):
+        raise InvalidInputError(f"fixed_dofs: indices must lie in [0, {n - 1}]")
+    if extra.size == 0 and (
+        fixed.size < 3 or np.linalg.matrix_rank(mesh.nodes[fixed] - mesh.nodes[fixed[0]]) < 2
+    ):
+        raise InvalidInputError(
+            "fixed_nodes: hold at least three nodes not on one line (else a rigid motion is free)"
+        )
+    fixed.setflags(write=False)
+    mask = np.ones(n, dtype=bool)
+    mask[(3 * fixed[:, None] + np.arange(3)).ravel()] = False
+    mask[extra] = False
+    fixed_all, free = np.flatnonzero(~mask), np.flatnonzero(mask)
+    if free.size == 0:
+        raise InvalidInputError("fixed_nodes, fixed_dofs: every DOF is fixed; nothing to solve")
+    # the six rigid motions (3 translations, 3 infinitesimal rotations) must each move
+    # some held DOF, else the stiffness is singular whatever the law
+    Xc = mesh.nodes - mesh.nodes.mean(0)
+    rigid = np.zeros((mesh.n_nodes, 3, 6))
+    for k in range(3):
+        rigid[:, k, k] = 1.0
+    rigid[:, :, 3:] = np.cross(np.eye(3)[None, :, :], Xc[:, None, :]).transpose(0, 2, 1)
+    R = rigid.reshape(n, 6)[fixed_all]
+    if np.linalg.matrix_rank(R, tol=1e-9 * float(np.abs(R).max(initial=1.0))) < 6:
+        raise InvalidInputError(
+            "fixed_nodes, fixed_dofs: the supports leave a rigid motion free (hold "
+            "at least three non-collinear nodes, or enough components)"
+        )
+    return fixed, extra, fixed_all, free

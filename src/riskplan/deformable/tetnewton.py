@@ -15,6 +15,7 @@ import numpy as np
 
 from riskplan.deformable.hyperelastic import SolveInfo, line_search_failure
 from riskplan.deformable.tetassembly import _norm, element_stiffness
+from riskplan.deformable.tetfactor import factor_reduced
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
 
 logger = logging.getLogger(__name__)
@@ -75,7 +76,7 @@ def _predictor(t, u: np.ndarray, dub: np.ndarray) -> np.ndarray:
     rhs = Kfull[t.free_dofs][:, t.fixed_dofs] @ dub
     out = u.copy()
     out[t.fixed_dofs] += dub
-    out[t.free_dofs] -= t._factor(Ke)(rhs)
+    out[t.free_dofs] -= factor_reduced(t._pattern, Ke)(rhs)
     return out
 
 
@@ -102,7 +103,7 @@ def _newton(t, u: np.ndarray, f: np.ndarray, fscale: float):
             break
         Ke = element_stiffness(t._G, t._V, t._lam, t._mu, Finv, lnJ).reshape(-1)
         try:
-            du = -t._factor(Ke)(r)
+            du = -factor_reduced(t._pattern, Ke)(r)
         except ConvergenceError as exc:
             exc.residual, exc.iterations = rn, it
             raise

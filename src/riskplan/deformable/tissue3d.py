@@ -22,9 +22,10 @@ Equilibrium (total Lagrangian): ``r(u) = f_int(u) − f_ext = 0`` at the free DO
 ``K_{ai,bk} = V_e [μ δ_ik ∇N_a·∇N_b + λ h_ai h_bk + c h_bi h_ak]`` with ``h_a = F⁻ᵀ ∇N_a``
 and ``c = μ − λ ln J`` (linear: ``F = I``, ``c = μ``). DOFs are interleaved,
 ``[u_x0, u_y0, u_z0, u_x1, ...]`` (scikit-fem's ``ElementVector(ElementTetP1())`` order),
-so ``u.reshape(N, 3)`` is the nodal displacement. Linear systems: the reduced stiffness is
-ordered by reverse Cuthill-McKee once per mesh and support set, and factorised as a banded
-Cholesky matrix (sparse LU when the tangent is not positive definite).
+so ``u.reshape(N, 3)`` is the nodal displacement. Linear systems (:mod:`.tetfactor`): banded
+Cholesky in reverse Cuthill-McKee order (sparse LU for a tangent that is not positive
+definite), and the band of ``K⁻¹`` by selected inversion (:meth:`TetTissue.element_green_blocks`).
+Material points: ``TetMaterialPoints`` (:mod:`.tetlocate`), the base class.
 
 Newton's method for the neo-Hookean law: full Newton with the consistent tangent, a
 backtracking line search on the potential ``Π(u) = Σ_e V_e W(F_e) − f·u`` that also
@@ -40,10 +41,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from riskplan._validation import as_array, check_choice, check_instance
-from riskplan.deformable.banded import BandedCholeskySolver
 from riskplan.deformable.hyperelastic import SolveInfo
 from riskplan.deformable.material import Material
-from riskplan.deformable.material_points import Interpolator
 from riskplan.deformable.tetassembly import (
     TetPattern,
     _norm,
@@ -52,10 +51,13 @@ from riskplan.deformable.tetassembly import (
     element_stiffness,
     linear_stiffness_parts,
     neohookean_stress,
+    support_dofs,
 )
+from riskplan.deformable.tetfactor import SINGULAR_PIVOT_RATIO, factor_reduced
 from riskplan.deformable.tetlocate import (
     INSIDE_TOL,
     LOCATE_CANDIDATES,
+    TetMaterialPoints,
     find_points,
     locate3d,
     sphere_points,
@@ -65,8 +67,9 @@ from riskplan.deformable.tetnewton import solve_nonlinear
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
 from riskplan.threads import one_blas_thread
 
-#: The pure parts live in :mod:`.tetassembly`, :mod:`.tetlocate` and :mod:`.tetnewton`; these
-#: names stay importable from here.
+#: The pure parts live in :mod:`.tetassembly`, :mod:`.tetfactor`, :mod:`.tetlocate` (the
+#: material-point queries, ``TetMaterialPoints``) and :mod:`.tetnewton`; these names stay
+#: importable from here.
 __all__ = [
     "INSIDE_TOL",
     "LOCATE_CANDIDATES",
@@ -87,13 +90,6 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 LAWS3D = ("linear", "neo-hookean")
-
-#: Least ratio of the smallest to the largest Cholesky pivot of a linear stiffness: below it
-#: the matrix is singular up to round-off (1e-16 relative) and the supports are refused.
-SINGULAR_PIVOT_RATIO = 1e-12
-
-# --------------------------------------------------------------------------------------
-# state and tissue
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,7 +134,7 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
-class TetTissue:
+class TetTissue(TetMaterialPoints):
     """A 3-D elastic body on a :class:`~riskplan.deformable.tetmesh.TetMesh` with the
     nodes ``fixed_nodes`` held, and a current state (displacement and the load it balances).
 
@@ -188,54 +184,19 @@ class TetTissue:
         self.law = law
         n = 3 * mesh.n_nodes
         self._n = n
-        fixed = np.unique(
-            np.asarray([] if fixed_nodes is None else fixed_nodes, dtype=np.int64).reshape(-1)
-        )
-        if fixed.size and (fixed.min() < 0 or fixed.max() >= mesh.n_nodes):
-            raise InvalidInputError(f"fixed_nodes: indices must lie in [0, {mesh.n_nodes - 1}]")
-        extra = np.unique(
-            np.asarray([] if fixed_dofs is None else fixed_dofs, dtype=np.int64).reshape(-1)
-        )
-        if extra.size and (extra.min() < 0 or extra.max() >= n):
-            raise InvalidInputError(f"fixed_dofs: indices must lie in [0, {n - 1}]")
-        if extra.size == 0 and (
-            fixed.size < 3 or np.linalg.matrix_rank(mesh.nodes[fixed] - mesh.nodes[fixed[0]]) < 2
-        ):
-            raise InvalidInputError(
-                "fixed_nodes: hold at least three nodes not on one line (else a rigid motion is free)"
-            )
+        fixed, extra, self.fixed_dofs, self.free_dofs = support_dofs(mesh, fixed_nodes, fixed_dofs)
         self.fixed_nodes = fixed
-        fixed.setflags(write=False)
-        mask = np.ones(n, dtype=bool)
-        mask[(3 * fixed[:, None] + np.arange(3)).ravel()] = False
-        mask[extra] = False
-        self.fixed_dofs, self.free_dofs = np.flatnonzero(~mask), np.flatnonzero(mask)
-        if self.free_dofs.size == 0:
-            raise InvalidInputError("fixed_nodes, fixed_dofs: every DOF is fixed; nothing to solve")
-        # the six rigid motions (3 translations, 3 infinitesimal rotations) must each move
-        # some held DOF, else the stiffness is singular whatever the law
-        Xc = mesh.nodes - mesh.nodes.mean(0)
-        rigid = np.zeros((mesh.n_nodes, 3, 6))
-        for k in range(3):
-            rigid[:, k, k] = 1.0
-        rigid[:, :, 3:] = np.cross(np.eye(3)[None, :, :], Xc[:, None, :]).transpose(0, 2, 1)
-        R = rigid.reshape(n, 6)[self.fixed_dofs]
-        if np.linalg.matrix_rank(R, tol=1e-9 * float(np.abs(R).max(initial=1.0))) < 6:
-            raise InvalidInputError(
-                "fixed_nodes, fixed_dofs: the supports leave a rigid motion free (hold "
-                "at least three non-collinear nodes, or enough components)"
-            )
         self._fixed_dofs_arg = extra
         self._pattern = _pattern(mesh.tets, self.free_dofs, n)
         self._lam, self._mu = material.lam3d, material.mu
         self._G = mesh.shape_gradients
         self._V = mesh.volumes
-        self._tets_flat = np.ascontiguousarray(mesh.tets.ravel())
         self._u = np.zeros(n)
         self._f = np.zeros(n)
         self._parts = _parts
         self._linear_solver = None
         self._K_fc = None
+        self._green = None  # element_green_blocks, on first use
         if law == "linear":
             self._factorise_linear()
 
@@ -250,42 +211,7 @@ class TetTissue:
     @one_blas_thread
     def _factorise_linear(self) -> None:
         Kl, Km = self._linear_parts()
-        self._linear_solver = self._factor(self._lam * Kl + self._mu * Km, linear=True)
-
-    def _factor(self, Ke_flat: np.ndarray, linear: bool = False):
-        """Solver ``r -> K_ff⁻¹ r`` of the reduced matrix: banded Cholesky in RCM order.
-
-        The linear stiffness is symmetric positive definite exactly when the supports hold
-        every rigid motion: a failed Cholesky factorisation, or a pivot ratio
-        ``min d / max d`` below :data:`SINGULAR_PIVOT_RATIO` (round-off of a singular
-        matrix; a held body measures 0.06-0.08 at 750-5000 elements), is an
-        :class:`InvalidInputError` about the supports, never a fall-back to LU (which would
-        answer a singular system with round-off). A neo-Hookean tangent may be indefinite
-        away from rest: sparse LU then, :class:`ConvergenceError` if that fails too.
-        """
-        import scipy.linalg
-
-        singular = InvalidInputError(
-            "fixed_nodes, fixed_dofs: the stiffness is singular (the supports leave a rigid "
-            "motion free, or some part of the mesh is not held)"
-        )
-        try:
-            cb = scipy.linalg.cholesky_banded(
-                self._pattern.banded(Ke_flat), lower=False, check_finite=False
-            )
-        except np.linalg.LinAlgError as exc:
-            if linear:
-                raise singular from exc
-            from scipy.sparse.linalg import splu
-
-            try:
-                return splu(self._pattern.csc(Ke_flat)).solve
-            except RuntimeError as exc2:
-                raise ConvergenceError(f"Newton: singular tangent ({exc2})") from exc2
-        d = cb[-1] ** 2
-        if linear and not d.min() > SINGULAR_PIVOT_RATIO * d.max():
-            raise singular
-        return BandedCholeskySolver(cb, self._pattern.band_perm)
+        self._linear_solver = factor_reduced(self._pattern, self._lam * Kl + self._mu * Km, True)
 
     def with_material(self, material: Material) -> TetTissue:
         """The same mesh, supports and law with another material (a material draw).
@@ -319,6 +245,7 @@ class TetTissue:
         state = self.__dict__.copy()
         state["_linear_solver"] = None
         state["_pattern"] = None
+        state["_green"] = None
         return state
 
     def __setstate__(self, state):
@@ -374,139 +301,6 @@ class TetTissue:
         """Back to the undeformed, unloaded state."""
         self._u = np.zeros(self._n)
         self._f = np.zeros(self._n)
-
-    # ---- material points ----------------------------------------------------------------
-    def locate(self, points):
-        """Containing elements and barycentric weights of reference points (no error outside).
-
-        Parameters
-        ----------
-        points : array_like, shape (P, 3)
-            Reference (material) positions.
-
-        Returns
-        -------
-        elements : ndarray, shape (P,)
-            Containing element, ``-1`` for a point outside the tissue.
-        weights : ndarray, shape (P, 4)
-            Barycentric weights ``λ_a`` (rows sum to 1).
-        """
-        pts = np.ascontiguousarray(as_array(points, "points", last_dim=3).reshape(-1, 3))
-        return find_points(self.mesh, pts)
-
-    def contains(self, points) -> np.ndarray:
-        """Which reference points lie in the tissue.
-
-        Parameters
-        ----------
-        points : array_like, shape (P, 3)
-            Reference positions.
-
-        Returns
-        -------
-        ndarray of bool, shape (P,)
-        """
-        return self.locate(points)[0] >= 0
-
-    def interpolator(self, points, name: str = "points") -> Interpolator:
-        """Barycentric interpolation at material points (an embedded target or obstacle:
-        :func:`sphere_points`), located once.
-
-        Parameters
-        ----------
-        points : array_like, shape (P, 3) or (3,)
-            Reference positions.
-        name : str
-            What the points are ("target", "obstacle 2"); named in the error.
-
-        Returns
-        -------
-        Interpolator
-            ``.interpolate(u)``, ``.positions(u)``, ``.spread(F)`` on ``(N, 3)`` nodal arrays.
-
-        Raises
-        ------
-        InvalidInputError
-            Some point lies outside the tissue (the error names the set and the points).
-        """
-        return locate3d(self.mesh, points, name)
-
-    def displacement_at(self, points, u=None) -> np.ndarray:
-        """Displacement of material points, ``u(X) = Σ_a λ_a(X) u_a`` (P1 interpolant).
-
-        Parameters
-        ----------
-        points : array_like, shape (P, 3)
-            Reference positions inside the tissue.
-        u : array_like, shape (N, 3), optional
-            Nodal displacement; ``None``: the current state.
-
-        Returns
-        -------
-        ndarray, shape (P, 3)
-        """
-        return self.interpolator(points).interpolate(self._field(u))
-
-    def positions(self, points, u=None) -> np.ndarray:
-        """Deformed positions ``X + u(X)`` of material points.
-
-        Parameters
-        ----------
-        points : array_like, shape (P, 3)
-            Reference positions inside the tissue.
-        u : array_like, shape (N, 3), optional
-            Nodal displacement; ``None``: the current state.
-
-        Returns
-        -------
-        ndarray, shape (P, 3)
-        """
-        return self.interpolator(points).positions(self._field(u))
-
-    def deformation_gradient_at(self, points, u=None) -> np.ndarray:
-        """Deformation gradient ``F = I + ∇_X u`` at material points (constant in each
-        element; a point on a shared face takes one of its elements).
-
-        Parameters
-        ----------
-        points : array_like, shape (P, 3)
-            Reference positions inside the tissue.
-        u : array_like, shape (N, 3), optional
-            Nodal displacement; ``None``: the current state.
-
-        Returns
-        -------
-        ndarray, shape (P, 3, 3)
-        """
-        ip = self.interpolator(points)
-        u3 = self._field(u)
-        e = ip.elements
-        return deformation_gradients(u3[self.mesh.tets[e]], self._G[e])
-
-    def point_forces(self, points, forces) -> np.ndarray:
-        """Consistent nodal forces of point forces at material points:
-        ``f_a = λ_a(X_p) F_p`` over the containing element's four nodes.
-
-        Parameters
-        ----------
-        points : array_like, shape (P, 3)
-            Reference positions inside the tissue.
-        forces : array_like, shape (P, 3)
-            Force at each point.
-
-        Returns
-        -------
-        ndarray, shape (N, 3)
-            Nodal forces (their sum is the resultant of ``forces``).
-        """
-        ip = self.interpolator(points)
-        f = as_array(forces, "forces", shape=(ip.n_points, 3))
-        return ip.spread(f)
-
-    def _field(self, u) -> np.ndarray:
-        if u is None:
-            return self._u.reshape(-1, 3)
-        return as_array(u, "u", shape=(self.mesh.n_nodes, 3))
 
     # ---- evaluations --------------------------------------------------------------------
     def _F(self, u_flat: np.ndarray) -> np.ndarray:
@@ -657,6 +451,45 @@ class TetTissue:
             Displacements at ``free_dofs``, same shape.
         """
         return self._linear_solver(f_free)
+
+    @one_blas_thread
+    def element_green_blocks(self) -> np.ndarray:
+        """``K⁻¹`` over each element's 12 DOFs (linear law; computed once per tissue).
+
+        ``G[e, 3a + i, 3b + k]`` is displacement ``i`` of the element's node ``a`` under a
+        unit force ``k`` at its node ``b`` (zero rows and columns at fixed DOFs), taken from
+        the band of ``K⁻¹`` by selected inversion of the cached factor
+        (``riskplan.deformable.tetfactor.band_inverse``): ``O(n b²)``, the cost of the
+        factorisation, instead of a solve per node.
+
+        Returns
+        -------
+        numpy.ndarray, shape (T, 12, 12)
+            Read-only; equal to the columns of solves up to round-off.
+
+        Raises
+        ------
+        InvalidInputError
+            The tissue is not linear (its tangent changes with the state).
+        """
+        if self.law != "linear":
+            raise InvalidInputError("element_green_blocks: the linear law only")
+        G = self._green
+        if G is None:
+            from riskplan.deformable.tetfactor import band_inverse, element_band_index
+
+            idx = self._pattern.__dict__.get("_green_index")
+            if idx is None:  # once per mesh and support set (the pattern is shared)
+                p = self._pattern
+                idx = element_band_index(
+                    p.element_dofs, self.free_dofs, self._n, p.band_perm, p.bandwidth
+                )
+                p.__dict__["_green_index"] = idx
+            zb = band_inverse(self._linear_solver.cb)
+            G = np.append(zb.ravel(), 0.0)[idx]
+            G.setflags(write=False)
+            self._green = G
+        return G
 
     def solve(self, nodal_forces, *, fixed_values=None, load_steps: int = 1) -> np.ndarray:
         """Equilibrium displacement under nodal forces; it becomes the current state.

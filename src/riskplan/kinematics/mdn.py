@@ -45,6 +45,7 @@ from torch import nn
 
 from riskplan._validation import as_array
 from riskplan.errors import InvalidInputError
+from riskplan.kinematics.normalisation import Normalisation
 from riskplan.kinematics.torch_mixture import GaussianMixture
 
 # exp of a raw diagonal entry is clamped to exp(+-LOG_DIAG_BOUND): eq. 2 holds exactly inside this
@@ -261,62 +262,6 @@ def mdn_nll(net: MDN, x: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
     """
     log_w, means, u = net(x)
     return -mixture_log_prob(log_w, means, u, points).mean()
-
-
-@dataclass(frozen=True)
-class Normalisation:
-    """Affine maps of inputs and points (fitted on the training split)."""
-
-    input_mean: np.ndarray
-    input_scale: np.ndarray
-    output_centre: np.ndarray
-    output_scale: np.ndarray
-
-    @classmethod
-    def fit(cls, displacements: np.ndarray, points: np.ndarray, angle_columns=()) -> Normalisation:
-        """Inputs: mean/std per tendon (identity for ``angle_columns``: the network takes their
-        cos and sin); points: mean/std per axis over all points.
-
-        Parameters
-        ----------
-        displacements : numpy.ndarray, (N, m)
-        points : numpy.ndarray, (N, P, d)
-        angle_columns : sequence of int
-
-        Returns
-        -------
-        Normalisation
-        """
-        im = displacements.mean(0)
-        isd = displacements.std(0)
-        isd = np.where(isd > 0, isd, 1.0)
-        for a in angle_columns:
-            im[a], isd[a] = 0.0, 1.0
-        flat = points.reshape(-1, points.shape[-1])  # no float64 copy of a large cloud array
-        oc = flat.mean(0, dtype=np.float64)
-        osd = flat.std(0, dtype=np.float64)
-        osd = np.where(osd > 0, osd, 1.0)
-        return cls(im, isd, oc, osd)
-
-    def to_json(self) -> dict:
-        return {
-            k: np.asarray(getattr(self, k), dtype=np.float64).tolist()
-            for k in ("input_mean", "input_scale", "output_centre", "output_scale")
-        }
-
-    @classmethod
-    def from_json(cls, obj: dict) -> Normalisation:
-        return cls(
-            *(
-                np.asarray(obj[k], dtype=np.float64)
-                for k in ("input_mean", "input_scale", "output_centre", "output_scale")
-            )
-        )
-
-    @property
-    def log_scale_sum(self) -> float:
-        """``sum log s``: NLL in metres = NLL in normalised units + this."""
-        return float(np.log(self.output_scale).sum())
 
 
 @dataclass(eq=False, repr=False)

@@ -31,105 +31,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from riskplan._validation import check_count
 from riskplan.errors import ConvergenceError, DataFormatError, InvalidInputError
 from riskplan.kinematics.data import PointCloudData, check_compatible
 from riskplan.kinematics.mdn import MDN, MDNModel, Normalisation, mixture_log_prob
+from riskplan.kinematics.train_config import TrainConfig
 
 log = logging.getLogger(__name__)
 
 CHECKPOINT_NAME = "checkpoint.pt"
 CHECKPOINT_FORMAT = "riskplan-mdn-checkpoint"
-
-
-@dataclass
-class TrainConfig:
-    """Training options (defaults: a small network that trains in minutes on one core).
-
-    The paper gives the architecture only as Fig. 2 (trunk + three heads); widths,
-    learning rate and schedule here are our choices.
-    """
-
-    n_components: int = 5
-    hidden: tuple[int, ...] = (64, 64)
-    head_hidden: tuple[int, ...] = (32,)
-    activation: str = "silu"
-    epochs: int = 100
-    batch_size: int = 32
-    points_per_config: int = 256
-    lr: float = 3e-3
-    weight_decay: float = 0.0
-    lr_factor: float = 0.5
-    lr_patience: int = 4
-    min_lr: float = 1e-5
-    early_stop_patience: int = 12
-    val_fraction: float = 0.1
-    val_points: int = 1024
-    seed: int = 0
-    dtype: str = "float32"
-    max_bad_steps: int = 20
-
-    def validate(self) -> None:
-        ints = (
-            "n_components",
-            "epochs",
-            "batch_size",
-            "points_per_config",
-            "val_points",
-            "max_bad_steps",
-        )
-        for name in ints:
-            check_count(getattr(self, name), name, 1)
-        for name in ("val_fraction", "lr", "lr_factor", "weight_decay", "min_lr"):
-            v = getattr(self, name, 0.0)
-            if (
-                isinstance(v, bool)
-                or not isinstance(v, (int, float, np.integer, np.floating))
-                or not math.isfinite(v)
-            ):
-                raise InvalidInputError(f"{name}: expected a finite number, got {v!r}")
-        for name in ("early_stop_patience", "lr_patience", "seed"):
-            check_count(getattr(self, name), name, 0)
-        if not 0.0 <= self.val_fraction < 1.0:
-            raise InvalidInputError(f"val_fraction: expected in [0, 1), got {self.val_fraction}")
-        if not (self.lr > 0 and math.isfinite(self.lr)):
-            raise InvalidInputError(f"lr: expected a positive finite number, got {self.lr}")
-        if not 0.0 < self.lr_factor < 1.0:
-            raise InvalidInputError(f"lr_factor: expected in (0, 1), got {self.lr_factor}")
-        if self.dtype not in ("float32", "float64"):
-            raise InvalidInputError(f"dtype: expected 'float32' or 'float64', got {self.dtype!r}")
-
-    def to_json(self) -> dict:
-        """The options as JSON types (tuples as lists), as stored in ``model.json``.
-
-        Returns
-        -------
-        dict
-            One entry per field.
-        """
-        d = dataclasses.asdict(self)
-        d["hidden"], d["head_hidden"] = list(self.hidden), list(self.head_hidden)
-        return d
-
-    @classmethod
-    def from_json(cls, obj: dict) -> TrainConfig:
-        """Inverse of :meth:`to_json`; unknown keys are ignored, missing ones take their defaults.
-
-        Parameters
-        ----------
-        obj : dict
-            Options by field name.
-
-        Returns
-        -------
-        TrainConfig
-        """
-        names = {f.name for f in dataclasses.fields(cls)}
-        kw = {k: v for k, v in obj.items() if k in names}
-        for k in ("hidden", "head_hidden"):
-            if k in kw:
-                kw[k] = tuple(kw[k])
-        return cls(**kw)
 
 
 @dataclass
@@ -302,12 +212,89 @@ def train(
     from riskplan.kinematics import model_io
 
     config = config or TrainConfig()
+    out = _check_run(data, config, out, resume, overwrite)
+    dtype = _torch_dtype(config.dtype)
+    train_idx, val_idx = split_indices(data.n_configs, config.val_fraction, config.seed)
+    net, opt, sched, norm = _initial_state(data, config, train_idx, dtype)
+    progress = _resume(out, data, config, net, opt, sched) if resume else _Progress(norm)
+    norm = progress.norm
+    val = _Evaluator(data, val_idx, norm, config.val_points, config.seed, dtype)
+    batches = _Batches(data, train_idx, norm, config.batch_size, dtype)
+    stopped_early = progress.since_best >= config.early_stop_patience and progress.best_epoch >= 0
+    t_start = time.perf_counter()
+
+    for epoch in range(progress.start_epoch, config.epochs):
+        if stopped_early:
+            break
+        t0 = time.perf_counter()
+        train_nll, skipped = _train_epoch(net, opt, batches, epoch, config, norm, on_step)
+        val_nll = val(net) if not val.empty else train_nll
+        improved = progress.record(net, sched, epoch, val_nll)
+        rec = EpochRecord(
+            epoch,
+            train_nll,
+            val_nll,
+            float(opt.param_groups[0]["lr"]),
+            skipped,
+            time.perf_counter() - t0,
+        )
+        progress.total_skipped += skipped
+        progress.history.append(rec)
+        stopped_early = progress.since_best >= config.early_stop_patience
+        if out is not None:
+            if improved:
+                _save_best(net, norm, data, config, progress.history, out, model_io)
+            state = _checkpoint(net, opt, sched, config, data, progress, epoch)
+            save_checkpoint(out / CHECKPOINT_NAME, state)
+        if on_epoch is not None:
+            on_epoch(rec)
+        if max_seconds is not None and time.perf_counter() - t_start > max_seconds:
+            log.info("time budget of %.0f s spent after epoch %d", max_seconds, epoch)
+            break
+
+    model = _best_model(net, data, config, progress)
+    if out is not None:
+        model_io.save_model(model, out)
+    p = progress
+    return TrainResult(model, p.history, p.best_epoch, p.best_val, stopped_early, p.total_skipped)
+
+
+@dataclass
+class _Progress:
+    """What the epoch loop carries from epoch to epoch (and a checkpoint stores with the
+    network, optimiser and schedule): the normalisation, the history, the best validation
+    NLL so far with its epoch and weights, and the skip counters."""
+
+    norm: Normalisation
+    history: list[EpochRecord] = field(default_factory=list)
+    start_epoch: int = 0
+    best_val: float = math.inf
+    best_epoch: int = -1
+    best_state: dict | None = None
+    since_best: int = 0
+    total_skipped: int = 0
+
+    def record(self, net: MDN, sched, epoch: int, val_nll: float) -> bool:
+        """Step the plateau schedule on the epoch's validation NLL and keep the weights if
+        they are the best so far; whether they are."""
+        if math.isfinite(val_nll):
+            sched.step(val_nll)
+        improved = math.isfinite(val_nll) and val_nll < self.best_val
+        if improved:
+            self.best_val, self.best_epoch, self.since_best = val_nll, epoch, 0
+            self.best_state = copy.deepcopy(net.state_dict())
+        else:
+            self.since_best += 1
+        return improved
+
+
+def _check_run(data, config, out, resume, overwrite) -> Path | None:
+    """Validate ``train``'s arguments before any work; ``out`` as a path."""
     config.validate()
     if data.n_configs < 2:
         raise DataFormatError(
             f"data set {data.path!r}: need at least 2 configurations to train (train/validation), got {data.n_configs}"
         )
-    dtype = _torch_dtype(config.dtype)
     out = Path(out) if out is not None else None
     if resume and out is None:
         raise InvalidInputError("resume: needs out= (the folder holding checkpoint.pt)")
@@ -317,13 +304,16 @@ def train(
         check_output_folder(out, "out")
     if out is not None and not resume and not overwrite:
         _refuse_existing_run(out, config)
+    return out
 
-    train_idx, val_idx = split_indices(data.n_configs, config.val_fraction, config.seed)
+
+def _initial_state(data, config, train_idx, dtype):
+    """The seeded network, Adam, the plateau schedule and the normalisation fitted on the
+    training configurations."""
     from riskplan.kinematics.data import angle_columns
 
     angles = angle_columns(data.robot_toml)  # a base rotation enters as (cos, sin)
     norm = Normalisation.fit(data.displacements[train_idx], data.points[train_idx], angles)
-
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)
         net = MDN(
@@ -339,165 +329,142 @@ def train(
     sched = torch.optim.lr_scheduler.ReduceLROnPlateau(
         opt, mode="min", factor=config.lr_factor, patience=config.lr_patience, min_lr=config.min_lr
     )
+    return net, opt, sched, norm
 
-    history: list[EpochRecord] = []
-    start_epoch, best_val, best_epoch, best_state, since_best, total_skipped = (
-        0,
-        math.inf,
-        -1,
-        None,
-        0,
-        0,
-    )
-    if resume:
-        norm, history, start_epoch, best_val, best_epoch, since_best, best_state, total_skipped = (
-            _resume(out, data, config, net, opt, sched)
-        )
 
-    val = _Evaluator(data, val_idx, norm, config.val_points, config.seed, dtype)
-    x_all = (data.displacements - norm.input_mean) / norm.input_scale
-    np_dtype = np.float64 if dtype == torch.float64 else np.float32
-    centre, scale = norm.output_centre.astype(np_dtype), norm.output_scale.astype(np_dtype)
-    n_train, N = train_idx.size, data.n_points
-    B = min(config.batch_size, n_train)
-    steps = math.ceil(n_train / B)
-    stopped_early = since_best >= config.early_stop_patience and best_epoch >= 0
-    t_start = time.perf_counter()
+class _Batches:
+    """Normalised mini-batches of the training configurations: inputs ``(B, m)`` and
+    ``points_per_config`` points ``(B, P, 3)`` drawn with replacement from each cloud."""
 
-    for epoch in range(start_epoch, config.epochs):
-        if stopped_early:
-            break
-        t0 = time.perf_counter()
-        net.train()
-        rng = np.random.default_rng([config.seed, epoch])
-        perm = rng.permutation(train_idx)
-        good = (copy.deepcopy(net.state_dict()), copy.deepcopy(opt.state_dict()))
-        run_loss, run_n, skipped, consecutive_bad = 0.0, 0, 0, 0
-        for step in range(steps):
-            idx = perm[step * B : (step + 1) * B]
-            pidx = rng.integers(0, N, size=(idx.size, config.points_per_config))
-            pts = (data.points[idx[:, None], pidx] - centre) / scale
-            x = torch.as_tensor(x_all[idx], dtype=dtype)
-            p = torch.as_tensor(pts, dtype=dtype)
-            opt.zero_grad(set_to_none=True)
-            loss = _batch_loss(net, x, p)
-            ok = bool(torch.isfinite(loss))
-            if ok:
-                loss.backward()
-                ok = _grads_finite(net)
-            if ok:
-                opt.step()
-                if not _params_finite(net):  # should not happen after finite gradients; roll back
-                    net.load_state_dict(good[0])
-                    opt.load_state_dict(good[1])
-                    ok = False
-            if not ok:
-                opt.zero_grad(set_to_none=True)
-                skipped += 1
-                consecutive_bad += 1
-                log.warning(
-                    "epoch %d step %d: non-finite loss or gradient; step skipped", epoch, step
+    def __init__(self, data, train_idx, norm, batch_size, dtype):
+        self.data, self.train_idx, self.dtype = data, train_idx, dtype
+        self.x_all = (data.displacements - norm.input_mean) / norm.input_scale
+        np_dtype = np.float64 if dtype == torch.float64 else np.float32
+        self.centre = norm.output_centre.astype(np_dtype)
+        self.scale = norm.output_scale.astype(np_dtype)
+        self.size = min(batch_size, train_idx.size)
+        self.steps = math.ceil(train_idx.size / self.size)
+
+    def draw(self, idx: np.ndarray, n_points: int, rng) -> tuple[torch.Tensor, torch.Tensor]:
+        pidx = rng.integers(0, self.data.n_points, size=(idx.size, n_points))
+        pts = (self.data.points[idx[:, None], pidx] - self.centre) / self.scale
+        x = torch.as_tensor(self.x_all[idx], dtype=self.dtype)
+        return x, torch.as_tensor(pts, dtype=self.dtype)
+
+
+def _train_epoch(net, opt, batches, epoch, config, norm, on_step) -> tuple[float, int]:
+    """One pass over the training configurations in the order and with the points drawn by
+    ``default_rng([seed, epoch])``; (mean training NLL in nats per point, steps skipped)."""
+    net.train()
+    rng = np.random.default_rng([config.seed, epoch])
+    perm = rng.permutation(batches.train_idx)
+    good = (copy.deepcopy(net.state_dict()), copy.deepcopy(opt.state_dict()))
+    run_loss, run_n, skipped, consecutive_bad = 0.0, 0, 0, 0
+    B = batches.size
+    for step in range(batches.steps):
+        idx = perm[step * B : (step + 1) * B]
+        x, p = batches.draw(idx, config.points_per_config, rng)
+        opt.zero_grad(set_to_none=True)
+        loss = _batch_loss(net, x, p)
+        if not _optimiser_step(net, opt, loss, good):
+            skipped += 1
+            consecutive_bad += 1
+            log.warning("epoch %d step %d: non-finite loss or gradient; step skipped", epoch, step)
+            if consecutive_bad >= config.max_bad_steps:
+                raise ConvergenceError(
+                    f"training diverged: {consecutive_bad} consecutive steps with non-finite loss or gradient at epoch {epoch}",
+                    residual=float(loss.detach()) if loss.numel() == 1 else None,
+                    iterations=epoch,
                 )
-                if consecutive_bad >= config.max_bad_steps:
-                    raise ConvergenceError(
-                        f"training diverged: {consecutive_bad} consecutive steps with non-finite loss or gradient at epoch {epoch}",
-                        residual=float(loss.detach()) if loss.numel() == 1 else None,
-                        iterations=epoch,
-                    )
-                continue
-            consecutive_bad = 0
-            lv = float(loss.detach())
-            run_loss += lv * idx.size
-            run_n += idx.size
-            if on_step is not None:
-                on_step(step, steps, lv + norm.log_scale_sum)
-        net.eval()
-        train_nll = run_loss / max(run_n, 1) + norm.log_scale_sum if run_n else math.nan
-        val_nll = val(net) if not val.empty else train_nll
-        total_skipped += skipped
-        if math.isfinite(val_nll):
-            sched.step(val_nll)
-        improved = math.isfinite(val_nll) and val_nll < best_val
-        if improved:
-            best_val, best_epoch, since_best = val_nll, epoch, 0
-            best_state = copy.deepcopy(net.state_dict())
-        else:
-            since_best += 1
-        rec = EpochRecord(
-            epoch,
-            train_nll,
-            val_nll,
-            float(opt.param_groups[0]["lr"]),
-            skipped,
-            time.perf_counter() - t0,
-        )
-        history.append(rec)
-        stopped_early = since_best >= config.early_stop_patience
-        if out is not None:
-            if improved:
-                _save_best(net, norm, data, config, history, out, model_io)
-            counters = (epoch, best_val, best_epoch, since_best, best_state, total_skipped)
-            save_checkpoint(
-                out / CHECKPOINT_NAME,
-                _checkpoint(net, opt, sched, norm, config, data, history, counters),
-            )
-        if on_epoch is not None:
-            on_epoch(rec)
-        if max_seconds is not None and time.perf_counter() - t_start > max_seconds:
-            log.info("time budget of %.0f s spent after epoch %d", max_seconds, epoch)
-            break
+            continue
+        consecutive_bad = 0
+        lv = float(loss.detach())
+        run_loss += lv * idx.size
+        run_n += idx.size
+        if on_step is not None:
+            on_step(step, batches.steps, lv + norm.log_scale_sum)
+    net.eval()
+    train_nll = run_loss / max(run_n, 1) + norm.log_scale_sum if run_n else math.nan
+    return train_nll, skipped
 
-    if best_state is None:
-        if not history:
+
+def _optimiser_step(net, opt, loss, good) -> bool:
+    """An Adam step on ``loss`` when it and its gradient are finite; parameters that turn
+    non-finite anyway roll back to ``good`` (the epoch's start). Whether the step counted."""
+    ok = bool(torch.isfinite(loss))
+    if ok:
+        loss.backward()
+        ok = _grads_finite(net)
+    if ok:
+        opt.step()
+        if not _params_finite(net):  # should not happen after finite gradients; roll back
+            net.load_state_dict(good[0])
+            opt.load_state_dict(good[1])
+            ok = False
+    if not ok:
+        opt.zero_grad(set_to_none=True)
+    return ok
+
+
+def _best_model(net, data, config, progress) -> MDNModel:
+    """The network with the best validation weights, as the finished model."""
+    if progress.best_state is None:
+        if not progress.history:
             raise ConvergenceError(
                 "training produced no epoch (epochs already reached by the checkpoint?)",
-                iterations=start_epoch,
+                iterations=progress.start_epoch,
             )
         raise ConvergenceError(
-            "training produced no finite validation loss", iterations=len(history)
+            "training produced no finite validation loss", iterations=len(progress.history)
         )
-    net.load_state_dict(best_state)
+    net.load_state_dict(progress.best_state)
     net.eval()
-    model = _model_with_history(net, norm, data, config, history, best_epoch, finished=True)
-    if out is not None:
-        model_io.save_model(model, out)
-    return TrainResult(model, history, best_epoch, best_val, stopped_early, total_skipped)
+    h, best = progress.history, progress.best_epoch
+    return _model_with_history(net, progress.norm, data, config, h, best, finished=True)
 
 
-def _resume(out, data, config, net, opt, sched):
-    """Load ``out``'s checkpoint into ``net``, ``opt`` and ``sched``; the loop's counters."""
+def _resume(out, data, config, net, opt, sched) -> _Progress:
+    """Load ``out``'s checkpoint into ``net``, ``opt`` and ``sched``; the loop's progress."""
     ck = load_checkpoint(out / CHECKPOINT_NAME)
     _check_resume(ck, data, config)
     net.load_state_dict(ck["net"])
     opt.load_state_dict(ck["optimizer"])
     sched.load_state_dict(ck["scheduler"])
-    norm = Normalisation.from_json(ck["normalisation"])
-    history = [EpochRecord(**h) for h in ck["history"]]
-    start_epoch = ck["epoch"] + 1
-    best_val, best_epoch, since_best = ck["best_val"], ck["best_epoch"], ck["since_best"]
-    log.info("resuming at epoch %d (best NLL %.4f at epoch %d)", start_epoch, best_val, best_epoch)
-    rest = (ck["best_state"], ck["skipped_steps"])
-    return (norm, history, start_epoch, best_val, best_epoch, since_best, *rest)
+    progress = _Progress(
+        Normalisation.from_json(ck["normalisation"]),
+        [EpochRecord(**h) for h in ck["history"]],
+        ck["epoch"] + 1,
+        ck["best_val"],
+        ck["best_epoch"],
+        ck["best_state"],
+        ck["since_best"],
+        ck["skipped_steps"],
+    )
+    p = progress
+    log.info(
+        "resuming at epoch %d (best NLL %.4f at epoch %d)", p.start_epoch, p.best_val, p.best_epoch
+    )
+    return progress
 
 
-def _checkpoint(net, opt, sched, norm, config, data, history, counters):
+def _checkpoint(net, opt, sched, config, data, progress: _Progress, epoch: int) -> dict:
     """The checkpoint written after each epoch (what ``_resume`` reads back)."""
-    epoch, best_val, best_epoch, since_best, best_state, total_skipped = counters
+    p = progress
     return {
         "format": CHECKPOINT_FORMAT,
         "format_version": 1,
         "net": net.state_dict(),
         "optimizer": opt.state_dict(),
         "scheduler": sched.state_dict(),
-        "normalisation": norm.to_json(),
+        "normalisation": p.norm.to_json(),
         "config": config.to_json(),
-        "history": [dataclasses.asdict(h) for h in history],
+        "history": [dataclasses.asdict(h) for h in p.history],
         "epoch": epoch,
-        "best_val": best_val,
-        "best_epoch": best_epoch,
-        "since_best": since_best,
-        "best_state": best_state,
-        "skipped_steps": total_skipped,
+        "best_val": p.best_val,
+        "best_epoch": p.best_epoch,
+        "since_best": p.since_best,
+        "best_state": p.best_state,
+        "skipped_steps": p.total_skipped,
         "data_hash": data.content_hash,
         "robot_toml": data.robot_toml,
         "n_tendons": data.n_tendons,

@@ -2,7 +2,8 @@
 kinematic wing's top. Tissue planning is :mod:`riskplan.tissue_planning`.
 
 * :mod:`riskplan.planning.prm` — OMPL PRM in tendon-displacement space with the paper's
-  validity condition (component means in free space), nominal trajectories;
+  validity condition (component means in free space, :mod:`riskplan.planning.roadmap`),
+  nominal trajectories;
 * :mod:`riskplan.planning.risk` — eq. 9/10 along plans, least-risk roadmap search;
 * :mod:`riskplan.planning.bo` — the paper's Bayesian optimisation of the nominal trajectory
   and the comparison optimisers;

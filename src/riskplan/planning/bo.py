@@ -53,6 +53,11 @@ import numpy as np
 from riskplan._validation import as_array, check_count, check_range
 from riskplan.collision import trajectory_probability
 from riskplan.errors import DataFormatError, InvalidInputError
+from riskplan.planning.bo_checks import (
+    LIMIT_SLACK,
+    check_optimiser_budget,
+    check_trajectory_limits,
+)
 from riskplan.planning.prm import DEFAULT_RESOLUTION
 
 log = logging.getLogger(__name__)
@@ -60,8 +65,6 @@ log = logging.getLogger(__name__)
 METHODS = ("bo", "random", "trust_region")
 CHECKPOINT_FORMAT = "riskplan-trajectory-optimisation"
 TR_SUCCESS, TR_FAILURE, TR_MIN, TR_MAX = 3, 4, 1 / 32, 0.4
-# configurations may leave the limits by this fraction of the range (interpolation round-off)
-LIMIT_SLACK = 1e-9
 
 
 @dataclass(frozen=True)
@@ -144,63 +147,6 @@ def _fingerprint(
     h.update(np.ascontiguousarray(limits, dtype=np.float64).tobytes())
     h.update(json.dumps({**asdict(config), "seed": int(seed)}, sort_keys=True).encode())
     return h.hexdigest()
-
-
-def check_trajectory_limits(trajectory, limits) -> tuple[np.ndarray, np.ndarray]:
-    """``trajectory (T >= 2, m)`` and ``limits (m, 2)`` checked: finite, ``lo < hi`` per
-    tendon, every configuration inside the limits (to round-off). Returns float64 copies."""
-    lim = as_array(limits, "limits", min_ndim=2)
-    if lim.ndim != 2 or lim.shape[1] != 2 or lim.shape[0] < 1:
-        raise InvalidInputError(f"limits: expected shape (m, 2), got {lim.shape}")
-    if not np.all(lim[:, 1] > lim[:, 0]):
-        i = int(np.flatnonzero(~(lim[:, 1] > lim[:, 0]))[0])
-        raise InvalidInputError(
-            f"limits: row {i} is {lim[i].tolist()}; expected low < high for every tendon"
-        )
-    traj = np.array(as_array(trajectory, "trajectory", min_ndim=2), dtype=np.float64)
-    if traj.ndim != 2 or traj.shape[1] != lim.shape[0] or len(traj) < 2:
-        raise InvalidInputError(
-            f"trajectory: expected shape (T >= 2, {lim.shape[0]}), got {traj.shape}"
-        )
-    # interpolated trajectories may cross a limit by a rounding of the span
-    slack = LIMIT_SLACK * (lim[:, 1] - lim[:, 0])
-    check_range(traj, "trajectory", lim[:, 0] - slack, lim[:, 1] + slack)
-    return traj, lim
-
-
-def check_optimiser_budget(config: OptimiserConfig, T: int, limits) -> None:
-    """The optimiser's work against the budget (:mod:`riskplan.budget`): the candidates of one
-    iteration (a few ``(n_candidates, m)`` arrays), the GP of the last iteration, whose kernel
-    matrix over ``T + iterations`` configurations is held in memory, and the motion checks of
-    a block of 16 candidates, each motion about the candidate box's diagonal
-    (``2 radius`` of the limits' span) long, at ``resolution``."""
-    from riskplan.budget import check_budget
-
-    lim = np.asarray(limits, dtype=np.float64)
-    m = lim.shape[0]
-    check_budget(
-        f"{config.n_candidates} candidates per iteration",
-        "candidates",
-        nbytes=8.0 * 4 * config.n_candidates * m,
-    )
-    n = float(T) + float(config.iterations)
-    check_budget(
-        f"{config.iterations} iterations (a GP over up to {n:.3g} configurations)",
-        "iterations",
-        nbytes=8.0 * 3 * n * n,
-    )
-    reach = 2.0 * config.radius * float(np.linalg.norm(lim[:, 1] - lim[:, 0]))
-    states = 16 * 2 * (reach / config.resolution + 1)
-    check_budget(
-        f"motion checks at resolution {config.resolution:g} ({states:.3g} states per block)",
-        "resolution",
-        nbytes=states * MOTION_STATE_BYTES * m,
-    )
-
-
-#: memory of one configuration in a batched motion check, per tendon (the configuration and
-#: the predicted mixture's arrays are larger; this is the least)
-MOTION_STATE_BYTES = 8.0
 
 
 def _digest(state: dict) -> str:
@@ -387,149 +333,223 @@ def optimise_trajectory(
     resume: bool = False,
     progress=None,
 ) -> OptimisationResult:
-    """Lower the eq.-10 bound of ``trajectory (T, m)`` by moving intermediate configurations.
+    r"""Lower the eq.-10 bound of a trajectory by moving its intermediate configurations.
 
-    ``bound(configs (N, m)) -> (N,)`` eq. 9 per configuration; ``validity(configs) -> (N,)``
-    bool and ``validity.motions(a, b, resolution) -> (N,)`` bool (a
-    :class:`~riskplan.planning.prm.MeanValidity`); ``limits (m, 2)``. ``bounds (T,)``: the
-    start trajectory's eq.-9 bounds if already known (saves T evaluations). ``checkpoint``: a
-    JSON path written atomically after every iteration; ``resume=True`` continues from it.
-    ``progress(iteration, total, bound)`` after each iteration. Never returns a trajectory
-    with a larger bound than the start's.
+    Each iteration moves at most one intermediate configuration ``x_i`` (see the module
+    docstring for the choice of ``i``, the candidates and their ranking) and keeps the move
+    when the trajectory's bound decreases; eq. 10 combines the per-configuration eq.-9
+    bounds :math:`p_t` as
+
+    .. math:: P = 1 - \prod_{t=1}^{T} (1 - p_t).
+
+    Never returns a trajectory with a larger bound than the start's.
+
+    Parameters
+    ----------
+    trajectory : array_like, shape (T, m)
+        The start trajectory (tendon displacements, m); ``T >= 2``; its first and last
+        configurations never move.
+    bound : callable
+        ``bound(configs (N, m)) -> (N,)``: eq. 9 per configuration, a probability.
+    validity : callable
+        ``validity(configs (N, m)) -> (N,)`` bool, and ``validity.motions(a (N, m), b (N, m),
+        resolution) -> (N,)`` bool (a :class:`~riskplan.planning.prm.MeanValidity`).
+    limits : array_like, shape (m, 2)
+        Displacement limits (m), low and high per tendon.
+    config : OptimiserConfig, optional
+        Method, iterations, candidates, radius and motion resolution (default
+        ``OptimiserConfig()``).
+    seed : int
+        Iteration ``k`` draws from ``numpy.random.default_rng([seed, k])``.
+    bounds : array_like, shape (T,), optional
+        The start trajectory's eq.-9 bounds if already known (saves T evaluations).
+    checkpoint : str or path, optional
+        A JSON file written atomically after every iteration.
+    resume : bool
+        Continue from ``checkpoint`` if it exists (the result equals an uninterrupted run's).
+    progress : callable, optional
+        ``progress(iteration, total, bound)`` after each iteration.
+
+    Returns
+    -------
+    OptimisationResult
+        The optimised trajectory ``(T, m)``, its bounds and the trace of eq. 10 per iteration.
     """
     from riskplan.io import write_json_atomic
 
-    if config is not None and not isinstance(config, OptimiserConfig):
-        raise InvalidInputError(f"config: expected an OptimiserConfig, got {type(config).__name__}")
-    config = config or OptimiserConfig()
-    config.validate()
-    traj, lim = check_trajectory_limits(trajectory, limits)
-    T, m = traj.shape
-    check_count(seed, "seed", 0)
-    if bounds is not None:
-        bounds = as_array(bounds, "bounds", shape=(T,))
-        check_range(bounds, "bounds", 0.0, 1.0)
-    if checkpoint is not None:
-        from riskplan.io import check_output_file
-
-        check_output_file(checkpoint, "checkpoint")  # before any work: not a folder
-    check_optimiser_budget(config, T, lim)
-    span = lim[:, 1] - lim[:, 0]
+    config, traj, lim, bounds = _check_optimiser_arguments(
+        trajectory, limits, config, seed, bounds, checkpoint
+    )
     fp = _fingerprint(traj, lim, config, seed)
     t0 = time.perf_counter()
-
     state = None
     if resume and checkpoint is not None and Path(checkpoint).is_file():
         state = read_checkpoint(checkpoint, fp, traj, lim, config)
     if state is None:
         p0 = np.asarray(bound(traj) if bounds is None else bounds, dtype=np.float64)
-        state = {
-            "format": CHECKPOINT_FORMAT,
-            "fingerprint": fp,
-            "iteration": 0,
-            "trajectory": traj.tolist(),
-            "bounds": p0.tolist(),
-            "initial_bound": float(trajectory_probability(p0)),
-            "X": traj.tolist(),
-            "p": p0.tolist(),
-            "trace": [float(trajectory_probability(p0))],
-            "chosen": [],
-            "accepted": [],
-            "radius": float(config.radius),
-            "succ": 0,
-            "fail": 0,
-            "evaluations": 0 if bounds is not None else T,
-            "seconds": 0.0,
-        }
+        state = _initial_state(traj, p0, fp, config, 0 if bounds is not None else len(traj))
     elapsed0 = float(state["seconds"])
-    cur = np.asarray(state["trajectory"])
-    p = np.asarray(state["bounds"])
-    X = [np.asarray(x) for x in state["X"]]
-    pX = list(state["p"])
-    inner = np.arange(1, T - 1)
+    cur, p = np.asarray(state["trajectory"]), np.asarray(state["bounds"])
+    X, pX = [np.asarray(x) for x in state["X"]], list(state["p"])
 
     for it in range(int(state["iteration"]), int(config.iterations)):
         rng = np.random.default_rng([int(seed), it])
         best = float(trajectory_probability(p))
         chosen, accepted = -1, False
-        w = p[inner] if len(inner) else np.zeros(0)
-        if len(inner) and w.sum() > 0:
-            i = (
-                int(inner[np.argmax(w)])
-                if config.method == "trust_region"
-                else int(rng.choice(inner, p=w / w.sum()))
-            )
-            radius = state["radius"] if config.method == "trust_region" else config.radius
-            cand = cur[i] + (rng.random((config.n_candidates, m)) * 2 - 1) * radius * span
-            cand = np.clip(cand, lim[:, 0], lim[:, 1])
-            cand = cand[validity(cand)]
-            if len(cand):
-                if config.method == "random":
-                    order = rng.permutation(len(cand))
-                else:
-                    rest = 1.0 - np.exp(np.log1p(-np.delete(p, i)).sum())  # eq. 10 without i
-                    y = 1.0 - (1.0 - rest) * (1.0 - np.asarray(pX))
-                    Xu = (np.asarray(X) - lim[:, 0]) / span
-                    acq, state["gp"] = _acquisition(
-                        Xu,
-                        y,
-                        (cand - lim[:, 0]) / span,
-                        best,
-                        int(rng.integers(2**31)),
-                        state.get("gp"),
-                    )
-                    order = np.argsort(-acq, kind="stable")
-                x_new = None
-                for j in range(0, len(order), 16):
-                    blk = cand[order[j : j + 16]]
-                    ok = validity.motions(
-                        np.broadcast_to(cur[i - 1], blk.shape), blk, config.resolution
-                    ) & validity.motions(
-                        blk, np.broadcast_to(cur[i + 1], blk.shape), config.resolution
-                    )
-                    if ok.any():
-                        x_new = blk[int(np.argmax(ok))]
-                        break
-                if x_new is not None:
-                    chosen = i
-                    p_new = float(bound(x_new[None])[0])
-                    state["evaluations"] += 1
-                    X.append(x_new)
-                    pX.append(p_new)
-                    trial = p.copy()
-                    trial[i] = p_new
-                    if float(trajectory_probability(trial)) < best:
-                        cur = cur.copy()
-                        cur[i] = x_new
-                        p = trial
-                        accepted = True
+        i = _pick_configuration(p, rng, config)
+        x_new = None
+        if i is not None:
+            x_new = _propose(i, cur, p, X, pX, lim, best, rng, state, validity, config)
+        if x_new is not None:
+            chosen = i
+            cur, p, accepted = _evaluate_move(i, x_new, bound, cur, p, X, pX, best, state)
         if config.method == "trust_region":
-            if accepted:
-                state["succ"], state["fail"] = state["succ"] + 1, 0
-            else:
-                state["succ"], state["fail"] = 0, state["fail"] + 1
-            if state["succ"] >= TR_SUCCESS:
-                state["radius"], state["succ"] = min(TR_MAX, 2 * state["radius"]), 0
-            elif state["fail"] >= TR_FAILURE:
-                state["radius"], state["fail"] = max(TR_MIN, state["radius"] / 2), 0
-        state.update(
-            iteration=it + 1,
-            trajectory=cur.tolist(),
-            bounds=p.tolist(),
-            X=[x.tolist() for x in X],
-            p=pX,
-            seconds=elapsed0 + time.perf_counter() - t0,
-        )
-        state["trace"].append(float(trajectory_probability(p)))
-        state["chosen"].append(chosen)
-        state["accepted"].append(accepted)
+            _update_trust_region(state, accepted)
+        seconds = elapsed0 + time.perf_counter() - t0
+        _record_iteration(state, it, cur, p, X, pX, chosen, accepted, seconds)
         if checkpoint is not None:
             state.pop("sha256", None)
             state["sha256"] = _digest(state)
             write_json_atomic(checkpoint, state, indent=None)
         if progress is not None:
             progress(it + 1, int(config.iterations), state["trace"][-1])
+    return _result(state, config, elapsed0 + time.perf_counter() - t0)
 
+
+def _check_optimiser_arguments(trajectory, limits, config, seed, bounds, checkpoint):
+    """``optimise_trajectory``'s arguments checked before any work: (config, trajectory
+    ``(T, m)``, limits ``(m, 2)``, bounds ``(T,)`` or None)."""
+    if config is not None and not isinstance(config, OptimiserConfig):
+        raise InvalidInputError(f"config: expected an OptimiserConfig, got {type(config).__name__}")
+    config = config or OptimiserConfig()
+    config.validate()
+    traj, lim = check_trajectory_limits(trajectory, limits)
+    check_count(seed, "seed", 0)
+    if bounds is not None:
+        bounds = as_array(bounds, "bounds", shape=(len(traj),))
+        check_range(bounds, "bounds", 0.0, 1.0)
+    if checkpoint is not None:
+        from riskplan.io import check_output_file
+
+        check_output_file(checkpoint, "checkpoint")  # before any work: not a folder
+    check_optimiser_budget(config, len(traj), lim)
+    return config, traj, lim, bounds
+
+
+def _initial_state(traj, p0, fp: str, config, evaluations: int) -> dict:
+    """The state before the first iteration (the checkpoint's content)."""
+    start = float(trajectory_probability(p0))
+    return {
+        "format": CHECKPOINT_FORMAT,
+        "fingerprint": fp,
+        "iteration": 0,
+        "trajectory": traj.tolist(),
+        "bounds": p0.tolist(),
+        "initial_bound": start,
+        "X": traj.tolist(),
+        "p": p0.tolist(),
+        "trace": [start],
+        "chosen": [],
+        "accepted": [],
+        "radius": float(config.radius),
+        "succ": 0,
+        "fail": 0,
+        "evaluations": evaluations,
+        "seconds": 0.0,
+    }
+
+
+def _pick_configuration(p: np.ndarray, rng, config) -> int | None:
+    """The intermediate configuration to move, from the bounds ``p (T,)``: drawn in proportion
+    to its bound, or the largest for the trust region; None when no intermediate one carries
+    risk."""
+    inner = np.arange(1, len(p) - 1)
+    w = p[inner] if len(inner) else np.zeros(0)
+    if not (len(inner) and w.sum() > 0):
+        return None
+    if config.method == "trust_region":
+        return int(inner[np.argmax(w)])
+    return int(rng.choice(inner, p=w / w.sum()))
+
+
+def _propose(i, cur, p, X, pX, lim, best, rng, state, validity, config) -> np.ndarray | None:
+    """The move for configuration ``i``: uniform candidates in the box around ``cur[i]``,
+    the valid ones ranked (at random, or by the acquisition), the first whose motions from
+    ``cur[i - 1]`` and to ``cur[i + 1]`` are valid; ``(m,)`` or None."""
+    span = lim[:, 1] - lim[:, 0]
+    radius = state["radius"] if config.method == "trust_region" else config.radius
+    step = (rng.random((config.n_candidates, cur.shape[1])) * 2 - 1) * radius * span
+    cand = np.clip(cur[i] + step, lim[:, 0], lim[:, 1])
+    cand = cand[validity(cand)]
+    if not len(cand):
+        return None
+    if config.method == "random":
+        order = rng.permutation(len(cand))
+    else:
+        # eq. 10 factorises: every known eq.-9 value gives the exact trajectory bound at i
+        rest = 1.0 - np.exp(np.log1p(-np.delete(p, i)).sum())  # eq. 10 without i
+        y = 1.0 - (1.0 - rest) * (1.0 - np.asarray(pX))
+        Xu = (np.asarray(X) - lim[:, 0]) / span
+        acq, state["gp"] = _acquisition(
+            Xu, y, (cand - lim[:, 0]) / span, best, int(rng.integers(2**31)), state.get("gp")
+        )
+        order = np.argsort(-acq, kind="stable")
+    for j in range(0, len(order), 16):
+        blk = cand[order[j : j + 16]]
+        res = config.resolution
+        ok = validity.motions(np.broadcast_to(cur[i - 1], blk.shape), blk, res) & (
+            validity.motions(blk, np.broadcast_to(cur[i + 1], blk.shape), res)
+        )
+        if ok.any():
+            return blk[int(np.argmax(ok))]
+    return None
+
+
+def _evaluate_move(i, x_new, bound, cur, p, X, pX, best, state):
+    """Evaluate eq. 9 at ``x_new`` (one evaluation, kept for the surrogate) and keep the move
+    of configuration ``i`` when eq. 10 decreases; (trajectory, bounds, accepted)."""
+    p_new = float(bound(x_new[None])[0])
+    state["evaluations"] += 1
+    X.append(x_new)
+    pX.append(p_new)
+    trial = p.copy()
+    trial[i] = p_new
+    if float(trajectory_probability(trial)) < best:
+        cur = cur.copy()
+        cur[i] = x_new
+        return cur, trial, True
+    return cur, p, False
+
+
+def _record_iteration(state, it, cur, p, X, pX, chosen, accepted, seconds) -> None:
+    """The state after iteration ``it`` (what the checkpoint holds)."""
+    state.update(
+        iteration=it + 1,
+        trajectory=cur.tolist(),
+        bounds=p.tolist(),
+        X=[x.tolist() for x in X],
+        p=pX,
+        seconds=seconds,
+    )
+    state["trace"].append(float(trajectory_probability(p)))
+    state["chosen"].append(chosen)
+    state["accepted"].append(accepted)
+
+
+def _update_trust_region(state: dict, accepted: bool) -> None:
+    """TuRBO's rule: the radius doubles after ``TR_SUCCESS`` consecutive improvements and
+    halves after ``TR_FAILURE`` consecutive failures, within ``[TR_MIN, TR_MAX]``."""
+    if accepted:
+        state["succ"], state["fail"] = state["succ"] + 1, 0
+    else:
+        state["succ"], state["fail"] = 0, state["fail"] + 1
+    if state["succ"] >= TR_SUCCESS:
+        state["radius"], state["succ"] = min(TR_MAX, 2 * state["radius"]), 0
+    elif state["fail"] >= TR_FAILURE:
+        state["radius"], state["fail"] = max(TR_MIN, state["radius"] / 2), 0
+
+
+def _result(state: dict, config, seconds: float) -> OptimisationResult:
     return OptimisationResult(
         trajectory=np.asarray(state["trajectory"]),
         bounds=np.asarray(state["bounds"]),
@@ -539,6 +559,6 @@ def optimise_trajectory(
         chosen=np.asarray(state["chosen"], dtype=int),
         accepted=np.asarray(state["accepted"], dtype=bool),
         evaluations=int(state["evaluations"]),
-        seconds=elapsed0 + time.perf_counter() - t0,
+        seconds=seconds,
         method=config.method,
     )

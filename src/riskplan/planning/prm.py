@@ -39,17 +39,16 @@ import itertools
 import logging
 import math
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from riskplan._validation import as_array, as_generator
 from riskplan.errors import InvalidInputError, PlanningError
 from riskplan.gaussian_mixture import as_numpy_mixture
+from riskplan.planning.roadmap import DEFAULT_RESOLUTION, MeanValidity, Roadmap
 
 log = logging.getLogger(__name__)
 
-DEFAULT_RESOLUTION = 1e-3  # m, motion check spacing (Euclidean, displacement space)
 DEFAULT_STEP = 2.5e-3  # m, largest step between consecutive trajectory configurations
 DEFAULT_MILESTONES = 300
 DEFAULT_NEIGHBOURS = 10  # OMPL's PRM default (magic::DEFAULT_NEAREST_NEIGHBORS)
@@ -62,78 +61,6 @@ def _check_positive(value, name: str) -> float:
     if not math.isfinite(v) or v <= 0:
         raise InvalidInputError(f"{name}: expected a finite number > 0, got {value!r}")
     return v
-
-
-class MeanValidity:
-    """Validity of configurations: within limits and every component mean in free space.
-
-    ``model``: anything with ``predict(configs (N, m))`` returning a mixture (a torch
-    ``GaussianMixture`` or a :class:`~riskplan.gaussian_mixture.NumpyMixture`) and
-    ``limits (m, 2)`` (an :class:`~riskplan.kinematics.MDNModel`); ``environment``: an
-    :class:`~riskplan.collision.Environment` in the model's (robot base) frame.
-    """
-
-    def __init__(self, model, environment):
-        self.model = model
-        self.environment = environment
-        self.limits = np.asarray(model.limits, dtype=np.float64)
-        self.n = self.limits.shape[0]
-        self.checks = 0
-
-    def within_limits(self, configs) -> np.ndarray:
-        """``(N, m) -> (N,)`` bool."""
-        c = np.asarray(configs, dtype=np.float64)
-        return np.all((c >= self.limits[:, 0]) & (c <= self.limits[:, 1]), axis=-1) & np.all(
-            np.isfinite(c), axis=-1
-        )
-
-    def means(self, configs) -> np.ndarray:
-        """Component means ``(N, K, 3)`` of the predicted mixtures (configs within limits)."""
-        gm = self.model.predict(np.asarray(configs, dtype=np.float64))
-        return as_numpy_mixture(gm, validate=False).means
-
-    def __call__(self, configs) -> np.ndarray:
-        """``(N, m) -> (N,)`` bool: within limits and no component mean inside an obstacle."""
-        c = np.atleast_2d(np.asarray(configs, dtype=np.float64))
-        ok = self.within_limits(c)
-        if ok.any():
-            mu = self.means(c[ok])
-            self.checks += len(mu)
-            inside = self.environment.contains(mu.reshape(-1, 3)).reshape(mu.shape[:2])
-            ok[np.flatnonzero(ok)] = ~inside.any(-1)
-        return ok
-
-    def motions(self, starts, ends, resolution: float = DEFAULT_RESOLUTION) -> np.ndarray:
-        """Validity of straight motions ``starts (N, m) -> ends (N, m)``: ``(N,)`` bool.
-
-        Each motion is checked at ``ceil(|b - a| / resolution) + 1`` equally spaced
-        configurations including both ends, all in one batch.
-        """
-        a = np.atleast_2d(np.asarray(starts, dtype=np.float64))
-        b = np.atleast_2d(np.asarray(ends, dtype=np.float64))
-        counts = np.maximum(1, np.ceil(np.linalg.norm(b - a, axis=-1) / resolution).astype(int)) + 1
-        owner = np.repeat(np.arange(len(a)), counts)
-        t = np.concatenate([np.linspace(0.0, 1.0, k) for k in counts])
-        pts = a[owner] + t[:, None] * (b - a)[owner]
-        ok = self(pts)
-        if getattr(self.environment, "crossing_check", False):
-            ok &= self._no_crossing(pts, owner)
-        return np.logical_and.reduceat(ok, np.concatenate([[0], np.cumsum(counts)[:-1]]))
-
-    def _no_crossing(self, pts, owner) -> np.ndarray:
-        """For surfaces that need not be closed (walls): ``(P,)`` False where a component mean
-        crosses a surface on its way from the previous configuration of the same motion."""
-        ok = np.ones(len(pts), dtype=bool)
-        inside = self.within_limits(pts)
-        same = np.flatnonzero((owner[1:] == owner[:-1]) & inside[1:] & inside[:-1]) + 1
-        if same.size:
-            sel = np.unique(np.concatenate([same - 1, same]))  # within the limits
-            pos = np.full(len(pts), -1)
-            pos[sel] = np.arange(len(sel))
-            mu = self.means(pts[sel])  # (len(sel), K, 3)
-            hit = self.environment.segments_collide(mu[pos[same - 1]], mu[pos[same]]).any(-1)
-            ok[same[hit]] = False
-        return ok
 
 
 def check_step(step, name: str = "step") -> float:
@@ -234,136 +161,6 @@ def _seed_ompl(seed: int) -> bool:
     return _OMPL_SEEDED[0] == int(seed)
 
 
-@dataclass
-class Roadmap:
-    """A PRM roadmap: milestones ``(V, m)``, undirected edges ``(E, 2)`` with lengths ``(E,)``.
-
-    Build with :func:`build_roadmap`; query with :meth:`shortest_path` or
-    :func:`riskplan.planning.risk.least_risk_path`.
-    """
-
-    vertices: np.ndarray
-    edges: np.ndarray
-    validity: MeanValidity = field(repr=False)
-    seed: int
-    resolution: float
-    n_neighbours: int
-    build_seconds: float
-    ompl_seeded: bool = False
-    n_milestones: int = 0  # OMPL's count; milestones without edges are not in ``vertices``
-
-    @property
-    def n_vertices(self) -> int:
-        return len(self.vertices)
-
-    @property
-    def n_edges(self) -> int:
-        return len(self.edges)
-
-    @property
-    def edge_lengths(self) -> np.ndarray:
-        v = self.vertices
-        return np.linalg.norm(v[self.edges[:, 1]] - v[self.edges[:, 0]], axis=-1)
-
-    def describe(self) -> str:
-        return (
-            f"{max(self.n_milestones, self.n_vertices)} milestones ({self.n_vertices} connected), "
-            f"{self.n_edges} edges, built in {self.build_seconds:.1f} s"
-        )
-
-    def connect(self, config) -> tuple[np.ndarray, np.ndarray]:
-        """Milestones reachable from ``config (m,)`` by a valid straight motion among its
-        ``n_neighbours`` nearest: ``(indices (k,), lengths (k,))``."""
-        d = np.linalg.norm(self.vertices - config, axis=-1)
-        near = np.argsort(d, kind="stable")[: self.n_neighbours]
-        ok = self.validity.motions(
-            np.broadcast_to(config, (len(near), len(config))), self.vertices[near], self.resolution
-        )
-        return near[ok], d[near[ok]]
-
-    def graph_with(self, start, goal, segment_cost=None, edge_costs=None):
-        """Sparse symmetric cost graph of the roadmap plus the start (node V) and the goal (V + 1).
-
-        ``segment_cost(a (N, m), b (N, m)) -> (N,)`` prices a straight motion (default: its
-        length); ``edge_costs (E,)`` are the roadmap edges' costs if already known. The start
-        and goal connect to their nearest valid milestones (and to each other if that motion
-        is valid).
-        """
-        from scipy.sparse import coo_matrix
-
-        cost = segment_cost or (lambda a, b: np.linalg.norm(b - a, axis=-1))
-        V = self.n_vertices
-        if edge_costs is None:
-            edge_costs = cost(self.vertices[self.edges[:, 0]], self.vertices[self.edges[:, 1]])
-        rows, cols, vals = (
-            [self.edges[:, 0]],
-            [self.edges[:, 1]],
-            [np.asarray(edge_costs, dtype=np.float64)],
-        )
-        for node, conf in ((V, start), (V + 1, goal)):
-            idx, _ = self.connect(conf)
-            rows.append(np.full(len(idx), node))
-            cols.append(idx)
-            vals.append(cost(np.broadcast_to(conf, (len(idx), len(conf))), self.vertices[idx]))
-        if (
-            np.linalg.norm(goal - start) > 0
-            and self.validity.motions(start[None], goal[None], self.resolution)[0]
-        ):
-            rows.append(np.array([V]))
-            cols.append(np.array([V + 1]))
-            vals.append(cost(start[None], goal[None]))
-        r, c, v = (np.concatenate(x) for x in (rows, cols, vals))
-        # a zero cost would read as "no edge" in a sparse graph
-        v = np.maximum(v, 1e-300)
-        g = coo_matrix(
-            (np.concatenate([v, v]), (np.concatenate([r, c]), np.concatenate([c, r]))),
-            shape=(V + 2, V + 2),
-        )
-        return g.tocsr()
-
-    def search(self, graph, start, goal) -> np.ndarray:
-        """Dijkstra from node V to V + 1 of ``graph``; the path's configurations ``(P, m)``."""
-        from scipy.sparse.csgraph import dijkstra
-
-        V = self.n_vertices
-        dist, pred = dijkstra(graph, directed=False, indices=V, return_predecessors=True)
-        if not np.isfinite(dist[V + 1]):
-            raise PlanningError(
-                f"no path from start to goal in the roadmap ({self.describe()}); grow it with more milestones "
-                "(--milestones) or move the goal"
-            )
-        nodes = [V + 1]
-        while nodes[-1] != V:
-            nodes.append(int(pred[nodes[-1]]))
-        nodes = nodes[::-1]
-        allv = np.vstack([self.vertices, start[None], goal[None]])
-        return allv[nodes]
-
-    def shortest_path(self, start, goal) -> np.ndarray:
-        """Shortest valid path (Euclidean length in displacement space) ``(P, m)``."""
-        start, goal = self.check_query(start, goal)
-        return self.search(self.graph_with(start, goal), start, goal)
-
-    def check_query(self, start, goal) -> tuple[np.ndarray, np.ndarray]:
-        """``start``, ``goal (m,)`` as float64 arrays; :class:`InvalidInputError` if either is
-        malformed, outside the limits or invalid."""
-        m = self.vertices.shape[1]
-        out = []
-        for name, c in (("start", start), ("goal", goal)):
-            c = as_array(c, name, shape=(m,))
-            lim = self.validity.limits
-            if not self.validity.within_limits(c[None])[0]:
-                raise InvalidInputError(
-                    f"{name}: {c.tolist()} is outside the displacement limits {lim.tolist()}"
-                )
-            if not self.validity(c[None])[0]:
-                raise InvalidInputError(
-                    f"{name}: configuration {c.tolist()} is invalid (a component mean of its predicted mixture lies inside an obstacle)"
-                )
-            out.append(c)
-        return out[0], out[1]
-
-
 def _planner_graph(ob, prm, si, m: int):
     """``(milestones (V, m), edges (E, 2) with i < j)`` of a grown OMPL PRM: the milestones
     that have edges (OMPL's planner data)."""
@@ -391,8 +188,36 @@ def build_roadmap(
 ) -> Roadmap:
     """Grow an OMPL PRM to ``n_milestones`` valid milestones in the displacement box.
 
-    ``progress(done, total)`` is called as milestones are added. ``max_seconds`` (optional)
-    raises :class:`PlanningError` if growing takes longer (a scene with almost no free space).
+    Milestones come from a sampler seeded with ``seed`` and connect to their
+    ``n_neighbours`` nearest through valid motions (see the module docstring): the same
+    seed gives the same roadmap on any machine.
+
+    Parameters
+    ----------
+    validity : MeanValidity
+        Validity of configurations and motions; its ``limits (m, 2)`` are the box.
+    n_milestones : int
+        Milestones to grow (>= 2).
+    seed : int
+        Seed of the milestone sampler.
+    n_neighbours : int
+        Nearest milestones each new one tries to connect to (OMPL's ``k``).
+    resolution : float
+        Motion-check spacing (m, planning coordinates).
+    progress : callable, optional
+        ``progress(done, total)`` as milestones are added.
+    max_seconds : float, optional
+        Wall-clock limit (s) of the growth.
+
+    Returns
+    -------
+    Roadmap
+        The milestones that have edges ``(V, m)`` and the edges ``(E, 2)``.
+
+    Raises
+    ------
+    PlanningError
+        Growing took longer than ``max_seconds`` (a scene with almost no free space).
     """
     from ompl import base as ob
     from ompl import geometric as og
@@ -404,6 +229,58 @@ def build_roadmap(
     resolution = _check_positive(resolution, "resolution")
     rng = as_generator(seed)  # a named error for a bad seed before OMPL is seeded with it
     seeded = _seed_ompl(seed)
+    stats = {"drawn": 0}
+    t0 = time.perf_counter()
+    # the motion validator is held here: OMPL keeps only a pointer to it
+    si, _motion = _space_information(ob, validity, rng, resolution, stats)
+    prm = og.PRM(si)
+    prm.setMaxNearestNeighbors(int(n_neighbours))
+    pdef = ob.ProblemDefinition(si)  # PRM's setup (nearest-neighbour structure) needs one
+    prm.setProblemDefinition(pdef)
+    prm.setup()
+    total = int(n_milestones)
+    state = {"timeout": False}
+
+    def stop() -> bool:
+        n = prm.milestoneCount()
+        if progress is not None:
+            progress(min(n, total), total)
+        if max_seconds is not None and time.perf_counter() - t0 > max_seconds:
+            state["timeout"] = True
+            return True
+        return n >= total
+
+    prm.growRoadmapPtc(ob.PlannerTerminationCondition(stop))
+    elapsed = time.perf_counter() - t0
+    if state["timeout"]:
+        raise PlanningError(
+            f"roadmap growth stopped after {elapsed:.1f} s (limit {max_seconds} s) with {prm.milestoneCount()} of "
+            f"{total} milestones ({stats['drawn']} configurations drawn); free space is too small for the model's means"
+        )
+    verts, E = _planner_graph(ob, prm, si, validity.n)
+    log.info(
+        "PRM: %d milestones (%d in OMPL), %d edges in %.2f s",
+        len(verts),
+        prm.milestoneCount(),
+        len(E),
+        elapsed,
+    )
+    return Roadmap(
+        verts,
+        E,
+        validity,
+        int(seed),
+        resolution,
+        int(n_neighbours),
+        elapsed,
+        seeded,
+        prm.milestoneCount(),
+    )
+
+
+def _space_information(ob, validity: MeanValidity, rng, resolution: float, stats: dict):
+    """OMPL's space of the displacement box with our validity checker, motion validator and
+    seeded valid-state sampler; (space information, the motion validator)."""
     lim = validity.limits
     m = validity.n
     space = ob.RealVectorStateSpace(m)
@@ -416,9 +293,7 @@ def build_roadmap(
     si.setStateValidityChecker(
         lambda s: bool(validity(np.array([s[i] for i in range(m)])[None])[0])
     )
-    t0 = time.perf_counter()
     pending: list[np.ndarray] = []
-    stats = {"drawn": 0}
 
     class _Sampler(ob.ValidStateSampler):
         # draws valid states in batches of 64 (one model call each) from the seeded generator
@@ -451,50 +326,7 @@ def build_roadmap(
     si.setMotionValidator(motion)
     si.setValidStateSamplerAllocator(lambda s: _Sampler(s))
     si.setup()
-    prm = og.PRM(si)
-    prm.setMaxNearestNeighbors(int(n_neighbours))
-    pdef = ob.ProblemDefinition(si)  # PRM's setup (nearest-neighbour structure) needs one
-    prm.setProblemDefinition(pdef)
-    prm.setup()
-    total = int(n_milestones)
-    state = {"timeout": False}
-
-    def stop() -> bool:
-        n = prm.milestoneCount()
-        if progress is not None:
-            progress(min(n, total), total)
-        if max_seconds is not None and time.perf_counter() - t0 > max_seconds:
-            state["timeout"] = True
-            return True
-        return n >= total
-
-    prm.growRoadmapPtc(ob.PlannerTerminationCondition(stop))
-    elapsed = time.perf_counter() - t0
-    if state["timeout"]:
-        raise PlanningError(
-            f"roadmap growth stopped after {elapsed:.1f} s (limit {max_seconds} s) with {prm.milestoneCount()} of "
-            f"{total} milestones ({stats['drawn']} configurations drawn); free space is too small for the model's means"
-        )
-    verts, E = _planner_graph(ob, prm, si, m)
-    nv = len(verts)
-    log.info(
-        "PRM: %d milestones (%d in OMPL), %d edges in %.2f s",
-        nv,
-        prm.milestoneCount(),
-        len(E),
-        elapsed,
-    )
-    return Roadmap(
-        verts,
-        E,
-        validity,
-        int(seed),
-        resolution,
-        int(n_neighbours),
-        elapsed,
-        seeded,
-        prm.milestoneCount(),
-    )
+    return si, motion
 
 
 def tip_positions(model, configs) -> np.ndarray:

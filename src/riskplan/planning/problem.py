@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from riskplan.errors import InvalidInputError, RobotDescriptionError
+from riskplan.planning.problem_voxels import VoxelEnvironment, VoxelGrid, read_voxel_octree
 
 __all__ = [
     "Problem",
@@ -102,140 +103,6 @@ def _vector(table: dict, key: str, prefix: str, path, n: int | None) -> np.ndarr
     if n is not None and len(v) != n:
         raise _err(path, f"{prefix}{key}", f"expected {n} entries, got {len(v)}")
     return np.array(v, dtype=np.float64)
-
-
-# ------------------------------------------------------------------------------ voxels
-@dataclass(frozen=True, eq=False)
-class VoxelGrid:
-    """Occupied cells of the lab's ``VoxelOctree`` (a regular grid stored in 4×4×4 blocks).
-
-    Attributes
-    ----------
-    limits: ``(3, 2)`` lower and upper corner of the grid per axis (m, voxel frame).
-    dimension: cells per axis ``N``.
-    occupied: ``(K, 3)`` integer indices ``(ix, iy, iz)`` of the occupied cells.
-    """
-
-    limits: np.ndarray
-    dimension: int
-    occupied: np.ndarray
-
-    @property
-    def spacing(self) -> np.ndarray:
-        """``(3,)`` cell size (m)."""
-        return (self.limits[:, 1] - self.limits[:, 0]) / self.dimension
-
-    def centers(self) -> np.ndarray:
-        """``(K, 3)`` centres of the occupied cells, voxel frame (m)."""
-        return self.limits[:, 0] + (self.occupied + 0.5) * self.spacing
-
-
-def read_voxel_octree(path) -> VoxelGrid:
-    """Read the lab's ``VoxelOctree`` file (``.msgpack`` or ``.json``; ``.toml`` is not read).
-
-    Format (``collision::VoxelOctree::to_toml`` and its msgpack/JSON twins): ``{"VoxelOctree":
-    {"dimension": N, "xlimits": [lo, hi], "ylimits", "zlimits", "data": [[bx, by, bz, bits],
-    ...]}}``; block ``(bx, by, bz)`` covers cells ``4 b + (0..3)`` and cell ``(x, y, z)`` of a
-    block is occupied when bit ``16 x + 4 y + z`` of ``bits`` is set (``VoxelOctree::bitmask``).
-    """
-    p = Path(path)
-    try:
-        raw = p.read_bytes()
-    except OSError as exc:
-        raise InvalidInputError(f"voxel file {str(p)!r}: cannot read ({exc})") from exc
-    if p.suffix == ".msgpack":
-        try:
-            import msgpack
-        except ImportError as exc:  # pragma: no cover - an optional extra
-            raise InvalidInputError(
-                f"voxel file {str(p)!r}: reading .msgpack needs the 'msgpack' package "
-                "(pip install 'riskplan[mesh]'), or give the .json form"
-            ) from exc
-        try:
-            doc = msgpack.unpackb(raw, strict_map_key=False)
-        except Exception as exc:
-            raise InvalidInputError(f"voxel file {str(p)!r}: not valid msgpack ({exc})") from exc
-    elif p.suffix == ".json":
-        import json
-
-        try:
-            doc = json.loads(raw)
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise InvalidInputError(f"voxel file {str(p)!r}: not valid JSON ({exc})") from exc
-    else:
-        raise InvalidInputError(
-            f"voxel file {str(p)!r}: expected .msgpack or .json, got {p.suffix!r}"
-        )
-    try:
-        t = doc["VoxelOctree"]
-        N = int(t["dimension"])
-        limits = np.array([t["xlimits"], t["ylimits"], t["zlimits"]], dtype=np.float64)
-        data = np.array(t["data"], dtype=object).reshape(-1, 4)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InvalidInputError(f"voxel file {str(p)!r}: not a VoxelOctree ({exc})") from exc
-    if N <= 0 or N % 4 or limits.shape != (3, 2) or np.any(limits[:, 1] <= limits[:, 0]):
-        raise InvalidInputError(f"voxel file {str(p)!r}: bad dimension {N} or limits")
-    blocks = data[:, :3].astype(np.int64)
-    bits = np.array([int(b) for b in data[:, 3]], dtype=np.uint64)
-    k = np.arange(64, dtype=np.uint64)
-    on = ((bits[:, None] >> k[None, :]) & np.uint64(1)).astype(bool)  # (B, 64)
-    b_idx, bit = np.nonzero(on)
-    local = np.stack([bit // 16, (bit // 4) % 4, bit % 4], axis=-1)
-    occupied = 4 * blocks[b_idx] + local
-    if occupied.size and (occupied.min() < 0 or occupied.max() >= N):
-        raise InvalidInputError(f"voxel file {str(p)!r}: blocks outside the {N}^3 grid")
-    return VoxelGrid(limits, N, occupied)
-
-
-@dataclass(frozen=True, eq=False)
-class VoxelEnvironment:
-    """The lab's ``[voxel_environment]``: a voxel obstacle file and its frames.
-
-    Conventions, established from the lab's code (``motion_planning::VoxelEnvironment`` in
-    Kuntz-Lab/interactive-rate-tendons) and checked on its data (tests/planning/test_problem.py):
-
-    * ``rotation_quat`` is **scalar first** ``(w, x, y, z)`` (``Eigen::Quaterniond(w, x, y, z)``);
-      its matrix ``R`` takes robot-frame points into the voxel frame, ``x_voxel = R x_robot``
-      (``rotate_point``), so ``x_robot = Rᵀ x_voxel``.
-    * ``scaling`` and ``translation`` take the segmentation image's physical frame (mm) to the
-      voxel frame (m): ``x_voxel = scaling (x_image + translation)``
-      (``translate_and_scale_image``). The voxel file itself is already in the voxel frame.
-    """
-
-    filename: Path | None
-    scaling: float = 1.0
-    translation: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    rotation_quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
-    interior_filename: Path | None = None
-
-    @property
-    def rotation(self) -> np.ndarray:
-        """``(3, 3)`` ``R`` with ``x_voxel = R x_robot``."""
-        from riskplan.robots.pose import quaternion_to_matrix
-
-        return quaternion_to_matrix(self.rotation_quat)
-
-    def image_to_voxel(self, points) -> np.ndarray:
-        """``(..., 3)`` segmentation-image points (its physical units) to the voxel frame (m)."""
-        return self.scaling * (np.asarray(points, dtype=np.float64) + np.asarray(self.translation))
-
-    def voxel_to_robot(self, points) -> np.ndarray:
-        """``(..., 3)`` voxel-frame points to the robot (base) frame: ``Rᵀ x``."""
-        return np.asarray(points, dtype=np.float64) @ self.rotation
-
-    def robot_to_voxel(self, points) -> np.ndarray:
-        """``(..., 3)`` robot-frame points to the voxel frame: ``R x``."""
-        return np.asarray(points, dtype=np.float64) @ self.rotation.T
-
-    def load(self) -> VoxelGrid:
-        """The voxel file's occupied cells (:func:`read_voxel_octree`)."""
-        if self.filename is None:
-            raise InvalidInputError("voxel_environment: no filename")
-        return read_voxel_octree(self.filename)
-
-    def obstacle_centers(self) -> np.ndarray:
-        """``(K, 3)`` centres of the occupied cells in the robot frame (m)."""
-        return self.voxel_to_robot(self.load().centers())
 
 
 @dataclass(frozen=True)
@@ -365,105 +232,37 @@ class Problem:
 def load_problem(path, *, robot=None) -> Problem:
     """Read a problem file (the lab's layouts or riskplan's, see the module docs).
 
-    ``robot``: a :class:`~riskplan.robots.TendonRobot` to use instead of the file's own robot
-    (a file that holds only ``[problem]``/``[environment]``). Raises :class:`ProblemFileError`
-    (an :class:`InvalidInputError`) naming the file and the field.
-    """
-    from riskplan.robots import TendonRobot, load_robot
-    from riskplan.robots.description import read_robot_text
+    Everything is checked before anything is computed: the ``[problem]`` table (start and
+    goal, the motion resolutions), the ``[environment]`` table and ``[voxel_environment]``.
 
+    Parameters
+    ----------
+    path : str or path
+        The problem file (TOML).
+    robot : TendonRobot or str or path, optional
+        A robot to use instead of the file's own (for a file that holds only
+        ``[problem]``/``[environment]``): a :class:`~riskplan.robots.TendonRobot`, or a name
+        or file :func:`~riskplan.robots.load_robot` reads.
+
+    Returns
+    -------
+    Problem
+        The robot, start and goal configurations ``(n_config,)`` (tensions in N, then
+        rotation in rad and retraction in m where enabled) with their displacements ``(m,)``
+        (m), and the environment.
+
+    Raises
+    ------
+    ProblemFileError
+        (an :class:`~riskplan.errors.InvalidInputError`) naming the file and the field.
+    """
     p = Path(path)
-    text = read_robot_text(p)
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ProblemFileError(f"{p}: not valid TOML ({exc})") from exc
-    if robot is None:
-        try:
-            robot = load_robot(p)
-        except RobotDescriptionError as exc:
-            raise ProblemFileError(f"{p}: {exc}", key=exc.key) from None
-    elif not isinstance(robot, TendonRobot):
-        robot = load_robot(robot)
-    if "problem" in doc:
-        prob = doc["problem"]
-        if not isinstance(prob, dict):
-            raise _err(p, "problem", "must be a table")
-        prefix = "problem."
-    else:  # the nested layout keeps the problem at the top level
-        prob = {k: doc[k] for k in _PROBLEM_KEYS if k in doc}
-        prefix = ""
-    if prefix:
-        _unknown(prob, _PROBLEM_KEYS, prefix, p)
-    configs = {}
-    disp = {}
-    m = robot.n_tendons
-    bm = robot.base_motion
+    doc = _read_toml(p)
+    robot = _problem_robot(p, robot)
+    prob, prefix = _problem_table(doc, p)
+    configs, disp = {}, {}
     for end in ("start", "goal"):
-        given = [k for k in (end, f"{end}_displacements") if k in prob]
-        if len(given) != 1:
-            raise _err(
-                p,
-                f"{prefix}{end}",
-                f"give exactly one of '{end}' (tensions, N) and '{end}_displacements' (m)"
-                + (", got both" if len(given) == 2 else ""),
-            )
-        vec = _vector(prob, given[0], prefix, p, m)
-        extra = []
-        for var, enabled, lim, unit in (
-            ("rotation", bm.rotation, bm.rotation_limits, "rad"),
-            ("retraction", bm.retraction, bm.retraction_limits, "m"),
-        ):
-            key = f"{end}_{var}"
-            if not enabled:
-                if key in prob and float(prob[key]) != 0.0:
-                    raise _err(p, f"{prefix}{key}", f"the robot has no base {var}")
-                continue
-            if key not in prob:
-                raise _err(p, f"{prefix}{key}", f"required: the robot enables base {var}")
-            v = _number(prob, key, prefix, p)
-            if not lim[0] <= v <= lim[1]:
-                raise _err(
-                    p,
-                    f"{prefix}{key}",
-                    f"{v} {unit} is outside the limits [{lim[0]:g}, {lim[1]:g}]",
-                )
-            extra.append(v)
-        ret = extra[-1] if bm.retraction else None
-        if given[0] == end:
-            tmax = robot.tension_limits
-            for j in range(m):
-                if not 0.0 <= vec[j] <= tmax[j]:
-                    raise _err(
-                        p,
-                        f"{prefix}{end}[{j}]",
-                        f"{vec[j]} N is outside the tension limits [0, {tmax[j]:g}] N "
-                        f"(max_tension of tendon {j})",
-                    )
-            tau = vec
-            d = robot.displacements_for_tensions(tau, retraction=ret)
-        else:
-            lim = robot.displacement_limits
-            for j in range(m):
-                if not lim[j, 0] <= vec[j] <= lim[j, 1]:
-                    raise _err(
-                        p,
-                        f"{prefix}{end}_displacements[{j}]",
-                        f"{vec[j]} m is outside the displacement limits [{lim[j, 0]:g}, {lim[j, 1]:g}] m",
-                    )
-            d = vec
-            tau = robot.tensions_for_displacements(d, retraction=ret)
-            over = np.flatnonzero(tau > robot.tension_limits * (1 + 1e-9))
-            if over.size:
-                j = int(over[0])
-                raise _err(
-                    p,
-                    f"{prefix}{end}_displacements[{j}]",
-                    f"needs {tau[j]:.4g} N on tendon {j}, above its max_tension "
-                    f"{robot.tension_limits[j]:g} N",
-                )
-        configs[end] = np.concatenate([tau, extra])
-        disp[end] = d
+        configs[end], disp[end] = _end_configuration(prob, end, prefix, p, robot)
     changes = {
         k: (_number(prob, k, prefix, p, nonneg=True) if k in prob else None)
         for k in ("min_tension_change", "min_rotation_change", "min_retraction_change")
@@ -471,11 +270,135 @@ def load_problem(path, *, robot=None) -> Problem:
     sample_like_sphere = prob.get("sample_like_sphere")
     if sample_like_sphere is not None and not isinstance(sample_like_sphere, bool):
         raise _err(p, f"{prefix}sample_like_sphere", "must be true or false")
-
     env = doc.get("environment", {})
     if not isinstance(env, dict):
         raise _err(p, "environment", "must be a table")
     _unknown(env, _ENV_KEYS, "environment.", p)
+    return Problem(
+        robot=robot,
+        start=configs["start"],
+        goal=configs["goal"],
+        start_displacements=disp["start"],
+        goal_displacements=disp["goal"],
+        min_tension_change=changes["min_tension_change"],
+        min_rotation_change=changes["min_rotation_change"],
+        min_retraction_change=changes["min_retraction_change"],
+        meshes=_meshes(env, p),
+        spheres=_spheres(env, p),
+        points=_points(env, p),
+        voxel_environment=_voxel_environment(doc, p),
+        sample_like_sphere=sample_like_sphere,
+        path=p.resolve(),
+    )
+
+
+def _read_toml(p: Path) -> dict:
+    from riskplan.robots.description import read_robot_text
+
+    try:
+        return tomllib.loads(read_robot_text(p))
+    except tomllib.TOMLDecodeError as exc:
+        raise ProblemFileError(f"{p}: not valid TOML ({exc})") from exc
+
+
+def _problem_robot(p: Path, robot):
+    """The file's own robot, or ``robot`` (loaded if a name or path)."""
+    from riskplan.robots import TendonRobot, load_robot
+
+    if robot is None:
+        try:
+            return load_robot(p)
+        except RobotDescriptionError as exc:
+            raise ProblemFileError(f"{p}: {exc}", key=exc.key) from None
+    return robot if isinstance(robot, TendonRobot) else load_robot(robot)
+
+
+def _problem_table(doc: dict, p: Path) -> tuple[dict, str]:
+    """The problem's keys and the prefix their errors carry (``"problem."``, or ``""`` for
+    the lab's nested layout, which keeps them at the top level)."""
+    if "problem" not in doc:
+        return {k: doc[k] for k in _PROBLEM_KEYS if k in doc}, ""
+    prob = doc["problem"]
+    if not isinstance(prob, dict):
+        raise _err(p, "problem", "must be a table")
+    _unknown(prob, _PROBLEM_KEYS, "problem.", p)
+    return prob, "problem."
+
+
+def _end_configuration(prob, end: str, prefix: str, p, robot) -> tuple[np.ndarray, np.ndarray]:
+    """The start or goal (``end``) as a configuration ``(n_config,)`` (tensions, then the
+    base motion) and displacements ``(m,)``, from the tensions or the displacements given,
+    converted through the robot model and checked against the robot's limits."""
+    m = robot.n_tendons
+    given = [k for k in (end, f"{end}_displacements") if k in prob]
+    if len(given) != 1:
+        raise _err(
+            p,
+            f"{prefix}{end}",
+            f"give exactly one of '{end}' (tensions, N) and '{end}_displacements' (m)"
+            + (", got both" if len(given) == 2 else ""),
+        )
+    vec = _vector(prob, given[0], prefix, p, m)
+    extra = _base_motion(prob, end, prefix, p, robot.base_motion)
+    ret = extra[-1] if robot.base_motion.retraction else None
+    if given[0] == end:
+        tmax = robot.tension_limits
+        for j in range(m):
+            if not 0.0 <= vec[j] <= tmax[j]:
+                raise _err(
+                    p,
+                    f"{prefix}{end}[{j}]",
+                    f"{vec[j]} N is outside the tension limits [0, {tmax[j]:g}] N "
+                    f"(max_tension of tendon {j})",
+                )
+        return np.concatenate([vec, extra]), robot.displacements_for_tensions(vec, retraction=ret)
+    lim = robot.displacement_limits
+    for j in range(m):
+        if not lim[j, 0] <= vec[j] <= lim[j, 1]:
+            raise _err(
+                p,
+                f"{prefix}{end}_displacements[{j}]",
+                f"{vec[j]} m is outside the displacement limits [{lim[j, 0]:g}, {lim[j, 1]:g}] m",
+            )
+    tau = robot.tensions_for_displacements(vec, retraction=ret)
+    over = np.flatnonzero(tau > robot.tension_limits * (1 + 1e-9))
+    if over.size:
+        j = int(over[0])
+        raise _err(
+            p,
+            f"{prefix}{end}_displacements[{j}]",
+            f"needs {tau[j]:.4g} N on tendon {j}, above its max_tension "
+            f"{robot.tension_limits[j]:g} N",
+        )
+    return np.concatenate([tau, extra]), vec
+
+
+def _base_motion(prob, end: str, prefix: str, p, bm) -> list[float]:
+    """``end``'s base rotation (rad) and retraction (m), those the robot enables, in that
+    order; required where enabled, refused (unless zero) where not."""
+    extra = []
+    for var, enabled, lim, unit in (
+        ("rotation", bm.rotation, bm.rotation_limits, "rad"),
+        ("retraction", bm.retraction, bm.retraction_limits, "m"),
+    ):
+        key = f"{end}_{var}"
+        if not enabled:
+            if key in prob and float(prob[key]) != 0.0:
+                raise _err(p, f"{prefix}{key}", f"the robot has no base {var}")
+            continue
+        if key not in prob:
+            raise _err(p, f"{prefix}{key}", f"required: the robot enables base {var}")
+        v = _number(prob, key, prefix, p)
+        if not lim[0] <= v <= lim[1]:
+            raise _err(
+                p, f"{prefix}{key}", f"{v} {unit} is outside the limits [{lim[0]:g}, {lim[1]:g}]"
+            )
+        extra.append(v)
+    return extra
+
+
+def _meshes(env: dict, p: Path) -> tuple[Path, ...]:
+    """``[[environment.meshes]]``: existing files, relative to the problem file."""
     meshes = []
     for k, t in enumerate(env.get("meshes", [])):
         key = f"environment.meshes[{k}]"
@@ -489,6 +412,11 @@ def load_problem(path, *, robot=None) -> Problem:
         if not mp.is_file():
             raise _err(p, f"{key}.filename", f"no such file: {mp}")
         meshes.append(mp.resolve())
+    return tuple(meshes)
+
+
+def _spheres(env: dict, p: Path) -> tuple[Sphere, ...]:
+    """``[[environment.spheres]]``: centre (m) and a positive radius (m)."""
     spheres = []
     for k, t in enumerate(env.get("spheres", [])):
         key = f"environment.spheres[{k}]"
@@ -504,6 +432,11 @@ def load_problem(path, *, robot=None) -> Problem:
         if not r > 0:
             raise _err(p, f"{key}.radius", f"expected > 0, got {r}")
         spheres.append(Sphere(tuple(float(v) for v in c), r))
+    return tuple(spheres)
+
+
+def _points(env: dict, p: Path) -> np.ndarray:
+    """``[[environment.points]]``: obstacle points ``(n, 3)`` (m)."""
     pts = []
     for k, t in enumerate(env.get("points", [])):
         key = f"environment.points[{k}]"
@@ -511,55 +444,38 @@ def load_problem(path, *, robot=None) -> Problem:
             raise _err(p, key, "expected a table with 'point'")
         _unknown(t, {"point"}, f"{key}.", p)
         pts.append(_vector(t, "point", f"{key}.", p, 3))
+    return np.array(pts, dtype=np.float64).reshape(-1, 3)
 
-    voxel = None
-    if "voxel_environment" in doc:
-        v = doc["voxel_environment"]
-        if not isinstance(v, dict):
-            raise _err(p, "voxel_environment", "must be a table")
-        _unknown(v, _VOXEL_KEYS, "voxel_environment.", p)
-        files = {}
-        for k in ("filename", "interior_filename"):
-            if k in v:
-                if not isinstance(v[k], str):
-                    raise _err(p, f"voxel_environment.{k}", "expected a file name (string)")
-                f = Path(v[k])
-                files[k] = (f if f.is_absolute() else (p.parent / f)).resolve()
-        if "filename" not in files:
-            raise _err(
-                p, "voxel_environment.filename", "missing (voxels stored inline are not read)"
-            )
-        q = (
-            _vector(v, "rotation_quat", "voxel_environment.", p, 4)
-            if "rotation_quat" in v
-            else None
-        )
-        if q is not None and np.linalg.norm(q) < 1e-12:
-            raise _err(p, "voxel_environment.rotation_quat", "must be non-zero")
-        tr = _vector(v, "translation", "voxel_environment.", p, 3) if "translation" in v else None
-        scaling = _number(v, "scaling", "voxel_environment.", p, default=1.0)
-        if not scaling > 0:
-            raise _err(p, "voxel_environment.scaling", f"expected > 0, got {scaling}")
-        voxel = VoxelEnvironment(
-            files["filename"],
-            scaling,
-            tuple(float(x) for x in (tr if tr is not None else (0.0, 0.0, 0.0))),
-            tuple(float(x) for x in (q if q is not None else (1.0, 0.0, 0.0, 0.0))),
-            files.get("interior_filename"),
-        )
-    return Problem(
-        robot=robot,
-        start=configs["start"],
-        goal=configs["goal"],
-        start_displacements=disp["start"],
-        goal_displacements=disp["goal"],
-        min_tension_change=changes["min_tension_change"],
-        min_rotation_change=changes["min_rotation_change"],
-        min_retraction_change=changes["min_retraction_change"],
-        meshes=tuple(meshes),
-        spheres=tuple(spheres),
-        points=np.array(pts, dtype=np.float64).reshape(-1, 3),
-        voxel_environment=voxel,
-        sample_like_sphere=sample_like_sphere,
-        path=p.resolve(),
+
+def _voxel_environment(doc: dict, p: Path) -> VoxelEnvironment | None:
+    """``[voxel_environment]``: the voxel file(s), relative to the problem file, and their
+    placement (scaling, translation in m, rotation quaternion)."""
+    if "voxel_environment" not in doc:
+        return None
+    v = doc["voxel_environment"]
+    if not isinstance(v, dict):
+        raise _err(p, "voxel_environment", "must be a table")
+    _unknown(v, _VOXEL_KEYS, "voxel_environment.", p)
+    files = {}
+    for k in ("filename", "interior_filename"):
+        if k in v:
+            if not isinstance(v[k], str):
+                raise _err(p, f"voxel_environment.{k}", "expected a file name (string)")
+            f = Path(v[k])
+            files[k] = (f if f.is_absolute() else (p.parent / f)).resolve()
+    if "filename" not in files:
+        raise _err(p, "voxel_environment.filename", "missing (voxels stored inline are not read)")
+    q = _vector(v, "rotation_quat", "voxel_environment.", p, 4) if "rotation_quat" in v else None
+    if q is not None and np.linalg.norm(q) < 1e-12:
+        raise _err(p, "voxel_environment.rotation_quat", "must be non-zero")
+    tr = _vector(v, "translation", "voxel_environment.", p, 3) if "translation" in v else None
+    scaling = _number(v, "scaling", "voxel_environment.", p, default=1.0)
+    if not scaling > 0:
+        raise _err(p, "voxel_environment.scaling", f"expected > 0, got {scaling}")
+    return VoxelEnvironment(
+        files["filename"],
+        scaling,
+        tuple(float(x) for x in (tr if tr is not None else (0.0, 0.0, 0.0))),
+        tuple(float(x) for x in (q if q is not None else (1.0, 0.0, 0.0, 0.0))),
+        files.get("interior_filename"),
     )

@@ -169,10 +169,10 @@ def check_plan_budget(
     work, naming the option: the roadmap (``--milestones``; its motion checks at
     ``--resolution``, a motion about the typical neighbour distance ``diag / n^(1/m)`` long),
     the trajectory (``--step``; estimated for a path across the displacement box's diagonal),
-    the optimiser (:func:`~riskplan.planning.bo.check_optimiser_budget`) and the validation
+    the optimiser (:func:`~riskplan.planning.bo_checks.check_optimiser_budget`) and the validation
     (``--executions`` of the nominal and the optimised trajectory on the robot)."""
     from riskplan.budget import check_budget
-    from riskplan.planning.bo import MOTION_STATE_BYTES, check_optimiser_budget
+    from riskplan.planning.bo_checks import MOTION_STATE_BYTES, check_optimiser_budget
 
     lim = np.asarray(limits, dtype=np.float64)
     m = lim.shape[0]
@@ -226,31 +226,144 @@ def plan_robot(
     optimise_progress=None,
     risk_progress=None,
 ) -> RobotPlan:
-    """Plan a nominal trajectory with a PRM and lower its eq.-10 bound (MDN paper section V).
+    r"""Plan a nominal trajectory with a PRM and lower its eq.-10 bound (MDN paper section V).
+
+    A roadmap over the valid configurations, the shortest path from start to goal (and, asked
+    for, the least-risk one), the nominal trajectory at ``step``, and the optimisation of its
+    bound (:func:`~riskplan.planning.optimise_trajectory`). Eq. 9 bounds each configuration's
+    collision probability :math:`p_t`, eq. 10 the trajectory's,
+    :math:`P = 1 - \prod_t (1 - p_t)`. Raises :class:`InvalidInputError` for malformed or
+    invalid inputs before any work, :class:`~riskplan.errors.PlanningError` when no path or
+    goal is found.
 
     Parameters
     ----------
-    model: an :class:`~riskplan.kinematics.MDNModel` (inputs ``(n,)``, see the module docs).
-    environment: an :class:`~riskplan.collision.Environment` or :class:`WallEnvironment`,
-        robot base frame.
-    start, goal: ``(n,)`` model inputs; start default: zeros clipped to the box. Exactly one
-        of ``goal`` and ``goal_tip`` (a ``(3,)`` base-frame tip target, reached within
-        ``tip_tolerance``).
-    box: ``(n, 2)`` box to search (default the model's limits), within the model's limits.
-    weights: ``(n,)`` planning weights (default :func:`configuration_weights` of the model's
-        robot).
-    step, resolution: trajectory step and motion-check spacing, planning coordinates.
-    least_risk: also search the roadmap for the least-risk path (edge cost ``-log(1 - p)``).
-    risk: the per-configuration risk optimised, ``"eq9"`` (the paper's bound, the default),
-        ``"cloud"`` (:class:`~riskplan.planning.risk.CloudRiskBound`, body contact) or
-        ``"bodies"`` (:class:`~riskplan.planning.risk.SampledBodyRisk`, body contact over
-        sampled executions; needs the model's robot); combined along the trajectory by eq. 10
-        either way.
+    model : MDNModel
+        The learned kinematics (inputs ``(n,)``, see the module docs).
+    environment : Environment or WallEnvironment
+        Obstacles in the robot base frame (m).
+    start, goal : array_like, shape (n,), optional
+        Model inputs; start default zeros clipped to the box. Give exactly one of ``goal``
+        and ``goal_tip`` (a ``(3,)`` base-frame tip target, m, reached within
+        ``tip_tolerance`` m).
+    goal_tip, tip_tolerance
+        See ``goal``.
+    box : array_like, shape (n, 2), optional
+        The box to search (default the model's limits), within the model's limits.
+    weights : array_like, shape (n,), optional
+        Planning weights (default :func:`configuration_weights` of the model's robot).
+    n_milestones, seed : int
+        Roadmap milestones; seed of the roadmap, the goal search and the optimiser.
+    step, resolution : float
+        Trajectory step and motion-check spacing, planning coordinates.
+    optimiser : OptimiserConfig, optional
+        The optimiser's settings; ``checkpoint`` (a JSON file) and ``resume`` are its own.
+    checkpoint, resume
+        See ``optimiser``.
+    least_risk : bool
+        Also search the roadmap for the least-risk path (edge cost ``-log(1 - p)``).
+    risk : {"eq9", "cloud", "bodies"}
+        The per-configuration risk optimised: the paper's bound, or body contact
+        (:class:`~riskplan.planning.risk.CloudRiskBound`,
+        :class:`~riskplan.planning.risk.SampledBodyRisk`).
+    roadmap_progress, optimise_progress, risk_progress : callable, optional
+        Progress callbacks of the three stages.
 
-    Eq. 9 per configuration ``p_t``, eq. 10 ``P = 1 - prod_t (1 - p_t)``. Raises
-    :class:`InvalidInputError` for malformed or invalid inputs before any work,
-    :class:`~riskplan.errors.PlanningError` when no path or goal is found.
+    Returns
+    -------
+    RobotPlan
+        Roadmap, path and nominal trajectory ``(T, n)`` (model inputs) with their bounds, the
+        optimisation result, timings (s), settings.
     """
+    optimiser, box, weights = _check_plan_arguments(
+        model, box, weights, goal, goal_tip, risk, step, resolution, tip_tolerance, optimiser,
+        n_milestones,
+    )  # fmt: skip
+    scaled = ScaledModel(model, weights, box)
+    start, goal, validity = _check_ends(scaled, environment, start, goal)
+    timings = {}
+    t = time.perf_counter()
+    roadmap = build_roadmap(
+        validity, n_milestones=n_milestones, seed=seed, resolution=resolution,
+        progress=roadmap_progress,
+    )  # fmt: skip
+    timings["roadmap_s"] = time.perf_counter() - t
+    ys = scaled.to_planning(start)
+    if goal is None:
+        goal_tip = as_array(goal_tip, "goal_tip", shape=(3,))
+        yg = goal_from_tip(roadmap, scaled, goal_tip, tolerance=tip_tolerance, seed=seed)
+        goal = scaled.to_model(yg)
+    else:
+        yg = scaled.to_planning(goal)
+    bound = make_risk(risk, scaled, environment)
+    t = time.perf_counter()
+    paths, path, nominal, nominal_bound, nominal_bounds = _nominal(
+        roadmap, bound, scaled, ys, yg, step, least_risk, risk_progress
+    )
+    timings["query_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    res = _optimise(
+        nominal, nominal_bounds, bound, validity, optimiser, seed, checkpoint, resume,
+        optimise_progress,
+    )  # fmt: skip
+    timings["optimise_s"] = time.perf_counter() - t
+    res = dataclasses.replace(res, trajectory=scaled.to_model(res.trajectory))
+    settings = _plan_settings(
+        roadmap, optimiser, n_milestones, step, resolution, seed, tip_tolerance, risk, weights, box
+    )
+    tip = None if goal_tip is None else np.asarray(goal_tip, dtype=np.float64)
+    return RobotPlan(
+        roadmap, start, goal, tip, scaled.to_model(path), scaled.to_model(nominal),
+        nominal_bounds, nominal_bound, res, paths, timings, settings, weights,
+    )  # fmt: skip
+
+
+def _nominal(roadmap, bound, scaled, ys, yg, step, least_risk, progress):
+    """The shortest path from ``ys`` to ``yg`` (with the least-risk comparison, asked for, in
+    model inputs) and the nominal trajectory at ``step`` with its bounds (eq. 10, eq. 9 per
+    configuration); planning coordinates."""
+    paths = None
+    if least_risk:
+        paths = compare_paths(roadmap, bound, ys, yg, step=step, progress=progress)
+        path = paths["shortest"]["path"]
+    else:
+        path = roadmap.shortest_path(ys, yg)
+    nominal = interpolate_path(path, step)
+    nominal_bound, nominal_bounds = trajectory_risk(bound, nominal)
+    for v in (paths or {}).values():
+        v["path"] = scaled.to_model(v["path"])
+        v["trajectory"] = scaled.to_model(v["trajectory"])
+    return paths, path, nominal, nominal_bound, nominal_bounds
+
+
+def _optimise(
+    nominal, nominal_bounds, bound, validity, optimiser, seed, checkpoint, resume, progress
+) -> OptimisationResult:
+    """The nominal trajectory's bound lowered (:func:`optimise_trajectory`), planning
+    coordinates."""
+    # a configuration's eq.-9 bound may be exactly 1 (a mean touching a surface): the optimiser's
+    # log1p(-p) is then -inf, exactly what eq. 10 needs, not an error
+    with np.errstate(divide="ignore"):
+        return optimise_trajectory(
+            nominal,
+            bound,
+            validity,
+            validity.limits,
+            config=optimiser,
+            seed=seed,
+            bounds=nominal_bounds,
+            checkpoint=checkpoint,
+            resume=resume,
+            progress=progress,
+        )
+
+
+def _check_plan_arguments(
+    model, box, weights, goal, goal_tip, risk, step, resolution, tip_tolerance, optimiser,
+    n_milestones,
+):  # fmt: skip
+    """``plan_robot``'s settings checked before any work, its budget included: (optimiser,
+    box ``(n, 2)`` within the model's limits, weights ``(n,)`` > 0)."""
     optimiser = optimiser or OptimiserConfig()
     optimiser.validate()
     if risk not in RISKS:
@@ -287,7 +400,14 @@ def plan_robot(
         resolution=resolution,
         optimiser=optimiser,
     )
-    scaled = ScaledModel(model, weights, box)
+    return optimiser, box, weights
+
+
+def _check_ends(scaled: ScaledModel, environment, start, goal):
+    """Start (default: zeros clipped to the box) and goal ``(n,)`` (None when a tip target
+    is given), inside the box and valid, and the validity check."""
+    box = scaled.box
+    n = box.shape[0]
     if start is None:
         start = np.clip(np.zeros(n), box[:, 0], box[:, 1])
     start = as_array(start, "start", shape=(n,))
@@ -305,57 +425,13 @@ def plan_robot(
             raise InvalidInputError(
                 f"{name}: configuration {c.tolist()} is invalid (a component mean of its predicted mixture lies inside an obstacle)"
             )
+    return start, goal, validity
 
-    timings = {}
-    t = time.perf_counter()
-    roadmap = build_roadmap(
-        validity,
-        n_milestones=n_milestones,
-        seed=seed,
-        resolution=resolution,
-        progress=roadmap_progress,
-    )
-    timings["roadmap_s"] = time.perf_counter() - t
-    ys = scaled.to_planning(start)
-    if goal is None:
-        goal_tip = as_array(goal_tip, "goal_tip", shape=(3,))
-        yg = goal_from_tip(roadmap, scaled, goal_tip, tolerance=tip_tolerance, seed=seed)
-        goal = scaled.to_model(yg)
-    else:
-        yg = scaled.to_planning(goal)
-    bound = make_risk(risk, scaled, environment)
-    t = time.perf_counter()
-    paths = None
-    if least_risk:
-        paths = compare_paths(roadmap, bound, ys, yg, step=step, progress=risk_progress)
-        path = paths["shortest"]["path"]
-    else:
-        path = roadmap.shortest_path(ys, yg)
-    nominal = interpolate_path(path, step)
-    nominal_bound, nominal_bounds = trajectory_risk(bound, nominal)
-    timings["query_s"] = time.perf_counter() - t
-    t = time.perf_counter()
-    # a configuration's eq.-9 bound may be exactly 1 (a mean touching a surface): the optimiser's
-    # log1p(-p) is then -inf, exactly what eq. 10 needs, not an error
-    with np.errstate(divide="ignore"):
-        res = optimise_trajectory(
-            nominal,
-            bound,
-            validity,
-            scaled.limits,
-            config=optimiser,
-            seed=seed,
-            bounds=nominal_bounds,
-            checkpoint=checkpoint,
-            resume=resume,
-            progress=optimise_progress,
-        )
-    timings["optimise_s"] = time.perf_counter() - t
-    res = dataclasses.replace(res, trajectory=scaled.to_model(res.trajectory))
-    if paths is not None:
-        for v in paths.values():
-            v["path"] = scaled.to_model(v["path"])
-            v["trajectory"] = scaled.to_model(v["trajectory"])
+
+def _plan_settings(
+    roadmap, optimiser, n_milestones, step, resolution, seed, tip_tolerance, risk, weights, box
+) -> dict:
+    """The settings a plan records (those that decide its result)."""
     settings = {
         "n_milestones": int(n_milestones),
         "step": step,
@@ -372,18 +448,4 @@ def plan_robot(
     if np.any(weights != 1.0):
         settings["weights"] = weights.tolist()
         settings["box"] = box.tolist()
-    return RobotPlan(
-        roadmap,
-        start,
-        goal,
-        None if goal_tip is None else np.asarray(goal_tip, dtype=np.float64),
-        scaled.to_model(path),
-        scaled.to_model(nominal),
-        nominal_bounds,
-        nominal_bound,
-        res,
-        paths,
-        timings,
-        settings,
-        weights,
-    )
+    return settings

@@ -422,38 +422,50 @@ def validation_table(
     backend: str = "local",
     workers: int | None = None,
 ) -> list[dict]:
-    """The "does it hold on the robot?" rows: one per named trajectory (e.g. ``{"nominal": ...,
-    "optimised": ...}``).
+    """The "does it hold on the robot?" rows: one per named trajectory.
 
-    Each row: ``name``, ``T``, ``bound`` (eq. 10 over eq. 9, the planner's objective),
-    ``bound_union`` (eq. 10 over the any-component variant of eq. 9, which ignores the weights:
-    a bound on *some* part of the body colliding, the event the robot Monte Carlo counts, whereas
-    eq. 9 bounds the probability that *a random surface point* of the body collides),
-    ``max_config_bound`` (largest eq.-9 term), ``mixture_mc`` / ``mixture_low`` / ``mixture_high``
-    (:func:`mixture_monte_carlo`, ``n_mixture`` trials), ``robot_mc`` / ``robot_low`` /
-    ``robot_high`` / ``robot_hits`` / ``robot_per_config`` (:func:`execute_on_robot`, ``n_robot``
-    executions, the conservative tube of ``radius``), the same with prefix ``robot_disks_`` for
-    the backbone-plus-disks body (``body="disks"``, the same executions; ``None`` for a
-    trajectory with base retraction, judged with the tube only), ``radius`` and ``n_robot``. Trajectories may be ``(T, n_config)`` configurations of a robot with base rotation/retraction. Every trajectory uses the same ``seed`` (common
-    random numbers: the same starts and transmission draws), which sharpens the comparison
-    between trajectories. ``robot`` defaults to the robot the model was trained for.
+    Every trajectory uses the same ``seed`` (common random numbers: the same starts and
+    transmission draws), which sharpens the comparison between trajectories. ``bound_union``
+    ignores the weights: it bounds *some* part of the body colliding, the event the robot
+    Monte Carlo counts, whereas eq. 9 bounds the probability that *a random surface point*
+    of the body collides.
+
+    Parameters
+    ----------
+    model : MDNModel
+        The learned kinematics the trajectories were planned with.
+    trajectories : dict
+        ``{name: (T, m) array}`` (e.g. ``"nominal"``, ``"optimised"``), tendon displacements
+        (m), or ``(T, n_config)`` configurations of a robot with base rotation/retraction.
+    environment : Environment
+        3-D obstacles in the robot's base frame.
+    robot : TendonRobot or str or path, optional
+        The robot executed (default the one the model was trained for).
+    n_robot : int
+        Robot executions per trajectory (:func:`execute_on_robot`).
+    n_mixture : int
+        Mixture Monte Carlo trials per trajectory (:func:`mixture_monte_carlo`).
+    seed : int
+        The common seed.
+    radius : float, optional
+        Radius of the conservative tube (m; :func:`execute_on_robot`).
+    backend, workers
+        :func:`riskplan.parallel.map_tasks`; the rows do not depend on them.
+
+    Returns
+    -------
+    list of dict
+        Per trajectory: ``name``, ``T``, ``bound`` (eq. 10 over eq. 9, the planner's
+        objective), ``bound_union`` (eq. 10 over the any-component variant of eq. 9),
+        ``max_config_bound`` (largest eq.-9 term), ``mixture_mc`` / ``mixture_low`` /
+        ``mixture_high``, ``robot_mc`` / ``robot_low`` / ``robot_high`` / ``robot_hits`` /
+        ``robot_per_config`` (the tube), the same with prefix ``robot_disks_`` for the
+        backbone-plus-disks body (``body="disks"``, the same executions; None for a
+        trajectory with base retraction), ``radius`` and ``n_robot``.
     """
-    from riskplan.robots import robot_from_toml
-
     if not isinstance(trajectories, dict) or not trajectories:
         raise InvalidInputError("trajectories: expected a non-empty dict {name: (T, m) array}")
-    if robot is None:
-        if not getattr(model, "robot_toml", ""):
-            raise InvalidInputError("robot: the model carries no robot description; pass robot=")
-        robot = robot_from_toml(model.robot_toml)
-    robot = _as_robot(robot)
-    # a model of a robot with base motion takes its configurations (tendons, rotation,
-    # retraction): its input count is the robot's n_config
-    if int(model.n_tendons) not in (robot.n_tendons, robot.n_config):
-        raise InvalidInputError(
-            f"model: has {model.n_tendons} inputs, robot {robot.name!r} has {robot.n_tendons} "
-            f"tendons ({robot.n_config} configuration variables)"
-        )
+    robot = _validation_robot(model, robot)
     rows = []
     for name, traj in trajectories.items():
         traj = _check_trajectory(traj, robot)
@@ -491,36 +503,43 @@ def validation_table(
                 "mixture_low": float(mix.trajectory.low),
                 "mixture_high": float(mix.trajectory.high),
                 "n_mixture": int(n_mixture),
-                "robot_mc": float(rob.trajectory.probability),
-                "robot_low": float(rob.trajectory.low),
-                "robot_high": float(rob.trajectory.high),
-                "robot_hits": int(rob.trajectory.hits),
-                "robot_per_config": rob.per_configuration.probability.tolist(),
-                **(
-                    {
-                        "robot_disks_mc": float(dsk.trajectory.probability),
-                        "robot_disks_low": float(dsk.trajectory.low),
-                        "robot_disks_high": float(dsk.trajectory.high),
-                        "robot_disks_hits": int(dsk.trajectory.hits),
-                        "robot_disks_per_config": dsk.per_configuration.probability.tolist(),
-                    }
-                    if dsk is not None
-                    else {
-                        k: None
-                        for k in (
-                            "robot_disks_mc",
-                            "robot_disks_low",
-                            "robot_disks_high",
-                            "robot_disks_hits",
-                            "robot_disks_per_config",
-                        )
-                    }
-                ),
+                **_execution_columns("robot", rob),
+                **_execution_columns("robot_disks", dsk),
                 "n_robot": int(n_robot),
                 "radius": rob.radius,
             }
         )
     return rows
+
+
+def _validation_robot(model, robot):
+    """The robot executed: ``robot``, or the model's own; its inputs must match the model's."""
+    from riskplan.robots import robot_from_toml
+
+    if robot is None:
+        if not getattr(model, "robot_toml", ""):
+            raise InvalidInputError("robot: the model carries no robot description; pass robot=")
+        robot = robot_from_toml(model.robot_toml)
+    robot = _as_robot(robot)
+    # a model of a robot with base motion takes its configurations (tendons, rotation,
+    # retraction): its input count is the robot's n_config
+    if int(model.n_tendons) not in (robot.n_tendons, robot.n_config):
+        raise InvalidInputError(
+            f"model: has {model.n_tendons} inputs, robot {robot.name!r} has {robot.n_tendons} "
+            f"tendons ({robot.n_config} configuration variables)"
+        )
+    return robot
+
+
+def _execution_columns(prefix: str, rob) -> dict:
+    """A validation row's columns of one robot Monte Carlo (None where it was not run)."""
+    keys = ("mc", "low", "high", "hits", "per_config")
+    if rob is None:
+        return {f"{prefix}_{k}": None for k in keys}
+    t = rob.trajectory
+    values = (float(t.probability), float(t.low), float(t.high), int(t.hits))
+    values += (rob.per_configuration.probability.tolist(),)
+    return {f"{prefix}_{k}": v for k, v in zip(keys, values)}
 
 
 def validation_markdown(rows: list[dict]) -> str:

@@ -221,13 +221,9 @@ def _jac_chol_slope(W, T, rt_all, drt_all, ddrt_all, node, kse, kbt, strain_row,
             x = _strains(W, strain_row, c)
             nw, t0, t1, t2 = unit_tangent(x, r, q)
             _jacobian_add_tendon(W, c, ti / nw, t0, t1, t2, r)
-            c0, c1, c2, c3, c4, c5 = tendon_slope_source(ti, nw, t0, t1, t2, x, r, q, dd)
-            W[slope_row + 0, c] -= c0
-            W[slope_row + 1, c] -= c1
-            W[slope_row + 2, c] -= c2
-            W[slope_row + 3, c] -= c3
-            W[slope_row + 4, c] -= c4
-            W[slope_row + 5, c] -= c5
+            src = tendon_slope_source(ti, nw, t0, t1, t2, x, r, q, dd)
+            for a in range(6):  # unrolled by LLVM (constant trip count and tuple index)
+                W[slope_row + a, c] -= src[a]
     for c in range(CHUNK):
         bad = packed_chol_factor6(W, c, JACOBIAN, FACTOR, True)
         W[FAILED, c] = 1.0 if bad else W[FAILED, c]

@@ -34,9 +34,9 @@ from riskplan.errors import RobotDescriptionError
 from riskplan.robots.params import (
     PROBLEM_TABLES,
     RobotParams,
-    _check_unknown,
     parse_robot_document,
 )
+from riskplan.robots.toml_fields import check_unknown_keys
 
 __all__ = [
     "BACKBONE_DEFAULTS",
@@ -96,17 +96,17 @@ def lab_robot_table(doc: dict) -> tuple[dict, str]:
     """``(table, prefix)``: the table holding ``backbone_specs``/``tendons`` and the key prefix
     (``""`` for the top-level layout, ``"robot."`` for the nested one). Checks top-level keys."""
     if isinstance(doc.get("robot"), dict) and "backbone_specs" in doc["robot"]:
-        _check_unknown(doc, {"robot"} | PROBLEM_TABLES | _NESTED_PROBLEM_KEYS, "")
+        check_unknown_keys(doc, {"robot"} | PROBLEM_TABLES | _NESTED_PROBLEM_KEYS, "")
         robot = doc["robot"]
-        _check_unknown(robot, _ROBOT_KEYS | {"backbone_specs", "tendons"}, "robot")
+        check_unknown_keys(robot, _ROBOT_KEYS | {"backbone_specs", "tendons"}, "robot")
         return robot, "robot."
-    _check_unknown(doc, {"backbone_specs", "tendon_robot", "tendons"} | PROBLEM_TABLES, "")
+    check_unknown_keys(doc, {"backbone_specs", "tendon_robot", "tendons"} | PROBLEM_TABLES, "")
     tr = doc.get("tendon_robot", {})
     if not isinstance(tr, dict):
         raise RobotDescriptionError(
             "robot description: 'tendon_robot' must be a table", key="tendon_robot"
         )
-    _check_unknown(tr, _ROBOT_KEYS, "tendon_robot")
+    check_unknown_keys(tr, _ROBOT_KEYS, "tendon_robot")
     merged = {**tr, "backbone_specs": doc.get("backbone_specs"), "tendons": doc.get("tendons")}
     return merged, ""
 
@@ -121,7 +121,7 @@ def parse_lab_document(doc: dict, *, default_name: str = "robot") -> RobotParams
             f"robot description: missing table '[{prefix}backbone_specs]'",
             key=f"{prefix}backbone_specs",
         )
-    _check_unknown(bb, _BACKBONE_KEYS, f"{prefix}backbone_specs")
+    check_unknown_keys(bb, _BACKBONE_KEYS, f"{prefix}backbone_specs")
     bbd = {**BACKBONE_DEFAULTS, **bb}
     native_bb = {}
     rename = {}  # native key -> lab key, for error messages
@@ -147,7 +147,7 @@ def parse_lab_document(doc: dict, *, default_name: str = "robot") -> RobotParams
         path = f"{prefix}tendons[{i}]"
         if not isinstance(t, dict):
             raise RobotDescriptionError(f"robot description: '{path}' must be a table", key=path)
-        _check_unknown(t, _TENDON_KEYS, path)
+        check_unknown_keys(t, _TENDON_KEYS, path)
         td = {**TENDON_DEFAULTS, **t}
         nt = {"name": f"tendon-{i}"}
         for lab, nat in (("C", "theta"), ("D", "radius"), ("max_tension", "max_tension")):

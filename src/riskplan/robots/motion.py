@@ -21,14 +21,44 @@ from riskplan.robots.shape import RodShape, rotation_z, shift_polynomial
 
 __all__ = [
     "check_base_motion",
+    "configuration_limits",
     "configuration_to_displacements",
     "configuration_to_tensions",
     "interpolate_configurations",
     "retracted",
     "solve_moved",
+    "split_configuration",
     "with_base_pose",
     "with_gravity",
 ]
+
+
+def configuration_limits(robot) -> np.ndarray:
+    """``(n_config, 2)`` ``[low, high]``: tendon displacements [m], then rotation [rad] and
+    retraction [m] where enabled (the lab's configuration order)."""
+    rows = [robot.displacement_limits]
+    bm = robot.base_motion
+    if bm.rotation:
+        rows.append(np.array([bm.rotation_limits]))
+    if bm.retraction:
+        rows.append(np.array([bm.retraction_limits]))
+    return np.concatenate(rows, axis=0)
+
+
+def split_configuration(robot, q, validate: bool = True):
+    """``(tendon part (..., m), rotation (...) or None, retraction (...) or None)`` of
+    configurations ``q (..., n_config)`` in the lab's order (tendons, rotation, retraction)."""
+    q = as_array(q, "configuration", min_ndim=1) if validate else np.asarray(q, dtype=float)
+    if q.shape[-1] != robot.n_config:
+        raise InvalidInputError(
+            f"configuration: expected last dimension {robot.n_config} ({robot.n_tendons} tendons"
+            f"{' + rotation' if robot.base_motion.rotation else ''}"
+            f"{' + retraction' if robot.base_motion.retraction else ''}), got shape {q.shape}"
+        )
+    m = robot.n_tendons
+    rot = q[..., m] if robot.base_motion.rotation else None
+    ret = q[..., -1] if robot.base_motion.retraction else None
+    return q[..., :m], rot, ret
 
 
 def with_base_pose(robot, position=(0.0, 0.0, 0.0), *, rotation=None, rpy=None, quaternion=None):

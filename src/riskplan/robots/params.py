@@ -13,9 +13,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from riskplan._validation import check_count
 from riskplan.errors import RobotDescriptionError
 from riskplan.robots.pose import BasePose, quaternion_to_matrix
+from riskplan.robots.toml_fields import (
+    check_unknown_keys,
+    field_integer,
+    field_number,
+    field_table,
+    field_vector,
+    suggest_key,
+)
 
 __all__ = [
     "Backbone",
@@ -187,109 +194,6 @@ def rpy_to_matrix(rpy) -> np.ndarray:
     return Rz @ Ry @ Rx
 
 
-# ---------------------------------------------------------------- parsing helpers
-def _num(
-    table: dict, key: str, path: str, *, default=None, positive=False, nonneg=False, allow_inf=False
-) -> float:
-    full = f"{path}.{key}" if path else key
-    if key not in table:
-        if default is None:
-            raise RobotDescriptionError(f"robot description: missing key '{full}'", key=full)
-        return float(default)
-    val = table[key]
-    if isinstance(val, bool) or not isinstance(val, (int, float)):
-        raise RobotDescriptionError(
-            f"robot description: '{full}' must be a number, got {val!r}", key=full
-        )
-    val = float(val)
-    if math.isnan(val) or (math.isinf(val) and not allow_inf):
-        raise RobotDescriptionError(
-            f"robot description: '{full}' must be finite, got {val}", key=full
-        )
-    if positive and not val > 0:
-        raise RobotDescriptionError(f"robot description: '{full}' must be > 0, got {val}", key=full)
-    if nonneg and not val >= 0:
-        raise RobotDescriptionError(
-            f"robot description: '{full}' must be >= 0, got {val}", key=full
-        )
-    return val
-
-
-def _vec(table: dict, key: str, path: str, n: int | None, *, default=None) -> tuple[float, ...]:
-    full = f"{path}.{key}" if path else key
-    if key not in table:
-        if default is None:
-            raise RobotDescriptionError(f"robot description: missing key '{full}'", key=full)
-        return tuple(float(v) for v in default)
-    val = table[key]
-    if not isinstance(val, list) or not all(
-        isinstance(v, (int, float)) and not isinstance(v, bool) for v in val
-    ):
-        raise RobotDescriptionError(
-            f"robot description: '{full}' must be a list of numbers, got {val!r}", key=full
-        )
-    if n is not None and len(val) != n:
-        raise RobotDescriptionError(
-            f"robot description: '{full}' must have {n} entries, got {len(val)}", key=full
-        )
-    if n is None and len(val) == 0:
-        raise RobotDescriptionError(f"robot description: '{full}' must not be empty", key=full)
-    out = tuple(float(v) for v in val)
-    if not all(math.isfinite(v) for v in out):
-        raise RobotDescriptionError(
-            f"robot description: '{full}' must be finite, got {val!r}", key=full
-        )
-    return out
-
-
-def _integer(value, key: str, low: int, high: int) -> int:
-    """``value`` of ``key`` as an ``int`` in ``[low, high]``, else
-    :class:`RobotDescriptionError` naming the key."""
-    return check_count(
-        value,
-        f"robot description: {key!r}",
-        low,
-        maximum=high,
-        error=lambda msg: RobotDescriptionError(msg, key=key),
-    )
-
-
-def _table(doc: dict, key: str, *, required=True) -> dict:
-    if key not in doc:
-        if required:
-            raise RobotDescriptionError(f"robot description: missing table '[{key}]'", key=key)
-        return {}
-    t = doc[key]
-    if not isinstance(t, dict):
-        raise RobotDescriptionError(f"robot description: '{key}' must be a table", key=key)
-    return t
-
-
-def suggest_key(key: str, known) -> str:
-    """``" (did you mean 'x'?)"`` naming the known key closest to ``key``, or ``""``.
-
-    Closeness is :func:`difflib.get_close_matches` on the lower-cased names (cut-off 0.6),
-    falling back to a known key that contains ``key`` or is contained in it.
-    """
-    import difflib
-
-    known = sorted(known)
-    lower = {k.lower(): k for k in known}
-    hits = difflib.get_close_matches(key.lower(), list(lower), n=1, cutoff=0.6)
-    if not hits:
-        hits = [k for k in lower if key.lower() in k or (k in key.lower() and len(k) > 2)]
-    return f" (did you mean '{lower[hits[0]]}'?)" if hits else ""
-
-
-def _check_unknown(table: dict, allowed: set[str], path: str, *, what="robot description") -> None:
-    for k in table:
-        if k not in allowed:
-            full = f"{path}.{k}" if path else k
-            raise RobotDescriptionError(
-                f"{what}: unknown key '{full}'{suggest_key(k, allowed)}", key=full
-            )
-
-
 #: top-level tables of a problem file that a robot reader skips (riskplan.planning.problem reads them)
 PROBLEM_TABLES = frozenset({"problem", "environment", "voxel_environment"})
 NATIVE_KEYS = frozenset(
@@ -313,15 +217,44 @@ def parse_robot_document(doc: dict, *, default_name: str = "robot") -> RobotPara
     The tables of a problem file (``[problem]``, ``[environment]``, ``[voxel_environment]``)
     are skipped. Raises :class:`RobotDescriptionError` naming the offending key.
     """
-    _check_unknown(doc, NATIVE_KEYS | PROBLEM_TABLES, "")
+    check_unknown_keys(doc, NATIVE_KEYS | PROBLEM_TABLES, "")
     name = doc.get("name", default_name)
     if not isinstance(name, str) or not name:
         raise RobotDescriptionError(
             "robot description: 'name' must be a non-empty string", key="name"
         )
+    backbone = _backbone(field_table(doc, "backbone"))
+    disks = _disks(field_table(doc, "disks", required=False), backbone)
+    tendons = _tendons(doc.get("tendons"), backbone.length)
+    g = field_table(doc, "gravity", required=False)
+    check_unknown_keys(g, {"enabled", "vector"}, "gravity")
+    enabled = g.get("enabled", False)
+    if not isinstance(enabled, bool):
+        raise RobotDescriptionError(
+            "robot description: 'gravity.enabled' must be true or false", key="gravity.enabled"
+        )
+    gravity = Gravity(enabled, field_vector(g, "vector", "gravity", 3, default=(0.0, 0.0, -9.81)))
+    base = _base_pose(field_table(doc, "base", required=False))
+    h = field_table(doc, "hysteresis", required=False)
+    check_unknown_keys(h, {"play", "play_variation", "offset_std"}, "hysteresis")
+    hyst = HysteresisParams(
+        field_number(h, "play", "hysteresis", default=0.0005, nonneg=True),
+        field_number(h, "play_variation", "hysteresis", default=0.2, nonneg=True),
+        field_number(h, "offset_std", "hysteresis", default=0.0001, nonneg=True),
+    )
+    motion = _base_motion(field_table(doc, "base_motion", required=False), backbone)
+    collision_radius = None
+    if "collision_radius" in doc:
+        collision_radius = field_number(doc, "collision_radius", "", positive=True)
+    return RobotParams(
+        name, backbone, disks, tuple(tendons), gravity, base, hyst, motion, collision_radius
+    )
 
-    b = _table(doc, "backbone")
-    _check_unknown(
+
+def _backbone(b: dict) -> Backbone:
+    """``[backbone]``: the rod's geometry and material (the shear modulus from Poisson's
+    ratio, 0.3 by default, unless given) and the integration step."""
+    check_unknown_keys(
         b,
         {
             "length",
@@ -335,32 +268,32 @@ def parse_robot_document(doc: dict, *, default_name: str = "robot") -> RobotPara
         },
         "backbone",
     )
-    length = _num(b, "length", "backbone", positive=True)
-    ro = _num(b, "outer_radius", "backbone", positive=True)
-    ri = _num(b, "inner_radius", "backbone", default=0.0, nonneg=True)
+    length = field_number(b, "length", "backbone", positive=True)
+    ro = field_number(b, "outer_radius", "backbone", positive=True)
+    ri = field_number(b, "inner_radius", "backbone", default=0.0, nonneg=True)
     if ri >= ro:
         raise RobotDescriptionError(
             f"robot description: 'backbone.inner_radius' ({ri}) must be < outer_radius ({ro})",
             key="backbone.inner_radius",
         )
-    E = _num(b, "youngs_modulus", "backbone", positive=True)
+    E = field_number(b, "youngs_modulus", "backbone", positive=True)
     if "shear_modulus" in b and "poisson_ratio" in b:
         raise RobotDescriptionError(
             "robot description: give either 'backbone.shear_modulus' or 'backbone.poisson_ratio', not both",
             key="backbone.shear_modulus",
         )
     if "shear_modulus" in b:
-        G = _num(b, "shear_modulus", "backbone", positive=True)
+        G = field_number(b, "shear_modulus", "backbone", positive=True)
     else:
-        nu = _num(b, "poisson_ratio", "backbone", default=0.3)
+        nu = field_number(b, "poisson_ratio", "backbone", default=0.3)
         if not -1.0 < nu < 0.5:
             raise RobotDescriptionError(
                 f"robot description: 'backbone.poisson_ratio' must lie in (-1, 0.5), got {nu}",
                 key="backbone.poisson_ratio",
             )
         G = E / (2.0 * (1.0 + nu))
-    density = _num(b, "density", "backbone", default=1000.0, nonneg=True)
-    step = _num(b, "step", "backbone", default=0.005, positive=True)
+    density = field_number(b, "density", "backbone", default=1000.0, nonneg=True)
+    step = field_number(b, "step", "backbone", default=0.005, positive=True)
     if step > length:
         raise RobotDescriptionError(
             f"robot description: 'backbone.step' ({step}) exceeds the length", key="backbone.step"
@@ -371,13 +304,16 @@ def parse_robot_document(doc: dict, *, default_name: str = "robot") -> RobotPara
             f"than the limit of {MAX_STEPS} (every solve integrates all of them; use a larger 'backbone.step' or a shorter length)",
             key="backbone.step",
         )
-    backbone = Backbone(length, ro, ri, E, G, density, step)
+    return Backbone(length, ro, ri, E, G, density, step)
 
-    d = _table(doc, "disks", required=False)
-    _check_unknown(d, {"count", "radius", "thickness", "density", "positions"}, "disks")
-    count = _integer(d.get("count", 0), "disks.count", 0, MAX_DISKS)
+
+def _disks(d: dict, backbone: Backbone) -> Disks:
+    """``[disks]``: count and positions (default: evenly spaced, the last at the tip)."""
+    length = backbone.length
+    check_unknown_keys(d, {"count", "radius", "thickness", "density", "positions"}, "disks")
+    count = field_integer(d.get("count", 0), "disks.count", 0, MAX_DISKS)
     if "positions" in d:
-        pos = _vec(d, "positions", "disks", count if count else None)
+        pos = field_vector(d, "positions", "disks", count if count else None)
         if count == 0:
             count = len(pos)
         if count > MAX_DISKS:
@@ -391,15 +327,20 @@ def parse_robot_document(doc: dict, *, default_name: str = "robot") -> RobotPara
         raise RobotDescriptionError(
             "robot description: 'disks.positions' must lie in [0, length]", key="disks.positions"
         )
-    disks = Disks(
+    return Disks(
         count,
-        _num(d, "radius", "disks", default=max(2 * ro, 0.01), positive=True),
-        _num(d, "thickness", "disks", default=0.002, nonneg=True),
-        _num(d, "density", "disks", default=0.0, nonneg=True),
+        field_number(
+            d, "radius", "disks", default=max(2 * backbone.outer_radius, 0.01), positive=True
+        ),
+        field_number(d, "thickness", "disks", default=0.002, nonneg=True),
+        field_number(d, "density", "disks", default=0.0, nonneg=True),
         pos,
     )
 
-    tl = doc.get("tendons")
+
+def _tendons(tl, length: float) -> list[Tendon]:
+    """``[[tendons]]``: routing polynomials ``theta(s)``, ``r(s) > 0`` on the backbone,
+    stiffness, displacement limits and maximal tension of each."""
     if not isinstance(tl, list) or len(tl) == 0:
         raise RobotDescriptionError(
             "robot description: at least one '[[tendons]]' entry is required", key="tendons"
@@ -414,7 +355,7 @@ def parse_robot_document(doc: dict, *, default_name: str = "robot") -> RobotPara
         path = f"tendons[{i}]"
         if not isinstance(t, dict):
             raise RobotDescriptionError(f"robot description: '{path}' must be a table", key=path)
-        _check_unknown(
+        check_unknown_keys(
             t, {"name", "theta", "radius", "stiffness", "displacement_limits", "max_tension"}, path
         )
         tname = t.get("name", f"tendon-{i}")
@@ -422,8 +363,8 @@ def parse_robot_document(doc: dict, *, default_name: str = "robot") -> RobotPara
             raise RobotDescriptionError(
                 f"robot description: '{path}.name' must be a string", key=f"{path}.name"
             )
-        theta = _vec(t, "theta", path, None)
-        radius = _vec(t, "radius", path, None)
+        theta = field_vector(t, "theta", path, None)
+        radius = field_vector(t, "radius", path, None)
         for key, poly in (("theta", theta), ("radius", radius)):
             if not 1 <= len(poly) <= MAX_POLY_TERMS:
                 raise RobotDescriptionError(
@@ -438,28 +379,23 @@ def parse_robot_document(doc: dict, *, default_name: str = "robot") -> RobotPara
                 f"robot description: '{path}.radius' gives r(s) <= 0 on [0, length]",
                 key=f"{path}.radius",
             )
-        k = _num(t, "stiffness", path, default=math.inf, positive=True, allow_inf=True)
-        lim = _vec(t, "displacement_limits", path, 2)
+        k = field_number(t, "stiffness", path, default=math.inf, positive=True, allow_inf=True)
+        lim = field_vector(t, "displacement_limits", path, 2)
         if not lim[0] < lim[1]:
             raise RobotDescriptionError(
                 f"robot description: '{path}.displacement_limits' needs low < high, got {lim}",
                 key=f"{path}.displacement_limits",
             )
-        tmax = _num(t, "max_tension", path, positive=True)
+        tmax = field_number(t, "max_tension", path, positive=True)
         tendons.append(Tendon(tname, theta, radius, k, (lim[0], lim[1]), tmax))
+    return tendons
 
-    g = _table(doc, "gravity", required=False)
-    _check_unknown(g, {"enabled", "vector"}, "gravity")
-    enabled = g.get("enabled", False)
-    if not isinstance(enabled, bool):
-        raise RobotDescriptionError(
-            "robot description: 'gravity.enabled' must be true or false", key="gravity.enabled"
-        )
-    gravity = Gravity(enabled, _vec(g, "vector", "gravity", 3, default=(0.0, 0.0, -9.81)))
 
-    bp = _table(doc, "base", required=False)
-    _check_unknown(bp, {"position", "rpy", "quaternion", "rotation"}, "base")
-    position = _vec(bp, "position", "base", 3, default=(0.0, 0.0, 0.0))
+def _base_pose(bp: dict) -> BasePose:
+    """``[base]``: position (m) and at most one of rpy (rad), a quaternion or a rotation
+    matrix (identity by default)."""
+    check_unknown_keys(bp, {"position", "rpy", "quaternion", "rotation"}, "base")
+    position = field_vector(bp, "position", "base", 3, default=(0.0, 0.0, 0.0))
     given = [k for k in ("rpy", "quaternion", "rotation") if k in bp]
     if len(given) > 1:
         raise RobotDescriptionError(
@@ -467,9 +403,9 @@ def parse_robot_document(doc: dict, *, default_name: str = "robot") -> RobotPara
             key=f"base.{given[1]}",
         )
     if "rpy" in bp:
-        Rm = rpy_to_matrix(_vec(bp, "rpy", "base", 3))
+        Rm = rpy_to_matrix(field_vector(bp, "rpy", "base", 3))
     elif "quaternion" in bp:
-        q = _vec(bp, "quaternion", "base", 4)
+        q = field_vector(bp, "quaternion", "base", 4)
         if np.linalg.norm(q) < 1e-12:
             raise RobotDescriptionError(
                 "robot description: 'base.quaternion' must be non-zero", key="base.quaternion"
@@ -481,24 +417,21 @@ def parse_robot_document(doc: dict, *, default_name: str = "robot") -> RobotPara
             raise RobotDescriptionError(
                 "robot description: 'base.rotation' must be a 3x3 list", key="base.rotation"
             )
-        Rm = np.array([_vec({"r": r}, "r", "base.rotation", 3) for r in rows])
+        Rm = np.array([field_vector({"r": r}, "r", "base.rotation", 3) for r in rows])
         if not np.allclose(Rm.T @ Rm, np.eye(3), atol=1e-6) or np.linalg.det(Rm) < 0:
             raise RobotDescriptionError(
                 "robot description: 'base.rotation' must be a rotation matrix", key="base.rotation"
             )
     else:
         Rm = np.eye(3)
-    base = BasePose(position, tuple(tuple(float(v) for v in row) for row in Rm))
+    return BasePose(position, tuple(tuple(float(v) for v in row) for row in Rm))
 
-    h = _table(doc, "hysteresis", required=False)
-    _check_unknown(h, {"play", "play_variation", "offset_std"}, "hysteresis")
-    hyst = HysteresisParams(
-        _num(h, "play", "hysteresis", default=0.0005, nonneg=True),
-        _num(h, "play_variation", "hysteresis", default=0.2, nonneg=True),
-        _num(h, "offset_std", "hysteresis", default=0.0001, nonneg=True),
-    )
-    bm = _table(doc, "base_motion", required=False)
-    _check_unknown(
+
+def _base_motion(bm: dict, backbone: Backbone) -> BaseMotion:
+    """``[base_motion]``: which base motions the robot has and their limits (retraction
+    keeps at least one integration step exposed)."""
+    length, step = backbone.length, backbone.step
+    check_unknown_keys(
         bm, {"rotation", "retraction", "rotation_limits", "retraction_limits"}, "base_motion"
     )
     flags = {}
@@ -509,8 +442,8 @@ def parse_robot_document(doc: dict, *, default_name: str = "robot") -> RobotPara
                 f"robot description: 'base_motion.{key}' must be true or false",
                 key=f"base_motion.{key}",
             )
-    rot_lim = _vec(bm, "rotation_limits", "base_motion", 2, default=(-math.pi, math.pi))
-    ret_lim = _vec(bm, "retraction_limits", "base_motion", 2, default=(0.0, length - step))
+    rot_lim = field_vector(bm, "rotation_limits", "base_motion", 2, default=(-math.pi, math.pi))
+    ret_lim = field_vector(bm, "retraction_limits", "base_motion", 2, default=(0.0, length - step))
     if not rot_lim[0] < rot_lim[1]:
         raise RobotDescriptionError(
             f"robot description: 'base_motion.rotation_limits' needs low < high, got {rot_lim}",
@@ -522,14 +455,8 @@ def parse_robot_document(doc: dict, *, default_name: str = "robot") -> RobotPara
             f"length - step = {length - step:g} m (at least one integration step stays exposed), got {ret_lim}",
             key="base_motion.retraction_limits",
         )
-    motion = BaseMotion(
+    return BaseMotion(
         flags["rotation"], flags["retraction"], (rot_lim[0], rot_lim[1]), (ret_lim[0], ret_lim[1])
-    )
-    collision_radius = None
-    if "collision_radius" in doc:
-        collision_radius = _num(doc, "collision_radius", "", positive=True)
-    return RobotParams(
-        name, backbone, disks, tuple(tendons), gravity, base, hyst, motion, collision_radius
     )
 
 
@@ -590,7 +517,19 @@ def params_to_dict(p: RobotParams) -> dict:
 
 
 def params_to_toml(p: RobotParams) -> str:
-    """TOML text of ``p`` (round-trips through :func:`~riskplan.robots.description.parse_robot_toml`)."""
+    """A robot description as a robot file.
+
+    Parameters
+    ----------
+    p : RobotParams
+        The description.
+
+    Returns
+    -------
+    str
+        TOML text that :func:`~riskplan.robots.description.parse_robot_toml` turns back into
+        ``p``.
+    """
     import tomli_w
 
     return tomli_w.dumps(params_to_dict(p))

@@ -14,9 +14,11 @@ from numba import njit
 
 from riskplan._validation import as_array, check_range
 from riskplan.errors import ConvergenceError, InvalidInputError
+from riskplan.robots import actuation as _actuation
 from riskplan.robots import cosserat
 from riskplan.robots import loaded as _loaded
 from riskplan.robots import motion as _motion
+from riskplan.robots.actuation import BATCH_KERNEL_MIN
 from riskplan.robots.loaded import SHOOT_MAXIT, SHOOT_TOL
 from riskplan.robots.params import BaseMotion, RobotParams, params_to_toml
 from riskplan.robots.rod_tables import DISP_MAXIT, DISP_TOL, LOCAL_MAXIT, LOCAL_TOL
@@ -35,9 +37,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-# Batches at least this large use the configuration-vectorised kernel (faster from ~8 on).
-BATCH_KERNEL_MIN = 8
 
 
 @njit(cache=True)
@@ -152,28 +151,26 @@ class TendonRobot:
     def configuration_limits(self) -> np.ndarray:
         """``(n_config, 2)`` ``[low, high]``: tendon displacements [m], then rotation [rad] and
         retraction [m] where enabled (the lab's configuration order)."""
-        rows = [self.displacement_limits]
-        bm = self.base_motion
-        if bm.rotation:
-            rows.append(np.array([bm.rotation_limits]))
-        if bm.retraction:
-            rows.append(np.array([bm.retraction_limits]))
-        return np.concatenate(rows, axis=0)
+        return _motion.configuration_limits(self)
 
     def split_configuration(self, q, *, validate: bool = True):
-        """``(tendon_part (..., m), rotation (...) or None, retraction (...) or None)`` of
-        configurations ``q (..., n_config)`` in the lab's order (tendons, rotation, retraction)."""
-        q = as_array(q, "configuration", min_ndim=1) if validate else np.asarray(q, dtype=float)
-        if q.shape[-1] != self.n_config:
-            raise InvalidInputError(
-                f"configuration: expected last dimension {self.n_config} ({self.n_tendons} tendons"
-                f"{' + rotation' if self.base_motion.rotation else ''}"
-                f"{' + retraction' if self.base_motion.retraction else ''}), got shape {q.shape}"
-            )
-        m = self.n_tendons
-        rot = q[..., m] if self.base_motion.rotation else None
-        ret = q[..., -1] if self.base_motion.retraction else None
-        return q[..., :m], rot, ret
+        """The parts of configurations in the lab's order (tendons, rotation, retraction).
+
+        Parameters
+        ----------
+        q : array_like, shape (..., n_config)
+            Configurations.
+        validate : bool
+            Check ``q``.
+
+        Returns
+        -------
+        tendons : numpy.ndarray, shape (..., m)
+            The tendon part (tensions in N or displacements in m).
+        rotation, retraction : numpy.ndarray, shape (...), or None
+            Base rotation (rad) and retraction (m); None where the robot has none.
+        """
+        return _motion.split_configuration(self, q, validate)
 
     @property
     def tendon_rest_lengths(self) -> np.ndarray:
@@ -188,7 +185,13 @@ class TendonRobot:
         )
 
     def toml_text(self) -> str:
-        """The robot file (TOML) that rebuilds this robot."""
+        """The robot file that rebuilds this robot.
+
+        Returns
+        -------
+        str
+            TOML text: the text read, or the parameters written out.
+        """
         return self._toml if self._toml is not None else params_to_toml(self.params)
 
     def __repr__(self) -> str:
@@ -197,45 +200,132 @@ class TendonRobot:
     def with_base_pose(
         self, position=(0.0, 0.0, 0.0), *, rotation=None, rpy=None, quaternion=None
     ) -> TendonRobot:
-        """The same robot with another base pose (give one of rotation matrix, rpy, quaternion)."""
+        """The same robot with another base pose (give at most one orientation).
+
+        Parameters
+        ----------
+        position : array_like, shape (3,)
+            Base position (m, world frame).
+        rotation : array_like, shape (3, 3), optional
+            Rotation matrix, base to world.
+        rpy : array_like, shape (3,), optional
+            Roll, pitch, yaw (rad).
+        quaternion : array_like, shape (4,), optional
+            Scalar first ``(w, x, y, z)``.
+
+        Returns
+        -------
+        TendonRobot
+        """
         return _motion.with_base_pose(
             self, position, rotation=rotation, rpy=rpy, quaternion=quaternion
         )
 
     def with_gravity(self, enabled: bool = True, vector=None) -> TendonRobot:
-        """The same robot with gravity switched on/off (``vector`` in the world frame, m/s^2)."""
+        """The same robot with gravity switched on or off.
+
+        Parameters
+        ----------
+        enabled : bool
+        vector : array_like, shape (3,), optional
+            Gravity in the world frame (m/s^2); default the robot's own.
+
+        Returns
+        -------
+        TendonRobot
+        """
         return _motion.with_gravity(self, enabled, vector)
 
     def interpolate_configurations(self, a, b, t) -> np.ndarray:
-        """``(..., n_config)`` points ``a + t (b - a)`` of the straight configuration-space motion
-        from ``a`` to ``b`` (``t`` scalar or ``(...)``, in [0, 1]); a base rotation over a full
-        turn takes the short way round and is wrapped into ``[-pi, pi)`` (the lab's
-        ``VoxelEnvironment`` interpolation with ``util::canonical_angle``)."""
+        """Points ``a + t (b - a)`` of the straight configuration-space motion from ``a`` to ``b``.
+
+        A base rotation over a full turn takes the short way round and is wrapped into
+        ``[-pi, pi)`` (the lab's ``VoxelEnvironment`` interpolation with
+        ``util::canonical_angle``).
+
+        Parameters
+        ----------
+        a, b : array_like, shape (..., n_config)
+            The motion's ends.
+        t : float or array_like, shape (...)
+            Fractions in [0, 1].
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., n_config)
+        """
         return _motion.interpolate_configurations(self, a, b, t)
 
     def configuration_to_displacements(self, q, *, validate: bool = True) -> np.ndarray:
-        """A configuration in tension form ``(..., n_config)`` (tensions [N], then rotation and
-        retraction) in displacement form (tendon displacements [m] that hold the same shape at
-        that retraction, then rotation and retraction unchanged)."""
+        """A configuration in tension form in displacement form.
+
+        Parameters
+        ----------
+        q : array_like, shape (..., n_config)
+            Tensions (N), then rotation (rad) and retraction (m) where enabled.
+        validate : bool
+            Check ``q``.
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., n_config)
+            Tendon displacements (m) that hold the same shape at that retraction, then
+            rotation and retraction unchanged.
+        """
         return _motion.configuration_to_displacements(self, q, validate=validate)
 
     def configuration_to_tensions(self, q, *, validate: bool = True) -> np.ndarray:
-        """The inverse of :meth:`configuration_to_displacements`: displacement form
-        ``(..., n_config)`` to tension form (tensions solved at the configuration's retraction)."""
+        """The inverse of :meth:`configuration_to_displacements`.
+
+        Parameters
+        ----------
+        q : array_like, shape (..., n_config)
+            Displacements (m), then rotation (rad) and retraction (m) where enabled.
+        validate : bool
+            Check ``q``.
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., n_config)
+            Tensions (N) solved at the configuration's retraction, then rotation and
+            retraction unchanged.
+        """
         return _motion.configuration_to_tensions(self, q, validate=validate)
 
     def check_base_motion(self, rotation, retraction, batch_shape) -> tuple:
-        """``(rotation, retraction)`` broadcast to ``batch_shape`` (``None`` stays ``None``),
-        checked against the robot's :class:`BaseMotion` (enabled, within limits)."""
+        """Base rotation and retraction checked against the robot's :class:`BaseMotion`
+        (enabled, within limits).
+
+        Parameters
+        ----------
+        rotation, retraction : float or array_like, optional
+            Rotation (rad) and retraction (m), scalars or of ``batch_shape``; None for none.
+        batch_shape : tuple of int
+            The configurations' batch shape.
+
+        Returns
+        -------
+        tuple
+            ``(rotation, retraction)`` broadcast to ``batch_shape`` (None stays None).
+        """
         return _motion.check_base_motion(self, rotation, retraction, batch_shape)
 
     def retracted(self, retraction: float) -> TendonRobot:
-        """The exposed part of this robot retracted by ``retraction`` [m], as a robot of its own.
+        """The exposed part of this robot retracted by ``retraction``, as a robot of its own.
 
         Length ``L - retraction``, routing polynomials shifted to the exposed arc length
         (:func:`shift_polynomial`), disks beyond the retraction kept (shifted), the same number
         of integration steps as the whole robot (so shapes of different retractions stack),
         identity base pose and no base motion. Cached per value.
+
+        Parameters
+        ----------
+        retraction : float
+            Retraction (m) within the robot's retraction limits.
+
+        Returns
+        -------
+        TendonRobot
         """
         return _motion.retracted(self, retraction)
 
@@ -261,11 +351,33 @@ class TendonRobot:
         return arr
 
     def check_tensions(self, tensions) -> np.ndarray:
-        """``tensions (..., m)`` as a float array in ``[0, max_tension]``, else :class:`InvalidInputError`."""
+        """Tensions checked (:class:`InvalidInputError` otherwise): finite, one per tendon, in
+        ``[0, max_tension]``.
+
+        Parameters
+        ----------
+        tensions : array_like, shape (..., m)
+            Tensions (N).
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., m)
+        """
         return self._check(tensions, "tensions", self._tlow, self._tmax)
 
     def check_displacements(self, displacements) -> np.ndarray:
-        """``displacements (..., m)`` as a float array within the limits, else :class:`InvalidInputError`."""
+        """Displacements checked (:class:`InvalidInputError` otherwise): finite, one per
+        tendon, within the displacement limits.
+
+        Parameters
+        ----------
+        displacements : array_like, shape (..., m)
+            Displacements (m).
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., m)
+        """
         return self._check(displacements, "displacements", self._dlo, self._dhi)
 
     def _to_world(self, P, Rs, tau, batch) -> RodShape:
@@ -322,87 +434,31 @@ class TendonRobot:
             return _motion.solve_moved(self, True, tensions, rotation, retraction, validate)
         tau = self.check_tensions(tensions) if validate else np.asarray(tensions, dtype=float)
         if tau.ndim == 1 and not self.loaded:
-            return self._solve_single_free(tau)
+            tau = np.array(tau, dtype=np.float64)  # a copy: the shape owns it
+            P, Rs = _actuation.solve_single_free(self, tau)
+            return self._to_world(P, Rs, tau, ())
         batch = tau.shape[:-1]
         flat = np.array(
             tau.reshape(-1, self.n_tendons), dtype=np.float64, order="C"
         )  # a copy: the shape owns it
-        B, n, m = flat.shape[0], self._n + 1, self.n_tendons
-        P = np.empty((B, n, 3))
-        Rs = np.empty((B, n, 3, 3))
-        if not self.loaded and B >= BATCH_KERNEL_MIN:
-            # Same algorithm, vectorised across configurations (bit-identical results).
-            from riskplan.robots.batch_kernel import solve_tensions_batch
-
-            P, Rs = solve_tensions_batch(self, flat, parallel=False, validate=False)
-        elif not self.loaded and B == 1:
-            # one configuration given as a batch: the scalar kernel (no batch loop to compile)
-            st = cosserat.shape_free(
-                flat[0], *self.tables, LOCAL_TOL, LOCAL_MAXIT, P[0], Rs[0], np.empty((n, 6)),
-                np.empty(m),
-            )  # fmt: skip
-            if st != cosserat.OK:
-                raise self.local_failure_error(flat[0])
-        elif not self.loaded:
-            lengths = np.empty((B, m))
-            status = np.empty(B, dtype=np.int64)
-            cosserat.shape_free_batch(
-                flat, *self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, lengths, status
-            )
-            bad = np.flatnonzero(status != cosserat.OK)
-            if bad.size:
-                raise self.local_failure_error(flat[bad[0]])
-        else:
-            for b in range(B):
-                Y = self._shoot(flat[b])
-                P[b] = Y[:, 0:3]
-                Rs[b] = Y[:, 3:12].reshape(n, 3, 3)
-        if not np.isfinite(P).all():  # never hand out NaN silently
-            b = int(np.flatnonzero(~np.isfinite(P).reshape(B, -1).all(-1))[0])
-            raise ConvergenceError(f"non-finite shape for tensions {flat[b].tolist()}")
+        P, Rs = _actuation.solve_batch(self, flat)
         return self._to_world(P, Rs, flat, batch)
 
-    def _solve_single_free(self, tau) -> RodShape:
-        """One configuration without external loads: the scalar kernel, no batch bookkeeping."""
-        tau = np.array(tau, dtype=np.float64)  # a copy: the shape owns it
-        n, m = self._n + 1, self.n_tendons
-        P = np.empty((n, 3))
-        Rs = np.empty((n, 3, 3))
-        st = cosserat.shape_free(
-            tau, *self.tables, LOCAL_TOL, LOCAL_MAXIT, P, Rs, np.empty((n, 6)), np.empty(m)
-        )
-        if st != cosserat.OK:
-            raise self.local_failure_error(tau)
-        # a non-finite value anywhere propagates along the RK4 pass to the tip position
-        if not math.isfinite(P[-1, 0] + P[-1, 1] + P[-1, 2]):
-            raise ConvergenceError(f"non-finite shape for tensions {tau.tolist()}")
-        return self._to_world(P, Rs, tau, ())
-
     def local_failure_error(self, tau) -> ConvergenceError:
-        """The error for a failed local strain solve (eqs. 2-3) of the unloaded rod, naming the
-        first node where a plain Newton re-solve stops and its scaled residual ``max |F_a / K_aa|``."""
-        tau = np.ascontiguousarray(tau, dtype=np.float64)
-        F, J, rhs, zero = np.empty(6), np.empty((6, 6)), np.empty((6, 1)), np.zeros(3)
-        x = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
-        kse, kbt = self.tables.kse, self.tables.kbt
-        for k in range(self._n + 1):
-            rt, drt = self.tables.offsets[2 * k], self.tables.offset_slopes[2 * k]
-            if (
-                cosserat.local_strains(
-                    x, tau, rt, drt, zero, zero, kse, kbt, LOCAL_TOL, LOCAL_MAXIT, F, J, rhs
-                )
-                < 0
-            ):
-                res = float(cosserat.local_residual(x, tau, rt, drt, zero, zero, kse, kbt, F))
-                return ConvergenceError(
-                    f"local strain solve failed at s = {self._s[k]:.4g} m for tensions {tau.tolist()} "
-                    f"(scaled residual {res:.3g} after {LOCAL_MAXIT} Newton iterations, tolerance {LOCAL_TOL:g})",
-                    residual=res,
-                    iterations=LOCAL_MAXIT,
-                )
-        return ConvergenceError(
-            f"local strain solve failed for tensions {tau.tolist()} (a plain Newton re-solve converges)"
-        )
+        """The error for a failed local strain solve (eqs. 2-3) of the unloaded rod.
+
+        Parameters
+        ----------
+        tau : array_like, shape (m,)
+            The tensions (N) whose solve failed.
+
+        Returns
+        -------
+        ConvergenceError
+            Naming the first node where a plain Newton re-solve stops and its scaled residual
+            ``max |F_a / K_aa|``.
+        """
+        return _actuation.local_failure_error(self, tau)
 
     def _shoot(self, tau) -> np.ndarray:
         """States ``(n+1, 18+m)`` of the loaded rod: ``N(0) = f L`` exactly, ``M(0)`` by Newton."""
@@ -461,67 +517,30 @@ class TendonRobot:
     def tensions_for_displacements(
         self, displacements, *, retraction=None, validate: bool = True
     ) -> np.ndarray:
-        """Tensions ``(..., m)`` [N] that realise tendon displacements ``(..., m)`` (see
-        :meth:`solve_displacements`; with ``retraction`` [m], of the robot retracted by it)."""
+        """Tensions that realise tendon displacements (the complementarity problem of
+        :meth:`solve_displacements`).
+
+        Parameters
+        ----------
+        displacements : array_like, shape (..., m)
+            Displacements (m).
+        retraction : float or array_like, optional
+            Retraction (m): of the robot retracted by it.
+        validate : bool
+            Check the arguments.
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., m)
+            Tensions (N).
+        """
         if retraction is not None:
             return _motion.per_retraction(
                 self, "tensions_for_displacements", displacements, retraction, validate
             )
         flat, batch = self._batch_input(displacements, self.check_displacements, validate)
-        B, m = flat.shape
-        if self.loaded:
-            tau = (
-                np.stack([_loaded.tensions_loaded(self, flat[b]) for b in range(B)])
-                if B
-                else np.zeros((0, m))
-            )
-            return tau.reshape(batch + (m,))
-        # start: the linearisation at tau = 0 (see __init__), clipped to tau >= 0
-        tau0 = np.ascontiguousarray(np.maximum(flat @ self._A0pinv.T, 0.0))
-        tau = np.empty((B, m))
-        infos = np.empty((B, 2))
-        status = np.empty(B, dtype=np.int64)
-        if B == 1:
-            # one configuration: the scalar kernel, so that a first call compiles no batch loop
-            status[0] = self._displacement_tensions(flat[0], tau0[0], tau[0], infos[0])
-        else:
-            cosserat.solve_displacement_batch(
-                flat,
-                self._kinv,
-                self._l0,
-                tau0,
-                *self.tables,
-                LOCAL_TOL,
-                LOCAL_MAXIT,
-                DISP_TOL,
-                DISP_MAXIT,
-                tau,
-                infos,
-                status,
-            )
-        bad = np.flatnonzero(status != cosserat.OK)
-        if bad.size:
-            b = int(bad[0])
-            raise ConvergenceError(
-                f"tension solve for displacements {flat[b].tolist()} did not converge (residual {infos[b, 1]:.3g} m)",
-                residual=float(infos[b, 1]),
-                iterations=int(infos[b, 0]),
-            )
-        return tau.reshape(batch + (m,))
-
-    def _displacement_tensions(self, d, tau0, tau, info) -> int:
-        """:func:`cosserat.solve_displacement_tensions` for one configuration, tried once more
-        from the slack state when it fails from ``tau0`` (as :func:`cosserat.solve_displacement_batch`
-        does per configuration); returns the status."""
-        st = cosserat.OUTER_FAIL
-        for start in (tau0, np.zeros(self.n_tendons)):
-            st = cosserat.solve_displacement_tensions(
-                d, self._kinv, self._l0, start, *self.tables, LOCAL_TOL, LOCAL_MAXIT, DISP_TOL,
-                DISP_MAXIT, tau, info,
-            )  # fmt: skip
-            if st == cosserat.OK:
-                break
-        return st
+        tau = _actuation.tensions_for_displacements(self, flat)
+        return tau.reshape(batch + (self.n_tendons,))
 
     def tendon_lengths(self, tensions, *, validate: bool = True) -> np.ndarray:
         """Tendon path lengths ``l_i = int |v + u x r_i + r_i'| ds`` ``(..., m)`` [m] for tensions ``(..., m)``.
@@ -539,27 +558,29 @@ class TendonRobot:
             ``(..., m)`` path lengths [m].
         """
         flat, batch = self._batch_input(tensions, self.check_tensions, validate)
-        m = self.n_tendons
-        out = np.empty(flat.shape)
-        for b in range(flat.shape[0]):
-            if self.loaded:
-                out[b] = self._shoot(flat[b])[-1, 18:]
-            else:
-                dl = np.empty((m, m))
-                if (
-                    cosserat.lengths_and_jacobian(
-                        flat[b], *self.tables, LOCAL_TOL, LOCAL_MAXIT, out[b], dl
-                    )
-                    != cosserat.OK
-                ):
-                    raise self.local_failure_error(flat[b])
-        return out.reshape(batch + (m,))
+        return _actuation.tendon_lengths(self, flat).reshape(batch + (self.n_tendons,))
 
     def displacements_for_tensions(
         self, tensions, *, retraction=None, validate: bool = True
     ) -> np.ndarray:
-        """Actuator displacements ``d = l0 - l(tau) + tau / k`` ``(..., m)`` [m] that hold taut
-        tendons at ``tensions`` (with ``retraction`` [m], of the robot retracted by it)."""
+        r"""Actuator displacements that hold taut tendons at ``tensions``:
+
+        .. math:: d = l_0 - l(\tau) + \tau / k.
+
+        Parameters
+        ----------
+        tensions : array_like, shape (..., m)
+            Tensions (N).
+        retraction : float or array_like, optional
+            Retraction (m): of the robot retracted by it.
+        validate : bool
+            Check the arguments.
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., m)
+            Displacements (m).
+        """
         if retraction is not None:
             return _motion.per_retraction(
                 self, "displacements_for_tensions", tensions, retraction, validate

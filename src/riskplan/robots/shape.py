@@ -48,7 +48,14 @@ class RodShape:
         return RodShape(s, self.positions[idx], self.rotations[idx], self.tensions[idx])
 
     def to_json(self) -> dict:
-        """``{"tip", "backbone", "tensions"}`` of a single shape (plain lists)."""
+        """A single shape as JSON types.
+
+        Returns
+        -------
+        dict
+            ``tip`` (3 numbers, m), ``backbone`` (``n`` points of 3, m) and ``tensions``
+            (``m`` numbers, N), as plain lists.
+        """
         if self.batch_shape:
             raise InvalidInputError("to_json: expected a single shape; index the batch first")
         return {

@@ -25,23 +25,24 @@ Design points the planner and the linearisation rely on:
 * FEM models (mesh, factorisation, interpolation weights) are cached per parameter set
   inside the scenario object, so thousands of steps from many stored states stay cheap.
 
-This module imports no scenario; the scenarios import it. The name → scenario registry lives
+This module imports no scenario; the scenarios import it. The parameters and full states
+(:class:`SimParams`, :class:`SimState`, the actuation noise) are defined in
+:mod:`riskplan.scenarios.values` and handed on from here. The name → scenario registry lives
 in :mod:`riskplan.scenarios.registry`.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import math
 from collections import OrderedDict
-from dataclasses import dataclass
-from functools import cached_property
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from riskplan._validation import as_array, as_generator, check_count, check_range
+from riskplan._validation import as_array, as_generator, check_range
 from riskplan.errors import InvalidInputError
+
+# the values a simulator passes (their home), handed on from here
+from riskplan.scenarios.values import SimParams, SimState, actuation_noise, frozen_array
 
 __all__ = [
     "FEMScenario",
@@ -55,192 +56,6 @@ __all__ = [
     "gaussian_noise",
     "rollout",
 ]
-
-
-def frozen_array(value, dtype=np.float64) -> np.ndarray:
-    """A C-contiguous read-only copy of ``value`` (states and parameters hold these)."""
-    arr = np.array(value, dtype=dtype, copy=True, order="C")
-    arr.setflags(write=False)
-    return arr
-
-
-def check_material(youngs_modulus, poissons_ratio) -> None:
-    """Raise :class:`~riskplan.errors.InvalidInputError` unless the nominal material of a
-    scenario's configuration is a finite ``youngs_modulus > 0`` and a ``poissons_ratio`` in
-    ``(-1, 0.5)`` (a positive-definite isotropic elastic law)."""
-    if not (0.0 < float(youngs_modulus) < math.inf):
-        raise InvalidInputError(f"youngs_modulus: must be finite and > 0, got {youngs_modulus!r}")
-    if not -1.0 < float(poissons_ratio) < 0.5:
-        raise InvalidInputError(f"poissons_ratio: must lie in (-1, 0.5), got {poissons_ratio!r}")
-
-
-@dataclass(frozen=True)
-class SimParams:
-    """Simulation parameters ``s`` of paper section III (one draw from a distribution S).
-
-    Attributes
-    ----------
-    youngs_modulus:
-        Young's modulus E of the tissue (> 0), in the paper's units (nominal 50).
-    poissons_ratio:
-        Poisson's ratio ν in (-1, 0.5) (nominal 0.4).
-    n_elements:
-        Requested number of triangles of the FEM mesh, in [8, 5000] (planning mesh: 175).
-    force_scale:
-        Interaction force scale (>= 0). Needle: the magnitude ``f_int`` of the force the
-        robot exerts in its direction of motion (nominal 1). Manipulation: a gain on the
-        commanded force increments (nominal 1).
-    actuation_cov:
-        ``None`` (no actuation noise) or an ``(m, m)`` covariance, stored as a tuple of
-        tuples so the value stays hashable; the control actually applied at step ``t`` is
-        ``u + w_t``, ``w_t ~ N(0, actuation_cov)``, clipped to the control bounds.
-    actuation_seed:
-        Seed of the actuation noise sequence; ``w_t`` is drawn from
-        ``default_rng([actuation_seed, t])`` so it depends on the step index only.
-    """
-
-    youngs_modulus: float = 50.0
-    poissons_ratio: float = 0.4
-    n_elements: int = 175
-    force_scale: float = 1.0
-    actuation_cov: tuple[tuple[float, ...], ...] | None = None
-    actuation_seed: int = 0
-
-    def __post_init__(self):
-        e = float(self.youngs_modulus)
-        nu = float(self.poissons_ratio)
-        f = float(self.force_scale)
-        for name, v in (("youngs_modulus", e), ("poissons_ratio", nu), ("force_scale", f)):
-            if not math.isfinite(v):
-                raise InvalidInputError(f"{name}: must be finite, got {v!r}")
-        if e <= 0.0:
-            raise InvalidInputError(f"youngs_modulus: must be > 0, got {e:.6g}")
-        if not (-1.0 < nu < 0.5):
-            raise InvalidInputError(f"poissons_ratio: must lie in (-1, 0.5), got {nu:.6g}")
-        if f < 0.0:
-            raise InvalidInputError(f"force_scale: must be >= 0, got {f:.6g}")
-        n = check_count(self.n_elements, "n_elements", 8, maximum=5000, integral=True)
-        object.__setattr__(self, "youngs_modulus", e)
-        object.__setattr__(self, "poissons_ratio", nu)
-        object.__setattr__(self, "force_scale", f)
-        object.__setattr__(self, "n_elements", n)
-        object.__setattr__(self, "actuation_seed", int(self.actuation_seed))
-        if self.actuation_cov is not None:
-            cov = as_array(self.actuation_cov, "actuation_cov", min_ndim=2)
-            if cov.ndim != 2 or cov.shape[0] != cov.shape[1]:
-                raise InvalidInputError(
-                    f"actuation_cov: expected a square (m, m) matrix, got shape {cov.shape}"
-                )
-            if not np.allclose(cov, cov.T, rtol=1e-12, atol=1e-15):
-                raise InvalidInputError("actuation_cov: must be symmetric")
-            if np.linalg.eigvalsh(cov).min() < -1e-14 * max(1.0, float(np.abs(cov).max())):
-                raise InvalidInputError("actuation_cov: must be positive semi-definite")
-            object.__setattr__(
-                self, "actuation_cov", tuple(tuple(float(v) for v in row) for row in cov)
-            )
-
-    def replace(self, **changes) -> SimParams:
-        """A copy with some fields changed (validated again)."""
-        return dataclasses.replace(self, **changes)
-
-    @cached_property
-    def actuation_factor(self) -> np.ndarray | None:
-        """``(m, m)`` factor ``L`` with ``L Lᵀ = actuation_cov`` (eigen-based, so PSD is fine)."""
-        if self.actuation_cov is None:
-            return None
-        cov = np.asarray(self.actuation_cov)
-        w, v = np.linalg.eigh(cov)
-        out = v * np.sqrt(np.clip(w, 0.0, None))
-        out.setflags(write=False)
-        return out
-
-    @property
-    def material_key(self) -> tuple[float, float, int]:
-        """What identifies a FEM model: ``(E, ν, n_elements)``."""
-        return (self.youngs_modulus, self.poissons_ratio, self.n_elements)
-
-
-def actuation_noise(params: SimParams, t: int, m: int) -> np.ndarray | None:
-    """The actuation noise ``w_t (m,)`` of step ``t`` under ``params``.
-
-    Drawn from ``default_rng([params.actuation_seed, t])``: a pure function of the
-    parameters and the step index, which keeps ``step`` deterministic (paper eq. 1).
-
-    Parameters
-    ----------
-    params : SimParams
-    t : int
-        Step index.
-    m : int
-        Control dimension.
-
-    Returns
-    -------
-    numpy.ndarray, (m,), or None
-        ``None`` if the parameters carry no actuation noise.
-    """
-    factor = params.actuation_factor
-    if factor is None:
-        return None
-    if factor.shape[0] != m:
-        raise InvalidInputError(
-            f"params.actuation_cov: expected a ({m}, {m}) covariance, got {factor.shape}"
-        )
-    z = np.random.default_rng([params.actuation_seed, int(t)]).standard_normal(m)
-    return factor @ z
-
-
-@dataclass(frozen=True, eq=False)
-class SimState:
-    """Full system state ``y_t`` (paper section III): everything needed to restart.
-
-    Attributes
-    ----------
-    t:
-        Step index (0 for the initial state).
-    displacement:
-        ``(n_nodes, 2)`` read-only FEM nodal displacement (warm start of the next solve).
-    n_elements:
-        The requested element count of the mesh ``displacement`` lives on; a state can
-        only be continued with parameters whose ``n_elements`` matches.
-    """
-
-    t: int
-    displacement: np.ndarray
-    n_elements: int
-
-    def __post_init__(self):
-        object.__setattr__(self, "t", int(self.t))
-        object.__setattr__(self, "n_elements", int(self.n_elements))
-        object.__setattr__(self, "displacement", frozen_array(self.displacement))
-
-    def __setstate__(self, state: dict) -> None:
-        # unpickled arrays come back writeable: make them read-only again
-        for k, v in state.items():
-            if isinstance(v, np.ndarray):
-                v.setflags(write=False)
-            object.__setattr__(self, k, v)
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        """All array fields by name (for comparisons and storage)."""
-        return {
-            f.name: getattr(self, f.name)
-            for f in dataclasses.fields(self)
-            if isinstance(getattr(self, f.name), np.ndarray)
-        }
-
-    def identical(self, other: SimState) -> bool:
-        """Bit-for-bit equality of every field (the snapshot/restore contract)."""
-        if type(self) is not type(other):
-            return False
-        for f in dataclasses.fields(self):
-            a, b = getattr(self, f.name), getattr(other, f.name)
-            if isinstance(a, np.ndarray):
-                if a.shape != b.shape or a.dtype != b.dtype or a.tobytes() != b.tobytes():
-                    return False
-            elif a != b:
-                return False
-        return True
 
 
 #: Per-process caches (models, meshes) shared by unpickled copies of one scenario
@@ -325,20 +140,53 @@ class FEMScenario:
         return float(self.config.goal_radius)
 
     def sample_params(self, seed=None) -> SimParams:
-        """One draw from ``distribution`` (the nominal parameters if there is none)."""
+        """One draw ``s ~ S`` from ``distribution`` (the nominal parameters if there is none).
+
+        Parameters
+        ----------
+        seed : int, numpy.random.Generator or None
+            Seeds the draw.
+
+        Returns
+        -------
+        SimParams
+        """
         if self.distribution is None:
             return self.nominal_params
         return self.distribution.sample(seed)
 
     def mesh_data(self, n_elements: int):
-        """Mesh, loads and interpolators for an element count (cached)."""
+        """Mesh, loads and interpolators for an element count (cached).
+
+        Parameters
+        ----------
+        n_elements : int
+            The requested element count (``SimParams.n_elements``).
+
+        Returns
+        -------
+        object
+            The scenario's per-mesh data (built on first use, then the same object).
+        """
         d = self._meshes.get(n_elements)
         if d is None:
             d = self._meshes[n_elements] = self._make_mesh_data(n_elements)
         return d
 
     def model(self, params: SimParams | None = None):
-        """The cached FEM model for ``params`` (built on first use, least recently used dropped)."""
+        """The cached FEM model for ``params`` (built on first use, least recently used dropped).
+
+        Parameters
+        ----------
+        params : SimParams, optional
+            Default: :attr:`nominal_params`. Models are keyed by
+            ``params.material_key = (E, ν, n_elements)``.
+
+        Returns
+        -------
+        object
+            The scenario's FEM model (a linear or neo-Hookean model of the tissue).
+        """
         params = params or self.nominal_params
         key = params.material_key
         m = self._models.get(key)
@@ -377,7 +225,18 @@ class FEMScenario:
         return self._data(state).interp.positions(state.displacement)
 
     def deformed_nodes(self, state) -> np.ndarray:
-        """Current node positions ``(n_nodes, 2)``."""
+        """Current node positions ``x = X + u``.
+
+        Parameters
+        ----------
+        state : SimState
+            A state of this scenario.
+
+        Returns
+        -------
+        numpy.ndarray, shape (n_nodes, 2)
+            Reference node positions plus ``state.displacement``.
+        """
         return self._data(state).mesh.nodes + state.displacement
 
 
@@ -531,7 +390,24 @@ def rollout(
 
 
 def check_control(control, bounds: np.ndarray, name: str = "control") -> np.ndarray:
-    """Validate a control ``(q,)`` against ``bounds (q, 2)`` (finite, inside the box)."""
+    """Validate a control against its box (finite, inside the bounds).
+
+    Parameters
+    ----------
+    control : array_like, shape (q,)
+        The control ``u``.
+    bounds : numpy.ndarray, shape (q, 2)
+        ``[low, high]`` per component.
+    name : str, optional
+        The argument's name in error messages.
+
+    Returns
+    -------
+    numpy.ndarray, shape (q,)
+        ``control`` as float64 (a copy when ``control`` is itself an array); raises
+        :class:`~riskplan.errors.InvalidInputError` for a wrong shape, a NaN or a
+        component outside its bounds.
+    """
     try:
         u = np.asarray(control, dtype=np.float64)
     except (TypeError, ValueError):
@@ -575,7 +451,33 @@ def apply_actuation_noise(
 
 
 def gaussian_noise(cov: np.ndarray, noise, rng, dim: int, name: str = "noise") -> np.ndarray:
-    """The measurement noise ``n (dim,)``: given explicitly, drawn with ``rng``, or zero."""
+    """The measurement noise ``n ~ N(0, cov)``: given explicitly, drawn with ``rng``, or zero.
+
+    The draw is NumPy's ``multivariate_normal(mean=0, cov, method="cholesky")`` bit for bit,
+    with the transposed Cholesky factor ``Lᵀ`` (``L Lᵀ = cov``) computed once per covariance:
+
+    .. math::
+
+        n = L\\, \\xi, \\qquad \\xi \\sim \\mathcal{N}(0, I_{\\mathrm{dim}})
+
+    Parameters
+    ----------
+    cov : array_like, shape (dim, dim)
+        Positive-definite covariance ``N`` (used only when drawing).
+    noise : array_like, shape (dim,), or None
+        Explicit noise, returned as given (validated).
+    rng : int, numpy.random.Generator or None
+        Draws the noise when ``noise`` is ``None``.
+    dim : int
+        Dimension of the measurement.
+    name : str, optional
+        The argument's name in error messages.
+
+    Returns
+    -------
+    numpy.ndarray, shape (dim,)
+        ``noise``, a draw, or zeros when neither ``noise`` nor ``rng`` is given.
+    """
     if noise is not None:
         return as_array(noise, name, shape=(dim,))
     if rng is None:

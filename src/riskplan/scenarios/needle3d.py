@@ -64,7 +64,7 @@ from riskplan.scenarios.base import (
     check_control,
     gaussian_noise,
 )
-from riskplan.scenarios.bevel import needle_step, pose_step_jacobian
+from riskplan.scenarios.bevel import _pose_vector_step, pose_step_jacobian
 from riskplan.scenarios.needle3d_config import Needle3DConfig, Needle3DState, _MeshData3D
 from riskplan.scenarios.needle3d_frames import FRAMES, JACOBIAN_STEP, Needle3DFrames
 from riskplan.scenarios.needle3d_space import Needle3DSpace, needle3d_steer
@@ -177,11 +177,11 @@ class Needle3DScenario(Needle3DFrames, FEMScenario):
         n_elements : int
             Requested number of tetrahedra (rounded to a grid by :func:`~riskplan.scenarios.tissue3d.grid_for`).
         """
+        d = self._meshes.get(n_elements)
+        if d is not None:  # the hot path: before any import
+            return d
         from riskplan.scenarios.tissue3d import grid_for
 
-        d = self._meshes.get(n_elements)
-        if d is not None:
-            return d
         key = grid_for(self.config.size, n_elements)
         d = self._meshes.get(key)
         if d is not None:
@@ -189,10 +189,13 @@ class Needle3DScenario(Needle3DFrames, FEMScenario):
             return d
         if d is None:
             d = self._meshes[key] = self._meshes[n_elements] = _MeshData3D(self.config, n_elements)
+            d.model_count = n_elements  # the count this grid's models are keyed by
         return d
 
     def _make_model(self, params: SimParams):
         d = self.mesh_data(params.n_elements)
+        if d.model_count != params.n_elements:  # counts on one grid share the first's model
+            return self.model(params.replace(n_elements=d.model_count))
         return d.block.model(params.youngs_modulus, params.poissons_ratio)
 
     # ---- protocol -----------------------------------------------------------------
@@ -248,12 +251,10 @@ class Needle3DScenario(Needle3DFrames, FEMScenario):
         u = check_control(control, self._bounds)
         u = apply_actuation_noise(u, params, state.t, self._bounds)
         cfg = self.config
-        m = state.material
-        R = m[3:12].reshape(3, 3).T
-        R1, p1 = needle_step(
-            R, m[:3], u[0], u[1], tau=cfg.tau, kappa=cfg.curvature, rho=self._rho(u)
+        # needle_step on the pose vector, compiled (equal to rounding)
+        mat = _pose_vector_step(
+            state.material, float(u[0]), float(u[1]), cfg.tau, cfg.curvature, self._rho(u)
         )
-        mat = np.concatenate([p1, R1.T.ravel()])
         disp, pose = self._tissue_response(mat, params)
         return Needle3DState(
             t=state.t + 1,
@@ -269,9 +270,9 @@ class Needle3DScenario(Needle3DFrames, FEMScenario):
         k = d.block.tracked.shape[0]
         if params.force_scale == 0.0 or not d.block.contains(mat[:3]):
             return np.zeros((k, 3)), mat.copy()
-        elem, lam = d.block.locate(mat[:3])
+        elem, lam = d.block.locate_point(mat[:3])
         model = self.model(params)
-        u_tip, tracked = model.point_load(int(elem[0]), lam[0], params.force_scale * mat[9:12])
+        u_tip, tracked = model.point_load(elem, lam, params.force_scale * mat[9:12])
         pose = mat.copy()
         pose[:3] += u_tip
         return tracked, pose

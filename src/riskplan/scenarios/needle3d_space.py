@@ -4,6 +4,7 @@ hands the simulator RRT."""
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -82,12 +83,26 @@ def needle3d_steer(x_from, x_to, bounds, n_steps: int, *, tau: float, kappa: flo
     duty : bool
         Whether the control carries a duty-cycle fraction ρ (q = 3).
     """
-    from riskplan.scenarios.bevel import se3_exp_batch
-
     p = np.asarray(x_from[:3], dtype=np.float64)
     R = np.asarray(x_from[3:12], dtype=np.float64).reshape(3, 3).T
     target = np.asarray(x_to[:3], dtype=np.float64)
-    lo, hi = bounds[:, 0], bounds[:, 1]
+    b = np.asarray(bounds, dtype=np.float64)
+    U, D = _steer_paths(tuple(b.ravel().tolist()), b.shape[0], int(n_steps), tau, kappa, duty)
+    # the paths in the start frame: p_k = p + R D_k (left invariance of the screw steps)
+    best = np.linalg.norm(D @ R.T + (p - target), axis=2).min(axis=1)
+    return U[int(np.argmin(best))].copy()
+
+
+@functools.lru_cache(maxsize=16)
+def _steer_paths(bounds: tuple, q: int, n_steps: int, tau: float, kappa: float, duty: bool):
+    """``(U (n, q), D (n, n_steps, 3))``: :func:`needle3d_steer`'s grid of constant controls
+    and the tip positions of their paths after 1 … ``n_steps`` steps, in the frame of the
+    start (``D_1 = d``, ``D_{k+1} = D_k + E^k d`` with ``(E, d) = exp(τ ξ̂)``); the same for
+    every start, so computed once per grid."""
+    from riskplan.scenarios.bevel import se3_exp_batch
+
+    b = np.asarray(bounds, dtype=np.float64).reshape(q, 2)
+    lo, hi = b[:, 0], b[:, 1]
     vs = lo[0] + (hi[0] - lo[0]) * np.array([0.2, 0.4, 0.6, 0.8, 1.0])
     ws = np.linspace(lo[1], hi[1], 41)
     rhos = np.linspace(lo[2], hi[2], 5) if duty else np.array([1.0])
@@ -95,13 +110,14 @@ def needle3d_steer(x_from, x_to, bounds, n_steps: int, *, tau: float, kappa: flo
     xi = np.zeros((len(V), 6))
     xi[:, 2], xi[:, 3], xi[:, 5] = tau * V, tau * P * kappa * V, tau * Wg
     E, dd = se3_exp_batch(xi)
-    Rk = np.broadcast_to(R, E.shape)
-    pk = np.broadcast_to(p, dd.shape)
-    best = np.full(len(V), np.inf)
-    for _ in range(int(n_steps)):
+    D = np.empty((len(V), n_steps, 3))
+    Rk = np.broadcast_to(np.eye(3), E.shape)
+    pk = np.zeros_like(dd)
+    for k in range(n_steps):
         pk = pk + np.einsum("nij,nj->ni", Rk, dd)
         Rk = Rk @ E
-        best = np.minimum(best, np.linalg.norm(pk - target, axis=1))
-    i = int(np.argmin(best))
-    u = np.array([V[i], Wg[i], P[i]])
-    return u[: bounds.shape[0]]
+        D[:, k] = pk
+    U = np.stack([V, Wg, P], axis=1)[:, :q]
+    for a in (U, D):
+        a.setflags(write=False)
+    return U, D

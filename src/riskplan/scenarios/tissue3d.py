@@ -9,19 +9,21 @@ cached factorisation (``K_ff⁻¹ f_free``) gives the nodal displacement ``u``, 
 displacement ``Σ_a λ_a u_a`` and the tracked points' are P1 interpolations. The solve does
 not touch the tissue's own state, so a step stays a pure function of its inputs.
 
-**Green's columns.** The load touches the four nodes of one element, and a step needs the
+**Green's functions.** The load touches the four nodes of one element, and a step needs the
 response at those four nodes and at the ``k`` tracked points only. For linear elasticity
-``u = K⁻¹ f`` is exact superposition, so :meth:`TetBlockModel.point_load` uses the columns
-``G_a = K⁻¹ E_a`` (``E_a (3N, 3)`` the unit forces at node ``a``), computed once per node
-and material (one solve with three right-hand sides) and kept with their tracked-point
-interpolation ``C G_a``::
+``u = K⁻¹ f`` is exact superposition, so :meth:`TetBlockModel.point_load` uses, per
+material, every element's 12 × 12 block ``G_e`` of ``K⁻¹`` (by selected inversion of the
+band of the factor, :meth:`riskplan.deformable.TetTissue.element_green_blocks`: the cost
+of one factorisation) and the tracked points' response ``W = K⁻¹ Cᵀ`` (``C`` their P1
+interpolation; one solve with ``3k`` right-hand sides)::
 
-    u(X) = Σ_a Σ_b λ_b G_a[b] λ_a f,     u(tracked) = Σ_a (C G_a) λ_a f
+    u(X) = Σ_b λ_b (G_e f_e)_b,     u(tracked) = W[e]ᵀ f_e,     f_e = λ ⊗ f (12,)
 
-A step then costs a few 3 × 3 products instead of a solve; a needle crossing a few
-dozen elements solves a few dozen times per material (the RRT and the linearisation
-re-use one material for thousands of steps). The result is the direct solve's up to
-round-off (tested against it, float64). Locating the tip uses the block's grid: the six
+(``W[e]`` the rows of the element's twelve DOFs; ``C K⁻¹ = (K⁻¹ Cᵀ)ᵀ`` by the symmetry of
+``K``). A step then costs two small products instead of a solve, on any element, and a new
+material costs two factorisation-sized passes. The result is the direct solve's up to
+round-off (tested against it, float64). :meth:`TetBlockModel.columns` gives the Green's
+columns of one node by a solve. Locating the tip uses the block's grid: the six
 tetrahedra of the grid cell holding the point are tried first (the general search only if
 round-off puts it in none of them).
 
@@ -31,6 +33,7 @@ held at its corners; a 3-D point support would be singular).
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 from riskplan.errors import InvalidInputError
@@ -75,6 +78,8 @@ class TetBlock:
         self.tets = self.mesh.tets
         self.n_nodes = self.mesh.n_nodes
         self.n_elements = self.mesh.n_elements
+        #: ``(T, 12)`` the DOFs of each tetrahedron (interleaved)
+        self.element_dofs = (3 * self.tets[:, :, None] + np.arange(3)).reshape(-1, 12)
         self.fixed_nodes = self.mesh.face_nodes("z-")
         tr = np.asarray(tracked, dtype=np.float64).reshape(-1, 3)
         try:
@@ -85,13 +90,13 @@ class TetBlock:
         self._base = None
         # the grid cell of every tetrahedron (its centroid's cell): a point is located by
         # its cell's tetrahedra (the Kuhn split puts six in each)
-        g = np.asarray(self.grid)
+        g = self._grid = np.asarray(self.grid, dtype=np.int64)
         cell = np.minimum((self.mesh.centroids / (self.size / g)).astype(np.int64), g - 1)
         flat = (cell[:, 0] * g[1] + cell[:, 1]) * g[2] + cell[:, 2]
         order = np.argsort(flat, kind="stable")
         counts = np.bincount(flat, minlength=int(np.prod(g)))
         if counts.min() == counts.max():  # a regular split: (cells, 6) table
-            self._cell_tets = order.reshape(len(counts), -1)
+            self._cell_tets = np.ascontiguousarray(order.reshape(len(counts), -1))
             self._cell_maps = np.ascontiguousarray(self.mesh.barycentric_maps[self._cell_tets])
         else:  # pragma: no cover - tet_block always splits each cell alike
             self._cell_tets = None
@@ -109,9 +114,9 @@ class TetBlock:
         bool
             Whether it lies in ``[0, size]``.
         """
-        x, y, z = (float(v) for v in np.asarray(X, dtype=np.float64).reshape(3))
+        X = np.asarray(X, dtype=np.float64).reshape(3)
         sx, sy, sz = self._size_tuple
-        return 0.0 <= x <= sx and 0.0 <= y <= sy and 0.0 <= z <= sz  # NaN: False
+        return bool(0.0 <= X[0] <= sx and 0.0 <= X[1] <= sy and 0.0 <= X[2] <= sz)  # NaN: False
 
     def locate(self, points) -> tuple[np.ndarray, np.ndarray]:
         """``(elem (k,), lam (k, 4))``: containing tetrahedra (``−1`` outside) and
@@ -138,22 +143,46 @@ class TetBlock:
                 return hit
         return find_points(self.mesh, pts)
 
+    def locate_point(self, X) -> tuple[int, np.ndarray]:
+        """``(elem, lam (4,))`` of one material point inside the block (a simulator step's
+        hot path: :meth:`locate` without its checks; the point must lie in the block,
+        :meth:`contains`; a point outside raises :class:`~riskplan.errors.InvalidInputError`).
+
+        Parameters
+        ----------
+        X : numpy.ndarray, shape (3,)
+            The material point.
+
+        Returns
+        -------
+        elem : int
+            The containing tetrahedron.
+        lam : numpy.ndarray, shape (4,)
+            Its barycentric weights.
+        """
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        if self._cell_tets is not None:
+            hit = self._locate_in_cell(X)
+            if hit is not None:
+                return int(hit[0][0]), hit[1][0]
+        # round-off between the cell's tetrahedra (rare), or a point outside
+        elem, lam = self.locate(X) if self.contains(X) else (np.array([-1]), None)
+        if elem[0] < 0:
+            raise InvalidInputError(f"X: {X.tolist()} lies outside the tissue block")
+        return int(elem[0]), lam[0]
+
     def _locate_in_cell(self, X: np.ndarray):
         """The tetrahedron of the grid cell holding ``X`` with the largest smallest
-        barycentric weight, if that weight is ``>= −INSIDE_TOL`` (else ``None``)."""
-        from riskplan.deformable.tetlocate import INSIDE_TOL
+        barycentric weight, if that weight is ``>= −INSIDE_TOL`` (else ``None``;
+        :func:`riskplan.deformable.tetlocate.locate_in_grid`)."""
+        from riskplan.deformable.tetlocate import INSIDE_TOL, locate_in_grid
 
-        g = self.grid
-        i = [min(int(X[k] * g[k] / self.size[k]), g[k] - 1) for k in range(3)]
-        c = (i[0] * g[1] + i[1]) * g[2] + i[2]
-        cand = self._cell_tets[c]
-        M = self._cell_maps[c]
-        b = M[:, :, :3] @ X + M[:, :, 3]
-        w = b.min(axis=1)
-        j = int(np.argmax(w))
-        if w[j] < -INSIDE_TOL:
+        e, lam = locate_in_grid(
+            X, self.size, self._grid, self._cell_tets, self._cell_maps, INSIDE_TOL
+        )
+        if e < 0:
             return None
-        return np.array([cand[j]]), b[j][None, :]
+        return np.array([e]), lam[None, :]
 
     def model(self, youngs_modulus: float, poissons_ratio: float) -> TetBlockModel:
         """The factorised model of one isotropic material (the first material builds the
@@ -196,7 +225,8 @@ class TetBlockModel:
         self.tissue = tissue
         self._free = tissue.free_dofs
         self._columns: dict = {}
-        self._elements: dict = {}
+        self._fast = None
+        self._edofs = block.element_dofs
 
     def columns(self, node: int) -> tuple[np.ndarray, np.ndarray]:
         """Green's columns of ``node`` (module docstring), computed on first use.
@@ -251,7 +281,8 @@ class TetBlockModel:
 
     def point_load(self, e: int, lam, force) -> tuple[np.ndarray, np.ndarray]:
         """``(u(X) (3,), u(tracked) (k, 3))`` for the force ``force (3,)`` at the point of
-        element ``e`` with barycentric weights ``lam (4,)``.
+        element ``e`` with barycentric weights ``lam (4,)`` (module docstring: the element's
+        block of ``K⁻¹`` and the tracked points' response ``W = K⁻¹ Cᵀ``).
 
         Parameters
         ----------
@@ -269,24 +300,33 @@ class TetBlockModel:
         u_tracked : numpy.ndarray, shape (k, 3)
             The displacement of the block's tracked points.
         """
-        lam = np.asarray(lam, dtype=np.float64)
-        Ge, CGe = self._element(int(e))
-        fa = np.outer(lam, np.asarray(force, dtype=np.float64)).reshape(12)  # nodal forces
-        return lam @ (Ge @ fa).reshape(4, 3), (CGe @ fa).reshape(-1, 3)
+        G, W = self._green()
+        lam = np.ascontiguousarray(lam, dtype=np.float64).reshape(4)
+        f = np.ascontiguousarray(force, dtype=np.float64).reshape(3)
+        u, tracked = _point_load_kernel(G, W, self._edofs, int(e), lam, f)
+        return u, tracked.reshape(-1, 3)
 
-    def _element(self, e: int) -> tuple[np.ndarray, np.ndarray]:
-        """``(G_e (12, 12), C G_e (3k, 12))``: the response of element ``e``'s nodes and of
-        the tracked points to the twelve nodal force components of ``e`` (the Green's
-        columns of its four nodes, superposed; cached per element)."""
-        hit = self._elements.get(e)
-        if hit is not None:
-            return hit
-        nodes = self.block.tets[e]
-        cols = [self.columns(int(a)) for a in nodes]
-        # G_e[(b, j), (a, i)] = G_a[nodes[b], j, i]
-        Ge = np.stack([G[nodes] for G, _ in cols], axis=2).reshape(12, 12)
-        CGe = np.stack([CG for _, CG in cols], axis=2).reshape(-1, 12)
-        self._elements[e] = hit = (Ge, CGe)
+    def _green(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(G (T, 12, 12), W (3N, 3k))``: every element's block of ``K⁻¹``
+        (:meth:`riskplan.deformable.TetTissue.element_green_blocks`) and the tracked
+        points' response to a unit force at each DOF, ``W = K⁻¹ Cᵀ`` (``C (3k, 3N)`` their
+        P1 interpolation; by the symmetry of ``K⁻¹``, column ``3p + j`` of ``W`` is also
+        component ``j`` at point ``p`` under each unit force): one solve with ``3k``
+        right-hand sides. Computed on first use."""
+        hit = self._fast
+        if hit is None:
+            b = self.block
+            ip = b.interp
+            k = ip.node_index.shape[0]
+            n = 3 * b.n_nodes
+            Ct = np.zeros((n, 3 * k))
+            comp = np.arange(3)
+            rows = 3 * ip.node_index[:, :, None] + comp  # (k, 4, 3)
+            cols = np.broadcast_to(3 * np.arange(k)[:, None, None] + comp, rows.shape)
+            np.add.at(Ct, (rows, cols), np.broadcast_to(ip.weights[:, :, None], rows.shape))
+            W = np.zeros((n, 3 * k))
+            W[self._free] = self.tissue.solve_linear_free(np.ascontiguousarray(Ct[self._free]))
+            self._fast = hit = (self.tissue.element_green_blocks(), W)
         return hit
 
     def point_load_direct(self, e: int, lam, force) -> tuple[np.ndarray, np.ndarray]:
@@ -315,3 +355,27 @@ class TetBlockModel:
         F[b.tets[e]] = np.outer(lam, np.asarray(force, dtype=np.float64))
         u = self.solve(F)
         return lam @ u[b.tets[e]], b.interp.interpolate(u)
+
+
+@nb.njit(cache=True)
+def _point_load_kernel(G, W, edofs, e, lam, force):
+    """:meth:`TetBlockModel.point_load`'s sums, compiled: ``f_e = λ ⊗ f``,
+    ``u(X) = Σ_b λ_b (G_e f_e)_b``, ``u(tracked) = W[e]ᵀ f_e`` (flat ``(3k,)``)."""
+    fa = np.empty(12)
+    for a in range(4):
+        for i in range(3):
+            fa[3 * a + i] = lam[a] * force[i]
+    u = np.zeros(3)
+    for b in range(4):
+        for j in range(3):
+            s = 0.0
+            for q in range(12):
+                s += G[e, 3 * b + j, q] * fa[q]
+            u[j] += lam[b] * s
+    tracked = np.zeros(W.shape[1])
+    for q in range(12):
+        row = edofs[e, q]
+        fq = fa[q]
+        for c in range(W.shape[1]):
+            tracked[c] += fq * W[row, c]
+    return u, tracked

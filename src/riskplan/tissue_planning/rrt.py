@@ -75,18 +75,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskplan._validation import as_array, as_generator, check_count
+from riskplan._validation import as_generator, check_count
 from riskplan.errors import (
     InvalidInputError,
     PlanningError,
 )
 from riskplan.scenarios.space import PlanningSpace
-from riskplan.tissue_planning.rrt_connect import (
-    _SIM_FAILURES,
-    _connect_edge,
-    _goal_radius,
-    _in_goal,
-)
+from riskplan.tissue_planning.rrt_connect import _goal_radius
+from riskplan.tissue_planning.rrt_extend import _Growth, _Tree
 
 log = logging.getLogger(__name__)
 
@@ -99,10 +95,6 @@ __all__ = [
     "rrt_plans",
     "sampling_bounds",
 ]
-
-#: Goal-directed extensions of a node's lineage after which it is no longer picked for the
-#: goal (a car facing away from the goal would otherwise be picked again and again).
-_MAX_GOAL_FAILS = 3
 
 
 def planning_space(sim) -> PlanningSpace:
@@ -242,11 +234,20 @@ class TreeResult:
 
 
 def actuation_std(sim) -> np.ndarray | None:
-    """``(q,)`` standard deviations of ``sim``'s actuation noise, or ``None`` if unknown.
+    """The standard deviations of ``sim``'s actuation noise.
 
-    ``sim.actuation_cov()`` if it has one: the manipulation scenario's ``0.1 df_max``, the
-    needle's ``config.actuation_std`` (``(0.1 v_max, 5° · φ_max / 60°)`` unless set: the
-    paper's ``(0.05, 5°)``, scaled with the control bounds)."""
+    Parameters
+    ----------
+    sim : Simulator
+        The scenario; its ``actuation_cov()`` if it has one: the manipulation scenario's
+        ``0.1 df_max``, the needle's ``config.actuation_std`` (``(0.1 v_max, 5° · φ_max /
+        60°)`` unless set: the paper's ``(0.05, 5°)``, scaled with the control bounds).
+
+    Returns
+    -------
+    numpy.ndarray or None
+        ``(q,)`` the square roots of the covariance's diagonal; ``None`` if unknown.
+    """
     cov = getattr(sim, "actuation_cov", None)
     if callable(cov):
         return np.sqrt(np.diag(np.asarray(cov(), dtype=np.float64)))
@@ -254,9 +255,24 @@ def actuation_std(sim) -> np.ndarray | None:
 
 
 def sampling_bounds(sim, options: RRTOptions) -> np.ndarray:
-    """``(q, 2)`` bounds the RRT samples controls in: ``sim.control_bounds`` narrowed by
-    ``options.control_margin`` actuation standard deviations on each side (see
-    :class:`RRTOptions`); the full bounds when the margin is 0 or the noise unknown."""
+    """The bounds the RRT samples controls in (see :class:`RRTOptions`).
+
+    Parameters
+    ----------
+    sim : Simulator
+        The scenario (``control_bounds``, and its actuation noise, :func:`actuation_std`).
+    options : RRTOptions
+        Its ``control_margin``: standard deviations of the actuation noise kept clear of
+        each bound.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(q, 2)``: ``sim.control_bounds`` narrowed by ``options.control_margin`` actuation
+        standard deviations on each side; the full bounds when the margin is 0 or the noise
+        unknown. Raises :class:`~riskplan.errors.InvalidInputError` when the margin leaves
+        no controls.
+    """
     bounds = np.asarray(sim.control_bounds, dtype=np.float64)
     if options.control_margin == 0.0:
         return bounds
@@ -296,51 +312,35 @@ def _check_sim(sim) -> None:
             )
 
 
-class _Tree:
-    """A growing tree: reduced states ``X`` (doubled when full), full states, edges, goals."""
-
-    def __init__(self, root, x0, u0, q: int, cap: int = 1024):
-        self.X = np.empty((cap, x0.shape[0]))
-        self.X[0] = x0
-        self.is_goal = np.zeros(cap, dtype=bool)
-        self.goal_fails = np.zeros(cap, dtype=np.int64)
-        self.parents, self.node_control = [-1], [u0]
-        self.node_state = [root]  # full state y of every node; edge_states: after each step
-        self.edge_states: list[tuple] = [()]
-        self.edge_controls: list[np.ndarray] = [np.empty((0, q))]
-        self.has_goal_child = [False]
-        self.goal_nodes: list[int] = []
-        self.n = 1
-
-    def add(self, sim, parent: int, seq, u, at_goal: bool) -> None:
-        n = self.n  # the node reached by the edge ``seq`` (states) under control ``u``
-        if n == self.X.shape[0]:
-            self.X = np.concatenate([self.X, np.empty_like(self.X)])
-            self.is_goal = np.concatenate([self.is_goal, np.zeros_like(self.is_goal)])
-            self.goal_fails = np.concatenate([self.goal_fails, np.zeros_like(self.goal_fails)])
-        self.X[n] = np.asarray(sim.reduced(seq[-1]), dtype=np.float64)
-        self.parents.append(parent)
-        self.node_state.append(seq[-1])
-        self.edge_states.append(tuple(seq))
-        self.edge_controls.append(np.tile(u, (len(seq), 1)))
-        self.node_control.append(u)
-        self.has_goal_child.append(False)
-        if at_goal:
-            self.has_goal_child[parent] = True
-            self.is_goal[n] = True
-            self.goal_nodes.append(n)
-        self.n = n + 1
-
-
 def grow_tree(
     sim, *, seed, params=None, space: PlanningSpace | None = None, options: RRTOptions | None = None
 ) -> TreeResult:
     """Grow one simulator RRT (paper IV-A) from ``sim.initial_state(params)`` until it has
     ``options.plans_per_tree`` goal nodes or ``options.max_iterations`` iterations.
 
-    Returns a :class:`TreeResult` whose ``plans`` are :class:`riskplan.control.NominalPlan`
-    (possibly none: :func:`rrt_plans` raises :class:`PlanningError` if all trees fail).
-    Deterministic in ``seed``.
+    Each iteration is one extension attempt (module docstring, steps 1-5;
+    :mod:`riskplan.tissue_planning.rrt_extend`). Deterministic in ``seed``.
+
+    Parameters
+    ----------
+    sim : PlanningScenario
+        The simulator (``step``, ``reduced``, ``initial_state``, ``control_bounds``,
+        ``in_collision``, ``in_goal``, ``goal_distance``).
+    seed : int or numpy.random.Generator
+        Seeds the samples and the candidate controls.
+    params : SimParams, optional
+        The planning parameters (default ``sim.nominal_params``: the expected deformation).
+    space : PlanningSpace, optional
+        The space to plan in (default :func:`planning_space` of ``sim``).
+    options : RRTOptions, optional
+        Budget and sampling of the tree (default ``RRTOptions()``).
+
+    Returns
+    -------
+    TreeResult
+        Its ``plans`` (a list of :class:`riskplan.control.NominalPlan`, possibly empty:
+        :func:`rrt_plans` raises :class:`~riskplan.errors.PlanningError` if all trees fail),
+        nodes, parents, goal nodes and statistics.
     """
     cpu0 = time.process_time()
     _check_sim(sim)
@@ -359,137 +359,33 @@ def grow_tree(
             f"space.max_control_change: expected shape ({q},), got {space.max_control_change.shape}"
         )
     gen = as_generator(seed)
-    k_steps = space.steps_per_extension
-    n_ctrl = options.n_controls
-
     root = sim.initial_state(params)
     x0 = np.asarray(sim.reduced(root), dtype=np.float64)
     tree = _Tree(root, x0, 0.5 * (bounds[:, 0] + bounds[:, 1]), q)
-    X, is_goal, goal_fails, n = tree.X, tree.is_goal, tree.goal_fails, tree.n
-    parents, node_state, node_control = tree.parents, tree.node_state, tree.node_control
-    edge_states, edge_controls = tree.edge_states, tree.edge_controls
-    has_goal_child, goal_nodes = tree.has_goal_child, tree.goal_nodes
-    steer = space.steer if options.goal_steer else None
-    n_steps = 0
+    growth = _Growth(sim, params, space, options, bounds, r_tight, gen, tree)
     it = 0
-
-    while it < options.max_iterations and len(goal_nodes) < options.plans_per_tree:
+    while it < options.max_iterations and len(tree.goal_nodes) < options.plans_per_tree:
         it += 1
-        x_s, to_goal = space.sample(gen, options.goal_bias)
-        dn = space.distance(X[:n], x_s, to_goal=to_goal)
-        dn[is_goal[:n]] = np.inf  # goal nodes are leaves
-        if to_goal:
-            dn[goal_fails[:n] >= _MAX_GOAL_FAILS] = np.inf
-            if not np.isfinite(dn).any():
-                continue
-        near = int(np.argmin(dn))
-        # candidate controls
-        if space.max_control_change is None:
-            U = bounds[:, 0] + gen.random((n_ctrl, q)) * (bounds[:, 1] - bounds[:, 0])
-        else:
-            d = space.max_control_change
-            U = node_control[near] + (2.0 * gen.random((n_ctrl, q)) - 1.0) * d
-            U = np.clip(U, bounds[:, 0], bounds[:, 1])
-        if to_goal and steer is not None:
-            # the space's local steering towards the goal point is one of the candidates
-            # (drawn after the random ones, so the random stream does not depend on it)
-            u_st = steer(X[near].copy(), x_s, bounds, k_steps)
-            if u_st is not None:
-                u_st = as_array(u_st, "space.steer(...)", shape=(q,))
-                if space.max_control_change is not None:  # the space's rate limit holds too
-                    d = space.max_control_change
-                    u_st = np.clip(u_st, node_control[near] - d, node_control[near] + d)
-                U[-1] = np.clip(u_st, bounds[:, 0], bounds[:, 1])
-        ends = np.full((n_ctrl, space.dim), np.nan)
-        traj: list = [None] * n_ctrl
-        for c in range(n_ctrl):
-            st = node_state[near]
-            seq = []
-            try:
-                for _ in range(k_steps):
-                    st = sim.step(st, U[c], params)
-                    seq.append(st)
-            except _SIM_FAILURES as exc:
-                log.debug("rrt: candidate control discarded (%s)", exc)
-                n_steps += len(seq) + 1
-                continue
-            n_steps += k_steps
-            xe = np.asarray(sim.reduced(st), dtype=np.float64)
-            if np.all(np.isfinite(xe)):
-                ends[c] = xe
-                traj[c] = seq
-        ok = np.isfinite(ends[:, 0])
-        dist = space.distance(np.where(ok[:, None], ends, 0.0), x_s, to_goal=to_goal)
-        dist[~ok] = np.inf
-        if to_goal and options.goal_entry:
-            # an edge through the goal ends there: it ranks first (stable among such edges)
-            for c in np.flatnonzero(ok):
-                if any(_in_goal(sim, st, r_tight) for st in traj[c]):
-                    dist[c] = -1.0
-        added = False
-        for c in np.argsort(dist, kind="stable"):
-            if not ok[c] or (to_goal and dist[c] >= dn[near]):
-                break  # towards the goal, only an edge that gets closer is worth adding
-            seq = traj[c]
-            accepted, goal_at = True, None
-            for j, st in enumerate(seq):
-                xj = ends[c] if j == len(seq) - 1 else np.asarray(sim.reduced(st), dtype=np.float64)
-                if not (np.all(np.isfinite(xj)) and space.contains(xj)) or sim.in_collision(st):
-                    accepted = False
-                    break
-                if _in_goal(sim, st, r_tight):
-                    goal_at = j
-                    break
-            if not accepted:
-                continue
-            if goal_at is not None:
-                if has_goal_child[near]:
-                    break  # one goal child per node keeps the plans of a tree distinct
-                seq = seq[: goal_at + 1]
-            tree.add(sim, near, seq, U[c], goal_at is not None)
-            X, is_goal, goal_fails, n = tree.X, tree.is_goal, tree.goal_fails, tree.n
-            added = True
-            break
-        first_new = n - 1
-        if to_goal and added and steer is not None and not is_goal[n - 1]:
-            ctx = (sim, params, space, steer, bounds, k_steps, r_tight)
-            for _ in range(options.goal_connect):
-                node = n - 1
-                seq, u_c, taken, at_goal = _connect_edge(
-                    *ctx, node_state[node], X[node], node_control[node], x_s
-                )
-                n_steps += taken
-                if seq is None:
-                    break
-                tree.add(sim, node, seq, u_c, at_goal)
-                X, is_goal, goal_fails, n = tree.X, tree.is_goal, tree.goal_fails, tree.n
-                if at_goal:
-                    break
-        if to_goal:
-            # every goal-directed attempt counts, and a child made by one inherits the count:
-            # a lineage creeping towards the goal with tiny steps (or facing away from it)
-            # stops being picked for the goal after _MAX_GOAL_FAILS attempts
-            goal_fails[near] += 1
-            if added:  # the edge's node and those of its goal connection
-                goal_fails[first_new:n] = goal_fails[near]
+        growth.iterate()
 
-    X = X[:n]
+    X = tree.X[: tree.n]
     best_node = int(np.argmin(space.distance(X, space.goal, to_goal=True)))
-    best = float(sim.goal_distance(node_state[best_node]))
-    if goal_nodes:
-        best = min(best, min(float(sim.goal_distance(node_state[g])) for g in goal_nodes))
+    best = float(sim.goal_distance(tree.node_state[best_node]))
+    if tree.goal_nodes:
+        best = min(best, min(float(sim.goal_distance(tree.node_state[g])) for g in tree.goal_nodes))
     plans = [
-        _extract(sim, params, root, x0, parents, edge_states, edge_controls, g) for g in goal_nodes
+        _extract(sim, params, root, x0, tree.parents, tree.edge_states, tree.edge_controls, g)
+        for g in tree.goal_nodes
     ]
     return TreeResult(
         seed=int(seed) if isinstance(seed, (int, np.integer)) else -1,
         plans=plans,
         nodes=X.copy(),
-        parents=np.asarray(parents, dtype=np.int64),
-        goal_nodes=list(goal_nodes),
+        parents=np.asarray(tree.parents, dtype=np.int64),
+        goal_nodes=list(tree.goal_nodes),
         iterations=it,
         best_goal_distance=best,
-        n_sim_steps=n_steps,
+        n_sim_steps=growth.n_steps,
         cpu_s=time.process_time() - cpu0,
     )
 
@@ -534,16 +430,44 @@ def rrt_plans(
 ) -> tuple[list, list[TreeResult]]:
     """``n_plans`` distinct candidate plans (paper IV-A: "multiple such plans are extracted").
 
-    Grows ``ceil(n_plans / options.plans_per_tree)`` trees with seeds
-    ``spawn_seeds(seed, ...)`` in parallel (``backend``/``workers`` as in
-    :func:`riskplan.parallel.map_tasks`); if they collect fewer plans than asked, up to
+    Grows ``ceil(n_plans / options.plans_per_tree)`` trees (:func:`grow_tree`) with seeds
+    ``spawn_seeds(seed, ...)`` in parallel; if they collect fewer plans than asked, up to
     ``max_rounds − 1`` further rounds of trees (the next seeds of the same sequence) run
-    for the rest. Returns ``(plans, trees)``: the first ``n_plans`` plans in tree order (a
-    list of :class:`riskplan.control.NominalPlan`, fewer, with a warning, if the budget ran
-    out) and every :class:`TreeResult`. ``on_tree(index, tree)`` is called as trees finish.
+    for the rest. The plans do not depend on ``backend`` or ``workers``.
 
-    Raises :class:`PlanningError` naming the trees' sizes and the best goal distance when no
-    tree reached the goal.
+    Parameters
+    ----------
+    sim : PlanningScenario
+        The simulator (as in :func:`grow_tree`).
+    n_plans : int
+        Plans wanted.
+    seed : int or None
+        Root of the trees' seeds.
+    params : SimParams, optional
+        The planning parameters (default ``sim.nominal_params``).
+    space : PlanningSpace, optional
+        The space to plan in (default :func:`planning_space` of ``sim``).
+    options : RRTOptions, optional
+        Budget and sampling of each tree (default ``RRTOptions()``).
+    max_rounds : int
+        Rounds of trees at most.
+    backend, workers
+        As in :func:`riskplan.parallel.map_tasks`.
+    on_tree : callable, optional
+        ``on_tree(index, tree)``, called as trees finish.
+
+    Returns
+    -------
+    plans : list of riskplan.control.NominalPlan
+        The first ``n_plans`` plans in tree order (fewer, with a warning, if the budget
+        ran out).
+    trees : list of TreeResult
+        Every tree grown.
+
+    Raises
+    ------
+    PlanningError
+        Naming the trees' sizes and the best goal distance, when no tree reached the goal.
     """
     from riskplan.parallel import map_tasks, spawn_seeds
 

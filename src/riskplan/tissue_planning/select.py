@@ -18,10 +18,11 @@ are built once per worker instead of once per plan).
 A plan whose linearisation fails (a solver that does not converge along it, a non-finite
 state) gets ``P(success) = 0`` and its error message; it is never selected.
 
-The paper never says how good the LQG-MP estimate is. :func:`honesty_check` puts it next
-to the success rate of ``n ≥ 1000`` closed-loop executions on the true simulator (each
-with its own ``s ~ S``, actuation and sensing noise;
-:func:`riskplan.control.lqg.monte_carlo_success`) with a 95 % Wilson interval.
+The paper never says how good the LQG-MP estimate is. :func:`honesty_check`
+(:mod:`riskplan.tissue_planning.calibration`) puts it next to the success rate of
+``n ≥ 1000`` closed-loop executions on the true simulator (each with its own ``s ~ S``,
+actuation and sensing noise; :func:`riskplan.control.lqg.monte_carlo_success`) with a 95 %
+Wilson interval.
 """
 
 from __future__ import annotations
@@ -38,6 +39,14 @@ from riskplan.errors import (
     InvalidInputError,
     NumericalError,
     SimulationError,
+)
+from riskplan.tissue_planning.calibration import (
+    SATURATED,
+    Calibration,
+    HonestyRow,
+    calibration_metrics,
+    evenly_spaced_ranks,
+    honesty_check,
 )
 
 log = logging.getLogger(__name__)
@@ -149,17 +158,40 @@ def evaluate_plan(
     seed=None,
     disturbance: bool = False,
 ):
-    """Linearise ``plan``, build its LQG controller and its LQG-MP estimate.
+    """Linearise ``plan``, build its LQG controller and its LQG-MP estimate (paper IV-B..D).
 
-    Returns ``(controller, result)`` (:class:`~riskplan.control.lqg.LQGController`,
-    :class:`~riskplan.control.lqgmp.LQGMPResult`). ``distribution``: S for ``M_t`` (``None``:
-    ``sim.distribution``); ``n_samples``: its draws per step; ``n_a_runs``: the A-runs per
-    step of :func:`~riskplan.control.linearize` (``None``: its default ``2 min(p, q)``;
-    ``2 * sim.state_dim`` is the paper's); ``Q``, ``R``: LQR costs (default: Bryson's rule from the simulator's scales, see
-    :func:`~riskplan.control.lqg.lqg_controller`);
-    ``seed``: linearisation perturbations and goal samples; ``disturbance``: the
-    persistent-disturbance state (beyond the paper, :func:`~riskplan.control.lqg_controller`)
-    instead of the paper's LQG.
+    Parameters
+    ----------
+    sim : Simulator
+        The simulator the plan runs on.
+    plan : NominalPlan
+        The candidate plan.
+    distribution : ParamDistribution, list of SimParams or None
+        S for ``M_t`` (``None``: ``sim.distribution``).
+    method : {"sigma", "truncation", "sampling"}
+        The LQG-MP method (:func:`~riskplan.control.lqgmp`).
+    n_samples : int
+        Draws of S per step.
+    n_goal_samples : int
+        Draws of the final state for ``P(goal)`` (trajectories with ``"sampling"``).
+    n_a_runs : int or None
+        A-runs per step of :func:`~riskplan.control.linearize` (``None``: its default
+        ``2 min(p, q)``; ``2 * sim.state_dim`` is the paper's).
+    Q, R : numpy.ndarray, optional
+        LQR costs (default: Bryson's rule from the simulator's scales, see
+        :func:`~riskplan.control.lqg.lqg_controller`).
+    seed : int, numpy.random.Generator or None
+        Seeds the linearisation's perturbations and the goal samples.
+    disturbance : bool
+        The persistent-disturbance state (beyond the paper,
+        :func:`~riskplan.control.lqg_controller`) instead of the paper's LQG.
+
+    Returns
+    -------
+    controller : LQGController
+        The plan's :class:`~riskplan.control.lqg.LQGController`.
+    result : LQGMPResult
+        Its :class:`~riskplan.control.lqgmp.LQGMPResult`.
     """
     from riskplan.control import linearize
     from riskplan.control.lqg import lqg_controller
@@ -233,14 +265,37 @@ def select_plan(
 ) -> Selection:
     """Evaluate every candidate with LQG-MP and select the most likely to succeed (paper IV-D).
 
-    ``plans``: the candidate :class:`~riskplan.control.NominalPlan` list; ``method``:
-    ``"sigma"`` (the paper's; a conservative bound, far below the model's probability for
-    plans passing close to obstacles), ``"truncation"`` (Patil 2012) or ``"sampling"``
-    (trajectories of the linear model), see :mod:`riskplan.control.lqgmp`; ``n_a_runs``:
-    A-runs per step of the linearisation (:func:`evaluate_plan`); ``disturbance``: select
-    with the persistent-disturbance controller (beyond the paper; default the paper's LQG);
-    ``on_result(i, score)`` is called as plans finish.
-    Raises :class:`~riskplan.errors.PlanningError` if no candidate could be evaluated.
+    Every candidate is evaluated by :func:`evaluate_plan` on the same parameter draws
+    (:func:`common_draws`); candidate ``i`` with seed ``spawn_seeds(seed, n)[i]``.
+
+    Parameters
+    ----------
+    sim : Simulator
+        The simulator the plans run on.
+    plans : list of NominalPlan
+        The candidate :class:`~riskplan.control.NominalPlan` list.
+    distribution : ParamDistribution, list of SimParams or None
+        S for ``M_t`` (``None``: ``sim.distribution``).
+    method : {"sigma", "truncation", "sampling"}
+        ``"sigma"`` (the paper's; a conservative bound, far below the model's probability
+        for plans passing close to obstacles), ``"truncation"`` (Patil 2012) or
+        ``"sampling"`` (trajectories of the linear model), see :mod:`riskplan.control.lqgmp`.
+    n_samples, n_goal_samples, n_a_runs, Q, R, disturbance
+        As in :func:`evaluate_plan` (``disturbance``: select with the persistent-disturbance
+        controller, beyond the paper; default the paper's LQG).
+    seed : int or None
+        Root of the draws' and the candidates' seeds.
+    backend, workers
+        As in :func:`riskplan.parallel.map_tasks` (over chunks of candidates).
+    on_result : callable, optional
+        ``on_result(i, score)``, called as plans finish.
+
+    Returns
+    -------
+    Selection
+        The ranking, the selected plan, its controller and LQG-MP result, every
+        candidate's controller. Raises :class:`~riskplan.errors.PlanningError` if no
+        candidate could be evaluated.
     """
     from riskplan.errors import PlanningError
     from riskplan.parallel import chunk_count, map_tasks, spawn_seeds
@@ -359,196 +414,3 @@ def common_draws(sim, distribution, n_samples: int, seed) -> list | None:
     n_samples = check_count(n_samples, "n_samples", 0, integral=True)
     s = spawn_seeds(seed, 1)[0] ^ 0x5EED  # apart from the per-plan seeds
     return list(distribution.sample_many(int(n_samples), s))
-
-
-@dataclass(frozen=True)
-class HonestyRow:
-    """One candidate in the check: its LQG-MP ``p_lqgmp`` and the Monte Carlo success rate
-    ``p_mc`` of ``n`` closed-loop executions with its 95 % interval ``[low, high]``, and
-    whether the estimate lies inside that interval.
-
-    ``index`` is the candidate's 0-based position in the candidate list (as in
-    ``candidates.npz``); ``rank`` its 1-based place in the LQG-MP ranking (1 = the selected
-    plan), the same count in tables and files."""
-
-    index: int
-    rank: int
-    p_lqgmp: float
-    p_mc: float
-    low: float
-    high: float
-    n: int
-
-    @property
-    def inside(self) -> bool:
-        return self.low <= self.p_lqgmp <= self.high
-
-
-def honesty_check(
-    sim,
-    plans,
-    selection: Selection,
-    distribution=None,
-    *,
-    others: int = 2,
-    n: int = 1000,
-    seed=0,
-    backend: str = "local",
-    workers: int | None = None,
-    on_row=None,
-) -> list[HonestyRow]:
-    """LQG-MP ``P(success)`` against the success rate of ``n`` closed-loop LQG executions
-    for the selected plan and ``others`` more (at even quantiles of the ranking, down to the
-    worst usable candidate).
-
-    Each execution draws ``s ~ distribution`` (``None``: ``sim.distribution``) and its
-    sensing noise (:func:`riskplan.control.lqg.monte_carlo_success`). ``on_row(row)`` is
-    called as each candidate's check finishes.
-    """
-    from riskplan.control.lqg import monte_carlo_success
-    from riskplan.parallel import spawn_seeds
-
-    n = check_count(n, "n", 1, integral=True)
-    others = check_count(others, "others", 0, integral=True)
-    distribution = getattr(sim, "distribution", None) if distribution is None else distribution
-    usable = [s for s in selection.ranking if s.error is None]
-    # the selected plan, then ``others`` ranks at even quantiles of the rest (the last one the worst)
-    k = min(int(others), len(usable) - 1)
-    picks = [0] + sorted(
-        set(np.linspace(0, len(usable) - 1, k + 1)[1:].round().astype(int).tolist())
-    )
-    seeds = spawn_seeds(seed, len(picks))
-    rows = []
-    for rank, s in zip(picks, seeds):
-        score = usable[rank]
-        est = monte_carlo_success(
-            sim,
-            plans[score.index],
-            selection.controllers[score.index],
-            distribution,
-            n=int(n),
-            seed=s,
-            backend=backend,
-            workers=workers,
-        )
-        rows.append(
-            HonestyRow(
-                index=score.index,
-                rank=rank + 1,
-                p_lqgmp=score.p_success,
-                p_mc=est.probability,
-                low=est.low,
-                high=est.high,
-                n=est.n,
-            )
-        )
-        if on_row is not None:
-            on_row(rows[-1])
-    return rows
-
-
-# ---- calibration of a predicted P(success) against measured rates (beyond the paper) -----
-
-#: A set of measured rates all at or above this says nothing about calibration: every
-#: estimator that predicts "near 1" scores well on it (issue: a saturated set).
-SATURATED = 0.98
-
-
-@dataclass(frozen=True)
-class Calibration:
-    """How well predicted probabilities match measured rates over ``n_plans`` (plan, case)
-    pairs (:func:`calibration_metrics`).
-
-    ``mae``: mean absolute error ``(1/n) Σ |p̂_i − r_i|``; ``spearman``: Spearman's rank
-    correlation of ``p̂`` and ``r`` (``None`` where undefined: fewer than 3 pairs or a
-    constant side); ``measured_spread``: ``max r − min r``; ``measured_min``,
-    ``measured_max``; ``informative``: the set can judge calibration — the rank correlation
-    is defined and not every measured rate is ``≥`` :data:`SATURATED`; ``meets_goal``:
-    informative, ``mae ≤ mae_goal`` and ``spearman ≥ spearman_goal``.
-    """
-
-    mae: float
-    spearman: float | None
-    n_plans: int
-    measured_spread: float
-    measured_min: float
-    measured_max: float
-    informative: bool
-    meets_goal: bool
-
-    def as_dict(self) -> dict:
-        """The fields as a JSON-serialisable dict.
-
-        Returns
-        -------
-        dict
-            The fields by name.
-        """
-        from dataclasses import asdict
-
-        return asdict(self)
-
-
-def calibration_metrics(
-    predicted, measured, *, mae_goal: float = 0.05, spearman_goal: float = 0.8
-) -> Calibration:
-    """Calibration of predicted probabilities ``predicted (n,)`` against measured success
-    rates ``measured (n,)`` (both in [0, 1]): mean absolute error, Spearman's rank
-    correlation (:func:`scipy.stats.spearmanr`, ties by average rank) and the spread of the
-    measured rates. Raises :class:`~riskplan.errors.InvalidInputError` for mismatched
-    shapes, an empty set, or values outside [0, 1].
-    """
-    import warnings
-
-    from scipy.stats import spearmanr
-
-    p = np.asarray(predicted, dtype=np.float64)
-    r = np.asarray(measured, dtype=np.float64)
-    if p.ndim != 1 or r.shape != p.shape or p.size == 0:
-        raise InvalidInputError(
-            f"predicted, measured: expected two equal non-empty 1-D arrays, got shapes {p.shape} and {r.shape}"
-        )
-    for name, v in (("predicted", p), ("measured", r)):
-        if not np.all(np.isfinite(v)) or v.min() < 0.0 or v.max() > 1.0:
-            raise InvalidInputError(f"{name}: expected probabilities in [0, 1]")
-    mae = float(np.abs(p - r).mean())
-    rho = None
-    if p.size >= 3 and np.ptp(p) > 0 and np.ptp(r) > 0:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # ConstantInputWarning is excluded above
-            rho = float(spearmanr(p, r).statistic)
-        if not np.isfinite(rho):
-            rho = None
-    informative = rho is not None and bool(r.min() < SATURATED)
-    return Calibration(
-        mae=mae,
-        spearman=rho,
-        n_plans=int(p.size),
-        measured_spread=float(r.max() - r.min()),
-        measured_min=float(r.min()),
-        measured_max=float(r.max()),
-        informative=informative,
-        meets_goal=bool(informative and mae <= mae_goal and rho >= spearman_goal),
-    )
-
-
-def evenly_spaced_ranks(n: int, k: int) -> list[int]:
-    """``min(k, n)`` distinct ranks ``0 … n − 1`` evenly spaced over the ranking (the first
-    and the last included): ``round(linspace(0, n − 1, k))``; all ranks when ``k ≥ n``.
-
-    Parameters
-    ----------
-    n : int
-        Number of ranks (positive).
-    k : int
-        Number of ranks wanted (positive).
-
-    Returns
-    -------
-    list of int
-        The ranks, ascending.
-    """
-    n, k = check_count(n, "n", 1, integral=True), check_count(k, "k", 1, integral=True)
-    if k >= n:
-        return list(range(int(n)))
-    return sorted(set(np.linspace(0, n - 1, int(k)).round().astype(int).tolist()))

@@ -36,7 +36,7 @@ Rules, fixed before any number was seen:
   Goal: ``mae ≤ 0.05`` and ``spearman ≥ 0.8``.
 
 Resumable: plans, per-(case, candidate) controllers and estimates, and every batch of
-executions are stored as they finish (:class:`riskplan.app.reproduce.deformable.BlobStore`,
+executions are stored as they finish (:class:`riskplan.app.reproduce.work_units.BlobStore`,
 :class:`riskplan.app.store.ResultStore`).
 """
 
@@ -51,8 +51,9 @@ import numpy as np
 
 from riskplan._validation import check_count
 from riskplan.app.reproduce.calibration_tasks import (
-    _cpu,
+    _cost,
     _framed,
+    _rate,
     _runs,
     estimate_candidate,
     execute_rates,
@@ -240,41 +241,117 @@ def run_calibration(
     the RRT's wall seconds when first computed; counts), kept out of the results because it
     differs from run to run.
     """
-    from riskplan.app.reproduce.deformable import BlobStore, _seed_for
-    from riskplan.parallel import imap_tasks, spawn_seeds
+    from riskplan.app.reproduce.work_units import BlobStore
+    from riskplan.parallel import imap_tasks
     from riskplan.scenarios.registry import SCENARIO_NAMES, make_scenario
-    from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
-    from riskplan.tissue_planning.select import calibration_metrics, evenly_spaced_ranks
 
     if name not in SCENARIO_NAMES:
         raise InvalidInputError(f"scenario: expected one of {SCENARIO_NAMES}, got {name!r}")
     if not isinstance(scale, CalibrationScale):
         raise InvalidInputError(f"scale: expected a CalibrationScale, got {scale!r}")
     cases = scale.cases or CALIBRATION_CASES[name]
-    blobs = BlobStore(store)
-    report = progress or (lambda stage, done, total: None)
-    pmap = partial(
-        imap_tasks,
-        backend=backend,
-        workers=workers,
-        ray_address=ray_address,
-        chunksize=1,
-        pool=pool,
+    study = _Study(
+        name=name,
+        scale=scale,
+        store=store,
+        blobs=BlobStore(store),
+        seed=seed,
+        pmap=partial(
+            imap_tasks,
+            backend=backend,
+            workers=workers,
+            ray_address=ray_address,
+            chunksize=1,
+            pool=pool,
+        ),
+        report=progress or (lambda stage, done, total: None),
+        pre=f"calibration.{name}",
     )
-    pre = f"calibration.{name}"
-
     # 1. candidates
     base = make_scenario(name, "nominal")
-    stage = f"{name} calibration: RRT candidates"
-    report(stage, 0, 1)
+    plans = _candidates(study, base, backend, workers)
+    sims = {c: case_scenario(name, c) for c in cases}
+    # 2. the σ ranking of every candidate (cheap), per case
+    sig = _estimates(
+        study,
+        sims,
+        plans,
+        [(c, j) for c in cases for j in range(len(plans))],
+        ("sigma",),
+        f"{name} calibration: σ ranking",
+        "sigma",
+    )
+    picks, n_usable, failed = _picks(cases, len(plans), sig, scale.n_plans)
+    # 3. every estimator on the picked candidates (the paper's controller and σ: step 2's)
+    ests = estimators_for(base)
+    ctrls = tuple(k for k in CONTROLLERS if any(CONTROLLER_OF[e] == k for e in ests))
+    full = _estimates(
+        study,
+        sims,
+        plans,
+        [(c, j) for c in cases for _r, j in picks[c]],
+        ests,
+        f"{name} calibration: estimators",
+        "estimate",
+        earlier=sig,
+    )
+    # 4. executions, common draws per case for every plan and both controllers
+    flags = _executions(study, sims, plans, cases, picks, ctrls, full)
+    # 5. numbers
+    n_batches = -(-scale.n_executions // scale.batch_size)
+    rows = _rows(cases, picks, full, flags, n_batches, ctrls, plans)
+    out: dict = {
+        "scenario": name,
+        "scale": asdict(scale),
+        "cases": list(cases),
+        "rule": (
+            f"{scale.n_plans} of {len(plans)} candidates at evenly spaced ranks of the paper's "
+            "σ ranking per case; cases of the paper's single-execution figures"
+        ),
+        "n_usable": n_usable,
+        "failed": failed,
+        "rows": rows,
+    }
+    if cost is not None:
+        cost.update(_cost(store, study.pre, sig, full, flags, len(flags) * scale.batch_size))
+    out["estimators"] = list(ests)
+    out.update(_metrics(ests, rows, cases))
+    return out
 
+
+@dataclass(frozen=True)
+class _Study:
+    """What the steps of one scenario's calibration study share: the scenario, its sizes,
+    the stores, the root seed, the task map, the progress callback and the records' key
+    prefix (``calibration.<name>``)."""
+
+    name: str
+    scale: CalibrationScale
+    store: object
+    blobs: object
+    seed: int
+    pmap: object
+    report: object
+    pre: str
+
+
+def _candidates(study: _Study, base, backend: str, workers) -> list:
+    """Step 1: ``n_candidates`` simulator-RRT plans in the deforming tissue with the expected
+    parameters, stored with the RRT's wall seconds when first computed (its CPU runs in the
+    pool's workers)."""
+    from riskplan.app.reproduce.work_units import _seed_for
+    from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
+
+    scale, pre = study.scale, study.pre
+    stage = f"{study.name} calibration: RRT candidates"
+    study.report(stage, 0, 1)
     t_rrt = time.perf_counter()
 
     def compute():
         ps, _ = rrt_plans(
             base,
             scale.n_candidates,
-            seed=_seed_for(seed, name, "calibration", "rrt"),
+            seed=_seed_for(study.seed, study.name, "calibration", "rrt"),
             params=base.nominal_params,
             options=RRTOptions(
                 n_controls=scale.n_controls,
@@ -286,74 +363,77 @@ def run_calibration(
         )
         return ps
 
-    plans = blobs.get_or_compute(f"{pre}.plans", compute)
-    # the RRT's wall seconds when first computed (its CPU runs in the pool's workers)
-    if store.get(f"{pre}.plans_wall_s") is None:
-        store.put(f"{pre}.plans_wall_s", time.perf_counter() - t_rrt)
-    report(stage, 1, 1)
-    sims = {c: case_scenario(name, c) for c in cases}
+    plans = study.blobs.get_or_compute(f"{pre}.plans", compute)
+    if study.store.get(f"{pre}.plans_wall_s") is None:
+        study.store.put(f"{pre}.plans_wall_s", time.perf_counter() - t_rrt)
+    study.report(stage, 1, 1)
+    return plans
 
-    def estimates(items, methods, label, tag, earlier=None):
-        keys = {it: f"{pre}.{tag}.{it[0]}.{it[1]:03d}" for it in items}
-        got = {it: blobs.get(keys[it]) for it in items}
-        todo = [it for it in items if got[it] is None]
-        done = len(items) - len(todo)
-        report(label, done, len(items))
-        tasks = [
-            (
-                sims[c],
-                plans[j],
-                scale.lin_samples,
-                scale.goal_samples,
-                _seed_for(seed, name, "calibration", "estimate", c, j),
-                methods,
-                None if earlier is None else earlier[c, j],
-            )
-            for c, j in todo
-        ]
-        for i, res in pmap(estimate_candidate, tasks):
-            got[todo[i]] = res
-            blobs.put(keys[todo[i]], res)
-            done += 1
-            report(label, done, len(items))
-        return got
 
-    # 2. the σ ranking of every candidate (cheap), per case
-    sig = estimates(
-        [(c, j) for c in cases for j in range(len(plans))],
-        ("sigma",),
-        f"{name} calibration: σ ranking",
-        "sigma",
-    )
+def _estimates(study: _Study, sims, plans, items, methods, label, tag, earlier=None) -> dict:
+    """``{(case, candidate): estimate_candidate result}`` of the estimators ``methods`` for
+    ``items``, stored one by one under ``<pre>.<tag>.<case>.<candidate>``; ``earlier``: the
+    results of an earlier call whose linearisation the estimators reuse."""
+    from riskplan.app.reproduce.work_units import _seed_for
+
+    scale = study.scale
+    keys = {it: f"{study.pre}.{tag}.{it[0]}.{it[1]:03d}" for it in items}
+    got = {it: study.blobs.get(keys[it]) for it in items}
+    todo = [it for it in items if got[it] is None]
+    done = len(items) - len(todo)
+    study.report(label, done, len(items))
+    tasks = [
+        (
+            sims[c],
+            plans[j],
+            scale.lin_samples,
+            scale.goal_samples,
+            _seed_for(study.seed, study.name, "calibration", "estimate", c, j),
+            methods,
+            None if earlier is None else earlier[c, j],
+        )
+        for c, j in todo
+    ]
+    for i, res in study.pmap(estimate_candidate, tasks):
+        got[todo[i]] = res
+        study.blobs.put(keys[todo[i]], res)
+        done += 1
+        study.report(label, done, len(items))
+    return got
+
+
+def _picks(cases, n_candidates: int, sig: dict, n_plans: int) -> tuple[dict, dict, dict]:
+    """The measured candidates per case, ``picks[case] = [(rank, candidate), ...]`` at evenly
+    spaced ranks of the σ ranking (highest first, ties by index; candidates whose
+    linearisation failed left out), with ``n_usable[case]`` and ``failed[case]``."""
+    from riskplan.tissue_planning.select import evenly_spaced_ranks
+
     picks: dict = {}
     n_usable, failed = {}, {}
     for c in cases:
-        ok = [j for j in range(len(plans)) if sig[c, j]["error"] is None]
-        failed[c] = len(plans) - len(ok)
+        ok = [j for j in range(n_candidates) if sig[c, j]["error"] is None]
+        failed[c] = n_candidates - len(ok)
         n_usable[c] = len(ok)
         ranking = sorted(ok, key=lambda j: (-sig[c, j]["p"]["sigma"], j))
         picks[c] = (
-            [(r, ranking[r]) for r in evenly_spaced_ranks(len(ranking), scale.n_plans)]
-            if ranking
-            else []
+            [(r, ranking[r]) for r in evenly_spaced_ranks(len(ranking), n_plans)] if ranking else []
         )
+    return picks, n_usable, failed
 
-    # 3. every estimator on the picked candidates (the paper's controller and σ: step 2's)
-    ests = estimators_for(base)
-    ctrls = tuple(k for k in CONTROLLERS if any(CONTROLLER_OF[e] == k for e in ests))
-    full = estimates(
-        [(c, j) for c in cases for _r, j in picks[c]],
-        ests,
-        f"{name} calibration: estimators",
-        "estimate",
-        earlier=sig,
-    )
 
-    # 4. executions, common draws per case for every plan and both controllers
-    n, bs = scale.n_executions, scale.batch_size
+def _executions(study: _Study, sims, plans, cases, picks, ctrls, full) -> dict:
+    """Step 4, ``flags[case, candidate, controller, batch]``: the rows of
+    :func:`~riskplan.app.reproduce.calibration_tasks.execute_rates` for every picked plan
+    whose estimators ran and every controller, in stored batches; execution ``i`` of a case
+    uses seed ``i`` of the case for every plan and controller (common draws)."""
+    from riskplan.app.reproduce.work_units import _seed_for
+    from riskplan.parallel import spawn_seeds
+
+    name, pre = study.name, study.pre
+    n, bs = study.scale.n_executions, study.scale.batch_size
     n_batches = -(-n // bs)
     case_seeds = {
-        c: spawn_seeds(_seed_for(seed, name, "calibration", "execute", c), n) for c in cases
+        c: spawn_seeds(_seed_for(study.seed, name, "calibration", "execute", c), n) for c in cases
     }
     # batch-major: a run stopped part-way holds every plan at the same number of executions
     items = [
@@ -365,22 +445,26 @@ def run_calibration(
         if full[c, j]["error"] is None
     ]
     bkey = {it: f"{pre}.exec.{it[0]}.{it[1]:03d}.{it[2]}.b{it[3]:05d}" for it in items}
-    flags = {it: store.get(bkey[it]) for it in items}
+    flags = {it: study.store.get(bkey[it]) for it in items}
     todo = [it for it in items if flags[it] is None]
     done = len(items) - len(todo)
     label = f"{name} calibration: executions"
-    report(label, done * bs, len(items) * bs)
+    study.report(label, done * bs, len(items) * bs)
     tasks = [
         (*_framed(sims[c], plans[j], k), full[c, j][k], case_seeds[c][b * bs : (b + 1) * bs])
         for c, j, k, b in todo
     ]
-    for i, res in pmap(execute_rates, tasks):
+    for i, res in study.pmap(execute_rates, tasks):
         flags[todo[i]] = res
-        store.put(bkey[todo[i]], res)
+        study.store.put(bkey[todo[i]], res)
         done += 1
-        report(label, done * bs, len(items) * bs)
+        study.report(label, done * bs, len(items) * bs)
+    return flags
 
-    # 5. numbers
+
+def _rows(cases, picks, full, flags, n_batches: int, ctrls, plans) -> list[dict]:
+    """One row per measured (case, plan): its rank, size, ``a_norm_max``, the predictions
+    of every estimator and the measured rate of every controller."""
     rows = []
     for c in cases:
         for r, j in picks[c]:
@@ -404,20 +488,13 @@ def run_calibration(
                     "measured": measured,
                 }
             )
-    out: dict = {
-        "scenario": name,
-        "scale": asdict(scale),
-        "cases": list(cases),
-        "rule": (
-            f"{scale.n_plans} of {len(plans)} candidates at evenly spaced ranks of the paper's "
-            "σ ranking per case; cases of the paper's single-execution figures"
-        ),
-        "n_usable": n_usable,
-        "failed": failed,
-        "rows": rows,
-    }
-    if cost is not None:
-        cost.update(_cost(store, pre, sig, full, flags, len(items) * bs))
+    return rows
+
+
+def _metrics(ests, rows: list[dict], cases) -> dict:
+    """``{estimator: metrics with by_case}`` over ``rows`` (``None`` without rows) and
+    ``best``: the estimator of lowest mae among those meeting the goal, else ``None``."""
+    from riskplan.tissue_planning.select import calibration_metrics
 
     def metrics(e, sel):
         return calibration_metrics(
@@ -425,8 +502,8 @@ def run_calibration(
             [s["measured"][CONTROLLER_OF[e]]["rate"] for s in sel],
         ).as_dict()
 
+    out: dict = {}
     best = None
-    out["estimators"] = list(ests)
     for e in ests:
         if not rows:
             out[e] = None
@@ -445,41 +522,6 @@ def run_calibration(
             best = e
     out["best"] = best
     return out
-
-
-def _rate(runs) -> dict:
-    """A (case, plan, controller)'s measured rate from its ``[[success, outcome], ...]``:
-    ``successes``, ``n``, ``rate``, its 95 % Wilson interval ``low``/``high`` and the count
-    of each ``outcome``."""
-    from riskplan.collision import binomial_interval
-
-    hits = int(sum(row[0] for row in runs))
-    lo, hi = binomial_interval(hits, len(runs), confidence=0.95)
-    outcomes: dict = {}
-    for row in runs:
-        outcomes[row[1]] = outcomes.get(row[1], 0) + 1
-    return {
-        "successes": hits,
-        "n": len(runs),
-        "rate": hits / len(runs),
-        "low": float(lo),
-        "high": float(hi),
-        "outcomes": outcomes,
-    }
-
-
-def _cost(store, pre, sig, full, flags, n_executions) -> dict:
-    """Where the stage's time went: CPU seconds summed over the stored records (each task
-    times itself) of the σ ranking, the estimators and the executions, and the RRT's wall
-    seconds when first computed (timings, not results: they differ from run to run)."""
-    return {
-        "rrt_wall_s": float(store.get(f"{pre}.plans_wall_s") or 0.0),
-        "sigma_ranking_cpu_s": sum(_cpu(v) for v in sig.values()),
-        "estimators_cpu_s": sum(_cpu(v) for v in full.values()),
-        "executions_cpu_s": sum(_cpu(v) for v in flags.values()),
-        "n_linearised": {"sigma_ranking": len(sig), "estimators": len(full)},
-        "n_executions": n_executions,
-    }
 
 
 # ---- figure -------------------------------------------------------------------------------

@@ -1,6 +1,8 @@
 """The calibration stage's tasks (:mod:`riskplan.app.reproduce.calibration`): a candidate's
 controllers and LQG-MP estimates, and a batch of closed-loop executions. Module level, so
-that a process pool can pickle them; each times itself in CPU seconds."""
+that a process pool can pickle them; each times itself in CPU seconds. Beside them what the
+study makes of their results: a measured rate (``_rate``) and where the time went
+(``_cost``)."""
 
 from __future__ import annotations
 
@@ -142,3 +144,38 @@ def _runs(record) -> list:
 def _cpu(record) -> float:
     """A stored record's CPU seconds (0 where it predates the field)."""
     return float(record.get("cpu_s", 0.0)) if isinstance(record, dict) else 0.0
+
+
+def _rate(runs) -> dict:
+    """A (case, plan, controller)'s measured rate from its ``[[success, outcome], ...]``:
+    ``successes``, ``n``, ``rate``, its 95 % Wilson interval ``low``/``high`` and the count
+    of each ``outcome``."""
+    from riskplan.collision import binomial_interval
+
+    hits = int(sum(row[0] for row in runs))
+    lo, hi = binomial_interval(hits, len(runs), confidence=0.95)
+    outcomes: dict = {}
+    for row in runs:
+        outcomes[row[1]] = outcomes.get(row[1], 0) + 1
+    return {
+        "successes": hits,
+        "n": len(runs),
+        "rate": hits / len(runs),
+        "low": float(lo),
+        "high": float(hi),
+        "outcomes": outcomes,
+    }
+
+
+def _cost(store, pre, sig, full, flags, n_executions) -> dict:
+    """Where the stage's time went: CPU seconds summed over the stored records (each task
+    times itself) of the σ ranking, the estimators and the executions, and the RRT's wall
+    seconds when first computed (timings, not results: they differ from run to run)."""
+    return {
+        "rrt_wall_s": float(store.get(f"{pre}.plans_wall_s") or 0.0),
+        "sigma_ranking_cpu_s": sum(_cpu(v) for v in sig.values()),
+        "estimators_cpu_s": sum(_cpu(v) for v in full.values()),
+        "executions_cpu_s": sum(_cpu(v) for v in flags.values()),
+        "n_linearised": {"sigma_ranking": len(sig), "estimators": len(full)},
+        "n_executions": n_executions,
+    }

@@ -24,9 +24,11 @@ Rules, fixed before any number was seen:
   (LQG: one linearisation and the gains; iLQR: its iterations and that linearisation) and
   per execution for each variant.
 
-The 3-D needle's cost has no obstacle barrier (its obstacles are deformed ellipsoids and
-parallelepipeds; :func:`~riskplan.control.ilqr.obstacle_barrier` is for polygons): iLQR
-there has the goal term only.
+The 3-D needle's iLQR cost has the same terms against its deformed ellipsoids and
+parallelepipeds (:mod:`riskplan.control.ilqr_cost3d`, read by
+:func:`~riskplan.control.ilqr.scenario_terms`). Its executions run grouped by mesh (a
+draw's outcome is a function of its seeds alone, so the order changes no result): the mesh
+case's draws fall on some ninety grids, and each grid's FEM model is built once.
 """
 
 from __future__ import annotations
@@ -80,9 +82,8 @@ class ControlScale:
 
 
 #: ``smoke``: seconds; ``paper``: the issue's 1000 executions per case and variant on the
-#: 2-D scenarios (10 candidates each, the five cases, Fig. 6's linearisation sizes), the
-#: 3-D needle at the scale one shared core allows (2 candidates of its RRT, case
-#: ``actuation`` only: a material or mesh draw rebuilds its 3-D FEM model per execution).
+#: 2-D scenarios (10 candidates each, the five cases, Fig. 6's linearisation sizes) and on
+#: the 3-D needle (2 candidates of its RRT, the five cases).
 CONTROL_SCALES = {
     "smoke": ControlScale(n_candidates=2, n_executions=4, cases=("material-high",)),
     "paper": ControlScale(
@@ -93,6 +94,7 @@ CONTROL_SCALES = {
         goal_samples=2000,
         n3d_candidates=2,
         n3d_executions=1000,
+        n3d_cases=("material-low", "material-high", "actuation", "mesh", "force"),
     ),
 }
 
@@ -102,17 +104,13 @@ def _draw(sim, gen):
     return sample(gen) if sample is not None else sim.distribution.sample(gen)
 
 
-def _goal_terms_3d(sim, plan) -> dict:
-    """The goal term of the 3-D needle: ``x*_T`` with the tip moved to the deformed
-    target's centre, ``Q_goal = 10 / r²`` on the tip (as :func:`scenario_terms` in 2-D)."""
-    from riskplan.control.ilqr import GOAL_WEIGHT
-
-    p = plan.reduced.shape[1]
-    goal = np.array(plan.reduced[-1], dtype=np.float64)
-    goal[:3] = sim.goal_center(plan.states[-1])
-    Qg = np.zeros((p, p))
-    Qg[[0, 1, 2], [0, 1, 2]] = GOAL_WEIGHT / sim.goal_radius**2
-    return {"goal": goal, "Q_goal": Qg}
+def _mesh_group(sim, params) -> int:
+    """The element count a draw's FEM model is keyed by (the 3-D needle's grid, else the
+    count itself): executions on one mesh run together."""
+    data = getattr(sim, "mesh_data", None)
+    if data is None or params.n_elements is None:
+        return 0
+    return int(getattr(data(params.n_elements), "model_count", params.n_elements))
 
 
 def compare_on_plan(sim, plan, n: int, *, seed: int = 0, lin_samples: int = 8, terms=None):
@@ -131,8 +129,8 @@ def compare_on_plan(sim, plan, n: int, *, seed: int = 0, lin_samples: int = 8, t
     lin_samples : int
         Parameter draws per linearisation.
     terms : dict, optional
-        iLQR's goal/obstacle terms (default :func:`~riskplan.control.ilqr.scenario_terms`
-        for a 2-D scenario, the goal term for the 3-D needle).
+        iLQR's goal/obstacle terms (default :func:`~riskplan.control.ilqr.scenario_terms`,
+        2-D or 3-D).
 
     Returns
     -------
@@ -147,9 +145,7 @@ def compare_on_plan(sim, plan, n: int, *, seed: int = 0, lin_samples: int = 8, t
     from riskplan.parallel import spawn_seeds
 
     if terms is None:
-        terms = (
-            _goal_terms_3d(sim, plan) if plan.reduced.shape[1] == 12 else scenario_terms(sim, plan)
-        )
+        terms = scenario_terms(sim, plan)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # rank-deficient fits, documented
         c0 = time.process_time()
@@ -173,13 +169,18 @@ def compare_on_plan(sim, plan, n: int, *, seed: int = 0, lin_samples: int = 8, t
         "ukf": (plan_l, ctrl_l, "ukf", c1 - c0),
         "ilqr": (plan_i, ctrl_i, "kalman", c2 - c1),
     }
-    ok = {k: [] for k in variants}
-    outcomes = {k: [] for k in variants}
+    ok = {k: [False] * n for k in variants}
+    outcomes = {k: [None] * n for k in variants}
     cpu = dict.fromkeys(variants, 0.0)
     names = list(variants)
     warm = getattr(sim, "model", None)
-    for i, s in enumerate(spawn_seeds(seed, n)):
-        params = _draw(sim, np.random.default_rng([s, 0]))
+    seeds = spawn_seeds(seed, n)
+    draws = [_draw(sim, np.random.default_rng([s, 0])) for s in seeds]
+    order = sorted(
+        range(n), key=lambda i: _mesh_group(sim, draws[i])
+    )  # stable: same mesh, seed order
+    for i in order:
+        s, params = seeds[i], draws[i]
         if callable(warm):
             warm(params)  # the draw's FEM model is built once and cached: outside the timing
         # each variant goes first equally often, so no variant pays for what another warmed
@@ -196,8 +197,8 @@ def compare_on_plan(sim, plan, n: int, *, seed: int = 0, lin_samples: int = 8, t
                 estimator=est,
             )
             cpu[k] += time.process_time() - t0
-            outcomes[k].append(ex.outcome)
-            ok[k].append(ex.outcome == "success")
+            outcomes[k][i] = ex.outcome
+            ok[k][i] = ex.outcome == "success"
     out = {
         "n": n,
         "T": plan.n_steps,

@@ -54,23 +54,61 @@ Work units and resumability: plans, per-(candidate, case) controllers and LQG-MP
 and batches of executions are stored as they finish (:class:`BlobStore` for pickled
 objects, :class:`~riskplan.app.store.ResultStore` for JSON numbers), so a rerun
 continues where the last one stopped and gives the same numbers.
+
+Modules: the methods, cases and sizes in :mod:`~riskplan.app.reproduce.deformable_setup`,
+the pool tasks in :mod:`~riskplan.app.reproduce.deformable_tasks`, the numbers and the
+paper's claims in :mod:`~riskplan.app.reproduce.deformable_numbers`, the open-vs-closed
+runs in :mod:`~riskplan.app.reproduce.feedback`, seeds and blobs in
+:mod:`~riskplan.app.reproduce.work_units`; this module runs the steps in order
+(:func:`run_scenario`) and one scenario with its timings (:func:`run_one_scenario`). Their
+names are importable from here too.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import logging
-import pickle
-import warnings
+import time
 from dataclasses import asdict, dataclass
 from functools import partial
 from pathlib import Path
 
 import numpy as np
 
-from riskplan._validation import check_count
-from riskplan.errors import DataFormatError, InvalidInputError
+from riskplan.app.reproduce.deformable_numbers import (
+    case_numbers,
+    claims,
+    highest_verdict,
+    mechanism,
+    selection_values,
+)
+from riskplan.app.reproduce.deformable_setup import (
+    EVAL_CASES,
+    METHOD_LABELS,
+    METHODS,
+    NOT_APPLICABLE,
+    OPEN_LOOP,
+    SCALES,
+    SELECTED_SETS,
+    ScenarioScale,
+)
+from riskplan.app.reproduce.deformable_tasks import (
+    _outcome_counts as _outcome_counts,
+)
+from riskplan.app.reproduce.deformable_tasks import (
+    evaluate_candidate,
+    execute_batch,
+    execute_methods,
+)
+from riskplan.app.reproduce.feedback import (
+    SINGLE_RUNS,
+    _feedback_rates,
+    open_closed_rates,
+    paired_outcomes,
+    single_executions,
+)
+from riskplan.app.reproduce.work_units import BlobStore, _seed_for
+from riskplan.errors import InvalidInputError
 
 log = logging.getLogger(__name__)
 
@@ -79,6 +117,7 @@ __all__ = [
     "METHODS",
     "METHOD_LABELS",
     "SCALES",
+    "SINGLE_RUNS",
     "BlobStore",
     "ScenarioScale",
     "claims",
@@ -88,290 +127,29 @@ __all__ = [
     "highest_verdict",
     "open_closed_rates",
     "paired_outcomes",
+    "run_one_scenario",
     "run_scenario",
     "single_executions",
 ]
 
-METHODS = ("rrt", "rrt_margins", "lqgmp_only", "ours_no_select", "ours")
-METHOD_LABELS = {
-    "rrt": "RRT with deformations (plain RRT, open loop)",
-    "rrt_margins": "RRT with deformations, our RRT's margins (open loop)",
-    "lqgmp_only": "LQG-MP only (static plans)",
-    "ours_no_select": "ours without LQG-MP selection",
-    "ours": "ours",
-}
-#: Methods executed without feedback.
-OPEN_LOOP = ("rrt", "rrt_margins")
-#: Candidate sets that are linearised and ranked by LQG-MP.
-SELECTED_SETS = ("deforming", "static")
-
-#: The paper's five uncertainty cases (riskplan.scenarios.uncertainty.CASE_NAMES minus nominal).
-EVAL_CASES = ("material-low", "material-high", "actuation", "mesh", "force")
-
-NOT_APPLICABLE = {
-    "manipulation": {
-        "lqgmp_only": "no static plan exists: without force the target never moves (paper §V-A defines this baseline for the needle)"
-    }
-}
-
 
 @dataclass(frozen=True)
-class ScenarioScale:
-    """Sizes of one scenario's evaluation.
+class _Run:
+    """What the steps of one scenario's run share: the scenario, its sizes, the stores, the
+    root seed, the task map and progress callback, the RRT's backend and workers, and the
+    key prefix of the selections, executions and open-vs-closed runs (``fig6.<name>``, or
+    ``fig6d.<name>`` for the disturbance controller)."""
 
-    ``n_candidates``: RRT candidates per set (paper: 100); ``n_executions`` per method and
-    case (paper: 1000); ``batch_size``: executions per stored work unit; ``lin_samples``:
-    parameter draws for ``M_t``; ``goal_samples``: LQG-MP draws for ``P(goal)``;
-    ``plans_per_tree`` / ``max_iterations`` / ``n_controls``: the RRT budget
-    (:class:`riskplan.tissue_planning.rrt.RRTOptions`); ``n_feedback``: executions of each
-    open-vs-closed condition of :mod:`riskplan.app.reproduce.feedback` (Figs. 4, 5 and
-    7(c-f) as rates; 0: not run).
-    """
-
-    n_candidates: int
-    n_executions: int
-    batch_size: int
-    lin_samples: int = 16
-    goal_samples: int = 2000
-    plans_per_tree: int = 5
-    max_iterations: int = 4000
-    n_controls: int = 6
-    n_feedback: int = 0
-
-    def __post_init__(self):
-        for name in (
-            "n_candidates",
-            "n_executions",
-            "batch_size",
-            "plans_per_tree",
-            "max_iterations",
-            "n_controls",
-            "goal_samples",
-        ):
-            check_count(getattr(self, name), name, 1)
-        check_count(self.n_feedback, "n_feedback", 0)
-        check_count(self.lin_samples, "lin_samples", 2)
-
-    def rrt_options(self):
-        from riskplan.tissue_planning.rrt import RRTOptions
-
-        return RRTOptions(
-            n_controls=self.n_controls,
-            max_iterations=self.max_iterations,
-            plans_per_tree=self.plans_per_tree,
-        )
-
-
-#: Named scales. ``smoke`` fits ``riskplan reproduce --paper all`` in about 5 minutes on two
-#: cores; ``paper`` is the paper's (100 candidates, 1000 executions per method and case).
-SCALES: dict[str, dict[str, ScenarioScale]] = {
-    "smoke": {
-        "needle": ScenarioScale(
-            n_candidates=2,
-            n_executions=20,
-            batch_size=10,
-            lin_samples=6,
-            goal_samples=300,
-            plans_per_tree=2,
-            n_feedback=10,
-        ),
-        "manipulation": ScenarioScale(
-            n_candidates=2,
-            n_executions=6,
-            batch_size=3,
-            lin_samples=4,
-            goal_samples=300,
-            plans_per_tree=2,
-            n_feedback=10,
-        ),
-    },
-    "paper": {
-        "needle": ScenarioScale(
-            n_candidates=100, n_executions=1000, batch_size=50, plans_per_tree=10, n_feedback=200
-        ),
-        "manipulation": ScenarioScale(
-            n_candidates=100,
-            n_executions=1000,
-            batch_size=20,
-            plans_per_tree=10,
-            n_feedback=200,
-        ),
-    },
-}
-
-
-class BlobStore:
-    """Pickled work products (plans, controllers) beside a ResultStore, hash-checked.
-
-    ``DIR/blobs/<key>.pkl`` holds the bytes; the ResultStore record ``blob.<key>`` holds their
-    SHA-256, written after the file, so a blob without a record is simply recomputed and a
-    blob whose bytes do not match its record raises :class:`DataFormatError` naming the file.
-    Only files this store wrote are ever unpickled (the hash is checked first).
-    """
-
-    def __init__(self, store):
-        self.store = store
-        self.dir = Path(store.root) / "blobs"
-        self.dir.mkdir(parents=True, exist_ok=True)
-
-    def get(self, key: str):
-        rec = self.store.get(f"blob.{key}")
-        if rec is None:
-            return None
-        path = self.dir / f"{key}.pkl"
-        try:
-            data = path.read_bytes()
-        except OSError as exc:
-            raise DataFormatError(f"{path}: results blob missing or unreadable ({exc})") from exc
-        if hashlib.sha256(data).hexdigest() != rec["sha256"]:
-            raise DataFormatError(f"{path}: corrupted results blob (content hash mismatch)")
-        return pickle.loads(data)
-
-    def put(self, key: str, obj) -> None:
-        from riskplan.io import atomic_path
-
-        data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
-        path = self.dir / f"{key}.pkl"
-        with atomic_path(path) as tmp:
-            Path(tmp).write_bytes(data)
-        self.store.put(
-            f"blob.{key}", {"sha256": hashlib.sha256(data).hexdigest(), "bytes": len(data)}
-        )
-
-    def get_or_compute(self, key: str, compute):
-        found = self.get(key)
-        if found is not None:
-            return found
-        obj = compute()
-        self.put(key, obj)
-        return obj
-
-
-# ---- tasks (module level: picklable for process pools and Ray) ---------------------------
-
-
-def evaluate_candidate(args):
-    """``args = (sim, plan, lin_samples, goal_samples, seed)``: linearise one candidate under one case's S, LQG gains, LQG-MP (paper §IV-B..D), with
-    :func:`riskplan.tissue_planning.select.evaluate_plan`. A candidate whose linearisation fails
-    (the simulator's solve along it) gets ``P(success) = 0``, no controller, and its error.
-    An optional sixth element ``disturbance`` (default ``False``) selects the
-    persistent-disturbance controller and its LQG-MP (beyond the paper)."""
-    from riskplan.errors import (
-        ConvergenceError,
-        ElementInversionError,
-        NumericalError,
-        SimulationError,
-    )
-    from riskplan.tissue_planning.select import evaluate_plan
-
-    # NumericalError: LQG-MP's propagation or a point covariance of a degenerate linear model
-    failures = (
-        ConvergenceError,
-        ElementInversionError,
-        NumericalError,
-        SimulationError,
-        np.linalg.LinAlgError,
-    )
-
-    sim, plan, lin_samples, goal_samples, seed, *rest = args
-    disturbance = bool(rest[0]) if rest else False
-    with warnings.catch_warnings():
-        # rank-deficient X_t along straight stretches is expected and documented by linearize
-        warnings.simplefilter("ignore", RuntimeWarning)
-        try:
-            ctrl, res = evaluate_plan(
-                sim,
-                plan,
-                sim.distribution,
-                n_samples=lin_samples,
-                n_goal_samples=goal_samples,
-                seed=seed,
-                disturbance=disturbance,
-            )
-        except failures as exc:
-            return {
-                "p_success": 0.0,
-                "p_collision_free": 0.0,
-                "p_goal": 0.0,
-                "controller": None,
-                "error": str(exc),
-            }
-    return {
-        "p_success": float(res.p_success),
-        "p_collision_free": float(res.p_collision_free),
-        "p_goal": float(res.p_goal),
-        "controller": ctrl,
-        "error": None,
-    }
-
-
-def execute_batch(args) -> list[list]:
-    """``args = (sim, plan, controller or None, seeds)``: one batch of executions:
-    ``[[success, collided, reached_goal, solver_failed, left_tissue, reason], ...]`` (flags
-    0/1; ``reason`` the solver's message for a solver failure, else ``None``;
-    :func:`riskplan.control.lqg.execute`): :func:`execute_methods` with one run."""
-    sim, plan, controller, seeds = args
-    return execute_methods((sim, [(plan, controller)], seeds))[0]
-
-
-def execute_methods(args) -> list[list[list]]:
-    """``args = (sim, runs, seeds)`` with ``runs = [(plan, controller or None), ...]``: the
-    executions of several methods on the same draws, draw by draw: for each seed the
-    parameters ``s ~ S`` are drawn once and every run executes under them, so the FEM model
-    (and, in the mesh case, the mesh) of a draw is built once for all methods instead of
-    once per method. Returns one list per run, each as :func:`execute_batch` returns it
-    for ``(sim, plan, controller, seeds)``, bit for bit (each execution is a function of
-    its seed only)."""
-    from riskplan.control.lqg import execute
-
-    sim, runs, seeds = args
-    out: list[list] = [[] for _ in runs]
-    for s in seeds:
-        for k, (plan, controller) in enumerate(runs):
-            # a fresh generator per run: the sensing noise of each starts where the draw of
-            # s leaves it, so that a run's executions do not depend on the other runs
-            gen = np.random.default_rng(s)
-            params = sim.distribution.sample(gen)
-            ex = execute(sim, plan, controller, params, seed=gen, keep_states=False)
-            out[k].append(
-                [
-                    int(ex.success),
-                    int(ex.collided),
-                    int(ex.reached_goal),
-                    int(ex.outcome == "solver_failure"),
-                    int(ex.left_tissue),
-                    ex.error if ex.outcome == "solver_failure" else None,
-                ]
-            )
-    return out
-
-
-def _outcome_counts(rows: list) -> tuple[np.ndarray, dict]:
-    """Flags ``(n, 5)`` int and the solver-failure reasons with their counts, from the rows
-    of :func:`execute_batch`."""
-    f = np.array([r[:5] for r in rows], dtype=np.int64).reshape(-1, 5)
-    reasons: dict = {}
-    for r in rows:
-        if r[3] and r[5] is not None:
-            # the step index varies; the reason is what follows it
-            key = str(r[5]).split(": ", 1)[-1]
-            reasons[key] = reasons.get(key, 0) + 1
-    return f, reasons
-
-
-def _seed_for(seed: int, *labels) -> int:
-    """A 63-bit seed for a named part of the run (stable across runs and backends)."""
-    words = [int(seed)] + [
-        int.from_bytes(hashlib.sha256(str(x).encode()).digest()[:4], "little") for x in labels
-    ]
-    return int(np.random.SeedSequence(words).generate_state(1, dtype=np.uint64)[0] >> np.uint64(1))
-
-
-def _wilson(k: int, n: int) -> tuple[float, float]:
-    from riskplan.collision import binomial_interval
-
-    lo, hi = binomial_interval(k, n, confidence=0.95)
-    return float(lo), float(hi)
+    name: str
+    scale: ScenarioScale
+    store: object
+    blobs: BlobStore
+    seed: int
+    pmap: object
+    report: object
+    backend: str
+    workers: int | None
+    pre: str
 
 
 def run_scenario(
@@ -423,10 +201,63 @@ def run_scenario(
     ``candidate``, and for the selecting methods ``n_tied`` (candidates sharing the best
     LQG-MP value) with ``tie`` (the sentence saying so, ``None`` when decided); ``selection[case][set]`` the LQG-MP values of every candidate.
     """
-    from riskplan.parallel import BACKENDS, imap_tasks, spawn_seeds
-    from riskplan.scenarios.registry import SCENARIO_NAMES, make_scenario
-    from riskplan.tissue_planning.rrt import rrt_plans
-    from riskplan.tissue_planning.select import tie_note
+    from riskplan.parallel import imap_tasks
+    from riskplan.scenarios.registry import make_scenario
+
+    _check_run(name, backend, cases)
+    run = _Run(
+        name=name,
+        scale=scale,
+        store=store,
+        blobs=BlobStore(store),
+        seed=seed,
+        pmap=partial(
+            imap_tasks,
+            backend=backend,
+            workers=workers,
+            ray_address=ray_address,
+            chunksize=1,
+            pool=pool,
+        ),
+        report=progress or (lambda stage, done, total: None),
+        backend=backend,
+        workers=workers,
+        pre=f"fig6d.{name}" if disturbance else f"fig6.{name}",
+    )
+    na = NOT_APPLICABLE.get(name, {})
+    make = make_sim or make_scenario
+    plans = _candidate_plans(run, make(name, "nominal"), na)
+    sims = {c: make(name, c) for c in cases}
+    selected_sets = [s for s in plans if s in SELECTED_SETS]
+    selection = _selection(run, sims, plans, selected_sets, cases, disturbance)
+    chosen, ties = _choose(cases, na, plans, selection)
+    flags, n_batches = _executions(run, sims, plans, chosen, cases)
+    # 4b. Fig. 7(c-f) as rates: the ``ours`` plan open vs closed loop on common draws
+    feedback = _feedback_rates(
+        name, scale, store, chosen, plans, sims, seed, run.pmap, run.report, run.pre
+    )
+    # 5. numbers
+    out_cases = case_numbers(cases, na, flags, n_batches, chosen, ties, plans)
+    return {
+        "scenario": name,
+        "scale": asdict(scale),
+        "disturbance": bool(disturbance),
+        "not_applicable": dict(na),
+        "candidates": {s: len(p) for s, p in plans.items()},
+        "plan_steps": {s: [int(p.n_steps) for p in ps] for s, ps in plans.items()},
+        "cases": out_cases,
+        "selection": selection_values(cases, selected_sets, selection, plans),
+        "feedback": feedback,
+        "claims": claims(out_cases),
+        # the mechanism: the same plan open and closed loop on the same draws
+        "mechanism": mechanism(cases, flags, n_batches, chosen),
+    }
+
+
+def _check_run(name: str, backend: str, cases) -> None:
+    """The scenario, backend and case names of :func:`run_scenario`, checked once."""
+    from riskplan.parallel import BACKENDS
+    from riskplan.scenarios.registry import SCENARIO_NAMES
 
     if name not in SCENARIO_NAMES:
         raise InvalidInputError(f"scenario: expected one of {SCENARIO_NAMES}, got {name!r}")
@@ -435,22 +266,15 @@ def run_scenario(
     for c in cases:
         if c not in EVAL_CASES:
             raise InvalidInputError(f"cases: expected names from {EVAL_CASES}, got {c!r}")
-    blobs = BlobStore(store)
-    report = progress or (lambda stage, done, total: None)
-    pmap = partial(
-        imap_tasks,
-        backend=backend,
-        workers=workers,
-        ray_address=ray_address,
-        chunksize=1,
-        pool=pool,
-    )
-    na = NOT_APPLICABLE.get(name, {})
 
-    # 1. candidate plans: deforming tissue with our RRT's margins (ours), the plain RRT in
-    # the deforming tissue (RRT with deformations) and (needle) in a static tissue (LQG-MP only)
-    make = make_sim or make_scenario
-    base = make(name, "nominal")
+
+def _candidate_plans(run: _Run, base, na: dict) -> dict[str, list]:
+    """Step 1, ``{set: plans}``: the candidates in the deforming tissue with our RRT's
+    margins (ours), the plain RRT in the deforming tissue (RRT with deformations) and,
+    where ``lqgmp_only`` applies (needle), the plain RRT in a static tissue (LQG-MP only)."""
+    from riskplan.tissue_planning.rrt import rrt_plans
+
+    scale, name = run.scale, run.name
     plain = dataclasses.replace(scale.rrt_options(), goal_depth=0.0, control_margin=0.0)
     sets = {"deforming": (base.nominal_params, scale.rrt_options())}
     sets["plain"] = (base.nominal_params, plain)
@@ -459,51 +283,59 @@ def run_scenario(
     plans: dict[str, list] = {}
     for k, (set_name, (params, options)) in enumerate(sets.items()):
         key = f"fig6.{name}.plans.{set_name}"
-        report(f"{name}: RRT candidates ({set_name})", k, len(sets))
+        run.report(f"{name}: RRT candidates ({set_name})", k, len(sets))
 
         def compute(params=params, set_name=set_name, options=options):
             ps, _ = rrt_plans(
                 base,
                 scale.n_candidates,
-                seed=_seed_for(seed, name, "rrt", set_name),
+                seed=_seed_for(run.seed, name, "rrt", set_name),
                 params=params,
                 options=options,
-                backend=backend,
-                workers=workers,
+                backend=run.backend,
+                workers=run.workers,
             )
             return ps
 
-        plans[set_name] = blobs.get_or_compute(key, compute)
-        report(f"{name}: RRT candidates ({set_name})", k + 1, len(sets))
+        plans[set_name] = run.blobs.get_or_compute(key, compute)
+        run.report(f"{name}: RRT candidates ({set_name})", k + 1, len(sets))
+    return plans
 
-    # 2. per candidate, case by case (a worker's cases share B_t's runs): linearise, LQG, LQG-MP
-    sims = {c: make(name, c) for c in cases}
-    selected_sets = [s for s in plans if s in SELECTED_SETS]
+
+def _selection(run: _Run, sims: dict, plans: dict, selected_sets, cases, disturbance) -> dict:
+    """Step 2, ``{(case, set, candidate): evaluate_candidate result}``: every candidate of
+    the ranked sets linearised under each case's S, with its LQG gains and LQG-MP values
+    (a worker's cases share B_t's runs); stored one by one."""
+    name, scale = run.name, run.scale
     sel_items = [(c, s, j) for s in selected_sets for j in range(len(plans[s])) for c in cases]
-    pre = f"fig6d.{name}" if disturbance else f"fig6.{name}"
-    sel_key = {it: f"{pre}.select.{it[0]}.{it[1]}.{it[2]:03d}" for it in sel_items}
-    selection: dict = {it: blobs.get(sel_key[it]) for it in sel_items}
+    sel_key = {it: f"{run.pre}.select.{it[0]}.{it[1]}.{it[2]:03d}" for it in sel_items}
+    selection: dict = {it: run.blobs.get(sel_key[it]) for it in sel_items}
     todo = [it for it in sel_items if selection[it] is None]
     done = len(sel_items) - len(todo)
-    report(f"{name}: linearise + LQG-MP", done, len(sel_items))
+    run.report(f"{name}: linearise + LQG-MP", done, len(sel_items))
     tasks = [
         (
             sims[c],
             plans[s][j],
             scale.lin_samples,
             scale.goal_samples,
-            _seed_for(seed, name, "select", c, s, j),
+            _seed_for(run.seed, name, "select", c, s, j),
             *((True,) if disturbance else ()),
         )
         for (c, s, j) in todo
     ]
-    for i, res in pmap(evaluate_candidate, tasks):
+    for i, res in run.pmap(evaluate_candidate, tasks):
         selection[todo[i]] = res
-        blobs.put(sel_key[todo[i]], res)
+        run.blobs.put(sel_key[todo[i]], res)
         done += 1
-        report(f"{name}: linearise + LQG-MP", done, len(sel_items))
+        run.report(f"{name}: linearise + LQG-MP", done, len(sel_items))
+    return selection
 
-    # 3. which plan and controller each method executes
+
+def _choose(cases, na: dict, plans: dict, selection: dict) -> tuple[dict, dict]:
+    """Step 3, which plan and controller each method executes: ``chosen[case, method] =
+    (set, candidate, selection result or None)`` and, for the selecting methods,
+    ``ties[case, method]`` (how many candidates share the best LQG-MP value)."""
     chosen: dict = {}
     ties: dict = {}
     for c in cases:
@@ -522,17 +354,25 @@ def run_scenario(
                 j = int(np.argmax(ps))  # first of the best on ties (reported: "tie")
                 chosen[c, m] = (s, j, selection[c, s, j])
                 ties[c, m] = int(np.sum(np.asarray(ps) == ps[j]))
+    return chosen, ties
 
-    # 4. executions in batches
-    n, bs = scale.n_executions, scale.batch_size
+
+def _executions(run: _Run, sims: dict, plans: dict, chosen: dict, cases) -> tuple[dict, int]:
+    """Step 4, ``(flags, n_batches)``: the executions of every chosen (case, method) in
+    stored batches, ``flags[case, method, batch]`` the rows of :func:`execute_batch`.
+    Execution ``i`` of a case uses seed ``i`` of the case for every method."""
+    from riskplan.parallel import spawn_seeds
+
+    name = run.name
+    n, bs = run.scale.n_executions, run.scale.batch_size
     n_batches = -(-n // bs)
-    case_seeds = {c: spawn_seeds(_seed_for(seed, name, "execute", c), n) for c in cases}
+    case_seeds = {c: spawn_seeds(_seed_for(run.seed, name, "execute", c), n) for c in cases}
     batch_items = [(c, m, b) for (c, m) in chosen for b in range(n_batches)]
-    bkey = {it: f"{pre}.exec.{it[0]}.{it[1]}.b{it[2]:05d}" for it in batch_items}
-    flags: dict = {it: store.get(bkey[it]) for it in batch_items}
+    bkey = {it: f"{run.pre}.exec.{it[0]}.{it[1]}.b{it[2]:05d}" for it in batch_items}
+    flags: dict = {it: run.store.get(bkey[it]) for it in batch_items}
     todo = [it for it in batch_items if flags[it] is None]
     done = len(batch_items) - len(todo)
-    report(f"{name}: executions", done * bs, len(batch_items) * bs)
+    run.report(f"{name}: executions", done * bs, len(batch_items) * bs)
 
     # one task per (case, batch) runs every method still missing there on the same draws
     # (execute_methods: a draw's FEM model and mesh are built once for all methods)
@@ -550,297 +390,14 @@ def run_scenario(
         (sims[c], [run_of(c, m) for m in ms], case_seeds[c][b * bs : (b + 1) * bs])
         for (c, b), ms in group_items
     ]
-    for i, res in pmap(execute_methods, tasks):
+    for i, res in run.pmap(execute_methods, tasks):
         (c, b), ms = group_items[i]
         for m, rows in zip(ms, res):
             flags[c, m, b] = rows
-            store.put(bkey[c, m, b], rows)
+            run.store.put(bkey[c, m, b], rows)
             done += 1
-            report(f"{name}: executions", done * bs, len(batch_items) * bs)
-
-    # 4b. Fig. 7(c-f) as rates: the ``ours`` plan open vs closed loop on common draws
-    feedback = _feedback_rates(name, scale, store, chosen, plans, sims, seed, pmap, report, pre)
-
-    # 5. numbers
-    out_cases: dict = {}
-    for c in cases:
-        out_cases[c] = {}
-        for m in METHODS:
-            if m in na:
-                out_cases[c][m] = None
-                continue
-            f, reasons = _outcome_counts([row for b in range(n_batches) for row in flags[c, m, b]])
-            k = int(f[:, 0].sum())
-            lo, hi = _wilson(k, len(f))
-            s, j, sel = chosen[c, m]
-            out_cases[c][m] = {
-                "successes": k,
-                "n": len(f),
-                "rate": k / len(f),
-                "low": lo,
-                "high": hi,
-                "collided": int(f[:, 1].sum()),
-                "missed_goal": int(
-                    ((f[:, 0] == 0) & (f[:, 1] == 0) & (f[:, 3] == 0) & (f[:, 4] == 0)).sum()
-                ),
-                "solver_failed": int(f[:, 3].sum()),
-                "left_tissue": int(f[:, 4].sum()),
-                "solver_failure_reasons": reasons,
-                "predicted": None if m in OPEN_LOOP else sel["p_success"],
-                "controller_error": None if m in OPEN_LOOP else sel.get("error"),
-                "candidate_set": s,
-                "candidate": j,
-                "n_tied": ties.get((c, m)),
-                "tie": None
-                if (c, m) not in ties
-                else tie_note(ties[c, m], len(plans[s]), sel["p_success"]),
-            }
-    # the mechanism: the same plan open and closed loop on the same draws
-    mechanism = {}
-    for c in cases:
-        if (c, "rrt_margins") not in chosen or (c, "ours_no_select") not in chosen:
-            continue
-        rows = {
-            m: _outcome_counts([row for b in range(n_batches) for row in flags[c, m, b]])[0]
-            for m in ("rrt_margins", "ours_no_select")
-        }
-        mechanism[c] = paired_outcomes(rows["rrt_margins"][:, 0], rows["ours_no_select"][:, 0])
-    sel_out = {
-        c: {
-            s: [
-                {k: v for k, v in selection[c, s, j].items() if k != "controller"}
-                for j in range(len(plans[s]))
-            ]
-            for s in selected_sets
-        }
-        for c in cases
-    }
-    return {
-        "scenario": name,
-        "scale": asdict(scale),
-        "disturbance": bool(disturbance),
-        "not_applicable": dict(na),
-        "candidates": {s: len(p) for s, p in plans.items()},
-        "plan_steps": {s: [int(p.n_steps) for p in ps] for s, ps in plans.items()},
-        "cases": out_cases,
-        "selection": sel_out,
-        "feedback": feedback,
-        "claims": claims(out_cases),
-        "mechanism": mechanism,
-    }
-
-
-def paired_outcomes(open_ok, closed_ok) -> dict:
-    """Open against closed loop on the same draws (``(n,)`` success flags each): how many
-    runs ``both`` succeed, ``neither``, ``only_open``, ``only_closed`` (feedback rescued
-    them), and the rates. Feedback that changes nothing leaves ``only_*`` at 0."""
-    a = np.asarray(open_ok, dtype=bool)
-    b = np.asarray(closed_ok, dtype=bool)
-    n = int(a.size)
-    return {
-        "n": n,
-        "open": int(a.sum()),
-        "closed": int(b.sum()),
-        "both": int((a & b).sum()),
-        "neither": int((~a & ~b).sum()),
-        "only_open": int((a & ~b).sum()),
-        "only_closed": int((~a & b).sum()),
-        "open_rate": float(a.mean()) if n else float("nan"),
-        "closed_rate": float(b.mean()) if n else float("nan"),
-    }
-
-
-def open_closed_rates(sim, plan, controller, params_list, seeds) -> dict:
-    """Executions of ``plan`` without and with ``controller`` on the same draws: run ``i``
-    uses ``params_list[i]`` and sensing seed ``seeds[i]`` in both. Returns
-    :func:`paired_outcomes` plus the outcome counts of each loop (``open_outcomes``,
-    ``closed_outcomes``; :data:`riskplan.control.lqg.OUTCOMES`)."""
-    from riskplan.control.lqg import OUTCOMES, execute
-
-    res = {"open": [], "closed": []}
-    for params, sd in zip(params_list, seeds):
-        for kind, ctrl in (("open", None), ("closed", controller)):
-            ex = execute(sim, plan, ctrl, params, seed=np.random.default_rng(sd), keep_states=False)
-            res[kind].append(ex.outcome)
-    out = paired_outcomes(
-        [o == "success" for o in res["open"]], [o == "success" for o in res["closed"]]
-    )
-    for kind in ("open", "closed"):
-        out[f"{kind}_outcomes"] = {o: res[kind].count(o) for o in OUTCOMES}
-    return out
-
-
-def claims(cases: dict) -> dict:
-    """The paper's Fig. 6 claims checked on measured rates (§V-A).
-
-    * ``ours_highest[case]``: ours has a strictly higher rate than every other applicable
-      method; ``ours_tied[case]``: ours shares the highest rate with at least one other
-      method (a tie is reported as a tie, not as "highest"); ``ours_highest_all``: strictly
-      highest in every case; ``ours_separated[case]`` whether its Wilson interval lies
-      above every other method's.
-    * "without LQG-MP: 34 % better than RRT with deformations and 17 % worse than the
-      complete method, averaged over cases": the paper does not say whether percent points
-      or relative change; both readings, on the rates averaged over the cases:
-      ``points = 100 (r̄_a − r̄_b)`` and ``relative = 100 (r̄_a / r̄_b − 1)``.
-    """
-    highest, tied, separated = {}, {}, {}
-    for c, ms in cases.items():
-        ours = ms["ours"]
-        others = [v for m, v in ms.items() if m != "ours" and v is not None]
-        best_other = max((o["rate"] for o in others), default=-1.0)
-        highest[c] = ours["rate"] > best_other
-        tied[c] = ours["rate"] == best_other
-        separated[c] = all(ours["low"] > o["high"] for o in others)
-
-    def mean_rate(m):
-        return float(np.mean([ms[m]["rate"] for ms in cases.values()]))
-
-    r_rrt, r_ns, r_ours = mean_rate("rrt"), mean_rate("ours_no_select"), mean_rate("ours")
-
-    def rel(a, b):
-        return None if b == 0 else 100.0 * (a / b - 1.0)
-
-    return {
-        "ours_highest": highest,
-        "ours_tied": tied,
-        "ours_highest_all": all(highest.values()),
-        "ours_separated": separated,
-        "mean_rate": {"rrt": r_rrt, "ours_no_select": r_ns, "ours": r_ours},
-        "no_select_vs_rrt": {
-            "points": 100.0 * (r_ns - r_rrt),
-            "relative": rel(r_ns, r_rrt),
-            "paper": 34.0,
-        },
-        "no_select_vs_ours": {
-            "points": 100.0 * (r_ns - r_ours),
-            "relative": rel(r_ns, r_ours),
-            "paper": -17.0,
-        },
-    }
-
-
-def highest_verdict(cl: dict) -> str:
-    """ "ours highest in every case": yes only when strictly highest in every case; ties
-    are named as ties (``cl`` from :func:`claims`)."""
-    strict = cl["ours_highest"]
-    ties = cl.get("ours_tied", {})
-    if cl["ours_highest_all"]:
-        return "yes"
-    parts = []
-    tied = [c for c, t in ties.items() if t]
-    lower = [c for c, ok in strict.items() if not ok and not ties.get(c)]
-    if tied:
-        parts.append("tied for highest in " + ", ".join(tied))
-    if lower:
-        parts.append("below another method in " + ", ".join(lower))
-    return "no (" + "; ".join(parts) + ")"
-
-
-# ---- Figs. 4, 5 and 7(c-f): single executions with and without feedback -----------------
-
-#: The single executions of the paper's Figs. 4, 5, 7(c-f): ``(figure, scenario, case used
-#: for the controller, parameter change, caption)``. "Much stiffer" (Fig. 5) is E = 150
-#: (three times the planning value; the paper gives no number). Fig. 7(c, d) "variation
-#: in material parameters": E = 35 (two standard deviations of case 2 below the mean,
-#: a softer object that deforms more); Fig. 7(e, f) "mesh elements increased": 1000
-#: elements (the top of case 4's range) instead of the planning mesh's 175.
-SINGLE_RUNS = (
-    ("fig4", "needle", "actuation", {"actuation": True}, "Fig. 4: actuation noise"),
-    (
-        "fig5",
-        "needle",
-        "material-high",
-        {"youngs_modulus": 150.0},
-        "Fig. 5: a much stiffer material (E = 150)",
-    ),
-    (
-        "fig7cd",
-        "manipulation",
-        "material-high",
-        {"youngs_modulus": 35.0},
-        "Fig. 7(c, d): softer material (E = 35)",
-    ),
-    ("fig7ef", "manipulation", "mesh", {"n_elements": 1000}, "Fig. 7(e, f): a 1000-element mesh"),
-)
-
-
-def single_executions(name: str, plans_and_controllers: dict, *, seed: int = 0) -> dict:
-    """Executions of the ``ours`` plan of ``name`` without and with feedback for the
-    :data:`SINGLE_RUNS` of that scenario.
-
-    ``plans_and_controllers[case] = (plan, controller)``. Returns ``{fig: {"open": Execution,
-    "closed": Execution, "params": SimParams, "caption": str}}`` (states kept for plots).
-    """
-    from riskplan.control.lqg import execute
-    from riskplan.scenarios.registry import make_scenario
-
-    out = {}
-    for fig, scen, case, change, caption in SINGLE_RUNS:
-        if scen != name or case not in plans_and_controllers:
-            continue
-        sim = make_scenario(name, case)
-        plan, ctrl = plans_and_controllers[case]
-        change = dict(change)
-        params = sim.nominal_params
-        if change.pop("actuation", False):
-            params = sim.distribution.sample(_seed_for(seed, fig, "actuation"))
-        params = params.replace(**change)
-        gen_seed = _seed_for(seed, fig, "sensing")
-        out[fig] = {
-            "open": execute(sim, plan, None, params, seed=gen_seed),
-            "closed": execute(sim, plan, ctrl, params, seed=gen_seed),
-            "params": params,
-            "caption": caption,
-            "sim": sim,
-        }
-    return out
-
-
-def _feedback_rates(name, scale, store, chosen, plans, sims, seed, pmap, report, pre=None) -> dict:
-    """``{figure: paired summary}`` of :mod:`riskplan.app.reproduce.feedback` for the conditions
-    of scenario ``name`` whose case ran: the ``ours`` plan of that case executed open and
-    closed loop on ``scale.n_feedback`` common draws, in stored batches (resumable)."""
-    from riskplan.app.reproduce.feedback import CONDITIONS, feedback_batch, paired_summary
-    from riskplan.parallel import spawn_seeds
-
-    n, bs = int(scale.n_feedback), scale.batch_size
-    figs = [f for f, c in CONDITIONS.items() if c.scenario == name and (c.case, "ours") in chosen]
-    if n == 0 or not figs:
-        return {}
-    n_batches = -(-n // bs)
-    items = [(f, b) for f in figs for b in range(n_batches)]
-    pre = pre or f"fig6.{name}"
-    key = {it: f"{pre}.feedback.{it[0]}.b{it[1]:05d}" for it in items}
-    rows = {it: store.get(key[it]) for it in items}
-    todo = [it for it in items if rows[it] is None]
-    seeds = {f: spawn_seeds(_seed_for(seed, name, "feedback", f), n) for f in figs}
-    done = len(items) - len(todo)
-    report(f"{name}: open vs closed loop", done * bs, len(items) * bs)
-
-    def task(it):
-        f, b = it
-        case = CONDITIONS[f].case
-        s, j, sel = chosen[case, "ours"]
-        return (sims[case], plans[s][j], sel["controller"], f, seeds[f][b * bs : (b + 1) * bs])
-
-    for i, res in pmap(feedback_batch, [task(it) for it in todo]):
-        rows[todo[i]] = res
-        store.put(key[todo[i]], res)
-        done += 1
-        report(f"{name}: open vs closed loop", done * bs, len(items) * bs)
-    out = {}
-    for f in figs:
-        summary = paired_summary([r for b in range(n_batches) for r in rows[f, b]])
-        case = CONDITIONS[f].case
-        _set, j, sel = chosen[case, "ours"]
-        summary.update(
-            caption=CONDITIONS[f].caption,
-            case=case,
-            candidate=j,
-            controller_error=sel.get("error"),
-        )
-        out[f] = summary
-    return out
+            run.report(f"{name}: executions", done * bs, len(batch_items) * bs)
+    return flags, n_batches
 
 
 def run_one_scenario(
@@ -884,14 +441,39 @@ def run_one_scenario(
     dict
         The :func:`run_scenario` result.
     """
-    import resource
-    import time
-
     from riskplan.app.store import ResultStore
-    from riskplan.errors import InvalidInputError
     from riskplan.io import write_json_atomic
     from riskplan.parallel import TaskPool
 
+    scale = _sized_scale(scenario, scale_name, candidates, executions)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    store = ResultStore(
+        out / "store",
+        {"figure": "fig6", "scenario": scenario, "sizes": asdict(scale), "seed": seed},
+    )
+    clock = _StageClock(progress)
+    with TaskPool("local", workers) as pool:
+        res = run_scenario(
+            scenario,
+            scale,
+            store,
+            seed=seed,
+            backend="local",
+            workers=workers,
+            pool=pool,
+            progress=clock,
+            disturbance=disturbance,
+        )
+    tag = scenario + ("_disturbance" if disturbance else "")
+    write_json_atomic(out / f"fig6_{tag}.json", res)
+    write_json_atomic(out / f"timings_{tag}.json", clock.record())
+    return res
+
+
+def _sized_scale(scenario: str, scale_name: str, candidates, executions) -> ScenarioScale:
+    """The named scale of ``scenario`` with the candidate and execution counts replaced
+    where given (the open-vs-closed runs capped at the executions)."""
     if scenario not in ("needle", "manipulation"):
         raise InvalidInputError(f"scenario: expected needle or manipulation, got {scenario!r}")
     if scale_name not in SCALES:
@@ -903,46 +485,36 @@ def run_one_scenario(
         scale = dataclasses.replace(
             scale, n_executions=executions, n_feedback=min(scale.n_feedback, executions)
         )
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    store = ResultStore(
-        out / "store",
-        {"figure": "fig6", "scenario": scenario, "sizes": asdict(scale), "seed": seed},
-    )
-    t0 = time.perf_counter()
-    stages: dict = {}
+    return scale
 
-    def tracked(stage, done, total):
-        now = time.perf_counter() - t0
-        st = stages.setdefault(stage, {"start_s": now, "end_s": now, "total": total})
+
+class _StageClock:
+    """A ``progress(stage, done, total)`` callback that records each stage's first and last
+    report in wall seconds since its creation (``start_s``, ``end_s``, ``done``, ``total``)
+    and passes the call on to ``progress``; :meth:`record` adds the wall seconds so far and
+    the CPU seconds of this process and of its finished workers."""
+
+    def __init__(self, progress=None):
+        self.t0 = time.perf_counter()
+        self.stages: dict = {}
+        self.progress = progress
+
+    def __call__(self, stage, done, total):
+        now = time.perf_counter() - self.t0
+        st = self.stages.setdefault(stage, {"start_s": now, "end_s": now, "total": total})
         st["end_s"] = now
         st["done"] = done
-        if progress is not None:
-            progress(stage, done, total)
+        if self.progress is not None:
+            self.progress(stage, done, total)
 
-    with TaskPool("local", workers) as pool:
-        res = run_scenario(
-            scenario,
-            scale,
-            store,
-            seed=seed,
-            backend="local",
-            workers=workers,
-            pool=pool,
-            progress=tracked,
-            disturbance=disturbance,
-        )
-    own = resource.getrusage(resource.RUSAGE_SELF)
-    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-    tag = scenario + ("_disturbance" if disturbance else "")
-    write_json_atomic(out / f"fig6_{tag}.json", res)
-    write_json_atomic(
-        out / f"timings_{tag}.json",
-        {
-            "wall_s": time.perf_counter() - t0,
+    def record(self) -> dict:
+        import resource
+
+        own = resource.getrusage(resource.RUSAGE_SELF)
+        kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return {
+            "wall_s": time.perf_counter() - self.t0,
             "cpu_s_self": own.ru_utime + own.ru_stime,
             "cpu_s_workers": kids.ru_utime + kids.ru_stime,
-            "stages": stages,
-        },
-    )
-    return res
+            "stages": self.stages,
+        }

@@ -30,6 +30,13 @@ Conditions (:data:`CONDITIONS`; the paper gives no numbers):
 Success as in Fig. 6 (:func:`riskplan.control.lqg.execute`): no collision at any state
 and the final target in the goal; a solver failure counts as a failure and is counted
 separately with its first message.
+
+In Fig. 6's run (:func:`riskplan.app.reproduce.deformable.run_scenario`) the conditions of a
+scenario execute the ``ours`` plan of their case in stored batches (:func:`_feedback_rates`);
+:func:`single_executions` gives the single executions the paper draws (:data:`SINGLE_RUNS`,
+states kept for the report's plots), and :func:`open_closed_rates` with
+:func:`paired_outcomes` the same comparison for any plan and list of draws (the needle
+study).
 """
 
 from __future__ import annotations
@@ -38,9 +45,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from riskplan.app.reproduce.work_units import _seed_for
 from riskplan.errors import InvalidInputError
 
-__all__ = ["CONDITIONS", "Condition", "condition_params", "feedback_batch", "paired_summary"]
+__all__ = [
+    "CONDITIONS",
+    "SINGLE_RUNS",
+    "Condition",
+    "condition_params",
+    "feedback_batch",
+    "open_closed_rates",
+    "paired_outcomes",
+    "paired_summary",
+    "single_executions",
+]
 
 
 @dataclass(frozen=True)
@@ -164,4 +182,150 @@ def paired_summary(rows) -> dict:
     }
     out["difference"] = None if not n else out["closed"]["rate"] - out["open"]["rate"]
     out["first_error"] = next((r[6] for r in rows if r[6]), None)
+    return out
+
+
+def paired_outcomes(open_ok, closed_ok) -> dict:
+    """Open against closed loop on the same draws (``(n,)`` success flags each): how many
+    runs ``both`` succeed, ``neither``, ``only_open``, ``only_closed`` (feedback rescued
+    them), and the rates. Feedback that changes nothing leaves ``only_*`` at 0."""
+    a = np.asarray(open_ok, dtype=bool)
+    b = np.asarray(closed_ok, dtype=bool)
+    n = int(a.size)
+    return {
+        "n": n,
+        "open": int(a.sum()),
+        "closed": int(b.sum()),
+        "both": int((a & b).sum()),
+        "neither": int((~a & ~b).sum()),
+        "only_open": int((a & ~b).sum()),
+        "only_closed": int((~a & b).sum()),
+        "open_rate": float(a.mean()) if n else float("nan"),
+        "closed_rate": float(b.mean()) if n else float("nan"),
+    }
+
+
+def open_closed_rates(sim, plan, controller, params_list, seeds) -> dict:
+    """Executions of ``plan`` without and with ``controller`` on the same draws: run ``i``
+    uses ``params_list[i]`` and sensing seed ``seeds[i]`` in both. Returns
+    :func:`paired_outcomes` plus the outcome counts of each loop (``open_outcomes``,
+    ``closed_outcomes``; :data:`riskplan.control.lqg.OUTCOMES`)."""
+    from riskplan.control.lqg import OUTCOMES, execute
+
+    res = {"open": [], "closed": []}
+    for params, sd in zip(params_list, seeds):
+        for kind, ctrl in (("open", None), ("closed", controller)):
+            ex = execute(sim, plan, ctrl, params, seed=np.random.default_rng(sd), keep_states=False)
+            res[kind].append(ex.outcome)
+    out = paired_outcomes(
+        [o == "success" for o in res["open"]], [o == "success" for o in res["closed"]]
+    )
+    for kind in ("open", "closed"):
+        out[f"{kind}_outcomes"] = {o: res[kind].count(o) for o in OUTCOMES}
+    return out
+
+
+# ---- Figs. 4, 5 and 7(c-f): single executions with and without feedback -----------------
+
+#: The single executions of the paper's Figs. 4, 5, 7(c-f): ``(figure, scenario, case used
+#: for the controller, parameter change, caption)``. "Much stiffer" (Fig. 5) is E = 150
+#: (three times the planning value; the paper gives no number). Fig. 7(c, d) "variation
+#: in material parameters": E = 35 (two standard deviations of case 2 below the mean,
+#: a softer object that deforms more); Fig. 7(e, f) "mesh elements increased": 1000
+#: elements (the top of case 4's range) instead of the planning mesh's 175.
+SINGLE_RUNS = (
+    ("fig4", "needle", "actuation", {"actuation": True}, "Fig. 4: actuation noise"),
+    (
+        "fig5",
+        "needle",
+        "material-high",
+        {"youngs_modulus": 150.0},
+        "Fig. 5: a much stiffer material (E = 150)",
+    ),
+    (
+        "fig7cd",
+        "manipulation",
+        "material-high",
+        {"youngs_modulus": 35.0},
+        "Fig. 7(c, d): softer material (E = 35)",
+    ),
+    ("fig7ef", "manipulation", "mesh", {"n_elements": 1000}, "Fig. 7(e, f): a 1000-element mesh"),
+)
+
+
+def single_executions(name: str, plans_and_controllers: dict, *, seed: int = 0) -> dict:
+    """Executions of the ``ours`` plan of ``name`` without and with feedback for the
+    :data:`SINGLE_RUNS` of that scenario.
+
+    ``plans_and_controllers[case] = (plan, controller)``. Returns ``{fig: {"open": Execution,
+    "closed": Execution, "params": SimParams, "caption": str}}`` (states kept for plots).
+    """
+    from riskplan.control.lqg import execute
+    from riskplan.scenarios.registry import make_scenario
+
+    out = {}
+    for fig, scen, case, change, caption in SINGLE_RUNS:
+        if scen != name or case not in plans_and_controllers:
+            continue
+        sim = make_scenario(name, case)
+        plan, ctrl = plans_and_controllers[case]
+        change = dict(change)
+        params = sim.nominal_params
+        if change.pop("actuation", False):
+            params = sim.distribution.sample(_seed_for(seed, fig, "actuation"))
+        params = params.replace(**change)
+        gen_seed = _seed_for(seed, fig, "sensing")
+        out[fig] = {
+            "open": execute(sim, plan, None, params, seed=gen_seed),
+            "closed": execute(sim, plan, ctrl, params, seed=gen_seed),
+            "params": params,
+            "caption": caption,
+            "sim": sim,
+        }
+    return out
+
+
+def _feedback_rates(name, scale, store, chosen, plans, sims, seed, pmap, report, pre=None) -> dict:
+    """``{figure: paired summary}`` (:func:`paired_summary`) for the conditions
+    of scenario ``name`` whose case ran: the ``ours`` plan of that case executed open and
+    closed loop on ``scale.n_feedback`` common draws, in stored batches (resumable)."""
+    from riskplan.parallel import spawn_seeds
+
+    n, bs = int(scale.n_feedback), scale.batch_size
+    figs = [f for f, c in CONDITIONS.items() if c.scenario == name and (c.case, "ours") in chosen]
+    if n == 0 or not figs:
+        return {}
+    n_batches = -(-n // bs)
+    items = [(f, b) for f in figs for b in range(n_batches)]
+    pre = pre or f"fig6.{name}"
+    key = {it: f"{pre}.feedback.{it[0]}.b{it[1]:05d}" for it in items}
+    rows = {it: store.get(key[it]) for it in items}
+    todo = [it for it in items if rows[it] is None]
+    seeds = {f: spawn_seeds(_seed_for(seed, name, "feedback", f), n) for f in figs}
+    done = len(items) - len(todo)
+    report(f"{name}: open vs closed loop", done * bs, len(items) * bs)
+
+    def task(it):
+        f, b = it
+        case = CONDITIONS[f].case
+        s, j, sel = chosen[case, "ours"]
+        return (sims[case], plans[s][j], sel["controller"], f, seeds[f][b * bs : (b + 1) * bs])
+
+    for i, res in pmap(feedback_batch, [task(it) for it in todo]):
+        rows[todo[i]] = res
+        store.put(key[todo[i]], res)
+        done += 1
+        report(f"{name}: open vs closed loop", done * bs, len(items) * bs)
+    out = {}
+    for f in figs:
+        summary = paired_summary([r for b in range(n_batches) for r in rows[f, b]])
+        case = CONDITIONS[f].case
+        _set, j, sel = chosen[case, "ours"]
+        summary.update(
+            caption=CONDITIONS[f].caption,
+            case=case,
+            candidate=j,
+            controller_error=sel.get("error"),
+        )
+        out[f] = summary
     return out

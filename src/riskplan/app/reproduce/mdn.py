@@ -134,15 +134,8 @@ def run_mdn(
         return found
 
     from riskplan.datasets import generate_splits
-    from riskplan.kinematics import load_model
     from riskplan.kinematics.data import read_point_clouds
-    from riskplan.kinematics.plotting import (
-        fig_nll_vs_components,
-        fig_samples_vs_truth,
-        plotly_samples_vs_truth,
-    )
-    from riskplan.kinematics.sweep import sweep
-    from riskplan.kinematics.training import CHECKPOINT_NAME, TrainConfig, train
+    from riskplan.kinematics.evaluation import evaluate_for_report
     from riskplan.robots import load_robot
 
     report = progress or (lambda stage, done, total: None)
@@ -162,55 +155,11 @@ def run_mdn(
     )
     train_data, test_data = read_point_clouds(paths["train"]), read_point_clouds(paths["test"])
     report("mdn: train (Fig. 5)", 1, steps)
-    cfg = TrainConfig(n_components=scale.n_components, epochs=scale.epochs, seed=seed, **TRAIN)
-    model_dir = out / "model"
-    trained = store.get("mdn.model")
-    if trained is not None:  # finished in an earlier (interrupted) run: its saved model
-        model = load_model(model_dir)
-        n_epochs = int(trained["epochs"])
-    else:
-        # a run killed during training left its checkpoint: continue it (a rerun of the same
-        # command must finish, not ask for --resume); otherwise start afresh
-        resume = (model_dir / CHECKPOINT_NAME).is_file()
-        res = train(
-            train_data,
-            cfg,
-            out=model_dir,
-            resume=resume,
-            overwrite=not resume,
-            max_seconds=scale.train_seconds or None,
-        )
-        model, n_epochs = res.model, len(res.history)
-        store.put("mdn.model", {"epochs": n_epochs, "best_epoch": int(res.best_epoch)})
-    from riskplan.kinematics.evaluation import evaluate_for_report
-
+    model, n_epochs = _fig5_model(train_data, out / "model", scale, store, seed)
     ev = evaluate_for_report(model, test_data, seed)
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig = fig_samples_vs_truth(model, test_data, n_configs=2, n_samples=1500, seed=seed)
-    fig.savefig(out / "fig5.png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    plotly_samples_vs_truth(model, test_data, n_configs=2, n_samples=1500, seed=seed).write_html(
-        out / "fig5.html", include_plotlyjs="directory", full_html=True
-    )
+    _fig5_figures(model, test_data, out, seed)
     report("mdn: K sweep (Fig. 4)", 2, steps)
-    sw = sweep(
-        paths["train"],
-        paths["test"],
-        list(scale.components),
-        TrainConfig(epochs=scale.sweep_epochs, seed=seed, **TRAIN),
-        out=out / "sweep",
-        workers=workers,
-        backend=backend,
-        ray_address=ray_address,
-        max_seconds_per_k=scale.sweep_seconds or None,
-    )
-    fig = fig_nll_vs_components(sw)
-    fig.savefig(out / "fig4.png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
+    sw = _fig4_sweep(paths, out, scale, seed, workers, backend, ray_address)
     report("mdn: timing", 3, steps)
     timing = _timing(model, robot, scale.timing_configs, seed)
     report("mdn: timing", 4, steps)
@@ -236,6 +185,81 @@ def run_mdn(
     }
     store.put("mdn.results", result)
     return result
+
+
+def _fig5_model(train_data, model_dir: Path, scale: MDNScale, store, seed: int):
+    """``(model, epochs)``: the Fig. 5 model (``scale.n_components`` components) trained on
+    ``train_data`` into ``model_dir`` within the scale's epoch and wall-clock budgets, or the
+    saved model of an earlier run that finished training (record ``mdn.model``)."""
+    from riskplan.kinematics import load_model
+    from riskplan.kinematics.training import CHECKPOINT_NAME, TrainConfig, train
+
+    cfg = TrainConfig(n_components=scale.n_components, epochs=scale.epochs, seed=seed, **TRAIN)
+    trained = store.get("mdn.model")
+    if trained is not None:  # finished in an earlier (interrupted) run: its saved model
+        return load_model(model_dir), int(trained["epochs"])
+    # a run killed during training left its checkpoint: continue it (a rerun of the same
+    # command must finish, not ask for --resume); otherwise start afresh
+    resume = (model_dir / CHECKPOINT_NAME).is_file()
+    res = train(
+        train_data,
+        cfg,
+        out=model_dir,
+        resume=resume,
+        overwrite=not resume,
+        max_seconds=scale.train_seconds or None,
+    )
+    n_epochs = len(res.history)
+    store.put("mdn.model", {"epochs": n_epochs, "best_epoch": int(res.best_epoch)})
+    return res.model, n_epochs
+
+
+def _fig5_figures(model, test_data, out: Path, seed: int) -> None:
+    """Fig. 5: samples of the predicted mixture against the ground-truth points of two test
+    configurations, as ``out/fig5.png`` and the plotly page ``out/fig5.html``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from riskplan.kinematics.plotting import fig_samples_vs_truth, plotly_samples_vs_truth
+
+    fig = fig_samples_vs_truth(model, test_data, n_configs=2, n_samples=1500, seed=seed)
+    fig.savefig(out / "fig5.png", dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    plotly_samples_vs_truth(model, test_data, n_configs=2, n_samples=1500, seed=seed).write_html(
+        out / "fig5.html", include_plotlyjs="directory", full_html=True
+    )
+
+
+def _fig4_sweep(paths: dict, out: Path, scale: MDNScale, seed: int, workers, backend, ray_address):
+    """Fig. 4: the test NLL against the number of components K (``scale.components``,
+    :func:`riskplan.kinematics.sweep.sweep` into ``out/sweep``), drawn as ``out/fig4.png``.
+    Returns the sweep."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from riskplan.kinematics.plotting import fig_nll_vs_components
+    from riskplan.kinematics.sweep import sweep
+    from riskplan.kinematics.training import TrainConfig
+
+    sw = sweep(
+        paths["train"],
+        paths["test"],
+        list(scale.components),
+        TrainConfig(epochs=scale.sweep_epochs, seed=seed, **TRAIN),
+        out=out / "sweep",
+        workers=workers,
+        backend=backend,
+        ray_address=ray_address,
+        max_seconds_per_k=scale.sweep_seconds or None,
+    )
+    fig = fig_nll_vs_components(sw)
+    fig.savefig(out / "fig4.png", dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return sw
 
 
 #: Fig. 7 scene: the shipped model, the procedural chest of this seed, the planner's default goal.

@@ -114,23 +114,40 @@ def _nearest_ellipsoid(a, M):
     return a + M @ s
 
 
+#: the box's faces, edges and vertices: (free coordinates, fixed ones, their sign patterns)
+_BOX_PIECES = []
+for _free in itertools.product((True, False), repeat=3):
+    _F = np.array([i for i in range(3) if _free[i]], dtype=np.int64)
+    _C = np.array([i for i in range(3) if not _free[i]], dtype=np.int64)
+    _S = np.array(list(itertools.product((-1.0, 1.0), repeat=_C.size)), dtype=np.float64)
+    _BOX_PIECES.append((_F, _C, _S.reshape(2**_C.size, _C.size)))
+
+
 def _nearest_box(a, M):
-    best, best_val = None, math.inf
-    for pattern in itertools.product((0, -1, 1), repeat=3):
-        s = np.array(pattern, dtype=np.float64)
-        free = np.array([p == 0 for p in pattern])
-        if free.any():
-            r = a + M[:, ~free] @ s[~free]
-            sol, *_ = np.linalg.lstsq(M[:, free], -r, rcond=None)
-            if np.any(np.abs(sol) > 1.0 + 1e-12):
-                continue
-            s[free] = sol
-        y = a + M @ s
-        val = float(y @ y)
-        if val < best_val:
-            best, best_val = y, val
+    """The nearest point to the origin of ``{a + M s : |s|∞ ≤ 1}`` (``None`` inside): the
+    least-squares point of every face, edge and vertex (the fixed coordinates at ±1, the
+    free ones solved from the normal equations, kept where they stay in [−1, 1]), all sign
+    patterns of one piece type at once; the nearest of them."""
     if np.all(np.abs(np.linalg.solve(M, -a)) <= 1.0):
         return None
+    best, best_val = None, math.inf
+    for F, C, signs in _BOX_PIECES:
+        S = np.zeros((signs.shape[0], 3))
+        S[:, C] = signs
+        if F.size:
+            MF = M[:, F]
+            r = a + signs @ M[:, C].T
+            sol = -np.linalg.solve(MF.T @ MF, MF.T @ r.T).T
+            ok = np.all(np.abs(sol) <= 1.0 + 1e-12, axis=1)
+            if not ok.any():
+                continue
+            S, sol = S[ok], sol[ok]
+            S[:, F] = sol
+        Y = a + S @ M.T
+        v = np.einsum("ij,ij->i", Y, Y)
+        k = int(np.argmin(v))
+        if v[k] < best_val:
+            best, best_val = Y[k], float(v[k])
     return best
 
 

@@ -118,3 +118,13 @@ def test_report_section_shows_intervals_and_speed(tmp_path):
     _needle3d_section(rep, r)
     text = " ".join(str(b) for sec in rep.sections for b in sec.blocks)
     assert "93/100 [0.860, 0.970]" in text and "200× (50×)" in text and "world frame" in text
+
+
+def test_checked_plans_are_distinct(straight):
+    """A candidate that repeats an earlier one's controls is not checked again."""
+    from riskplan.app.reproduce.needle3d import PlanRow, _distinct
+
+    _, plan = straight
+    plans = [plan, plan]
+    rows = [PlanRow(0, plan.n_steps, {}, {}), PlanRow(1, plan.n_steps, {}, {})]
+    assert [r.index for r in _distinct(rows, plans)] == [0]

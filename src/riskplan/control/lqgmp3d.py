@@ -38,20 +38,30 @@ needle (docs/results.md): the co-motion is real (``J`` matches a regression of t
 executions' target centres on their tips), but switched on it made the estimates
 optimistic on 4 of 6 plans, because the linear model also under-predicts the tip's final
 spread by about as much as the co-motion takes off; off, the two cancel.
+
+**Beyond the linear model** (``moments=``, a
+:class:`~riskplan.control.lqgmp3d_moments.SecondOrderModel`): every method runs on that
+model's recursion instead, the checked position ``x*_{t+1} + offset_t + P_t ξ + ε_t`` with a
+residual ``ε_t`` of its own (truncated jointly with ``ξ``, then dropped), and the goal test on
+the tip relative to the moving target that the model carries (its spread now right, the
+co-motion belongs in it).
 """
 
 from __future__ import annotations
+
+import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.special import ndtr
 from scipy.stats import chi2
 
 from riskplan._validation import as_generator, check_count
+from riskplan.control.lqgmp3d_moments import SecondOrderModel
 from riskplan.control.lqgmp_common import (
     METHODS,
     LQGMPResult,
     _check_propagation,
-    _closed_loop_draws,
     _factor,
     _truncate,
     joint_covariances,
@@ -65,10 +75,6 @@ __all__ = ["METHODS_3D", "lqgmp_3d"]
 METHODS_3D = (*METHODS, "per-step")
 
 _TINY = 1e-24
-
-
-def _point_cov(S, p3):
-    return S[np.ix_(p3, p3)]
 
 
 def _check_arguments(plan, controller, n_goal_samples) -> None:
@@ -97,6 +103,7 @@ def lqgmp_3d(
     drift: bool = False,
     seed=None,
     goal_motion: bool = False,
+    moments=None,
 ) -> LQGMPResult:
     """LQG-MP ``P(success)`` of ``plan`` under ``controller`` against 3-D convex obstacles
     (module docstring). ``sim`` provides ``obstacles(state)`` and ``goal(state)`` as
@@ -104,7 +111,10 @@ def lqgmp_3d(
     reduced state's coordinates where it has them: the needle's material frame) and ``goal_point_indices`` (3 indices of x, the
     position; also the collision point). Arguments as :func:`riskplan.control.lqgmp.lqgmp`;
     ``goal_motion``: the target moves with the final state where ``sim`` has
-    ``goal_jacobian`` (module docstring)."""
+    ``goal_jacobian`` (module docstring); ``moments``: a
+    :class:`~riskplan.control.lqgmp3d_moments.SecondOrderModel` of this plan and controller
+    to run the methods on instead of the linear model (``drift`` and ``goal_motion`` then
+    do not apply: the model carries its own mean and moving target)."""
     from riskplan.collision import DEFAULT_CUTOFF
 
     cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
@@ -115,34 +125,28 @@ def lqgmp_3d(
     if pos.shape != (3,):
         raise InvalidInputError("sim.goal_point_indices: expected the 3 indices of the position")
     T = plan.n_steps
-    F, Qn, dm = joint_covariances(controller, drift)
-    nz = F.shape[1] // 2
+    model = _model(sim, plan, controller, pos, drift, goal_motion, moments)
     gen = as_generator(seed)
-    mean = np.zeros((T + 1, 2 * nz))
-    cov = np.zeros((T + 1, 2 * nz, 2 * nz))
-    cov[0, :nz, :nz] = controller.P0
-    mu = np.zeros(2 * nz)
-    S = cov[0].copy()
-    E = _goal_map(sim, plan, pos, 2 * nz, goal_motion)
     if method == "sampling":
-        for t in range(T):
-            mean[t + 1] = F[t] @ mean[t] + dm[t]
-            cov[t + 1] = F[t] @ cov[t] @ F[t].T + Qn[t]
-        _check_propagation(mean, cov)
-        return _sampled(
-            sim, plan, controller, F, Qn, dm, mean, cov, pos, int(n_goal_samples), gen, E
-        )
+        return _sampled(sim, plan, model, pos, int(n_goal_samples), gen)
+    n2 = model.F.shape[1]
+    mean = np.zeros((T + 1, n2))
+    cov = np.zeros((T + 1, n2, n2))
+    cov[0] = model.P0
+    mu = np.zeros(n2)
+    S = cov[0].copy()
     free = np.ones(T)
     k3 = chi2(3)
     for t in range(T):
-        mu = F[t] @ mu + dm[t]
-        S = F[t] @ S @ F[t].T + Qn[t]
+        mu = model.F[t] @ mu + model.c[t]
+        S = model.F[t] @ S @ model.F[t].T + model.Q[t]
         S = 0.5 * (S + S.T)
         _check_propagation(mu[None], S[None], t + 1)
         y = plan.states[t + 1]
         bodies = _obstacles(sim, y)
-        centre = plan.reduced[t + 1][pos] + mu[pos]
-        Sp = _point_cov(S, pos)
+        P, R = model.P[t], model.resid[t]
+        centre = plan.reduced[t + 1][pos] + model.offset[t] + P @ mu
+        Sp = P @ S @ P.T + R
         if not bodies:
             mean[t + 1], cov[t + 1] = mu, S
             continue
@@ -160,39 +164,24 @@ def lqgmp_3d(
             # 2-D sigma method does; the spread direction keeps its distances
             Sp = Sp + 1e-9 * ev[-1] * np.eye(3)
         L = np.linalg.cholesky(Sp)
-        found = [nearest_to_origin(b, L, centre) for b in bodies]
+        found = _nearest(bodies, L, centre, None if method == "sigma" else cutoff)
         if method == "sigma":
             c = min(d for d, _ in found)
             free[t] = float(k3.cdf(c * c))
         else:
-            order = np.argsort([d for d, _ in found], kind="stable")
-            chosen = []  # (n, d) whitened half-spaces
-            p_t = 0.0
-            for j in order:
-                d, n = found[j]
-                if d > cutoff:
-                    break
-                b = bodies[j]
-                a = np.linalg.solve(L, b.centre - centre)
-                M = np.linalg.solve(L, b.A)
-                if any(b.support_min(nc, a, M) >= dc for nc, dc in chosen):
-                    continue  # wholly beyond a chosen half-space: its mass is counted there
-                chosen.append((n, d))
-                p_t += float(ndtr(-d))
-            # truncate the joint distribution: nᵀ L⁻¹ (x − centre) ≤ d on the position
-            for n, d in chosen if method == "truncation" else ():
-                cpos = np.linalg.solve(L.T, n)
-                c = np.zeros(2 * nz)
-                c[pos] = cpos
-                mu, S = _truncate(mu, S, c, d + float(cpos @ mu[pos]))
+            chosen = _half_spaces(bodies, found, L, centre, cutoff)
+            p_t = sum(float(ndtr(-d)) for _, d in chosen)
+            if method == "truncation" and chosen:
+                mu, S = _truncate_step(mu, S, P, R, model.cross[t], L, chosen)
             free[t] = 1.0 - min(1.0, p_t)
         mean[t + 1], cov[t + 1] = mu, S
     _check_propagation(mean, cov)
     p_free = float(np.prod(free))
-    Sx = E @ cov[T] @ E.T
+    Sx = model.goal_P @ cov[T] @ model.goal_P.T + model.goal_resid
     xT = (
         plan.reduced[T][pos]
-        + E @ mean[T]
+        + model.goal_offset
+        + model.goal_P @ mean[T]
         + gen.standard_normal((int(n_goal_samples), 3)) @ _factor(0.5 * (Sx + Sx.T)).T
     )
     p_goal = float(_goal(sim, plan.states[T]).contains(xT).mean())
@@ -204,6 +193,110 @@ def lqgmp_3d(
         mean=mean,
         cov=cov,
         method=method,
+    )
+
+
+def _nearest(bodies, L, centre, cutoff) -> list:
+    """``nearest_to_origin`` of each body in the whitened frame; with a ``cutoff``, a body
+    whose lower bound ``‖L⁻¹(c − centre)‖ − ‖L⁻¹A‖_F r`` (``r = 1`` for an ellipsoid, ``√3``
+    for a box: the largest ``|s|`` of its unit set) already exceeds it gets ``(inf, None)``
+    without the search (the half-spaces stop at the cutoff)."""
+    out = []
+    for b in bodies:
+        if cutoff is not None:
+            a = np.linalg.norm(np.linalg.solve(L, b.centre - centre))
+            r = 1.0 if b.kind == "ellipsoid" else math.sqrt(3.0)
+            if a - np.linalg.norm(np.linalg.solve(L, b.A)) * r > cutoff:
+                out.append((math.inf, None))
+                continue
+        out.append(nearest_to_origin(b, L, centre))
+    return out
+
+
+def _half_spaces(bodies, found, L, centre, cutoff) -> list:
+    """Patil 2012's half-spaces of one step: ``(n, d)`` whitened, nearest obstacle first,
+    skipping an obstacle wholly beyond a chosen half-space (its mass is counted there) and
+    those farther than ``cutoff``."""
+    order = np.argsort([d for d, _ in found], kind="stable")
+    chosen = []
+    for j in order:
+        d, n = found[j]
+        if d > cutoff:
+            break
+        b = bodies[j]
+        a = np.linalg.solve(L, b.centre - centre)
+        M = np.linalg.solve(L, b.A)
+        if any(b.support_min(nc, a, M) >= dc for nc, dc in chosen):
+            continue
+        chosen.append((n, d))
+    return chosen
+
+
+def _truncate_step(mu, S, P, R, cross, L, chosen):
+    """Truncate ``N(mu, S)`` of ``ξ`` by the step's half-spaces ``nᵀ L⁻¹ (y − centre) ≤ d`` on
+    the position ``y = centre + P (ξ − mu) + ε`` (``ε ~ N(0, R)``, ``Cov(ξ, ε) = cross``): the
+    joint Gaussian of ``(ξ, ε)`` is truncated to each half-space in turn and ``ε``, this
+    step's alone, is dropped after. The planes stay where the step's centre put them."""
+    n2 = mu.shape[0]
+    m = np.concatenate([mu, np.zeros(3)])
+    C = np.block([[S, cross], [cross.T, R]])
+    start = P @ mu
+    for n, d in chosen:
+        cpos = np.linalg.solve(L.T, n)
+        c = np.concatenate([P.T @ cpos, cpos])
+        m, C = _truncate(m, C, c, d + float(cpos @ start))
+    return m[:n2], C[:n2, :n2]
+
+
+@dataclass(frozen=True, eq=False)
+class _LinearModel:
+    """The linear model's recursion in :class:`SecondOrderModel`'s form (no offsets, no
+    residual; the position is ``P ξ``)."""
+
+    F: np.ndarray
+    c: np.ndarray
+    Q: np.ndarray
+    P: np.ndarray
+    offset: np.ndarray
+    resid: np.ndarray
+    cross: np.ndarray
+    goal_P: np.ndarray
+    goal_offset: np.ndarray
+    goal_resid: np.ndarray
+    P0: np.ndarray
+
+
+def _model(sim, plan, controller, pos, drift, goal_motion, moments):
+    """The recursion the methods run on: ``moments`` (checked against the plan), else the
+    linear model of ``controller`` (:func:`joint_covariances`)."""
+    T = plan.n_steps
+    if moments is not None:
+        if not isinstance(moments, SecondOrderModel) or moments.n_steps != T:
+            raise InvalidInputError(
+                "moments: expected the SecondOrderModel of this plan (same number of steps)"
+            )
+        if moments.F.shape[1] != 2 * controller.model()[0].shape[1]:
+            raise InvalidInputError("moments: built for another controller's state dimension")
+        return moments
+    F, Qn, dm = joint_covariances(controller, drift)
+    n2 = F.shape[1]
+    nz = n2 // 2
+    P = np.zeros((3, n2))
+    P[np.arange(3), pos] = 1.0
+    P0 = np.zeros((n2, n2))
+    P0[:nz, :nz] = controller.P0
+    return _LinearModel(
+        F=F,
+        c=dm,
+        Q=Qn,
+        P=np.broadcast_to(P, (T, 3, n2)),
+        offset=np.zeros((T, 3)),
+        resid=np.zeros((T, 3, 3)),
+        cross=np.zeros((T, n2, 3)),
+        goal_P=_goal_map(sim, plan, pos, n2, goal_motion),
+        goal_offset=np.zeros(3),
+        goal_resid=np.zeros((3, 3)),
+        P0=P0,
     )
 
 
@@ -235,22 +328,41 @@ def _goal_map(sim, plan, pos, n2: int, goal_motion: bool) -> np.ndarray:
     return E
 
 
-def _sampled(sim, plan, controller, F, Qn, dm, mean, cov, pos, n, gen, E) -> LQGMPResult:
+def _sampled(sim, plan, model, pos, n, gen) -> LQGMPResult:
+    """``method="sampling"``: ``n`` trajectories of the model's recursion, each position
+    ``x*_{t+1}[pos] + offset_t + P_t ξ + ε_t`` checked against the obstacles at every step,
+    the final one (relative to the moving target with ``moments``) against the target."""
     T = plan.n_steps
+    n2 = model.F.shape[1]
+    mean = np.zeros((T + 1, n2))
+    cov = np.zeros((T + 1, n2, n2))
+    cov[0] = model.P0
+    xi = gen.standard_normal((n, n2)) @ _factor(model.P0).T
     alive = np.ones(n, dtype=bool)
     free = np.ones(T)
-    for t, xi in _closed_loop_draws(gen, n, T, controller.P0, F, dm, Qn):
+    for t in range(T):
+        mean[t + 1] = model.F[t] @ mean[t] + model.c[t]
+        cov[t + 1] = model.F[t] @ cov[t] @ model.F[t].T + model.Q[t]
+        # ε_t and the part of the step's noise it explains (the filter saw it), then the rest
+        R, X = model.resid[t], model.cross[t]
+        Rp = np.linalg.pinv(R, hermitian=True) if R.any() else np.zeros((3, 3))
+        eps = gen.standard_normal((n, 3)) @ _factor(R).T
+        rest = model.Q[t] - X @ Rp @ X.T
+        xi = xi @ model.F[t].T + model.c[t] + eps @ (X @ Rp).T
+        xi += gen.standard_normal((n, n2)) @ _factor(0.5 * (rest + rest.T)).T
         before = int(alive.sum())
         if before == 0:
             free[t] = 0.0
             continue
-        x = plan.reduced[t + 1][pos] + xi[:, pos]
+        x = plan.reduced[t + 1][pos] + model.offset[t] + xi @ model.P[t].T + eps
         hit = np.zeros(n, dtype=bool)
         for b in _obstacles(sim, plan.states[t + 1]):
             hit |= b.contains(x)
         alive &= ~hit
         free[t] = float(alive.sum()) / before
-    xT = plan.reduced[T][pos] + xi @ E.T
+    _check_propagation(mean, cov)
+    eps = gen.standard_normal((n, 3)) @ _factor(model.goal_resid).T
+    xT = plan.reduced[T][pos] + model.goal_offset + xi @ model.goal_P.T + eps
     in_goal = _goal(sim, plan.states[T]).contains(xT)
     n_free = int(alive.sum())
     p_goal = float(in_goal[alive].mean()) if n_free else float(in_goal.mean())

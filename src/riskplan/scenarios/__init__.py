@@ -62,6 +62,8 @@ _HOME = {
     "Needle3DState": "needle3d_config",
     "needle3d_steer": "needle3d_space",
     "JACOBIAN_STEP": "needle3d_frames",
+    "CONTROL_STEP": "needle3d_moments",
+    "TIP_KINDS": "needle3d_moments",
     "draw_frame": "plotting",
     "figure_for": "plotting",
     "frame_indices": "plotting",

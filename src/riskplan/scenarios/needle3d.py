@@ -67,6 +67,7 @@ from riskplan.scenarios.base import (
 from riskplan.scenarios.bevel import _pose_vector_step, pose_step_jacobian
 from riskplan.scenarios.needle3d_config import Needle3DConfig, Needle3DState, _MeshData3D
 from riskplan.scenarios.needle3d_frames import FRAMES, JACOBIAN_STEP, Needle3DFrames
+from riskplan.scenarios.needle3d_moments import Needle3DMoments
 from riskplan.scenarios.needle3d_space import Needle3DSpace, needle3d_steer
 
 __all__ = [
@@ -83,7 +84,7 @@ __all__ = [
 PLANNING_ELEMENTS = 1296
 
 
-class Needle3DScenario(Needle3DFrames, FEMScenario):
+class Needle3DScenario(Needle3DMoments, Needle3DFrames, FEMScenario):
     """The 3-D needle as a :class:`~riskplan.scenarios.base.Simulator` (module docstring).
 
     Dimensions: controls ``(v, ω)`` (q = 2; ``(v, ω, ρ)`` with duty cycling), reduced state

@@ -32,8 +32,12 @@ __all__ = [
 #: ``goal_connect``): enough to cross the block (20 edges of up to 0.3)
 GOAL_CONNECT = 20
 
-#: LQG-MP estimators compared on every plan (:func:`riskplan.control.lqgmp3d.lqgmp_3d`)
-ESTIMATORS = ("truncation", "per-step", "sigma", "sampling")
+#: LQG-MP estimators compared on every plan (:func:`riskplan.control.lqgmp3d.lqgmp_3d`): the
+#: truncation, per-step, sigma and sampling methods on the second-order model of the true
+#: system (:func:`riskplan.control.lqgmp3d_moments.second_order_model`, where the case's only
+#: uncertainty is the actuation noise; the linear model otherwise), and ``"linear"``, the
+#: truncation on the linear model (the estimate before the model change)
+ESTIMATORS = ("truncation", "per-step", "sigma", "sampling", "linear")
 
 
 @dataclass
@@ -76,45 +80,61 @@ class PlanRow:
         return dict(self.__dict__)
 
 
+def _actuation_cov(sim):
+    """``Σ_w`` when the case's only uncertainty is the actuation noise (the second-order
+    model's scope), else ``None`` (material, mesh and force draws: the linear model)."""
+    from riskplan.scenarios.uncertainty import ActuationNoise
+
+    dist = sim.distribution
+    return np.asarray(dist.cov, dtype=np.float64) if isinstance(dist, ActuationNoise) else None
+
+
 def evaluate_candidates(sim, plans, *, seed=0, n_samples: int = 16, n_goal_samples: int = 4000):
     """Every candidate's controller (linearised along it with ``sim.distribution``) and
     its LQG-MP estimates by each of :data:`ESTIMATORS`. Returns ``(controllers, rows)``;
-    a candidate whose linearisation fails gets ``None`` and estimates of 0."""
+    a candidate whose linearisation fails gets ``None`` and estimates of 0. CPU seconds
+    in ``estimate_cpu_s``: ``"truncation"`` the prediction given the controller (the
+    second-order model and the truncation on it), ``"truncation+linearise"`` with the
+    linearisation and the controller's gains, ``"linear"`` the linear model's truncation."""
     from riskplan.control.lqgmp3d import lqgmp_3d
+    from riskplan.control.lqgmp3d_moments import second_order_model
     from riskplan.parallel import spawn_seeds
     from riskplan.tissue_planning.select import _FAILURES, evaluate_plan
 
+    W = _actuation_cov(sim)
     ctrls, rows = [], []
+    kw = dict(n_goal_samples=n_goal_samples)
     for i, (plan, s) in enumerate(zip(plans, spawn_seeds(seed, len(plans)))):
-        t0, c0 = time.perf_counter(), time.process_time()
+        c0 = time.process_time()
         try:
             ctrl, res = evaluate_plan(
-                sim,
-                plan,
-                method="truncation",
-                n_samples=n_samples,
-                seed=s,
-                n_goal_samples=n_goal_samples,
+                sim, plan, method="truncation", n_samples=n_samples, seed=s, **kw
             )
         except _FAILURES as exc:
             log.warning("needle3d: candidate %d not linearised (%s)", i, exc)
             ctrls.append(None)
             rows.append(PlanRow(i, plan.n_steps, dict.fromkeys(ESTIMATORS, 0.0), {}))
             continue
-        est, secs = (
-            {"truncation": res.p_success},
-            {"truncation+linearise": time.perf_counter() - t0},
-        )
-        cpu = {"truncation+linearise": time.process_time() - c0}
+        c_lin = time.process_time() - c0
         c0 = time.process_time()
-        lqgmp_3d(sim, plan, ctrl, method="truncation", n_goal_samples=n_goal_samples, seed=s)
-        cpu["truncation"] = time.process_time() - c0
-        for m in ESTIMATORS[1:]:
-            t0 = time.perf_counter()
-            est[m] = lqgmp_3d(
-                sim, plan, ctrl, method=m, n_goal_samples=n_goal_samples, seed=s
+        lqgmp_3d(sim, plan, ctrl, method="truncation", seed=s, **kw)
+        cpu = {"linear": time.process_time() - c0}
+        c0 = time.process_time()
+        mo = None if W is None else second_order_model(sim, plan, ctrl, W)
+        est = {
+            "truncation": lqgmp_3d(
+                sim, plan, ctrl, method="truncation", seed=s, moments=mo, **kw
             ).p_success
+        }
+        cpu["truncation"] = time.process_time() - c0
+        # the linearisation and gains (evaluate_plan less its linear estimate) + the prediction
+        cpu["truncation+linearise"] = c_lin - cpu["linear"] + cpu["truncation"]
+        secs = {"truncation": cpu["truncation"]}
+        for m in ESTIMATORS[1:4]:
+            t0 = time.perf_counter()
+            est[m] = lqgmp_3d(sim, plan, ctrl, method=m, seed=s, moments=mo, **kw).p_success
             secs[m] = time.perf_counter() - t0
+        est["linear"] = res.p_success
         ctrls.append(ctrl)
         rows.append(PlanRow(i, plan.n_steps, est, secs, estimate_cpu_s=cpu))
     return ctrls, rows
@@ -160,6 +180,17 @@ def measure_plan(sim, plan, controller, row: PlanRow, *, n: int, seed=0) -> Plan
     row.mc_s = time.perf_counter() - t0
     row.closed_cpu_s = closed_cpu
     return row
+
+
+def _distinct(rows, plans) -> list:
+    """``rows`` without those whose plan repeats the controls of an earlier one."""
+    seen, out = set(), []
+    for r in rows:
+        key = plans[r.index].controls.tobytes()
+        if key not in seen:
+            seen.add(key)
+            out.append(r)
+    return out
 
 
 def _measure_task(args) -> PlanRow:
@@ -237,7 +268,9 @@ def plan_needle3d(
     if check_runs:
         from riskplan.parallel import map_tasks
 
-        usable = [r for r in ranked if ctrls[r.index] is not None]
+        # distinct plans only: the RRT's trees return the same goal-connected path more than
+        # once (11 distinct of 30 at the paper's sizes), and a copy checks nothing new
+        usable = _distinct([r for r in ranked if ctrls[r.index] is not None], plans)
         chosen = [
             usable[k] for k in evenly_spaced_ranks(len(usable), min(check_plans, len(usable)))
         ]

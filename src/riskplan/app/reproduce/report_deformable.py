@@ -287,6 +287,7 @@ def _needle3d_section(rep: Report, r: dict) -> None:
             )
         rows.append(
             [row["index"], row["n_steps"], e["truncation"], e["per-step"], e["sigma"], e["sampling"],
+             e.get("linear", "-"),
              f"{row['closed']}/{n} [{lo:.3f}, {hi:.3f}]" if n else "-",
              ("yes" if lo <= e["truncation"] <= hi else "no") if n else "-",
              f"{row['open']}/{n}" if n else "-", speed]
@@ -300,6 +301,7 @@ def _needle3d_section(rep: Report, r: dict) -> None:
             "per-step",
             "sigma",
             "sampling",
+            "linear model",
             "closed loop [95 % Wilson]",
             "inside",
             "open loop",

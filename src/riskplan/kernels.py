@@ -165,12 +165,16 @@ def _tissue3d() -> None:
     cell_tets = np.zeros((1, 1), dtype=np.int64)
     maps = np.zeros((1, 1, 4, 4))
     grid = np.ones(3, dtype=np.int64)
-    tetlocate.locate_in_grid(0.5 * one, one, grid, cell_tets, maps, tetlocate.INSIDE_TOL)
     edofs = np.arange(12, dtype=np.int64).reshape(1, 12)
     G, W = np.zeros((1, 12, 12)), np.zeros((12, 3))
+    G.flags.writeable = False  # the model's cached Green's functions are read-only
     tissue3d._point_load_kernel(G, W, edofs, 0, np.full(4, 0.25), one)
     pose = np.concatenate([np.zeros(3), np.eye(3).reshape(-1)])
-    bevel._pose_vector_step(pose, 1.0, 0.0, 0.1, 1.0, 0.5)
+    X = 0.5 * one
+    for _ in range(2):  # writeable, then read-only (a state's arrays are frozen): two signatures
+        tetlocate.locate_in_grid(X, one, grid, cell_tets, maps, tetlocate.INSIDE_TOL)
+        bevel._pose_vector_step(pose, 1.0, 0.0, 0.1, 1.0, 0.5)
+        X.flags.writeable = pose.flags.writeable = False
 
 
 #: (area, function) in the order :func:`warm` runs them

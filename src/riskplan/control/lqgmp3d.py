@@ -77,7 +77,9 @@ METHODS_3D = (*METHODS, "per-step")
 _TINY = 1e-24
 
 
-def _check_arguments(plan, controller, n_goal_samples, method, goal_se, max_goal_samples) -> None:
+def _check_arguments(
+    plan, controller, n_goal_samples, method=None, goal_se=None, max_goal_samples=1
+) -> None:
     """Raise :class:`InvalidInputError` unless ``plan`` is a :class:`NominalPlan`,
     ``controller`` its :class:`LQGController`, ``n_goal_samples`` a positive integer and
     ``goal_se`` ``None`` or (not for ``"sampling"``) a finite number > 0 with

@@ -38,6 +38,10 @@ KERNEL_MODULES = (
     "riskplan.collision._kernels",
     "riskplan.geometry2d",
     "riskplan.deformable.nhkernels",
+    "riskplan.deformable.tetfactor",
+    "riskplan.deformable.tetlocate",
+    "riskplan.scenarios.tissue3d",
+    "riskplan.scenarios.bevel",
 )
 
 
@@ -145,12 +149,41 @@ def _deformable() -> None:
     k.scaled_norm(np.ones(1))
 
 
+def _tissue3d() -> None:
+    # the 3-D needle's kernels (tissue wing, called by name), on minimal inputs of the types
+    # their callers pass: the band of a 3x3 SPD matrix's factor as scipy returns it, one grid
+    # cell with one tetrahedron, one element's point load, one pose-vector step
+    import scipy.linalg
+
+    tetfactor = importlib.import_module("riskplan.deformable.tetfactor")
+    tetlocate = importlib.import_module("riskplan.deformable.tetlocate")
+    tissue3d = importlib.import_module("riskplan.scenarios.tissue3d")
+    bevel = importlib.import_module("riskplan.scenarios.bevel")
+    ab = np.array([[0.0, -1.0, -1.0], [4.0, 4.0, 4.0]])
+    tetfactor.band_inverse(scipy.linalg.cholesky_banded(ab, lower=False))
+    one = np.ones(3)
+    cell_tets = np.zeros((1, 1), dtype=np.int64)
+    maps = np.zeros((1, 1, 4, 4))
+    grid = np.ones(3, dtype=np.int64)
+    edofs = np.arange(12, dtype=np.int64).reshape(1, 12)
+    G, W = np.zeros((1, 12, 12)), np.zeros((12, 3))
+    G.flags.writeable = False  # the model's cached Green's functions are read-only
+    tissue3d._point_load_kernel(G, W, edofs, 0, np.full(4, 0.25), one)
+    pose = np.concatenate([np.zeros(3), np.eye(3).reshape(-1)])
+    X = 0.5 * one
+    for _ in range(2):  # writeable, then read-only (a state's arrays are frozen): two signatures
+        tetlocate.locate_in_grid(X, one, grid, cell_tets, maps, tetlocate.INSIDE_TOL)
+        bevel._pose_vector_step(pose, 1.0, 0.0, 0.1, 1.0, 0.5)
+        X.flags.writeable = pose.flags.writeable = False
+
+
 #: (area, function) in the order :func:`warm` runs them
 AREAS: tuple[tuple[str, Callable[[], None]], ...] = (
     ("robot", _robot),
     ("collision", _collision),
     ("geometry2d", _geometry2d),
     ("deformable", _deformable),
+    ("tissue3d", _tissue3d),
 )
 
 
@@ -161,7 +194,7 @@ def warm(progress: Callable[[str], None] | None = None) -> dict[str, float]:
     ----------
     progress:
         Called with each area's name before it runs (``"robot"``, ``"collision"``,
-        ``"geometry2d"``, ``"deformable"``).
+        ``"geometry2d"``, ``"deformable"``, ``"tissue3d"``).
 
     Returns
     -------

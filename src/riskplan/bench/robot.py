@@ -11,9 +11,12 @@ Figures (median wall time, paper robot, no gravity, 5 mm step):
   ``riskplan.datasets.generate_splits``), serial backend (None with ``include_dataset=False``).
 * ``first_call_cold_s`` — a fresh Python process, from its start to its first
   ``solve_displacements``, with an empty numba cache (``NUMBA_CACHE_DIR`` set to a new folder):
-  what the first command costs when nothing is compiled (None with ``include_first_call=False``).
+  what the first command costs when nothing is compiled (None with ``include_first_call=False``);
+  ``first_call_cold_cpu_s``: its CPU time (user + system; on a shared machine the wall time
+  also counts the waits for a core).
 * ``first_call_installed_s`` — the same process with the package's own kernel cache, as
-  ``make install`` leaves it (it runs ``riskplan warm``); ``kernel_cache_complete`` says
+  ``make install`` leaves it (it runs ``riskplan warm``), and ``first_call_installed_cpu_s``
+  its CPU time; ``kernel_cache_complete`` says
   whether every kernel was cached when it was measured (:func:`riskplan.kernels.cold`).
 
 Anchors: the compiled C++ peer (Kuntz-Lab/interactive-rate-tendons) takes 66-73 us per
@@ -23,6 +26,7 @@ configuration on a 2-core machine; the MDN paper quotes 0.39 ms for its Cosserat
 from __future__ import annotations
 
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -52,27 +56,34 @@ _FIRST_CALL = (
 )
 
 
-def _first_call_s(cache_dir: str | None) -> float:
-    """Wall time of a fresh process that imports riskplan and solves one shape."""
+def _first_call_s(cache_dir: str | None) -> tuple[float, float]:
+    """Wall time and CPU time (user + system) of a fresh process that imports riskplan and
+    solves one shape."""
     env = dict(os.environ)
     if cache_dir is not None:
         env["NUMBA_CACHE_DIR"] = cache_dir
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     subprocess.run([sys.executable, "-c", _FIRST_CALL], env=env, check=True)
-    return time.perf_counter() - t0
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
 
 
 def first_call_figures() -> dict:
-    """``first_call_cold_s``, ``first_call_installed_s`` and ``kernel_cache_complete``."""
+    """``first_call_cold_s``, ``first_call_installed_s`` (wall), their CPU times
+    ``first_call_cold_cpu_s``, ``first_call_installed_cpu_s`` and ``kernel_cache_complete``."""
     from riskplan.kernels import cold
 
     complete = not cold()
-    installed = _first_call_s(None)
+    installed, installed_cpu = _first_call_s(None)
     with tempfile.TemporaryDirectory() as tmp:
-        cold_s = _first_call_s(tmp)
+        cold_s, cold_cpu = _first_call_s(tmp)
     return {
         "first_call_cold_s": cold_s,
+        "first_call_cold_cpu_s": cold_cpu,
         "first_call_installed_s": installed,
+        "first_call_installed_cpu_s": installed_cpu,
         "kernel_cache_complete": complete,
     }
 
@@ -124,7 +135,15 @@ def run(
     }
     if include_dataset:
         out["dataset_small_s"] = _dataset_small_s()
-    out |= dict.fromkeys(("first_call_cold_s", "first_call_installed_s", "kernel_cache_complete"))
+    out |= dict.fromkeys(
+        (
+            "first_call_cold_s",
+            "first_call_cold_cpu_s",
+            "first_call_installed_s",
+            "first_call_installed_cpu_s",
+            "kernel_cache_complete",
+        )
+    )
     if include_first_call:
         out |= first_call_figures()
     return out

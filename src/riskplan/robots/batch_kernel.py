@@ -25,10 +25,10 @@ configuration's column of ``W``.
 
 Repetition that is deliberate (a duplicate-code scan lists it):
 
-* the 6x6 Cholesky factor and solve on the packed lower triangle (``_factor_column``,
-  ``_solve_column``, once each) are unrolled, row after row of the same shape, so that LLVM
-  keeps the 21 entries in registers and vectorises across the chunk; the scalar kernel's
-  ``linalg6`` loops do the same operations in the same order;
+* the 6x6 Cholesky factor and solve on the packed lower triangle of a column of ``W``
+  (``linalg6.packed_chol_factor6``, ``packed_chol_solve6``, beside the scalar kernel's loops
+  that do the same operations in the same order) are unrolled, row after row of the same
+  shape, so that LLVM keeps the 21 entries in registers and vectorises across the chunk;
 * ``_jac_chol_slope`` repeats the tendon loop of ``_jac_chol`` because it fuses the
   Jacobian and the slope's right-hand side into one pass over the tendons (calling both
   would evaluate every tendon tangent twice per node);
@@ -50,6 +50,7 @@ from numba import get_num_threads, njit, prange
 from riskplan.errors import ConvergenceError, InvalidInputError
 from riskplan.robots import cosserat
 from riskplan.robots.integration import rk4_row
+from riskplan.robots.linalg6 import packed_chol_factor6, packed_chol_solve6
 from riskplan.robots.rod_tables import LOCAL_MAXIT, LOCAL_TOL, RodTables
 from riskplan.robots.strains import (
     tendon_slope_source,
@@ -179,234 +180,6 @@ def _jacobian_add_tendon(W, c, sc, t0, t1, t2, r):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _factor_column(W, c, store):
-    """Cholesky factor (``linalg6.chol_factor6``'s operations, unrolled) of configuration
-    ``c``'s packed Jacobian ``W[JACOBIAN:JACOBIAN+21, c]``, written to ``W[FACTOR:FACTOR+21, c]``
-    when ``store``. Returns True if a pivot was not positive."""
-    j00 = W[JACOBIAN + 0, c]
-    j10 = W[JACOBIAN + 1, c]
-    j11 = W[JACOBIAN + 2, c]
-    j20 = W[JACOBIAN + 3, c]
-    j21 = W[JACOBIAN + 4, c]
-    j22 = W[JACOBIAN + 5, c]
-    j30 = W[JACOBIAN + 6, c]
-    j31 = W[JACOBIAN + 7, c]
-    j32 = W[JACOBIAN + 8, c]
-    j33 = W[JACOBIAN + 9, c]
-    j40 = W[JACOBIAN + 10, c]
-    j41 = W[JACOBIAN + 11, c]
-    j42 = W[JACOBIAN + 12, c]
-    j43 = W[JACOBIAN + 13, c]
-    j44 = W[JACOBIAN + 14, c]
-    j50 = W[JACOBIAN + 15, c]
-    j51 = W[JACOBIAN + 16, c]
-    j52 = W[JACOBIAN + 17, c]
-    j53 = W[JACOBIAN + 18, c]
-    j54 = W[JACOBIAN + 19, c]
-    j55 = W[JACOBIAN + 20, c]
-    bad = False
-    d = j00
-    bad = bad | (not d > 0.0)
-    d = math.sqrt(d)
-    j00 = d
-    inv = 1.0 / d
-    acc = j10
-    j10 = acc * inv
-    acc = j20
-    j20 = acc * inv
-    acc = j30
-    j30 = acc * inv
-    acc = j40
-    j40 = acc * inv
-    acc = j50
-    j50 = acc * inv
-    d = j11
-    d -= j10 * j10
-    bad = bad | (not d > 0.0)
-    d = math.sqrt(d)
-    j11 = d
-    inv = 1.0 / d
-    acc = j21
-    acc -= j20 * j10
-    j21 = acc * inv
-    acc = j31
-    acc -= j30 * j10
-    j31 = acc * inv
-    acc = j41
-    acc -= j40 * j10
-    j41 = acc * inv
-    acc = j51
-    acc -= j50 * j10
-    j51 = acc * inv
-    d = j22
-    d -= j20 * j20
-    d -= j21 * j21
-    bad = bad | (not d > 0.0)
-    d = math.sqrt(d)
-    j22 = d
-    inv = 1.0 / d
-    acc = j32
-    acc -= j30 * j20
-    acc -= j31 * j21
-    j32 = acc * inv
-    acc = j42
-    acc -= j40 * j20
-    acc -= j41 * j21
-    j42 = acc * inv
-    acc = j52
-    acc -= j50 * j20
-    acc -= j51 * j21
-    j52 = acc * inv
-    d = j33
-    d -= j30 * j30
-    d -= j31 * j31
-    d -= j32 * j32
-    bad = bad | (not d > 0.0)
-    d = math.sqrt(d)
-    j33 = d
-    inv = 1.0 / d
-    acc = j43
-    acc -= j40 * j30
-    acc -= j41 * j31
-    acc -= j42 * j32
-    j43 = acc * inv
-    acc = j53
-    acc -= j50 * j30
-    acc -= j51 * j31
-    acc -= j52 * j32
-    j53 = acc * inv
-    d = j44
-    d -= j40 * j40
-    d -= j41 * j41
-    d -= j42 * j42
-    d -= j43 * j43
-    bad = bad | (not d > 0.0)
-    d = math.sqrt(d)
-    j44 = d
-    inv = 1.0 / d
-    acc = j54
-    acc -= j50 * j40
-    acc -= j51 * j41
-    acc -= j52 * j42
-    acc -= j53 * j43
-    j54 = acc * inv
-    d = j55
-    d -= j50 * j50
-    d -= j51 * j51
-    d -= j52 * j52
-    d -= j53 * j53
-    d -= j54 * j54
-    bad = bad | (not d > 0.0)
-    d = math.sqrt(d)
-    j55 = d
-    inv = 1.0 / d
-    W[FACTOR + 0, c] = j00 if store else W[FACTOR + 0, c]
-    W[FACTOR + 1, c] = j10 if store else W[FACTOR + 1, c]
-    W[FACTOR + 2, c] = j11 if store else W[FACTOR + 2, c]
-    W[FACTOR + 3, c] = j20 if store else W[FACTOR + 3, c]
-    W[FACTOR + 4, c] = j21 if store else W[FACTOR + 4, c]
-    W[FACTOR + 5, c] = j22 if store else W[FACTOR + 5, c]
-    W[FACTOR + 6, c] = j30 if store else W[FACTOR + 6, c]
-    W[FACTOR + 7, c] = j31 if store else W[FACTOR + 7, c]
-    W[FACTOR + 8, c] = j32 if store else W[FACTOR + 8, c]
-    W[FACTOR + 9, c] = j33 if store else W[FACTOR + 9, c]
-    W[FACTOR + 10, c] = j40 if store else W[FACTOR + 10, c]
-    W[FACTOR + 11, c] = j41 if store else W[FACTOR + 11, c]
-    W[FACTOR + 12, c] = j42 if store else W[FACTOR + 12, c]
-    W[FACTOR + 13, c] = j43 if store else W[FACTOR + 13, c]
-    W[FACTOR + 14, c] = j44 if store else W[FACTOR + 14, c]
-    W[FACTOR + 15, c] = j50 if store else W[FACTOR + 15, c]
-    W[FACTOR + 16, c] = j51 if store else W[FACTOR + 16, c]
-    W[FACTOR + 17, c] = j52 if store else W[FACTOR + 17, c]
-    W[FACTOR + 18, c] = j53 if store else W[FACTOR + 18, c]
-    W[FACTOR + 19, c] = j54 if store else W[FACTOR + 19, c]
-    W[FACTOR + 20, c] = j55 if store else W[FACTOR + 20, c]
-    return bad
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _solve_column(W, c, b0, b1, b2, b3, b4, b5):
-    """``L L^T x = b`` with configuration ``c``'s factor ``W[FACTOR:FACTOR+21, c]``
-    (``linalg6.chol_solve6``'s operations, unrolled); returns ``x`` as a 6-tuple."""
-    l00 = W[FACTOR + 0, c]
-    l10 = W[FACTOR + 1, c]
-    l11 = W[FACTOR + 2, c]
-    l20 = W[FACTOR + 3, c]
-    l21 = W[FACTOR + 4, c]
-    l22 = W[FACTOR + 5, c]
-    l30 = W[FACTOR + 6, c]
-    l31 = W[FACTOR + 7, c]
-    l32 = W[FACTOR + 8, c]
-    l33 = W[FACTOR + 9, c]
-    l40 = W[FACTOR + 10, c]
-    l41 = W[FACTOR + 11, c]
-    l42 = W[FACTOR + 12, c]
-    l43 = W[FACTOR + 13, c]
-    l44 = W[FACTOR + 14, c]
-    l50 = W[FACTOR + 15, c]
-    l51 = W[FACTOR + 16, c]
-    l52 = W[FACTOR + 17, c]
-    l53 = W[FACTOR + 18, c]
-    l54 = W[FACTOR + 19, c]
-    l55 = W[FACTOR + 20, c]
-    acc = b0
-    b0 = acc / l00
-    acc = b1
-    acc -= l10 * b0
-    b1 = acc / l11
-    acc = b2
-    acc -= l20 * b0
-    acc -= l21 * b1
-    b2 = acc / l22
-    acc = b3
-    acc -= l30 * b0
-    acc -= l31 * b1
-    acc -= l32 * b2
-    b3 = acc / l33
-    acc = b4
-    acc -= l40 * b0
-    acc -= l41 * b1
-    acc -= l42 * b2
-    acc -= l43 * b3
-    b4 = acc / l44
-    acc = b5
-    acc -= l50 * b0
-    acc -= l51 * b1
-    acc -= l52 * b2
-    acc -= l53 * b3
-    acc -= l54 * b4
-    b5 = acc / l55
-    acc = b5
-    b5 = acc / l55
-    acc = b4
-    acc -= l54 * b5
-    b4 = acc / l44
-    acc = b3
-    acc -= l43 * b4
-    acc -= l53 * b5
-    b3 = acc / l33
-    acc = b2
-    acc -= l32 * b3
-    acc -= l42 * b4
-    acc -= l52 * b5
-    b2 = acc / l22
-    acc = b1
-    acc -= l21 * b2
-    acc -= l31 * b3
-    acc -= l41 * b4
-    acc -= l51 * b5
-    b1 = acc / l11
-    acc = b0
-    acc -= l10 * b1
-    acc -= l20 * b2
-    acc -= l30 * b3
-    acc -= l40 * b4
-    acc -= l50 * b5
-    b0 = acc / l00
-    return b0, b1, b2, b3, b4, b5
-
-
-@njit(cache=True, error_model="numpy", inline="always")
 def _jac_chol(W, T, rt_all, drt_all, node, kse, kbt, strain_row, always):
     """Jacobian of (2)-(3) at ``W[strain_row:strain_row+6]`` (``strains.local_jacobian``, lower triangle) and its
     Cholesky factor; stored into ``W[FACTOR:]`` for every configuration (``always``) or for those
@@ -422,7 +195,7 @@ def _jac_chol(W, T, rt_all, drt_all, node, kse, kbt, strain_row, always):
             _jacobian_add_tendon(W, c, ti / nw, t0, t1, t2, r)
     for c in range(CHUNK):
         upd = always or W[REFACTOR, c] != 0.0
-        bad = _factor_column(W, c, upd)
+        bad = packed_chol_factor6(W, c, JACOBIAN, FACTOR, upd)
         fl = bad and upd
         W[FAILED, c] = 1.0 if fl else W[FAILED, c]
         W[ACTIVE, c] = 0.0 if fl else W[ACTIVE, c]
@@ -448,18 +221,14 @@ def _jac_chol_slope(W, T, rt_all, drt_all, ddrt_all, node, kse, kbt, strain_row,
             x = _strains(W, strain_row, c)
             nw, t0, t1, t2 = unit_tangent(x, r, q)
             _jacobian_add_tendon(W, c, ti / nw, t0, t1, t2, r)
-            c0, c1, c2, c3, c4, c5 = tendon_slope_source(ti, nw, t0, t1, t2, x, r, q, dd)
-            W[slope_row + 0, c] -= c0
-            W[slope_row + 1, c] -= c1
-            W[slope_row + 2, c] -= c2
-            W[slope_row + 3, c] -= c3
-            W[slope_row + 4, c] -= c4
-            W[slope_row + 5, c] -= c5
+            src = tendon_slope_source(ti, nw, t0, t1, t2, x, r, q, dd)
+            for a in range(6):  # unrolled by LLVM (constant trip count and tuple index)
+                W[slope_row + a, c] -= src[a]
     for c in range(CHUNK):
-        bad = _factor_column(W, c, True)
+        bad = packed_chol_factor6(W, c, JACOBIAN, FACTOR, True)
         W[FAILED, c] = 1.0 if bad else W[FAILED, c]
-        b0, b1, b2, b3, b4, b5 = _solve_column(
-            W, c, W[slope_row + 0, c], W[slope_row + 1, c], W[slope_row + 2, c],
+        b0, b1, b2, b3, b4, b5 = packed_chol_solve6(
+            W, c, FACTOR, W[slope_row + 0, c], W[slope_row + 1, c], W[slope_row + 2, c],
             W[slope_row + 3, c], W[slope_row + 4, c], W[slope_row + 5, c],
         )  # fmt: skip
         W[slope_row + 0, c] = b0
@@ -503,8 +272,8 @@ def _chord(W, T, rt_all, drt_all, node, kse, kbt, tol, maxit, strain_row, first)
         for c in range(CHUNK):
             act = W[ACTIVE, c] != 0.0
             W[ERROR_PREV, c] = W[ERROR, c] if act else W[ERROR_PREV, c]
-            b0, b1, b2, b3, b4, b5 = _solve_column(
-                W, c, -W[RESIDUAL + 0, c], -W[RESIDUAL + 1, c], -W[RESIDUAL + 2, c],
+            b0, b1, b2, b3, b4, b5 = packed_chol_solve6(
+                W, c, FACTOR, -W[RESIDUAL + 0, c], -W[RESIDUAL + 1, c], -W[RESIDUAL + 2, c],
                 -W[RESIDUAL + 3, c], -W[RESIDUAL + 4, c], -W[RESIDUAL + 5, c],
             )  # fmt: skip
             W[strain_row + 0, c] = W[strain_row + 0, c] + b0 if act else W[strain_row + 0, c]

@@ -7,6 +7,15 @@ The entry points called from Python (:func:`solve_displacement_tensions`,
 fields as separate arrays, like those of :mod:`riskplan.robots.integration`: plain arrays cross
 the Python boundary ten times faster than a named tuple, so these parameter lists repeat by
 design; inside compiled code the tables travel as one ``RodTables``.
+
+The helpers of :func:`solve_displacement_tensions` (system, search direction, line search,
+Gaussian elimination) are compiled inline into it: numba links a called kernel's whole
+machine-code module into each caller and optimises it again there, so a tower of separately
+compiled helpers, each linking the length pass, made a first call optimise that pass four
+times. Inline, they are typed once per call site (one each; ``_system_at``, three calls of two
+calls, three), and the solve links only :func:`~riskplan.robots.tendon_lengths.lengths_and_jacobian`
+and ``complementarity_system``. ``error_model="numpy"``: a division by zero gives inf or NaN
+(caught by the residual and status checks) instead of a Python exception branch per division.
 """
 
 from __future__ import annotations
@@ -24,7 +33,7 @@ from riskplan.robots.tendon_lengths import lengths_and_jacobian
 LINE_SEARCH_MAXIT = 30
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack):
     """Newton system ``Jm step = phi`` of the complementarity problem at ``tau`` (see
     :func:`solve_displacement_tensions`) in length units, with ``a_i = tau_i * 1e-3`` (tensions in
@@ -72,7 +81,7 @@ def complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack):
     return res, merit
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def levenberg_marquardt_system(Jm, phi, mu, A, b, m, slack):
     """``A = J^T J + mu I``, ``b = J^T phi`` (Levenberg-Marquardt normal equations) with the
     slack rows scaled to length units (1e-3 m/N) like the residual."""
@@ -91,7 +100,7 @@ def levenberg_marquardt_system(Jm, phi, mu, A, b, m, slack):
         A[i, i] += mu
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def search_direction(Jm, phi, merit, slack, lm, A, step, m):
     """Newton step (``lm`` False) or Levenberg-Marquardt step into ``step``; False if singular."""
     if lm:
@@ -104,7 +113,7 @@ def search_direction(Jm, phi, merit, slack, lm, A, step, m):
     return gauss_solve(A, step, m, 1)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def _system_at(d, kinv, l0, tau, rod, tol, maxit, lengths, dl, Jm, phi, fb, slack):
     """Tendon lengths and their Jacobian at ``tau`` (:func:`lengths_and_jacobian`), then the
     Newton system there (:func:`complementarity_system`); returns ``(status, residual, merit)``
@@ -119,7 +128,7 @@ def _system_at(d, kinv, l0, tau, rod, tol, maxit, lengths, dl, Jm, phi, fb, slac
     return OK, res, merit
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def line_search(d, kinv, l0, tau, step, merit, fb, rod, tols, work):
     """Backtracking on the squared residual along ``step`` from ``tau`` (projected on tau >= 0):
     halves the step until it falls by the Armijo factor. Leaves the accepted point in ``trial``
@@ -141,7 +150,7 @@ def line_search(d, kinv, l0, tau, step, merit, fb, rod, tols, work):
     return False, 0.0, 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def solve_displacement_tensions(
     d,
     kinv,

@@ -49,19 +49,30 @@ def rk4_row(q0, q1, q2, x0, xm, x1, h):
     """One classical RK4 step of one row ``q`` of ``R`` under ``q' = q [u]x`` and of the matching
     position component under ``p_a' = q . v``, with strains ``x0, xm, x1`` (indexable, 6) at
     ``s, s + h/2, s + h``. Returns the new row and the position increment. Shared by
-    :func:`rk4_pose_step` and the lockstep kernel."""
-    k10, k11, k12, kp1 = _row_rate(q0, q1, q2, x0)
+    :func:`rk4_pose_step` and the lockstep kernel.
+
+    The four stages are one loop (LLVM unrolls it; numba types and lowers the rate function
+    once instead of four times, which a first call feels). The weighted sums start from
+    ``-0.0``, the exact additive identity, so they add ``k1 + 2 k2 + 2 k3 + k4`` in that order
+    and to the bit as the stages written out.
+    """
     a = 0.5 * h
-    k20, k21, k22, kp2 = _row_rate(q0 + a * k10, q1 + a * k11, q2 + a * k12, xm)
-    k30, k31, k32, kp3 = _row_rate(q0 + a * k20, q1 + a * k21, q2 + a * k22, xm)
-    k40, k41, k42, kp4 = _row_rate(q0 + h * k30, q1 + h * k31, q2 + h * k32, x1)
+    s0, s1, s2 = q0, q1, q2  # the point the stage's rate is taken at
+    n0 = n1 = n2 = dp = -0.0
+    for st in range(4):
+        x = x0 if st == 0 else (xm if st < 3 else x1)
+        k0, k1, k2, kp = _row_rate(s0, s1, s2, x)
+        w = 2.0 if st == 1 or st == 2 else 1.0
+        n0 += w * k0
+        n1 += w * k1
+        n2 += w * k2
+        dp += w * kp
+        step = a if st < 2 else h
+        s0 = q0 + step * k0
+        s1 = q1 + step * k1
+        s2 = q2 + step * k2
     c = h / 6.0
-    return (
-        q0 + c * (k10 + 2.0 * k20 + 2.0 * k30 + k40),
-        q1 + c * (k11 + 2.0 * k21 + 2.0 * k31 + k41),
-        q2 + c * (k12 + 2.0 * k22 + 2.0 * k32 + k42),
-        c * (kp1 + 2.0 * kp2 + 2.0 * kp3 + kp4),
-    )
+    return q0 + c * n0, q1 + c * n1, q2 + c * n2, c * dp
 
 
 @njit(cache=True, inline="always")
@@ -91,7 +102,7 @@ def pose_derivative(R, x, dR, dp):
         dR[a, 2] = R[a, 0] * u1 - R[a, 1] * u0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def shape_free(
     tau,
     rt_all,
@@ -122,6 +133,10 @@ def shape_free(
     ``tau`` are the fields of :class:`~riskplan.robots.rod_tables.RodTables`: call it as
     ``shape_free(tau, *robot.tables, tol, maxit, ...)`` (numba types plain arrays much faster
     than a named tuple at the Python boundary).
+
+    One loop over the stations, the base included, so that each inline helper has one call
+    site: numba types and lowers an inline helper once per call site, and a first call
+    compiles this kernel (see :mod:`riskplan.robots.cosserat`).
     """
     m = tau.shape[0]
     h = length / n_steps
@@ -130,68 +145,54 @@ def shape_free(
     fac = np.zeros(1, dtype=np.int64)
     zero = np.zeros(3)
     sp = np.empty(m)
-    x0 = np.zeros(6)
-    x0[2] = 1.0
+    x0 = np.empty(6)  # the previous station's strains and slope
     d0 = np.empty(6)
-    xa = np.empty(6)  # previous node and its slope, for the predictor
+    xa = np.empty(6)  # the station before that, for the predictor
     da = np.empty(6)
-    x1 = np.empty(6)
+    x1 = np.zeros(6)  # this station's strains (at the base: the straight rod) and slope
+    x1[2] = 1.0
     d1 = np.empty(6)
     xm = np.empty(6)
-    if (
-        local_strains_chord(
-            x0, tau, rt_all[0], drt_all[0], zero, zero, kse, kbt, tol, maxit, F, L, fac
-        )
-        < 0
-    ):
-        return LOCAL_FAIL
-    local_jacobian(x0, tau, rt_all[0], drt_all[0], kse, kbt, L)
-    if not chol_factor6(L):
-        return LOCAL_FAIL
-    fac[0] = 1
-    for a in range(6):
-        d0[a] = F[a]
-    strain_slope(x0, tau, rt_all[0], drt_all[0], ddrt_all[0], L, d0)
     for a in range(3):
         p_out[0, a] = 0.0
         for b in range(3):
             R_out[0, a, b] = 1.0 if a == b else 0.0
-    for a in range(6):
-        x_out[0, a] = x0[a]
-    tendon_speeds(x0, rt_all[0], drt_all[0], sp)
     for i in range(m):
-        lengths[i] = sp[i]
-    for k in range(n_steps):
-        j1 = 2 * k + 2
+        lengths[i] = 0.0
+    for k in range(n_steps + 1):
+        j = 2 * k
         for a in range(6):
-            if k == 0:
+            if k == 1:
                 x1[a] = x0[a] + h * d0[a]
-            else:
+            elif k > 1:
                 x1[a] = 5.0 * xa[a] + 2.0 * h * da[a] - 4.0 * x0[a] + 4.0 * h * d0[a]
         if (
             local_strains_chord(
-                x1, tau, rt_all[j1], drt_all[j1], zero, zero, kse, kbt, tol, maxit, F, L, fac
+                x1, tau, rt_all[j], drt_all[j], zero, zero, kse, kbt, tol, maxit, F, L, fac
             )
             < 0
         ):
             return LOCAL_FAIL
-        local_jacobian(x1, tau, rt_all[j1], drt_all[j1], kse, kbt, L)
+        local_jacobian(x1, tau, rt_all[j], drt_all[j], kse, kbt, L)
         if not chol_factor6(L):
             return LOCAL_FAIL
         fac[0] = 1
-        strain_slope(x1, tau, rt_all[j1], drt_all[j1], ddrt_all[j1], L, d1)
+        strain_slope(x1, tau, rt_all[j], drt_all[j], ddrt_all[j], L, d1)
+        if k > 0:
+            for a in range(6):
+                xm[a] = 0.5 * (x0[a] + x1[a]) + 0.125 * h * (d0[a] - d1[a])
+        # Simpson weights 1, 4, 2, 4, ..., 4, 1 over the nodes: the half step before this
+        # station (weight 4), then the station itself
+        for q in range(0 if k > 0 else 1, 2):
+            xq = xm if q == 0 else x1
+            wq = 4.0 if q == 0 else (1.0 if k == 0 or k == n_steps else 2.0)
+            tendon_speeds(xq, rt_all[j - 1 + q], drt_all[j - 1 + q], sp)
+            for i in range(m):
+                lengths[i] += wq * sp[i]
+        if k > 0:
+            rk4_pose_step(p_out[k - 1], R_out[k - 1], x0, xm, x1, h, p_out[k], R_out[k])
         for a in range(6):
-            xm[a] = 0.5 * (x0[a] + x1[a]) + 0.125 * h * (d0[a] - d1[a])
-        tendon_speeds(xm, rt_all[j1 - 1], drt_all[j1 - 1], sp)
-        for i in range(m):
-            lengths[i] += 4.0 * sp[i]
-        tendon_speeds(x1, rt_all[j1], drt_all[j1], sp)
-        w = 2.0 if k < n_steps - 1 else 1.0
-        for i in range(m):
-            lengths[i] += w * sp[i]
-        rk4_pose_step(p_out[k], R_out[k], x0, xm, x1, h, p_out[k + 1], R_out[k + 1])
-        for a in range(6):
-            x_out[k + 1, a] = x1[a]
+            x_out[k, a] = x1[a]
             xa[a] = x0[a]
             da[a] = d0[a]
             x0[a] = x1[a]

@@ -339,8 +339,11 @@ class TendonRobot:
             and value.ndim >= 1
             and value.shape[-1] == self.n_tendons
             and value.flags.c_contiguous
+            and value.flags.writeable
         ):
-            if in_limits(value, low, high):
+            # flat and writeable: one compiled signature (numba specialises on the number of
+            # dimensions and on read-only arrays; a read-only input takes the numpy checks)
+            if in_limits(value.reshape(-1), low, high):
                 return value
         arr = as_array(value, name, min_ndim=1)
         if arr.shape[-1] != self.n_tendons:
@@ -398,7 +401,10 @@ class TendonRobot:
         """``(flat, batch)``: ``values (..., m)``, checked by ``check`` when ``validate``, as a
         C-contiguous float array ``flat (B, m)``, and the leading shape ``batch``."""
         a = check(values) if validate else np.asarray(values, dtype=float)
-        return np.ascontiguousarray(a.reshape(-1, self.n_tendons)), a.shape[:-1]
+        flat = np.ascontiguousarray(a.reshape(-1, self.n_tendons))
+        if not flat.flags.writeable:  # a read-only array would compile the kernels once more
+            flat = flat.copy()
+        return flat, a.shape[:-1]
 
     # ---------------------------------------------------------------------- solving
     def solve_tensions(

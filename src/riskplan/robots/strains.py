@@ -100,7 +100,7 @@ def tendon_slope_source(ti, nw, t0, t1, t2, x, r, dr, ddr):
     )
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def local_residual(x, tau, rt, drt, nb, mb, kse, kbt, F):
     """Residual ``F (6,)`` of eqs. (2)-(3) at strains ``x = (v, u)``; returns ``max |F_a / K_aa|``
     (an estimate of the strain error, since the Jacobian is dominated by ``diag(K_se, K_bt)``)."""
@@ -129,7 +129,7 @@ def local_residual(x, tau, rt, drt, nb, mb, kse, kbt, F):
     return e
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def local_jacobian(x, tau, rt, drt, kse, kbt, J):
     """Jacobian ``J (6, 6)`` of eqs. (2)-(3): ``[[K_se + A, G], [B, K_bt + H]]`` with, per tendon,
     ``A_i = tau_i (I - t_i t_i^T)/|w_i|``, ``G_i = -A_i [r_i]x``, ``B_i = [r_i]x A_i``,
@@ -137,59 +137,33 @@ def local_jacobian(x, tau, rt, drt, kse, kbt, J):
     for a in range(6):
         for b in range(6):
             J[a, b] = 0.0
-    J[0, 0] = kse[0]
-    J[1, 1] = kse[1]
-    J[2, 2] = kse[2]
-    J[3, 3] = kbt[0]
-    J[4, 4] = kbt[1]
-    J[5, 5] = kbt[2]
+    for a in range(3):
+        J[a, a] = kse[a]
+        J[3 + a, 3 + a] = kbt[a]
     for i in range(tau.shape[0]):
         ti = tau[i]
         if ti == 0.0:
             continue
         r0, r1, r2 = rt[i, 0], rt[i, 1], rt[i, 2]
-        nw, t0, t1, t2 = unit_tangent(x, row3(rt, i), row3(drt, i))
+        r = row3(rt, i)
+        nw, t0, t1, t2 = unit_tangent(x, r, row3(drt, i))
         sc = ti / nw
         a00, a11, a22, a01, a02, a12, b00, b01, b02, b10, b11, b12, b20, b21, b22 = (
-            tendon_stiffness(sc, t0, t1, t2, row3(rt, i))
+            tendon_stiffness(sc, t0, t1, t2, r)
         )
-        J[0, 0] += a00
-        J[0, 1] += a01
-        J[0, 2] += a02
-        J[1, 0] += a01
-        J[1, 1] += a11
-        J[1, 2] += a12
-        J[2, 0] += a02
-        J[2, 1] += a12
-        J[2, 2] += a22
-        J[0, 3] -= b00
-        J[0, 4] -= b01
-        J[0, 5] -= b02
-        J[1, 3] -= b10
-        J[1, 4] -= b11
-        J[1, 5] -= b12
-        J[2, 3] -= b20
-        J[2, 4] -= b21
-        J[2, 5] -= b22
-        J[3, 0] -= b00
-        J[4, 0] -= b01
-        J[5, 0] -= b02
-        J[3, 1] -= b10
-        J[4, 1] -= b11
-        J[5, 1] -= b12
-        J[3, 2] -= b20
-        J[4, 2] -= b21
-        J[5, 2] -= b22
-        # H = -[r]x Bm
-        J[3, 3] -= -r2 * b10 + r1 * b20
-        J[3, 4] -= -r2 * b11 + r1 * b21
-        J[3, 5] -= -r2 * b12 + r1 * b22
-        J[4, 3] -= r2 * b00 - r0 * b20
-        J[4, 4] -= r2 * b01 - r0 * b21
-        J[4, 5] -= r2 * b02 - r0 * b22
-        J[5, 3] -= -r1 * b00 + r0 * b10
-        J[5, 4] -= -r1 * b01 + r0 * b11
-        J[5, 5] -= -r1 * b02 + r0 * b12
+        # the blocks as loops over tuples (LLVM unrolls them; numba types a loop body once,
+        # so a first call compiles this faster than the 45 statements written out)
+        A = ((a00, a01, a02), (a01, a11, a12), (a02, a12, a22))
+        Bm = ((b00, b01, b02), (b10, b11, b12), (b20, b21, b22))
+        for p in range(3):
+            for q in range(3):
+                J[p, q] += A[p][q]
+                J[p, 3 + q] -= Bm[p][q]  # G = -Bm
+                J[3 + q, p] -= Bm[p][q]  # B = -Bm^T
+        for q in range(3):  # H = -[r]x Bm
+            J[3, 3 + q] -= -r2 * Bm[1][q] + r1 * Bm[2][q]
+            J[4, 3 + q] -= r2 * Bm[0][q] - r0 * Bm[2][q]
+            J[5, 3 + q] -= -r1 * Bm[0][q] + r0 * Bm[1][q]
 
 
 @njit(cache=True, inline="always")
@@ -248,12 +222,6 @@ def local_strains_chord(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, L, fac
     return -1
 
 
-# The same solve as a function of its own, for lengths_and_jacobian (the displacement solve's
-# inner loop): numba re-types an inline helper at every call site, so a first call compiles
-# faster this way; shape_free, whose speed the bench measures, inlines the one above.
-local_strains_chord_call = njit(cache=True)(local_strains_chord.py_func)
-
-
 @njit(cache=True, inline="always")
 def tendon_speeds(x, rt, drt, out):
     """``|w_i|`` for every tendon (path length per unit s)."""
@@ -273,10 +241,10 @@ def strain_slope(x, tau, rt, drt, ddrt, L, out):
         ti = tau[i]
         if ti == 0.0:
             continue
-        nw, t0, t1, t2 = unit_tangent(x, row3(rt, i), row3(drt, i))
-        c0, c1, c2, c3, c4, c5 = tendon_slope_source(
-            ti, nw, t0, t1, t2, x, row3(rt, i), row3(drt, i), row3(ddrt, i)
-        )
+        r = row3(rt, i)
+        dr = row3(drt, i)
+        nw, t0, t1, t2 = unit_tangent(x, r, dr)
+        c0, c1, c2, c3, c4, c5 = tendon_slope_source(ti, nw, t0, t1, t2, x, r, dr, row3(ddrt, i))
         out[0] -= c0
         out[1] -= c1
         out[2] -= c2

@@ -8,10 +8,10 @@ from numba import njit
 
 from riskplan.robots.linalg6 import chol_factor6, chol_solve6
 from riskplan.robots.rod_tables import LOCAL_FAIL, OK
-from riskplan.robots.strains import local_jacobian, local_strains_chord_call, row3, unit_tangent
+from riskplan.robots.strains import local_jacobian, local_strains_chord, row3, unit_tangent
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def lengths_and_jacobian(
     tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl
 ):
@@ -50,10 +50,7 @@ def lengths_and_jacobian(
         else:
             for a in range(6):
                 xprev[a] = x[a]
-        if (
-            local_strains_chord_call(x, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, fac)
-            < 0
-        ):
+        if local_strains_chord(x, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, fac) < 0:
             return LOCAL_FAIL
         local_jacobian(x, tau, rt, drt, kse, kbt, J)
         if not chol_factor6(J):

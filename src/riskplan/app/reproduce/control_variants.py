@@ -1,7 +1,8 @@
 """LQG against its variants on common random draws (issue item "beyond LQG"): the Kalman
 filter against the UKF (:mod:`riskplan.control.ukf`), and the plan as given against the
 plan re-optimised by iLQR (:mod:`riskplan.control.ilqr`) for a cost with the goal as
-terminal term and (2-D) an obstacle barrier (:func:`riskplan.control.ilqr.scenario_terms`).
+terminal term and an obstacle barrier (:func:`riskplan.control.ilqr.scenario_terms`; 2-D
+polygons, and the 3-D needle's convex bodies below).
 
 Rules, fixed before any number was seen:
 

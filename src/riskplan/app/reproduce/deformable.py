@@ -171,12 +171,15 @@ def run_scenario(
 
     Parameters
     ----------
+    name : ``"needle"`` or ``"manipulation"``.
     scale : sizes (:class:`ScenarioScale`).
     store : :class:`~riskplan.app.store.ResultStore`; finished work is read from and
         written to it (resumable).
     seed : master seed; every part derives its own (:func:`_seed_for`).
     backend, workers, ray_address : :func:`riskplan.parallel.imap_tasks`.
     progress : optional ``progress(stage, done, total)`` callback.
+    cases : the uncertainty cases to evaluate, each handed to ``make_sim`` (default
+        ``EVAL_CASES``: the paper's five).
     pool : a :class:`riskplan.parallel.TaskPool` to run the selection and execution tasks on
         (the RRT candidates use the enclosing ``with TaskPool`` block's pool); ``None``: as
         :func:`riskplan.parallel.imap_tasks` decides.

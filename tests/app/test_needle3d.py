@@ -8,6 +8,8 @@ import pytest
 
 from riskplan.app.reproduce.needle3d import (
     ESTIMATORS,
+    GOAL_SE,
+    MAX_GOAL_SAMPLES,
     evaluate_candidates,
     measure_plan,
     needle3d_figure,
@@ -30,6 +32,13 @@ def test_estimators_and_executions_on_common_draws(straight):
     row = rows[0]
     assert ctrls[0] is not None and set(row.estimates) == set(ESTIMATORS)
     assert all(0.0 <= p <= 1.0 for p in row.estimates.values())
+    # every estimate but sampling drawn to GOAL_SE (or the cap), in batches of 500
+    for m in ESTIMATORS:
+        n_m, se = row.estimate_n[m], row.estimate_se[m]
+        if m == "sampling":
+            assert n_m == 500
+        else:
+            assert n_m % 500 == 0 and (se <= GOAL_SE or n_m == MAX_GOAL_SAMPLES)
     # sigma's chi-square factor is conservative against the truncation's half-spaces
     assert row.estimates["sigma"] <= row.estimates["truncation"]
     measure_plan(sim, plan, ctrls[0], row, n=4, seed=1)
@@ -108,6 +117,7 @@ def test_report_section_shows_intervals_and_speed(tmp_path):
     checked = PlanRow(0, 20, est, {}, n=100, closed=93, closed_ci=(0.86, 0.97))
     checked.estimate_cpu_s = {"truncation": 0.05, "truncation+linearise": 0.2}
     checked.closed_cpu_s = 10.0
+    checked.estimate_se, checked.estimate_n = {"truncation": 3e-4}, {"truncation": 12000}
     unchecked = PlanRow(1, 22, est, {})
     r = {
         "settings": {"case": "actuation", "n_plans": 2, "n_elements": 1296, "check_runs": 100},
@@ -118,6 +128,7 @@ def test_report_section_shows_intervals_and_speed(tmp_path):
     _needle3d_section(rep, r)
     text = " ".join(str(b) for sec in rep.sections for b in sec.blocks)
     assert "93/100 [0.860, 0.970]" in text and "200× (50×)" in text and "world frame" in text
+    assert "0.9000 ± 0.0003 (12,000 draws)" in text
 
 
 def test_checked_plans_are_distinct(straight):

@@ -69,7 +69,7 @@ from riskplan.control.lqgmp_common import (
 from riskplan.errors import InvalidInputError
 from riskplan.geometry3d import nearest_to_origin
 
-__all__ = ["METHODS_3D", "lqgmp_3d"]
+__all__ = ["METHODS_3D", "binomial_se", "lqgmp_3d"]
 
 #: the 2-D methods and ``"per-step"`` (half-spaces without truncation)
 METHODS_3D = (*METHODS, "per-step")
@@ -77,9 +77,13 @@ METHODS_3D = (*METHODS, "per-step")
 _TINY = 1e-24
 
 
-def _check_arguments(plan, controller, n_goal_samples) -> None:
+def _check_arguments(
+    plan, controller, n_goal_samples, method=None, goal_se=None, max_goal_samples=1
+) -> None:
     """Raise :class:`InvalidInputError` unless ``plan`` is a :class:`NominalPlan`,
-    ``controller`` its :class:`LQGController` and ``n_goal_samples`` a positive integer."""
+    ``controller`` its :class:`LQGController`, ``n_goal_samples`` a positive integer and
+    ``goal_se`` ``None`` or (not for ``"sampling"``) a finite number > 0 with
+    ``max_goal_samples`` a positive integer."""
     from riskplan.control.lqg import LQGController
     from riskplan.control.plan import NominalPlan
 
@@ -90,6 +94,12 @@ def _check_arguments(plan, controller, n_goal_samples) -> None:
             "controller: expected the LQGController of this plan (same number of steps)"
         )
     check_count(n_goal_samples, "n_goal_samples", 1, integral=True)
+    if goal_se is not None:
+        if method == "sampling":
+            raise InvalidInputError("goal_se: not for method='sampling' (use n_goal_samples)")
+        if not (isinstance(goal_se, (int, float)) and math.isfinite(goal_se) and goal_se > 0):
+            raise InvalidInputError(f"goal_se: expected a finite number > 0, got {goal_se!r}")
+        check_count(max_goal_samples, "max_goal_samples", 1, integral=True)
 
 
 def lqgmp_3d(
@@ -104,6 +114,8 @@ def lqgmp_3d(
     seed=None,
     goal_motion: bool = False,
     moments=None,
+    goal_se: float | None = None,
+    max_goal_samples: int = 1_000_000,
 ) -> LQGMPResult:
     """LQG-MP ``P(success)`` of ``plan`` under ``controller`` against 3-D convex obstacles
     (module docstring). ``sim`` provides ``obstacles(state)`` and ``goal(state)`` as
@@ -114,13 +126,20 @@ def lqgmp_3d(
     ``goal_jacobian`` (module docstring); ``moments``: a
     :class:`~riskplan.control.lqgmp3d_moments.SecondOrderModel` of this plan and controller
     to run the methods on instead of the linear model (``drift`` and ``goal_motion`` then
-    do not apply: the model carries its own mean and moving target)."""
+    do not apply: the model carries its own mean and moving target).
+
+    ``goal_se``: the goal test's precision instead of a count (not for ``"sampling"``, whose
+    draws are whole trajectories): batches of ``n_goal_samples`` final positions are drawn
+    until ``sqrt(p̃(1 − p̃)/n) <= goal_se`` or ``n >= max_goal_samples``, with
+    ``p̃ = (k + 1)/(n + 2)`` for ``k`` of ``n`` draws in the target (the Laplace estimate, so
+    a first batch with no miss does not read as a standard error of 0). The estimate stays
+    ``k/n``; ``n`` and the standard error of ``p_success`` come back in the result."""
     from riskplan.collision import DEFAULT_CUTOFF
 
     cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
     if method not in METHODS_3D:
         raise InvalidInputError(f"method: expected one of {METHODS_3D}, got {method!r}")
-    _check_arguments(plan, controller, n_goal_samples)
+    _check_arguments(plan, controller, n_goal_samples, method, goal_se, max_goal_samples)
     pos = np.asarray(getattr(sim, "goal_point_indices", (0, 1, 2)), dtype=np.int64)
     if pos.shape != (3,):
         raise InvalidInputError("sim.goal_point_indices: expected the 3 indices of the position")
@@ -178,13 +197,17 @@ def lqgmp_3d(
     _check_propagation(mean, cov)
     p_free = float(np.prod(free))
     Sx = model.goal_P @ cov[T] @ model.goal_P.T + model.goal_resid
-    xT = (
-        plan.reduced[T][pos]
-        + model.goal_offset
-        + model.goal_P @ mean[T]
-        + gen.standard_normal((int(n_goal_samples), 3)) @ _factor(0.5 * (Sx + Sx.T)).T
+    centre = plan.reduced[T][pos] + model.goal_offset + model.goal_P @ mean[T]
+    k, n = _goal_draws(
+        _goal(sim, plan.states[T]),
+        centre,
+        _factor(0.5 * (Sx + Sx.T)),
+        int(n_goal_samples),
+        goal_se,
+        int(max_goal_samples),
+        gen,
     )
-    p_goal = float(_goal(sim, plan.states[T]).contains(xT).mean())
+    p_goal = k / n
     return LQGMPResult(
         p_success=p_free * p_goal,
         p_collision_free=p_free,
@@ -193,7 +216,43 @@ def lqgmp_3d(
         mean=mean,
         cov=cov,
         method=method,
+        n_goal_samples=n,
+        p_success_se=p_free * binomial_se(k, n),
     )
+
+
+def binomial_se(k: int, n: int) -> float:
+    """Standard error of a fraction of independent draws.
+
+    Parameters
+    ----------
+    k : int
+        Draws that hit (``0 <= k <= n``).
+    n : int
+        Draws (``>= 1``).
+
+    Returns
+    -------
+    float
+        ``sqrt(p̃(1 − p̃)/n)`` with the Laplace estimate ``p̃ = (k + 1)/(n + 2)`` (never 0
+        for ``k = 0`` or ``k = n``, where ``k/n`` would read as exact).
+    """
+    pt = (k + 1.0) / (n + 2.0)
+    return float(np.sqrt(pt * (1.0 - pt) / n))
+
+
+def _goal_draws(body, centre, L, batch, goal_se, max_n, gen) -> tuple[int, int]:
+    """``(k, n)``: ``k`` of ``n`` draws ``centre + L z`` (``z ~ N(0, I_3)``) inside ``body``.
+    ``n = batch`` without ``goal_se``; with it, batches until :func:`binomial_se` is at most
+    ``goal_se`` or ``n`` reaches ``max_n`` (the last batch cut to it)."""
+    k = n = 0
+    while True:
+        m = batch if goal_se is None else min(batch, max_n - n)
+        xT = centre + gen.standard_normal((m, 3)) @ L.T
+        k += int(np.count_nonzero(body.contains(xT)))
+        n += m
+        if goal_se is None or n >= max_n or binomial_se(k, n) <= goal_se:
+            return k, n
 
 
 def _nearest(bodies, L, centre, cutoff) -> list:
@@ -366,12 +425,15 @@ def _sampled(sim, plan, model, pos, n, gen) -> LQGMPResult:
     in_goal = _goal(sim, plan.states[T]).contains(xT)
     n_free = int(alive.sum())
     p_goal = float(in_goal[alive].mean()) if n_free else float(in_goal.mean())
+    k = int(np.count_nonzero(alive & in_goal))
     return LQGMPResult(
-        p_success=float((alive & in_goal).mean()),
+        p_success=k / n,
         p_collision_free=n_free / n,
         p_goal=p_goal,
         p_free_steps=free,
         mean=mean,
         cov=cov,
         method="sampling",
+        n_goal_samples=n,
+        p_success_se=binomial_se(k, n),
     )

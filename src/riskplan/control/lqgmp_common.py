@@ -44,7 +44,12 @@ class LQGMPResult:
     ``p_success``, ``p_collision_free``, ``p_goal`` (floats); ``p_free_steps (T,)`` the
     per-step factor of ``p_collision_free`` (steps 1..T); ``mean (T + 1, 2p)`` and
     ``cov (T + 1, 2p, 2p)`` of ``ξ_t = (x̄_t, x̂_t)`` (the mean is zero for ``"sigma"``;
-    after truncation for ``"truncation"``, and carries the drift with ``drift=True``); ``method``.
+    after truncation for ``"truncation"``, and carries the drift with ``drift=True``); ``method``;
+    ``n_goal_samples``: the draws of the goal test (0 where not recorded: the 2-D
+    recursion of :func:`~riskplan.control.lqgmp.lqgmp` leaves it) and
+    ``p_success_se``: the Monte Carlo standard error of ``p_success`` from those draws,
+    ``p_free · sqrt(p̃(1 − p̃)/n)`` (``p̃`` as :func:`riskplan.control.lqgmp3d.lqgmp_3d`'s
+    ``goal_se``; NaN where not sampled).
     """
 
     p_success: float
@@ -54,6 +59,8 @@ class LQGMPResult:
     mean: np.ndarray
     cov: np.ndarray
     method: str
+    n_goal_samples: int = 0
+    p_success_se: float = float("nan")
 
 
 def joint_covariances(

@@ -19,6 +19,8 @@ log = logging.getLogger(__name__)
 
 __all__ = [
     "ESTIMATORS",
+    "GOAL_SE",
+    "MAX_GOAL_SAMPLES",
     "Needle3DResult",
     "PlanRow",
     "evaluate_candidates",
@@ -39,6 +41,17 @@ GOAL_CONNECT = 20
 #: truncation on the linear model (the estimate before the model change)
 ESTIMATORS = ("truncation", "per-step", "sigma", "sampling", "linear")
 
+#: standard error of the goal test's draws in every estimate but ``"sampling"``
+#: (:func:`riskplan.control.lqgmp3d.lqgmp_3d` ``goal_se``), set before any run: a tenth of
+#: the narrowest 95 % Wilson half-width the check compares against (1000 executions at
+#: p = 0.999: 0.0027), so the prediction's own Monte Carlo error cannot move it across an
+#: interval's edge by more than a tenth of the interval
+GOAL_SE = 3e-4
+
+#: cap on those draws: 10⁶ meet :data:`GOAL_SE` for p ≥ 0.9; below, the Wilson half-width at
+#: 1000 executions is ≥ 0.019 and 10⁶ draws (standard error ≤ 5e-4) stay under a tenth of it
+MAX_GOAL_SAMPLES = 1_000_000
+
 
 @dataclass
 class PlanRow:
@@ -55,7 +68,9 @@ class PlanRow:
     executions; ``estimate_cpu_s``: CPU seconds of the linearisation + truncation estimate
     and of the truncation estimate alone (given the controller); ``closed_cpu_s``: CPU
     seconds of the ``n`` closed-loop executions (the process's own time, so the speed
-    ratio does not count other jobs' load)."""
+    ratio does not count other jobs' load); ``estimate_n``/``estimate_se``: each estimate's
+    goal-test draws and the standard error of its ``P(success)`` from them
+    (:class:`~riskplan.control.lqgmp_common.LQGMPResult` ``n_goal_samples``, ``p_success_se``)."""
 
     index: int
     n_steps: int
@@ -75,6 +90,8 @@ class PlanRow:
     mc_s: float = 0.0
     estimate_cpu_s: dict = field(default_factory=dict)
     closed_cpu_s: float = 0.0
+    estimate_n: dict = field(default_factory=dict)
+    estimate_se: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -89,9 +106,20 @@ def _actuation_cov(sim):
     return np.asarray(dist.cov, dtype=np.float64) if isinstance(dist, ActuationNoise) else None
 
 
-def evaluate_candidates(sim, plans, *, seed=0, n_samples: int = 16, n_goal_samples: int = 4000):
+def evaluate_candidates(
+    sim,
+    plans,
+    *,
+    seed=0,
+    n_samples: int = 16,
+    n_goal_samples: int = 4000,
+    goal_se: float | None = GOAL_SE,
+):
     """Every candidate's controller (linearised along it with ``sim.distribution``) and
-    its LQG-MP estimates by each of :data:`ESTIMATORS`. Returns ``(controllers, rows)``;
+    its LQG-MP estimates by each of :data:`ESTIMATORS`: the goal test in batches of
+    ``n_goal_samples`` draws to a standard error of ``goal_se`` (at most
+    :data:`MAX_GOAL_SAMPLES`; ``None``: one batch), ``"sampling"`` with ``n_goal_samples``
+    trajectories. Returns ``(controllers, rows)``;
     a candidate whose linearisation fails gets ``None`` and estimates of 0. CPU seconds
     in ``estimate_cpu_s``: ``"truncation"`` the prediction given the controller (the
     second-order model and the truncation on it), ``"truncation+linearise"`` with the
@@ -104,10 +132,11 @@ def evaluate_candidates(sim, plans, *, seed=0, n_samples: int = 16, n_goal_sampl
     W = _actuation_cov(sim)
     ctrls, rows = [], []
     kw = dict(n_goal_samples=n_goal_samples)
+    kw_se = dict(kw, goal_se=goal_se, max_goal_samples=MAX_GOAL_SAMPLES)
     for i, (plan, s) in enumerate(zip(plans, spawn_seeds(seed, len(plans)))):
         c0 = time.process_time()
         try:
-            ctrl, res = evaluate_plan(
+            ctrl, _ = evaluate_plan(
                 sim, plan, method="truncation", n_samples=n_samples, seed=s, **kw
             )
         except _FAILURES as exc:
@@ -117,26 +146,37 @@ def evaluate_candidates(sim, plans, *, seed=0, n_samples: int = 16, n_goal_sampl
             continue
         c_lin = time.process_time() - c0
         c0 = time.process_time()
-        lqgmp_3d(sim, plan, ctrl, method="truncation", seed=s, **kw)
+        lqgmp_3d(sim, plan, ctrl, method="truncation", seed=s, **kw)  # evaluate_plan's share
+        c_lin -= time.process_time() - c0
+        c0 = time.process_time()
+        got = {"linear": lqgmp_3d(sim, plan, ctrl, method="truncation", seed=s, **kw_se)}
         cpu = {"linear": time.process_time() - c0}
         c0 = time.process_time()
         mo = None if W is None else second_order_model(sim, plan, ctrl, W)
-        est = {
-            "truncation": lqgmp_3d(
-                sim, plan, ctrl, method="truncation", seed=s, moments=mo, **kw
-            ).p_success
-        }
+        got["truncation"] = lqgmp_3d(
+            sim, plan, ctrl, method="truncation", seed=s, moments=mo, **kw_se
+        )
         cpu["truncation"] = time.process_time() - c0
         # the linearisation and gains (evaluate_plan less its linear estimate) + the prediction
-        cpu["truncation+linearise"] = c_lin - cpu["linear"] + cpu["truncation"]
+        cpu["truncation+linearise"] = c_lin + cpu["truncation"]
         secs = {"truncation": cpu["truncation"]}
         for m in ESTIMATORS[1:4]:
             t0 = time.perf_counter()
-            est[m] = lqgmp_3d(sim, plan, ctrl, method=m, seed=s, moments=mo, **kw).p_success
+            mkw = kw if m == "sampling" else kw_se
+            got[m] = lqgmp_3d(sim, plan, ctrl, method=m, seed=s, moments=mo, **mkw)
             secs[m] = time.perf_counter() - t0
-        est["linear"] = res.p_success
         ctrls.append(ctrl)
-        rows.append(PlanRow(i, plan.n_steps, est, secs, estimate_cpu_s=cpu))
+        rows.append(
+            PlanRow(
+                i,
+                plan.n_steps,
+                {m: got[m].p_success for m in ESTIMATORS},
+                secs,
+                estimate_cpu_s=cpu,
+                estimate_n={m: got[m].n_goal_samples for m in ESTIMATORS},
+                estimate_se={m: got[m].p_success_se for m in ESTIMATORS},
+            )
+        )
     return ctrls, rows
 
 

@@ -147,6 +147,7 @@ def test_deformable_modules_import_without_cycles():
         "tetmesh",
         "tetassembly",
         "tetlocate",
+        "tetfactor",
         "tetnewton",
         "tissue3d",
     ]

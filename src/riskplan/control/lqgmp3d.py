@@ -50,7 +50,6 @@ co-motion belongs in it).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.special import ndtr
@@ -307,24 +306,6 @@ def _truncate_step(mu, S, P, R, cross, L, chosen):
     return m[:n2], C[:n2, :n2]
 
 
-@dataclass(frozen=True, eq=False)
-class _LinearModel:
-    """The linear model's recursion in :class:`SecondOrderModel`'s form (no offsets, no
-    residual; the position is ``P ξ``)."""
-
-    F: np.ndarray
-    c: np.ndarray
-    Q: np.ndarray
-    P: np.ndarray
-    offset: np.ndarray
-    resid: np.ndarray
-    cross: np.ndarray
-    goal_P: np.ndarray
-    goal_offset: np.ndarray
-    goal_resid: np.ndarray
-    P0: np.ndarray
-
-
 def _model(sim, plan, controller, pos, drift, goal_motion, moments):
     """The recursion the methods run on: ``moments`` (checked against the plan), else the
     linear model of ``controller`` (:func:`joint_covariances`)."""
@@ -344,7 +325,9 @@ def _model(sim, plan, controller, pos, drift, goal_motion, moments):
     P[np.arange(3), pos] = 1.0
     P0 = np.zeros((n2, n2))
     P0[:nz, :nz] = controller.P0
-    return _LinearModel(
+    # the linear model in the second-order model's form: no offsets, no residual, the
+    # position is P ξ
+    return SecondOrderModel(
         F=F,
         c=dm,
         Q=Qn,

@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q torch==2.13.0
 	$(PY) -m pip install -q -e ".[all,ray,test,docs]"
 	# compile the numba kernels once, here, so that no command or test compiles them
-	$(VENV)/bin/riskplan warm
+	$(VENV)/bin/riskplan warm --workers 2
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -31,7 +31,7 @@ demo: $(STAMP)
 test: $(STAMP) browser lint
 	# warm the kernel cache first (a second or two when it is warm): an emptied cache is then
 	# compiled once, here, instead of by each test worker on its first call
-	$(VENV)/bin/riskplan warm
+	$(VENV)/bin/riskplan warm --workers 2
 	$(PY) -m pytest -n 2 --dist loadfile -q
 
 # ruff (configured in pyproject.toml): lint rules and the formatter; `ruff format src tests` fixes layout.

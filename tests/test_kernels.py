@@ -47,3 +47,32 @@ def test_warm_compiles_from_an_empty_cache(tmp_path):
     )
     assert out.stdout.strip() == ""
     assert any(p.suffix == ".nbi" for p in tmp_path.rglob("*"))
+
+
+def test_warm_in_two_processes_fills_the_cache(tmp_path):
+    # the worker processes compile; their cache entries are what a later process loads
+    code = (
+        "from riskplan import kernels; "
+        "t = kernels.warm(workers=2, areas=('geometry2d', 'deformable')); "
+        "print(sorted(t)); "
+        "print(','.join(k for k in kernels.cold() "
+        "if k.startswith(('riskplan.geometry2d', 'riskplan.deformable.nhkernels'))))"
+    )
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    lines = out.stdout.strip().splitlines()
+    assert lines[0] == "['deformable', 'geometry2d']"
+    assert len(lines) == 1 or lines[1] == ""
+
+
+def test_warm_rejects_unknown_areas_and_workers():
+    import pytest
+
+    from riskplan.errors import InvalidInputError
+
+    with pytest.raises(InvalidInputError, match="areas"):
+        kernels.warm(areas=("nope",))
+    with pytest.raises(InvalidInputError, match="workers"):
+        kernels.warm(workers=0)

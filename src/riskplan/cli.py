@@ -133,11 +133,17 @@ def demo(
 
 
 @app.command()
-def warm() -> None:
+def warm(
+    workers: int = typer.Option(
+        1, "--workers", min=1, help="Processes that compile at once (make uses 2)."
+    ),
+) -> None:
     """Compile the numba kernels into their on-disk cache (``make install`` runs this once)."""
     from riskplan.kernels import warm as warm_kernels
 
-    times = warm_kernels(progress=lambda area: typer.echo(f"warming {area} kernels"))
+    times = warm_kernels(
+        progress=lambda area: typer.echo(f"warming {area} kernels"), workers=workers
+    )
     typer.echo(", ".join(f"{a} {t:.1f} s" for a, t in times.items()))
 
 

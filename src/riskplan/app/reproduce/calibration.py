@@ -45,7 +45,6 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import asdict, dataclass, field
-from functools import partial
 
 import numpy as np
 
@@ -241,8 +240,7 @@ def run_calibration(
     the RRT's wall seconds when first computed; counts), kept out of the results because it
     differs from run to run.
     """
-    from riskplan.app.reproduce.work_units import BlobStore
-    from riskplan.parallel import imap_tasks
+    from riskplan.app.reproduce.work_units import BlobStore, stage_map
     from riskplan.scenarios.registry import SCENARIO_NAMES, make_scenario
 
     if name not in SCENARIO_NAMES:
@@ -256,14 +254,7 @@ def run_calibration(
         store=store,
         blobs=BlobStore(store),
         seed=seed,
-        pmap=partial(
-            imap_tasks,
-            backend=backend,
-            workers=workers,
-            ray_address=ray_address,
-            chunksize=1,
-            pool=pool,
-        ),
+        pmap=stage_map(backend, workers, ray_address, pool),
         report=progress or (lambda stage, done, total: None),
         pre=f"calibration.{name}",
     )

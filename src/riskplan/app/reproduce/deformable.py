@@ -70,7 +70,6 @@ import dataclasses
 import logging
 import time
 from dataclasses import asdict, dataclass
-from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -107,7 +106,7 @@ from riskplan.app.reproduce.feedback import (
     paired_outcomes,
     single_executions,
 )
-from riskplan.app.reproduce.work_units import BlobStore, _seed_for
+from riskplan.app.reproduce.work_units import BlobStore, _seed_for, stage_map
 from riskplan.errors import InvalidInputError
 
 log = logging.getLogger(__name__)
@@ -204,7 +203,6 @@ def run_scenario(
     ``candidate``, and for the selecting methods ``n_tied`` (candidates sharing the best
     LQG-MP value) with ``tie`` (the sentence saying so, ``None`` when decided); ``selection[case][set]`` the LQG-MP values of every candidate.
     """
-    from riskplan.parallel import imap_tasks
     from riskplan.scenarios.registry import make_scenario
 
     _check_run(name, backend, cases)
@@ -214,14 +212,7 @@ def run_scenario(
         store=store,
         blobs=BlobStore(store),
         seed=seed,
-        pmap=partial(
-            imap_tasks,
-            backend=backend,
-            workers=workers,
-            ray_address=ray_address,
-            chunksize=1,
-            pool=pool,
-        ),
+        pmap=stage_map(backend, workers, ray_address, pool),
         report=progress or (lambda stage, done, total: None),
         backend=backend,
         workers=workers,

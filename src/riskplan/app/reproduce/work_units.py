@@ -73,3 +73,21 @@ def _seed_for(seed: int, *labels) -> int:
         int.from_bytes(hashlib.sha256(str(x).encode()).digest()[:4], "little") for x in labels
     ]
     return int(np.random.SeedSequence(words).generate_state(1, dtype=np.uint64)[0] >> np.uint64(1))
+
+
+def stage_map(backend, workers, ray_address, pool):
+    """The map a stage runs its work units through: :func:`riskplan.parallel.imap_tasks` with
+    the stage's backend and one unit per task (``chunksize=1``: units are seconds each, and a
+    killed run keeps every finished one)."""
+    from functools import partial
+
+    from riskplan.parallel import imap_tasks
+
+    return partial(
+        imap_tasks,
+        backend=backend,
+        workers=workers,
+        ray_address=ray_address,
+        chunksize=1,
+        pool=pool,
+    )

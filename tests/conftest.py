@@ -111,6 +111,7 @@ TOL = {
     "half_plane_truncation": dict(rtol=0.0, atol=1e-9),  # truncated Gaussian vs closed form
     "half_plane_sigma": dict(rtol=1e-9, atol=0.0),  # chi-square ball vs closed form
     "sigma_jitter": dict(rtol=1e-8, atol=0.0),  # ... with a 1e-9 variance jitter (rank-1 spread)
+    "gaussian_in_ellipsoid": dict(rtol=0.0, atol=1e-8),  # quadrature (asks 1e-9) vs closed form
     "steady_state": dict(rtol=1e-6, atol=0.0),  # loop state after 40 steps vs its fixed point
     # Monte Carlo
     "monte_carlo_mean": dict(rtol=0.0, atol=0.05),  # 4000 draws, sd 0.009 (atol x max |c|)

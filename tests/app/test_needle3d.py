@@ -32,13 +32,18 @@ def test_estimators_and_executions_on_common_draws(straight):
     row = rows[0]
     assert ctrls[0] is not None and set(row.estimates) == set(ESTIMATORS)
     assert all(0.0 <= p <= 1.0 for p in row.estimates.values())
-    # every estimate but sampling drawn to GOAL_SE (or the cap), in batches of 500
+    # every estimate but sampling with the exact goal test (no draws, its error bound), and
+    # the comparison with the goal test drawn to GOAL_SE (or the cap), in batches of 500
     for m in ESTIMATORS:
         n_m, se = row.estimate_n[m], row.estimate_se[m]
         if m == "sampling":
             assert n_m == 500
         else:
-            assert n_m % 500 == 0 and (se <= GOAL_SE or n_m == MAX_GOAL_SAMPLES)
+            assert n_m == 0 and 0.0 <= se <= GOAL_SE
+    d = row.draws
+    assert d["n"] % 500 == 0 and (d["se"] <= GOAL_SE or d["n"] == MAX_GOAL_SAMPLES)
+    assert abs(d["truncation"] - row.estimates["truncation"]) <= 4.5 * d["se"] + GOAL_SE
+    assert d["cpu_s"] > 0.0 and 0.0 <= d["linear"] <= 1.0
     # sigma's chi-square factor is conservative against the truncation's half-spaces
     assert row.estimates["sigma"] <= row.estimates["truncation"]
     measure_plan(sim, plan, ctrls[0], row, n=4, seed=1)
@@ -129,6 +134,12 @@ def test_report_section_shows_intervals_and_speed(tmp_path):
     text = " ".join(str(b) for sec in rep.sections for b in sec.blocks)
     assert "93/100 [0.860, 0.970]" in text and "200× (50×)" in text and "world frame" in text
     assert "0.9000 ± 0.0003 (12,000 draws)" in text
+    checked.estimate_se, checked.estimate_n = {"truncation": 1e-10}, {"truncation": 0}
+    r["rows"] = [checked.as_dict()]
+    rep = Report(tmp_path)
+    _needle3d_section(rep, r)
+    text = " ".join(str(b) for sec in rep.sections for b in sec.blocks)
+    assert "0.9000 (exact goal test)" in text
 
 
 def test_checked_plans_are_distinct(straight):

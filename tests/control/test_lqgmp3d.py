@@ -193,33 +193,43 @@ def test_goal_se_draws_batches_until_the_standard_error_is_met():
     """``goal_se``: the batch loop stops at the first batch whose standard error
     sqrt(p̃(1 − p̃)/n) is at most the target (one batch fewer is above it, on the same draws:
     the generator's stream does not depend on the batching); the estimate matches the closed
-    form F_χ²₃(r²/s²) and a fixed 10⁶-draw estimate within their binomial errors."""
+    form F_χ²₃(r²/s²) and a fixed 10⁶-draw estimate within their binomial errors (the draws
+    are ``goal="draws"``; the default goal test is exact)."""
     s2, r, batch, target = 0.01, 0.3, 1000, 1e-3
     plan, ctrl = _one_step(s2 * np.eye(3))
     sim = _MovingGoal(r, 0.0)
     exact = float(chi2(3).cdf(r * r / s2))  # 0.97
     got = lqgmp_3d(
-        sim, plan, ctrl, method="truncation", n_goal_samples=batch, goal_se=target, seed=5
+        sim,
+        plan,
+        ctrl,
+        method="truncation",
+        goal="draws",
+        n_goal_samples=batch,
+        goal_se=target,
+        seed=5,
     )
     n = got.n_goal_samples
     assert n % batch == 0 and n > batch
     assert isinstance(got.p_success, float) and isinstance(got.p_success_se, float)
-    same = lqgmp_3d(sim, plan, ctrl, method="truncation", n_goal_samples=n, seed=5)
+    same = lqgmp_3d(sim, plan, ctrl, method="truncation", goal="draws", n_goal_samples=n, seed=5)
     assert same.p_goal == got.p_goal  # the same draws, one batch
     k = round(got.p_goal * n)
     assert got.p_success_se == binomial_se(k, n) <= target
-    fewer = lqgmp_3d(sim, plan, ctrl, method="truncation", n_goal_samples=n - batch, seed=5)
+    fewer = lqgmp_3d(
+        sim, plan, ctrl, method="truncation", goal="draws", n_goal_samples=n - batch, seed=5
+    )
     assert binomial_se(round(fewer.p_goal * (n - batch)), n - batch) > target
     assert abs(got.p_goal - exact) <= _binomial(exact, n)
     big = 1_000_000
-    ref = lqgmp_3d(sim, plan, ctrl, method="truncation", n_goal_samples=big, seed=6)
+    ref = lqgmp_3d(sim, plan, ctrl, method="truncation", goal="draws", n_goal_samples=big, seed=6)
     assert abs(got.p_goal - ref.p_goal) <= _binomial(exact, n) + _binomial(exact, big)
 
 
 def test_goal_se_is_capped_and_validated():
     plan, ctrl = _one_step(0.01 * np.eye(3))
     sim = _MovingGoal(0.3, 0.0)
-    kw = dict(method="sigma", n_goal_samples=1000, seed=0)
+    kw = dict(method="sigma", n_goal_samples=1000, seed=0, goal="draws")
     capped = lqgmp_3d(sim, plan, ctrl, goal_se=1e-6, max_goal_samples=2500, **kw)
     assert capped.n_goal_samples == 2500
     assert lqgmp_3d(sim, plan, ctrl, **kw).n_goal_samples == 1000  # no target: one batch

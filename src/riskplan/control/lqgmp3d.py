@@ -24,8 +24,10 @@ parallelepipeds (:class:`riskplan.geometry3d.ConvexBody`) — with the three met
   ``T`` — the linear model's own probability (the oracle the two estimates are tested
   against).
 
-``P(goal)``: draws of the final position in the deformed target (after truncation for
-``"truncation"``). ``P(success) = P(no collision) · P(goal)``.
+``P(goal)``: the probability that the final position (after truncation for
+``"truncation"``) lies in the deformed target — exactly, by quadrature, for an ellipsoid
+(:mod:`riskplan.control.lqgmp3d_goal`; every target of the 3-D needle is one), else by draws
+(``goal="draws"`` selects them for any target). ``P(success) = P(no collision) · P(goal)``.
 
 **A target that moves with the robot** (``goal_motion=True``, where ``sim`` has
 ``goal_jacobian(state, params) (3, p)``; off by default): the needle pushes the tissue where its tip is,
@@ -56,6 +58,7 @@ from scipy.special import ndtr
 from scipy.stats import chi2
 
 from riskplan._validation import as_generator, check_count
+from riskplan.control.lqgmp3d_goal import gaussian_in_ellipsoid
 from riskplan.control.lqgmp3d_moments import SecondOrderModel
 from riskplan.control.lqgmp_common import (
     METHODS,
@@ -68,24 +71,32 @@ from riskplan.control.lqgmp_common import (
 from riskplan.errors import InvalidInputError
 from riskplan.geometry3d import nearest_to_origin
 
-__all__ = ["METHODS_3D", "binomial_se", "lqgmp_3d"]
+__all__ = ["GOAL_TESTS", "METHODS_3D", "binomial_se", "lqgmp_3d"]
 
 #: the 2-D methods and ``"per-step"`` (half-spaces without truncation)
 METHODS_3D = (*METHODS, "per-step")
+
+#: goal tests of :func:`lqgmp_3d`: the exact probability (quadrature) and the draws
+GOAL_TESTS = ("exact", "draws")
 
 _TINY = 1e-24
 
 
 def _check_arguments(
-    plan, controller, n_goal_samples, method=None, goal_se=None, max_goal_samples=1
+    plan, controller, n_goal_samples, method=None, goal_se=None, max_goal_samples=1, goal="exact"
 ) -> None:
-    """Raise :class:`InvalidInputError` unless ``plan`` is a :class:`NominalPlan`,
+    """Raise :class:`InvalidInputError` unless ``method`` is one of :data:`METHODS_3D` (or
+    ``None``), ``goal`` one of ``GOAL_TESTS``, ``plan`` a :class:`NominalPlan`,
     ``controller`` its :class:`LQGController`, ``n_goal_samples`` a positive integer and
     ``goal_se`` ``None`` or (not for ``"sampling"``) a finite number > 0 with
     ``max_goal_samples`` a positive integer."""
     from riskplan.control.lqg import LQGController
     from riskplan.control.plan import NominalPlan
 
+    if method is not None and method not in METHODS_3D:
+        raise InvalidInputError(f"method: expected one of {METHODS_3D}, got {method!r}")
+    if goal not in GOAL_TESTS:
+        raise InvalidInputError(f"goal: expected one of {GOAL_TESTS}, got {goal!r}")
     if not isinstance(plan, NominalPlan):
         raise InvalidInputError(f"plan: expected a NominalPlan, got {type(plan).__name__}")
     if not isinstance(controller, LQGController) or controller.n_steps != plan.n_steps:
@@ -115,6 +126,7 @@ def lqgmp_3d(
     moments=None,
     goal_se: float | None = None,
     max_goal_samples: int = 1_000_000,
+    goal: str = "exact",
 ) -> LQGMPResult:
     """LQG-MP ``P(success)`` of ``plan`` under ``controller`` against 3-D convex obstacles
     (module docstring). ``sim`` provides ``obstacles(state)`` and ``goal(state)`` as
@@ -132,13 +144,18 @@ def lqgmp_3d(
     until ``sqrt(p̃(1 − p̃)/n) <= goal_se`` or ``n >= max_goal_samples``, with
     ``p̃ = (k + 1)/(n + 2)`` for ``k`` of ``n`` draws in the target (the Laplace estimate, so
     a first batch with no miss does not read as a standard error of 0). The estimate stays
-    ``k/n``; ``n`` and the standard error of ``p_success`` come back in the result."""
+    ``k/n``; ``n`` and the standard error of ``p_success`` come back in the result.
+
+    ``goal`` (not for ``"sampling"``, whose trajectories are its goal test): ``"exact"``, the
+    default, the probability of the final position's Gaussian in the target by quadrature
+    (:func:`~riskplan.control.lqgmp3d_goal.gaussian_in_ellipsoid`) where the target is an
+    ellipsoid (every target of the 3-D needle), with ``n_goal_samples`` 0 and ``p_success_se``
+    ``p_free`` times its error bound in the result; another target, or ``"draws"``, takes
+    the draws above (the result's ``goal_test`` says which ran)."""
     from riskplan.collision import DEFAULT_CUTOFF
 
     cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
-    if method not in METHODS_3D:
-        raise InvalidInputError(f"method: expected one of {METHODS_3D}, got {method!r}")
-    _check_arguments(plan, controller, n_goal_samples, method, goal_se, max_goal_samples)
+    _check_arguments(plan, controller, n_goal_samples, method, goal_se, max_goal_samples, goal)
     pos = np.asarray(getattr(sim, "goal_point_indices", (0, 1, 2)), dtype=np.int64)
     if pos.shape != (3,):
         raise InvalidInputError("sim.goal_point_indices: expected the 3 indices of the position")
@@ -197,16 +214,10 @@ def lqgmp_3d(
     p_free = float(np.prod(free))
     Sx = model.goal_P @ cov[T] @ model.goal_P.T + model.goal_resid
     centre = plan.reduced[T][pos] + model.goal_offset + model.goal_P @ mean[T]
-    k, n = _goal_draws(
-        _goal(sim, plan.states[T]),
-        centre,
-        _factor(0.5 * (Sx + Sx.T)),
-        int(n_goal_samples),
-        goal_se,
-        int(max_goal_samples),
-        gen,
+    draws = (int(n_goal_samples), goal_se, int(max_goal_samples), gen)
+    p_goal, n, err, used = _goal_test(
+        _goal(sim, plan.states[T]), centre, 0.5 * (Sx + Sx.T), goal, draws
     )
-    p_goal = k / n
     return LQGMPResult(
         p_success=p_free * p_goal,
         p_collision_free=p_free,
@@ -216,7 +227,8 @@ def lqgmp_3d(
         cov=cov,
         method=method,
         n_goal_samples=n,
-        p_success_se=p_free * binomial_se(k, n),
+        p_success_se=p_free * err,
+        goal_test=used,
     )
 
 
@@ -238,6 +250,19 @@ def binomial_se(k: int, n: int) -> float:
     """
     pt = (k + 1.0) / (n + 2.0)
     return float(np.sqrt(pt * (1.0 - pt) / n))
+
+
+def _goal_test(body, centre, Sx, goal: str, draws) -> tuple[float, int, float, str]:
+    """``(P(goal), n, err, used)`` of the final position ``N(centre, Sx)`` in ``body``:
+    ``"exact"`` on an ellipsoid by :func:`~riskplan.control.lqgmp3d_goal.gaussian_in_ellipsoid`
+    (``n = 0``, ``err`` its error bound), else ``draws = (batch, goal_se, max_n, gen)`` by
+    ``_goal_draws`` (``n`` the draws, ``err`` :func:`binomial_se`)."""
+    if goal == "exact" and body.kind == "ellipsoid":
+        p, err = gaussian_in_ellipsoid(body, centre, Sx)
+        return p, 0, err, "exact"
+    batch, goal_se, max_n, gen = draws
+    k, n = _goal_draws(body, centre, _factor(Sx), batch, goal_se, max_n, gen)
+    return k / n, n, binomial_se(k, n), "draws"
 
 
 def _goal_draws(body, centre, L, batch, goal_se, max_n, gen) -> tuple[int, int]:

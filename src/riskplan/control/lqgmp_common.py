@@ -49,7 +49,9 @@ class LQGMPResult:
     recursion of :func:`~riskplan.control.lqgmp.lqgmp` leaves it) and
     ``p_success_se``: the Monte Carlo standard error of ``p_success`` from those draws,
     ``p_free · sqrt(p̃(1 − p̃)/n)`` (``p̃`` as :func:`riskplan.control.lqgmp3d.lqgmp_3d`'s
-    ``goal_se``; NaN where not sampled).
+    ``goal_se``; NaN where not sampled), or with the exact goal test ``p_free`` times its
+    quadrature's error bound (``n_goal_samples`` 0); ``goal_test``: ``"draws"`` or
+    ``"exact"`` (:func:`riskplan.control.lqgmp3d.lqgmp_3d`'s ``goal``).
     """
 
     p_success: float
@@ -61,6 +63,7 @@ class LQGMPResult:
     method: str
     n_goal_samples: int = 0
     p_success_se: float = float("nan")
+    goal_test: str = "draws"
 
 
 def joint_covariances(

@@ -41,8 +41,10 @@ GOAL_CONNECT = 20
 #: truncation on the linear model (the estimate before the model change)
 ESTIMATORS = ("truncation", "per-step", "sigma", "sampling", "linear")
 
-#: standard error of the goal test's draws in every estimate but ``"sampling"``
-#: (:func:`riskplan.control.lqgmp3d.lqgmp_3d` ``goal_se``), set before any run: a tenth of
+#: standard error of the goal test's draws where they are used — the comparison of
+#: :func:`evaluate_candidates` (``PlanRow.draws``) and a target that is not an ellipsoid;
+#: the estimates' own goal test is exact (:func:`riskplan.control.lqgmp3d.lqgmp_3d`
+#: ``goal="exact"``) — (``goal_se``), set before any run: a tenth of
 #: the narrowest 95 % Wilson half-width the check compares against (1000 executions at
 #: p = 0.999: 0.0027), so the prediction's own Monte Carlo error cannot move it across an
 #: interval's edge by more than a tenth of the interval
@@ -70,7 +72,10 @@ class PlanRow:
     seconds of the ``n`` closed-loop executions (the process's own time, so the speed
     ratio does not count other jobs' load); ``estimate_n``/``estimate_se``: each estimate's
     goal-test draws and the standard error of its ``P(success)`` from them
-    (:class:`~riskplan.control.lqgmp_common.LQGMPResult` ``n_goal_samples``, ``p_success_se``)."""
+    (:class:`~riskplan.control.lqgmp_common.LQGMPResult` ``n_goal_samples``, ``p_success_se``;
+    with the exact goal test, the default, 0 draws and the quadrature's error bound);
+    ``draws``: the truncation estimates with the goal test drawn to :data:`GOAL_SE` instead,
+    their draws, standard error and CPU seconds (the comparison with the exact test)."""
 
     index: int
     n_steps: int
@@ -92,6 +97,7 @@ class PlanRow:
     closed_cpu_s: float = 0.0
     estimate_n: dict = field(default_factory=dict)
     estimate_se: dict = field(default_factory=dict)
+    draws: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -116,8 +122,9 @@ def evaluate_candidates(
     goal_se: float | None = GOAL_SE,
 ):
     """Every candidate's controller (linearised along it with ``sim.distribution``) and
-    its LQG-MP estimates by each of :data:`ESTIMATORS`: the goal test in batches of
-    ``n_goal_samples`` draws to a standard error of ``goal_se`` (at most
+    its LQG-MP estimates by each of :data:`ESTIMATORS`: the goal test exact (a target that
+    is not an ellipsoid, and the comparison in ``PlanRow.draws``: in batches of
+    ``n_goal_samples`` draws to a standard error of ``goal_se``, at most
     :data:`MAX_GOAL_SAMPLES`; ``None``: one batch), ``"sampling"`` with ``n_goal_samples``
     trajectories. Returns ``(controllers, rows)``;
     a candidate whose linearisation fails gets ``None`` and estimates of 0. CPU seconds
@@ -153,10 +160,13 @@ def evaluate_candidates(
         cpu = {"linear": time.process_time() - c0}
         c0 = time.process_time()
         mo = None if W is None else second_order_model(sim, plan, ctrl, W)
+        c_model = time.process_time() - c0
+        c0 = time.process_time()
         got["truncation"] = lqgmp_3d(
             sim, plan, ctrl, method="truncation", seed=s, moments=mo, **kw_se
         )
-        cpu["truncation"] = time.process_time() - c0
+        cpu["truncation"] = c_model + time.process_time() - c0
+        drawn = _drawn(sim, plan, ctrl, s, mo, c_model, kw_se)
         # the linearisation and gains (evaluate_plan less its linear estimate) + the prediction
         cpu["truncation+linearise"] = c_lin + cpu["truncation"]
         secs = {"truncation": cpu["truncation"]}
@@ -175,9 +185,31 @@ def evaluate_candidates(
                 estimate_cpu_s=cpu,
                 estimate_n={m: got[m].n_goal_samples for m in ESTIMATORS},
                 estimate_se={m: got[m].p_success_se for m in ESTIMATORS},
+                draws=drawn,
             )
         )
     return ctrls, rows
+
+
+def _drawn(sim, plan, ctrl, seed, moments, c_model: float, kw_se: dict) -> dict:
+    """The truncation estimate (on ``moments`` and on the linear model) with the goal test
+    drawn to :data:`GOAL_SE` instead of exact, for comparison: ``{"truncation": p, "n": n,
+    "se": s.e., "cpu_s": the prediction's CPU seconds with the draws, "linear": p}``."""
+    from riskplan.control.lqgmp3d import lqgmp_3d
+
+    c0 = time.process_time()
+    tr = lqgmp_3d(
+        sim, plan, ctrl, method="truncation", seed=seed, moments=moments, goal="draws", **kw_se
+    )
+    cpu = c_model + time.process_time() - c0
+    lin = lqgmp_3d(sim, plan, ctrl, method="truncation", seed=seed, goal="draws", **kw_se)
+    return {
+        "truncation": tr.p_success,
+        "n": tr.n_goal_samples,
+        "se": tr.p_success_se,
+        "cpu_s": cpu,
+        "linear": lin.p_success,
+    }
 
 
 def measure_plan(sim, plan, controller, row: PlanRow, *, n: int, seed=0) -> PlanRow:

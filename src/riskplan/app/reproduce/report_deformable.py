@@ -256,9 +256,12 @@ def _calibration_section(rep: Report, cal: dict) -> None:
 
 
 def _with_se(row: dict, method: str):
-    """The estimate, with its Monte Carlo standard error and goal-test draws where recorded."""
+    """The estimate, with its Monte Carlo standard error and goal-test draws where recorded,
+    or "(exact goal test)" where the goal test drew nothing (0 draws, an error bound)."""
     p = row["estimates"][method]
     se, n = row.get("estimate_se", {}).get(method), row.get("estimate_n", {}).get(method)
+    if n == 0 and se is not None:
+        return f"{p:.4f} (exact goal test)"
     return f"{p:.4f} ± {se:.4f} ({n:,} draws)" if se is not None and n else p
 
 
@@ -276,8 +279,8 @@ def _needle3d_section(rep: Report, r: dict) -> None:
         "executions per checked plan on common draws, the controller and LQG-MP in the "
         f"{st.get('frame', 'world')} frame. Speed: CPU seconds of the truncation estimate "
         "(and with its linearisation) against those of the closed-loop executions. The "
-        "truncation's ± is the standard error of its goal-test draws (drawn to a target set "
-        "before the run: a tenth of the narrowest Wilson half-width compared against).",
+        "truncation's goal test is exact (a Gaussian in the target ellipsoid, by quadrature); "
+        "where it draws instead, its ± is the standard error of the draws.",
     )
     sec.blocks.append(
         f'<p><a href="{html.escape(r["figure"])}">tissue block, obstacles, target, candidate '

@@ -44,6 +44,7 @@ def test_estimators_and_executions_on_common_draws(straight):
     assert d["n"] % 500 == 0 and (d["se"] <= GOAL_SE or d["n"] == MAX_GOAL_SAMPLES)
     assert abs(d["truncation"] - row.estimates["truncation"]) <= 4.5 * d["se"] + GOAL_SE
     assert d["cpu_s"] > 0.0 and 0.0 <= d["linear"] <= 1.0
+    assert len(row.estimate_cpu_s["truncation_repeats"]) == 2
     # sigma's chi-square factor is conservative against the truncation's half-spaces
     assert row.estimates["sigma"] <= row.estimates["truncation"]
     measure_plan(sim, plan, ctrls[0], row, n=4, seed=1)

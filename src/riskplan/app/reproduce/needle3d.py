@@ -68,7 +68,8 @@ class PlanRow:
     distance of the final tip from the plan's end, both relative to the deformed target
     centre (what feedback corrects); ``mc_s``: seconds of the closed- and open-loop
     executions; ``estimate_cpu_s``: CPU seconds of the linearisation + truncation estimate
-    and of the truncation estimate alone (given the controller); ``closed_cpu_s``: CPU
+    and of the truncation estimate alone (given the controller; ``"truncation_repeats"``:
+    two more runs of it, warm); ``closed_cpu_s``: CPU
     seconds of the ``n`` closed-loop executions (the process's own time, so the speed
     ratio does not count other jobs' load); ``estimate_n``/``estimate_se``: each estimate's
     goal-test draws and the standard error of its ``P(success)`` from them
@@ -130,7 +131,8 @@ def evaluate_candidates(
     a candidate whose linearisation fails gets ``None`` and estimates of 0. CPU seconds
     in ``estimate_cpu_s``: ``"truncation"`` the prediction given the controller (the
     second-order model and the truncation on it), ``"truncation+linearise"`` with the
-    linearisation and the controller's gains, ``"linear"`` the linear model's truncation."""
+    linearisation and the controller's gains, ``"linear"`` the linear model's truncation,
+    ``"truncation_repeats"`` two more runs of the prediction (a list)."""
     from riskplan.control.lqgmp3d import lqgmp_3d
     from riskplan.control.lqgmp3d_moments import second_order_model
     from riskplan.parallel import spawn_seeds
@@ -167,6 +169,7 @@ def evaluate_candidates(
         )
         cpu["truncation"] = c_model + time.process_time() - c0
         drawn = _drawn(sim, plan, ctrl, s, mo, c_model, kw_se)
+        cpu["truncation_repeats"] = _repeat_cpu(sim, plan, ctrl, s, W, kw_se)
         # the linearisation and gains (evaluate_plan less its linear estimate) + the prediction
         cpu["truncation+linearise"] = c_lin + cpu["truncation"]
         secs = {"truncation": cpu["truncation"]}
@@ -189,6 +192,22 @@ def evaluate_candidates(
             )
         )
     return ctrls, rows
+
+
+def _repeat_cpu(sim, plan, ctrl, seed, W, kw_se: dict, n: int = 2) -> list:
+    """CPU seconds of ``n`` more runs of the prediction (the second-order model and the
+    truncation on it), after the first: the first run of a plan also fills the tissue's
+    per-node caches for the points the statistical linearisation visits."""
+    from riskplan.control.lqgmp3d import lqgmp_3d
+    from riskplan.control.lqgmp3d_moments import second_order_model
+
+    out = []
+    for _ in range(n):
+        c0 = time.process_time()
+        mo = None if W is None else second_order_model(sim, plan, ctrl, W)
+        lqgmp_3d(sim, plan, ctrl, method="truncation", seed=seed, moments=mo, **kw_se)
+        out.append(time.process_time() - c0)
+    return out
 
 
 def _drawn(sim, plan, ctrl, seed, moments, c_model: float, kw_se: dict) -> dict:

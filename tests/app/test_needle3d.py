@@ -12,6 +12,7 @@ from riskplan.app.reproduce.needle3d import (
     MAX_GOAL_SAMPLES,
     evaluate_candidates,
     measure_plan,
+    measure_structured,
     needle3d_figure,
 )
 from riskplan.control import NominalPlan
@@ -56,6 +57,22 @@ def test_estimators_and_executions_on_common_draws(straight):
         lo, hi = getattr(row, f"{mode}_ci")
         assert lo <= getattr(row, mode) / 4 <= hi
         assert getattr(row, f"target_error_{mode}") >= 0.0
+
+
+def test_structured_check_executes_on_the_same_draws(straight):
+    """The structured linearisation's controller: its prediction, executions counted with a
+    Wilson interval, CPU seconds; a case beyond the actuation noise is left alone."""
+    from riskplan.app.reproduce.needle3d import PlanRow
+
+    sim, plan = straight
+    row = measure_structured(sim, plan, PlanRow(0, plan.n_steps, {}, {}), n=4, seed=1)
+    st = row.structured
+    assert 0.0 <= st["prediction"] <= 1.0 and 0 <= st["closed"] <= 4
+    lo, hi = st["closed_ci"]
+    assert lo <= st["closed"] / 4 <= hi
+    assert st["lin_cpu_s"] > 0.0 and st["cpu_s"] > 0.0 and st["closed_cpu_s"] > 0.0
+    other = scenario_from_config("needle3d", None, "material-high")
+    assert measure_structured(other, plan, PlanRow(0, 16, {}, {}), n=4).structured == {}
 
 
 def test_figure_has_block_bodies_and_plans(straight):

@@ -25,6 +25,7 @@ __all__ = [
     "PlanRow",
     "evaluate_candidates",
     "measure_plan",
+    "measure_structured",
     "needle3d_figure",
     "plan_needle3d",
     "write_outputs",
@@ -76,7 +77,8 @@ class PlanRow:
     (:class:`~riskplan.control.lqgmp_common.LQGMPResult` ``n_goal_samples``, ``p_success_se``;
     with the exact goal test, the default, 0 draws and the quadrature's error bound);
     ``draws``: the truncation estimates with the goal test drawn to :data:`GOAL_SE` instead,
-    their draws, standard error and CPU seconds (the comparison with the exact test)."""
+    their draws, standard error and CPU seconds (the comparison with the exact test);
+    ``structured``: the structured linearisation's check (:func:`measure_structured`)."""
 
     index: int
     n_steps: int
@@ -99,6 +101,7 @@ class PlanRow:
     estimate_n: dict = field(default_factory=dict)
     estimate_se: dict = field(default_factory=dict)
     draws: dict = field(default_factory=dict)
+    structured: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -284,9 +287,51 @@ def _distinct(rows, plans) -> list:
     return out
 
 
+def measure_structured(sim, plan, row: PlanRow, *, n: int, seed=0) -> PlanRow:
+    """The structured linearisation's check (the actuation case; nothing otherwise): the
+    controller from :func:`~riskplan.control.lqgmp3d_moments.structured_linearization`
+    (the material step's closed form times the tissue's Jacobian, no simulator runs), its
+    prediction (second-order model, truncation, exact goal test) and ``n`` closed-loop
+    executions on the draws of :func:`measure_plan`, in ``row.structured``: ``prediction``,
+    ``closed``, ``closed_ci``, ``lin_cpu_s`` (linearisation and gains), ``cpu_s`` (the
+    prediction), ``closed_cpu_s``."""
+    from riskplan.collision import binomial_interval
+    from riskplan.control.lqg import execute, lqg_controller
+    from riskplan.control.lqgmp3d import lqgmp_3d
+    from riskplan.control.lqgmp3d_moments import second_order_model, structured_linearization
+    from riskplan.parallel import spawn_seeds
+
+    W = _actuation_cov(sim)
+    if W is None:
+        return row
+    c0 = time.process_time()
+    ctrl = lqg_controller(structured_linearization(sim, plan, W))
+    c1 = time.process_time()
+    pred = lqgmp_3d(
+        sim, plan, ctrl, method="truncation", moments=second_order_model(sim, plan, ctrl, W)
+    )
+    c2 = time.process_time()
+    k = 0
+    for s in spawn_seeds(seed, n):
+        gen = np.random.default_rng(s)
+        ex = execute(sim, plan, ctrl, sim.sample_params(gen), seed=gen, keep_states=False)
+        k += ex.outcome == "success"
+    lo, hi = binomial_interval(k, n)
+    row.structured = dict(
+        prediction=pred.p_success,
+        closed=k,
+        closed_ci=(float(lo), float(hi)),
+        lin_cpu_s=c1 - c0,
+        cpu_s=c2 - c1,
+        closed_cpu_s=time.process_time() - c2,
+    )
+    return row
+
+
 def _measure_task(args) -> PlanRow:
-    sim, plan, controller, row, n, seed = args
-    return measure_plan(sim, plan, controller, row, n=n, seed=seed)
+    sim, plan, controller, row, n, seed, structured = args
+    row = measure_plan(sim, plan, controller, row, n=n, seed=seed)
+    return measure_structured(sim, plan, row, n=n, seed=seed) if structured else row
 
 
 @dataclass
@@ -308,6 +353,7 @@ def plan_needle3d(
     n_plans: int = 10,
     seed: int = 0,
     check_runs: int = 0,
+    structured: bool = False,
     check_plans: int = 6,
     max_iterations: int = 600,
     workers: int | None = None,
@@ -316,7 +362,8 @@ def plan_needle3d(
 ) -> Needle3DResult:
     """Simulator RRT candidates for the 3-D needle, LQG-MP (truncation) selection and, with
     ``check_runs > 0``, closed/open-loop executions of the selected plan and of
-    ``check_plans − 1`` more spread over the ranking. ``frame``: the reduced state the
+    ``check_plans − 1`` more spread over the ranking (``structured``: each also with the
+    structured linearisation's controller, :func:`measure_structured`). ``frame``: the reduced state the
     linearisation, the controllers and LQG-MP read (:data:`riskplan.scenarios.needle3d.FRAMES`;
     the RRT plans in the world frame, its plans are reframed); ``result.plans`` stay in
     the world frame."""
@@ -368,7 +415,10 @@ def plan_needle3d(
         # one task per checked plan (the same draws for each: seed + 1)
         done = map_tasks(
             _measure_task,
-            [(sim, plans[r.index], ctrls[r.index], r, check_runs, seed + 1) for r in chosen],
+            [
+                (sim, plans[r.index], ctrls[r.index], r, check_runs, seed + 1, structured)
+                for r in chosen
+            ],
             backend="local" if (workers or 0) != 1 else "serial",
             workers=workers,
         )
@@ -523,7 +573,7 @@ def write_outputs(result: Needle3DResult, out, *, n_executed: int = 10, seed: in
 #: sizes of the ``reproduce`` stage ``needle3d`` by scale name
 NEEDLE3D_SCALES = {
     "smoke": dict(n_plans=2, check_runs=0, check_plans=1, max_iterations=400),
-    "paper": dict(n_plans=30, check_runs=1000, check_plans=6, max_iterations=600),
+    "paper": dict(n_plans=30, check_runs=1000, check_plans=6, max_iterations=600, structured=True),
 }
 
 

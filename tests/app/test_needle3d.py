@@ -12,9 +12,9 @@ from riskplan.app.reproduce.needle3d import (
     MAX_GOAL_SAMPLES,
     evaluate_candidates,
     measure_plan,
-    measure_structured,
     needle3d_figure,
 )
+from riskplan.app.reproduce.needle3d_checks import measure_structured
 from riskplan.control import NominalPlan
 from riskplan.scenarios.registry import scenario_from_config
 

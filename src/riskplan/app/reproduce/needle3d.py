@@ -25,7 +25,6 @@ __all__ = [
     "PlanRow",
     "evaluate_candidates",
     "measure_plan",
-    "measure_structured",
     "needle3d_figure",
     "plan_needle3d",
     "write_outputs",
@@ -78,7 +77,7 @@ class PlanRow:
     with the exact goal test, the default, 0 draws and the quadrature's error bound);
     ``draws``: the truncation estimates with the goal test drawn to :data:`GOAL_SE` instead,
     their draws, standard error and CPU seconds (the comparison with the exact test);
-    ``structured``: the structured linearisation's check (:func:`measure_structured`)."""
+    ``structured``: the structured linearisation's check (:func:`~riskplan.app.reproduce.needle3d_checks.measure_structured`)."""
 
     index: int
     n_steps: int
@@ -108,12 +107,9 @@ class PlanRow:
 
 
 def _actuation_cov(sim):
-    """``Σ_w`` when the case's only uncertainty is the actuation noise (the second-order
-    model's scope), else ``None`` (material, mesh and force draws: the linear model)."""
-    from riskplan.scenarios.uncertainty import ActuationNoise
+    from riskplan.app.reproduce.needle3d_checks import actuation_cov
 
-    dist = sim.distribution
-    return np.asarray(dist.cov, dtype=np.float64) if isinstance(dist, ActuationNoise) else None
+    return actuation_cov(sim)
 
 
 def evaluate_candidates(
@@ -136,6 +132,7 @@ def evaluate_candidates(
     second-order model and the truncation on it), ``"truncation+linearise"`` with the
     linearisation and the controller's gains, ``"linear"`` the linear model's truncation,
     ``"truncation_repeats"`` two more runs of the prediction (a list)."""
+    from riskplan.app.reproduce.needle3d_checks import drawn_estimate, repeat_cpu
     from riskplan.control.lqgmp3d import lqgmp_3d
     from riskplan.control.lqgmp3d_moments import second_order_model
     from riskplan.parallel import spawn_seeds
@@ -171,8 +168,8 @@ def evaluate_candidates(
             sim, plan, ctrl, method="truncation", seed=s, moments=mo, **kw_se
         )
         cpu["truncation"] = c_model + time.process_time() - c0
-        drawn = _drawn(sim, plan, ctrl, s, mo, c_model, kw_se)
-        cpu["truncation_repeats"] = _repeat_cpu(sim, plan, ctrl, s, W, kw_se)
+        drawn = drawn_estimate(sim, plan, ctrl, s, mo, c_model, kw_se)
+        cpu["truncation_repeats"] = repeat_cpu(sim, plan, ctrl, s, W, kw_se)
         # the linearisation and gains (evaluate_plan less its linear estimate) + the prediction
         cpu["truncation+linearise"] = c_lin + cpu["truncation"]
         secs = {"truncation": cpu["truncation"]}
@@ -195,43 +192,6 @@ def evaluate_candidates(
             )
         )
     return ctrls, rows
-
-
-def _repeat_cpu(sim, plan, ctrl, seed, W, kw_se: dict, n: int = 2) -> list:
-    """CPU seconds of ``n`` more runs of the prediction (the second-order model and the
-    truncation on it), after the first: the first run of a plan also fills the tissue's
-    per-node caches for the points the statistical linearisation visits."""
-    from riskplan.control.lqgmp3d import lqgmp_3d
-    from riskplan.control.lqgmp3d_moments import second_order_model
-
-    out = []
-    for _ in range(n):
-        c0 = time.process_time()
-        mo = None if W is None else second_order_model(sim, plan, ctrl, W)
-        lqgmp_3d(sim, plan, ctrl, method="truncation", seed=seed, moments=mo, **kw_se)
-        out.append(time.process_time() - c0)
-    return out
-
-
-def _drawn(sim, plan, ctrl, seed, moments, c_model: float, kw_se: dict) -> dict:
-    """The truncation estimate (on ``moments`` and on the linear model) with the goal test
-    drawn to :data:`GOAL_SE` instead of exact, for comparison: ``{"truncation": p, "n": n,
-    "se": s.e., "cpu_s": the prediction's CPU seconds with the draws, "linear": p}``."""
-    from riskplan.control.lqgmp3d import lqgmp_3d
-
-    c0 = time.process_time()
-    tr = lqgmp_3d(
-        sim, plan, ctrl, method="truncation", seed=seed, moments=moments, goal="draws", **kw_se
-    )
-    cpu = c_model + time.process_time() - c0
-    lin = lqgmp_3d(sim, plan, ctrl, method="truncation", seed=seed, goal="draws", **kw_se)
-    return {
-        "truncation": tr.p_success,
-        "n": tr.n_goal_samples,
-        "se": tr.p_success_se,
-        "cpu_s": cpu,
-        "linear": lin.p_success,
-    }
 
 
 def measure_plan(sim, plan, controller, row: PlanRow, *, n: int, seed=0) -> PlanRow:
@@ -287,48 +247,9 @@ def _distinct(rows, plans) -> list:
     return out
 
 
-def measure_structured(sim, plan, row: PlanRow, *, n: int, seed=0) -> PlanRow:
-    """The structured linearisation's check (the actuation case; nothing otherwise): the
-    controller from :func:`~riskplan.control.lqgmp3d_moments.structured_linearization`
-    (the material step's closed form times the tissue's Jacobian, no simulator runs), its
-    prediction (second-order model, truncation, exact goal test) and ``n`` closed-loop
-    executions on the draws of :func:`measure_plan`, in ``row.structured``: ``prediction``,
-    ``closed``, ``closed_ci``, ``lin_cpu_s`` (linearisation and gains), ``cpu_s`` (the
-    prediction), ``closed_cpu_s``."""
-    from riskplan.collision import binomial_interval
-    from riskplan.control.lqg import execute, lqg_controller
-    from riskplan.control.lqgmp3d import lqgmp_3d
-    from riskplan.control.lqgmp3d_moments import second_order_model, structured_linearization
-    from riskplan.parallel import spawn_seeds
-
-    W = _actuation_cov(sim)
-    if W is None:
-        return row
-    c0 = time.process_time()
-    ctrl = lqg_controller(structured_linearization(sim, plan, W))
-    c1 = time.process_time()
-    pred = lqgmp_3d(
-        sim, plan, ctrl, method="truncation", moments=second_order_model(sim, plan, ctrl, W)
-    )
-    c2 = time.process_time()
-    k = 0
-    for s in spawn_seeds(seed, n):
-        gen = np.random.default_rng(s)
-        ex = execute(sim, plan, ctrl, sim.sample_params(gen), seed=gen, keep_states=False)
-        k += ex.outcome == "success"
-    lo, hi = binomial_interval(k, n)
-    row.structured = dict(
-        prediction=pred.p_success,
-        closed=k,
-        closed_ci=(float(lo), float(hi)),
-        lin_cpu_s=c1 - c0,
-        cpu_s=c2 - c1,
-        closed_cpu_s=time.process_time() - c2,
-    )
-    return row
-
-
 def _measure_task(args) -> PlanRow:
+    from riskplan.app.reproduce.needle3d_checks import measure_structured
+
     sim, plan, controller, row, n, seed, structured = args
     row = measure_plan(sim, plan, controller, row, n=n, seed=seed)
     return measure_structured(sim, plan, row, n=n, seed=seed) if structured else row
@@ -363,7 +284,8 @@ def plan_needle3d(
     """Simulator RRT candidates for the 3-D needle, LQG-MP (truncation) selection and, with
     ``check_runs > 0``, closed/open-loop executions of the selected plan and of
     ``check_plans − 1`` more spread over the ranking (``structured``: each also with the
-    structured linearisation's controller, :func:`measure_structured`). ``frame``: the reduced state the
+    structured linearisation's controller,
+    :func:`~riskplan.app.reproduce.needle3d_checks.measure_structured`). ``frame``: the reduced state the
     linearisation, the controllers and LQG-MP read (:data:`riskplan.scenarios.needle3d.FRAMES`;
     the RRT plans in the world frame, its plans are reframed); ``result.plans`` stay in
     the world frame."""

@@ -72,8 +72,8 @@ def cold() -> list[str]:
 
 def _robot() -> None:
     from riskplan.robots import load_robot
+    from riskplan.robots.actuation import BATCH_KERNEL_MIN
     from riskplan.robots.batch_kernel import solve_tensions_batch
-    from riskplan.robots.robot import BATCH_KERNEL_MIN
 
     robot = load_robot("paper")
     tau = np.linspace(0.0, 1.0, BATCH_KERNEL_MIN * robot.n_tendons).reshape(BATCH_KERNEL_MIN, -1)

@@ -66,13 +66,12 @@ from riskplan.scenarios.base import (
 )
 from riskplan.scenarios.bevel import _pose_vector_step, pose_step_jacobian
 from riskplan.scenarios.needle3d_config import Needle3DConfig, Needle3DState, _MeshData3D
-from riskplan.scenarios.needle3d_frames import FRAMES, JACOBIAN_STEP, Needle3DFrames
+from riskplan.scenarios.needle3d_frames import FRAMES, Needle3DFrames
 from riskplan.scenarios.needle3d_moments import Needle3DMoments
 from riskplan.scenarios.needle3d_space import Needle3DSpace, needle3d_steer
 
 __all__ = [
     "FRAMES",
-    "JACOBIAN_STEP",
     "PLANNING_ELEMENTS",
     "Needle3DConfig",
     "Needle3DScenario",

@@ -484,6 +484,8 @@ def rrt_plans(
     seeds = spawn_seeds(seed, first * max_rounds + int(n_plans))
     trees: list[TreeResult] = []
     plans: list = []
+    seen: set[bytes] = set()
+    repeats = 0
     used = 0
     for _ in range(int(max_rounds)):
         missing = int(n_plans) - len(plans)
@@ -505,7 +507,15 @@ def rrt_plans(
         used += n_trees
         trees.extend(results)
         for r in results:
-            plans.extend(r.plans)
+            for p in r.plans:
+                # the trees share the root, and steered edges are deterministic: a path of
+                # steered edges can recur in several trees; it is kept once
+                key = p.controls.tobytes()
+                if key in seen:
+                    repeats += 1
+                    continue
+                seen.add(key)
+                plans.append(p)
     if not plans:
         sizes = [t.size for t in trees]
         best = min(t.best_goal_distance for t in trees)
@@ -514,6 +524,8 @@ def rrt_plans(
             f"(tree sizes {min(sizes)}..{max(sizes)} nodes, best goal distance {best:.4g}); "
             "raise options.max_iterations or n_controls, or check that the goal is reachable"
         )
+    if repeats:
+        log.info("simulator RRT: %d plans repeated an earlier tree's and were dropped", repeats)
     if len(plans) < n_plans:
         log.warning(
             "simulator RRT: %d of %d plans within the budget (%d trees)",

@@ -505,7 +505,7 @@ def lqgmp(
     seed : int, numpy.random.Generator or None
         Seeds the goal samples (the trajectories with ``"sampling"``).
     **options_3d
-        The 3-D model's own keywords (``goal_motion``, ``moments``, ``goal_se``,
+        The 3-D model's own keywords (``goal``, ``goal_motion``, ``moments``, ``goal_se``,
         ``max_goal_samples``, ...), handed to :func:`riskplan.control.lqgmp3d.lqgmp_3d`
         unchanged; :class:`~riskplan.errors.InvalidInputError` for a 2-D simulator.
 

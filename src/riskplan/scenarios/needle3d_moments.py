@@ -91,6 +91,33 @@ class Needle3DMoments:
                 K[:, 3 + 3 * k + i3, 3 + 3 * j + i3] = E[:, j, k, None]
         return K
 
+    def material_step_batch(self, material, controls) -> np.ndarray:
+        """The exact material step ``m' = K(u) m`` of each row (the screw step of the
+        simulator, :func:`riskplan.scenarios.bevel.pose_step_jacobian`, nonlinear in ``u``),
+        for Monte Carlo of the closed loop beyond any expansion in the control
+        (:func:`riskplan.control.lqgmp3d_particles.lqgmp_particles`).
+
+        Parameters
+        ----------
+        material : array_like, shape (n, 12)
+            Material poses ``m = (X, e₁, e₂, e₃)``.
+        controls : array_like, shape (n, q)
+            The controls actually applied (inside the bounds).
+
+        Returns
+        -------
+        numpy.ndarray, shape (n, 12)
+            ``K(u_i) m_i``.
+        """
+        m = np.asarray(material, dtype=np.float64)
+        U = np.asarray(controls, dtype=np.float64)
+        if m.ndim != 2 or m.shape[1] != 12 or U.shape != (m.shape[0], self.control_dim):
+            raise InvalidInputError(
+                f"material, controls: expected (n, 12) and (n, {self.control_dim}), "
+                f"got {m.shape} and {U.shape}"
+            )
+        return np.einsum("nij,nj->ni", self._pose_jacobians(U), m)
+
     def material_step_derivatives(self, state: Needle3DState, control):
         """``m' = K(u) m`` and its control derivatives at ``u = control`` (module docstring).
 

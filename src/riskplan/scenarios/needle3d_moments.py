@@ -116,7 +116,20 @@ class Needle3DMoments:
                 f"material, controls: expected (n, 12) and (n, {self.control_dim}), "
                 f"got {m.shape} and {U.shape}"
             )
-        return np.einsum("nij,nj->ni", self._pose_jacobians(U), m)
+        cfg = self.config
+        n = U.shape[0]
+        rho = U[:, 2] if U.shape[1] == 3 else np.ones(n)
+        xi = np.zeros((n, 6))
+        xi[:, 2] = cfg.tau * U[:, 0]
+        xi[:, 3] = cfg.tau * rho * cfg.curvature * U[:, 0]
+        xi[:, 5] = cfg.tau * U[:, 1]
+        E, d = se3_exp_batch(xi)
+        frame = m[:, 3:].reshape(n, 3, 3)  # rows e₁, e₂, e₃
+        out = np.empty_like(m)
+        # X' = X + Σ_j d_j e_j, e_k' = Σ_j E_jk e_j: K(u) m without the (n, 12, 12) K
+        out[:, :3] = m[:, :3] + (d[:, None, :] @ frame)[:, 0]
+        out[:, 3:] = (E.transpose(0, 2, 1) @ frame).reshape(n, 9)
+        return out
 
     def material_step_derivatives(self, state: Needle3DState, control):
         """``m' = K(u) m`` and its control derivatives at ``u = control`` (module docstring).

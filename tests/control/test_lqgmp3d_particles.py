@@ -7,6 +7,7 @@ oracles at z = 4)."""
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -37,20 +38,24 @@ def _skew(a: np.ndarray) -> np.ndarray:
 @pytest.fixture(scope="module")
 def close_pass():
     """The plan, its LQG controller, its second-order model, and 600 closed-loop
-    executions' outcomes and final tips relative to the deformed target centre."""
+    executions: success (collisions counted at every state, the run carried on past one so
+    that every run ends) and the final tip relative to the deformed target centre."""
     sim = scenario_from_config("needle3d", None, "actuation")
     plan = NominalPlan.from_rollout(sim, sim.initial_state(), np.array(CLOSE_PASS))
     ctrl = lqg_controller(linearize(sim, plan, n_samples=16, seed=0))
     W = np.array(sim.distribution.cov)
     mo = second_order_model(sim, plan, ctrl, W)
-    outcomes, rel = [], []
+    going_on = copy.copy(sim)
+    going_on.in_collision = lambda state: False  # the same run, not stopped at a collision
+    success, rel = [], []
     for s in spawn_seeds(1, 600):
         gen = np.random.default_rng(s)
-        ex = execute(sim, plan, ctrl, sim.sample_params(gen), seed=gen, keep_states=False)
+        ex = execute(going_on, plan, ctrl, sim.sample_params(gen), seed=gen)
+        hit = any(sim.in_collision(y) for y in ex.states[1:])
+        success.append(ex.outcome == "success" and not hit)
         last = ex.states[-1]
-        outcomes.append(ex.outcome)
         rel.append(last.pose[:3] - sim.goal(last).centre)
-    return sim, plan, ctrl, mo, W, np.array(outcomes), np.array(rel)
+    return sim, plan, ctrl, mo, W, np.array(success), np.array(rel)
 
 
 def test_material_step_batch_is_the_simulators_step(close_pass, tol):
@@ -93,23 +98,22 @@ def test_linear_step_gives_the_linear_gaussian_moments(close_pass, tol):
 def test_exact_step_predicts_the_executions(close_pass):
     """The exact step's ``P(success)`` inside the executions' z = 4 Wilson interval, and the
     final tip's skewness across the plan — non-zero in the executions, beyond what 600 runs
-    can show by chance, zero for any Gaussian model — matched by the particles."""
-    sim, plan, ctrl, mo, W, outcomes, rel = close_pass
-    k, n = int(np.count_nonzero(outcomes == "success")), outcomes.shape[0]
-    conf = math.erf(Z / math.sqrt(2))
-    lo, hi = binomial_interval(k, n, confidence=conf)
+    can show by chance, zero for any Gaussian model — matched by the particles, and not by
+    the particles whose step is linear in the control."""
+    sim, plan, ctrl, mo, W, success, rel = close_pass
+    k, n = int(np.count_nonzero(success)), success.shape[0]
+    lo, hi = binomial_interval(k, n, confidence=math.erf(Z / math.sqrt(2)))
     res = lqgmp_particles(sim, plan, ctrl, mo, W, n_particles=40_000, seed=2)
     assert lo <= res.p_success <= hi
-    free = outcomes != "collision"
-    ex_skew = _skew(rel[free])
-    se = math.sqrt(6.0 / free.sum())
+    ex_skew = _skew(rel)
+    se = math.sqrt(6.0 / n)
     axis = int(np.argmax(np.abs(ex_skew)))
     assert abs(ex_skew[axis]) > Z * se  # the executions' tip is not Gaussian
-    alive, _, _, _, _, prel = _run(
-        sim, plan, ctrl, mo, W, 40_000, "exact", True, np.random.default_rng(3)
-    )
-    shifted = prel - sim.goal(plan.states[-1]).centre
-    assert abs(_skew(shifted[alive])[axis] - ex_skew[axis]) <= Z * se
+    *_, prel = _run(sim, plan, ctrl, mo, W, 40_000, "exact", True, np.random.default_rng(3))
+    assert abs(_skew(prel)[axis] - ex_skew[axis]) <= Z * se
+    # the counterfactual on the same draws: the step linear in the control leaves it out
+    *_, plin = _run(sim, plan, ctrl, mo, W, 40_000, "linear", True, np.random.default_rng(3))
+    assert abs(_skew(plin)[axis] - ex_skew[axis]) > Z * se
 
 
 def test_bad_input(close_pass):

@@ -70,10 +70,9 @@ class Needle3DMoments:
         frame), so that ``tip_moments`` of kinds ``"position"`` and ``"measured"`` agree."""
         return self.frame == "world"
 
-    def _pose_jacobians(self, U: np.ndarray) -> np.ndarray:
-        """``K(u) (n, 12, 12)`` for each row of ``U (n, q)``: the structure of
-        :func:`riskplan.scenarios.bevel.pose_step_jacobian` filled from one batched screw
-        exponential."""
+    def _screw_steps(self, U: np.ndarray):
+        """``(E (n, 3, 3), d (n, 3))``: the screw exponential ``exp(τ ξ̂(u))`` of each row of
+        ``U (n, q)``, in one batch."""
         cfg = self.config
         n = U.shape[0]
         rho = U[:, 2] if U.shape[1] == 3 else np.ones(n)
@@ -81,7 +80,14 @@ class Needle3DMoments:
         xi[:, 2] = cfg.tau * U[:, 0]
         xi[:, 3] = cfg.tau * rho * cfg.curvature * U[:, 0]
         xi[:, 5] = cfg.tau * U[:, 1]
-        E, d = se3_exp_batch(xi)
+        return se3_exp_batch(xi)
+
+    def _pose_jacobians(self, U: np.ndarray) -> np.ndarray:
+        """``K(u) (n, 12, 12)`` for each row of ``U (n, q)``: the structure of
+        :func:`riskplan.scenarios.bevel.pose_step_jacobian` filled from one batched screw
+        exponential."""
+        n = U.shape[0]
+        E, d = self._screw_steps(U)
         K = np.zeros((n, 12, 12))
         i3 = np.arange(3)
         K[:, i3, i3] = 1.0
@@ -116,14 +122,8 @@ class Needle3DMoments:
                 f"material, controls: expected (n, 12) and (n, {self.control_dim}), "
                 f"got {m.shape} and {U.shape}"
             )
-        cfg = self.config
         n = U.shape[0]
-        rho = U[:, 2] if U.shape[1] == 3 else np.ones(n)
-        xi = np.zeros((n, 6))
-        xi[:, 2] = cfg.tau * U[:, 0]
-        xi[:, 3] = cfg.tau * rho * cfg.curvature * U[:, 0]
-        xi[:, 5] = cfg.tau * U[:, 1]
-        E, d = se3_exp_batch(xi)
+        E, d = self._screw_steps(U)
         frame = m[:, 3:].reshape(n, 3, 3)  # rows e₁, e₂, e₃
         out = np.empty_like(m)
         # X' = X + Σ_j d_j e_j, e_k' = Σ_j E_jk e_j: K(u) m without the (n, 12, 12) K

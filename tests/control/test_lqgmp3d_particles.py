@@ -37,14 +37,20 @@ def _skew(a: np.ndarray) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def close_pass():
-    """The plan, its LQG controller, its second-order model, and 600 closed-loop
-    executions: success (collisions counted at every state, the run carried on past one so
-    that every run ends) and the final tip relative to the deformed target centre."""
+    """The plan, its LQG controller and its second-order model."""
     sim = scenario_from_config("needle3d", None, "actuation")
     plan = NominalPlan.from_rollout(sim, sim.initial_state(), np.array(CLOSE_PASS))
     ctrl = lqg_controller(linearize(sim, plan, n_samples=16, seed=0))
     W = np.array(sim.distribution.cov)
-    mo = second_order_model(sim, plan, ctrl, W)
+    return sim, plan, ctrl, second_order_model(sim, plan, ctrl, W), W
+
+
+@pytest.fixture(scope="module")
+def executions(close_pass):
+    """600 closed-loop executions of the plan: success (collisions counted at every state,
+    the run carried on past one so that every run ends) and the final tip relative to the
+    deformed target centre."""
+    sim, plan, ctrl, *_ = close_pass
     going_on = copy.copy(sim)
     going_on.in_collision = lambda state: False  # the same run, not stopped at a collision
     success, rel = [], []
@@ -55,7 +61,7 @@ def close_pass():
         success.append(ex.outcome == "success" and not hit)
         last = ex.states[-1]
         rel.append(last.pose[:3] - sim.goal(last).centre)
-    return sim, plan, ctrl, mo, W, np.array(success), np.array(rel)
+    return np.array(success), np.array(rel)
 
 
 def test_material_step_batch_is_the_simulators_step(close_pass, tol):
@@ -75,7 +81,7 @@ def test_linear_step_gives_the_linear_gaussian_moments(close_pass, tol):
     """With the step linearised and no clip the particles are a linear-Gaussian recursion,
     ``ξ' = F ξ + (0, K_t Δ_t) + N(0, Q)`` (the second-order model's ``F`` and ``Q``, its
     mean input without the second-order term): sample moments against it."""
-    sim, plan, ctrl, mo, W, *_ = close_pass
+    sim, plan, ctrl, mo, W = close_pass
     np.testing.assert_array_equal(ctrl.model()[4][0], sim.sensing_cov)  # the same N
     n, p = 40_000, 12
     _, _, _, mean, cov, _ = _run(
@@ -95,12 +101,13 @@ def test_linear_step_gives_the_linear_gaussian_moments(close_pass, tol):
 
 
 @pytest.mark.slow
-def test_exact_step_predicts_the_executions(close_pass):
+def test_exact_step_predicts_the_executions(close_pass, executions):
     """The exact step's ``P(success)`` inside the executions' z = 4 Wilson interval, and the
     final tip's skewness across the plan — non-zero in the executions, beyond what 600 runs
     can show by chance, zero for any Gaussian model — matched by the particles, and not by
     the particles whose step is linear in the control."""
-    sim, plan, ctrl, mo, W, success, rel = close_pass
+    sim, plan, ctrl, mo, W = close_pass
+    success, rel = executions
     k, n = int(np.count_nonzero(success)), success.shape[0]
     lo, hi = binomial_interval(k, n, confidence=math.erf(Z / math.sqrt(2)))
     res = lqgmp_particles(sim, plan, ctrl, mo, W, n_particles=40_000, seed=2)
@@ -117,7 +124,7 @@ def test_exact_step_predicts_the_executions(close_pass):
 
 
 def test_bad_input(close_pass):
-    sim, plan, ctrl, mo, W, *_ = close_pass
+    sim, plan, ctrl, mo, W = close_pass
     with pytest.raises(InvalidInputError, match="step"):
         lqgmp_particles(sim, plan, ctrl, mo, W, step="cubic")
     with pytest.raises(InvalidInputError, match="moments"):

@@ -32,8 +32,9 @@ obstacles at ``t + 1``; it succeeds where it never collides and its final tip re
 to the moving target (the model's goal map) lies in the plan's deformed target.
 
 Cost: ``T`` batched screw exponentials of ``n`` controls; 30,000 particles of a 23-step
-plan take about 1 s of CPU (their normal draws alone, 8 per particle and step, 0.1 s). Scope: the world frame (the checked position is the sensed
-tip), the actuation case (the second-order model's scope).
+plan take about 1 s of CPU (their normal draws alone, 8 per particle and step, 0.1 s).
+Scope: the world frame (the checked position is the sensed tip), the actuation case (the
+second-order model's scope).
 """
 
 from __future__ import annotations

@@ -10,6 +10,7 @@ from riskplan.app.reproduce.needle3d import (
     ESTIMATORS,
     GOAL_SE,
     MAX_GOAL_SAMPLES,
+    N_PARTICLES,
     evaluate_candidates,
     measure_plan,
     needle3d_figure,
@@ -39,6 +40,8 @@ def test_estimators_and_executions_on_common_draws(straight):
         n_m, se = row.estimate_n[m], row.estimate_se[m]
         if m == "sampling":
             assert n_m == 500
+        elif m == "particles":
+            assert n_m == N_PARTICLES and 0.0 < se < 1.0
         else:
             assert n_m == 0 and 0.0 <= se <= GOAL_SE
     d = row.draws

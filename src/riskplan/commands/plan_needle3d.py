@@ -4,6 +4,7 @@ closed/open-loop executions, and an interactive plotly figure."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import typer
@@ -81,7 +82,7 @@ def register(plan_app: typer.Typer) -> None:
             f"LQG-MP {t['selection_s']:.1f} s; selected #{result.best}"
         )
         table = Table(
-            title="LQG-MP P(success) (truncation, per-step, sigma, sampling) and executions"
+            title="LQG-MP P(success) (truncation, per-step, sigma, sampling, particles) and executions"
         )
         for h in (
             "plan",
@@ -90,6 +91,7 @@ def register(plan_app: typer.Typer) -> None:
             "per-step",
             "sigma",
             "sampling",
+            "particles",
             "closed",
             "95% CI",
             "open",
@@ -104,6 +106,7 @@ def register(plan_app: typer.Typer) -> None:
                 str(r.index),
                 str(r.n_steps),
                 *(f"{e[m]:.3f}" for m in ("truncation", "per-step", "sigma", "sampling")),
+                "-" if math.isnan(e.get("particles", math.nan)) else f"{e['particles']:.3f}",
                 closed,
                 ci,
                 opened,

@@ -70,10 +70,9 @@ class Needle3DMoments:
         frame), so that ``tip_moments`` of kinds ``"position"`` and ``"measured"`` agree."""
         return self.frame == "world"
 
-    def _pose_jacobians(self, U: np.ndarray) -> np.ndarray:
-        """``K(u) (n, 12, 12)`` for each row of ``U (n, q)``: the structure of
-        :func:`riskplan.scenarios.bevel.pose_step_jacobian` filled from one batched screw
-        exponential."""
+    def _screw_steps(self, U: np.ndarray):
+        """``(E (n, 3, 3), d (n, 3))``: the screw exponential ``exp(τ ξ̂(u))`` of each row of
+        ``U (n, q)``, in one batch."""
         cfg = self.config
         n = U.shape[0]
         rho = U[:, 2] if U.shape[1] == 3 else np.ones(n)
@@ -81,7 +80,14 @@ class Needle3DMoments:
         xi[:, 2] = cfg.tau * U[:, 0]
         xi[:, 3] = cfg.tau * rho * cfg.curvature * U[:, 0]
         xi[:, 5] = cfg.tau * U[:, 1]
-        E, d = se3_exp_batch(xi)
+        return se3_exp_batch(xi)
+
+    def _pose_jacobians(self, U: np.ndarray) -> np.ndarray:
+        """``K(u) (n, 12, 12)`` for each row of ``U (n, q)``: the structure of
+        :func:`riskplan.scenarios.bevel.pose_step_jacobian` filled from one batched screw
+        exponential."""
+        n = U.shape[0]
+        E, d = self._screw_steps(U)
         K = np.zeros((n, 12, 12))
         i3 = np.arange(3)
         K[:, i3, i3] = 1.0
@@ -90,6 +96,40 @@ class Needle3DMoments:
             for k in range(3):
                 K[:, 3 + 3 * k + i3, 3 + 3 * j + i3] = E[:, j, k, None]
         return K
+
+    def material_step_batch(self, material, controls) -> np.ndarray:
+        """The exact material step ``m' = K(u) m`` of each row (the screw step of the
+        simulator, :func:`riskplan.scenarios.bevel.pose_step_jacobian`, nonlinear in ``u``),
+        for Monte Carlo of the closed loop beyond any expansion in the control
+        (:func:`riskplan.control.lqgmp3d_particles.lqgmp_particles`).
+
+        Parameters
+        ----------
+        material : array_like, shape (n, 12)
+            Material poses ``m = (X, e₁, e₂, e₃)``.
+        controls : array_like, shape (n, q)
+            The controls actually applied (inside the bounds).
+
+        Returns
+        -------
+        numpy.ndarray, shape (n, 12)
+            ``K(u_i) m_i``.
+        """
+        m = np.asarray(material, dtype=np.float64)
+        U = np.asarray(controls, dtype=np.float64)
+        if m.ndim != 2 or m.shape[1] != 12 or U.shape != (m.shape[0], self.control_dim):
+            raise InvalidInputError(
+                f"material, controls: expected (n, 12) and (n, {self.control_dim}), "
+                f"got {m.shape} and {U.shape}"
+            )
+        n = U.shape[0]
+        E, d = self._screw_steps(U)
+        frame = m[:, 3:].reshape(n, 3, 3)  # rows e₁, e₂, e₃
+        out = np.empty_like(m)
+        # X' = X + Σ_j d_j e_j, e_k' = Σ_j E_jk e_j: K(u) m without the (n, 12, 12) K
+        out[:, :3] = m[:, :3] + (d[:, None, :] @ frame)[:, 0]
+        out[:, 3:] = (E.transpose(0, 2, 1) @ frame).reshape(n, 9)
+        return out
 
     def material_step_derivatives(self, state: Needle3DState, control):
         """``m' = K(u) m`` and its control derivatives at ``u = control`` (module docstring).

@@ -21,6 +21,7 @@ __all__ = [
     "ESTIMATORS",
     "GOAL_SE",
     "MAX_GOAL_SAMPLES",
+    "N_PARTICLES",
     "Needle3DResult",
     "PlanRow",
     "evaluate_candidates",
@@ -38,8 +39,12 @@ GOAL_CONNECT = 20
 #: truncation, per-step, sigma and sampling methods on the second-order model of the true
 #: system (:func:`riskplan.control.lqgmp3d_moments.second_order_model`, where the case's only
 #: uncertainty is the actuation noise; the linear model otherwise), and ``"linear"``, the
-#: truncation on the linear model (the estimate before the model change)
-ESTIMATORS = ("truncation", "per-step", "sigma", "sampling", "linear")
+#: truncation on the linear model (the estimate before the model change), and
+#: ``"particles"``, Monte Carlo of the reduced closed loop with the exact material step and
+#: the controls' clip (:func:`riskplan.control.lqgmp3d_particles.lqgmp_particles`: the
+#: final tip's skew, which every Gaussian estimate leaves out; NaN where the second-order
+#: model does not apply)
+ESTIMATORS = ("truncation", "per-step", "sigma", "sampling", "linear", "particles")
 
 #: standard error of the goal test's draws where they are used — the comparison of
 #: :func:`evaluate_candidates` (``PlanRow.draws``) and a target that is not an ellipsoid;
@@ -49,6 +54,11 @@ ESTIMATORS = ("truncation", "per-step", "sigma", "sampling", "linear")
 #: p = 0.999: 0.0027), so the prediction's own Monte Carlo error cannot move it across an
 #: interval's edge by more than a tenth of the interval
 GOAL_SE = 3e-4
+
+#: particles of the ``"particles"`` estimate, set before any run: its standard error
+#: ``sqrt(p(1 − p)/n)`` is then at most a tenth of the 95 % Wilson half-width of 1000
+#: executions, ``≈ 1.96 sqrt(p(1 − p)/1000)``, at any ``p`` (``n ≥ 1000/0.196² ≈ 26,000``)
+N_PARTICLES = 30_000
 
 #: cap on those draws: 10⁶ meet :data:`GOAL_SE` for p ≥ 0.9; below, the Wilson half-width at
 #: 1000 executions is ≥ 0.019 and 10⁶ draws (standard error ≤ 5e-4) stay under a tenth of it
@@ -126,15 +136,17 @@ def evaluate_candidates(
     is not an ellipsoid, and the comparison in ``PlanRow.draws``: in batches of
     ``n_goal_samples`` draws to a standard error of ``goal_se``, at most
     :data:`MAX_GOAL_SAMPLES`; ``None``: one batch), ``"sampling"`` with ``n_goal_samples``
-    trajectories. Returns ``(controllers, rows)``;
+    trajectories, ``"particles"`` with :data:`N_PARTICLES`. Returns ``(controllers, rows)``;
     a candidate whose linearisation fails gets ``None`` and estimates of 0. CPU seconds
     in ``estimate_cpu_s``: ``"truncation"`` the prediction given the controller (the
     second-order model and the truncation on it), ``"truncation+linearise"`` with the
     linearisation and the controller's gains, ``"linear"`` the linear model's truncation,
-    ``"truncation_repeats"`` two more runs of the prediction (a list)."""
+    ``"truncation_repeats"`` two more runs of the prediction (a list), ``"particles"`` the
+    particles given the second-order model."""
     from riskplan.app.reproduce.needle3d_checks import drawn_estimate, repeat_cpu
     from riskplan.control.lqgmp3d import lqgmp_3d
     from riskplan.control.lqgmp3d_moments import second_order_model
+    from riskplan.control.lqgmp3d_particles import lqgmp_particles
     from riskplan.parallel import spawn_seeds
     from riskplan.tissue_planning.select import _FAILURES, evaluate_plan
 
@@ -178,16 +190,23 @@ def evaluate_candidates(
             mkw = kw if m == "sampling" else kw_se
             got[m] = lqgmp_3d(sim, plan, ctrl, method=m, seed=s, moments=mo, **mkw)
             secs[m] = time.perf_counter() - t0
+        if mo is not None and getattr(sim, "position_is_measured", False):
+            c0 = time.process_time()
+            got["particles"] = lqgmp_particles(
+                sim, plan, ctrl, mo, W, n_particles=N_PARTICLES, seed=s
+            )
+            cpu["particles"] = time.process_time() - c0
+        nan = float("nan")
         ctrls.append(ctrl)
         rows.append(
             PlanRow(
                 i,
                 plan.n_steps,
-                {m: got[m].p_success for m in ESTIMATORS},
+                {m: got[m].p_success if m in got else nan for m in ESTIMATORS},
                 secs,
                 estimate_cpu_s=cpu,
-                estimate_n={m: got[m].n_goal_samples for m in ESTIMATORS},
-                estimate_se={m: got[m].p_success_se for m in ESTIMATORS},
+                estimate_n={m: got[m].n_goal_samples if m in got else 0 for m in ESTIMATORS},
+                estimate_se={m: got[m].p_success_se if m in got else nan for m in ESTIMATORS},
                 draws=drawn,
             )
         )

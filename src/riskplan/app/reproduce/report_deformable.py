@@ -299,7 +299,7 @@ def _needle3d_section(rep: Report, r: dict) -> None:
             )
         rows.append(
             [row["index"], row["n_steps"], _with_se(row, "truncation"), e["per-step"], e["sigma"], e["sampling"],
-             e.get("linear", "-"),
+             e.get("linear", "-"), _with_se(row, "particles") if "particles" in e else "-",
              f"{row['closed']}/{n} [{lo:.3f}, {hi:.3f}]" if n else "-",
              ("yes" if lo <= e["truncation"] <= hi else "no") if n else "-",
              f"{row['open']}/{n}" if n else "-", speed]
@@ -314,6 +314,7 @@ def _needle3d_section(rep: Report, r: dict) -> None:
             "sigma",
             "sampling",
             "linear model",
+            "particles",
             "closed loop [95 % Wilson]",
             "inside",
             "open loop",

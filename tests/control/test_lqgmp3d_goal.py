@@ -211,3 +211,19 @@ def test_lqgmp_3d_goal_test_is_exact_by_default(tol):
 
     boxed = lqgmp_3d(_BoxGoal(r, 0.0), plan, ctrl, method="truncation", n_goal_samples=300)
     assert boxed.goal_test == "draws" and boxed.n_goal_samples == 300
+
+
+def test_goal_test_takes_an_indefinite_covariance_as_its_nearest_semidefinite_one(tol):
+    """A final covariance indefinite beyond round-off (a residual of the statistical
+    linearisation) is clipped to its nearest positive semi-definite matrix, as the draws'
+    eigen-factor does, instead of raising."""
+    from riskplan.control.lqgmp3d import _goal_test
+
+    n = np.array([1.0, 2.0, 2.0]) / 3.0
+    S = 0.04 * (np.eye(3) - np.outer(n, n)) - 1e-6 * np.outer(n, n)  # eigenvalue −1e-6
+    ball = _ball(0.3)
+    p, n_draws, err, used = _goal_test(ball, np.zeros(3), S, "exact", None)
+    clipped, _ = gaussian_in_ellipsoid(ball, np.zeros(3), 0.04 * (np.eye(3) - np.outer(n, n)))
+    np.testing.assert_allclose(p, clipped, **tol["float64_ref"])
+    np.testing.assert_allclose(p, chi2.cdf(0.3**2 / 0.04, 2), **tol["gaussian_in_ellipsoid"])
+    assert (n_draws, used) == (0, "exact") and err <= tol["gaussian_in_ellipsoid"]["atol"]

@@ -258,7 +258,10 @@ def _goal_test(body, centre, Sx, goal: str, draws) -> tuple[float, int, float, s
     (``n = 0``, ``err`` its error bound), else ``draws = (batch, goal_se, max_n, gen)`` by
     ``_goal_draws`` (``n`` the draws, ``err`` :func:`binomial_se`)."""
     if goal == "exact" and body.kind == "ellipsoid":
-        p, err = gaussian_in_ellipsoid(body, centre, Sx)
+        # the nearest positive semi-definite matrix, as the draws' eigen-factor takes it: a
+        # residual covariance of the statistical linearisation can be indefinite by round-off
+        w, V = np.linalg.eigh(Sx)
+        p, err = gaussian_in_ellipsoid(body, centre, (V * np.clip(w, 0.0, None)) @ V.T)
         return p, 0, err, "exact"
     batch, goal_se, max_n, gen = draws
     k, n = _goal_draws(body, centre, _factor(Sx), batch, goal_se, max_n, gen)

@@ -27,12 +27,19 @@ def lengths_and_jacobian(
     n_nodes = 2 * n_steps + 1
     F = np.empty(6)
     J = np.empty((6, 6))
-    fac = np.zeros(1, dtype=np.int64)
+    # float arrays from np.empty, filled here: np.zeros and integer arrays are numba overloads
+    # that a first call compiles apart from the kernel (a few tenths of a second each)
+    fac = np.empty(1)  # 1.0 when J holds a Cholesky factor
+    fac[0] = 0.0
     col = np.empty(6)
     S = np.empty((6, m))
     G = np.empty((6, m))
-    zero = np.zeros(3)
-    x = np.zeros(6)
+    zero = np.empty(3)
+    x = np.empty(6)
+    for a in range(6):
+        x[a] = 0.0
+        if a < 3:
+            zero[a] = 0.0
     x[2] = 1.0
     xprev = x.copy()
     for i in range(m):
@@ -55,7 +62,7 @@ def lengths_and_jacobian(
         local_jacobian(x, tau, rt, drt, kse, kbt, J)
         if not chol_factor6(J):
             return LOCAL_FAIL
-        fac[0] = 1
+        fac[0] = 1.0
         if node == 0 or node == n_nodes - 1:
             wgt = h / 6.0
         elif node % 2 == 1:

@@ -7,7 +7,7 @@ import pytest
 
 from riskplan.errors import InvalidInputError
 from riskplan.robots import batch_kernel, load_robot, robot_from_toml
-from riskplan.robots.robot import LOCAL_MAXIT, LOCAL_TOL
+from riskplan.robots.rod_tables import LOCAL_MAXIT, LOCAL_TOL
 from tests.conftest import TOL
 
 # the lockstep kernel repeats the scalar kernel's operations in the same order, so the

@@ -127,6 +127,13 @@ def _geometry2d() -> None:
     grid = geo.TriangleLocator(nodes, tris)
     grid.locate(pts[0])
     grid.locate_points(pts)
+    # and on read-only maps, as a tissue mesh's locator gets them (its cached maps are frozen):
+    # numba compiles a signature of its own for read-only arrays
+    maps = geo.barycentric_maps(nodes, tris)
+    maps.flags.writeable = False
+    grid = geo.TriangleLocator(nodes, tris, maps=maps)
+    grid.locate(pts[0])
+    grid.locate_points(pts)
 
 
 def _deformable() -> None:

@@ -164,7 +164,8 @@ def test_complementarity_system_equals_its_python_source(robot, fb, monkeypatch)
     d = np.full(m, 0.002)
 
     def run():
-        Jm, phi, slack = np.empty((m, m)), np.empty((m, 1)), np.zeros(m, dtype=np.int64)
+        # slack flags as the solve passes them (float), so the test hits the warmed signature
+        Jm, phi, slack = np.empty((m, m)), np.empty((m, 1)), np.zeros(m)
         res, merit = displacement.complementarity_system(
             d, robot._kinv, robot._l0, tau, lengths, dl, Jm, phi, fb, slack
         )

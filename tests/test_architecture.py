@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ast
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -23,7 +24,6 @@ CORE = {
     "parallel",
     "budget",
     "parsing",
-    "kernels",
     "gaussian_mixture",
     "geometry2d",
     "geometry3d",
@@ -32,7 +32,9 @@ CORE = {
 }
 KINEMATIC_WING = ("datasets", "kinematics", "planning")
 TISSUE_WING = ("deformable", "scenarios", "control", "tissue_planning")
-APPLICATION = {"app", "bench", "commands", "cli", "__main__"}
+#: ``kernels`` is the ``riskplan warm`` list: it names (and imports, to compile) the kernel
+#: modules of the core and of both wings, so it sits above the wings, beside the CLI
+APPLICATION = {"app", "bench", "commands", "cli", "__main__", "kernels"}
 
 
 def _modules():
@@ -64,12 +66,26 @@ def test_architecture_doc_lists_every_module():
 
 
 def _riskplan_imports(rel: Path) -> list[str]:
-    """The riskplan packages (first component after ``riskplan.``) that module ``rel`` imports."""
-    tree = ast.parse((SRC / rel).read_text(encoding="utf-8"))
+    """The riskplan packages (first component after ``riskplan.``) that module ``rel`` imports:
+    by an import statement, or by name — a string that is a module path (``"riskplan.x.y"``, as
+    ``importlib.import_module`` takes it) or the literal start of an f-string
+    (``f"riskplan.x.{name}"``) counts as an import of ``x``, so an edge cannot hide in a call."""
+    return _imports_in((SRC / rel).read_text(encoding="utf-8"))
+
+
+def _imports_in(text: str) -> list[str]:
+    tree = ast.parse(text)
     out = []
     for node in ast.walk(tree):
         names = []
-        if isinstance(node, ast.ImportFrom) and node.module:
+        if isinstance(node, ast.Constant) and isinstance(node.value, str):
+            if re.fullmatch(r"riskplan(\.\w+)+", node.value):
+                names = [node.value]
+        elif isinstance(node, ast.JoinedStr) and node.values:
+            head = node.values[0]
+            if isinstance(head, ast.Constant) and re.match(r"riskplan\.\w+\.", str(head.value)):
+                names = [str(head.value)]
+        elif isinstance(node, ast.ImportFrom) and node.module:
             names = [node.module]
             if node.module == "riskplan":
                 names = [f"riskplan.{a.name}" for a in node.names]
@@ -92,6 +108,17 @@ def _allowed(pkg: str) -> set[str] | None:
         if pkg in wing:
             return CORE | set(wing[: wing.index(pkg) + 1])
     raise AssertionError(f"riskplan.{pkg} is in no layer of tests/test_architecture.py")
+
+
+def test_an_import_by_name_is_an_import():
+    text = (
+        "import importlib\n"
+        "k = importlib.import_module('riskplan.deformable.nhkernels')\n"
+        "m = importlib.import_module(f'riskplan.scenarios.{name}')\n"
+        "from riskplan.collision import Environment\n"
+        "'riskplan plans; riskplan.robots is the robot package'  # prose, not a module path\n"
+    )
+    assert sorted(_imports_in(text)) == ["collision", "deformable", "scenarios"]
 
 
 def test_layers_core_two_wings_and_application():

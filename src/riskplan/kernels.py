@@ -12,6 +12,9 @@ commands use, so every specialisation the commands need is compiled and cached.
 ``make install`` (and so ``make demo`` and ``make test``) runs it once, as ``riskplan warm``;
 afterwards a fresh process reaches its first robot shape in about a second.
 :func:`kernel_dispatchers` lists every kernel and :func:`cold` the ones with nothing cached yet (a test checks that :func:`warm` leaves none).
+
+The module is part of the application layer (docs/architecture.md): it names, and imports
+when called, the kernel modules of the core and of both wings.
 """
 
 from __future__ import annotations
@@ -72,8 +75,8 @@ def cold() -> list[str]:
 
 def _robot() -> None:
     from riskplan.robots import load_robot
+    from riskplan.robots.actuation import BATCH_KERNEL_MIN
     from riskplan.robots.batch_kernel import solve_tensions_batch
-    from riskplan.robots.robot import BATCH_KERNEL_MIN
 
     robot = load_robot("paper")
     tau = np.linspace(0.0, 1.0, BATCH_KERNEL_MIN * robot.n_tendons).reshape(BATCH_KERNEL_MIN, -1)
@@ -137,9 +140,9 @@ def _geometry2d() -> None:
 
 
 def _deformable() -> None:
-    # one P1 triangle with two nodes held (the tissue wing's kernels, called by name: the
-    # core does not import the wing)
-    k = importlib.import_module("riskplan.deformable.nhkernels")
+    # one P1 triangle with two nodes held (the tissue wing's kernels)
+    from riskplan.deformable import nhkernels as k
+
     tri = np.array([[0, 1, 2]], dtype=np.int64)
     G = np.array([[[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]]])
     areas = np.array([0.5])
@@ -157,15 +160,14 @@ def _deformable() -> None:
 
 
 def _tissue3d() -> None:
-    # the 3-D needle's kernels (tissue wing, called by name), on minimal inputs of the types
-    # their callers pass: the band of a 3x3 SPD matrix's factor as scipy returns it, one grid
-    # cell with one tetrahedron, one element's point load, one pose-vector step
+    # the 3-D needle's kernels (tissue wing), on minimal inputs of the types their callers
+    # pass: the band of a 3x3 SPD matrix's factor as scipy returns it, one grid cell with one
+    # tetrahedron, one element's point load, one pose-vector step
     import scipy.linalg
 
-    tetfactor = importlib.import_module("riskplan.deformable.tetfactor")
-    tetlocate = importlib.import_module("riskplan.deformable.tetlocate")
-    tissue3d = importlib.import_module("riskplan.scenarios.tissue3d")
-    bevel = importlib.import_module("riskplan.scenarios.bevel")
+    from riskplan.deformable import tetfactor, tetlocate
+    from riskplan.scenarios import bevel, tissue3d
+
     ab = np.array([[0.0, -1.0, -1.0], [4.0, 4.0, 4.0]])
     tetfactor.band_inverse(scipy.linalg.cholesky_banded(ab, lower=False))
     one = np.ones(3)

@@ -164,6 +164,19 @@ def _parent_gone(parent_pid: int, ppid: int) -> bool:
         return False
 
 
+def _cpu_seconds(pid: int) -> float | None:
+    """User + system CPU seconds process ``pid`` has used so far: fields 14 and 15 of Linux's
+    ``/proc/<pid>/stat`` (clock ticks); ``None`` without that file (another system, or the
+    process is gone). A pool's workers are children of the forkserver, not of this process,
+    so ``resource.getrusage(RUSAGE_CHILDREN)`` never counts them."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as fh:
+            fields = fh.read().rsplit(b")", 1)[1].split()  # the name (field 2) may hold spaces
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
+
+
 def _watch_parent(parent_pid: int, ppid: int) -> None:
     import time
 
@@ -226,6 +239,9 @@ class TaskPool:
     Clean ends as without a pool: worker initialiser and watchdog unchanged; when a call ends
     early (a task raised, Ctrl-C, the consumer closed the generator) the workers are
     terminated and the next call starts fresh ones. One call at a time per pool.
+
+    ``workers_cpu_s``: the CPU seconds of the ``local`` workers, read from each worker just
+    before it stops (so complete after the ``with`` block); ``None`` where they cannot be read.
     """
 
     def __init__(
@@ -239,6 +255,9 @@ class TaskPool:
         self._requested = None if workers is None else int(workers)
         self.ray_address = ray_address
         self.pools_started = 0  #: local process pools started so far (diagnostics)
+        #: CPU seconds of the local workers stopped so far, read just before they stop (Linux;
+        #: ``None`` where a worker's CPU time cannot be read, and with Ray; 0 when serial)
+        self.workers_cpu_s: float | None = None if backend == "ray" else 0.0
         self._executor = None
         self._ray = None
         self._ray_started_here = False
@@ -265,6 +284,7 @@ class TaskPool:
         self._closed = True
         if self._executor is not None:
             ex, self._executor = self._executor, None
+            self._count_cpu(ex)
             ex.shutdown(wait=True)
         if self._ray_started_here:
             self._ray.shutdown()
@@ -273,7 +293,16 @@ class TaskPool:
     def _terminate(self) -> None:
         if self._executor is not None:
             ex, self._executor = self._executor, None
+            self._count_cpu(ex)
             _terminate_pool(ex)
+
+    def _count_cpu(self, ex) -> None:
+        """Add the CPU seconds of executor ``ex``'s workers to ``workers_cpu_s``."""
+        for proc in list((getattr(ex, "_processes", None) or {}).values()):
+            cpu = _cpu_seconds(proc.pid)
+            self.workers_cpu_s = (
+                None if cpu is None or self.workers_cpu_s is None else (self.workers_cpu_s + cpu)
+            )
 
     def accepts(self, backend: str, workers: int | None, ray_address: str | None) -> bool:
         """Whether a call asking for ``backend`` / ``workers`` / ``ray_address`` can run here."""

@@ -166,6 +166,22 @@ def test_query_dimension_errors(boxes_env):
         boxes_env.segments_collide(np.zeros((2, 3)), np.zeros((3, 3)))
 
 
+def test_check_environment_names_the_argument_and_the_dimension(boxes_env):
+    from riskplan.collision.environment import check_environment
+
+    square = Environment.from_polygons([[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]])
+    assert check_environment(boxes_env) is boxes_env
+    assert check_environment(square, dim=2) is square
+    with pytest.raises(InvalidInputError, match=r"^scene: expected an Environment, got str"):
+        check_environment("chest", "scene")
+    with pytest.raises(
+        InvalidInputError, match=r"^environment: expected a 3-D Environment, got str"
+    ):
+        check_environment("chest", dim=3)
+    with pytest.raises(InvalidInputError, match=r"expected a 3-D Environment, got a 2-D one"):
+        check_environment(square, dim=3)
+
+
 def test_load_errors(tmp_path):
     with pytest.raises(InvalidInputError, match="no such file"):
         Environment.load(tmp_path / "missing.stl")

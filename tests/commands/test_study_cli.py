@@ -28,3 +28,19 @@ def test_run_one_scenario_refuses_bad_names_before_writing(tmp_path, kwargs, fie
     with pytest.raises(InvalidInputError, match=field):
         run_one_scenario(out=out, **kwargs)
     assert not out.exists()
+
+
+def test_timings_count_the_workers_cpu(tmp_path):
+    """A tiny Fig. 6 run on two local workers: ``cpu_s_workers`` is their CPU time (it read
+    0.0 when taken from ``RUSAGE_CHILDREN``, which never sees the forkserver's children),
+    positive and at most two workers' wall time."""
+    import json
+    import os
+
+    if not os.path.exists("/proc/self/stat"):
+        pytest.skip("worker CPU is read from /proc")
+    out = tmp_path / "fig6"
+    run_one_scenario("needle", out, candidates=1, executions=2, workers=2, seed=1)
+    t = json.loads((out / "timings_needle.json").read_text())
+    assert 0.0 < t["cpu_s_workers"] <= 2 * t["wall_s"]
+    assert t["cpu_s_self"] > 0.0

@@ -136,7 +136,7 @@ def _fd_grad(f, P, h=1e-6):
 
 
 def test_signed_distance_closed_form(tol):
-    from riskplan.control.ilqr import signed_distance
+    from riskplan.control.ilqr_cost import signed_distance
 
     sq = square(0.0, 0.0, 1.0)
     P = np.array([[1.5, 0.2], [2.0, 2.5], [-1.3, -1.4], [0.2, -0.5], [0.9, 0.0], [0.0, 3.0]])
@@ -150,7 +150,7 @@ def test_signed_distance_closed_form(tol):
 
 
 def test_barrier_derivatives_against_finite_differences(rng, tol):
-    from riskplan.control.ilqr import obstacle_barrier, signed_distance
+    from riskplan.control.ilqr_cost import obstacle_barrier, signed_distance
 
     polys = [square(0.0, 0.0, 1.0), square(3.0, 0.5, 0.5)]
     w, delta = 2.0, 0.4
@@ -220,7 +220,7 @@ def test_barrier_over_trajectory_chain_rule(rng, tol):
 def test_barrier_moves_the_plan_away_and_cost_decreases(rng):
     """A square obstacle placed beside the linear toy's plan: iLQR with the barrier ends
     farther from it than iLQR without, every accepted iterate lowers the cost."""
-    from riskplan.control.ilqr import signed_distance
+    from riskplan.control.ilqr_cost import signed_distance
 
     sim, plan = _setup(rng, T=6, goal_half=5.0)
     T = plan.n_steps
@@ -259,7 +259,8 @@ def test_needle_scenario_terms():
 
     from riskplan.control import NominalPlan
     from riskplan.control.greedy import greedy_needle_controls
-    from riskplan.control.ilqr import scenario_terms, signed_distance, tracking_controller
+    from riskplan.control.ilqr import tracking_controller
+    from riskplan.control.ilqr_cost import scenario_terms, signed_distance
     from riskplan.control.linearize import RankDeficiencyWarning
     from riskplan.scenarios.registry import make_scenario
 

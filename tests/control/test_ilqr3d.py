@@ -239,7 +239,8 @@ def test_barrier_moves_a_3d_plan_off_a_grazed_obstacle():
     weights (w = 1, δ = the target radius 0.1) move it by about 0.0005 only (the tracking
     cost holds the bevel's roll as tightly as its pitch); w = 10, δ = 0.05 is used here to
     show the direction clearly (about 0.004)."""
-    from riskplan.control.ilqr import ilqr, scenario_terms
+    from riskplan.control.ilqr import ilqr
+    from riskplan.control.ilqr_cost import scenario_terms
     from riskplan.control.linearize import RankDeficiencyWarning, linearize
     from riskplan.control.lqg import bryson_weights
 

@@ -9,9 +9,18 @@ import numpy as np
 import pytest
 from scipy.special import ndtr
 
-from riskplan.control import NominalPlan, execute, lqg_controller, lqgmp, monte_carlo_success
+from riskplan.control import (
+    LQGController,
+    NominalPlan,
+    execute,
+    lqg_controller,
+    lqgmp,
+    monte_carlo_success,
+)
 from riskplan.control.linearize import Linearization
 from riskplan.errors import InvalidInputError
+from riskplan.geometry3d import ConvexBody
+from riskplan.scenarios.base import SimParams
 from riskplan.scenarios.uncertainty import ActuationNoise
 from tests.conftest import TOL
 
@@ -134,6 +143,10 @@ def test_bad_input(rng):
         lqgmp(sim, plan, ctrl, method="exact")
     with pytest.raises(InvalidInputError, match="controller"):
         lqgmp(sim, plan, lqg_controller(_exact(sim, 1)))
+    with pytest.raises(
+        InvalidInputError, match=r"goal_motion: options of the 3-D model \(workspace_dim = 3\) only"
+    ):
+        lqgmp(sim, plan, ctrl, goal_motion=True)
 
 
 def test_sigma_distances_batch_equals_free_region(rng, tol):
@@ -516,3 +529,66 @@ def test_near_singular_point_covariance_on_the_per_step_path(method, monkeypatch
         np.testing.assert_allclose(
             slow.p_free_steps[0], float(ndtr(d / sd)), **TOL["half_plane_truncation"]
         )
+
+
+class _Moving3D:
+    """A 3-D simulator for one step ``x̄₁ ~ N(0, s² I)`` of a 12-dimensional state (no
+    feedback): a ball obstacle beside the path and a target ball whose centre follows the
+    tip, ``c = α δx`` (``goal_jacobian``)."""
+
+    workspace_dim = 3
+    goal_point_indices = (0, 1, 2)
+
+    def obstacles(self, state):
+        return [ConvexBody("ellipsoid", np.array([0.35, 0.0, 0.0]), 0.1 * np.eye(3))]
+
+    def goal(self, state):
+        return ConvexBody("ellipsoid", np.zeros(3), 0.15 * np.eye(3))
+
+    def goal_jacobian(self, state, params):
+        J = np.zeros((3, 12))
+        J[:, :3] = 0.3 * np.eye(3)
+        return J
+
+
+def _one_step_3d(s2):
+    p, q, m = 12, 2, 3
+    M = np.zeros((1, p, p))
+    M[0, :3, :3] = s2 * np.eye(3)
+    H = np.concatenate([np.eye(3), np.zeros((3, 9))], axis=1)[None]
+    lin = Linearization(
+        A=np.eye(p)[None],
+        B=np.zeros((1, p, q)),
+        M=M,
+        H=H,
+        N=np.eye(m)[None],
+        rank=np.zeros(1, dtype=np.int64),
+    )
+    zeros = np.zeros((1, p, p))
+    ctrl = LQGController(
+        L=np.zeros((1, q, p)), K=np.zeros((1, p, m)), P=zeros, P0=zeros[0], lin=lin
+    )
+    plan = NominalPlan(
+        states=(0, 1), controls=np.zeros((1, q)), reduced=np.zeros((2, p)), params=SimParams()
+    )
+    return plan, ctrl
+
+
+@pytest.mark.parametrize("method", ["sigma", "truncation", "sampling"])
+def test_dispatcher_hands_the_3d_options_to_lqgmp_3d(method):
+    """``lqgmp`` on a 3-D simulator is ``lqgmp_3d`` with every keyword, the 3-D model's own
+    (``goal_motion``, ``goal_se``) included: the same draws give the same result; without
+    ``goal_motion`` the fixed target gives another ``P(goal)`` (the option is not dropped)."""
+    from riskplan.control.lqgmp3d import lqgmp_3d
+
+    plan, ctrl = _one_step_3d(0.01)
+    sim = _Moving3D()
+    kw = dict(method=method, n_goal_samples=4000, seed=3, goal_motion=True)
+    if method != "sampling":
+        kw |= dict(goal_se=0.01, max_goal_samples=20_000)
+    via = lqgmp(sim, plan, ctrl, **kw)
+    direct = lqgmp_3d(sim, plan, ctrl, **kw)
+    assert via.p_success == direct.p_success and via.p_goal == direct.p_goal
+    assert via.p_collision_free == direct.p_collision_free
+    fixed = lqgmp(sim, plan, ctrl, method=method, n_goal_samples=4000, seed=3)
+    assert fixed.p_goal != via.p_goal

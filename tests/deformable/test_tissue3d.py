@@ -271,7 +271,7 @@ def test_prescribed_homogeneous_deformation_is_reproduced(block, law, scale):
 
 
 def test_point_location_agrees_with_exhaustive_search():
-    from riskplan.deformable.tissue3d import INSIDE_TOL, find_points
+    from riskplan.deformable.tetlocate import INSIDE_TOL, find_points
 
     m = tet_block(n_elements=5000)
     rng = np.random.default_rng(7)

@@ -116,7 +116,7 @@ def test_training_is_the_seeded_adam_loop(synth_small, tmp_path):
 
 def test_nan_loss_skips_step_and_keeps_parameters(synth_small, monkeypatch):
     data = read_point_clouds(synth_small)
-    real = training_mod._batch_loss
+    real = training_mod.mdn_nll
     state = {"calls": 0, "snapshot": None, "unchanged": None}
 
     def faulty(net, x, p):
@@ -129,7 +129,7 @@ def test_nan_loss_skips_step_and_keeps_parameters(synth_small, monkeypatch):
             state["unchanged"] = all(torch.equal(a, b) for a, b in zip(params, state["snapshot"]))
         return real(net, x, p)
 
-    monkeypatch.setattr(training_mod, "_batch_loss", faulty)
+    monkeypatch.setattr(training_mod, "mdn_nll", faulty)
     res = train(
         data, TrainConfig(n_components=2, epochs=2, batch_size=4, hidden=(16,), head_hidden=())
     )
@@ -144,7 +144,7 @@ def test_nan_loss_skips_step_and_keeps_parameters(synth_small, monkeypatch):
 def test_persistent_nan_raises(synth_small, monkeypatch):
     data = read_point_clouds(synth_small)
     monkeypatch.setattr(
-        training_mod, "_batch_loss", lambda net, x, p: net(x)[0].sum() * float("inf") * 0.0
+        training_mod, "mdn_nll", lambda net, x, p: net(x)[0].sum() * float("inf") * 0.0
     )
     with pytest.raises(ConvergenceError, match="non-finite"):
         train(data, TrainConfig(n_components=2, epochs=3, batch_size=2, max_bad_steps=5))

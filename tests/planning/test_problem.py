@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from riskplan.errors import InvalidInputError
-from riskplan.planning.problem import ProblemFileError, VoxelEnvironment, load_problem
+from riskplan.planning.problem import ProblemFileError, load_problem
+from riskplan.planning.problem_voxels import VoxelEnvironment
 from riskplan.robots.params import quaternion_to_matrix
 from tests.conftest import TOL
 

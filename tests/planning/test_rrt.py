@@ -400,3 +400,63 @@ def test_goal_connect_stops_when_blocked():
 def test_goal_connect_validates():
     with pytest.raises(InvalidInputError, match="goal_connect"):
         RRTOptions(goal_connect=-1)
+
+
+def _steered_point_robot(**connect):
+    """A point robot with a straight-line steering rule: the steered control from a node
+    towards the goal point is the same every time it is asked."""
+    robot = PointRobot(goal=(0.7, 0.5), goal_radius=0.05, obstacle=((0.8, 0.0), (0.9, 0.1)))
+
+    def steer(x, target, bounds, k):
+        return np.clip((target - x) / (0.1 * k), bounds[:, 0], bounds[:, 1])
+
+    space = dataclasses.replace(robot.planning_space(), steps_per_extension=1, steer=steer)
+    return robot, space
+
+
+def _children_states_distinct(tree) -> bool:
+    kids: dict[int, list[bytes]] = {}
+    for i in range(1, tree.size):
+        kids.setdefault(int(tree.parents[i]), []).append(tree.nodes[i].tobytes())
+    return all(len(set(v)) == len(v) for v in kids.values())
+
+
+def test_a_node_makes_one_steered_child_so_the_plans_of_a_tree_are_distinct():
+    """The steering rule is deterministic: a node picked for the goal again (after the
+    goal's parent is exhausted) would get a second child with the first one's state, and
+    the goal connection would repeat the path to the goal. Each node's steered control
+    makes at most one child, so no two children of a node share a state, and the tree's
+    plans are distinct."""
+    robot, space = _steered_point_robot()
+    opts = RRTOptions(
+        n_controls=2, goal_bias=1.0, max_iterations=60, plans_per_tree=4, goal_connect=20
+    )
+    for seed in range(3):
+        tree = grow_tree(robot, seed=seed, space=space, options=opts)
+        assert len(tree.plans) >= 2
+        assert _children_states_distinct(tree)
+        keys = [p.controls.tobytes() for p in tree.plans]
+        assert len(set(keys)) == len(keys)
+        for plan in tree.plans:
+            replay = NominalPlan.from_rollout(robot, robot.initial_state(), plan.controls)
+            assert plan.reduced.tobytes() == replay.reduced.tobytes()
+        again = grow_tree(robot, seed=seed, space=space, options=opts)
+        assert again.nodes.tobytes() == tree.nodes.tobytes()
+
+
+def test_rrt_plans_keeps_a_path_repeated_by_several_trees_once():
+    """Every tree starts at the same root, and its first goal-directed step there (steered
+    and connected) reaches the goal on the same straight path: the trees' plans repeat it,
+    rrt_plans keeps it once and returns distinct plans, the same for the same seed."""
+    robot, space = _steered_point_robot()
+    opts = RRTOptions(
+        n_controls=2, goal_bias=1.0, max_iterations=60, plans_per_tree=2, goal_connect=20
+    )
+    plans, trees = rrt_plans(robot, 3, seed=5, space=space, options=opts, backend="serial")
+    grown = [p.controls.tobytes() for t in trees for p in t.plans]
+    assert len(set(grown)) < len(grown)  # the trees did repeat a path
+    keys = [p.controls.tobytes() for p in plans]
+    assert len(plans) == 3 and len(set(keys)) == 3
+    assert set(keys) == set(grown)
+    again, _ = rrt_plans(robot, 3, seed=5, space=space, options=opts, backend="serial")
+    assert [p.controls.tobytes() for p in again] == keys

@@ -142,8 +142,13 @@ def test_bad_input_names_the_argument(robot):
         execute_on_robot(robot, ok, env, 2, backend="threads")
     with pytest.raises(InvalidInputError, match="radius"):
         execute_on_robot(robot, ok, env, 2, radius=-0.01, backend="serial")
-    with pytest.raises(InvalidInputError, match="environment"):
+    with pytest.raises(InvalidInputError, match="environment: expected a 3-D Environment"):
         execute_on_robot(robot, ok, "chest", 2, backend="serial")
+    square = Environment.from_polygons([[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]])
+    with pytest.raises(
+        InvalidInputError, match="environment: expected a 3-D Environment, got a 2-D"
+    ):
+        execute_on_robot(robot, ok, square, 2, backend="serial")
 
 
 # ------------------------------------------------------------ mixtures of the model

@@ -11,7 +11,8 @@ import pytest
 from riskplan.errors import InvalidInputError, RobotDescriptionError
 from riskplan.robots import load_robot
 from riskplan.robots.description import parse_robot_toml
-from riskplan.robots.robot import TendonRobot, rotation_z, shift_polynomial
+from riskplan.robots.robot import TendonRobot
+from riskplan.robots.shape import rotation_z, shift_polynomial
 from tests.conftest import TOL
 
 LAB = Path(__file__).resolve().parents[1] / "data" / "kuntz-lab"

@@ -8,7 +8,6 @@ import pytest
 from riskplan.errors import ConvergenceError, InvalidInputError, RobotDescriptionError
 from riskplan.robots import RodShape, load_robot, robot_from_toml
 from riskplan.robots import actuation as actuation_module
-from riskplan.robots import robot as robot_module
 from riskplan.robots.rod_tables import LOCAL_TOL
 from tests.conftest import TOL
 
@@ -203,7 +202,7 @@ def test_local_solve_failure_names_node_and_residual(paper, monkeypatch, call):
         elif call == "small_batch":
             paper.solve_tensions(np.tile(tau, (3, 1)))
         elif call == "kernel_batch":
-            paper.solve_tensions(np.tile(tau, (robot_module.BATCH_KERNEL_MIN + 2, 1)))
+            paper.solve_tensions(np.tile(tau, (actuation_module.BATCH_KERNEL_MIN + 2, 1)))
         else:
             paper.tendon_lengths(tau)
     assert info.value.residual > LOCAL_TOL and info.value.iterations == 1

@@ -588,10 +588,12 @@ class Environment:
         return (inside | cross).reshape(shape)
 
 
-def check_environment(environment, name: str = "environment") -> Environment:
-    """Raise :class:`InvalidInputError` unless ``environment`` is an :class:`Environment`."""
+def check_environment(environment, name: str = "environment", dim=None) -> Environment:
+    """``environment`` if it is an :class:`Environment` (``dim``-dimensional when ``dim`` is
+    given), else :class:`InvalidInputError` naming the argument ``name`` and what it got."""
+    want = "an Environment" if dim is None else f"a {dim}-D Environment"
     if not isinstance(environment, Environment):
-        raise InvalidInputError(
-            f"{name}: expected an Environment, got {type(environment).__name__}"
-        )
+        raise InvalidInputError(f"{name}: expected {want}, got {type(environment).__name__}")
+    if dim is not None and environment.dim != dim:
+        raise InvalidInputError(f"{name}: expected {want}, got a {environment.dim}-D one")
     return environment

@@ -113,7 +113,7 @@ def voxel_environment(occupied, origin, spacing, *, transform=None, name="voxels
         As :func:`voxel_boundary_mesh`.
     transform : callable, optional
         Takes the ``(V, 3)`` vertices to the environment's frame (a rigid motion, e.g.
-        :meth:`riskplan.planning.problem.VoxelEnvironment.voxel_to_robot`); a reflection
+        :meth:`riskplan.planning.problem_voxels.VoxelEnvironment.voxel_to_robot`); a reflection
         would turn the faces inwards and is refused.
     name : str
         The obstacle's name.

@@ -57,7 +57,7 @@ def register(plan_app: typer.Typer) -> None:
             raise InvalidInputError(
                 f"--case: expected one of {', '.join(CASE_NAMES)}, got {case!r}"
             )
-        from riskplan.scenarios.needle3d import FRAMES
+        from riskplan.scenarios import FRAMES
 
         if frame not in FRAMES:
             raise InvalidInputError(f"--frame: expected one of {', '.join(FRAMES)}, got {frame!r}")

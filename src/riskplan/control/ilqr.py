@@ -64,29 +64,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskplan.control.ilqr_cost import (
-    BARRIER_SCALE,
-    BARRIER_WEIGHT,
-    GOAL_WEIGHT,
-    _make_barrier,
-    obstacle_barrier,
-    scenario_terms,
-    signed_distance,
-)
+from riskplan.control.ilqr_cost import BARRIER_SCALE, BARRIER_WEIGHT, _make_barrier
 from riskplan.control.plan import NominalPlan
 from riskplan.errors import ConvergenceError, InvalidInputError, SimulationError
 
-__all__ = [
-    "BARRIER_SCALE",
-    "BARRIER_WEIGHT",
-    "GOAL_WEIGHT",
-    "ILQRResult",
-    "ilqr",
-    "obstacle_barrier",
-    "scenario_terms",
-    "signed_distance",
-    "tracking_controller",
-]
+__all__ = ["ILQRResult", "ilqr", "tracking_controller"]
 
 #: Regularisation at which the search gives up on a descent step: the iterate is then a
 #: local minimum of ``J`` to the model's accuracy.
@@ -213,7 +195,7 @@ def ilqr(
     points=((0, 1),),
     body=None,
     barrier_weight: float = BARRIER_WEIGHT,
-    barrier_scale: float = 1.0,
+    barrier_scale: float = BARRIER_SCALE,
 ) -> ILQRResult:
     """Re-optimise ``plan`` by iLQR on the simulator (module docstring).
 

@@ -457,6 +457,7 @@ def lqgmp(
     cutoff: float | None = None,
     drift: bool = False,
     seed=None,
+    **options_3d,
 ) -> LQGMPResult:
     r"""LQG-MP probability of success of ``plan`` under ``controller`` (paper IV-D).
 
@@ -503,6 +504,10 @@ def lqgmp(
         process noise covariance.
     seed : int, numpy.random.Generator or None
         Seeds the goal samples (the trajectories with ``"sampling"``).
+    **options_3d
+        The 3-D model's own keywords (``goal_motion``, ``moments``, ``goal_se``,
+        ``max_goal_samples``, ...), handed to :func:`riskplan.control.lqgmp3d.lqgmp_3d`
+        unchanged; :class:`~riskplan.errors.InvalidInputError` for a 2-D simulator.
 
     Returns
     -------
@@ -513,22 +518,18 @@ def lqgmp(
     Notes
     -----
     A simulator with ``workspace_dim = 3`` (the 3-D needle) is evaluated by
-    :func:`riskplan.control.lqgmp3d.lqgmp_3d` against its 3-D convex obstacles.
+    :func:`riskplan.control.lqgmp3d.lqgmp_3d` against its 3-D convex obstacles, with every
+    argument of this call: the two calls give the same result.
     """
     from riskplan.collision import DEFAULT_CUTOFF
 
     cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
+    args = dict(method=method, n_goal_samples=n_goal_samples, cutoff=cutoff, drift=drift, seed=seed)
     if getattr(sim, "workspace_dim", 2) == 3:  # 3-D convex obstacles (the 3-D needle)
-        return lqgmp_3d(
-            sim,
-            plan,
-            controller,
-            method=method,
-            n_goal_samples=n_goal_samples,
-            cutoff=cutoff,
-            drift=drift,
-            seed=seed,
-        )
+        return lqgmp_3d(sim, plan, controller, **args, **options_3d)
+    if options_3d:
+        what = ", ".join(sorted(options_3d))
+        raise InvalidInputError(f"{what}: options of the 3-D model (workspace_dim = 3) only")
     if method not in METHODS:
         raise InvalidInputError(f"method: expected one of {METHODS}, got {method!r}")
     _check_arguments(plan, controller, n_goal_samples)

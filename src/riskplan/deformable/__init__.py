@@ -29,8 +29,9 @@ from riskplan.deformable.loads import (
 from riskplan.deformable.material import Material
 from riskplan.deformable.material_points import Interpolator, contains, locate
 from riskplan.deformable.mesh import TissueMesh, mesh_polygon, rectangle
+from riskplan.deformable.tetlocate import sphere_points
 from riskplan.deformable.tetmesh import TetMesh, tet_block, tet_fill_surface
-from riskplan.deformable.tissue3d import TetTissue, TissueState3D, sphere_points
+from riskplan.deformable.tissue3d import TetTissue, TissueState3D
 
 __all__ = [
     "HyperelasticModel",

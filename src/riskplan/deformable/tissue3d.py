@@ -44,7 +44,6 @@ from riskplan._validation import as_array, check_choice, check_instance
 from riskplan.deformable.hyperelastic import SolveInfo
 from riskplan.deformable.material import Material
 from riskplan.deformable.tetassembly import (
-    TetPattern,
     _norm,
     _pattern,
     deformation_gradients,
@@ -53,39 +52,17 @@ from riskplan.deformable.tetassembly import (
     neohookean_stress,
     support_dofs,
 )
-from riskplan.deformable.tetfactor import SINGULAR_PIVOT_RATIO, factor_reduced
-from riskplan.deformable.tetlocate import (
-    INSIDE_TOL,
-    LOCATE_CANDIDATES,
-    TetMaterialPoints,
-    find_points,
-    locate3d,
-    sphere_points,
-)
+from riskplan.deformable.tetfactor import factor_reduced
+from riskplan.deformable.tetlocate import TetMaterialPoints
 from riskplan.deformable.tetmesh import TetMesh
 from riskplan.deformable.tetnewton import solve_nonlinear
 from riskplan.errors import ConvergenceError, ElementInversionError, InvalidInputError
 from riskplan.threads import one_blas_thread
 
 #: The pure parts live in :mod:`.tetassembly`, :mod:`.tetfactor`, :mod:`.tetlocate` (the
-#: material-point queries, ``TetMaterialPoints``) and :mod:`.tetnewton`; these names stay
-#: importable from here.
-__all__ = [
-    "INSIDE_TOL",
-    "LOCATE_CANDIDATES",
-    "SINGULAR_PIVOT_RATIO",
-    "TetPattern",
-    "TetTissue",
-    "TissueState3D",
-    "deformation_gradients",
-    "element_stiffness",
-    "find_points",
-    "linear_stiffness_parts",
-    "locate3d",
-    "neohookean_stress",
-    "solve_nonlinear",
-    "sphere_points",
-]
+#: material-point queries, ``TetMaterialPoints``, ``locate3d``, ``find_points``,
+#: ``sphere_points``) and :mod:`.tetnewton`, and are imported from there.
+__all__ = ["TetTissue", "TissueState3D"]
 
 logger = logging.getLogger(__name__)
 

@@ -33,7 +33,7 @@ import torch
 
 from riskplan.errors import ConvergenceError, DataFormatError, InvalidInputError
 from riskplan.kinematics.data import PointCloudData, check_compatible
-from riskplan.kinematics.mdn import MDN, MDNModel, Normalisation, mixture_log_prob
+from riskplan.kinematics.mdn import MDN, MDNModel, Normalisation, mdn_nll, mixture_log_prob
 from riskplan.kinematics.train_config import TrainConfig
 
 log = logging.getLogger(__name__)
@@ -78,12 +78,6 @@ def split_indices(n: int, val_fraction: float, seed: int) -> tuple[np.ndarray, n
         n_val = min(max(n_val, 1), n - 1)
     perm = np.random.default_rng([seed, 7919]).permutation(n)
     return np.sort(perm[n_val:]), np.sort(perm[:n_val])
-
-
-def _batch_loss(net: MDN, x: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
-    """Mean NLL (normalised units) of ``points (B, N, 3)`` under ``net(x (B, m))``."""
-    log_w, means, u = net(x)
-    return -mixture_log_prob(log_w, means, u, points).mean()
 
 
 def _params_finite(net: torch.nn.Module) -> bool:
@@ -365,7 +359,7 @@ def _train_epoch(net, opt, batches, epoch, config, norm, on_step) -> tuple[float
         idx = perm[step * B : (step + 1) * B]
         x, p = batches.draw(idx, config.points_per_config, rng)
         opt.zero_grad(set_to_none=True)
-        loss = _batch_loss(net, x, p)
+        loss = mdn_nll(net, x, p)
         if not _optimiser_step(net, opt, loss, good):
             skipped += 1
             consecutive_bad += 1

@@ -35,16 +35,9 @@ from pathlib import Path
 import numpy as np
 
 from riskplan.errors import InvalidInputError, RobotDescriptionError
-from riskplan.planning.problem_voxels import VoxelEnvironment, VoxelGrid, read_voxel_octree
+from riskplan.planning.problem_voxels import VoxelEnvironment
 
-__all__ = [
-    "Problem",
-    "Sphere",
-    "VoxelEnvironment",
-    "VoxelGrid",
-    "load_problem",
-    "read_voxel_octree",
-]
+__all__ = ["Problem", "Sphere", "load_problem"]
 
 _PROBLEM_KEYS = {
     "start",

@@ -65,6 +65,7 @@ from riskplan.collision import (
     monte_carlo_probability,
     monte_carlo_trajectory,
 )
+from riskplan.collision.environment import check_environment
 from riskplan.collision.trajectory import trajectory_bound
 from riskplan.errors import InvalidInputError
 from riskplan.gaussian_mixture import as_numpy_mixture
@@ -156,14 +157,6 @@ def _check_trajectory(trajectory, robot) -> np.ndarray:
     )
     check_range(traj, "trajectory", low=lim[:, 0], high=lim[:, 1])
     return traj
-
-
-def _check_environment(environment) -> Environment:
-    if not isinstance(environment, Environment) or environment.dim != 3:
-        raise InvalidInputError(
-            f"environment: expected a 3-D Environment (robot base frame), got {environment!r}"
-        )
-    return environment
 
 
 def default_radius(robot) -> float:
@@ -303,7 +296,7 @@ def execute_on_robot(
     """
     robot = _as_robot(robot)
     traj = _check_trajectory(trajectory, robot)
-    env = _check_environment(environment)
+    env = check_environment(environment, dim=3)
     n = check_count(n, "n", 1)
     seed = _check_seed(seed)
     chunk = check_count(chunk, "chunk", 1)
@@ -392,7 +385,7 @@ def mixture_monte_carlo(
         :func:`~riskplan.collision.monte_carlo_probability` per configuration: what eq. 9
         bounds).
     """
-    env = _check_environment(environment)
+    env = check_environment(environment, dim=3)
     n = check_count(n, "n", 1)
     seed = _check_seed(seed)
     m = int(getattr(model, "n_tendons", -1))

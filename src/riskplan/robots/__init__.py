@@ -18,7 +18,8 @@ from riskplan.robots.params import (
     params_to_toml,
 )
 from riskplan.robots.pose import BasePose
-from riskplan.robots.robot import RodShape, TendonRobot
+from riskplan.robots.robot import TendonRobot
+from riskplan.robots.shape import RodShape
 
 __all__ = [
     "PACKAGED_ROBOTS",

@@ -18,24 +18,11 @@ from riskplan.robots import actuation as _actuation
 from riskplan.robots import cosserat
 from riskplan.robots import loaded as _loaded
 from riskplan.robots import motion as _motion
-from riskplan.robots.actuation import BATCH_KERNEL_MIN
-from riskplan.robots.loaded import SHOOT_MAXIT, SHOOT_TOL
 from riskplan.robots.params import BaseMotion, RobotParams, params_to_toml
-from riskplan.robots.rod_tables import DISP_MAXIT, DISP_TOL
-from riskplan.robots.shape import RodShape, rotation_z, shift_polynomial
+from riskplan.robots.shape import RodShape
 from riskplan.robots.tendon_lengths import rest_lengths_and_jacobian
 
-__all__ = [
-    "BATCH_KERNEL_MIN",
-    "DISP_MAXIT",
-    "DISP_TOL",
-    "SHOOT_MAXIT",
-    "SHOOT_TOL",
-    "RodShape",
-    "TendonRobot",
-    "rotation_z",
-    "shift_polynomial",
-]
+__all__ = ["TendonRobot"]
 
 log = logging.getLogger(__name__)
 

@@ -46,7 +46,7 @@ _HOME = {
     "ManipulationConfig": "manipulation_config",
     "ManipulationScenario": "manipulation",
     "ManipulationState": "manipulation_config",
-    "FRAMES": "needle_frames",
+    "FRAMES": "base",
     "NeedleConfig": "needle_config",
     "NeedleScenario": "needle",
     "NeedleState": "needle_config",

@@ -33,18 +33,20 @@ in :mod:`riskplan.scenarios.registry`.
 
 from __future__ import annotations
 
+import copy
 from collections import OrderedDict
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from riskplan._validation import as_array, as_generator, check_range
+from riskplan._validation import as_array, as_generator, check_choice, check_range
 from riskplan.errors import InvalidInputError
 
 # the values a simulator passes (their home), handed on from here
 from riskplan.scenarios.values import SimParams, SimState, actuation_noise, frozen_array
 
 __all__ = [
+    "FRAMES",
     "FEMScenario",
     "SimParams",
     "SimState",
@@ -56,6 +58,35 @@ __all__ = [
     "gaussian_noise",
     "rollout",
 ]
+
+
+#: The frames a scenario's reduced state may be read in (``frame=``; the needles', the
+#: module docstrings of :mod:`riskplan.scenarios.needle` and :mod:`riskplan.scenarios.needle3d`):
+#: the world, or the tissue's material (reference) coordinates.
+FRAMES = ("world", "material")
+
+
+def with_frame(self, frame: str):
+    """This scenario (same configuration, distribution and FEM caches) with the reduced
+    state in ``frame`` (:data:`FRAMES`): a shallow copy with its ``frame`` set. The scenarios
+    with frames (the needles) bind it as their method. Simulation, collision and goal tests
+    are the same in both frames; what changes is what the controller and LQG-MP see (the
+    scenario's ``reduced``, ``observation_jacobian``, ``state_obstacles``, ``state_goal``).
+    Plans made in another frame follow with :meth:`riskplan.control.NominalPlan.reframed`.
+
+    Parameters
+    ----------
+    frame : str
+        ``"world"`` or ``"material"``.
+
+    Returns
+    -------
+    Simulator
+        A shallow copy of ``self`` (its type) reading ``x`` in ``frame``.
+    """
+    out = copy.copy(self)
+    out.frame = check_choice(frame, FRAMES, "frame")
+    return out
 
 
 #: Per-process caches (models, meshes) shared by unpickled copies of one scenario

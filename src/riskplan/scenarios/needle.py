@@ -77,18 +77,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from riskplan._validation import as_array, as_generator, check_count
+from riskplan._validation import as_array, as_generator, check_choice, check_count
 from riskplan.errors import InvalidInputError
 from riskplan.geometry2d import points_in_polygon
-from riskplan.scenarios import needle_frames
+from riskplan.scenarios import base, needle_frames
 from riskplan.scenarios.base import (
+    FRAMES,
     FEMScenario,
     SimParams,
     apply_actuation_noise,
     check_control,
 )
 from riskplan.scenarios.needle_config import NeedleConfig, NeedleState
-from riskplan.scenarios.needle_frames import FRAMES
 from riskplan.scenarios.needle_mesh import MeshData, NeedleModel, world_pose
 from riskplan.scenarios.needle_space import car_steer, car_step, needle_box_space
 from riskplan.scenarios.space import BoxSpace
@@ -96,7 +96,6 @@ from riskplan.scenarios.space import BoxSpace
 # the configuration, state, kinematics and world pose live in needle_config, needle_space and
 # needle_mesh; this module hands them on with the scenario
 __all__ = [
-    "FRAMES",
     "NeedleConfig",
     "NeedleScenario",
     "NeedleState",
@@ -142,10 +141,8 @@ class NeedleScenario(FEMScenario):
         frame: str = "world",
     ):
         super().__init__(config or NeedleConfig(), distribution, cache_size)
-        if frame not in FRAMES:
-            raise InvalidInputError(f"frame: expected one of {FRAMES}, got {frame!r}")
         #: the reduced state's frame (module docstring): ``"world"`` (the paper's) or ``"material"``
-        self.frame = frame
+        self.frame = check_choice(frame, FRAMES, "frame")
         self._bounds = np.array(
             [[0.0, self.config.v_max], [-self.config.phi_max, self.config.phi_max]]
         )
@@ -334,7 +331,7 @@ class NeedleScenario(FEMScenario):
         return d.push_forces(state.material, params.force_scale)
 
     # the reduced state's frames (module docstring): functions of needle_frames, bound here
-    with_frame = needle_frames.with_frame
+    with_frame = base.with_frame
     reduced = needle_frames.reduced
     measure = needle_frames.measure
     observation_jacobian = needle_frames.observation_jacobian

@@ -54,10 +54,11 @@ import functools
 
 import numpy as np
 
-from riskplan._validation import as_array, as_generator, check_count
+from riskplan._validation import as_array, as_generator, check_choice, check_count
 from riskplan.errors import InvalidInputError
 from riskplan.geometry3d import ConvexBody
 from riskplan.scenarios.base import (
+    FRAMES,
     FEMScenario,
     SimParams,
     apply_actuation_noise,
@@ -66,13 +67,11 @@ from riskplan.scenarios.base import (
 )
 from riskplan.scenarios.bevel import _pose_vector_step, pose_step_jacobian
 from riskplan.scenarios.needle3d_config import Needle3DConfig, Needle3DState, _MeshData3D
-from riskplan.scenarios.needle3d_frames import FRAMES, JACOBIAN_STEP, Needle3DFrames
+from riskplan.scenarios.needle3d_frames import Needle3DFrames
 from riskplan.scenarios.needle3d_moments import Needle3DMoments
 from riskplan.scenarios.needle3d_space import Needle3DSpace, needle3d_steer
 
 __all__ = [
-    "FRAMES",
-    "JACOBIAN_STEP",
     "PLANNING_ELEMENTS",
     "Needle3DConfig",
     "Needle3DScenario",
@@ -107,9 +106,7 @@ class Needle3DScenario(Needle3DMoments, Needle3DFrames, FEMScenario):
         frame: str = "world",
     ):
         super().__init__(config or Needle3DConfig(), distribution, cache_size)
-        if frame not in FRAMES:
-            raise InvalidInputError(f"frame: expected one of {FRAMES}, got {frame!r}")
-        self.frame = frame
+        self.frame = check_choice(frame, FRAMES, "frame")
         cfg = self.config
         self.control_dim = 3 if cfg.duty_cycle else 2
         b = [[0.0, cfg.v_max], [-cfg.omega_max, cfg.omega_max], [0.0, 1.0]]

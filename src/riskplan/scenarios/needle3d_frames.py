@@ -1,6 +1,7 @@
 """The 3-D needle's reduced-state frames and tissue Jacobians: the methods of
 :class:`riskplan.scenarios.needle3d.Needle3DScenario` that read the tip in the world or the
-material frame (:data:`riskplan.scenarios.needle3d.FRAMES`, the module docstring there)
+material frame (:data:`riskplan.scenarios.FRAMES`, the module docstring of
+:mod:`riskplan.scenarios.needle3d`)
 and differentiate the tissue response in the material pose — ``with_frame``, ``measure``,
 ``observation_jacobian``, ``state_obstacles``, ``state_goal`` and ``goal_jacobian`` — and
 the affine images of the deformed bodies with the tip's gauge in each (the collision and
@@ -12,15 +13,12 @@ import math
 
 import numpy as np
 
-from riskplan.errors import InvalidInputError
 from riskplan.geometry3d import ConvexBody
+from riskplan.scenarios import base
 from riskplan.scenarios.base import SimParams, gaussian_noise
 from riskplan.scenarios.needle3d_config import Needle3DState
 
-__all__ = ["FRAMES", "JACOBIAN_STEP"]
-
-#: Reduced-state frames (:mod:`riskplan.scenarios.needle3d` module docstring).
-FRAMES = ("world", "material")
+__all__ = ["JACOBIAN_STEP"]
 
 #: Central-difference step of :meth:`Needle3DFrames.observation_jacobian` and
 #: :meth:`Needle3DFrames.goal_jacobian` (the response is quadratic in the material pose
@@ -31,28 +29,8 @@ JACOBIAN_STEP = 1e-6
 class Needle3DFrames:
     """Frame and Jacobian methods of the 3-D needle scenario (module docstring)."""
 
-    def with_frame(self, frame: str) -> Needle3DFrames:
-        """This scenario (same configuration, distribution and FEM caches) with the reduced
-        state in ``frame`` (:data:`FRAMES`, module docstring); plans made in another frame
-        follow with :meth:`riskplan.control.NominalPlan.reframed`.
-
-        Parameters
-        ----------
-        frame : str
-            ``"world"`` or ``"material"``.
-
-        Returns
-        -------
-        Needle3DScenario
-            A shallow copy reading ``x`` in ``frame``.
-        """
-        import copy
-
-        if frame not in FRAMES:
-            raise InvalidInputError(f"frame: expected one of {FRAMES}, got {frame!r}")
-        out = copy.copy(self)
-        out.frame = frame
-        return out
+    # the frame switch shared with the 2-D needle (:mod:`riskplan.scenarios.base`)
+    with_frame = base.with_frame
 
     def measure(self, state: Needle3DState, noise=None, rng=None) -> np.ndarray:
         """``z = x_world + n``, the sensed world tip position of ``state`` (both frames; in

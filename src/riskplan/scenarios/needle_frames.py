@@ -4,7 +4,7 @@ world or the material frame — the reduced state, the measurement and its Jacob
 obstacles and the goal in the reduced state's coordinates.
 
 The functions take the scenario as ``self``: :class:`~riskplan.scenarios.needle.NeedleScenario`
-binds them as its methods (``with_frame``, ``reduced``, ``measure``,
+binds them as its methods (``reduced``, ``measure``,
 ``observation_jacobian``, ``state_obstacles``, ``state_goal``, ``observe``), documented
 there."""
 
@@ -13,47 +13,16 @@ from __future__ import annotations
 import numpy as np
 
 from riskplan._validation import as_array
-from riskplan.errors import InvalidInputError
 from riskplan.scenarios.base import SimParams, gaussian_noise
 from riskplan.scenarios.needle_config import NeedleState
 
-__all__ = ["FRAMES"]
-
-#: The reduced-state frames of :class:`~riskplan.scenarios.needle.NeedleScenario` (the
-#: module docstring of :mod:`riskplan.scenarios.needle`).
-FRAMES = ("world", "material")
+__all__: list[str] = []
 
 #: Step of the central differences of :meth:`NeedleScenario.observation_jacobian`, in
 #: units of the scene size: far below an element (about 0.1 on the planning mesh), so a
 #: difference straddles an element edge (where the P1 field has a kink) only for a pose
 #: within 1e-6 of it.
 H_STEP = 1e-6
-
-
-def with_frame(self, frame: str):
-    """This scenario (same configuration, distribution and FEM caches) with the reduced
-    state in ``frame`` (:data:`FRAMES`; :mod:`riskplan.scenarios.needle`). Simulation, collision and
-    goal tests are the same in both frames; what changes is what the controller and
-    LQG-MP see: :meth:`reduced`, :meth:`observation_jacobian`, :meth:`state_obstacles`
-    and :meth:`state_goal`.
-
-    Parameters
-    ----------
-    frame : str
-        ``"world"`` or ``"material"``.
-
-    Returns
-    -------
-    NeedleScenario
-        A shallow copy reading ``x`` in ``frame``.
-    """
-    import copy
-
-    if frame not in FRAMES:
-        raise InvalidInputError(f"frame: expected one of {FRAMES}, got {frame!r}")
-    out = copy.copy(self)
-    out.frame = frame
-    return out
 
 
 def reduced(self, state: NeedleState) -> np.ndarray:

@@ -99,7 +99,7 @@ class TetBlock:
 
     def __init__(self, size, n_elements: int, tracked):
         from riskplan.deformable import tet_block
-        from riskplan.deformable.tissue3d import locate3d
+        from riskplan.deformable.tetlocate import locate3d
 
         self.size = np.asarray(size, dtype=np.float64)
         self._size_tuple = tuple(float(v) for v in self.size)
@@ -164,7 +164,7 @@ class TetBlock:
         lam : numpy.ndarray, shape (k, 4)
             Barycentric weights in it.
         """
-        from riskplan.deformable.tissue3d import find_points
+        from riskplan.deformable.tetlocate import find_points
 
         pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
         if self._cell_tets is not None and len(pts) == 1 and self.contains(pts[0]):

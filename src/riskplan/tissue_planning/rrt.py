@@ -33,14 +33,19 @@ One iteration (paper IV-A):
    within ``(1 − goal_depth) · r_goal`` of its centre (``sim.goal_distance``; see
    :class:`RRTOptions`), the edge ends there and the new node is a goal node: a leaf, never
    expanded. At most one goal
-   child per node, so the plans of one tree differ before their last edge.
+   child per node, and at most one child made by a node's steered control (the steering
+   rule is deterministic: asked again from the same node, it would add a copy of that
+   child, state for state, and the plans through it would repeat), so the plans of one
+   tree are distinct.
 
 A plan is the path from the root to a goal node: the controls of its edges (each held
 for its steps) and every state on the way, as a :class:`riskplan.control.NominalPlan`.
 Many distinct candidates (the paper uses 100) come from several trees with independent
 seeds, each collecting ``plans_per_tree`` goal nodes; the trees run through
 :mod:`riskplan.parallel`, and a tree's result depends only on its seed, so the plans do
-not depend on the backend or on the number of workers.
+not depend on the backend or on the number of workers. The trees share the root, and a
+path of steered edges from it is the same in every tree that takes it: a plan repeating
+an earlier tree's is kept once.
 
 Choices the paper leaves open (documented in docs/planning.md):
 
@@ -415,6 +420,22 @@ def _tree_task(args) -> TreeResult:
     return grow_tree(sim, seed=seed, params=params, space=space, options=options)
 
 
+def _add_distinct(plans: list, seen: set, results) -> int:
+    """Append the trees' plans to ``plans`` except those whose controls are in ``seen``
+    (updated); the number left out. The trees share the root, and steered edges are
+    deterministic: a path of steered edges can recur in several trees; it is kept once."""
+    repeats = 0
+    for r in results:
+        for p in r.plans:
+            key = p.controls.tobytes()
+            if key in seen:
+                repeats += 1
+                continue
+            seen.add(key)
+            plans.append(p)
+    return repeats
+
+
 def rrt_plans(
     sim,
     n_plans: int = 100,
@@ -431,7 +452,9 @@ def rrt_plans(
     """``n_plans`` distinct candidate plans (paper IV-A: "multiple such plans are extracted").
 
     Grows ``ceil(n_plans / options.plans_per_tree)`` trees (:func:`grow_tree`) with seeds
-    ``spawn_seeds(seed, ...)`` in parallel; if they collect fewer plans than asked, up to
+    ``spawn_seeds(seed, ...)`` in parallel; a plan whose controls repeat an earlier tree's
+    (a path of deterministic steered edges from the shared root) is kept once; if they
+    collect fewer distinct plans than asked, up to
     ``max_rounds − 1`` further rounds of trees (the next seeds of the same sequence) run
     for the rest. The plans do not depend on ``backend`` or ``workers``.
 
@@ -459,10 +482,10 @@ def rrt_plans(
     Returns
     -------
     plans : list of riskplan.control.NominalPlan
-        The first ``n_plans`` plans in tree order (fewer, with a warning, if the budget
-        ran out).
+        The first ``n_plans`` distinct plans (no two with the same controls) in tree
+        order (fewer, with a warning, if the budget ran out).
     trees : list of TreeResult
-        Every tree grown.
+        Every tree grown (their ``plans`` as each tree found them, repeats included).
 
     Raises
     ------
@@ -484,6 +507,8 @@ def rrt_plans(
     seeds = spawn_seeds(seed, first * max_rounds + int(n_plans))
     trees: list[TreeResult] = []
     plans: list = []
+    seen: set[bytes] = set()
+    repeats = 0
     used = 0
     for _ in range(int(max_rounds)):
         missing = int(n_plans) - len(plans)
@@ -504,8 +529,7 @@ def rrt_plans(
         )
         used += n_trees
         trees.extend(results)
-        for r in results:
-            plans.extend(r.plans)
+        repeats += _add_distinct(plans, seen, results)
     if not plans:
         sizes = [t.size for t in trees]
         best = min(t.best_goal_distance for t in trees)
@@ -514,6 +538,8 @@ def rrt_plans(
             f"(tree sizes {min(sizes)}..{max(sizes)} nodes, best goal distance {best:.4g}); "
             "raise options.max_iterations or n_controls, or check that the goal is reachable"
         )
+    if repeats:
+        log.info("simulator RRT: %d plans repeated an earlier tree's and were dropped", repeats)
     if len(plans) < n_plans:
         log.warning(
             "simulator RRT: %d of %d plans within the budget (%d trees)",

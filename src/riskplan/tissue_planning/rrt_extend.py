@@ -13,7 +13,9 @@ reached, the control and the states of the edge that reached it. An iteration
 3. candidate controls (random in the sampling bounds or within the rate limit of the node's
    control; towards the goal, the steering rule's control replaces the last), each simulated
    for ``steps_per_extension`` steps from the node's stored state, ranked by the distance of
-   their end state to the sample (an edge through the goal first);
+   their end state to the sample (an edge through the goal first); a node's steered control
+   makes at most one child (the rule is deterministic: a second steered child would repeat
+   the first, state for state, and so would the plans through it);
 4. the best candidate whose every state is inside the space and collision-free becomes an
    edge; it ends at its first state in the (tightened) goal, which makes a goal node;
 5. towards the goal, optionally, steered edges "until blocked"
@@ -51,6 +53,10 @@ class _Tree:
         self.edge_states: list[tuple] = [()]
         self.edge_controls: list[np.ndarray] = [np.empty((0, q))]
         self.has_goal_child = [False]
+        # whether the node's steered control already made a child: the steering rule is
+        # deterministic (the same control from a node towards the goal point each time), so
+        # a second steered child would repeat the first, state for state
+        self.steered = [False]
         self.goal_nodes: list[int] = []
         self.n = 1
 
@@ -67,6 +73,7 @@ class _Tree:
         self.edge_controls.append(np.tile(u, (len(seq), 1)))
         self.node_control.append(u)
         self.has_goal_child.append(False)
+        self.steered.append(False)
         if at_goal:
             self.has_goal_child[parent] = True
             self.is_goal[n] = True
@@ -110,10 +117,10 @@ class _Growth:
             if not np.isfinite(dn).any():
                 return
         near = int(np.argmin(dn))
-        U = self._candidate_controls(near, x_s, to_goal)
+        U, steered = self._candidate_controls(near, x_s, to_goal)
         ends, traj = self._simulate(near, U)
         ok, dist = self._rank(ends, traj, x_s, to_goal)
-        added = self._add_best(near, U, ends, traj, ok, dist, dn[near], to_goal)
+        added = self._add_best(near, U, ends, traj, ok, dist, dn[near], to_goal, steered)
         first_new = tree.n - 1
         if to_goal and added and self.steer is not None and not tree.is_goal[tree.n - 1]:
             self._connect(x_s)
@@ -125,8 +132,9 @@ class _Growth:
             if added:  # the edge's node and those of its goal connection
                 tree.goal_fails[first_new : tree.n] = tree.goal_fails[near]
 
-    def _candidate_controls(self, near: int, x_s, to_goal: bool) -> np.ndarray:
-        """``(n_controls, q)`` controls to try from node ``near`` (step 3)."""
+    def _candidate_controls(self, near: int, x_s, to_goal: bool) -> tuple[np.ndarray, bool]:
+        """``(U, steered)``: ``(n_controls, q)`` controls to try from node ``near`` (step 3),
+        and whether the last is the steering rule's."""
         bounds, space, gen = self.bounds, self.space, self.gen
         n_ctrl, q = self.options.n_controls, bounds.shape[0]
         u_near = self.tree.node_control[near]
@@ -136,9 +144,11 @@ class _Growth:
             d = space.max_control_change
             U = u_near + (2.0 * gen.random((n_ctrl, q)) - 1.0) * d
             U = np.clip(U, bounds[:, 0], bounds[:, 1])
-        if to_goal and self.steer is not None:
+        steered = False
+        if to_goal and self.steer is not None and not self.tree.steered[near]:
             # the space's local steering towards the goal point is one of the candidates
-            # (drawn after the random ones, so the random stream does not depend on it)
+            # (drawn after the random ones, so the random stream does not depend on it);
+            # once it made a child of this node, the random candidates alone are tried
             u_st = self.steer(self.tree.X[near].copy(), x_s, bounds, space.steps_per_extension)
             if u_st is not None:
                 u_st = as_array(u_st, "space.steer(...)", shape=(q,))
@@ -146,7 +156,8 @@ class _Growth:
                     d = space.max_control_change
                     u_st = np.clip(u_st, u_near - d, u_near + d)
                 U[-1] = np.clip(u_st, bounds[:, 0], bounds[:, 1])
-        return U
+                steered = True
+        return U, steered
 
     def _simulate(self, near: int, U: np.ndarray):
         """Each candidate simulated for ``steps_per_extension`` steps from the node's state:
@@ -186,9 +197,11 @@ class _Growth:
                     dist[c] = -1.0
         return ok, dist
 
-    def _add_best(self, near: int, U, ends, traj, ok, dist, d_near, to_goal: bool) -> bool:
+    def _add_best(
+        self, near: int, U, ends, traj, ok, dist, d_near, to_goal: bool, steered: bool
+    ) -> bool:
         """Add the best valid candidate as an edge from ``near`` (steps 4-5); whether one
-        was added."""
+        was added. ``steered``: the last candidate is the steering rule's."""
         tree = self.tree
         for c in np.argsort(dist, kind="stable"):
             if not ok[c] or (to_goal and dist[c] >= d_near):
@@ -202,6 +215,8 @@ class _Growth:
                     break  # one goal child per node keeps the plans of a tree distinct
                 seq = seq[: goal_at + 1]
             tree.add(self.sim, near, seq, U[c], goal_at is not None)
+            if steered and c == len(U) - 1:
+                tree.steered[near] = True
             return True
         return False
 
@@ -220,5 +235,6 @@ class _Growth:
             if seq is None:
                 break
             tree.add(self.sim, node, seq, u_c, at_goal)
+            tree.steered[node] = True  # its steered control: the one just taken
             if at_goal:
                 break

@@ -1,7 +1,7 @@
 """LQG against its variants on common random draws (issue item "beyond LQG"): the Kalman
 filter against the UKF (:mod:`riskplan.control.ukf`), and the plan as given against the
 plan re-optimised by iLQR (:mod:`riskplan.control.ilqr`) for a cost with the goal as
-terminal term and an obstacle barrier (:func:`riskplan.control.ilqr.scenario_terms`; 2-D
+terminal term and an obstacle barrier (:func:`riskplan.control.ilqr_cost.scenario_terms`; 2-D
 polygons, and the 3-D needle's convex bodies below).
 
 Rules, fixed before any number was seen:
@@ -27,7 +27,7 @@ Rules, fixed before any number was seen:
 
 The 3-D needle's iLQR cost has the same terms against its deformed ellipsoids and
 parallelepipeds (:mod:`riskplan.control.ilqr_cost3d`, read by
-:func:`~riskplan.control.ilqr.scenario_terms`). Its executions run grouped by mesh (a
+:func:`~riskplan.control.ilqr_cost.scenario_terms`). Its executions run grouped by mesh (a
 draw's outcome is a function of its seeds alone, so the order changes no result): the mesh
 case's draws fall on some ninety grids, and each grid's FEM model is built once.
 """
@@ -130,7 +130,7 @@ def compare_on_plan(sim, plan, n: int, *, seed: int = 0, lin_samples: int = 8, t
     lin_samples : int
         Parameter draws per linearisation.
     terms : dict, optional
-        iLQR's goal/obstacle terms (default :func:`~riskplan.control.ilqr.scenario_terms`,
+        iLQR's goal/obstacle terms (default :func:`~riskplan.control.ilqr_cost.scenario_terms`,
         2-D or 3-D).
 
     Returns
@@ -142,7 +142,8 @@ def compare_on_plan(sim, plan, n: int, *, seed: int = 0, lin_samples: int = 8, t
     """
     from riskplan.collision import binomial_interval
     from riskplan.control import execute
-    from riskplan.control.ilqr import scenario_terms, tracking_controller
+    from riskplan.control.ilqr import tracking_controller
+    from riskplan.control.ilqr_cost import scenario_terms
     from riskplan.parallel import spawn_seeds
 
     if terms is None:

@@ -57,7 +57,7 @@ def configuration_clearance(
     robot, configurations, venv, *, _cache=None
 ) -> list[ConfigurationCheck]:
     """``(N, n_config)`` configurations of ``robot`` against the voxel file of ``venv``
-    (a :class:`~riskplan.planning.problem.VoxelEnvironment`), robot frame -> voxel frame by
+    (a :class:`~riskplan.planning.problem_voxels.VoxelEnvironment`), robot frame -> voxel frame by
     ``venv.robot_to_voxel``. Returns one :class:`ConfigurationCheck` per configuration."""
     grid, occ, dist = _cache if _cache is not None else _occupancy(venv)
     out = []

@@ -89,6 +89,13 @@ def _robot() -> None:
     d[1, 0] = 0.01
     robot.solve_displacements(d[1])
     robot.solve_displacements(d)
+    # the compiled tendon offsets at one arc length (robots build their tables with numpy,
+    # the same operations; the kernel stays public and is the tests' reference)
+    from riskplan.robots.rod_tables import tendon_offsets
+
+    coeffs = np.ones((robot.n_tendons, 2))
+    rt, drt = np.empty((robot.n_tendons, 3)), np.empty((robot.n_tendons, 3))
+    tendon_offsets(coeffs, coeffs, 0.5, rt, drt)
 
 
 def _collision() -> None:

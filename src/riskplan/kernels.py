@@ -89,6 +89,13 @@ def _robot() -> None:
     d[1, 0] = 0.01
     robot.solve_displacements(d[1])
     robot.solve_displacements(d)
+    # the compiled tendon offsets at one arc length (robots build their tables with numpy,
+    # the same operations; the kernel stays public and is the tests' reference)
+    from riskplan.robots.rod_tables import tendon_offsets
+
+    coeffs = np.ones((robot.n_tendons, 2))
+    rt, drt = np.empty((robot.n_tendons, 3)), np.empty((robot.n_tendons, 3))
+    tendon_offsets(coeffs, coeffs, 0.5, rt, drt)
 
 
 def _collision() -> None:
@@ -128,6 +135,13 @@ def _geometry2d() -> None:
     nodes = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
     tris = np.array([[0, 1, 2], [1, 3, 2]])
     grid = geo.TriangleLocator(nodes, tris)
+    grid.locate(pts[0])
+    grid.locate_points(pts)
+    # and on read-only maps, as a tissue mesh's locator gets them (its cached maps are frozen):
+    # numba compiles a signature of its own for read-only arrays
+    maps = geo.barycentric_maps(nodes, tris)
+    maps.flags.writeable = False
+    grid = geo.TriangleLocator(nodes, tris, maps=maps)
     grid.locate(pts[0])
     grid.locate_points(pts)
 

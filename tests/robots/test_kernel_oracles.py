@@ -164,7 +164,8 @@ def test_complementarity_system_equals_its_python_source(robot, fb, monkeypatch)
     d = np.full(m, 0.002)
 
     def run():
-        Jm, phi, slack = np.empty((m, m)), np.empty((m, 1)), np.zeros(m, dtype=np.int64)
+        # slack flags as the solve passes them (float), so the test hits the warmed signature
+        Jm, phi, slack = np.empty((m, m)), np.empty((m, 1)), np.zeros(m)
         res, merit = displacement.complementarity_system(
             d, robot._kinv, robot._l0, tau, lengths, dl, Jm, phi, fb, slack
         )
@@ -187,3 +188,30 @@ def test_offset_table_equals_the_offset_kernel(robot):
         rod_tables.tendon_offsets(robot._theta, robot._radius, j * 0.5 * h, rt, drt)
         same(t.offsets[j], rt)
         same(t.offset_slopes[j], drt)
+
+
+def test_rest_lengths_in_numpy_equal_the_length_kernel(robot):
+    # the robot's rest lengths and their Jacobian come from numpy (building a robot compiles
+    # nothing); they are the compiled length pass at zero tension, to the bit
+    m = robot.n_tendons
+    st, lengths, dl = _lengths(robot, np.zeros(m))
+    assert st == 0
+    l_np, dl_np = tendon_lengths.rest_lengths_and_jacobian(*robot.tables)
+    np.testing.assert_array_equal(l_np, lengths)
+    np.testing.assert_array_equal(dl_np, dl)
+    np.testing.assert_array_equal(robot._l0, lengths)
+
+
+def test_building_a_robot_compiles_nothing():
+    # a fresh process that only builds robots calls no kernel (numba then has no signature of
+    # any kernel, compiled or loaded from the cache)
+    import subprocess
+    import sys
+
+    code = (
+        "from riskplan.robots import load_robot; from riskplan.kernels import kernel_dispatchers; "
+        "load_robot('paper').with_gravity(True); "
+        "print(sorted(k for k, d in kernel_dispatchers().items() if d.signatures))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

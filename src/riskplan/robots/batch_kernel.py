@@ -325,20 +325,19 @@ def _solve_chunk(taus, b0, rod, tol, maxit, P, Rout, status):
             T[i, c] = taus[b0 + (c if c < nb else 0), i]
     h = length / n_steps
     for c in range(CHUNK):
-        W[STRAIN + 2, c] = 1.0
+        W[STRAIN_NEXT + 2, c] = 1.0  # the base station's start: the straight rod
         W[ROTATION + 0, c] = 1.0
         W[ROTATION + 4, c] = 1.0
         W[ROTATION + 8, c] = 1.0
-    _chord(W, T, rt_all, drt_all, 0, kse, kbt, tol, maxit, STRAIN, True)
-    _jac_chol_slope(W, T, rt_all, drt_all, ddrt_all, 0, kse, kbt, STRAIN, SLOPE)
-    _emit(W, P, Rout, b0, nb, 0)
-    for k in range(n_steps):
-        j1 = 2 * k + 2
-        if k == 0:
+    # one loop over the stations, the base included, each solved in the STRAIN_NEXT rows: the
+    # inline chord and slope stages then have one call site each (numba types and lowers an
+    # inline function once per call site, and this kernel is most of a cold cache's compile)
+    for k in range(n_steps + 1):
+        if k == 1:
             for a in range(6):
                 for c in range(CHUNK):
                     W[STRAIN_NEXT + a, c] = W[STRAIN + a, c] + h * W[SLOPE + a, c]
-        else:
+        elif k > 1:
             for a in range(6):
                 for c in range(CHUNK):
                     W[STRAIN_NEXT + a, c] = (
@@ -347,18 +346,19 @@ def _solve_chunk(taus, b0, rod, tol, maxit, P, Rout, status):
                         - 4.0 * W[STRAIN + a, c]
                         + 4.0 * h * W[SLOPE + a, c]
                     )
-        _chord(W, T, rt_all, drt_all, j1, kse, kbt, tol, maxit, STRAIN_NEXT, False)
-        _jac_chol_slope(W, T, rt_all, drt_all, ddrt_all, j1, kse, kbt, STRAIN_NEXT, SLOPE_NEXT)
-        for a in range(6):
-            for c in range(CHUNK):
-                W[STRAIN_MID + a, c] = 0.5 * (
-                    W[STRAIN + a, c] + W[STRAIN_NEXT + a, c]
-                ) + 0.125 * h * (W[SLOPE + a, c] - W[SLOPE_NEXT + a, c])
-        _rk4(W, h)
-        _emit(W, P, Rout, b0, nb, k + 1)
-        for a in range(
-            12
-        ):  # STRAIN_PREV, SLOPE_PREV <- STRAIN, SLOPE and STRAIN, SLOPE <- STRAIN_NEXT, SLOPE_NEXT (rows are consecutive)
+        _chord(W, T, rt_all, drt_all, 2 * k, kse, kbt, tol, maxit, STRAIN_NEXT, k == 0)
+        _jac_chol_slope(W, T, rt_all, drt_all, ddrt_all, 2 * k, kse, kbt, STRAIN_NEXT, SLOPE_NEXT)
+        if k > 0:
+            for a in range(6):
+                for c in range(CHUNK):
+                    W[STRAIN_MID + a, c] = 0.5 * (
+                        W[STRAIN + a, c] + W[STRAIN_NEXT + a, c]
+                    ) + 0.125 * h * (W[SLOPE + a, c] - W[SLOPE_NEXT + a, c])
+            _rk4(W, h)
+        _emit(W, P, Rout, b0, nb, k)
+        # STRAIN_PREV, SLOPE_PREV <- STRAIN, SLOPE and STRAIN, SLOPE <- STRAIN_NEXT, SLOPE_NEXT
+        # (the rows are consecutive)
+        for a in range(12):
             for c in range(CHUNK):
                 W[STRAIN_PREV + a, c] = W[STRAIN + a, c]
                 W[STRAIN + a, c] = W[STRAIN_NEXT + a, c]

@@ -40,7 +40,7 @@ def complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack):
     N compare with lengths in m at 1 mm/N) and ``b_i = g_i``: the min function
     ``r_i = min(a_i, b_i)`` (``fb = False``) or the Fischer-Burmeister function
     ``r_i = a_i + b_i - sqrt(a_i^2 + b_i^2)`` (``fb = True``, whose squared norm is smooth);
-    ``phi = -r``, except that slack rows of the min function (``slack[i] = 1``) are written in
+    ``phi = -r``, except that slack rows of the min function (``slack[i] = 1.0``) are written in
     tension units, ``step_i = -tau_i``. Returns ``(max |min(a_i, b_i)|, sum r_i^2)``."""
     m = d.shape[0]
     res = 0.0
@@ -48,7 +48,11 @@ def complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack):
     for i in range(m):
         g = l0[i] - lengths[i] + tau[i] * kinv[i] - d[i]
         a = tau[i] * 1e-3
-        res = max(res, abs(min(a, g)))
+        # res = max(res, |min(a, g)|) written out (numba's min/max of a tuple is an overload a
+        # first call compiles on its own; these are the comparisons they make, in their order)
+        v = abs(g if g < a else a)
+        if v > res:
+            res = v
         if fb:
             nrm = math.sqrt(a * a + g * g)
             if nrm > 0.0:
@@ -62,21 +66,21 @@ def complementarity_system(d, kinv, l0, tau, lengths, dl, Jm, phi, fb, slack):
                 Jm[i, j] = -cb * dl[i, j]
             Jm[i, i] += cb * kinv[i] + ca * 1e-3
             phi[i, 0] = -r
-            slack[i] = 0
+            slack[i] = 0.0
         elif tau[i] <= g:  # slack row kept in N (identity) so that a full step gives exactly 0
             for j in range(m):
                 Jm[i, j] = 0.0
             Jm[i, i] = 1.0
             r = a
             phi[i, 0] = -tau[i]
-            slack[i] = 1
+            slack[i] = 1.0
         else:
             for j in range(m):
                 Jm[i, j] = -dl[i, j]
             Jm[i, i] += kinv[i]
             r = g
             phi[i, 0] = -r
-            slack[i] = 0
+            slack[i] = 0.0
         merit += r * r
     return res, merit
 
@@ -88,13 +92,13 @@ def levenberg_marquardt_system(Jm, phi, mu, A, b, m, slack):
     for i in range(m):
         acc = 0.0
         for k in range(m):
-            w = 1e-6 if slack[k] else 1.0
+            w = 1e-6 if slack[k] != 0.0 else 1.0
             acc += w * Jm[k, i] * phi[k, 0]
         b[i, 0] = acc
         for j in range(m):
             acc = 0.0
             for k in range(m):
-                w = 1e-6 if slack[k] else 1.0
+                w = 1e-6 if slack[k] != 0.0 else 1.0
                 acc += w * Jm[k, i] * Jm[k, j]
             A[i, j] = acc
         A[i, i] += mu
@@ -140,7 +144,8 @@ def line_search(d, kinv, l0, tau, step, merit, fb, rod, tols, work):
     alpha = 1.0
     for _ls in range(LINE_SEARCH_MAXIT):
         for i in range(m):
-            trial[i] = max(tau[i] + alpha * step[i, 0], 0.0)
+            t = tau[i] + alpha * step[i, 0]
+            trial[i] = 0.0 if 0.0 > t else t  # max(t, 0.0), as numba's max compares
         st, res_t, merit_t = _system_at(
             d, kinv, l0, trial, rod, tol, maxit, lengths, dl, Jt, pt, fb, slack_t
         )
@@ -194,13 +199,17 @@ def solve_displacement_tensions(
     pt = np.empty((m, 1))
     Jc = np.empty((m, m))
     step = np.empty((m, 1))
-    slack = np.zeros(m, dtype=np.int64)
-    slack_t = np.zeros(m, dtype=np.int64)
+    # slack flags (1.0: the row is slack) as float arrays from np.empty: np.zeros and integer
+    # arrays are numba overloads that a first call compiles apart from the kernel
+    slack = np.empty(m)
+    slack_t = np.empty(m)
     rod = RodTables(rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps)
     tols = (tol, maxit, dtol)
     work = (trial, lengths, dl, Jt, pt, slack_t)
     for i in range(m):
         tau[i] = tau0[i]
+        slack[i] = 0.0
+        slack_t[i] = 0.0
     info[0] = 0
     info[1] = 1e300
     # False, typed as a plain bool: a literal False (and later True) would compile each helper

@@ -142,14 +142,21 @@ def shape_free(
     h = length / n_steps
     F = np.empty(6)
     L = np.empty((6, 6))
-    fac = np.zeros(1, dtype=np.int64)
-    zero = np.zeros(3)
+    # float arrays from np.empty, filled here: np.zeros and integer arrays are numba overloads
+    # that a first call compiles apart from the kernel
+    fac = np.empty(1)  # 1.0 when L holds a Cholesky factor
+    fac[0] = 0.0
+    zero = np.empty(3)
     sp = np.empty(m)
     x0 = np.empty(6)  # the previous station's strains and slope
     d0 = np.empty(6)
     xa = np.empty(6)  # the station before that, for the predictor
     da = np.empty(6)
-    x1 = np.zeros(6)  # this station's strains (at the base: the straight rod) and slope
+    x1 = np.empty(6)  # this station's strains (at the base: the straight rod) and slope
+    for a in range(6):
+        x1[a] = 0.0
+        if a < 3:
+            zero[a] = 0.0
     x1[2] = 1.0
     d1 = np.empty(6)
     xm = np.empty(6)
@@ -176,7 +183,7 @@ def shape_free(
         local_jacobian(x1, tau, rt_all[j], drt_all[j], kse, kbt, L)
         if not chol_factor6(L):
             return LOCAL_FAIL
-        fac[0] = 1
+        fac[0] = 1.0
         strain_slope(x1, tau, rt_all[j], drt_all[j], ddrt_all[j], L, d1)
         if k > 0:
             for a in range(6):

@@ -19,8 +19,8 @@ from riskplan.robots import cosserat
 from riskplan.robots import loaded as _loaded
 from riskplan.robots import motion as _motion
 from riskplan.robots.params import BaseMotion, RobotParams, params_to_toml
-from riskplan.robots.rod_tables import LOCAL_MAXIT, LOCAL_TOL
 from riskplan.robots.shape import RodShape
+from riskplan.robots.tendon_lengths import rest_lengths_and_jacobian
 
 __all__ = ["TendonRobot"]
 
@@ -73,14 +73,11 @@ class TendonRobot:
         self._kinv = np.array(
             [0.0 if math.isinf(t.stiffness) else 1.0 / t.stiffness for t in params.tendons]
         )
-        m = self.n_tendons
-        self._l0 = np.empty(m)
-        dl = np.empty((m, m))
-        st = cosserat.lengths_and_jacobian(
-            np.zeros(m), *self.tables, LOCAL_TOL, LOCAL_MAXIT, self._l0, dl
-        )
-        if st != cosserat.OK:  # pragma: no cover - the straight rod always solves
-            raise ConvergenceError("rest-length computation failed")
+        # rest lengths and their tension Jacobian: the length kernel's pass at tau = 0, in numpy
+        # (the same numbers to the bit), so that building a robot compiles nothing
+        self._l0, dl = rest_lengths_and_jacobian(*self.tables)
+        if not (np.isfinite(self._l0).all() and np.isfinite(dl).all()):
+            raise ConvergenceError("rest-length computation failed: non-finite tendon lengths")
         self._G0 = -dl  # d(shortening)/d tau at tau = 0, used for start values
         # Start of the displacement solve: the linearisation at tau = 0, (G0 + diag(1/k)) tau = d.
         # A pseudo-inverse, since with inextensible antagonistic tendons this matrix is singular

@@ -123,9 +123,16 @@ def local_residual(x, tau, rt, drt, nb, mb, kse, kbt, F):
         F[3] += sc * (r1 * w2 - r2 * w1)
         F[4] += sc * (r2 * w0 - r0 * w2)
         F[5] += sc * (r0 * w1 - r1 * w0)
+    # max(e, |F_a / K_aa|, ...) written out: numba's ``max`` of a tuple is an overload that a
+    # first call compiles on its own; ``if v > e`` is the comparison it makes, in its order
     e = 0.0
     for a in range(3):
-        e = max(e, abs(F[a] / kse[a]), abs(F[3 + a] / kbt[a]))
+        v = abs(F[a] / kse[a])
+        if v > e:
+            e = v
+        v = abs(F[3 + a] / kbt[a])
+        if v > e:
+            e = v
     return e
 
 
@@ -200,7 +207,7 @@ def local_strains(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, J, rhs):
 @njit(cache=True, inline="always")
 def local_strains_chord(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, L, fac):
     """Like :func:`local_strains`, but reuses the Cholesky factor ``L`` of an earlier Jacobian
-    (``fac[0] = 1`` when ``L`` holds one) while the residual falls by at least 4x per step,
+    (``fac[0] = 1.0`` when ``L`` holds one) while the residual falls by at least 4x per step,
     and refactors otherwise (a chord/Newton hybrid; the Jacobian changes little between
     neighbouring stations). Returns the number of steps, or -1.
     """
@@ -211,12 +218,12 @@ def local_strains_chord(x, tau, rt, drt, nb, mb, kse, kbt, tol, maxit, F, L, fac
             return it
         if not e == e:
             return -1
-        if fac[0] == 0 or e > 0.25 * e_prev:
+        if fac[0] == 0.0 or e > 0.25 * e_prev:
             local_jacobian(x, tau, rt, drt, kse, kbt, L)
             if not chol_factor6(L):
-                fac[0] = 0
+                fac[0] = 0.0
                 return -1
-            fac[0] = 1
+            fac[0] = 1.0
         e_prev = e
         _newton_update(x, F, L)
     return -1

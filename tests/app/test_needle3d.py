@@ -161,13 +161,3 @@ def test_report_section_shows_intervals_and_speed(tmp_path):
     _needle3d_section(rep, r)
     text = " ".join(str(b) for sec in rep.sections for b in sec.blocks)
     assert "0.9000 (exact goal test)" in text
-
-
-def test_checked_plans_are_distinct(straight):
-    """A candidate that repeats an earlier one's controls is not checked again."""
-    from riskplan.app.reproduce.needle3d import PlanRow, _distinct
-
-    _, plan = straight
-    plans = [plan, plan]
-    rows = [PlanRow(0, plan.n_steps, {}, {}), PlanRow(1, plan.n_steps, {}, {})]
-    assert [r.index for r in _distinct(rows, plans)] == [0]

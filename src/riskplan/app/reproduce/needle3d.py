@@ -116,12 +116,6 @@ class PlanRow:
         return dict(self.__dict__)
 
 
-def _actuation_cov(sim):
-    from riskplan.app.reproduce.needle3d_checks import actuation_cov
-
-    return actuation_cov(sim)
-
-
 def evaluate_candidates(
     sim,
     plans,
@@ -143,14 +137,14 @@ def evaluate_candidates(
     linearisation and the controller's gains, ``"linear"`` the linear model's truncation,
     ``"truncation_repeats"`` two more runs of the prediction (a list), ``"particles"`` the
     particles given the second-order model."""
-    from riskplan.app.reproduce.needle3d_checks import drawn_estimate, repeat_cpu
+    from riskplan.app.reproduce.needle3d_checks import actuation_cov, drawn_estimate, repeat_cpu
     from riskplan.control.lqgmp3d import lqgmp_3d
     from riskplan.control.lqgmp3d_moments import second_order_model
     from riskplan.control.lqgmp3d_particles import lqgmp_particles
     from riskplan.parallel import spawn_seeds
     from riskplan.tissue_planning.select import _FAILURES, evaluate_plan
 
-    W = _actuation_cov(sim)
+    W = actuation_cov(sim)
     ctrls, rows = [], []
     kw = dict(n_goal_samples=n_goal_samples)
     kw_se = dict(kw, goal_se=goal_se, max_goal_samples=MAX_GOAL_SAMPLES)
@@ -255,17 +249,6 @@ def measure_plan(sim, plan, controller, row: PlanRow, *, n: int, seed=0) -> Plan
     return row
 
 
-def _distinct(rows, plans) -> list:
-    """``rows`` without those whose plan repeats the controls of an earlier one."""
-    seen, out = set(), []
-    for r in rows:
-        key = plans[r.index].controls.tobytes()
-        if key not in seen:
-            seen.add(key)
-            out.append(r)
-    return out
-
-
 def _measure_task(args) -> PlanRow:
     from riskplan.app.reproduce.needle3d_checks import measure_structured
 
@@ -347,9 +330,8 @@ def plan_needle3d(
     if check_runs:
         from riskplan.parallel import map_tasks
 
-        # distinct plans only: the RRT's trees return the same goal-connected path more than
-        # once (11 distinct of 30 at the paper's sizes), and a copy checks nothing new
-        usable = _distinct([r for r in ranked if ctrls[r.index] is not None], plans)
+        # the candidates are distinct plans (rrt_plans keeps a path repeated by several trees once)
+        usable = [r for r in ranked if ctrls[r.index] is not None]
         chosen = [
             usable[k] for k in evenly_spaced_ranks(len(usable), min(check_plans, len(usable)))
         ]

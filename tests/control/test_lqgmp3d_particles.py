@@ -16,8 +16,9 @@ import pytest
 from riskplan.collision import binomial_interval
 from riskplan.control import NominalPlan, linearize
 from riskplan.control.lqg import execute, lqg_controller
+from riskplan.control.lqgmp3d import binomial_se
 from riskplan.control.lqgmp3d_moments import second_order_model
-from riskplan.control.lqgmp3d_particles import _run, lqgmp_particles
+from riskplan.control.lqgmp3d_particles import _run, draw_until, lqgmp_particles
 from riskplan.errors import InvalidInputError
 from riskplan.parallel import spawn_seeds
 from riskplan.scenarios.registry import scenario_from_config
@@ -84,9 +85,8 @@ def test_linear_step_gives_the_linear_gaussian_moments(close_pass, tol):
     sim, plan, ctrl, mo, W = close_pass
     np.testing.assert_array_equal(ctrl.model()[4][0], sim.sensing_cov)  # the same N
     n, p = 40_000, 12
-    _, _, _, mean, cov, _ = _run(
-        sim, plan, ctrl, mo, W, n, "linear", False, np.random.default_rng(5)
-    )
+    res = lqgmp_particles(sim, plan, ctrl, mo, W, n_particles=n, step="linear", clip=False, seed=5)
+    mean, cov = res.mean, res.cov
     mu, S = np.zeros(2 * p), np.array(mo.P0)
     for t in range(plan.n_steps):
         c = np.zeros(2 * p)
@@ -123,6 +123,48 @@ def test_exact_step_predicts_the_executions(close_pass, executions):
     assert abs(_skew(plin)[axis] - ex_skew[axis]) > Z * se
 
 
+def test_draws_stop_at_the_first_batch_that_meets_the_standard_error():
+    """Bernoulli draws with a known ``p``: the loop stops at the first batch whose binomial
+    standard error is at most the target (checked by replaying the batches), never earlier;
+    the cap holds; the estimate lies within z = 4 of ``p``; ``None`` draws one batch."""
+    for p_true, target in ((0.5, 0.01), (0.95, 0.004), (0.999, 0.004), (0.3, 0.002)):
+        gen = np.random.default_rng(7)
+        hits = []
+
+        def run_batch(m, gen=gen, hits=hits, p_true=p_true):
+            k = int(np.count_nonzero(gen.random(m) < p_true))
+            hits.append((k, m))
+            return k, m
+
+        k, n, extras = draw_until(run_batch, 300, target, 10**6)
+        assert extras == [m for _, m in hits] and n == sum(extras) and n % 300 == 0
+        cum = np.cumsum(hits, axis=0)
+        ses = [binomial_se(int(kk), int(nn)) for kk, nn in cum]
+        assert ses[-1] <= target and all(se > target for se in ses[:-1])
+        assert abs(k / n - p_true) <= Z * math.sqrt(p_true * (1 - p_true) / n)
+    k, n, extras = draw_until(lambda m: (m // 2, m), 300, 1e-9, 1000)  # the cap, last batch cut
+    assert (k, n, extras) == (500, 1000, [300, 300, 300, 100])
+    assert draw_until(lambda m: (m, m), 300, None, 1234)[1:] == (1234, [1234])
+
+
+def test_particles_to_a_standard_error(close_pass):
+    """``p_se``: whole batches until the binomial standard error of ``P(success)`` meets
+    it; the reported standard error is that one; without the moments they are NaN."""
+    sim, plan, ctrl, mo, W = close_pass
+    res = lqgmp_particles(
+        sim, plan, ctrl, mo, W, n_particles=8000, seed=4, p_se=0.006, batch=500, keep_moments=False
+    )
+    n = res.n_goal_samples
+    assert n % 500 == 0 and n <= 8000
+    k = round(res.p_success * n)
+    assert res.p_success_se == binomial_se(k, n) <= 0.006
+    one = lqgmp_particles(sim, plan, ctrl, mo, W, seed=4, p_se=0.5, batch=500)
+    assert one.n_goal_samples == 500  # met by the first batch
+    assert np.isnan(res.mean[1:]).all() and np.isnan(res.cov[1:]).all()
+    np.testing.assert_array_equal(res.cov[0], mo.P0)
+    assert 0.0 <= res.p_success <= res.p_collision_free <= 1.0
+
+
 def test_bad_input(close_pass):
     sim, plan, ctrl, mo, W = close_pass
     with pytest.raises(InvalidInputError, match="step"):
@@ -133,6 +175,10 @@ def test_bad_input(close_pass):
         lqgmp_particles(sim, plan, ctrl, mo, -W)
     with pytest.raises(InvalidInputError, match="n_particles"):
         lqgmp_particles(sim, plan, ctrl, mo, W, n_particles=0)
+    with pytest.raises(InvalidInputError, match="p_se"):
+        lqgmp_particles(sim, plan, ctrl, mo, W, p_se=0.0)
+    with pytest.raises(InvalidInputError, match="batch"):
+        lqgmp_particles(sim, plan, ctrl, mo, W, p_se=0.01, batch=0)
     with pytest.raises(InvalidInputError, match="world frame"):
         lqgmp_particles(sim.with_frame("material"), plan, ctrl, mo, W)
     with pytest.raises(InvalidInputError, match="material, controls"):

@@ -10,7 +10,9 @@ from riskplan.app.reproduce.needle3d import (
     ESTIMATORS,
     GOAL_SE,
     MAX_GOAL_SAMPLES,
-    N_PARTICLES,
+    MAX_PARTICLES,
+    PARTICLES_BATCH,
+    PARTICLES_SE,
     evaluate_candidates,
     measure_plan,
     needle3d_figure,
@@ -40,8 +42,9 @@ def test_estimators_and_executions_on_common_draws(straight):
         n_m, se = row.estimate_n[m], row.estimate_se[m]
         if m == "sampling":
             assert n_m == 500
-        elif m == "particles":
-            assert n_m == N_PARTICLES and 0.0 < se < 1.0
+        elif m == "particles":  # whole batches to the target standard error
+            assert n_m % PARTICLES_BATCH == 0 and 0.0 < se < 1.0
+            assert se <= PARTICLES_SE or n_m == MAX_PARTICLES
         else:
             assert n_m == 0 and 0.0 <= se <= GOAL_SE
     d = row.draws
@@ -60,6 +63,50 @@ def test_estimators_and_executions_on_common_draws(straight):
         lo, hi = getattr(row, f"{mode}_ci")
         assert lo <= getattr(row, mode) / 4 <= hi
         assert getattr(row, f"target_error_{mode}") >= 0.0
+
+
+def test_accuracy_checks_and_speed_ratios():
+    """Within ±2 points of all executions, inside the Wilson interval of the first ones
+    (here [0.8763, 0.9552] for 92 of 100), the counterfactual on each side; speed ratios."""
+    from riskplan.app.reproduce.needle3d_checks import (
+        CHECK_POINTS,
+        accuracy_checks,
+        speed_ratios,
+    )
+
+    assert CHECK_POINTS == 0.02
+    est = {"a": 0.915, "b": 0.8949, "c": 0.8951, "d": 0.96, "e": float("nan")}
+    got = accuracy_checks(est, 9150, 10_000, 92, 100)
+    assert [got[m]["within_points"] for m in "abcde"] == [True, False, True, False, False]
+    assert [got[m]["inside_first"] for m in "abcde"] == [True, True, True, False, False]
+    assert got["a"]["error"] == 0.915 - 0.915 and got["b"]["error"] == 0.8949 - 0.915
+    sp = speed_ratios({"truncation": 0.5, "truncation_repeats": [0.4, 0.5], "x": 0.0}, 100.0, 10.0)
+    assert sp == {"truncation": {"all": 200.0, "first": 20.0}}
+
+
+def test_split_executions_equal_one_process(straight, monkeypatch):
+    """The executions split into tasks (3 draws each, a task across the open-loop edge)
+    give what one process gives on the same draws: counts, intervals, targeting errors."""
+    import riskplan.app.reproduce.needle3d_checks as checks
+    from riskplan.app.reproduce.needle3d import PlanRow
+
+    sim, plan = straight
+    ctrls, rows = evaluate_candidates(sim, [plan], seed=0, n_goal_samples=200)
+    one = measure_plan(sim, plan, ctrls[0], PlanRow(0, 16, {}, {}), n=7, seed=3, n_open=4)
+    assert (one.n, one.n_open) == (7, 4)
+    assert sum(one.outcomes_closed.values()) == 7 and sum(one.outcomes_open.values()) == 4
+    assert one.closed_first <= one.closed and one.closed_first_cpu_s <= one.closed_cpu_s
+    monkeypatch.setattr(checks, "DRAWS_PER_TASK", 3)
+    (split,) = checks.measure_checked(
+        sim, [plan], ctrls, [rows[0]], n=7, n_open=4, seed=3, structured=False, workers=1
+    )
+    for name in ("n", "n_open", "closed", "closed_ci", "closed_first", "closed_first_ci"):
+        assert getattr(split, name) == getattr(one, name), name
+    for name in ("open", "open_ci", "outcomes_closed", "outcomes_open"):
+        assert getattr(split, name) == getattr(one, name), name
+    for name in ("target_error_closed", "target_error_open", "end_error_open"):
+        assert getattr(split, name) == getattr(one, name), name
+    assert set(split.checks) == set(ESTIMATORS) and "truncation" in split.speed
 
 
 def test_structured_check_executes_on_the_same_draws(straight):
@@ -141,6 +188,7 @@ def test_report_section_shows_intervals_and_speed(tmp_path):
 
     est = dict.fromkeys(ESTIMATORS, 0.9)
     checked = PlanRow(0, 20, est, {}, n=100, closed=93, closed_ci=(0.86, 0.97))
+    checked.n_open, checked.closed_first, checked.closed_first_ci = 50, 45, (0.79, 0.96)
     checked.estimate_cpu_s = {"truncation": 0.05, "truncation+linearise": 0.2}
     checked.closed_cpu_s = 10.0
     checked.estimate_se, checked.estimate_n = {"truncation": 3e-4}, {"truncation": 12000}
@@ -154,6 +202,7 @@ def test_report_section_shows_intervals_and_speed(tmp_path):
     _needle3d_section(rep, r)
     text = " ".join(str(b) for sec in rep.sections for b in sec.blocks)
     assert "93/100 [0.860, 0.970]" in text and "200× (50×)" in text and "world frame" in text
+    assert "45/50 [0.790, 0.960]" in text and "within ±2 points" in text
     assert "0.9000 ± 0.0003 (12,000 draws)" in text
     checked.estimate_se, checked.estimate_n = {"truncation": 1e-10}, {"truncation": 0}
     r["rows"] = [checked.as_dict()]

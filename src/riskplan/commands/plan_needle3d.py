@@ -27,7 +27,14 @@ def register(plan_app: typer.Typer) -> None:
         workers: int = workers_option("worker processes (0: one per core)"),
         seed: int = typer.Option(0, "--seed", min=0, help="master seed"),
         check_runs: int = typer.Option(
-            0, "--check-runs", min=0, help="closed- and open-loop executions per checked plan"
+            0, "--check-runs", min=0, help="closed-loop executions per checked plan"
+        ),
+        open_runs: int | None = typer.Option(
+            None,
+            "--open-runs",
+            min=1,
+            help="open-loop executions on the first of the same draws, and the Wilson check "
+            "on them (default: all --check-runs)",
         ),
         check_plans: int = typer.Option(
             6,
@@ -69,6 +76,7 @@ def register(plan_app: typer.Typer) -> None:
                 n_plans=plans,
                 seed=seed,
                 check_runs=check_runs,
+                open_runs=open_runs,
                 check_plans=check_plans,
                 max_iterations=max_iterations,
                 workers=workers or None,
@@ -94,6 +102,8 @@ def register(plan_app: typer.Typer) -> None:
             "particles",
             "closed",
             "95% CI",
+            "trunc ±2pt",
+            "first",
             "open",
         ):
             table.add_column(h, justify="right")
@@ -101,7 +111,10 @@ def register(plan_app: typer.Typer) -> None:
             e = r.estimates
             closed = f"{r.closed}/{r.n}" if r.n else "-"
             ci = f"[{r.closed_ci[0]:.3f}, {r.closed_ci[1]:.3f}]" if r.n else "-"
-            opened = f"{r.open}/{r.n}" if r.n else "-"
+            near = r.checks.get("truncation", {}).get("within_points")
+            within = "-" if near is None else ("yes" if near else "no")
+            first = f"{r.closed_first}/{r.n_open}" if r.n else "-"
+            opened = f"{r.open}/{r.n_open}" if r.n else "-"
             table.add_row(
                 str(r.index),
                 str(r.n_steps),
@@ -109,6 +122,8 @@ def register(plan_app: typer.Typer) -> None:
                 "-" if math.isnan(e.get("particles", math.nan)) else f"{e['particles']:.3f}",
                 closed,
                 ci,
+                within,
+                first,
                 opened,
             )
         Console().print(table)

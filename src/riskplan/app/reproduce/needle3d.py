@@ -21,7 +21,9 @@ __all__ = [
     "ESTIMATORS",
     "GOAL_SE",
     "MAX_GOAL_SAMPLES",
-    "N_PARTICLES",
+    "MAX_PARTICLES",
+    "PARTICLES_BATCH",
+    "PARTICLES_SE",
     "Needle3DResult",
     "PlanRow",
     "evaluate_candidates",
@@ -55,10 +57,23 @@ ESTIMATORS = ("truncation", "per-step", "sigma", "sampling", "linear", "particle
 #: interval's edge by more than a tenth of the interval
 GOAL_SE = 3e-4
 
-#: particles of the ``"particles"`` estimate, set before any run: its standard error
-#: ``sqrt(p(1 − p)/n)`` is then at most a tenth of the 95 % Wilson half-width of 1000
-#: executions, ``≈ 1.96 sqrt(p(1 − p)/1000)``, at any ``p`` (``n ≥ 1000/0.196² ≈ 26,000``)
-N_PARTICLES = 30_000
+#: target standard error of the ``"particles"`` estimate, set before any run from the check
+#: it serves — within ±2 points (:data:`~riskplan.app.reproduce.needle3d_checks.CHECK_POINTS`)
+#: of 10,000 closed-loop executions at ≥ 100× their speed: a fifth of the tolerance, so its
+#: own Monte Carlo error moves it across the tolerance's edge by at most a fifth of it (the
+#: 10,000 executions' own standard error is at most 0.005). Particles are drawn in batches
+#: of :data:`PARTICLES_BATCH` until ``sqrt(p̃(1 − p̃)/n)`` meets it (plans near p = 1 stop
+#: after 2000). Against the 95 % Wilson interval of 1000 executions (half-width 0.006 at
+#: p = 0.99, 0.018 at p = 0.9) it is a coarser precision than the earlier fixed 30,000
+#: particles (a tenth of that half-width)
+PARTICLES_SE = 0.004
+
+#: particles per batch of the ``"particles"`` estimate
+PARTICLES_BATCH = 2000
+
+#: cap on those particles: 16,000 meet :data:`PARTICLES_SE` at any p
+#: (``sqrt(0.25/16,000) = 0.00395``), so the cap only bounds the work
+MAX_PARTICLES = 16_000
 
 #: cap on those draws: 10⁶ meet :data:`GOAL_SE` for p ≥ 0.9; below, the Wilson half-width at
 #: 1000 executions is ≥ 0.019 and 10⁶ draws (standard error ≤ 5e-4) stay under a tenth of it
@@ -87,7 +102,15 @@ class PlanRow:
     with the exact goal test, the default, 0 draws and the quadrature's error bound);
     ``draws``: the truncation estimates with the goal test drawn to :data:`GOAL_SE` instead,
     their draws, standard error and CPU seconds (the comparison with the exact test);
-    ``structured``: the structured linearisation's check (:func:`~riskplan.app.reproduce.needle3d_checks.measure_structured`)."""
+    ``structured``: the structured linearisation's check (:func:`~riskplan.app.reproduce.needle3d_checks.measure_structured`);
+    ``n_open``: the first draws also executed open loop (the rest closed loop only: ``n``
+    counts all), with ``closed_first``/``closed_first_ci``/``closed_first_cpu_s`` the closed
+    loop on them (:func:`~riskplan.app.reproduce.needle3d_checks.fill_rates`; the targeting
+    errors are on them too); ``checks``: each estimate within
+    :data:`~riskplan.app.reproduce.needle3d_checks.CHECK_POINTS` of ``closed/n`` and inside
+    ``closed_first_ci`` (:func:`~riskplan.app.reproduce.needle3d_checks.accuracy_checks`);
+    ``speed``: the executions' CPU over each prediction's
+    (:func:`~riskplan.app.reproduce.needle3d_checks.speed_ratios`)."""
 
     index: int
     n_steps: int
@@ -111,6 +134,12 @@ class PlanRow:
     estimate_se: dict = field(default_factory=dict)
     draws: dict = field(default_factory=dict)
     structured: dict = field(default_factory=dict)
+    n_open: int = 0
+    closed_first: int = 0
+    closed_first_ci: tuple = (0.0, 0.0)
+    closed_first_cpu_s: float = 0.0
+    checks: dict = field(default_factory=dict)
+    speed: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -130,13 +159,14 @@ def evaluate_candidates(
     is not an ellipsoid, and the comparison in ``PlanRow.draws``: in batches of
     ``n_goal_samples`` draws to a standard error of ``goal_se``, at most
     :data:`MAX_GOAL_SAMPLES`; ``None``: one batch), ``"sampling"`` with ``n_goal_samples``
-    trajectories, ``"particles"`` with :data:`N_PARTICLES`. Returns ``(controllers, rows)``;
+    trajectories, ``"particles"`` to :data:`PARTICLES_SE` (batches of
+    :data:`PARTICLES_BATCH`, at most :data:`MAX_PARTICLES`). Returns ``(controllers, rows)``;
     a candidate whose linearisation fails gets ``None`` and estimates of 0. CPU seconds
     in ``estimate_cpu_s``: ``"truncation"`` the prediction given the controller (the
     second-order model and the truncation on it), ``"truncation+linearise"`` with the
     linearisation and the controller's gains, ``"linear"`` the linear model's truncation,
-    ``"truncation_repeats"`` two more runs of the prediction (a list), ``"particles"`` the
-    particles given the second-order model."""
+    ``"truncation_repeats"`` two more runs of the prediction (a list); ``"per-step"``,
+    ``"sigma"``, ``"sampling"`` and ``"particles"`` the second-order model and the method."""
     from riskplan.app.reproduce.needle3d_checks import actuation_cov, drawn_estimate, repeat_cpu
     from riskplan.control.lqgmp3d import lqgmp_3d
     from riskplan.control.lqgmp3d_moments import second_order_model
@@ -180,16 +210,26 @@ def evaluate_candidates(
         cpu["truncation+linearise"] = c_lin + cpu["truncation"]
         secs = {"truncation": cpu["truncation"]}
         for m in ESTIMATORS[1:4]:
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             mkw = kw if m == "sampling" else kw_se
             got[m] = lqgmp_3d(sim, plan, ctrl, method=m, seed=s, moments=mo, **mkw)
             secs[m] = time.perf_counter() - t0
+            cpu[m] = c_model + time.process_time() - c0
         if mo is not None and getattr(sim, "position_is_measured", False):
             c0 = time.process_time()
             got["particles"] = lqgmp_particles(
-                sim, plan, ctrl, mo, W, n_particles=N_PARTICLES, seed=s
+                sim,
+                plan,
+                ctrl,
+                mo,
+                W,
+                n_particles=MAX_PARTICLES,
+                seed=s,
+                p_se=PARTICLES_SE,
+                batch=PARTICLES_BATCH,
+                keep_moments=False,
             )
-            cpu["particles"] = time.process_time() - c0
+            cpu["particles"] = c_model + time.process_time() - c0
         nan = float("nan")
         ctrls.append(ctrl)
         rows.append(
@@ -207,54 +247,25 @@ def evaluate_candidates(
     return ctrls, rows
 
 
-def measure_plan(sim, plan, controller, row: PlanRow, *, n: int, seed=0) -> PlanRow:
-    """Closed- and open-loop executions of ``plan`` on the same ``n`` draws (parameters and
-    actuation from ``sim.distribution``, the closed loop's sensing noise from the same seed):
-    success counts, Wilson intervals, outcomes, and the targeting error (final distance of the
-    world tip to the deformed target centre)."""
-    from riskplan.collision import binomial_interval
-    from riskplan.control.lqg import execute
+def measure_plan(
+    sim, plan, controller, row: PlanRow, *, n: int, seed=0, n_open: int | None = None
+) -> PlanRow:
+    """Closed-loop executions of ``plan`` on ``n`` draws (parameters and actuation from
+    ``sim.distribution``, the closed loop's sensing noise from the same seed) and open-loop
+    ones on the first ``n_open`` of them (``None``: all ``n``; common draws): success counts,
+    Wilson intervals, outcomes, and the targeting error (final distance of the world tip to
+    the deformed target centre), in one process
+    (:func:`~riskplan.app.reproduce.needle3d_checks.execute_draws`,
+    :func:`~riskplan.app.reproduce.needle3d_checks.fill_rates`)."""
+    from riskplan.app.reproduce.needle3d_checks import execute_draws, fill_rates
     from riskplan.parallel import spawn_seeds
 
     t0 = time.perf_counter()
-    res = {"closed": [], "open": []}
-    closed_cpu = 0.0
-    y_T = plan.states[-1]
-    rel_plan = plan.reduced[-1][:3] - sim.goal(y_T).centre
-    for s in spawn_seeds(seed, n):
-        for mode, ctrl in (("closed", controller), ("open", None)):
-            c0 = time.process_time()
-            gen = np.random.default_rng(s)
-            params = sim.sample_params(gen)
-            ex = execute(sim, plan, ctrl, params, seed=gen, keep_states=False)
-            if mode == "closed":
-                closed_cpu += time.process_time() - c0
-            last = ex.states[-1]
-            rel = last.pose[:3] - sim.goal(last).centre
-            res[mode].append(
-                (ex.outcome, float(np.linalg.norm(rel)), float(np.linalg.norm(rel - rel_plan)))
-            )
-    for mode in ("closed", "open"):
-        outc = [o for o, *_ in res[mode]]
-        k = sum(o == "success" for o in outc)
-        lo, hi = binomial_interval(k, n)
-        setattr(row, mode, k)
-        setattr(row, f"{mode}_ci", (float(lo), float(hi)))
-        setattr(row, f"outcomes_{mode}", {o: outc.count(o) for o in sorted(set(outc))})
-        setattr(row, f"target_error_{mode}", float(np.mean([d for _, d, _ in res[mode]])))
-        setattr(row, f"end_error_{mode}", float(np.mean([e for *_, e in res[mode]])))
-    row.n = n
+    n_open = n if n_open is None else min(int(n_open), n)
+    part = execute_draws((sim, plan, controller, spawn_seeds(seed, n), n_open))
+    fill_rates(row, [part], n_open)
     row.mc_s = time.perf_counter() - t0
-    row.closed_cpu_s = closed_cpu
     return row
-
-
-def _measure_task(args) -> PlanRow:
-    from riskplan.app.reproduce.needle3d_checks import measure_structured
-
-    sim, plan, controller, row, n, seed, structured = args
-    row = measure_plan(sim, plan, controller, row, n=n, seed=seed)
-    return measure_structured(sim, plan, row, n=n, seed=seed) if structured else row
 
 
 @dataclass
@@ -276,6 +287,7 @@ def plan_needle3d(
     n_plans: int = 10,
     seed: int = 0,
     check_runs: int = 0,
+    open_runs: int | None = None,
     structured: bool = False,
     check_plans: int = 6,
     max_iterations: int = 600,
@@ -284,10 +296,14 @@ def plan_needle3d(
     frame: str = "world",
 ) -> Needle3DResult:
     """Simulator RRT candidates for the 3-D needle, LQG-MP (truncation) selection and, with
-    ``check_runs > 0``, closed/open-loop executions of the selected plan and of
-    ``check_plans − 1`` more spread over the ranking (``structured``: each also with the
-    structured linearisation's controller,
-    :func:`~riskplan.app.reproduce.needle3d_checks.measure_structured`). ``frame``: the reduced state the
+    ``check_runs > 0``, ``check_runs`` closed-loop executions of the selected plan and of
+    ``check_plans − 1`` more spread over the ranking, open-loop ones on the first
+    ``open_runs`` of the same draws (``None``: all; ``structured``: the structured
+    linearisation's controller on those too,
+    :func:`~riskplan.app.reproduce.needle3d_checks.measure_structured`), split into tasks
+    of :data:`~riskplan.app.reproduce.needle3d_checks.DRAWS_PER_TASK` draws over the
+    workers; each checked row gets its accuracy checks and speed ratios (:class:`PlanRow`
+    ``checks``, ``speed``). ``frame``: the reduced state the
     linearisation, the controllers and LQG-MP read (:data:`riskplan.scenarios.needle3d.FRAMES`;
     the RRT plans in the world frame, its plans are reframed); ``result.plans`` stay in
     the world frame."""
@@ -327,22 +343,24 @@ def plan_needle3d(
     ranked = sorted(rows, key=lambda r: (-r.estimates["truncation"], r.index))
     best = ranked[0].index
     t0 = time.perf_counter()
+    open_runs = check_runs if open_runs is None else min(int(open_runs), check_runs)
     if check_runs:
-        from riskplan.parallel import map_tasks
-
         # the candidates are distinct plans (rrt_plans keeps a path repeated by several trees once)
         usable = [r for r in ranked if ctrls[r.index] is not None]
         chosen = [
             usable[k] for k in evenly_spaced_ranks(len(usable), min(check_plans, len(usable)))
         ]
-        # one task per checked plan (the same draws for each: seed + 1)
-        done = map_tasks(
-            _measure_task,
-            [
-                (sim, plans[r.index], ctrls[r.index], r, check_runs, seed + 1, structured)
-                for r in chosen
-            ],
-            backend="local" if (workers or 0) != 1 else "serial",
+        from riskplan.app.reproduce.needle3d_checks import measure_checked
+
+        done = measure_checked(
+            sim,
+            plans,
+            ctrls,
+            chosen,
+            n=check_runs,
+            n_open=open_runs,
+            seed=seed + 1,  # the same draws for each plan
+            structured=structured,
             workers=workers,
         )
         by_index = {r.index: r for r in done}
@@ -359,6 +377,7 @@ def plan_needle3d(
             n_plans=n_plans,
             seed=seed,
             check_runs=check_runs,
+            open_runs=open_runs,
             n_elements=sim.nominal_params.n_elements,
             frame=frame,
         ),
@@ -496,7 +515,17 @@ def write_outputs(result: Needle3DResult, out, *, n_executed: int = 10, seed: in
 #: sizes of the ``reproduce`` stage ``needle3d`` by scale name
 NEEDLE3D_SCALES = {
     "smoke": dict(n_plans=2, check_runs=0, check_plans=1, max_iterations=400),
-    "paper": dict(n_plans=30, check_runs=1000, check_plans=6, max_iterations=600, structured=True),
+    # 10,000 closed-loop executions per checked plan (the check within ±2 points), open loop and
+    # the structured check on the first 1000 of them (the Wilson check at 1000, the targeting
+    # error): about 25 core-minutes in all
+    "paper": dict(
+        n_plans=30,
+        check_runs=10_000,
+        open_runs=1000,
+        check_plans=6,
+        max_iterations=600,
+        structured=True,
+    ),
 }
 
 

@@ -1,6 +1,10 @@
 """Checks of the 3-D needle stage (:mod:`riskplan.app.reproduce.needle3d`) beside its
 estimates: the prediction with the goal test drawn instead of exact, warm repeats of the
-prediction's timing, and the structured linearisation's controller against executions."""
+prediction's timing, the structured linearisation's controller against executions, and the
+executions themselves — split into tasks of consecutive draws so that 2 worker processes
+balance — with the accuracy checks the estimates are judged by (within
+:data:`CHECK_POINTS` of the closed-loop rate of all executions; inside the 95 % Wilson
+interval of the first ``n_open``) and their speed ratios."""
 
 from __future__ import annotations
 
@@ -8,7 +12,25 @@ import time
 
 import numpy as np
 
-__all__ = ["actuation_cov", "drawn_estimate", "measure_structured", "repeat_cpu"]
+from riskplan.errors import InvalidInputError
+
+__all__ = [
+    "CHECK_POINTS",
+    "DRAWS_PER_TASK",
+    "accuracy_checks",
+    "actuation_cov",
+    "drawn_estimate",
+    "execute_draws",
+    "fill_rates",
+    "measure_checked",
+    "measure_structured",
+    "repeat_cpu",
+    "speed_ratios",
+]
+
+#: the tolerance of the check against many executions (issue #22, item 5: predicted
+#: P(success) "within ±2 points of ≥ 10,000" closed-loop executions)
+CHECK_POINTS = 0.02
 
 
 def actuation_cov(sim):
@@ -98,3 +120,162 @@ def measure_structured(sim, plan, row, *, n: int, seed=0):
         closed_cpu_s=time.process_time() - c2,
     )
     return row
+
+
+def execute_draws(args) -> dict:
+    """One task of the executions (:func:`~riskplan.app.reproduce.needle3d.measure_plan`):
+    ``args = (sim, plan, controller, seeds, n_open)``; closed-loop executions on the draws of
+    ``seeds`` (parameters and actuation from ``sim.distribution``, the sensing noise from the
+    same generator) and open-loop ones on the first ``n_open`` of them (common draws). Returns
+    ``{"closed": [...], "open": [...], "closed_cpu_s": [...]}``, per draw ``(outcome, final
+    distance of the world tip to the deformed target centre, distance of it from the plan's
+    end, both relative to that centre)`` and the closed loop's CPU seconds."""
+    from riskplan.control.lqg import execute
+
+    sim, plan, controller, seeds, n_open = args
+    rel_plan = plan.reduced[-1][:3] - sim.goal(plan.states[-1]).centre
+    out = {"closed": [], "open": [], "closed_cpu_s": []}
+    for j, s in enumerate(seeds):
+        for mode, ctrl in (("closed", controller), ("open", None)):
+            if mode == "open" and j >= n_open:
+                continue
+            c0 = time.process_time()
+            gen = np.random.default_rng(s)
+            ex = execute(sim, plan, ctrl, sim.sample_params(gen), seed=gen, keep_states=False)
+            if mode == "closed":
+                out["closed_cpu_s"].append(time.process_time() - c0)
+            last = ex.states[-1]
+            rel = last.pose[:3] - sim.goal(last).centre
+            out[mode].append(
+                (ex.outcome, float(np.linalg.norm(rel)), float(np.linalg.norm(rel - rel_plan)))
+            )
+    return out
+
+
+def fill_rates(row, parts: list, n_open: int):
+    """Put the tasks' executions (:func:`execute_draws`, ``parts`` in draw order) into
+    ``row`` (a :class:`~riskplan.app.reproduce.needle3d.PlanRow`): ``n``, ``closed``,
+    ``closed_ci`` over all draws; ``n_open``, ``open``, ``open_ci`` and ``closed_first``,
+    ``closed_first_ci`` over the first ``n_open`` (common draws); outcomes; the targeting
+    errors on the common draws; ``closed_cpu_s`` (all) and ``closed_first_cpu_s``. Returns
+    ``row``."""
+    from riskplan.collision import binomial_interval
+
+    closed = [r for part in parts for r in part["closed"]]
+    opened = [r for part in parts for r in part["open"]]
+    cpu = [c for part in parts for c in part["closed_cpu_s"]]
+    n = len(closed)
+    n_open = min(int(n_open), n)
+    if len(opened) != n_open:
+        raise InvalidInputError(
+            f"fill_rates: {len(opened)} open-loop executions, expected {n_open}"
+        )
+
+    def rate(runs):
+        k = sum(o == "success" for o, *_ in runs)
+        lo, hi = binomial_interval(k, len(runs))
+        return k, (float(lo), float(hi))
+
+    row.n, row.n_open = n, n_open
+    row.closed, row.closed_ci = rate(closed)
+    row.closed_first, row.closed_first_ci = rate(closed[:n_open])
+    row.open, row.open_ci = rate(opened)
+    for mode, runs in (("closed", closed), ("open", opened)):
+        outc = [o for o, *_ in runs]
+        setattr(row, f"outcomes_{mode}", {o: outc.count(o) for o in sorted(set(outc))})
+    for mode, runs in (("closed", closed[:n_open]), ("open", opened)):
+        setattr(row, f"target_error_{mode}", float(np.mean([d for _, d, _ in runs])))
+        setattr(row, f"end_error_{mode}", float(np.mean([e for *_, e in runs])))
+    row.closed_cpu_s = float(sum(cpu))
+    row.closed_first_cpu_s = float(sum(cpu[:n_open]))
+    return row
+
+
+def accuracy_checks(
+    estimates: dict, k: int, n: int, k_first: int, n_first: int, points: float = CHECK_POINTS
+) -> dict:
+    """Each estimate against the executions: ``{method: {"error": p − k/n, "within_points":
+    |p − k/n| <= points, "inside_first": p in the 95 % Wilson interval of k_first of
+    n_first}}`` (NaN estimates: ``False``)."""
+    from riskplan.collision import binomial_interval
+
+    lo, hi = binomial_interval(k_first, n_first)
+    out = {}
+    for m, p in estimates.items():
+        err = float(p) - k / n
+        out[m] = {
+            "error": err,
+            "within_points": bool(abs(err) <= points),
+            "inside_first": bool(lo <= p <= hi),
+        }
+    return out
+
+
+def speed_ratios(estimate_cpu_s: dict, closed_cpu_s: float, closed_first_cpu_s: float) -> dict:
+    """``{method: {"all": closed_cpu_s / cpu, "first": closed_first_cpu_s / cpu}}``: the
+    executions' CPU seconds (all of them; the first ``n_open``) over each prediction's, for
+    every method with a CPU time (numbers only: the lists of repeats are left out)."""
+    return {
+        m: {"all": closed_cpu_s / c, "first": closed_first_cpu_s / c}
+        for m, c in estimate_cpu_s.items()
+        if isinstance(c, float) and c > 0.0
+    }
+
+
+#: draws per task of the executions: tasks of equal size keep 2 workers balanced
+DRAWS_PER_TASK = 1000
+
+
+def _task(args):
+    """A worker's task: ``("draws", ...)`` executions
+    (:func:`~riskplan.app.reproduce.needle3d_checks.execute_draws`) or ``("structured",
+    ...)`` the structured check of one plan."""
+    kind, rest = args
+    if kind == "draws":
+        return execute_draws(rest)
+    sim, plan, row, n, seed = rest
+    return measure_structured(sim, plan, row, n=n, seed=seed).structured
+
+
+def measure_checked(sim, plans, ctrls, chosen, *, n, n_open, seed, structured, workers):
+    """The executions of the ``chosen`` rows' plans, ``n`` closed-loop draws each (open loop
+    and the structured check on the first ``n_open``), in tasks of :data:`DRAWS_PER_TASK`
+    draws over the workers (the heavier ones first; ``workers`` as
+    :func:`~riskplan.parallel.map_tasks`, 1: in this process); each row filled
+    (:func:`fill_rates`), checked (:func:`accuracy_checks`) and timed (:func:`speed_ratios`,
+    ``mc_s`` the wall seconds of all the executions). Returns the rows."""
+    from riskplan.parallel import map_tasks, spawn_seeds
+
+    seeds = spawn_seeds(seed, n)  # the same draws for every plan
+    heavy, light, where = [], [], []
+    for r in chosen:
+        sim_plan_ctrl = (sim, plans[r.index], ctrls[r.index])
+        if structured:
+            heavy.append(("structured", (sim, plans[r.index], r, n_open, seed)))
+            where.append((r.index, "structured", len(heavy) - 1))
+        for a in range(0, n, DRAWS_PER_TASK):
+            chunk = seeds[a : a + DRAWS_PER_TASK]
+            task = ("draws", (*sim_plan_ctrl, chunk, max(0, min(n_open - a, len(chunk)))))
+            (heavy if a < n_open else light).append(task)
+            where.append((r.index, "draws", len(heavy) - 1 if a < n_open else -len(light)))
+    t0 = time.perf_counter()
+    backend = "local" if (workers or 0) != 1 else "serial"
+    done = map_tasks(_task, heavy + light, backend=backend, workers=workers, chunksize=1)
+    wall = time.perf_counter() - t0
+    out = []
+    for r in chosen:
+        parts = []
+        for idx, kind, j in where:
+            if idx != r.index:
+                continue
+            got = done[j] if j >= 0 else done[len(heavy) + (-j - 1)]
+            if kind == "structured":
+                r.structured = got
+            else:
+                parts.append(got)
+        fill_rates(r, parts, n_open)
+        r.mc_s = wall
+        r.checks = accuracy_checks(r.estimates, r.closed, r.n, r.closed_first, r.n_open)
+        r.speed = speed_ratios(r.estimate_cpu_s, r.closed_cpu_s, r.closed_first_cpu_s)
+        out.append(r)
+    return out

@@ -1,8 +1,9 @@
 """The 3-D needle under uncertainty (issue: beyond the deformable paper's future work):
 simulator RRT candidates, LQG-MP selection in 3-D, and the measurements — LQG-MP
-``P(success)`` (truncation, per-step, sigma, sampling of the linear model) against
-closed-loop executions with a 95 % Wilson interval, and the targeting error of closed vs
-open loop on common draws — plus the interactive plotly figure and the outputs of
+``P(success)`` (truncation, per-step, sigma, sampling, the linear model, particles) against
+closed-loop executions (within ±2 points of all of them, e.g. 10,000, and inside the 95 %
+Wilson interval of the first, e.g. 1000), and the targeting error of closed vs open loop
+on common draws — plus the interactive plotly figure and the outputs of
 ``riskplan plan needle3d``.
 """
 
@@ -85,14 +86,14 @@ class PlanRow:
     """One candidate's estimates and measured rates.
 
     ``estimates``: P(success) by each of :data:`ESTIMATORS`; ``estimate_s``: seconds each
-    took; ``closed``/``open``: successes of ``n`` closed-/open-loop executions on common
-    draws, with Wilson intervals; ``outcomes_closed``/``outcomes_open``: counts per outcome;
+    took; ``closed``: successes of ``n`` closed-loop executions, ``open``: of ``n_open``
+    open-loop ones on the first of the same draws, with Wilson intervals; ``outcomes_closed``/``outcomes_open``: counts per outcome;
     ``target_error_closed``/``target_error_open``: mean final distance of the world tip to
     the deformed target centre (Hauser et al.'s targeting error; the plan's own end lies up
     to 0.7 target radii from the centre); ``end_error_closed``/``end_error_open``: mean
     distance of the final tip from the plan's end, both relative to the deformed target
-    centre (what feedback corrects); ``mc_s``: seconds of the closed- and open-loop
-    executions; ``estimate_cpu_s``: CPU seconds of the linearisation + truncation estimate
+    centre (what feedback corrects; both on the common draws); ``mc_s``: wall seconds of
+    the executions (in the stage: of all checked plans' together); ``estimate_cpu_s``: CPU seconds of the linearisation + truncation estimate
     and of the truncation estimate alone (given the controller; ``"truncation_repeats"``:
     two more runs of it, warm); ``closed_cpu_s``: CPU
     seconds of the ``n`` closed-loop executions (the process's own time, so the speed

@@ -161,6 +161,16 @@ def test_plan_needle3d_rejects_a_bad_case(tmp_path):
     assert "--case" in (res.output + str(res.exception))
 
 
+def test_plan_needle3d_rejects_bad_run_counts():
+    from riskplan.app.reproduce.needle3d import plan_needle3d
+    from riskplan.errors import InvalidInputError
+
+    with pytest.raises(InvalidInputError, match="open_runs"):
+        plan_needle3d(check_runs=10, open_runs=0)
+    with pytest.raises(InvalidInputError, match="check_runs"):
+        plan_needle3d(check_runs=-1)
+
+
 def test_material_frame_outputs_execute_in_their_frame(straight, tmp_path):
     """A material-frame controller is executed on the material-frame scenario, and the
     figure's executed paths are world tip positions (beside the world plan)."""

@@ -308,10 +308,14 @@ def plan_needle3d(
     linearisation, the controllers and LQG-MP read (:data:`riskplan.scenarios.needle3d.FRAMES`;
     the RRT plans in the world frame, its plans are reframed); ``result.plans`` stay in
     the world frame."""
+    from riskplan._validation import check_count
     from riskplan.scenarios.registry import scenario_from_config
     from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
     from riskplan.tissue_planning.select import evenly_spaced_ranks
 
+    check_count(check_runs, "check_runs", 0, integral=True)
+    if open_runs is not None:
+        check_count(open_runs, "open_runs", 1, integral=True)
     sim = scenario_from_config("needle3d", config, case)
     t0 = time.perf_counter()
     plans, _ = rrt_plans(

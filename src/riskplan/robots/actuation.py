@@ -68,9 +68,10 @@ def _solve_free_displacements(robot, flat: np.ndarray):
     status = np.empty(B, dtype=np.int64)
     P = np.empty((B, n, 3))
     Rs = np.empty((B, n, 3, 3))
+    xs = np.empty((B, 2 * n - 1, 6))
     if B == 1:
         # one configuration: the scalar kernel, so that a first call compiles no batch loop
-        status[0] = _displacement_tensions(robot, flat[0], tau0[0], tau[0], infos[0], P[0], Rs[0])
+        status[0] = _displacement_tensions(robot, flat[0], tau0[0], tau[0], infos[0], xs[0])
     else:
         cosserat.solve_displacement_batch(
             flat,
@@ -85,8 +86,7 @@ def _solve_free_displacements(robot, flat: np.ndarray):
             tau,
             infos,
             status,
-            P,
-            Rs,
+            xs,
         )
     bad = np.flatnonzero(status != cosserat.OK)
     if bad.size:
@@ -96,10 +96,13 @@ def _solve_free_displacements(robot, flat: np.ndarray):
             residual=float(infos[b, 1]),
             iterations=int(infos[b, 0]),
         )
+    h = robot._L / robot._n
+    for b in range(B):
+        cosserat.pose_from_node_strains(xs[b], h, robot._n, P[b], Rs[b])
     return tau, P, Rs
 
 
-def _displacement_tensions(robot, d, tau0, tau, info, P, Rs) -> int:
+def _displacement_tensions(robot, d, tau0, tau, info, xs) -> int:
     """:func:`cosserat.solve_displacement_tensions` for one configuration (shape into ``P, Rs``),
     tried once more from the slack state when it fails from ``tau0`` (as
     :func:`cosserat.solve_displacement_batch` does per configuration); returns the status."""
@@ -107,7 +110,7 @@ def _displacement_tensions(robot, d, tau0, tau, info, P, Rs) -> int:
     for start in (tau0, np.zeros(robot.n_tendons)):
         st = cosserat.solve_displacement_tensions(
             d, robot._kinv, robot._l0, start, *robot.tables, LOCAL_TOL, LOCAL_MAXIT, DISP_TOL,
-            DISP_MAXIT, tau, info, P, Rs,
+            DISP_MAXIT, tau, info, xs,
         )  # fmt: skip
         if st == cosserat.OK:
             break

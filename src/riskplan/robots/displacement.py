@@ -25,7 +25,6 @@ import math
 import numpy as np
 from numba import njit
 
-from riskplan.robots.integration import pose_from_node_strains
 from riskplan.robots.linalg6 import gauss_solve
 from riskplan.robots.rod_tables import LOCAL_FAIL, OK, OUTER_FAIL, RodTables
 from riskplan.robots.tendon_lengths import lengths_and_jacobian
@@ -175,8 +174,7 @@ def solve_displacement_tensions(
     outer_maxit,
     tau,
     info,
-    p_out,
-    R_out,
+    xs,
 ):
     """Tensions for tendon displacements ``d (m,)`` with compliant tendons and slack (no loads),
     and the shape they hold.
@@ -193,12 +191,13 @@ def solve_displacement_tensions(
     stiff problems such as inextensible antagonistic tendons, where full steps overshoot.
     ``tau0`` is the start. Writes ``tau``; ``info = [iterations, residual]``. Returns status.
 
-    On success also the shape at ``tau``: positions ``p_out (n+1, 3)`` and frames
-    ``R_out (n+1, 3, 3)`` (base frame), integrated
-    (:func:`~riskplan.robots.integration.pose_from_node_strains`) from the
-    strains that the last length pass solved at every RK4 node, which is always at the
-    returned ``tau`` (the start when it already solves the problem, an accepted line-search
-    point, or the re-evaluation at ``tau`` on the switch to Fischer-Burmeister).
+    On success ``xs (2n+1, 6)`` holds the strains solved at every RK4 node at the returned
+    ``tau``: the last length pass is always at it (the start when it already solves the
+    problem, an accepted line-search point, or the re-evaluation at ``tau`` on the switch to
+    Fischer-Burmeister), so :func:`~riskplan.robots.integration.pose_from_node_strains` gives
+    the shape from them without another pass. The pose is a kernel of its own, called after
+    this one: integrated here, its RK4 steps would be optimised again inside this kernel's
+    module (about 1 s more to a first call than the separate kernel, measured).
     """
     m = d.shape[0]
     lengths = np.empty(m)
@@ -210,7 +209,6 @@ def solve_displacement_tensions(
     pt = np.empty((m, 1))
     Jc = np.empty((m, m))
     step = np.empty((m, 1))
-    xs = np.empty((2 * n_steps + 1, 6))  # the node strains of the last length pass
     # slack flags (1.0: the row is slack) as float arrays from np.empty: np.zeros and integer
     # arrays are numba overloads that a first call compiles apart from the kernel
     slack = np.empty(m)
@@ -236,8 +234,6 @@ def solve_displacement_tensions(
         info[0] = it
         info[1] = res
         if res <= dtol:
-            # the last length pass was at tau (see above): its node strains give the shape
-            pose_from_node_strains(xs, length / n_steps, n_steps, p_out, R_out)
             return OK
         # Newton step; if J is singular or the step finds no decrease, a Levenberg-Marquardt
         # step with mu = |r|^2 (Yamashita & Fukushima 2001: still quadratic near solutions that
@@ -296,11 +292,10 @@ def solve_displacement_batch(
     taus,
     infos,
     status,
-    p_out,
-    R_out,
+    xs,
 ):
-    """Batched :func:`solve_displacement_tensions` over ``ds (B, m)``, shapes into
-    ``p_out (B, n+1, 3)``, ``R_out (B, n+1, 3, 3)``; a configuration that fails from its start
+    """Batched :func:`solve_displacement_tensions` over ``ds (B, m)``, node strains into
+    ``xs (B, 2n+1, 6)``; a configuration that fails from its start
     ``tau0s[b]`` is tried once more from the slack state (``infos`` of the last try)."""
     slack_start = np.zeros(ds.shape[1])
     for b in range(ds.shape[0]):
@@ -309,7 +304,7 @@ def solve_displacement_batch(
             start = tau0s[b] if attempt == 0 else slack_start
             st = solve_displacement_tensions(
                 ds[b], kinv, l0, start, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps,
-                tol, maxit, dtol, outer_maxit, taus[b], infos[b], p_out[b], R_out[b],
+                tol, maxit, dtol, outer_maxit, taus[b], infos[b], xs[b],
             )  # fmt: skip
             if st == OK:
                 break

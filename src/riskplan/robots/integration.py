@@ -89,7 +89,7 @@ def rk4_pose_step(p, R, x0, xm, x1, h, pn, Rn):
         pn[a] = p[a] + dp
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def pose_from_node_strains(xs, h, n_steps, p_out, R_out):
     """Positions ``p_out (n+1, 3)`` and frames ``R_out (n+1, 3, 3)`` (base frame, from the
     identity at ``s = 0``) by ``n`` RK4 steps (:func:`rk4_pose_step`) of ``p' = R v``,
@@ -97,7 +97,7 @@ def pose_from_node_strains(xs, h, n_steps, p_out, R_out):
     (the displacement solve's length pass leaves them,
     :func:`~riskplan.robots.tendon_lengths.lengths_and_jacobian`). :func:`shape_free` takes the
     same steps with Hermite-interpolated half-step strains; the two passes differ by O(h^4).
-    One call site of the inline step, so a kernel that inlines this compiles the step once.
+    One call site of the inline step, so that a first call types and lowers it once.
     """
     for a in range(3):
         p_out[0, a] = 0.0

@@ -68,11 +68,13 @@ def _solve_free_displacements(robot, flat: np.ndarray):
     status = np.empty(B, dtype=np.int64)
     P = np.empty((B, n, 3))
     Rs = np.empty((B, n, 3, 3))
-    xs = np.empty((B, 2 * n - 1, 6))
+    xs = None
     if B == 1:
-        # one configuration: the scalar kernel, so that a first call compiles no batch loop
-        status[0] = _displacement_tensions(robot, flat[0], tau0[0], tau[0], infos[0], xs[0])
-    else:
+        # one configuration: the scalar kernel, so that a first call compiles no batch loop;
+        # the pose below
+        xs = np.empty((2 * n - 1, 6))
+        status[0] = _displacement_tensions(robot, flat[0], tau0[0], tau[0], infos[0], xs)
+    else:  # the batch kernel integrates each pose itself (one call, no loop here)
         cosserat.solve_displacement_batch(
             flat,
             robot._kinv,
@@ -86,7 +88,8 @@ def _solve_free_displacements(robot, flat: np.ndarray):
             tau,
             infos,
             status,
-            xs,
+            P,
+            Rs,
         )
     bad = np.flatnonzero(status != cosserat.OK)
     if bad.size:
@@ -96,9 +99,8 @@ def _solve_free_displacements(robot, flat: np.ndarray):
             residual=float(infos[b, 1]),
             iterations=int(infos[b, 0]),
         )
-    h = robot._L / robot._n
-    for b in range(B):
-        cosserat.pose_from_node_strains(xs[b], h, robot._n, P[b], Rs[b])
+    if xs is not None:
+        cosserat.pose_from_node_strains(xs, robot._L / robot._n, robot._n, P[0], Rs[0])
     return tau, P, Rs
 
 

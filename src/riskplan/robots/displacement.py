@@ -25,6 +25,7 @@ import math
 import numpy as np
 from numba import njit
 
+from riskplan.robots.integration import pose_from_node_strains
 from riskplan.robots.linalg6 import gauss_solve
 from riskplan.robots.rod_tables import LOCAL_FAIL, OK, OUTER_FAIL, RodTables
 from riskplan.robots.tendon_lengths import lengths_and_jacobian
@@ -292,20 +293,25 @@ def solve_displacement_batch(
     taus,
     infos,
     status,
-    xs,
+    p_out,
+    R_out,
 ):
-    """Batched :func:`solve_displacement_tensions` over ``ds (B, m)``, node strains into
-    ``xs (B, 2n+1, 6)``; a configuration that fails from its start
-    ``tau0s[b]`` is tried once more from the slack state (``infos`` of the last try)."""
+    """Batched :func:`solve_displacement_tensions` over ``ds (B, m)``, with the shapes
+    ``p_out (B, n+1, 3)``, ``R_out (B, n+1, 3, 3)`` integrated from each solve's node strains
+    (:func:`~riskplan.robots.integration.pose_from_node_strains`, the scalar path's kernel);
+    a configuration that fails from its start ``tau0s[b]`` is tried once more from the slack
+    state (``infos`` of the last try)."""
     slack_start = np.zeros(ds.shape[1])
+    xs = np.empty((2 * n_steps + 1, 6))
     for b in range(ds.shape[0]):
         st = OUTER_FAIL
         for attempt in range(2):
             start = tau0s[b] if attempt == 0 else slack_start
             st = solve_displacement_tensions(
                 ds[b], kinv, l0, start, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps,
-                tol, maxit, dtol, outer_maxit, taus[b], infos[b], xs[b],
+                tol, maxit, dtol, outer_maxit, taus[b], infos[b], xs,
             )  # fmt: skip
             if st == OK:
+                pose_from_node_strains(xs, length / n_steps, n_steps, p_out[b], R_out[b])
                 break
         status[b] = st

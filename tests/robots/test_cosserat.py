@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from riskplan.robots import TendonRobot, load_robot
+from riskplan.robots import TendonRobot, load_robot, robot_from_toml
 from riskplan.robots import cosserat as C
 from riskplan.robots.integration import pose_from_node_strains
 from riskplan.robots.linalg6 import chol_factor6
@@ -17,6 +17,7 @@ from riskplan.robots.rod_tables import LOCAL_MAXIT, LOCAL_TOL
 from riskplan.robots.strains import strain_slope
 from tests.conftest import TOL
 from tests.robots.reference_kernels import shape_free_exact_midpoints, strains_along
+from tests.robots.test_robot import FOUR_INEXTENSIBLE
 
 
 @pytest.fixture(scope="module")
@@ -178,6 +179,19 @@ def test_displacement_shape_is_the_pose_of_its_last_length_pass(paper):
     ref = paper.solve_tensions(shape.tensions, validate=False)
     np.testing.assert_allclose(shape.positions, ref.positions, **TOL["node_strain_shape"])
     np.testing.assert_allclose(shape.rotations, ref.rotations, **TOL["node_strain_rotations"])
+
+
+def test_displacement_shape_after_the_fischer_burmeister_switch():
+    """Inextensible antagonistic tendons: these solves stall in min-function form and continue
+    in Fischer-Burmeister form (all three do, seen with the kernels' Python source), whose
+    re-evaluation at ``tau`` or later accepted steps are then the last length passes; the shape
+    is still the node-strain pass at the returned tensions, to the bit."""
+    robot = robot_from_toml(FOUR_INEXTENSIBLE)
+    for d in ([0.005, 0.0, 0.0, 0.0], [0.01, 0.0, 0.0, 0.005], [0.02, 0.0, 0.01, 0.0]):
+        shape = robot.solve_displacements(d)
+        P, R = _node_strain_pose(robot, shape.tensions)
+        np.testing.assert_array_equal(shape.positions, P)
+        np.testing.assert_array_equal(shape.rotations, R)
 
 
 def test_node_strain_pass_converges_at_fourth_order(paper):

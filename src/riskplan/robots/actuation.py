@@ -41,7 +41,7 @@ def tensions_for_displacements(robot, flat: np.ndarray) -> np.ndarray:
             if B
             else np.zeros((0, m))
         )
-    return _solve_free_displacements(robot, flat)[0]
+    return _solve_free_displacements(robot, flat, shapes=False)[0]
 
 
 def shapes_for_displacements(robot, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -56,9 +56,10 @@ def shapes_for_displacements(robot, flat: np.ndarray) -> tuple[np.ndarray, np.nd
     return tau, P, Rs
 
 
-def _solve_free_displacements(robot, flat: np.ndarray):
-    """``(tau, P, Rs)`` of :func:`shapes_for_displacements` (unchecked shapes); raises
-    :class:`ConvergenceError` where a tension solve fails."""
+def _solve_free_displacements(robot, flat: np.ndarray, shapes: bool = True):
+    """``(tau, P, Rs)`` of :func:`shapes_for_displacements` (unchecked shapes; with
+    ``shapes=False`` a single configuration's pose is not integrated, a batch's always is, in
+    the batch kernel); raises :class:`ConvergenceError` where a tension solve fails."""
     B, m = flat.shape
     n = robot._n + 1
     # start: the linearisation at tau = 0 (see TendonRobot.__init__), clipped to tau >= 0
@@ -99,7 +100,7 @@ def _solve_free_displacements(robot, flat: np.ndarray):
             residual=float(infos[b, 1]),
             iterations=int(infos[b, 0]),
         )
-    if xs is not None:
+    if xs is not None and shapes:
         cosserat.pose_from_node_strains(xs, robot._L / robot._n, robot._n, P[0], Rs[0])
     return tau, P, Rs
 

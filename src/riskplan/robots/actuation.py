@@ -106,7 +106,7 @@ def _solve_free_displacements(robot, flat: np.ndarray, shapes: bool = True):
 
 
 def _displacement_tensions(robot, d, tau0, tau, info, xs) -> int:
-    """:func:`cosserat.solve_displacement_tensions` for one configuration (shape into ``P, Rs``),
+    """:func:`cosserat.solve_displacement_tensions` for one configuration (node strains into ``xs``),
     tried once more from the slack state when it fails from ``tau0`` (as
     :func:`cosserat.solve_displacement_batch` does per configuration); returns the status."""
     st = cosserat.OUTER_FAIL

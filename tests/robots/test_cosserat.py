@@ -9,12 +9,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from riskplan.robots import TendonRobot, load_robot
+from riskplan.robots import TendonRobot, load_robot, robot_from_toml
 from riskplan.robots import cosserat as C
+from riskplan.robots.integration import pose_from_node_strains
 from riskplan.robots.linalg6 import chol_factor6
+from riskplan.robots.rod_tables import LOCAL_MAXIT, LOCAL_TOL
 from riskplan.robots.strains import strain_slope
 from tests.conftest import TOL
 from tests.robots.reference_kernels import shape_free_exact_midpoints, strains_along
+from tests.robots.test_robot import FOUR_INEXTENSIBLE
 
 
 @pytest.fixture(scope="module")
@@ -136,6 +139,74 @@ def test_hermite_midpoints_match_exact_midpoint_solves(paper):
         and ldiffs[0] / ldiffs[1] > 10
         and ldiffs[1] / ldiffs[2] > 10
     ), ldiffs
+
+
+def _node_strain_pose(robot, tau):
+    """The displacement solve's shape pass at ``tau``: the length pass's node strains (eqs.
+    (2)-(3) solved at every RK4 node), integrated by ``pose_from_node_strains``."""
+    n, m = robot.n_stations - 1, robot.n_tendons
+    xs, P, R = np.empty((2 * n + 1, 6)), np.empty((n + 1, 3)), np.empty((n + 1, 3, 3))
+    st = C.lengths_and_jacobian(
+        tau, *robot.tables, LOCAL_TOL, LOCAL_MAXIT, np.empty(m), np.empty((m, m)), xs
+    )
+    assert st == C.OK
+    pose_from_node_strains(xs, robot.params.backbone.length / n, n, P, R)
+    return P, R
+
+
+def test_displacement_shape_is_the_pose_of_its_last_length_pass(paper):
+    """``solve_displacements``' shape is, to the bit, the node-strain pass at the tensions it
+    returns (the solve's last length pass is at them), batch and single, slack tendons and
+    tensions over the limit included (batch vs single: ``test_robot.py``'s batch-equals-loop); and it is ``shape_free``'s shape at those tensions up to
+    the two passes' O(h^4) difference (measured bound: TOL["node_strain_shape"])."""
+    rng = np.random.default_rng(5)
+    lim = paper.displacement_limits
+    d = np.vstack(
+        [
+            rng.uniform(lim[:, 0], lim[:, 1], (30, 4)),
+            [[-0.01, 0, 0, 0], [0.04, 0, 0, 0], [0.02, -0.01, -0.01, -0.01], [0, 0, 0, 0]],
+        ]
+    )
+    shape = paper.solve_displacements(d)
+    for b in range(len(d)):
+        P, R = _node_strain_pose(paper, shape.tensions[b])
+        np.testing.assert_array_equal(shape.positions[b], P)
+        np.testing.assert_array_equal(shape.rotations[b], R)
+        # one configuration (the scalar kernel; its start tau0 = A0^+ d rounds apart from the
+        # batch's matrix product, so its tensions may differ from the batch's in the last bits)
+        one = paper.solve_displacements(d[b])
+        np.testing.assert_array_equal(one.positions, _node_strain_pose(paper, one.tensions)[0])
+    ref = paper.solve_tensions(shape.tensions, validate=False)
+    np.testing.assert_allclose(shape.positions, ref.positions, **TOL["node_strain_shape"])
+    np.testing.assert_allclose(shape.rotations, ref.rotations, **TOL["node_strain_rotations"])
+
+
+def test_displacement_shape_after_the_fischer_burmeister_switch():
+    """Inextensible antagonistic tendons: these solves stall in min-function form and continue
+    in Fischer-Burmeister form (all three do, seen with the kernels' Python source), whose
+    re-evaluation at ``tau`` or later accepted steps are then the last length passes; the shape
+    is still the node-strain pass at the returned tensions, to the bit."""
+    robot = robot_from_toml(FOUR_INEXTENSIBLE)
+    for d in ([0.005, 0.0, 0.0, 0.0], [0.01, 0.0, 0.0, 0.005], [0.02, 0.0, 0.01, 0.0]):
+        shape = robot.solve_displacements(d)
+        P, R = _node_strain_pose(robot, shape.tensions)
+        np.testing.assert_array_equal(shape.positions, P)
+        np.testing.assert_array_equal(shape.rotations, R)
+
+
+def test_node_strain_pass_converges_at_fourth_order(paper):
+    """The node-strain pass against a fine reference (``shape_free``, n = 640): the tip error
+    shrinks ~16x per halving of the step, and with solved midpoints it is no less accurate
+    than ``shape_free``'s Hermite midpoints at the robot's n = 40."""
+    tau = np.array([2.4, 0.0, 0.6, 7.2])
+    ref = with_step(paper, 0.2 / 640).solve_tensions(tau).tip
+    errs = []
+    for n in (10, 20, 40):
+        P, _ = _node_strain_pose(with_step(paper, 0.2 / n), tau)
+        errs.append(np.abs(P[-1] - ref).max())
+    rates = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+    assert np.all(rates > 3.6), (errs, rates)
+    assert errs[-1] <= np.abs(paper.solve_tensions(tau).tip - ref).max(), errs
 
 
 def test_strain_slope_matches_finite_differences(paper):

@@ -62,19 +62,28 @@ def _shape_free(robot, tau):
 
 def _lengths(robot, tau):
     m = robot.n_tendons
-    out = (np.empty(m), np.empty((m, m)))
+    out = (np.empty(m), np.empty((m, m)), np.empty((2 * robot.n_stations - 1, 6)))
     st = tendon_lengths.lengths_and_jacobian(tau, *robot.tables, LOCAL_TOL, LOCAL_MAXIT, *out)
     return (st, *out)
 
 
+def _node_pose(robot, tau):
+    # the shape solve_displacements takes: the length pass's node strains, integrated
+    st, _, _, xs = _lengths(robot, tau)
+    n = robot.n_stations
+    P, R = np.empty((n, 3)), np.empty((n, 3, 3))
+    integration.pose_from_node_strains(xs, robot.params.backbone.length / (n - 1), n - 1, P, R)
+    return st, P, R
+
+
 def _displacement(robot, d):
-    m = robot.n_tendons
-    tau, info = np.empty(m), np.empty(2)
+    m, n = robot.n_tendons, robot.n_stations
+    tau, info, xs = np.empty(m), np.empty(2), np.empty((2 * n - 1, 6))
     st = displacement.solve_displacement_tensions(
         d, robot._kinv, robot._l0, np.zeros(m), *robot.tables, LOCAL_TOL, LOCAL_MAXIT,
-        DISP_TOL, DISP_MAXIT, tau, info,
+        DISP_TOL, DISP_MAXIT, tau, info, xs,
     )  # fmt: skip
-    return st, tau, info
+    return st, tau, info, xs
 
 
 def _loaded(robot, tau):
@@ -90,7 +99,9 @@ def _loaded(robot, tau):
 
 
 @pytest.mark.parametrize(
-    "run", [_shape_free, _lengths, _loaded], ids=["shape_free", "lengths", "loaded"]
+    "run",
+    [_shape_free, _lengths, _node_pose, _loaded],
+    ids=["shape_free", "lengths", "node_pose", "loaded"],
 )
 def test_tension_kernels_equal_their_python_source(robot, run, monkeypatch):
     for seed in (0, 1):
@@ -116,8 +127,8 @@ def test_displacement_solve_equals_its_python_source(robot, monkeypatch):
             interpret(mp)
             python = _displacement(robot, d)
         assert compiled[0] == python[0] == 0
-        same(compiled[1], python[1])
-        same(compiled[2], python[2])
+        for a, b in zip(compiled[1:], python[1:], strict=True):  # tensions, info, node strains
+            same(a, b)
 
 
 def test_strain_equation_kernels_equal_their_python_source(robot, monkeypatch):
@@ -160,7 +171,7 @@ def test_strain_equation_kernels_equal_their_python_source(robot, monkeypatch):
 def test_complementarity_system_equals_its_python_source(robot, fb, monkeypatch):
     m = robot.n_tendons
     tau = _tensions(robot, 4)
-    _, lengths, dl = _lengths(robot, tau)
+    _, lengths, dl, _ = _lengths(robot, tau)
     d = np.full(m, 0.002)
 
     def run():
@@ -194,7 +205,7 @@ def test_rest_lengths_in_numpy_equal_the_length_kernel(robot):
     # the robot's rest lengths and their Jacobian come from numpy (building a robot compiles
     # nothing); they are the compiled length pass at zero tension, to the bit
     m = robot.n_tendons
-    st, lengths, dl = _lengths(robot, np.zeros(m))
+    st, lengths, dl, _ = _lengths(robot, np.zeros(m))
     assert st == 0
     l_np, dl_np = tendon_lengths.rest_lengths_and_jacobian(*robot.tables)
     np.testing.assert_array_equal(l_np, lengths)

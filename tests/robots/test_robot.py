@@ -90,10 +90,12 @@ def test_displacement_tension_round_trip(paper, rng):
     tau0 = rng.uniform(0.2, 1.0, (5, 4)) * paper.tension_limits * 0.5
     d0 = paper.displacements_for_tensions(tau0)
     np.testing.assert_allclose(paper.tensions_for_displacements(d0), tau0, **TOL["tension_solve"])
+    # the displacement solve integrates its own node strains (solved midpoints), shape_free
+    # interpolates the midpoints: the same shape up to the O(h^4) difference of the two passes
     np.testing.assert_allclose(
         paper.solve_displacements(d0).positions,
         paper.solve_tensions(tau0).positions,
-        **TOL["displacement_roundtrip"],
+        **TOL["node_strain_shape"],
     )
 
 

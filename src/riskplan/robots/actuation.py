@@ -21,6 +21,7 @@ from riskplan.robots.rod_tables import DISP_MAXIT, DISP_TOL, LOCAL_MAXIT, LOCAL_
 __all__ = [
     "BATCH_KERNEL_MIN",
     "local_failure_error",
+    "shapes_for_displacements",
     "solve_batch",
     "solve_single_free",
     "tendon_lengths",
@@ -40,15 +41,41 @@ def tensions_for_displacements(robot, flat: np.ndarray) -> np.ndarray:
             if B
             else np.zeros((0, m))
         )
+    return _solve_free_displacements(robot, flat, shapes=False)[0]
+
+
+def shapes_for_displacements(robot, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tensions ``(B, m)`` [N] that realise the displacements ``flat (B, m)`` [m] of a robot
+    without external loads, and the shapes they hold: positions ``(B, n, 3)`` [m] and frames
+    ``(B, n, 3, 3)``, base frame, integrated from the strains of the solve's last length pass
+    (:func:`cosserat.solve_displacement_tensions`), so no shape kernel runs."""
+    tau, P, Rs = _solve_free_displacements(robot, flat)
+    if not np.isfinite(P).all():  # never hand out NaN silently
+        b = int(np.flatnonzero(~np.isfinite(P).reshape(P.shape[0], -1).all(-1))[0])
+        raise ConvergenceError(f"non-finite shape for displacements {flat[b].tolist()}")
+    return tau, P, Rs
+
+
+def _solve_free_displacements(robot, flat: np.ndarray, shapes: bool = True):
+    """``(tau, P, Rs)`` of :func:`shapes_for_displacements` (unchecked shapes; with
+    ``shapes=False`` a single configuration's pose is not integrated, a batch's always is, in
+    the batch kernel); raises :class:`ConvergenceError` where a tension solve fails."""
+    B, m = flat.shape
+    n = robot._n + 1
     # start: the linearisation at tau = 0 (see TendonRobot.__init__), clipped to tau >= 0
     tau0 = np.ascontiguousarray(np.maximum(flat @ robot._A0pinv.T, 0.0))
     tau = np.empty((B, m))
     infos = np.empty((B, 2))
     status = np.empty(B, dtype=np.int64)
+    P = np.empty((B, n, 3))
+    Rs = np.empty((B, n, 3, 3))
+    xs = None
     if B == 1:
-        # one configuration: the scalar kernel, so that a first call compiles no batch loop
-        status[0] = _displacement_tensions(robot, flat[0], tau0[0], tau[0], infos[0])
-    else:
+        # one configuration: the scalar kernel, so that a first call compiles no batch loop;
+        # the pose below
+        xs = np.empty((2 * n - 1, 6))
+        status[0] = _displacement_tensions(robot, flat[0], tau0[0], tau[0], infos[0], xs)
+    else:  # the batch kernel integrates each pose itself (one call, no loop here)
         cosserat.solve_displacement_batch(
             flat,
             robot._kinv,
@@ -62,6 +89,8 @@ def tensions_for_displacements(robot, flat: np.ndarray) -> np.ndarray:
             tau,
             infos,
             status,
+            P,
+            Rs,
         )
     bad = np.flatnonzero(status != cosserat.OK)
     if bad.size:
@@ -71,18 +100,20 @@ def tensions_for_displacements(robot, flat: np.ndarray) -> np.ndarray:
             residual=float(infos[b, 1]),
             iterations=int(infos[b, 0]),
         )
-    return tau
+    if xs is not None and shapes:
+        cosserat.pose_from_node_strains(xs, robot._L / robot._n, robot._n, P[0], Rs[0])
+    return tau, P, Rs
 
 
-def _displacement_tensions(robot, d, tau0, tau, info) -> int:
-    """:func:`cosserat.solve_displacement_tensions` for one configuration, tried once more
-    from the slack state when it fails from ``tau0`` (as :func:`cosserat.solve_displacement_batch`
-    does per configuration); returns the status."""
+def _displacement_tensions(robot, d, tau0, tau, info, xs) -> int:
+    """:func:`cosserat.solve_displacement_tensions` for one configuration (node strains into ``xs``),
+    tried once more from the slack state when it fails from ``tau0`` (as
+    :func:`cosserat.solve_displacement_batch` does per configuration); returns the status."""
     st = cosserat.OUTER_FAIL
     for start in (tau0, np.zeros(robot.n_tendons)):
         st = cosserat.solve_displacement_tensions(
             d, robot._kinv, robot._l0, start, *robot.tables, LOCAL_TOL, LOCAL_MAXIT, DISP_TOL,
-            DISP_MAXIT, tau, info,
+            DISP_MAXIT, tau, info, xs,
         )  # fmt: skip
         if st == cosserat.OK:
             break
@@ -97,10 +128,10 @@ def tendon_lengths(robot, flat: np.ndarray) -> np.ndarray:
         if robot.loaded:
             out[b] = robot._shoot(flat[b])[-1, 18:]
         else:
-            dl = np.empty((m, m))
+            dl, xs = np.empty((m, m)), np.empty((2 * robot._n + 1, 6))
             if (
                 cosserat.lengths_and_jacobian(
-                    flat[b], *robot.tables, LOCAL_TOL, LOCAL_MAXIT, out[b], dl
+                    flat[b], *robot.tables, LOCAL_TOL, LOCAL_MAXIT, out[b], dl, xs
                 )
                 != cosserat.OK
             ):

@@ -37,8 +37,9 @@ is their namespace and the model's documentation. ``robot.TendonRobot`` is the v
   offsets ``r_i(s)`` from the routing polynomials, status codes;
 * :mod:`.linalg6` -- 6x6 Cholesky and small Gaussian elimination;
 * :mod:`.strains` -- residual, Jacobian and solves of (2)-(3) at one node, strain slopes;
-* :mod:`.integration` -- the RK4 pass without loads (:func:`shape_free`) and with loads
-  (:func:`shape_loaded`);
+* :mod:`.integration` -- the RK4 pass without loads (:func:`shape_free`), the pose from
+  strains solved at every node (:func:`pose_from_node_strains`, the displacement solve's
+  shape) and the pass with loads (:func:`shape_loaded`);
 * :mod:`.tendon_lengths` -- path lengths and their tension sensitivity;
 * :mod:`.displacement` -- tensions for tendon displacements (complementarity solve);
 * :mod:`.batch_kernel` -- :func:`shape_free` in lockstep over chunks of configurations.
@@ -50,7 +51,12 @@ callers) before timing.
 """
 
 from riskplan.robots.displacement import solve_displacement_batch, solve_displacement_tensions
-from riskplan.robots.integration import shape_free, shape_free_batch, shape_loaded
+from riskplan.robots.integration import (
+    pose_from_node_strains,
+    shape_free,
+    shape_free_batch,
+    shape_loaded,
+)
 from riskplan.robots.rod_tables import (
     LOCAL_FAIL,
     OK,
@@ -78,6 +84,7 @@ __all__ = [
     "local_residual",
     "local_strains",
     "local_strains_chord",
+    "pose_from_node_strains",
     "rod_tables",
     "shape_free",
     "shape_free_batch",

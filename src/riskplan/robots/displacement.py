@@ -25,6 +25,7 @@ import math
 import numpy as np
 from numba import njit
 
+from riskplan.robots.integration import pose_from_node_strains
 from riskplan.robots.linalg6 import gauss_solve
 from riskplan.robots.rod_tables import LOCAL_FAIL, OK, OUTER_FAIL, RodTables
 from riskplan.robots.tendon_lengths import lengths_and_jacobian
@@ -118,13 +119,13 @@ def search_direction(Jm, phi, merit, slack, lm, A, step, m):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _system_at(d, kinv, l0, tau, rod, tol, maxit, lengths, dl, Jm, phi, fb, slack):
-    """Tendon lengths and their Jacobian at ``tau`` (:func:`lengths_and_jacobian`), then the
-    Newton system there (:func:`complementarity_system`); returns ``(status, residual, merit)``
-    (residual and merit 0 when the length solve failed)."""
+def _system_at(d, kinv, l0, tau, rod, tol, maxit, lengths, dl, xs, Jm, phi, fb, slack):
+    """Tendon lengths and their Jacobian at ``tau`` (:func:`lengths_and_jacobian`, which leaves
+    the node strains in ``xs``), then the Newton system there (:func:`complementarity_system`);
+    returns ``(status, residual, merit)`` (residual and merit 0 when the length solve failed)."""
     st = lengths_and_jacobian(
         tau, rod.offsets, rod.offset_slopes, rod.offset_curvatures, rod.kse, rod.kbt, rod.length, rod.n_steps,
-        tol, maxit, lengths, dl,
+        tol, maxit, lengths, dl, xs,
     )  # fmt: skip
     if st != OK:
         return st, 0.0, 0.0
@@ -137,9 +138,9 @@ def line_search(d, kinv, l0, tau, step, merit, fb, rod, tols, work):
     """Backtracking on the squared residual along ``step`` from ``tau`` (projected on tau >= 0):
     halves the step until it falls by the Armijo factor. Leaves the accepted point in ``trial``
     with its system in ``Jt, pt, slack_t``; returns ``(accepted, max residual, merit)``.
-    ``tols = (tol, maxit, dtol)``; ``work = (trial, lengths, dl, Jt, pt, slack_t)``."""
+    ``tols = (tol, maxit, dtol)``; ``work = (trial, lengths, dl, xs, Jt, pt, slack_t)``."""
     tol, maxit, dtol = tols
-    trial, lengths, dl, Jt, pt, slack_t = work
+    trial, lengths, dl, xs, Jt, pt, slack_t = work
     m = tau.shape[0]
     alpha = 1.0
     for _ls in range(LINE_SEARCH_MAXIT):
@@ -147,7 +148,7 @@ def line_search(d, kinv, l0, tau, step, merit, fb, rod, tols, work):
             t = tau[i] + alpha * step[i, 0]
             trial[i] = 0.0 if 0.0 > t else t  # max(t, 0.0), as numba's max compares
         st, res_t, merit_t = _system_at(
-            d, kinv, l0, trial, rod, tol, maxit, lengths, dl, Jt, pt, fb, slack_t
+            d, kinv, l0, trial, rod, tol, maxit, lengths, dl, xs, Jt, pt, fb, slack_t
         )
         if st == OK and (merit_t <= (1.0 - 1e-4 * alpha) * merit or res_t <= dtol):
             return True, res_t, merit_t
@@ -174,8 +175,10 @@ def solve_displacement_tensions(
     outer_maxit,
     tau,
     info,
+    xs,
 ):
-    """Tensions for tendon displacements ``d (m,)`` with compliant tendons and slack (no loads).
+    """Tensions for tendon displacements ``d (m,)`` with compliant tendons and slack (no loads),
+    and the shape they hold.
 
     Complementarity (per tendon)::
 
@@ -188,6 +191,14 @@ def solve_displacement_tensions(
     full step is taken whenever it does, so the local convergence stays quadratic). Needed for
     stiff problems such as inextensible antagonistic tendons, where full steps overshoot.
     ``tau0`` is the start. Writes ``tau``; ``info = [iterations, residual]``. Returns status.
+
+    On success ``xs (2n+1, 6)`` holds the strains solved at every RK4 node at the returned
+    ``tau``: the last length pass is always at it (the start when it already solves the
+    problem, an accepted line-search point, or the re-evaluation at ``tau`` on the switch to
+    Fischer-Burmeister), so :func:`~riskplan.robots.integration.pose_from_node_strains` gives
+    the shape from them without another pass. The pose is a kernel of its own, called after
+    this one: integrated here, its RK4 steps would be optimised again inside this kernel's
+    module (about 1 s more to a first call than the separate kernel, measured).
     """
     m = d.shape[0]
     lengths = np.empty(m)
@@ -205,7 +216,7 @@ def solve_displacement_tensions(
     slack_t = np.empty(m)
     rod = RodTables(rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps)
     tols = (tol, maxit, dtol)
-    work = (trial, lengths, dl, Jt, pt, slack_t)
+    work = (trial, lengths, dl, xs, Jt, pt, slack_t)
     for i in range(m):
         tau[i] = tau0[i]
         slack[i] = 0.0
@@ -215,7 +226,9 @@ def solve_displacement_tensions(
     # False, typed as a plain bool: a literal False (and later True) would compile each helper
     # that takes it once per literal value
     fb = m < 0
-    st, res, merit = _system_at(d, kinv, l0, tau, rod, tol, maxit, lengths, dl, Jm, phi, fb, slack)
+    st, res, merit = _system_at(
+        d, kinv, l0, tau, rod, tol, maxit, lengths, dl, xs, Jm, phi, fb, slack
+    )
     if st != OK:
         return st
     for it in range(outer_maxit):
@@ -242,7 +255,7 @@ def solve_displacement_tensions(
             # no such points when dg/dtau is positive semidefinite, as a compliance matrix is
             fb = not fb  # True, typed as a plain bool (see above)
             st, res, merit = _system_at(
-                d, kinv, l0, tau, rod, tol, maxit, lengths, dl, Jm, phi, fb, slack
+                d, kinv, l0, tau, rod, tol, maxit, lengths, dl, xs, Jm, phi, fb, slack
             )
             if st != OK:
                 return LOCAL_FAIL
@@ -280,18 +293,25 @@ def solve_displacement_batch(
     taus,
     infos,
     status,
+    p_out,
+    R_out,
 ):
-    """Batched :func:`solve_displacement_tensions` over ``ds (B, m)``; a configuration that fails
-    from its start ``tau0s[b]`` is tried once more from the slack state (``infos`` of the last try)."""
+    """Batched :func:`solve_displacement_tensions` over ``ds (B, m)``, with the shapes
+    ``p_out (B, n+1, 3)``, ``R_out (B, n+1, 3, 3)`` integrated from each solve's node strains
+    (:func:`~riskplan.robots.integration.pose_from_node_strains`, the scalar path's kernel);
+    a configuration that fails from its start ``tau0s[b]`` is tried once more from the slack
+    state (``infos`` of the last try)."""
     slack_start = np.zeros(ds.shape[1])
+    xs = np.empty((2 * n_steps + 1, 6))
     for b in range(ds.shape[0]):
         st = OUTER_FAIL
         for attempt in range(2):
             start = tau0s[b] if attempt == 0 else slack_start
             st = solve_displacement_tensions(
                 ds[b], kinv, l0, start, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps,
-                tol, maxit, dtol, outer_maxit, taus[b], infos[b],
+                tol, maxit, dtol, outer_maxit, taus[b], infos[b], xs,
             )  # fmt: skip
             if st == OK:
+                pose_from_node_strains(xs, length / n_steps, n_steps, p_out[b], R_out[b])
                 break
         status[b] = st

@@ -90,6 +90,27 @@ def rk4_pose_step(p, R, x0, xm, x1, h, pn, Rn):
 
 
 @njit(cache=True)
+def pose_from_node_strains(xs, h, n_steps, p_out, R_out):
+    """Positions ``p_out (n+1, 3)`` and frames ``R_out (n+1, 3, 3)`` (base frame, from the
+    identity at ``s = 0``) by ``n`` RK4 steps (:func:`rk4_pose_step`) of ``p' = R v``,
+    ``R' = R [u]x`` with the strains ``xs (2n+1, 6)`` solved at every RK4 node ``s = j h / 2``
+    (the displacement solve's length pass leaves them,
+    :func:`~riskplan.robots.tendon_lengths.lengths_and_jacobian`). :func:`shape_free` takes the
+    same steps with Hermite-interpolated half-step strains; the two passes differ by O(h^4).
+    One call site of the inline step, so that a first call types and lowers it once.
+    """
+    for a in range(3):
+        p_out[0, a] = 0.0
+        for b in range(3):
+            R_out[0, a, b] = 1.0 if a == b else 0.0
+    for k in range(n_steps):
+        j = 2 * k
+        rk4_pose_step(
+            p_out[k], R_out[k], xs[j], xs[j + 1], xs[j + 2], h, p_out[k + 1], R_out[k + 1]
+        )
+
+
+@njit(cache=True)
 def pose_derivative(R, x, dR, dp):
     u0 = x[3]
     u1 = x[4]

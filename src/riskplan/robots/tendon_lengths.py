@@ -15,14 +15,17 @@ from riskplan.robots.strains import local_jacobian, local_strains_chord, row3, u
 
 @njit(cache=True, error_model="numpy")
 def lengths_and_jacobian(
-    tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl
+    tau, rt_all, drt_all, ddrt_all, kse, kbt, length, n_steps, tol, maxit, lengths, dl, xs
 ):
     """Tendon path lengths ``l (m,)`` and ``dl[i, j] = d l_i / d tau_j`` without external loads.
 
     Uses Simpson's rule on the RK4 nodes; the sensitivity of the local strains is
     ``dx/dtau_j = -J^{-1} [t_j; r_j x t_j]`` (implicit function theorem on eqs. (2)-(3)) and
     ``d|w_i|/dx = [t_i; r_i x t_i]``. Returns a status code. Arguments 2-8: the fields of
-    :class:`~riskplan.robots.rod_tables.RodTables` (``ddrt_all`` unused).
+    :class:`~riskplan.robots.rod_tables.RodTables` (``ddrt_all`` unused). ``xs (2n+1, 6)``
+    receives the strains ``(v, u)`` solved at the nodes (steps and half steps), from which
+    :func:`~riskplan.robots.integration.pose_from_node_strains` integrates the shape (rows
+    past a failed node are left as they were).
     """
     m = tau.shape[0]
     h = length / n_steps
@@ -61,6 +64,8 @@ def lengths_and_jacobian(
                 xprev[a] = x[a]
         if local_strains_chord(x, tau, rt, drt, zero, zero, kse, kbt, tol, maxit, F, J, fac) < 0:
             return LOCAL_FAIL
+        for a in range(6):
+            xs[node, a] = x[a]
         local_jacobian(x, tau, rt, drt, kse, kbt, J)
         if not chol_factor6(J):
             return LOCAL_FAIL

@@ -36,6 +36,23 @@ class                          builtin base                raised when
 
 from __future__ import annotations
 
+__all__ = [
+    "BackendUnavailableError",
+    "BudgetError",
+    "ConvergenceError",
+    "DataFormatError",
+    "ElementInversionError",
+    "InvalidInputError",
+    "MissingDependencyError",
+    "NumericalError",
+    "OutputLockedError",
+    "PlanningError",
+    "RiskplanError",
+    "RobotDescriptionError",
+    "SimulationError",
+    "require",
+]
+
 
 class RiskplanError(Exception):
     """Base class of every error raised on purpose by riskplan."""

@@ -12,6 +12,18 @@ import os
 import tempfile
 from pathlib import Path
 
+__all__ = [
+    "atomic_path",
+    "canonical_json",
+    "check_output_file",
+    "check_output_folder",
+    "output_lock",
+    "read_file_with",
+    "read_json_object",
+    "write_json_atomic",
+    "write_text_atomic",
+]
+
 
 @contextlib.contextmanager
 def atomic_path(path, suffix: str | None = None):

@@ -18,6 +18,16 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import TypeVar
 
+__all__ = [
+    "THREAD_ENV",
+    "blas_pools",
+    "blas_threads",
+    "limit_process_threads",
+    "one_blas_thread",
+    "one_torch_thread",
+    "torch_threads",
+]
+
 F = TypeVar("F", bound=Callable)
 
 _blas_pools: list | None = None

@@ -86,7 +86,7 @@ class ModelBuild:
 
     ``cached``: True when a finished build was found (nothing computed). ``timings``: seconds
     per stage of this call (``dataset``, ``training``, ``evaluation``; empty on a cache hit).
-    ``evaluation``: the test-split figures (:meth:`Evaluation.to_json`).
+    ``evaluation``: the test-split figures (``Evaluation.to_json``).
     """
 
     model: object

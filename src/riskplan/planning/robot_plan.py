@@ -169,7 +169,7 @@ def check_plan_budget(
     work, naming the option: the roadmap (``--milestones``; its motion checks at
     ``--resolution``, a motion about the typical neighbour distance ``diag / n^(1/m)`` long),
     the trajectory (``--step``; estimated for a path across the displacement box's diagonal),
-    the optimiser (:func:`~riskplan.planning.bo_checks.check_optimiser_budget`) and the validation
+    the optimiser (``bo_checks.check_optimiser_budget``) and the validation
     (``--executions`` of the nominal and the optimised trajectory on the robot)."""
     from riskplan.budget import check_budget
     from riskplan.planning.bo_checks import MOTION_STATE_BYTES, check_optimiser_budget

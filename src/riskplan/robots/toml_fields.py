@@ -107,7 +107,7 @@ def field_table(doc: dict, key: str, *, required=True) -> dict:
 def suggest_key(key: str, known) -> str:
     """``" (did you mean 'x'?)"`` naming the known key closest to ``key``, or ``""``.
 
-    Closeness is :func:`difflib.get_close_matches` on the lower-cased names (cut-off 0.6),
+    Closeness is ``difflib.get_close_matches`` on the lower-cased names (cut-off 0.6),
     falling back to a known key that contains ``key`` or is contained in it.
     """
     import difflib

@@ -157,7 +157,20 @@ class OutputLockedError(InvalidInputError):
 
 
 def require(module: str, extra: str):
-    """Import ``module`` or raise :class:`MissingDependencyError` naming the pip extra."""
+    """Import ``module`` or raise :class:`MissingDependencyError` naming the pip extra.
+
+    Parameters
+    ----------
+    module : str
+        The module's dotted name.
+    extra : str
+        The pip extra that installs it.
+
+    Returns
+    -------
+    module
+        The imported module.
+    """
     import importlib
 
     try:

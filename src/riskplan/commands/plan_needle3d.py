@@ -55,11 +55,12 @@ def register(plan_app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
-        from riskplan.app.reproduce.needle3d import plan_needle3d, write_outputs
+        from riskplan.app.reproduce.needle3d import write_outputs
         from riskplan.commands._shared import output_folder
         from riskplan.errors import InvalidInputError
         from riskplan.io import check_output_folder
         from riskplan.scenarios.uncertainty import CASE_NAMES
+        from riskplan.tissue_planning.needle3d import plan_needle3d
 
         if case not in CASE_NAMES:
             raise InvalidInputError(

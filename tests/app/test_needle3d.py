@@ -170,6 +170,34 @@ def test_plan_needle3d_rejects_bad_run_counts():
         plan_needle3d(check_runs=10, open_runs=0)
     with pytest.raises(InvalidInputError, match="check_runs"):
         plan_needle3d(check_runs=-1)
+    # checked before any work: an unknown frame no longer waits for the RRT to fail
+    with pytest.raises(InvalidInputError, match="frame"):
+        plan_needle3d(frame="body")
+    with pytest.raises(InvalidInputError, match="case"):
+        plan_needle3d("nope")
+    with pytest.raises(InvalidInputError, match="check_plans"):
+        plan_needle3d(check_plans=0)
+
+
+def test_summary_rows_show_checked_and_unchecked_plans():
+    """The command's table: a checked plan's counts, interval and ±2-point check; an
+    unchecked one (and an estimate that does not apply) shows "-"."""
+    from riskplan.app.reproduce.needle3d import SUMMARY_HEADER, summary_rows
+    from riskplan.tissue_planning.needle3d import Needle3DResult, PlanRow
+
+    est = dict.fromkeys(ESTIMATORS, 0.9)
+    checked = PlanRow(3, 20, est, {}, n=100, closed=93, closed_ci=(0.86, 0.97), open=40)
+    checked.n_open, checked.closed_first = 50, 45
+    checked.checks = {"truncation": {"within_points": False}}
+    unchecked = PlanRow(1, 22, dict(est, particles=float("nan")), {})
+    res = Needle3DResult([], [checked, unchecked], 3, None, {}, {})
+    rows = summary_rows(res)
+    assert all(len(r) == len(SUMMARY_HEADER) for r in rows)
+    assert rows[0] == (
+        "3", "20", "0.900", "0.900", "0.900", "0.900", "0.900",
+        "93/100", "[0.860, 0.970]", "no", "45/50", "40/50",
+    )  # fmt: skip
+    assert rows[1] == ("1", "22", *["0.900"] * 4, "-", "-", "-", "-", "-", "-")
 
 
 def test_material_frame_outputs_execute_in_their_frame(straight, tmp_path):

@@ -424,12 +424,18 @@ def plan_needle3d(
     Raises
     ------
     riskplan.errors.InvalidInputError
-        On a negative ``check_runs``, an ``open_runs`` below 1 or an unknown case.
+        On an unknown ``case`` or ``frame``, a negative ``check_runs``, or a
+        ``check_plans`` or ``open_runs`` below 1.
     """
-    from riskplan._validation import check_count
+    from riskplan._validation import check_choice, check_count
+    from riskplan.scenarios import CASE_NAMES, FRAMES
     from riskplan.scenarios.registry import scenario_from_config
 
+    # checked before any work (an unknown frame would otherwise fail after the RRT)
+    check_choice(case, CASE_NAMES, "case")
+    check_choice(frame, FRAMES, "frame")
     check_count(check_runs, "check_runs", 0, integral=True)
+    check_count(check_plans, "check_plans", 1, integral=True)
     if open_runs is not None:
         check_count(open_runs, "open_runs", 1, integral=True)
     sim = scenario_from_config("needle3d", config, case)
@@ -486,7 +492,9 @@ def _check_ranked(sim, plans, ctrls, ranked, n, n_open, check_plans, seed, struc
         chosen,
         n=n,
         n_open=n_open,
-        seed=seed + 1,  # the same draws for each plan
+        # the same draws for each plan; seed + 1, not a spawn_seeds child: the common draws
+        # docs/results.md quotes as "seed 1" (the first 1000 draws reproduced) are this stream
+        seed=seed + 1,
         structured=structured,
         workers=workers,
     )

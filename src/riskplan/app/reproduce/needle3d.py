@@ -8,6 +8,7 @@ the ``reproduce`` stage ``needle3d`` (:func:`run_needle3d` at the sizes of
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -16,10 +17,55 @@ from riskplan.tissue_planning.needle3d import Needle3DResult, plan_needle3d
 
 __all__ = [
     "NEEDLE3D_SCALES",
+    "SUMMARY_HEADER",
     "needle3d_figure",
     "run_needle3d",
+    "summary_rows",
     "write_outputs",
 ]
+
+#: the columns of :func:`summary_rows` (the table ``riskplan plan needle3d`` prints)
+SUMMARY_HEADER = (
+    "plan",
+    "steps",
+    "trunc",
+    "per-step",
+    "sigma",
+    "sampling",
+    "particles",
+    "closed",
+    "95% CI",
+    "trunc ±2pt",
+    "first",
+    "open",
+)
+
+
+def summary_rows(result: Needle3DResult) -> list[tuple[str, ...]]:
+    """One row of strings per candidate, in the ranking's order, under :data:`SUMMARY_HEADER`:
+    index, steps, the LQG-MP estimates (truncation, per-step, sigma, sampling, particles),
+    the closed-loop successes and their 95 % Wilson interval, whether the truncation lies
+    within ±2 points of them, and the closed and open loop on the first draws ("-" where a
+    candidate was not checked or a value does not apply)."""
+    rows = []
+    for r in result.rows:
+        e = r.estimates
+        near = r.checks.get("truncation", {}).get("within_points")
+        particles = e.get("particles", math.nan)
+        rows.append(
+            (
+                str(r.index),
+                str(r.n_steps),
+                *(f"{e[m]:.3f}" for m in ("truncation", "per-step", "sigma", "sampling")),
+                "-" if math.isnan(particles) else f"{particles:.3f}",
+                f"{r.closed}/{r.n}" if r.n else "-",
+                f"[{r.closed_ci[0]:.3f}, {r.closed_ci[1]:.3f}]" if r.n else "-",
+                "-" if near is None else ("yes" if near else "no"),
+                f"{r.closed_first}/{r.n_open}" if r.n else "-",
+                f"{r.open}/{r.n_open}" if r.n else "-",
+            )
+        )
+    return rows
 
 
 def needle3d_figure(sim, plans, executed=(), highlight: int | None = None):

@@ -49,6 +49,13 @@ class CalibrationRow:
 
     @property
     def inside(self) -> bool:
+        """Whether the estimate lies in the Monte Carlo interval: ``low ≤ p_lqgmp ≤ high``.
+
+        Returns
+        -------
+        bool
+            ``True`` when the LQG-MP estimate is inside the 95 % interval.
+        """
         return self.low <= self.p_lqgmp <= self.high
 
 

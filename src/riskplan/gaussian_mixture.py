@@ -80,6 +80,15 @@ def check_mixture_arrays(weights, means, precision_cholesky) -> None:
     Shapes ``(..., K)``, ``(..., K, d)``, ``(..., K, d, d)`` with ``K, d >= 1``; finite values;
     non-negative weights summing to 1 (within :data:`WEIGHT_SUM_ATOL`) over the last axis;
     ``U`` upper triangular with a positive diagonal. Works on any real dtype.
+
+    Parameters
+    ----------
+    weights : array_like, shape (..., K)
+        Mixture weights.
+    means : array_like, shape (..., K, d)
+        Component means.
+    precision_cholesky : array_like, shape (..., K, d, d)
+        Upper Cholesky factors ``U_k`` of the precisions.
     """
     w, m, u = weights, means, precision_cholesky
     if w.ndim < 1 or m.ndim < 2 or u.ndim < 3:
@@ -124,7 +133,17 @@ def check_mixture_arrays(weights, means, precision_cholesky) -> None:
 
 def check_point_shape(shape: tuple, dim: int, batch_shape: tuple) -> None:
     """Raise :class:`InvalidInputError` unless points of ``shape`` are ``(..., N, dim)`` with
-    leading axes that broadcast against ``batch_shape``."""
+    leading axes that broadcast against ``batch_shape``.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        The points' shape.
+    dim : int
+        The mixture's dimension ``d``.
+    batch_shape : tuple of int
+        The mixtures' batch shape.
+    """
     if len(shape) < 2 or shape[-1] != dim:
         raise InvalidInputError(
             f"points: expected shape (..., N, {dim}) for a {dim}-D mixture, got {tuple(shape)}"
@@ -145,6 +164,16 @@ def precision_cholesky_from_covariances(covariances) -> np.ndarray:
     ``Sigma`` is accepted. Raises :class:`InvalidInputError` for NaN/inf or a covariance that is
     not symmetric positive definite. (The collision package's stricter
     ``precision_cholesky_from_covariance`` also rejects visibly asymmetric input.)
+
+    Parameters
+    ----------
+    covariances : array_like, shape (..., d, d)
+        Symmetric positive definite covariances.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(..., d, d)`` upper triangular ``U``.
     """
     cov = _as_real_array(covariances, "covariances")
     if cov.ndim < 2 or cov.shape[-1] != cov.shape[-2]:
@@ -175,6 +204,26 @@ def draw_components(
     ``one_per_component``: ``S = K``, one point from every component (the union quantity of
     the collision bounds). One ``rng.random`` call for the components, then one
     ``rng.standard_normal`` call.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        The generator.
+    weights : numpy.ndarray
+        ``(B, K)`` mixture weights.
+    means : numpy.ndarray
+        ``(B, K, d)`` component means.
+    covariance_factors : numpy.ndarray
+        ``(B, K, d, d)`` factors ``U^{-1}`` of the covariances.
+    n : int
+        Draws per mixture.
+    one_per_component : bool
+        Draw one point from every component (``S = K``) instead of one from the mixture.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(B, n, S, d)`` points, ``μ_k + U_k^{-1} z`` with ``z`` standard normal.
     """
     B, K, d = means.shape
     if not one_per_component:
@@ -248,7 +297,24 @@ class NumpyMixture(MixtureBatch):
 
     @classmethod
     def from_covariances(cls, weights, means, covariances, *, validate: bool = True):
-        """Build from covariances ``(..., K, d, d)`` (:func:`precision_cholesky_from_covariances`)."""
+        """Build from covariances ``(..., K, d, d)`` (:func:`precision_cholesky_from_covariances`).
+
+        Parameters
+        ----------
+        weights : array_like, shape (..., K)
+            Mixture weights.
+        means : array_like, shape (..., K, d)
+            Component means.
+        covariances : array_like, shape (..., K, d, d)
+            Component covariances.
+        validate : bool
+            Check the parameters.
+
+        Returns
+        -------
+        NumpyMixture
+            The mixtures.
+        """
         return cls(
             weights, means, precision_cholesky_from_covariances(covariances), validate=validate
         )
@@ -276,12 +342,24 @@ class NumpyMixture(MixtureBatch):
 
     # ---------------------------------------------------------------- moments
     def mean(self) -> np.ndarray:
-        """Mean of each mixture, ``sum_k w_k mu_k``; shape ``(..., d)``."""
+        """Mean of each mixture, ``sum_k w_k mu_k``; shape ``(..., d)``.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(..., d)``.
+        """
         return np.einsum("...k,...ki->...i", self.weights, self.means)
 
     def covariance(self) -> np.ndarray:
         """Covariance of each mixture (law of total covariance); shape ``(..., d, d)``:
-        ``sum_k w_k (Sigma_k + (mu_k - mu)(mu_k - mu)^T)`` with ``mu`` the mixture mean."""
+        ``sum_k w_k (Sigma_k + (mu_k - mu)(mu_k - mu)^T)`` with ``mu`` the mixture mean.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(..., d, d)``.
+        """
         dev = self.means - self.mean()[..., None, :]
         spread = self.covariances + dev[..., :, None] * dev[..., None, :]
         with np.errstate(over="ignore", invalid="ignore"):
@@ -309,6 +387,17 @@ class NumpyMixture(MixtureBatch):
 
         Raises :class:`InvalidInputError` for points of the wrong dimension or type, a leading
         shape that does not broadcast against the batch shape, or NaN/inf values.
+
+        Parameters
+        ----------
+        points : array_like, shape (..., N, d)
+            Finite points whose leading axes broadcast against the batch shape.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(..., K, N)`` log densities
+            ``−½ |U_k (x_n − μ_k)|² + log det U_k − (d/2) log 2π``.
         """
         x = self._check_points(points)
         diff = x[..., None, :, :] - self.means[..., :, None, :]  # (..., K, N, d)
@@ -326,6 +415,16 @@ class NumpyMixture(MixtureBatch):
 
         The sum over components is a log-sum-exp (stable for far-away points); zero-weight
         components contribute ``-inf`` inside it and are ignored.
+
+        Parameters
+        ----------
+        points : array_like, shape (..., N, d)
+            Finite points whose leading axes broadcast against the batch shape.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(..., N)``, ``log Σ_k w_k N(x_n; μ_k, Σ_k)``.
         """
         comp = self.component_log_prob(points)
         with np.errstate(divide="ignore"):
@@ -338,6 +437,18 @@ class NumpyMixture(MixtureBatch):
         """Draw ``n`` points from each mixture; returns ``(..., n, d)``.
 
         ``seed``: ``None``, an int, a ``SeedSequence`` or a ``numpy.random.Generator``.
+
+        Parameters
+        ----------
+        n : int
+            Points per mixture (``>= 0``).
+        seed : None, int, numpy.random.SeedSequence or numpy.random.Generator
+            The draws' seed.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(..., n, d)``.
         """
         check_count(n, "n", 0)
         K, d = self.n_components, self.dim
@@ -361,7 +472,13 @@ class NumpyMixture(MixtureBatch):
 
     # ------------------------------------------------------------- conversion
     def numpy(self) -> dict[str, np.ndarray]:
-        """``{"weights", "means", "precision_cholesky"}`` (as the torch type's ``numpy()``)."""
+        """``{"weights", "means", "precision_cholesky"}`` (as the torch type's ``numpy()``).
+
+        Returns
+        -------
+        dict of str to numpy.ndarray
+            The three parameter arrays by name.
+        """
         return {name: getattr(self, name) for name in FIELDS}
 
     def __repr__(self) -> str:
@@ -390,6 +507,18 @@ def as_numpy_mixture(mixture, *, validate: bool = True) -> NumpyMixture:
     ``weights``, ``means`` and ``precision_cholesky`` arrays; re-validated when ``validate``.
 
     This is the boundary of the array code: it never imports torch.
+
+    Parameters
+    ----------
+    mixture : NumpyMixture, GaussianMixture or object
+        The mixture.
+    validate : bool
+        Check the parameters.
+
+    Returns
+    -------
+    NumpyMixture
+        The same mixture as float64 arrays (``mixture`` itself when it is one).
     """
     if isinstance(mixture, NumpyMixture):
         if validate:

@@ -12,7 +12,8 @@ import pytest
 
 from tests import duplicates_measure as dm
 
-#: the count when the measure came into `make test` (the measure: at most 4); it may only shrink
+#: the measured count (the measure: at most 4; docs/architecture.md "Measures" names the four);
+#: it may only shrink
 KNOWN_REPEATED_BLOCKS = 4
 
 SAMPLE = textwrap.dedent(

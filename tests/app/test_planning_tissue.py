@@ -11,7 +11,7 @@ from PIL import Image
 from riskplan.app.outputs.tissue_plan import _pack, summary_rows, write_outputs
 from riskplan.scenarios.uncertainty import get_case
 from riskplan.tissue_planning.plan import TissuePlanningResult
-from riskplan.tissue_planning.select import HonestyRow, select_plan
+from riskplan.tissue_planning.select import CalibrationRow, select_plan
 from tests.conftest import TOL
 from tests.planning.conftest import SMALL_MESH, near_needle, needle_result  # noqa: F401 (fixtures)
 
@@ -31,7 +31,7 @@ def test_write_outputs(tmp_path, near_needle, needle_result):  # noqa: F811
     sel = select_plan(
         near_needle, plans[:2], case, n_samples=2, n_goal_samples=200, seed=0, backend="serial"
     )
-    row = HonestyRow(index=sel.best, rank=1, p_lqgmp=0.9, p_mc=0.8, low=0.7, high=0.95, n=100)
+    row = CalibrationRow(index=sel.best, rank=1, p_lqgmp=0.9, p_mc=0.8, low=0.7, high=0.95, n=100)
     res = TissuePlanningResult(
         "needle", "actuation", 0, near_needle, plans[:2], trees, sel, [row], {"rrt": 1.0}
     )
@@ -51,9 +51,9 @@ def test_write_outputs(tmp_path, near_needle, needle_result):  # noqa: F811
         assert np.array_equal(z["L"], sel.controller.L) and z["K"].shape == sel.controller.K.shape
     meta = json.loads(files["selected.json"].read_text())
     assert meta["index"] == sel.best and meta["p_success"] == sel.score(sel.best).p_success
-    assert meta["honesty_check"][0]["inside"] is True
+    assert meta["calibration_check"][0]["inside"] is True
     # ranks are counted the same way in the table and the file: 1 = the selected plan
-    assert meta["honesty_check"][0]["rank"] == summary_rows(res)[0][1] == 1
+    assert meta["calibration_check"][0]["rank"] == summary_rows(res)[0][1] == 1
     from riskplan.planning.export import read_tissue_plan
 
     exp = read_tissue_plan(files["selected_controls.csv"], files["selected_gains.npz"])

@@ -105,7 +105,7 @@ def test_problem_voxels_and_points_are_in_the_planners_scene(tmp_path):
     from pathlib import Path
 
     from riskplan.planning.problem import load_problem
-    from riskplan.planning.robot_plan import problem_environment
+    from riskplan.planning.problem_scene import problem_environment
 
     lab = Path(__file__).parents[1] / "data" / "kuntz-lab" / "task-0001.toml"
     text = lab.read_text()

@@ -37,7 +37,7 @@ def test_plan_tissue_manipulation_small(tmp_path):
     assert res.exit_code == 0, res.output
     meta = json.loads((tmp_path / "selected.json").read_text())
     assert meta["n_candidates"] == 2 and 0.0 <= meta["p_success"] <= 1.0
-    assert [r["n"] for r in meta["honesty_check"]] == [20, 20]
+    assert [r["n"] for r in meta["calibration_check"]] == [20, 20]
     assert (tmp_path / "candidates.png").stat().st_size > 0
     assert "LQG-MP P(success)" in res.output
 

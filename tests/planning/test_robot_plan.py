@@ -17,11 +17,8 @@ from riskplan.errors import InvalidInputError
 from riskplan.gaussian_mixture import NumpyMixture
 from riskplan.planning.prm import MeanValidity
 from riskplan.planning.problem import load_problem
-from riskplan.planning.robot_plan import (
-    WallEnvironment,
-    configuration_weights,
-    problem_configurations,
-)
+from riskplan.planning.problem_scene import WallEnvironment, problem_configurations
+from riskplan.planning.robot_plan import configuration_weights
 from tests.conftest import TOL
 
 LAB = Path(__file__).resolve().parents[1] / "data" / "kuntz-lab"

@@ -10,7 +10,12 @@ import riskplan.control
 from riskplan.control.lqgmp import lqgmp
 from riskplan.errors import InvalidInputError, SimulationError
 from riskplan.scenarios.uncertainty import get_case
-from riskplan.tissue_planning.select import common_draws, evaluate_plan, honesty_check, select_plan
+from riskplan.tissue_planning.select import (
+    calibration_check,
+    common_draws,
+    evaluate_plan,
+    select_plan,
+)
 from tests.conftest import approx_tol
 from tests.planning.conftest import SMALL_MESH
 
@@ -108,9 +113,9 @@ def test_failed_candidate_scores_zero(near_needle, needle_result, monkeypatch):
     assert sel.best == 1 and sel.controllers[0] is None
 
 
-def test_honesty_check_rows(near_needle, needle_result, selection):
+def test_calibration_check_rows(near_needle, needle_result, selection):
     plans, _ = needle_result
-    rows = honesty_check(
+    rows = calibration_check(
         near_needle, plans, selection, CASE, others=1, n=60, seed=0, backend="serial"
     )
     assert [r.rank for r in rows] == [1, len(plans)]  # 1-based: 1 is the selected plan
@@ -119,7 +124,7 @@ def test_honesty_check_rows(near_needle, needle_result, selection):
         assert r.n == 60 and 0.0 <= r.low <= r.p_mc <= r.high <= 1.0
         assert r.p_lqgmp == selection.score(r.index).p_success
     with pytest.raises(InvalidInputError, match="n:"):
-        honesty_check(near_needle, plans, selection, CASE, n=0)
+        calibration_check(near_needle, plans, selection, CASE, n=0)
 
 
 def test_empty_candidate_list_is_named(near_needle):

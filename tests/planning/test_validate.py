@@ -9,11 +9,11 @@ import trimesh
 from riskplan.collision import Environment, trajectory_bound
 from riskplan.errors import InvalidInputError
 from riskplan.kinematics.robot_mixture import arc_backbone
+from riskplan.planning.clearance import tube_clearance
 from riskplan.planning.validate import (
     default_radius,
     execute_on_robot,
     mixture_monte_carlo,
-    tube_clearance,
     validation_markdown,
     validation_table,
 )
@@ -207,7 +207,7 @@ def test_disks_body_hits_a_slab_at_a_disk_but_not_between_disks(robot):
 def test_disk_clearance_closed_form(robot, tol):
     # straight body along z with identity frames: every disk's rim reaches x = R, so a slab
     # x >= a gives a clearance a - R (a ring sample lies exactly on the +x rim)
-    from riskplan.planning.validate import disk_clearance
+    from riskplan.planning.clearance import disk_clearance
     from riskplan.robots.geometry import BodyGeometry
 
     geom = BodyGeometry.from_params(robot.params)

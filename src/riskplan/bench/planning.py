@@ -50,11 +50,8 @@ def new_robot_end_to_end(quick: bool = False) -> dict:
     from riskplan.kinematics.model_cache import ensure_model
     from riskplan.planning.bo import OptimiserConfig
     from riskplan.planning.problem import load_problem
-    from riskplan.planning.robot_plan import (
-        plan_robot,
-        problem_configurations,
-        problem_environment,
-    )
+    from riskplan.planning.problem_scene import problem_configurations, problem_environment
+    from riskplan.planning.robot_plan import plan_robot
 
     task = lab_task()
     if task is None:

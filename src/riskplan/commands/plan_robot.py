@@ -18,7 +18,7 @@ def _robot_problem(problem, robot, env, start, goal, goal_tip):
     """The planning problem of ``plan robot``: its ``--problem`` file, or one made of
     ``--robot``, ``--env``, ``--start`` and ``--goal`` (the combinations checked first)."""
     from riskplan.errors import InvalidInputError
-    from riskplan.planning.robot_plan import problem_from_options
+    from riskplan.planning.problem_scene import problem_from_options
 
     # every input is checked before any work: the problem, the scene, start and goal
     if problem is not None:
@@ -241,7 +241,7 @@ def _add_robot_cmd(plan_app: typer.Typer):
         from riskplan.errors import InvalidInputError
         from riskplan.parsing import parse_numbers
         from riskplan.planning.bo import OptimiserConfig
-        from riskplan.planning.robot_plan import problem_configurations, problem_environment
+        from riskplan.planning.problem_scene import problem_configurations, problem_environment
 
         for name, v in (
             ("step", step),

@@ -93,7 +93,7 @@ def _add_tissue(plan_app: typer.Typer):
         from rich.console import Console
         from rich.table import Table
 
-        from riskplan.app.outputs.tissue_plan import HONESTY_HEADER, summary_rows, write_outputs
+        from riskplan.app.outputs.tissue_plan import CALIBRATION_HEADER, summary_rows, write_outputs
         from riskplan.commands._shared import output_folder
         from riskplan.io import check_output_folder
         from riskplan.scenarios.registry import make_scenario
@@ -170,9 +170,9 @@ def _add_tissue(plan_app: typer.Typer):
         )
         if sel.tie_note:
             console.print(sel.tie_note)
-        if result.honesty:
+        if result.calibration_rows:
             table = Table(title=f"LQG-MP estimate vs {check_runs} closed-loop executions ({case})")
-            for h in HONESTY_HEADER:
+            for h in CALIBRATION_HEADER:
                 table.add_column(h, justify="right")
             for row in summary_rows(result):
                 table.add_row(*[f"{v:.3f}" if isinstance(v, float) else str(v) for v in row])

@@ -15,6 +15,7 @@ kinematic wing's top. Tissue planning is :mod:`riskplan.tissue_planning`.
 from riskplan.planning.bo import OptimisationResult, OptimiserConfig, optimise_trajectory
 from riskplan.planning.chest import ChestPlan, RecessGoal, plan_chest, recess_goal
 from riskplan.planning.chest_scene import Chest, ChestParams, build_chest
+from riskplan.planning.clearance import tube_clearance
 from riskplan.planning.prm import (
     MeanValidity,
     Roadmap,
@@ -36,7 +37,6 @@ from riskplan.planning.validate import (
     RobotMonteCarlo,
     execute_on_robot,
     mixture_monte_carlo,
-    tube_clearance,
     validation_table,
 )
 

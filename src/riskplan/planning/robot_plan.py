@@ -60,12 +60,6 @@ from riskplan.planning.prm import (
     goal_from_tip,
     interpolate_path,
 )
-from riskplan.planning.problem_scene import (
-    WallEnvironment,
-    problem_configurations,
-    problem_environment,
-    problem_from_options,
-)
 from riskplan.planning.risk import RISKS, compare_paths, make_risk, trajectory_risk
 
 log = logging.getLogger(__name__)
@@ -73,13 +67,9 @@ log = logging.getLogger(__name__)
 __all__ = [
     "RobotPlan",
     "ScaledModel",
-    "WallEnvironment",
     "check_plan_budget",
     "configuration_weights",
     "plan_robot",
-    "problem_configurations",
-    "problem_environment",
-    "problem_from_options",
 ]
 
 

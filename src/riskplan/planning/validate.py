@@ -78,11 +78,9 @@ __all__ = [
     "MixtureMonteCarlo",
     "RobotMonteCarlo",
     "default_radius",
-    "disk_clearance",
     "execute_on_robot",
     "mixture_monte_carlo",
     "simulate_executions",
-    "tube_clearance",
     "validation_markdown",
     "validation_table",
 ]

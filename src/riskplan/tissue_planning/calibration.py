@@ -1,7 +1,7 @@
 """LQG-MP's estimate against closed-loop executions (beyond the deformable-planning paper,
 Patil, van den Berg & Alterovitz, RSS 2011, which never says how good the estimate is).
 
-:func:`honesty_check` puts the LQG-MP ``P(success)`` of the selected plan
+:func:`calibration_check` puts the LQG-MP ``P(success)`` of the selected plan
 (:func:`~riskplan.tissue_planning.select.select_plan`) and of others at even quantiles of
 the ranking next to the success rate of ``n ≥ 1000`` closed-loop executions on the true
 simulator (each with its own ``s ~ S``, actuation and sensing noise;
@@ -22,15 +22,15 @@ from riskplan.errors import InvalidInputError
 __all__ = [
     "SATURATED",
     "Calibration",
-    "HonestyRow",
+    "CalibrationRow",
+    "calibration_check",
     "calibration_metrics",
     "evenly_spaced_ranks",
-    "honesty_check",
 ]
 
 
 @dataclass(frozen=True)
-class HonestyRow:
+class CalibrationRow:
     """One candidate in the check: its LQG-MP ``p_lqgmp`` and the Monte Carlo success rate
     ``p_mc`` of ``n`` closed-loop executions with its 95 % interval ``[low, high]``, and
     whether the estimate lies inside that interval.
@@ -49,10 +49,17 @@ class HonestyRow:
 
     @property
     def inside(self) -> bool:
+        """Whether the estimate lies in the Monte Carlo interval: ``low ≤ p_lqgmp ≤ high``.
+
+        Returns
+        -------
+        bool
+            ``True`` when the LQG-MP estimate is inside the 95 % interval.
+        """
         return self.low <= self.p_lqgmp <= self.high
 
 
-def honesty_check(
+def calibration_check(
     sim,
     plans,
     selection,
@@ -64,7 +71,7 @@ def honesty_check(
     backend: str = "local",
     workers: int | None = None,
     on_row=None,
-) -> list[HonestyRow]:
+) -> list[CalibrationRow]:
     """LQG-MP ``P(success)`` against the success rate of ``n`` closed-loop LQG executions
     for the selected plan and ``others`` more (at even quantiles of the ranking, down to the
     worst usable candidate).
@@ -93,7 +100,7 @@ def honesty_check(
 
     Returns
     -------
-    list of HonestyRow
+    list of CalibrationRow
         One row per candidate checked, the selected plan first.
     """
     from riskplan.control.lqg import monte_carlo_success
@@ -123,7 +130,7 @@ def honesty_check(
             workers=workers,
         )
         rows.append(
-            HonestyRow(
+            CalibrationRow(
                 index=score.index,
                 rank=rank + 1,
                 p_lqgmp=score.p_success,

@@ -77,8 +77,9 @@ def selection_setup(sim, plans, selection: str):
 @dataclass
 class TissuePlanningResult:
     """Everything one run produces: the scenario (``sim``, with the case's distribution),
-    ``plans``, ``trees``, the :class:`~riskplan.tissue_planning.select.Selection`, the honesty rows
-    and wall-clock ``timings`` (seconds: ``rrt``, ``selection``, ``check``);
+    ``plans``, ``trees``, the :class:`~riskplan.tissue_planning.select.Selection`, the
+    calibration check's rows ``calibration_rows``
+    (:class:`~riskplan.tissue_planning.calibration.CalibrationRow`) and wall-clock ``timings`` (seconds: ``rrt``, ``selection``, ``check``);
     ``selection_mode`` (:data:`SELECTIONS`) and ``frame`` (the needle's reduced-state frame
     of the selection; ``selection.plan`` and its controller are in it)."""
 
@@ -89,7 +90,7 @@ class TissuePlanningResult:
     plans: list
     trees: list
     selection: object
-    honesty: list = field(default_factory=list)
+    calibration_rows: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
     selection_mode: str = "paper"
     frame: str | None = None
@@ -146,7 +147,7 @@ def plan_tissue(
     from riskplan.control.lqgmp import METHODS
     from riskplan.scenarios.registry import make_scenario
     from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
-    from riskplan.tissue_planning.select import honesty_check, select_plan
+    from riskplan.tissue_planning.select import calibration_check, select_plan
 
     # every argument checked before the trees grow (a bad method used to fail after them)
     if method is not None and method not in METHODS:
@@ -188,7 +189,7 @@ def plan_tissue(
     rows = []
     if check_runs:
         t0 = time.perf_counter()
-        rows = honesty_check(
+        rows = calibration_check(
             ssim,
             splans,
             selection,

@@ -18,7 +18,7 @@ are built once per worker instead of once per plan).
 A plan whose linearisation fails (a solver that does not converge along it, a non-finite
 state) gets ``P(success) = 0`` and its error message; it is never selected.
 
-The paper never says how good the LQG-MP estimate is. :func:`honesty_check`
+The paper never says how good the LQG-MP estimate is. :func:`calibration_check`
 (:mod:`riskplan.tissue_planning.calibration`) puts it next to the success rate of
 ``n ≥ 1000`` closed-loop executions on the true simulator (each with its own ``s ~ S``,
 actuation and sensing noise; :func:`riskplan.control.lqg.monte_carlo_success`) with a 95 %
@@ -43,10 +43,10 @@ from riskplan.errors import (
 from riskplan.tissue_planning.calibration import (
     SATURATED,
     Calibration,
-    HonestyRow,
+    CalibrationRow,
+    calibration_check,
     calibration_metrics,
     evenly_spaced_ranks,
-    honesty_check,
 )
 
 log = logging.getLogger(__name__)
@@ -54,14 +54,14 @@ log = logging.getLogger(__name__)
 __all__ = [
     "SATURATED",
     "Calibration",
-    "HonestyRow",
+    "CalibrationRow",
     "PlanScore",
     "Selection",
+    "calibration_check",
     "calibration_metrics",
     "common_draws",
     "evaluate_plan",
     "evenly_spaced_ranks",
-    "honesty_check",
     "select_plan",
     "tie_note",
 ]

@@ -27,7 +27,7 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     import warnings
 
     from riskplan.app.outputs.tissue_plan import (
-        HONESTY_HEADER,
+        CALIBRATION_HEADER,
         candidates_figure,
         execution_gif,
         summary_rows,
@@ -80,7 +80,7 @@ def run(report: Report, ctx: dict, *, seed: int, workers: int | None) -> None:
     )
     Report.table(
         sec,
-        HONESTY_HEADER,
+        CALIBRATION_HEADER,
         summary_rows(res),
         caption=f"LQG-MP estimate vs {CHECK_RUNS} closed-loop executions (95 % Wilson interval)",
     )

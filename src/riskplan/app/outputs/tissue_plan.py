@@ -100,7 +100,7 @@ def write_outputs(
     * ``selected_controls.csv`` and ``selected_gains.npz``: the controller's files
       (:func:`riskplan.planning.export.write_tissue_plan`);
     * ``selected.json``: scenario, case, seed, index (0-based candidate), probabilities, the
-      honesty check (ranks 1-based, 1 = selected, as in the table), timings;
+      calibration check (key ``calibration_check``; ranks 1-based, 1 = selected, as in the table), timings;
     * ``candidates.png`` and ``execution.gif`` (one closed-loop run under a draw of the case).
     """
     from riskplan.io import write_json_atomic
@@ -175,7 +175,9 @@ def write_outputs(
             "frame": result.frame,
             "n_tied": sel.n_tied,
             "tie": sel.tie_note,
-            "honesty_check": [dict(asdict(r), inside=r.inside) for r in result.honesty],
+            "calibration_check": [
+                dict(asdict(r), inside=r.inside) for r in result.calibration_rows
+            ],
             "timings_s": result.timings,
             "n_candidates": len(result.plans),
         },
@@ -198,7 +200,7 @@ def write_outputs(
 
 
 def summary_rows(result: TissuePlanningResult) -> list[list]:
-    """Table rows for the honesty check: candidate, rank, LQG-MP, Monte Carlo, interval."""
+    """Table rows for the calibration check: candidate, rank, LQG-MP, Monte Carlo, interval."""
     return [
         [
             r.index,
@@ -209,11 +211,11 @@ def summary_rows(result: TissuePlanningResult) -> list[list]:
             r.n,
             "yes" if r.inside else "no",
         ]
-        for r in result.honesty
+        for r in result.calibration_rows
     ]
 
 
-HONESTY_HEADER = [
+CALIBRATION_HEADER = [
     "candidate",
     "rank",
     "P(success) LQG-MP",

@@ -1,10 +1,10 @@
-"""Honesty check of LQG-MP (issue 11, part 5; the deformable paper never reports it): for the
+"""Calibration check of LQG-MP (issue 11, part 5; the deformable paper never reports it): for the
 needle scenario, a plan (the tissue demo's greedy arc steering on the nominal parameters),
 its LQG controller, the LQG-MP P(success) (sigma, truncation and sampling; the paper's
 zero-mean model and with the drift carried), against the success rate of closed-loop and open-loop
 executions on the true simulator with 95 % Wilson intervals, per uncertainty case.
 
-Two plans (docs/control.md, "Honesty check"):
+Two plans (docs/control.md, "Calibration check"):
 
 * ``"edge"``: full speed (``v = v_max``), stopped at the first state inside the goal — the
   plan ends on the goal's edge and leaves no speed to feedback;

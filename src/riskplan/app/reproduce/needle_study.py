@@ -116,6 +116,8 @@ def deformation_sizes(plans, *, n_draws: int = 50, seed: int = 0, cases=None) ->
         ref_goal = np.asarray(cfg.goal_center)
         g, o, r = [], [], []
         n = 1 if case == "nominal" else int(n_draws)
+        # case k's draws from root seed + k, not a spawn_seeds child: the deformation sizes
+        # in docs/scenarios.md were measured on exactly these streams (a child would redraw them)
         seeds = spawn_seeds(seed + k, n * len(plans))
         for i, plan in enumerate(plans):
             for j in range(n):
@@ -161,6 +163,8 @@ def fig45_rates(plans_and_controllers: dict, *, n: int = 200, seed: int = 0) -> 
         plan, ctrl = plans_and_controllers["material-high"]
         for e in FIG5_YOUNGS:
             params = [sim.nominal_params.replace(youngs_modulus=e)] * n
+            # sensing noise from root seed + 1, not a spawn_seeds child: the Fig. 5 counts in
+            # docs/reproduce.md were measured on exactly this stream (a child would redraw it)
             out[f"fig5 E={e:g}"] = open_closed_rates(
                 sim, plan, ctrl, params, spawn_seeds(seed + 1, n)
             )

@@ -1,4 +1,4 @@
-"""The LQG-MP honesty check runs at small scale and reports rates inside their intervals."""
+"""The LQG-MP calibration check runs at small scale and reports rates inside their intervals."""
 
 from __future__ import annotations
 

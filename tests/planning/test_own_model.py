@@ -142,6 +142,25 @@ def test_reported_risk_agrees_with_monte_carlo_of_the_model(planned):
     assert bound <= hi, (bound, lo, hi)
 
 
+def test_a_tip_target_is_reached_through_the_models_farthest_mean():
+    # the contract's tip: the component mean farthest from the origin, here the arc's end
+    model = ConstantCurvatureModel()
+    target = model.backbone([[-0.008, 0.003]])[0, -1]
+    tolerance = 0.002  # m, the planner's tip tolerance asked for
+    plan = plan_chest(
+        model,
+        _scene(),
+        start=[0.008, 0.0],
+        goal_tip=target,
+        tip_tolerance=tolerance,
+        n_milestones=60,
+        optimiser=OptimiserConfig(iterations=0),
+    )
+    reached = model.backbone(plan.goal[None])[0, -1]
+    assert np.linalg.norm(reached - target) <= tolerance
+    np.testing.assert_array_equal(plan.nominal[-1], plan.goal)
+
+
 def test_an_object_without_the_members_is_refused():
     class NoPredict:
         limits = np.array([[0.0, 1.0]])

@@ -8,7 +8,7 @@ A shared core, two wings that never import each other, and the application layer
 * kinematic wing: ``datasets`` → ``kinematics`` (the mixture density network) → ``planning``
   (chest cavity and any robot: PRM, risk, Bayesian optimisation, validation);
 * tissue wing: ``deformable`` (FEM) → ``scenarios`` (needle, manipulation) → ``control``
-  (LQG, LQG-MP) → ``tissue_planning`` (simulator RRT, plan selection);
+  (LQG, LQG-MP) → ``tissue_planning`` (simulator RRT, plan selection, the 3-D needle);
 * application: ``app`` (demo, reproduce, command outputs, report), ``commands``, ``bench``,
   ``cli``.
 
@@ -23,6 +23,7 @@ use (PEP 562), so ``import riskplan`` stays fast and imports neither torch nor t
     plan = rp.plan_chest(model, chest)                 # riskplan.planning
     sim = rp.make_scenario("needle", "material-high")  # riskplan.scenarios
     result = rp.plan_tissue("needle", n_plans=20)      # riskplan.tissue_planning
+    result = rp.plan_needle3d("actuation")             # riskplan.tissue_planning (the 3-D needle)
 
 Each name is defined in the module :data:`PUBLIC` names; the reference documents it there.
 

@@ -71,6 +71,7 @@ PUBLIC = {
     "rrt_plans": "riskplan.tissue_planning",
     "select_plan": "riskplan.tissue_planning",
     "plan_tissue": "riskplan.tissue_planning",
+    "plan_needle3d": "riskplan.tissue_planning",
 }
 
 __all__ = [

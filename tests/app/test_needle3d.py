@@ -6,7 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from riskplan.app.reproduce.needle3d import (
+from riskplan.app.reproduce.needle3d import needle3d_figure
+from riskplan.control import NominalPlan
+from riskplan.scenarios.registry import scenario_from_config
+from riskplan.tissue_planning.needle3d import (
     ESTIMATORS,
     GOAL_SE,
     MAX_GOAL_SAMPLES,
@@ -15,11 +18,8 @@ from riskplan.app.reproduce.needle3d import (
     PARTICLES_SE,
     evaluate_candidates,
     measure_plan,
-    needle3d_figure,
 )
-from riskplan.app.reproduce.needle3d_checks import measure_structured
-from riskplan.control import NominalPlan
-from riskplan.scenarios.registry import scenario_from_config
+from riskplan.tissue_planning.needle3d_checks import measure_structured
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +68,7 @@ def test_estimators_and_executions_on_common_draws(straight):
 def test_accuracy_checks_and_speed_ratios():
     """Within ±2 points of all executions, inside the Wilson interval of the first ones
     (here [0.8763, 0.9552] for 92 of 100), the counterfactual on each side; speed ratios."""
-    from riskplan.app.reproduce.needle3d_checks import (
+    from riskplan.tissue_planning.needle3d_checks import (
         CHECK_POINTS,
         accuracy_checks,
         speed_ratios,
@@ -87,8 +87,8 @@ def test_accuracy_checks_and_speed_ratios():
 def test_split_executions_equal_one_process(straight, monkeypatch):
     """The executions split into tasks (3 draws each, a task across the open-loop edge)
     give what one process gives on the same draws: counts, intervals, targeting errors."""
-    import riskplan.app.reproduce.needle3d_checks as checks
-    from riskplan.app.reproduce.needle3d import PlanRow
+    import riskplan.tissue_planning.needle3d_checks as checks
+    from riskplan.tissue_planning.needle3d import PlanRow
 
     sim, plan = straight
     ctrls, rows = evaluate_candidates(sim, [plan], seed=0, n_goal_samples=200)
@@ -112,7 +112,7 @@ def test_split_executions_equal_one_process(straight, monkeypatch):
 def test_structured_check_executes_on_the_same_draws(straight):
     """The structured linearisation's controller: its prediction, executions counted with a
     Wilson interval, CPU seconds; a case beyond the actuation noise is left alone."""
-    from riskplan.app.reproduce.needle3d import PlanRow
+    from riskplan.tissue_planning.needle3d import PlanRow
 
     sim, plan = straight
     row = measure_structured(sim, plan, PlanRow(0, plan.n_steps, {}, {}), n=4, seed=1)
@@ -134,7 +134,8 @@ def test_figure_has_block_bodies_and_plans(straight):
 
 
 def test_outputs_are_written_whole(straight, tmp_path):
-    from riskplan.app.reproduce.needle3d import Needle3DResult, write_outputs
+    from riskplan.app.reproduce.needle3d import write_outputs
+    from riskplan.tissue_planning.needle3d import Needle3DResult
 
     sim, plan = straight
     ctrls, rows = evaluate_candidates(sim, [plan], seed=0, n_goal_samples=200)
@@ -162,19 +163,48 @@ def test_plan_needle3d_rejects_a_bad_case(tmp_path):
 
 
 def test_plan_needle3d_rejects_bad_run_counts():
-    from riskplan.app.reproduce.needle3d import plan_needle3d
     from riskplan.errors import InvalidInputError
+    from riskplan.tissue_planning.needle3d import plan_needle3d
 
     with pytest.raises(InvalidInputError, match="open_runs"):
         plan_needle3d(check_runs=10, open_runs=0)
     with pytest.raises(InvalidInputError, match="check_runs"):
         plan_needle3d(check_runs=-1)
+    # checked before any work: an unknown frame no longer waits for the RRT to fail
+    with pytest.raises(InvalidInputError, match="frame"):
+        plan_needle3d(frame="body")
+    with pytest.raises(InvalidInputError, match="case"):
+        plan_needle3d("nope")
+    with pytest.raises(InvalidInputError, match="check_plans"):
+        plan_needle3d(check_plans=0)
+
+
+def test_summary_rows_show_checked_and_unchecked_plans():
+    """The command's table: a checked plan's counts, interval and ±2-point check; an
+    unchecked one (and an estimate that does not apply) shows "-"."""
+    from riskplan.app.reproduce.needle3d import SUMMARY_HEADER, summary_rows
+    from riskplan.tissue_planning.needle3d import Needle3DResult, PlanRow
+
+    est = dict.fromkeys(ESTIMATORS, 0.9)
+    checked = PlanRow(3, 20, est, {}, n=100, closed=93, closed_ci=(0.86, 0.97), open=40)
+    checked.n_open, checked.closed_first = 50, 45
+    checked.checks = {"truncation": {"within_points": False}}
+    unchecked = PlanRow(1, 22, dict(est, particles=float("nan")), {})
+    res = Needle3DResult([], [checked, unchecked], 3, None, {}, {})
+    rows = summary_rows(res)
+    assert all(len(r) == len(SUMMARY_HEADER) for r in rows)
+    assert rows[0] == (
+        "3", "20", "0.900", "0.900", "0.900", "0.900", "0.900",
+        "93/100", "[0.860, 0.970]", "no", "45/50", "40/50",
+    )  # fmt: skip
+    assert rows[1] == ("1", "22", *["0.900"] * 4, "-", "-", "-", "-", "-", "-")
 
 
 def test_material_frame_outputs_execute_in_their_frame(straight, tmp_path):
     """A material-frame controller is executed on the material-frame scenario, and the
     figure's executed paths are world tip positions (beside the world plan)."""
-    from riskplan.app.reproduce.needle3d import Needle3DResult, needle3d_figure, write_outputs
+    from riskplan.app.reproduce.needle3d import needle3d_figure, write_outputs
+    from riskplan.tissue_planning.needle3d import Needle3DResult
 
     sim, plan = straight
     mat = sim.with_frame("material")
@@ -193,8 +223,8 @@ def test_report_section_shows_intervals_and_speed(tmp_path):
     """The report's 3-D needle table: the Wilson interval, whether the truncation lies in
     it, and the CPU speed ratio of the estimate against the closed-loop executions."""
     from riskplan.app.report import Report
-    from riskplan.app.reproduce.needle3d import PlanRow
     from riskplan.app.reproduce.report_deformable import _needle3d_section
+    from riskplan.tissue_planning.needle3d import PlanRow
 
     est = dict.fromkeys(ESTIMATORS, 0.9)
     checked = PlanRow(0, 20, est, {}, n=100, closed=93, closed_ci=(0.86, 0.97))

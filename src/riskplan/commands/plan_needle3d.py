@@ -4,7 +4,6 @@ closed/open-loop executions, and an interactive plotly figure."""
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import typer
@@ -55,20 +54,12 @@ def register(plan_app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
-        from riskplan.app.reproduce.needle3d import plan_needle3d, write_outputs
+        from riskplan.app.reproduce.needle3d import SUMMARY_HEADER, summary_rows, write_outputs
         from riskplan.commands._shared import output_folder
-        from riskplan.errors import InvalidInputError
         from riskplan.io import check_output_folder
-        from riskplan.scenarios.uncertainty import CASE_NAMES
+        from riskplan.tissue_planning.needle3d import plan_needle3d
 
-        if case not in CASE_NAMES:
-            raise InvalidInputError(
-                f"--case: expected one of {', '.join(CASE_NAMES)}, got {case!r}"
-            )
-        from riskplan.scenarios import FRAMES
-
-        if frame not in FRAMES:
-            raise InvalidInputError(f"--frame: expected one of {', '.join(FRAMES)}, got {frame!r}")
+        _check_choices(case, frame)
         check_output_folder(out, "--out")
         with output_folder(out):
             result = plan_needle3d(
@@ -92,40 +83,22 @@ def register(plan_app: typer.Typer) -> None:
         table = Table(
             title="LQG-MP P(success) (truncation, per-step, sigma, sampling, particles) and executions"
         )
-        for h in (
-            "plan",
-            "steps",
-            "trunc",
-            "per-step",
-            "sigma",
-            "sampling",
-            "particles",
-            "closed",
-            "95% CI",
-            "trunc ±2pt",
-            "first",
-            "open",
-        ):
+        for h in SUMMARY_HEADER:
             table.add_column(h, justify="right")
-        for r in result.rows:
-            e = r.estimates
-            closed = f"{r.closed}/{r.n}" if r.n else "-"
-            ci = f"[{r.closed_ci[0]:.3f}, {r.closed_ci[1]:.3f}]" if r.n else "-"
-            near = r.checks.get("truncation", {}).get("within_points")
-            within = "-" if near is None else ("yes" if near else "no")
-            first = f"{r.closed_first}/{r.n_open}" if r.n else "-"
-            opened = f"{r.open}/{r.n_open}" if r.n else "-"
-            table.add_row(
-                str(r.index),
-                str(r.n_steps),
-                *(f"{e[m]:.3f}" for m in ("truncation", "per-step", "sigma", "sampling")),
-                "-" if math.isnan(e.get("particles", math.nan)) else f"{e['particles']:.3f}",
-                closed,
-                ci,
-                within,
-                first,
-                opened,
-            )
+        for row in summary_rows(result):
+            table.add_row(*row)
         Console().print(table)
         for name, path in files.items():
             typer.echo(f"{name}: {path}")
+
+
+def _check_choices(case: str, frame: str) -> None:
+    """``--case`` and ``--frame`` of ``plan needle3d``, checked before any work."""
+    from riskplan.errors import InvalidInputError
+    from riskplan.scenarios import FRAMES
+    from riskplan.scenarios.uncertainty import CASE_NAMES
+
+    if case not in CASE_NAMES:
+        raise InvalidInputError(f"--case: expected one of {', '.join(CASE_NAMES)}, got {case!r}")
+    if frame not in FRAMES:
+        raise InvalidInputError(f"--frame: expected one of {', '.join(FRAMES)}, got {frame!r}")

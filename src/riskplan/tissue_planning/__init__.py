@@ -1,11 +1,36 @@
 """Planning in deformable tissue (Patil, van den Berg & Alterovitz, RSS 2011): the simulator
 RRT (:mod:`~riskplan.tissue_planning.rrt`), LQG-MP plan selection
 (:mod:`~riskplan.tissue_planning.select`) and the method end to end
-(:func:`~riskplan.tissue_planning.plan.plan_tissue`).
+(:func:`~riskplan.tissue_planning.plan.plan_tissue`); the 3-D needle's planning
+(:func:`~riskplan.tissue_planning.needle3d.plan_needle3d`: candidates, LQG-MP estimators in 3-D,
+the check against executions, :mod:`~riskplan.tissue_planning.needle3d_checks`).
 
 The tissue wing's top: it imports ``scenarios`` and ``control`` and never the kinematic wing.
 """
 
+from riskplan.tissue_planning.needle3d import (
+    ESTIMATORS,
+    GOAL_SE,
+    MAX_GOAL_SAMPLES,
+    MAX_PARTICLES,
+    PARTICLES_BATCH,
+    PARTICLES_SE,
+    Needle3DResult,
+    PlanRow,
+    evaluate_candidates,
+    measure_plan,
+    plan_needle3d,
+)
+from riskplan.tissue_planning.needle3d_checks import (
+    CHECK_POINTS,
+    DRAWS_PER_TASK,
+    accuracy_checks,
+    execute_draws,
+    fill_rates,
+    measure_checked,
+    measure_structured,
+    speed_ratios,
+)
 from riskplan.tissue_planning.plan import (
     SELECTIONS,
     STEP_S,
@@ -64,4 +89,27 @@ __all__ = [
     "select_plan",
     "selection_setup",
     "tie_note",
+]
+
+# the 3-D needle's planning (needle3d.py, needle3d_checks.py)
+__all__ += [
+    "CHECK_POINTS",
+    "DRAWS_PER_TASK",
+    "ESTIMATORS",
+    "GOAL_SE",
+    "MAX_GOAL_SAMPLES",
+    "MAX_PARTICLES",
+    "PARTICLES_BATCH",
+    "PARTICLES_SE",
+    "Needle3DResult",
+    "PlanRow",
+    "accuracy_checks",
+    "evaluate_candidates",
+    "execute_draws",
+    "fill_rates",
+    "measure_checked",
+    "measure_plan",
+    "measure_structured",
+    "plan_needle3d",
+    "speed_ratios",
 ]

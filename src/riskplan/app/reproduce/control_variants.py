@@ -9,7 +9,7 @@ Rules, fixed before any number was seen:
 * **Plans**: per scenario, ``n_candidates`` simulator-RRT plans in the deforming tissue with
   the options of the Fig. 6 stage at the same named scale
   (:meth:`riskplan.app.reproduce.deformable.ScenarioScale.rrt_options`; the 3-D needle:
-  those of :func:`riskplan.app.reproduce.needle3d.plan_needle3d`); per case, the plan with
+  those of :func:`riskplan.tissue_planning.plan_needle3d`); per case, the plan with
   the highest LQG-MP ``P(success)`` under that case's S is the one executed (the
   selected plan, as Fig. 6's "ours"; 3-D: the truncation estimate, as the needle3d stage).
 * **Variants** on that plan: ``lqg`` (the paper's LQR + Kalman filter), ``ukf`` (the same
@@ -280,7 +280,7 @@ def _candidates(name: str, scale_name: str, n: int, seed: int):
 
 def _candidates_3d(n: int, seed: int):
     """RRT candidates of the 3-D needle, the options of
-    :func:`~riskplan.app.reproduce.needle3d.plan_needle3d`."""
+    :func:`~riskplan.tissue_planning.plan_needle3d`."""
     from riskplan.scenarios.registry import scenario_from_config
     from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
 

@@ -270,7 +270,7 @@ def _needle3d_section(rep: Report, r: dict) -> None:
     figure and the estimates against executions."""
     import html
 
-    from riskplan.app.reproduce.needle3d_checks import CHECK_POINTS
+    from riskplan.tissue_planning.needle3d_checks import CHECK_POINTS
 
     sec = rep.section("3-D needle under uncertainty (beyond the paper)")
     st = r["settings"]

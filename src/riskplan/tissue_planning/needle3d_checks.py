@@ -1,10 +1,13 @@
-"""Checks of the 3-D needle stage (:mod:`riskplan.app.reproduce.needle3d`) beside its
-estimates: the prediction with the goal test drawn instead of exact, warm repeats of the
+"""Checks of the 3-D needle's planning (:mod:`riskplan.tissue_planning.needle3d`) beside
+its estimates: the prediction with the goal test drawn instead of exact, warm repeats of the
 prediction's timing, the structured linearisation's controller against executions, and the
 executions themselves — split into tasks of consecutive draws so that 2 worker processes
 balance — with the accuracy checks the estimates are judged by (within
 :data:`CHECK_POINTS` of the closed-loop rate of all executions; inside the 95 % Wilson
-interval of the first ``n_open``) and their speed ratios."""
+interval of the first ``n_open``) and their speed ratios.
+
+``actuation_cov``, ``drawn_estimate`` and ``repeat_cpu`` are helpers of
+:func:`~riskplan.tissue_planning.needle3d.evaluate_candidates`."""
 
 from __future__ import annotations
 
@@ -18,13 +21,10 @@ __all__ = [
     "CHECK_POINTS",
     "DRAWS_PER_TASK",
     "accuracy_checks",
-    "actuation_cov",
-    "drawn_estimate",
     "execute_draws",
     "fill_rates",
     "measure_checked",
     "measure_structured",
-    "repeat_cpu",
     "speed_ratios",
 ]
 
@@ -60,7 +60,7 @@ def repeat_cpu(sim, plan, ctrl, seed, W, kw_se: dict, n: int = 2) -> list:
 
 def drawn_estimate(sim, plan, ctrl, seed, moments, c_model: float, kw_se: dict) -> dict:
     """The truncation estimate (on ``moments`` and on the linear model) with the goal test
-    drawn to :data:`~riskplan.app.reproduce.needle3d.GOAL_SE` instead of exact, for comparison: ``{"truncation": p, "n": n,
+    drawn to :data:`~riskplan.tissue_planning.needle3d.GOAL_SE` instead of exact, for comparison: ``{"truncation": p, "n": n,
     "se": s.e., "cpu_s": the prediction's CPU seconds with the draws, "linear": p}``."""
     from riskplan.control.lqgmp3d import lqgmp_3d
 
@@ -85,10 +85,28 @@ def measure_structured(sim, plan, row, *, n: int, seed=0):
     (the material step's closed form times the tissue's Jacobian, no simulator runs), its
     prediction (second-order model, truncation, exact goal test) and ``n`` closed-loop
     executions on the draws of
-    :func:`~riskplan.app.reproduce.needle3d.measure_plan`, in ``row.structured``: ``prediction``,
-    ``closed``, ``closed_ci``, ``lin_cpu_s`` (linearisation and gains), ``cpu_s`` (the
-    prediction), ``closed_cpu_s``. Returns ``row`` (a
-    :class:`~riskplan.app.reproduce.needle3d.PlanRow`)."""
+    :func:`~riskplan.tissue_planning.needle3d.measure_plan`.
+
+    Parameters
+    ----------
+    sim : riskplan.scenarios.Needle3DScenario
+        The scenario; with a case other than the actuation noise, nothing is done.
+    plan : riskplan.control.NominalPlan
+        The plan checked.
+    row : riskplan.tissue_planning.needle3d.PlanRow
+        The plan's row; ``row.structured`` is set in place.
+    n : int
+        Closed-loop executions.
+    seed : int or numpy.random.SeedSequence, optional
+        Master seed of the draws (:func:`~riskplan.parallel.spawn_seeds` ``(seed, n)``).
+
+    Returns
+    -------
+    riskplan.tissue_planning.needle3d.PlanRow
+        ``row``, with ``row.structured``: ``prediction``, ``closed``, ``closed_ci``,
+        ``lin_cpu_s`` (linearisation and gains), ``cpu_s`` (the prediction),
+        ``closed_cpu_s`` (empty for a case it does not apply to).
+    """
     from riskplan.collision import binomial_interval
     from riskplan.control.lqg import execute, lqg_controller
     from riskplan.control.lqgmp3d import lqgmp_3d
@@ -123,13 +141,25 @@ def measure_structured(sim, plan, row, *, n: int, seed=0):
 
 
 def execute_draws(args) -> dict:
-    """One task of the executions (:func:`~riskplan.app.reproduce.needle3d.measure_plan`):
-    ``args = (sim, plan, controller, seeds, n_open)``; closed-loop executions on the draws of
-    ``seeds`` (parameters and actuation from ``sim.distribution``, the sensing noise from the
-    same generator) and open-loop ones on the first ``n_open`` of them (common draws). Returns
-    ``{"closed": [...], "open": [...], "closed_cpu_s": [...]}``, per draw ``(outcome, final
-    distance of the world tip to the deformed target centre, distance of it from the plan's
-    end, both relative to that centre)`` and the closed loop's CPU seconds."""
+    """One task of the executions (:func:`~riskplan.tissue_planning.needle3d.measure_plan`):
+    closed-loop executions on the draws of ``seeds`` (parameters and actuation from
+    ``sim.distribution``, the sensing noise from the same generator) and open-loop ones on
+    the first ``n_open`` of them (common draws).
+
+    Parameters
+    ----------
+    args : tuple
+        ``(sim, plan, controller, seeds, n_open)``: the scenario, the plan, its controller,
+        the draws' seeds and the number of them also executed open loop (one argument, so
+        that it maps over worker processes).
+
+    Returns
+    -------
+    dict
+        ``{"closed": [...], "open": [...], "closed_cpu_s": [...]}``: per draw ``(outcome,
+        final distance of the world tip to the deformed target centre, distance of it from
+        the plan's end, both relative to that centre)`` and the closed loop's CPU seconds.
+    """
     from riskplan.control.lqg import execute
 
     sim, plan, controller, seeds, n_open = args
@@ -153,12 +183,30 @@ def execute_draws(args) -> dict:
 
 
 def fill_rates(row, parts: list, n_open: int):
-    """Put the tasks' executions (:func:`execute_draws`, ``parts`` in draw order) into
-    ``row`` (a :class:`~riskplan.app.reproduce.needle3d.PlanRow`): ``n``, ``closed``,
-    ``closed_ci`` over all draws; ``n_open``, ``open``, ``open_ci`` and ``closed_first``,
-    ``closed_first_ci`` over the first ``n_open`` (common draws); outcomes; the targeting
-    errors on the common draws; ``closed_cpu_s`` (all) and ``closed_first_cpu_s``. Returns
-    ``row``."""
+    """Put the tasks' executions into ``row``: ``n``, ``closed``, ``closed_ci`` over all
+    draws; ``n_open``, ``open``, ``open_ci`` and ``closed_first``, ``closed_first_ci`` over
+    the first ``n_open`` (common draws); outcomes; the targeting errors on the common draws;
+    ``closed_cpu_s`` (all) and ``closed_first_cpu_s``.
+
+    Parameters
+    ----------
+    row : riskplan.tissue_planning.needle3d.PlanRow
+        The plan's row, filled in place.
+    parts : list of dict
+        The tasks' results (:func:`execute_draws`), in draw order.
+    n_open : int
+        Draws executed open loop (the first ones).
+
+    Returns
+    -------
+    riskplan.tissue_planning.needle3d.PlanRow
+        ``row``.
+
+    Raises
+    ------
+    riskplan.errors.InvalidInputError
+        When ``parts`` hold another number of open-loop executions than ``n_open``.
+    """
     from riskplan.collision import binomial_interval
 
     closed = [r for part in parts for r in part["closed"]]
@@ -194,9 +242,27 @@ def fill_rates(row, parts: list, n_open: int):
 def accuracy_checks(
     estimates: dict, k: int, n: int, k_first: int, n_first: int, points: float = CHECK_POINTS
 ) -> dict:
-    """Each estimate against the executions: ``{method: {"error": p − k/n, "within_points":
-    |p − k/n| <= points, "inside_first": p in the 95 % Wilson interval of k_first of
-    n_first}}`` (NaN estimates: ``False``)."""
+    """Each estimate against the executions: within ``points`` of the closed-loop rate of
+    all of them, and inside the 95 % Wilson interval of the first ones.
+
+    Parameters
+    ----------
+    estimates : dict
+        Method -> predicted ``P(success)`` ``p``.
+    k, n : int
+        Successes of all closed-loop executions, and their number.
+    k_first, n_first : int
+        Successes of the first executions, and their number.
+    points : float, optional
+        The tolerance on ``|p − k/n|`` (:data:`CHECK_POINTS`).
+
+    Returns
+    -------
+    dict
+        ``{method: {"error": p − k/n, "within_points": |p − k/n| <= points,
+        "inside_first": p in the 95 % Wilson interval of k_first of n_first}}`` (NaN
+        estimates: ``False``).
+    """
     from riskplan.collision import binomial_interval
 
     lo, hi = binomial_interval(k_first, n_first)
@@ -212,9 +278,23 @@ def accuracy_checks(
 
 
 def speed_ratios(estimate_cpu_s: dict, closed_cpu_s: float, closed_first_cpu_s: float) -> dict:
-    """``{method: {"all": closed_cpu_s / cpu, "first": closed_first_cpu_s / cpu}}``: the
-    executions' CPU seconds (all of them; the first ``n_open``) over each prediction's, for
-    every method with a CPU time (numbers only: the lists of repeats are left out)."""
+    """The executions' CPU seconds (all of them; the first ``n_open``) over each prediction's.
+
+    Parameters
+    ----------
+    estimate_cpu_s : dict
+        Method -> the prediction's CPU seconds (non-numbers, such as the lists of repeats,
+        and zeros are left out).
+    closed_cpu_s : float
+        CPU seconds of all closed-loop executions.
+    closed_first_cpu_s : float
+        CPU seconds of the first ones.
+
+    Returns
+    -------
+    dict
+        ``{method: {"all": closed_cpu_s / cpu, "first": closed_first_cpu_s / cpu}}``.
+    """
     return {
         m: {"all": closed_cpu_s / c, "first": closed_first_cpu_s / c}
         for m, c in estimate_cpu_s.items()
@@ -228,7 +308,7 @@ DRAWS_PER_TASK = 1000
 
 def _task(args):
     """A worker's task: ``("draws", ...)`` executions
-    (:func:`~riskplan.app.reproduce.needle3d_checks.execute_draws`) or ``("structured",
+    (:func:`~riskplan.tissue_planning.needle3d_checks.execute_draws`) or ``("structured",
     ...)`` the structured check of one plan."""
     kind, rest = args
     if kind == "draws":
@@ -240,10 +320,37 @@ def _task(args):
 def measure_checked(sim, plans, ctrls, chosen, *, n, n_open, seed, structured, workers):
     """The executions of the ``chosen`` rows' plans, ``n`` closed-loop draws each (open loop
     and the structured check on the first ``n_open``), in tasks of :data:`DRAWS_PER_TASK`
-    draws over the workers (the heavier ones first; ``workers`` as
-    :func:`~riskplan.parallel.map_tasks`, 1: in this process); each row filled
-    (:func:`fill_rates`), checked (:func:`accuracy_checks`) and timed (:func:`speed_ratios`,
-    ``mc_s`` the wall seconds of all the executions). Returns the rows."""
+    draws over the workers (the heavier ones first); each row filled (:func:`fill_rates`),
+    checked (:func:`accuracy_checks`) and timed (:func:`speed_ratios`, ``mc_s`` the wall
+    seconds of all the executions).
+
+    Parameters
+    ----------
+    sim : riskplan.scenarios.Needle3DScenario
+        The scenario, in the frame the controllers read.
+    plans : list of riskplan.control.NominalPlan
+        All candidates (indexed by ``row.index``).
+    ctrls : list
+        Their controllers.
+    chosen : list of riskplan.tissue_planning.needle3d.PlanRow
+        The rows checked.
+    n : int
+        Closed-loop executions per plan (the same draws for every plan).
+    n_open : int
+        The first draws also executed open loop (and the structured check's).
+    seed : int or numpy.random.SeedSequence
+        Master seed of the draws (:func:`~riskplan.parallel.spawn_seeds` ``(seed, n)``).
+    structured : bool
+        Whether to run the structured check (:func:`measure_structured`).
+    workers : int or None
+        Worker processes, as :func:`~riskplan.parallel.map_tasks` takes them (1: in this
+        process).
+
+    Returns
+    -------
+    list of riskplan.tissue_planning.needle3d.PlanRow
+        The ``chosen`` rows, filled in place, in their order.
+    """
     from riskplan.parallel import map_tasks, spawn_seeds
 
     seeds = spawn_seeds(seed, n)  # the same draws for every plan

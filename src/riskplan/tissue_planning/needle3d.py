@@ -479,8 +479,8 @@ def plan_needle3d(
 def _check_ranked(sim, plans, ctrls, ranked, n, n_open, check_plans, seed, structured, workers):
     """The check of :func:`plan_needle3d`: ``check_plans`` rows evenly spaced over the
     ranking (the selected one first) executed; returns the ranking with them filled."""
+    from riskplan.tissue_planning.calibration import evenly_spaced_ranks
     from riskplan.tissue_planning.needle3d_checks import measure_checked
-    from riskplan.tissue_planning.select import evenly_spaced_ranks
 
     # the candidates are distinct plans (rrt_plans keeps a path repeated by several trees once)
     usable = [r for r in ranked if ctrls[r.index] is not None]

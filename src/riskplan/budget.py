@@ -43,7 +43,20 @@ _UNITS = {"": 1, "K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
 
 
 def parse_bytes(text, name: str = MEMORY_ENV) -> int:
-    """``"16G"``, ``"512M"``, ``"2.5T"`` or a plain number of bytes -> bytes (binary units)."""
+    """``"16G"``, ``"512M"``, ``"2.5T"`` or a plain number of bytes -> bytes (binary units).
+
+    Parameters
+    ----------
+    text : str or float
+        The size.
+    name : str
+        What it sets, for messages.
+
+    Returns
+    -------
+    int
+        Bytes (K, M, G, T are powers of 1024).
+    """
     m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*([KMGT]?)(?:i?B)?\s*", str(text))
     if not m:
         raise InvalidInputError(f"{name}: expected a size such as 16G or 512M, got {text!r}")
@@ -54,7 +67,18 @@ def parse_bytes(text, name: str = MEMORY_ENV) -> int:
 
 
 def format_bytes(n: float) -> str:
-    """``n`` bytes in the largest binary unit that keeps the number >= 1 (``"24.0 GiB"``)."""
+    """``n`` bytes in the largest binary unit that keeps the number >= 1 (``"24.0 GiB"``).
+
+    Parameters
+    ----------
+    n : float
+        Bytes.
+
+    Returns
+    -------
+    str
+        The size with its unit.
+    """
     for unit, size in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
         if n >= size:
             return f"{n / size:.3g} {unit}"
@@ -69,7 +93,13 @@ def _physical_memory() -> int | None:
 
 
 def memory_ceiling() -> int:
-    """Bytes a single request may hold (``RISKPLAN_MAX_MEMORY``, module docstring)."""
+    """Bytes a single request may hold (``RISKPLAN_MAX_MEMORY``, module docstring).
+
+    Returns
+    -------
+    int
+        Bytes: ``RISKPLAN_MAX_MEMORY``, else the default capped at half the physical memory.
+    """
     text = os.environ.get(MEMORY_ENV)
     if text:
         return parse_bytes(text)
@@ -79,7 +109,13 @@ def memory_ceiling() -> int:
 
 
 def time_ceiling() -> float:
-    """Seconds a single request may need at least (``RISKPLAN_MAX_HOURS``, module docstring)."""
+    """Seconds a single request may need at least (``RISKPLAN_MAX_HOURS``, module docstring).
+
+    Returns
+    -------
+    float
+        Seconds: ``RISKPLAN_MAX_HOURS`` × 3600, else the default.
+    """
     text = os.environ.get(TIME_ENV)
     if not text:
         return DEFAULT_HOURS * 3600.0

@@ -36,6 +36,23 @@ class                          builtin base                raised when
 
 from __future__ import annotations
 
+__all__ = [
+    "BackendUnavailableError",
+    "BudgetError",
+    "ConvergenceError",
+    "DataFormatError",
+    "ElementInversionError",
+    "InvalidInputError",
+    "MissingDependencyError",
+    "NumericalError",
+    "OutputLockedError",
+    "PlanningError",
+    "RiskplanError",
+    "RobotDescriptionError",
+    "SimulationError",
+    "require",
+]
+
 
 class RiskplanError(Exception):
     """Base class of every error raised on purpose by riskplan."""
@@ -140,7 +157,20 @@ class OutputLockedError(InvalidInputError):
 
 
 def require(module: str, extra: str):
-    """Import ``module`` or raise :class:`MissingDependencyError` naming the pip extra."""
+    """Import ``module`` or raise :class:`MissingDependencyError` naming the pip extra.
+
+    Parameters
+    ----------
+    module : str
+        The module's dotted name.
+    extra : str
+        The pip extra that installs it.
+
+    Returns
+    -------
+    module
+        The imported module.
+    """
     import importlib
 
     try:

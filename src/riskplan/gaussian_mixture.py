@@ -56,6 +56,18 @@ import numpy as np
 from riskplan._validation import as_generator, check_count
 from riskplan.errors import InvalidInputError
 
+__all__ = [
+    "FIELDS",
+    "WEIGHT_SUM_ATOL",
+    "MixtureBatch",
+    "NumpyMixture",
+    "as_numpy_mixture",
+    "check_mixture_arrays",
+    "check_point_shape",
+    "draw_components",
+    "precision_cholesky_from_covariances",
+]
+
 #: how far the weights of a mixture may sum from 1
 WEIGHT_SUM_ATOL = 1e-5
 #: the parameters' names, in the constructors' order

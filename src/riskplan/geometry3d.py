@@ -56,22 +56,70 @@ class ConvexBody:
         object.__setattr__(self, "_Ainv", np.linalg.inv(A))
 
     def local(self, points) -> np.ndarray:
-        """``s = A⁻¹ (x − c)`` for points ``(..., 3)``."""
+        """``s = A⁻¹ (x − c)`` for points ``(..., 3)``.
+
+        Parameters
+        ----------
+        points : array_like, shape (..., 3)
+            Points in the body's frame of reference.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(..., 3)`` local coordinates ``s``.
+        """
         return (np.asarray(points, dtype=np.float64) - self.centre) @ self._Ainv.T
 
     def norm(self, points) -> np.ndarray:
-        """The body's gauge of each point ``(...)``: ``≤ 1`` inside (closed)."""
+        """The body's gauge of each point ``(...)``: ``≤ 1`` inside (closed).
+
+        Parameters
+        ----------
+        points : array_like, shape (..., 3)
+            Points.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(...)``: ``|s|`` (ellipsoid) or ``max_i |s_i|`` (box).
+        """
         s = self.local(points)
         if self.kind == "ellipsoid":
             return np.sqrt(np.einsum("...i,...i->...", s, s))
         return np.abs(s).max(axis=-1)
 
     def contains(self, points) -> np.ndarray:
-        """Whether each point ``(..., 3)`` lies in the body (closed)."""
+        """Whether each point ``(..., 3)`` lies in the body (closed).
+
+        Parameters
+        ----------
+        points : array_like, shape (..., 3)
+            Points.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(...)`` bool.
+        """
         return self.norm(points) <= 1.0
 
     def support_min(self, n, a=None, M=None) -> float:
-        """``min_{s ∈ B} nᵀ (a + M s)`` (``a = centre``, ``M = A`` by default)."""
+        """``min_{s ∈ B} nᵀ (a + M s)`` (``a = centre``, ``M = A`` by default).
+
+        Parameters
+        ----------
+        n : numpy.ndarray
+            ``(3,)`` direction.
+        a : numpy.ndarray, optional
+            ``(3,)`` centre of the mapped body (default ``centre``).
+        M : numpy.ndarray, optional
+            ``(3, 3)`` map of the unit body (default ``A``).
+
+        Returns
+        -------
+        float
+            ``nᵀ a − |Mᵀ n|₂`` (ellipsoid) or ``nᵀ a − |Mᵀ n|₁`` (box).
+        """
         a = self.centre if a is None else a
         M = self.A if M is None else M
         g = M.T @ n
@@ -80,7 +128,18 @@ class ConvexBody:
 
     def surface(self, n: int = 12) -> np.ndarray:
         """Points ``(k, 3)`` on the boundary (a latitude-longitude grid of the sphere or the
-        cube mapped by ``A``), for figures."""
+        cube mapped by ``A``), for figures.
+
+        Parameters
+        ----------
+        n : int
+            Latitude rows (``2 n`` longitudes).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(2 n², 3)`` boundary points.
+        """
         u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 2 * n), np.linspace(0, np.pi, n))
         s = np.stack([np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v)], -1).reshape(-1, 3)
         if self.kind == "box":
@@ -154,7 +213,24 @@ def _nearest_box(a, M):
 def nearest_to_origin(body: ConvexBody, L: np.ndarray, mu: np.ndarray):
     """``(d, n)``: the whitened distance from ``N(mu, L Lᵀ)``'s mean to ``body`` and the unit
     normal ``n (3,)`` (whitened) of the separating half-space ``nᵀ y ≤ d``; ``(0.0, None)``
-    when the mean lies in the body."""
+    when the mean lies in the body.
+
+    Parameters
+    ----------
+    body : ConvexBody
+        The body.
+    L : numpy.ndarray
+        ``(3, 3)`` Cholesky factor of the covariance.
+    mu : numpy.ndarray
+        ``(3,)`` mean.
+
+    Returns
+    -------
+    d : float
+        Whitened distance (0 inside the body).
+    n : numpy.ndarray or None
+        ``(3,)`` whitened unit normal, None inside.
+    """
     a = np.linalg.solve(L, body.centre - mu)
     M = np.linalg.solve(L, body.A)
     y = _nearest_ellipsoid(a, M) if body.kind == "ellipsoid" else _nearest_box(a, M)

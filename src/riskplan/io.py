@@ -12,12 +12,36 @@ import os
 import tempfile
 from pathlib import Path
 
+__all__ = [
+    "atomic_path",
+    "canonical_json",
+    "check_output_file",
+    "check_output_folder",
+    "output_lock",
+    "read_file_with",
+    "read_json_object",
+    "write_json_atomic",
+    "write_text_atomic",
+]
+
 
 @contextlib.contextmanager
 def atomic_path(path, suffix: str | None = None):
     """Yield a temporary path in the target's folder; rename it onto ``path`` on success.
 
     On an exception the temporary file is removed and ``path`` is untouched.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The target file; its folder is created.
+    suffix : str, optional
+        Suffix of the temporary file (default ``.tmp``).
+
+    Yields
+    ------
+    pathlib.Path
+        The temporary path to write.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -38,7 +62,20 @@ def atomic_path(path, suffix: str | None = None):
 
 def check_output_folder(path, name: str = "out") -> Path:
     """Raise :class:`~riskplan.errors.InvalidInputError` unless ``path`` can be (or is) a folder:
-    it must not be an existing file, nor lie below one. Call before any work is done."""
+    it must not be an existing file, nor lie below one. Call before any work is done.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The folder.
+    name : str
+        The option that gave it, for messages.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     from riskplan.errors import InvalidInputError
 
     path = Path(path)
@@ -54,7 +91,20 @@ def check_output_folder(path, name: str = "out") -> Path:
 
 
 def check_output_file(path, name: str = "out") -> Path:
-    """Raise :class:`~riskplan.errors.InvalidInputError` if ``path`` is a folder or lies below a file."""
+    """Raise :class:`~riskplan.errors.InvalidInputError` if ``path`` is a folder or lies below a file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    name : str
+        The option that gave it, for messages.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     from riskplan.errors import InvalidInputError
 
     path = Path(path)
@@ -138,16 +188,47 @@ def read_file_with(path, read, what: str, *, error=None, hint: str = ""):
 
 def canonical_json(obj) -> str:
     """Deterministic JSON text of ``obj`` (sorted keys, no spaces, non-finite numbers refused):
-    the text content hashes are computed on."""
+    the text content hashes are computed on.
+
+    Parameters
+    ----------
+    obj : object
+        JSON-serialisable data with finite numbers.
+
+    Returns
+    -------
+    str
+        The text.
+    """
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
 def write_text_atomic(path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (:func:`atomic_path`).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file; its folder is created.
+    text : str
+        The content.
+    """
     with atomic_path(path) as tmp:
         tmp.write_text(text)
 
 
 def write_json_atomic(path, obj, **kwargs) -> None:
+    """Write ``obj`` as JSON (indent 2 unless given, a final newline) to ``path`` atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file; its folder is created.
+    obj : object
+        JSON-serialisable data.
+    **kwargs
+        Handed to ``json.dumps``.
+    """
     kwargs.setdefault("indent", 2)
     write_text_atomic(path, json.dumps(obj, **kwargs) + "\n")
 
@@ -169,6 +250,13 @@ def output_lock(path, what: str = "output"):
     The lock file holds the owner's process id; a lock left by a process that no longer
     exists (killed) is taken over. Raises :class:`~riskplan.errors.OutputLockedError` (an
     ``InvalidInputError``) naming the running process otherwise.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The output being written.
+    what : str
+        What it is, for messages.
     """
     from riskplan.errors import InvalidInputError, OutputLockedError
 

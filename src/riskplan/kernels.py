@@ -50,7 +50,13 @@ KERNEL_MODULES = (
 
 def kernel_dispatchers() -> dict[str, object]:
     """``{"module.function": dispatcher}`` for every numba kernel in :data:`KERNEL_MODULES`
-    (imports them)."""
+    (imports them).
+
+    Returns
+    -------
+    dict
+        Dotted name to numba dispatcher.
+    """
     from numba.core.registry import CPUDispatcher
 
     out = {}
@@ -64,7 +70,13 @@ def kernel_dispatchers() -> dict[str, object]:
 
 def cold() -> list[str]:
     """Kernels with nothing in numba's cache yet (no index file where this process looks),
-    except those numba inlines into their callers (``inline="always"``: never cached alone)."""
+    except those numba inlines into their callers (``inline="always"``: never cached alone).
+
+    Returns
+    -------
+    list of str
+        Sorted dotted names.
+    """
     return sorted(
         name
         for name, d in kernel_dispatchers().items()
@@ -220,16 +232,16 @@ def warm(
 
     Parameters
     ----------
-    progress:
+    progress : callable, optional
         Called with each area's name before it runs (``"robot"``, ``"collision"``,
         ``"geometry2d"``, ``"deformable"``, ``"tissue3d"``).
-    workers:
+    workers : int
         Processes that compile at once (``1``: in this process, one area after the other).
         The areas compile disjoint modules' kernels and numba writes each kernel's cache
         entry by itself, so with ``workers > 1`` the areas compile in a process pool (the
         robot area, about two thirds of the compile time, beside the others); this process
         then loads them from the cache when it calls them.
-    areas:
+    areas : tuple of str, optional
         The areas to warm (names in ``AREAS``); all by default.
 
     Returns

@@ -40,6 +40,22 @@ import numpy as np
 from riskplan._validation import check_workers, seed_sequence
 from riskplan.errors import BackendUnavailableError, InvalidInputError, require
 
+__all__ = [
+    "PARENT_POLL_SECONDS",
+    "RAY_CONNECT_TIMEOUT_S",
+    "TaskPool",
+    "active_pool",
+    "check_ray_address",
+    "chunk_count",
+    "chunk_size",
+    "default_workers",
+    "effective_workers",
+    "imap_tasks",
+    "map_tasks",
+    "parse_ray_address",
+    "spawn_seeds",
+]
+
 log = logging.getLogger(__name__)
 
 BACKENDS = ("serial", "local", "ray")

@@ -79,6 +79,24 @@ def parse_numbers(
     number of values required. ``integers``: values are ``int`` (integer literals only).
     ``allow_empty``: an empty or blank ``text`` gives ``[]`` (e.g. ``--head-hidden ''``, no
     hidden layers) instead of an error. Raises :class:`InvalidInputError`.
+
+    Parameters
+    ----------
+    text : str
+        The row.
+    name : str
+        The option, for messages.
+    count : int, optional
+        The number of values required.
+    integers : bool
+        Values are ``int``.
+    allow_empty : bool
+        A blank ``text`` gives ``[]``.
+
+    Returns
+    -------
+    list of float or list of int
+        The values.
     """
     kind = "integers" if integers else "numbers"
     if not isinstance(text, str):
@@ -110,6 +128,20 @@ def parse_rows(text: str, name: str, *, columns: int | None = None) -> np.ndarra
 
     Every row must have the same length (``columns`` when given). Raises
     :class:`InvalidInputError` naming ``name``.
+
+    Parameters
+    ----------
+    text : str
+        The rows.
+    name : str
+        The option, for messages.
+    columns : int, optional
+        The row length required.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(N, m)`` float64.
     """
     if not isinstance(text, str) or not text.strip():
         raise InvalidInputError(
@@ -151,6 +183,20 @@ def read_table(path, name: str, *, key: str | None = None) -> np.ndarray:
     and ``.npy``. Checks only that it holds finite numbers in a 1-D or non-empty 2-D
     table; the caller checks the shape it needs. Raises :class:`DataFormatError` naming
     ``name`` and the file (and the line, for text).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    name : str
+        The option, for messages.
+    key : str, optional
+        The entry of a JSON object or ``.npz`` file.
+
+    Returns
+    -------
+    numpy.ndarray
+        The table, float64.
     """
     path = Path(path)
     suffix = path.suffix.lower()

@@ -18,6 +18,16 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import TypeVar
 
+__all__ = [
+    "THREAD_ENV",
+    "blas_pools",
+    "blas_threads",
+    "limit_process_threads",
+    "one_blas_thread",
+    "one_torch_thread",
+    "torch_threads",
+]
+
 F = TypeVar("F", bound=Callable)
 
 _blas_pools: list | None = None
@@ -25,7 +35,13 @@ _blas_pools: list | None = None
 
 def blas_pools() -> list:
     """``threadpoolctl`` controllers of the BLAS libraries loaded by NumPy and SciPy
-    (looked up once per process; SciPy is imported first so its own OpenBLAS is seen)."""
+    (looked up once per process; SciPy is imported first so its own OpenBLAS is seen).
+
+    Returns
+    -------
+    list
+        ``threadpoolctl`` library controllers.
+    """
     global _blas_pools
     if _blas_pools is None:
         import scipy.linalg  # noqa: F401 - loads SciPy's BLAS before the lookup
@@ -38,7 +54,17 @@ def blas_pools() -> list:
 @contextmanager
 def blas_threads(limit: int = 1) -> Iterator[None]:
     """Run the block with at most ``limit`` BLAS threads per library, then restore the
-    previous counts (only pools above ``limit`` are touched; ~10 us when none is)."""
+    previous counts (only pools above ``limit`` are touched; ~10 us when none is).
+
+    Parameters
+    ----------
+    limit : int
+        Most BLAS threads per library inside the block.
+
+    Yields
+    ------
+    None
+    """
     changed = []
     for pool in blas_pools():
         n = pool.get_num_threads()
@@ -53,7 +79,18 @@ def blas_threads(limit: int = 1) -> Iterator[None]:
 
 
 def one_blas_thread(fn: F) -> F:
-    """Decorator: run ``fn`` inside ``blas_threads(1)``."""
+    """Decorator: run ``fn`` inside ``blas_threads(1)``.
+
+    Parameters
+    ----------
+    fn : callable
+        The function to wrap.
+
+    Returns
+    -------
+    callable
+        The wrapper.
+    """
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):

@@ -66,7 +66,20 @@ class CloudRisk:
 
 
 def allocate_points(weights, n: int) -> np.ndarray:
-    """Points per component ``(..., K)`` summing to ``n``: ``n w_k`` rounded by largest remainders."""
+    """Points per component ``(..., K)`` summing to ``n``: ``n w_k`` rounded by largest remainders.
+
+    Parameters
+    ----------
+    weights : array_like, shape (..., K)
+        Mixture weights, summing to 1.
+    n : int
+        Points to allocate.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(..., K)`` int64 counts.
+    """
     w = np.asarray(weights, dtype=np.float64)
     raw = w * n
     base = np.floor(raw).astype(np.int64)
@@ -91,19 +104,31 @@ def cloud_risk(
 
     Parameters
     ----------
-    mixture: ``T`` mixtures (``weights (T, K)``, ``means (T, K, 3)``, ``precision_cholesky
-        (T, K, 3, 3)``) along a trajectory, or one mixture (``T = 1``); base frame of ``environment``.
-    environment: obstacles (3-D, or 2-D with 2-D mixtures).
-    n_points: points per cloud (the point clouds the MDN learned from have 512).
-    n_clouds: clouds (executions) drawn; the same ``seed`` gives the same draws for every call
+    mixture : GaussianMixture or NumpyMixture
+        ``T`` mixtures (``weights (T, K)``, ``means (T, K, 3)``, ``precision_cholesky
+        (T, K, 3, 3)``) along a trajectory, or one mixture (``T = 1``); base frame of
+        ``environment``.
+    environment : Environment
+        Obstacles (3-D, or 2-D with 2-D mixtures).
+    n_points : int
+        Points per cloud (the point clouds the MDN learned from have 512).
+    n_clouds : int
+        Clouds (executions) drawn; the same ``seed`` gives the same draws for every call
         (common random numbers: a deterministic function of the mixtures).
-    coherence: ``ρ`` in ``[0, 1]``.
-    margin: a point counts as touching when its signed distance is below ``margin`` [m]
-        (``0``: inside).
+    coherence : float
+        ``ρ`` in ``[0, 1]``.
+    margin : float
+        A point counts as touching when its signed distance is below ``margin`` [m] (``0``:
+        inside).
+    seed : int
+        Seeds the draws.
+    validate : bool
+        Check the inputs.
 
     Returns
     -------
-    :class:`CloudRisk`.
+    CloudRisk
+        Per-configuration and trajectory fractions of colliding clouds, and the hits.
     """
     env = check_environment(environment) if validate else environment
     gm = check_mixture(mixture, env.dim, validate=validate)

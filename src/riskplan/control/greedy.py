@@ -37,7 +37,31 @@ def greedy_needle_controls(
     within ``clearance`` of a (deformed) obstacle, keep the one ending closest to the
     (deformed) goal centre, apply its first control, repeat; stop once in the goal. With
     ``depth > 0`` "in the goal" also asks for a distance to the deformed goal centre of at most
-    ``(1 − depth) · goal_radius``, so the plan ends inside the goal instead of on its edge."""
+    ``(1 − depth) · goal_radius``, so the plan ends inside the goal instead of on its edge.
+
+    Parameters
+    ----------
+    sim : NeedleScenario
+        The 2-D needle simulator.
+    params : object
+        The simulator parameters to steer on (nominal).
+    n_steps : int
+        Most steps planned.
+    clearance : float
+        Least clearance [m] to a deformed obstacle along the lookahead arc; a closer arc costs
+        ``100 (clearance − margin)``.
+    horizon : int
+        Lookahead steps of each constant-control arc.
+    speed : float
+        Insertion speed as a fraction of ``v_max``, in ``(0, 1]``.
+    depth : float
+        Fraction of the goal radius to end inside by, in ``[0, 1)``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(T, 2)`` controls ``(v, φ)`` with ``T <= n_steps``.
+    """
     lo, hi = sim.control_bounds[1]
     phis = np.linspace(lo, hi, 9)
     if not 0.0 < speed <= 1.0:
@@ -83,7 +107,27 @@ def greedy_manipulation_controls(
     (:func:`riskplan.control.linearize.control_jacobian`), take the minimum-norm increment
     (within its bounds) that moves the target up to ``max_move`` towards the goal, halve it
     while the object would touch the obstacle; stop once the target is in the goal.
-    Returns the increments ``(T, 6)``."""
+    Returns the increments ``(T, 6)``.
+
+    Parameters
+    ----------
+    sim : ManipulationScenario
+        The 2-D manipulation simulator.
+    params : object
+        The simulator parameters to steer on (nominal).
+    n_steps : int
+        Most steps planned.
+    max_move : float
+        Longest target move [m] asked of one step.
+    eps : float
+        Forward-difference step of the Jacobian as a fraction of ``f_max``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(T, 6)`` force increments, ``T <= n_steps``; ``(1, 6)`` zeros when the first step
+        finds no move.
+    """
     from riskplan.control.linearize import control_jacobian
     from riskplan.errors import ConvergenceError, ElementInversionError
 

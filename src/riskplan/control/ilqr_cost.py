@@ -250,7 +250,7 @@ def scenario_terms(
     barrier_weight: float = BARRIER_WEIGHT,
     barrier_scale: float = BARRIER_SCALE,
 ) -> dict:
-    """The goal and obstacle terms of :func:`ilqr` read from a 2-D scenario, in the reduced
+    """The goal and obstacle terms of :func:`~riskplan.control.ilqr.ilqr` read from a 2-D scenario, in the reduced
     state's coordinates as LQG-MP reads them (:mod:`riskplan.control.lqgmp`); a 3-D
     scenario (``workspace_dim = 3``) is handed to
     :func:`~riskplan.control.ilqr_cost3d.scenario_terms_3d`.
@@ -277,7 +277,7 @@ def scenario_terms(
     Returns
     -------
     dict
-        Keyword arguments of :func:`ilqr`: ``goal``, ``Q_goal``, ``obstacles``, ``points``,
+        Keyword arguments of :func:`~riskplan.control.ilqr.ilqr`: ``goal``, ``Q_goal``, ``obstacles``, ``points``,
         ``body``, ``barrier_weight``, ``barrier_scale``.
     """
     if getattr(sim, "workspace_dim", 2) == 3:

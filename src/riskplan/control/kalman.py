@@ -33,7 +33,28 @@ __all__ = ["kalman_gains", "kalman_recursion"]
 
 def kalman_recursion(A: np.ndarray, H: np.ndarray, M: np.ndarray, N: np.ndarray, P0: np.ndarray):
     """The recursion without checks: ``A (T, p, p)``, ``H (T, m, p)``, ``M (T, p, p)``,
-    ``N (T, m, m)``, ``P0 (p, p)``; returns ``(K (T, p, m), P (T, p, p))``."""
+    ``N (T, m, m)``, ``P0 (p, p)``; returns ``(K (T, p, m), P (T, p, p))``.
+
+    Parameters
+    ----------
+    A : numpy.ndarray
+        ``(T, p, p)`` state matrices.
+    H : numpy.ndarray
+        ``(T, m, p)`` observation matrices.
+    M : numpy.ndarray
+        ``(T, p, p)`` process noise covariances.
+    N : numpy.ndarray
+        ``(T, m, m)`` measurement noise covariances.
+    P0 : numpy.ndarray
+        ``(p, p)`` covariance of the initial estimate.
+
+    Returns
+    -------
+    K : numpy.ndarray
+        ``(T, p, m)`` filter gains (equations of :func:`kalman_gains`).
+    P : numpy.ndarray
+        ``(T, p, p)`` posterior covariances.
+    """
     T, p, _ = A.shape
     m = H.shape[1]
     K = np.empty((T, p, m))

@@ -123,6 +123,16 @@ def point_indices(sim) -> tuple[np.ndarray, np.ndarray]:
     From ``sim.collision_point_indices`` / ``sim.goal_point_indices`` when the scenario
     defines them (manipulation: the sensed boundary points / the target), else ``x[:2]``
     for both (the needle's position).
+
+    Parameters
+    ----------
+    sim : Simulator
+        The scenario (its optional point-index attributes and ``state_dim``).
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``collision (k, 2)`` and ``goal (2,)`` int64 indices into the reduced state.
     """
     col = np.asarray(getattr(sim, "collision_point_indices", ((0, 1),)), dtype=np.int64).reshape(
         -1, 2
@@ -148,10 +158,25 @@ def body_points(sim, plan: NominalPlan, t: int, col: np.ndarray):
     ``(base, a, b, lam)`` for the nominal state ``y*_t``: the points of the body's outline
     (a closed polygon, in order), each moving with an interpolation of the deviations of
     two collision points. Then ``outline = True`` and LQG-MP also checks the outline's edges
-    (module docstring). The manipulation declares its deformed boundary nodes, each
-    interpolated by arc length between the two sensed points around it: its 12 sensed
-    points are about 0.28 apart, wider than the obstacle (0.14), so the points alone call
-    an outline that wraps round an obstacle corner free.
+    (module docstring). The manipulation declares its deformed boundary nodes, each interpolated
+    by arc length between the two sensed points around it (its 12 sensed points are 0.28 apart,
+    wider than the 0.14 obstacle: alone they call free an outline round an obstacle corner).
+
+    Parameters
+    ----------
+    sim : Simulator
+        The scenario (its optional ``collision_outline``).
+    plan : NominalPlan
+        The nominal plan.
+    t : int
+        The step.
+    col : numpy.ndarray
+        ``(k, 2)`` collision point indices (:func:`point_indices`).
+
+    Returns
+    -------
+    tuple
+        ``(base (n, 2), a (n,), b (n,), lam (n,), outline: bool)``.
     """
     hook = getattr(sim, "collision_outline", None)
     k = len(col)
@@ -225,9 +250,20 @@ def _outline_meets(polys, ring) -> bool:
 
 
 def polygon_environment(polygons):
-    """A 2-D :class:`~riskplan.collision.Environment` from simple polygons ``[(k_i, 2)]``,
-    built without the self-intersection check (``Environment.from_polygons(validate=False)``):
-    the scenarios' deformed polygons stay simple, and this runs once per plan step."""
+    """A 2-D :class:`~riskplan.collision.Environment` from simple polygons, without the
+    self-intersection check (``Environment.from_polygons(validate=False)``): the scenarios'
+    deformed polygons stay simple, and this runs once per plan step.
+
+    Parameters
+    ----------
+    polygons : sequence of array_like
+        Simple polygons ``(k_i, 2)``.
+
+    Returns
+    -------
+    Environment
+        The 2-D environment of the polygons.
+    """
     from riskplan.collision import Environment
 
     return Environment.from_polygons(polygons, validate=False)

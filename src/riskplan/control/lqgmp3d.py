@@ -129,29 +129,46 @@ def lqgmp_3d(
     goal: str = "exact",
 ) -> LQGMPResult:
     """LQG-MP ``P(success)`` of ``plan`` under ``controller`` against 3-D convex obstacles
-    (module docstring). ``sim`` provides ``obstacles(state)`` and ``goal(state)`` as
-    :class:`~riskplan.geometry3d.ConvexBody` (``state_obstacles`` / ``state_goal`` in the
-    reduced state's coordinates where it has them: the needle's material frame) and ``goal_point_indices`` (3 indices of x, the
-    position; also the collision point). Arguments as :func:`riskplan.control.lqgmp.lqgmp`;
-    ``goal_motion``: the target moves with the final state where ``sim`` has
-    ``goal_jacobian`` (module docstring); ``moments``: a
-    :class:`~riskplan.control.lqgmp3d_moments.SecondOrderModel` of this plan and controller
-    to run the methods on instead of the linear model (``drift`` and ``goal_motion`` then
-    do not apply: the model carries its own mean and moving target).
+    (module docstring).
 
-    ``goal_se``: the goal test's precision instead of a count (not for ``"sampling"``, whose
-    draws are whole trajectories): batches of ``n_goal_samples`` final positions are drawn
-    until ``sqrt(p̃(1 − p̃)/n) <= goal_se`` or ``n >= max_goal_samples``, with
-    ``p̃ = (k + 1)/(n + 2)`` for ``k`` of ``n`` draws in the target (the Laplace estimate, so
-    a first batch with no miss does not read as a standard error of 0). The estimate stays
-    ``k/n``; ``n`` and the standard error of ``p_success`` come back in the result.
+    Parameters
+    ----------
+    sim : Simulator
+        ``obstacles(state)`` and ``goal(state)`` as :class:`~riskplan.geometry3d.ConvexBody`
+        (``state_obstacles`` / ``state_goal`` in the reduced state's coordinates where it has
+        them: the needle's material frame) and ``goal_point_indices`` (3 indices of x, the
+        position; also the collision point).
+    plan, controller, method, n_goal_samples, cutoff, drift, seed
+        As :func:`riskplan.control.lqgmp.lqgmp`.
+    goal_motion : bool
+        The target moves with the final state where ``sim`` has ``goal_jacobian``.
+    moments : SecondOrderModel, optional
+        A :class:`~riskplan.control.lqgmp3d_moments.SecondOrderModel` of this plan and
+        controller to run the methods on instead of the linear model (``drift`` and
+        ``goal_motion`` then do not apply: the model carries its own mean and moving target).
+    goal_se : float, optional
+        The goal test's precision instead of a count (not for ``"sampling"``, whose draws are
+        whole trajectories): batches of ``n_goal_samples`` final positions are drawn until
+        ``sqrt(p̃(1 − p̃)/n) <= goal_se`` or ``n >= max_goal_samples``, with
+        ``p̃ = (k + 1)/(n + 2)`` for ``k`` of ``n`` draws in the target (the Laplace estimate,
+        so a first batch with no miss does not read as a standard error of 0). The estimate
+        stays ``k/n``.
+    max_goal_samples : int
+        Most goal draws with ``goal_se``.
+    goal : {"exact", "draws"}
+        Not for ``"sampling"`` (its trajectories are its goal test). ``"exact"``: the
+        probability of the final position's Gaussian in the target by quadrature
+        (:func:`~riskplan.control.lqgmp3d_goal.gaussian_in_ellipsoid`) where the target is an
+        ellipsoid (every target of the 3-D needle), with ``n_goal_samples`` 0 and
+        ``p_success_se`` ``p_free`` times its error bound; another target, or ``"draws"``,
+        takes the draws of ``goal_se``.
 
-    ``goal`` (not for ``"sampling"``, whose trajectories are its goal test): ``"exact"``, the
-    default, the probability of the final position's Gaussian in the target by quadrature
-    (:func:`~riskplan.control.lqgmp3d_goal.gaussian_in_ellipsoid`) where the target is an
-    ellipsoid (every target of the 3-D needle), with ``n_goal_samples`` 0 and ``p_success_se``
-    ``p_free`` times its error bound in the result; another target, or ``"draws"``, takes
-    the draws above (the result's ``goal_test`` says which ran)."""
+    Returns
+    -------
+    LQGMPResult
+        ``p_success`` and its factors per step, the distributions, ``n_goal_samples``,
+        ``p_success_se`` and ``goal_test`` (which test ran).
+    """
     from riskplan.collision import DEFAULT_CUTOFF
 
     cutoff = DEFAULT_CUTOFF if cutoff is None else float(cutoff)
@@ -171,44 +188,12 @@ def lqgmp_3d(
     mu = np.zeros(n2)
     S = cov[0].copy()
     free = np.ones(T)
-    k3 = chi2(3)
     for t in range(T):
         mu = model.F[t] @ mu + model.c[t]
         S = model.F[t] @ S @ model.F[t].T + model.Q[t]
         S = 0.5 * (S + S.T)
         _check_propagation(mu[None], S[None], t + 1)
-        y = plan.states[t + 1]
-        bodies = _obstacles(sim, y)
-        P, R = model.P[t], model.resid[t]
-        centre = plan.reduced[t + 1][pos] + model.offset[t] + P @ mu
-        Sp = P @ S @ P.T + R
-        if not bodies:
-            mean[t + 1], cov[t + 1] = mu, S
-            continue
-        if any(bool(b.contains(centre)) for b in bodies):
-            free[t] = 0.0
-            mean[t + 1], cov[t + 1] = mu, S
-            continue
-        ev = np.linalg.eigvalsh(Sp)
-        if ev[-1] <= _TINY:
-            mean[t + 1], cov[t + 1] = mu, S  # a deterministic point outside every obstacle
-            continue
-        if ev[0] <= 1e-12 * ev[-1]:
-            # near-singular (e.g. the force case: the tissue's offset of the tip only scales
-            # with f_int, a rank-1 spread): a jitter of 1e-9 of the largest variance, as the
-            # 2-D sigma method does; the spread direction keeps its distances
-            Sp = Sp + 1e-9 * ev[-1] * np.eye(3)
-        L = np.linalg.cholesky(Sp)
-        found = _nearest(bodies, L, centre, None if method == "sigma" else cutoff)
-        if method == "sigma":
-            c = min(d for d, _ in found)
-            free[t] = float(k3.cdf(c * c))
-        else:
-            chosen = _half_spaces(bodies, found, L, centre, cutoff)
-            p_t = sum(float(ndtr(-d)) for _, d in chosen)
-            if method == "truncation" and chosen:
-                mu, S = _truncate_step(mu, S, P, R, model.cross[t], L, chosen)
-            free[t] = 1.0 - min(1.0, p_t)
+        free[t], mu, S = _step_free(sim, plan, model, pos, method, cutoff, t, mu, S)
         mean[t + 1], cov[t + 1] = mu, S
     _check_propagation(mean, cov)
     p_free = float(np.prod(free))
@@ -230,6 +215,38 @@ def lqgmp_3d(
         p_success_se=p_free * err,
         goal_test=used,
     )
+
+
+def _step_free(sim, plan, model, pos, method, cutoff, t, mu, S):
+    """The factor ``P(free at step t + 1)`` of :func:`lqgmp_3d` and the joint moments after it
+    (truncated with ``"truncation"``)."""
+    y = plan.states[t + 1]
+    bodies = _obstacles(sim, y)
+    P, R = model.P[t], model.resid[t]
+    centre = plan.reduced[t + 1][pos] + model.offset[t] + P @ mu
+    Sp = P @ S @ P.T + R
+    if not bodies:
+        return 1.0, mu, S
+    if any(bool(b.contains(centre)) for b in bodies):
+        return 0.0, mu, S
+    ev = np.linalg.eigvalsh(Sp)
+    if ev[-1] <= _TINY:
+        return 1.0, mu, S  # a deterministic point outside every obstacle
+    if ev[0] <= 1e-12 * ev[-1]:
+        # near-singular (e.g. the force case: the tissue's offset of the tip only scales
+        # with f_int, a rank-1 spread): a jitter of 1e-9 of the largest variance, as the
+        # 2-D sigma method does; the spread direction keeps its distances
+        Sp = Sp + 1e-9 * ev[-1] * np.eye(3)
+    L = np.linalg.cholesky(Sp)
+    found = _nearest(bodies, L, centre, None if method == "sigma" else cutoff)
+    if method == "sigma":
+        c = min(d for d, _ in found)
+        return float(chi2(3).cdf(c * c)), mu, S
+    chosen = _half_spaces(bodies, found, L, centre, cutoff)
+    p_t = sum(float(ndtr(-d)) for _, d in chosen)
+    if method == "truncation" and chosen:
+        mu, S = _truncate_step(mu, S, P, R, model.cross[t], L, chosen)
+    return 1.0 - min(1.0, p_t), mu, S
 
 
 def binomial_se(k: int, n: int) -> float:

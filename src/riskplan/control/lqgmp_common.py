@@ -73,7 +73,25 @@ def joint_covariances(
     ``G (d̄, 0) (T, 2n)`` of the recursion (zero unless ``drift``; then ``M − d̄ d̄ᵀ``
     replaces the second moment ``M``), for the controller's model
     (:meth:`~riskplan.control.lqg.LQGController.model`: ``n = p``, or ``p + q`` with the
-    disturbance state)."""
+    disturbance state).
+
+    Parameters
+    ----------
+    ctrl : LQGController
+        The controller (its model, ``L`` and ``K``).
+    drift : bool
+        Carry the mean one-step deviation ``lin.drift`` (not for a disturbance-state
+        controller).
+
+    Returns
+    -------
+    F : numpy.ndarray
+        ``(T, 2n, 2n)`` transition of the joint state ``(x_t, x̂_t)``.
+    noise : numpy.ndarray
+        ``(T, 2n, 2n)``, ``G diag(M, N) Gᵀ``.
+    mean_input : numpy.ndarray
+        ``(T, 2n)``, ``G (d̄, 0)``.
+    """
     lin = ctrl.lin
     if drift and ctrl.disturbance:
         raise InvalidInputError(

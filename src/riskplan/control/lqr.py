@@ -27,7 +27,28 @@ __all__ = ["lqr_gains", "lqr_recursion"]
 
 def lqr_recursion(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, Q_final: np.ndarray):
     """The recursion without checks: ``A (T, p, p)``, ``B (T, p, q)``, ``Q (T, p, p)``, ``R (T, q, q)``,
-    ``Q_final (p, p)``; returns ``(L (T, q, p), S (T + 1, p, p))`` with ``S[t]`` the cost-to-go matrix."""
+    ``Q_final (p, p)``; returns ``(L (T, q, p), S (T + 1, p, p))`` with ``S[t]`` the cost-to-go matrix.
+
+    Parameters
+    ----------
+    A : numpy.ndarray
+        ``(T, p, p)`` state matrices.
+    B : numpy.ndarray
+        ``(T, p, q)`` control matrices.
+    Q : numpy.ndarray
+        ``(T, p, p)`` state costs.
+    R : numpy.ndarray
+        ``(T, q, q)`` control costs.
+    Q_final : numpy.ndarray
+        ``(p, p)`` final state cost.
+
+    Returns
+    -------
+    L : numpy.ndarray
+        ``(T, q, p)`` feedback gains, ``u_t = L_t x_t`` (equations of :func:`lqr_gains`).
+    S : numpy.ndarray
+        ``(T + 1, p, p)`` cost-to-go matrices, ``S[T] = Q_final``.
+    """
     T, p, q = B.shape
     L = np.empty((T, q, p))
     S = np.empty((T + 1, p, p))

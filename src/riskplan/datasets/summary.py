@@ -14,16 +14,25 @@ __all__ = ["over_max_tension", "summarize"]
 def over_max_tension(tensions, tension_limits, done=None) -> dict:
     """Arrivals whose tendon tensions exceed ``max_tension``: counts and indices.
 
+    An arrival ``(c, s)`` is over the limit when ``tensions[c, s, j] > tension_limits[j]
+    (1 + 1e-9)`` for some tendon ``j``.
+
     Parameters
     ----------
-    tensions: ``(C, S, m)`` arrival tensions [N]; tension_limits: ``(m,)`` [N];
-    done: ``(C,)`` bool, the targets to count (default all).
+    tensions : array_like, shape (C, S, m)
+        Arrival tensions [N] of ``C`` targets, ``S`` arrivals each, ``m`` tendons.
+    tension_limits : array_like, shape (m,)
+        Each tendon's ``max_tension`` [N].
+    done : array_like of bool, shape (C,), optional
+        The targets to count (default all).
 
     Returns
     -------
-    ``{"arrivals": n, "of": N, "fraction": n / N, "targets": [i, ...] (targets with at least
-    one such arrival, ascending), "per_tendon": [n_j, ...] (arrivals over the limit of
-    tendon j)}``.
+    dict
+        ``arrivals`` (n, the arrivals over a limit), ``of`` (N, the arrivals counted),
+        ``fraction`` (n / N, 0 when N is 0), ``targets`` (ascending indices of the targets with
+        at least one such arrival) and ``per_tendon`` (per tendon ``j``, the arrivals over its
+        limit).
     """
     tau = np.asarray(tensions, dtype=np.float64)
     C = tau.shape[0]

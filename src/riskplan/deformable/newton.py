@@ -59,7 +59,24 @@ def stable_norm(x: np.ndarray) -> float:
 def line_search_failure(raise_inverted, J_bad, residual: float, iterations: int):
     """What a Newton line search that found no acceptable step ends in: ``raise_inverted``
     raises for the inverted elements of its last trial (``J_bad``, ``None`` if none
-    inverted), else the :class:`~riskplan.errors.ConvergenceError` returned here is raised."""
+    inverted), else the :class:`~riskplan.errors.ConvergenceError` returned here is raised.
+
+    Parameters
+    ----------
+    raise_inverted : callable
+        ``raise_inverted(J_bad, context)`` raises for inverted elements.
+    J_bad : numpy.ndarray or None
+        ``(E,)`` det F per element of the last trial (some <= 0), or None.
+    residual : float
+        The last residual norm.
+    iterations : int
+        Newton iterations run.
+
+    Returns
+    -------
+    ConvergenceError
+        The error to raise.
+    """
     if J_bad is not None:
         raise_inverted(J_bad, " in every line-search trial")
     return ConvergenceError(

@@ -62,7 +62,7 @@ def factor_reduced(pattern, Ke_flat: np.ndarray, linear: bool = False):
     Returns
     -------
     callable
-        A :class:`~riskplan.deformable.banded.BandedCholeskySolver` (or an LU solve).
+        A ``banded.BandedCholeskySolver`` (or an LU solve).
     """
     import scipy.linalg
 

@@ -46,7 +46,18 @@ STAGES = ("dataset", "training", "evaluation")
 
 def cache_root(cache=None) -> Path:
     """The model cache folder: ``cache`` if given, else ``$RISKPLAN_CACHE/models``, else
-    ``$XDG_CACHE_HOME/riskplan/models`` (default ``~/.cache/riskplan/models``)."""
+    ``$XDG_CACHE_HOME/riskplan/models`` (default ``~/.cache/riskplan/models``).
+
+    Parameters
+    ----------
+    cache : str or pathlib.Path, optional
+        An explicit folder.
+
+    Returns
+    -------
+    pathlib.Path
+        The folder (not created).
+    """
     if cache is not None:
         return Path(cache)
     env = os.environ.get("RISKPLAN_CACHE")
@@ -60,6 +71,16 @@ def robot_hash(robot) -> str:
     """SHA-256 (hex) of the robot's canonical parameters (name left out).
 
     Two files that describe the same robot (the lab's layouts, riskplan's own) hash alike.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+
+    Returns
+    -------
+    str
+        64 hex digits.
     """
     from riskplan.robots.params import params_to_dict
 
@@ -70,7 +91,22 @@ def robot_hash(robot) -> str:
 
 
 def build_key(protocol, train_config, seed: int) -> str:
-    """First 16 hex digits of the SHA-256 of the protocol JSON, the training settings and the seed."""
+    """First 16 hex digits of the SHA-256 of the protocol JSON, the training settings and the seed.
+
+    Parameters
+    ----------
+    protocol : Protocol
+        The data-set protocol.
+    train_config : TrainConfig
+        The training settings.
+    seed : int
+        The build's seed.
+
+    Returns
+    -------
+    str
+        16 hex digits.
+    """
     doc = {
         "protocol": json.loads(protocol.to_json()),
         "train": train_config.to_json(),
@@ -86,7 +122,7 @@ class ModelBuild:
 
     ``cached``: True when a finished build was found (nothing computed). ``timings``: seconds
     per stage of this call (``dataset``, ``training``, ``evaluation``; empty on a cache hit).
-    ``evaluation``: the test-split figures (:meth:`Evaluation.to_json`).
+    ``evaluation``: the test-split figures (``Evaluation.to_json``).
     """
 
     model: object

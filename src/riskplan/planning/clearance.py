@@ -85,6 +85,26 @@ def disk_clearance(
     ``sd(centre) - sqrt(R^2 + t^2/4)``); otherwise the signed distance is evaluated on
     rings ``resolution`` apart over the flat disk and the clearance is ``min sd - t/2`` (negative:
     the disk enters an obstacle; penetrations shallower than about ``resolution / 2`` can be missed).
+
+    Parameters
+    ----------
+    environment : Environment
+        Obstacles in the robot's base frame.
+    s : array_like, shape (n,)
+        Arc lengths [m] of the backbone stations.
+    positions : array_like, shape (..., n, 3)
+        Backbone positions [m].
+    rotations : array_like, shape (..., n, 3, 3)
+        Backbone frames.
+    body : BodyGeometry
+        The disks' arc lengths, radius and thickness.
+    resolution : float
+        Ring spacing [m] of the evaluation over a disk.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(...,)`` least clearance [m] of a disk per backbone (negative: in collision).
     """
     from riskplan.robots.geometry import interpolate_frames
 

@@ -200,7 +200,18 @@ def problem_environment(problem, *, check_units: bool = True, voxels: str = "aut
 
 def problem_configurations(problem) -> tuple[np.ndarray, np.ndarray]:
     """Start and goal of ``problem`` as model inputs ``(n_config,)``: tendon displacements
-    (converted from the file's tensions through the robot model), then rotation and retraction."""
+    (converted from the file's tensions through the robot model), then rotation and retraction.
+
+    Parameters
+    ----------
+    problem : Problem
+        The planning problem.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``(start, goal)``, each ``(n_config,)``.
+    """
     m = problem.robot.n_tendons
     return tuple(
         np.concatenate([np.asarray(d, dtype=np.float64), np.asarray(q[m:], dtype=np.float64)])
@@ -216,7 +227,24 @@ def problem_from_options(robot, env, start, goal):
     :class:`~riskplan.robots.TendonRobot`), a mesh file (robot base frame, m) and start/goal in
     tension form, each ``"T1,...,Tm[,rotation][,retraction]"`` or an ``(n_config,)`` array
     (``goal`` may be ``None`` for a tip target). Checked like a problem file: tension,
-    rotation and retraction limits, the mesh present; errors name the option."""
+    rotation and retraction limits, the mesh present; errors name the option.
+
+    Parameters
+    ----------
+    robot : str, pathlib.Path or TendonRobot
+        A packaged robot's name, a robot file or a robot.
+    env : str or pathlib.Path
+        The mesh file.
+    start : str or array_like
+        Start configuration, tension form.
+    goal : str, array_like or None
+        Goal configuration, tension form; None for a tip target.
+
+    Returns
+    -------
+    Problem
+        The checked problem.
+    """
     from pathlib import Path
 
     from riskplan.parsing import parse_numbers

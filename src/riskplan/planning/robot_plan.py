@@ -109,12 +109,50 @@ class ScaledModel:
         self.robot = getattr(model, "robot", None)
 
     def to_model(self, y) -> np.ndarray:
+        """Model inputs ``x = y / weights``.
+
+        Parameters
+        ----------
+        y : array_like, shape (..., n_inputs)
+            Planning coordinates.
+
+        Returns
+        -------
+        numpy.ndarray
+            Model inputs, same shape.
+        """
         return np.asarray(y, dtype=np.float64) / self.weights
 
     def to_planning(self, x) -> np.ndarray:
+        """Planning coordinates ``y = weights * x``.
+
+        Parameters
+        ----------
+        x : array_like, shape (..., n_inputs)
+            Model inputs.
+
+        Returns
+        -------
+        numpy.ndarray
+            Planning coordinates, same shape.
+        """
         return np.asarray(x, dtype=np.float64) * self.weights
 
     def predict(self, y, *args, **kwargs):
+        """The model's prediction at planning coordinates ``y``, clipped into the box.
+
+        Parameters
+        ----------
+        y : array_like, shape (..., n_inputs)
+            Planning coordinates.
+        *args, **kwargs
+            Handed to ``model.predict``.
+
+        Returns
+        -------
+        GaussianMixture
+            What ``model.predict`` returns.
+        """
         # exact at the box's faces: y / w * w may differ from x by an ulp
         x = np.clip(self.to_model(y), self.box[:, 0], self.box[:, 1])
         return self.model.predict(x, *args, **kwargs)
@@ -123,7 +161,20 @@ class ScaledModel:
 def configuration_weights(robot, n_inputs: int) -> np.ndarray:
     """``(n_inputs,)`` planning weights (module docs): 1 per tendon and for retraction, the
     robot's length (m/rad) for rotation. All ones for a robot without base motion or
-    ``robot=None``."""
+    ``robot=None``.
+
+    Parameters
+    ----------
+    robot : TendonRobot or None
+        The robot.
+    n_inputs : int
+        The model's inputs.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(n_inputs,)`` weights.
+    """
     w = np.ones(int(n_inputs))
     if robot is None:
         return w
@@ -161,8 +212,24 @@ def check_plan_budget(
     work, naming the option: the roadmap (``--milestones``; its motion checks at
     ``--resolution``, a motion about the typical neighbour distance ``diag / n^(1/m)`` long),
     the trajectory (``--step``; estimated for a path across the displacement box's diagonal),
-    the optimiser (:func:`~riskplan.planning.bo_checks.check_optimiser_budget`) and the validation
-    (``--executions`` of the nominal and the optimised trajectory on the robot)."""
+    the optimiser (``bo_checks.check_optimiser_budget``) and the validation
+    (``--executions`` of the nominal and the optimised trajectory on the robot).
+
+    Parameters
+    ----------
+    limits : array_like, shape (n_config, 2)
+        The configuration box.
+    n_milestones : int
+        Roadmap milestones.
+    step : float
+        Trajectory step.
+    resolution : float
+        Motion-check resolution.
+    optimiser : OptimiserConfig
+        The optimiser's settings.
+    executions : int
+        Validation executions.
+    """
     from riskplan.budget import check_budget
     from riskplan.planning.bo_checks import MOTION_STATE_BYTES, check_optimiser_budget
 

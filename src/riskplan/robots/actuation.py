@@ -33,7 +33,20 @@ BATCH_KERNEL_MIN = 8
 
 
 def tensions_for_displacements(robot, flat: np.ndarray) -> np.ndarray:
-    """Tensions ``(B, m)`` [N] that realise the displacements ``flat (B, m)`` [m]."""
+    """Tensions ``(B, m)`` [N] that realise the displacements ``flat (B, m)`` [m].
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    flat : numpy.ndarray
+        ``(B, m)`` tendon displacements [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(B, m)`` tensions [N].
+    """
     B, m = flat.shape
     if robot.loaded:
         return (
@@ -48,7 +61,24 @@ def shapes_for_displacements(robot, flat: np.ndarray) -> tuple[np.ndarray, np.nd
     """Tensions ``(B, m)`` [N] that realise the displacements ``flat (B, m)`` [m] of a robot
     without external loads, and the shapes they hold: positions ``(B, n, 3)`` [m] and frames
     ``(B, n, 3, 3)``, base frame, integrated from the strains of the solve's last length pass
-    (:func:`cosserat.solve_displacement_tensions`), so no shape kernel runs."""
+    (:func:`cosserat.solve_displacement_tensions`), so no shape kernel runs.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        A robot without external loads.
+    flat : numpy.ndarray
+        ``(B, m)`` tendon displacements [m].
+
+    Returns
+    -------
+    tau : numpy.ndarray
+        ``(B, m)`` tensions [N].
+    positions : numpy.ndarray
+        ``(B, n, 3)`` [m], base frame.
+    frames : numpy.ndarray
+        ``(B, n, 3, 3)``, base frame.
+    """
     tau, P, Rs = _solve_free_displacements(robot, flat)
     if not np.isfinite(P).all():  # never hand out NaN silently
         b = int(np.flatnonzero(~np.isfinite(P).reshape(P.shape[0], -1).all(-1))[0])
@@ -121,7 +151,20 @@ def _displacement_tensions(robot, d, tau0, tau, info, xs) -> int:
 
 
 def tendon_lengths(robot, flat: np.ndarray) -> np.ndarray:
-    """Tendon path lengths ``(B, m)`` [m] at the tensions ``flat (B, m)`` [N]."""
+    """Tendon path lengths ``(B, m)`` [m] at the tensions ``flat (B, m)`` [N].
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    flat : numpy.ndarray
+        ``(B, m)`` tensions [N].
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(B, m)`` tendon path lengths [m].
+    """
     m = robot.n_tendons
     out = np.empty(flat.shape)
     for b in range(flat.shape[0]):
@@ -142,7 +185,20 @@ def tendon_lengths(robot, flat: np.ndarray) -> np.ndarray:
 def local_failure_error(robot, tau) -> ConvergenceError:
     """The error for a failed local strain solve (eqs. 2-3) of the unloaded rod at tensions
     ``tau (m,)``, naming the first node where a plain Newton re-solve stops and its scaled
-    residual ``max |F_a / K_aa|``."""
+    residual ``max |F_a / K_aa|``.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    tau : array_like, shape (m,)
+        The tensions [N] whose solve failed.
+
+    Returns
+    -------
+    ConvergenceError
+        The error to raise.
+    """
     tau = np.ascontiguousarray(tau, dtype=np.float64)
     F, J, rhs, zero = np.empty(6), np.empty((6, 6)), np.empty((6, 1)), np.zeros(3)
     x = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
@@ -169,7 +225,22 @@ def local_failure_error(robot, tau) -> ConvergenceError:
 
 def solve_single_free(robot, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """One configuration ``tau (m,)`` [N] without external loads: the scalar kernel, no batch
-    bookkeeping; positions ``(n, 3)`` [m] and frames ``(n, 3, 3)``, base frame."""
+    bookkeeping; positions ``(n, 3)`` [m] and frames ``(n, 3, 3)``, base frame.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        A robot without external loads.
+    tau : numpy.ndarray
+        ``(m,)`` tensions [N].
+
+    Returns
+    -------
+    positions : numpy.ndarray
+        ``(n, 3)`` [m], base frame.
+    frames : numpy.ndarray
+        ``(n, 3, 3)``, base frame.
+    """
     n, m = robot._n + 1, robot.n_tendons
     P = np.empty((n, 3))
     Rs = np.empty((n, 3, 3))
@@ -189,7 +260,22 @@ def solve_batch(robot, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ``(B, n, 3, 3)``, base frame. Without gravity batches of ``BATCH_KERNEL_MIN`` or more go
     through the SIMD kernel (:mod:`riskplan.robots.batch_kernel`, the same results), one
     configuration through the scalar kernel, others through the batched loop; with gravity,
-    shooting per configuration."""
+    shooting per configuration.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    flat : numpy.ndarray
+        ``(B, m)`` tensions [N].
+
+    Returns
+    -------
+    positions : numpy.ndarray
+        ``(B, n, 3)`` [m], base frame.
+    frames : numpy.ndarray
+        ``(B, n, 3, 3)``, base frame.
+    """
     B, n, m = flat.shape[0], robot._n + 1, robot.n_tendons
     P = np.empty((B, n, 3))
     Rs = np.empty((B, n, 3, 3))

@@ -401,6 +401,24 @@ def solve_tensions_batch(robot, tensions, *, parallel: bool | None = None, valid
     ``parallel``: split the chunks over numba's threads (default: when more than one thread is
     set). Raises :class:`InvalidInputError` for bad tensions or a robot with gravity on and
     :class:`ConvergenceError` if a configuration fails in the scalar kernel too.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        A robot with gravity off.
+    tensions : array_like, shape (B, m)
+        Tensions [N].
+    parallel : bool, optional
+        Split the chunks over numba's threads.
+    validate : bool
+        Check the tensions' range.
+
+    Returns
+    -------
+    positions : numpy.ndarray
+        ``(B, n + 1, 3)`` [m], base frame.
+    rotations : numpy.ndarray
+        ``(B, n + 1, 3, 3)``, columns the body axes.
     """
     if robot.loaded:
         raise InvalidInputError(

@@ -53,6 +53,16 @@ def read_robot_text(path: str | Path) -> str:
 
     Raises :class:`RobotDescriptionError` naming the file if it cannot be read or is not
     valid UTF-8.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The robot TOML file.
+
+    Returns
+    -------
+    str
+        Its text.
     """
     p = Path(path)
     try:
@@ -66,7 +76,20 @@ def read_robot_text(path: str | Path) -> str:
 
 
 def load_robot_params(path: str | Path) -> tuple[RobotParams, str]:
-    """Read a robot TOML file (UTF-8); returns ``(params, text)``."""
+    """Read a robot TOML file (UTF-8); returns ``(params, text)``.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The robot TOML file; its stem names a robot whose document gives no name.
+
+    Returns
+    -------
+    params : RobotParams
+        The parsed, validated parameters (:func:`parse_robot_toml`).
+    text : str
+        The file's text.
+    """
     p = Path(path)
     text = read_robot_text(p)
     return parse_robot_toml(text, default_name=p.stem), text

@@ -56,6 +56,20 @@ def play_operator(engaged, path, play) -> np.ndarray:
 
     ``e_t = min(max(e_{t-1}, c_t - b), c_t + b)`` for t = 1..T; returns ``e_T`` (a new array,
     also for an empty path).
+
+    Parameters
+    ----------
+    engaged : array_like, shape (..., m)
+        Engaged positions ``e_0`` [m].
+    path : array_like, shape (..., T, m)
+        Commanded displacements ``c_t`` [m].
+    play : array_like, shape (..., m)
+        Half-widths ``b`` of the play [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        ``e_T``, shape ``(..., m)``.
     """
     e = np.array(engaged, dtype=np.float64)
     c = np.asarray(path, dtype=np.float64)
@@ -109,7 +123,18 @@ class HysteresisModel:
         return self.robot.n_tendons
 
     def initial_state(self, displacements=None) -> HysteresisState:
-        """State at rest at ``displacements (..., m)`` (default zeros), with no lag."""
+        """State at rest at ``displacements (..., m)`` (default zeros), with no lag.
+
+        Parameters
+        ----------
+        displacements : array_like, shape (..., m), optional
+            Rest displacements [m] within the robot's limits.
+
+        Returns
+        -------
+        HysteresisState
+            Engaged at those displacements.
+        """
         m = self.n_tendons
         if displacements is None:
             return HysteresisState(np.zeros(m))
@@ -118,7 +143,22 @@ class HysteresisModel:
         return HysteresisState(d.copy())
 
     def sample_run(self, rng, batch_shape=()) -> tuple[np.ndarray, np.ndarray]:
-        """Per-run parameters ``(play (..., m), offset (..., m))`` drawn from ``rng`` (seed or Generator)."""
+        """Per-run parameters ``(play (..., m), offset (..., m))`` drawn from ``rng`` (seed or Generator).
+
+        Parameters
+        ----------
+        rng : int, numpy.random.Generator or None
+            Seed or generator.
+        batch_shape : tuple of int
+            Runs to draw.
+
+        Returns
+        -------
+        play : numpy.ndarray
+            ``(..., m)`` play widths ``b max(0, 1 + v z)`` [m], ``z`` standard normal.
+        offset : numpy.ndarray
+            ``(..., m)`` zero offsets, normal with ``offset_std`` [m].
+        """
         g = as_generator(rng)
         shp = tuple(batch_shape) + (self.n_tendons,)
         p = self.params
@@ -135,6 +175,22 @@ class HysteresisModel:
         own play and offset (:meth:`sample_run`); without, nominal values. ``state.engaged`` must
         be finite with last dimension ``m`` and a batch shape broadcasting with the path's; an
         empty path (T = 0) leaves the state where it is.
+
+        Parameters
+        ----------
+        state : HysteresisState
+            The engaged positions before the path.
+        path : array_like, shape (..., T, m)
+            Commanded displacements [m] within the robot's limits.
+        rng : int, numpy.random.Generator or None
+            Draws the run's play and offset; None: nominal.
+
+        Returns
+        -------
+        state : HysteresisState
+            The engaged positions after the path.
+        effective : numpy.ndarray
+            ``(..., m)`` displacements [m] the robot receives, clipped to its limits.
         """
         m = self.n_tendons
         engaged = _check_state(state, m)
@@ -166,6 +222,22 @@ class HysteresisModel:
         is ``clip(e_start, target - b, target + b)`` exactly; ``e_start`` is ``start_state.engaged``
         (default: the start itself, reached without lag). Vectorised over the batch; returns
         ``(state, effective (..., m))`` like :meth:`move`.
+
+        Parameters
+        ----------
+        starts, targets : array_like, shape (..., m)
+            Commanded start and end displacements [m].
+        rng : int, numpy.random.Generator or None
+            As :meth:`move`.
+        start_state : HysteresisState, optional
+            Engaged positions at the start (default the start itself).
+
+        Returns
+        -------
+        state : HysteresisState
+            The engaged positions at the target.
+        effective : numpy.ndarray
+            ``(..., m)`` displacements [m] the robot receives.
         """
         m = self.n_tendons
         a = as_array(starts, "starts", last_dim=m)
@@ -177,7 +249,24 @@ class HysteresisModel:
         return self.move(state, path, rng)
 
     def shape_after(self, state: HysteresisState, path, rng=None):
-        """``(new_state, RodShape)`` after driving along ``path (..., T, m)`` (see :meth:`move`)."""
+        """``(new_state, RodShape)`` after driving along ``path (..., T, m)`` (see :meth:`move`).
+
+        Parameters
+        ----------
+        state : HysteresisState
+            The engaged positions before the path.
+        path : array_like, shape (..., T, m)
+            Commanded displacements [m].
+        rng : int, numpy.random.Generator or None
+            As :meth:`move`.
+
+        Returns
+        -------
+        state : HysteresisState
+            The engaged positions after the path.
+        shape : RodShape
+            The robot's shape at the effective displacements.
+        """
         new, eff = self.move(state, path, rng)
         return new, self.robot.solve_displacements(eff)
 
@@ -195,6 +284,24 @@ def robot_after_path(
     ``state`` defaults to rest at the path's first point; ``seed`` (int/Generator/None) draws
     the run-to-run variation (None: nominal, deterministic). Returns a :class:`RodShape`.
     Raises :class:`InvalidInputError` for an empty path (T = 0).
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    path : array_like, shape (T, m)
+        Commanded displacements [m].
+    state : HysteresisState, optional
+        Engaged positions before the path.
+    seed : int, numpy.random.Generator or None
+        Draws the run-to-run variation.
+    params : HysteresisParams, optional
+        The transmission's parameters (default the robot's, ``params.hysteresis``).
+
+    Returns
+    -------
+    RodShape
+        The shape at the effective displacements.
     """
     eff = effective_displacements(robot, path, state=state, seed=seed, params=params)
     return robot.solve_displacements(eff)
@@ -214,6 +321,24 @@ def effective_displacements(
     Generator or None) draws this run's play widths and zero offsets (None: nominal values).
     Feed the result to ``robot.solve_displacements``. Raises :class:`InvalidInputError` for an
     empty path (T = 0).
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    path : array_like, shape (..., T, m)
+        Commanded displacements [m].
+    state : HysteresisState, optional
+        Engaged positions before the path.
+    seed : int, numpy.random.SeedSequence, numpy.random.Generator or None
+        Draws the run's play widths and offsets.
+    params : HysteresisParams, optional
+        The transmission's parameters (default the robot's).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(..., m)`` effective displacements [m].
     """
     model = HysteresisModel(robot, params)
     c = _check_path(path)

@@ -75,6 +75,16 @@ def lab_angle_to_theta(c):
     ``r(s) (cos theta(s), sin theta(s), 0)``; ``(sin C, cos C) = (cos(pi/2 - C), sin(pi/2 - C))``.
     Coefficients ``[c0, c1, ...]`` become ``[pi/2 - c0, -c1, ...]``. A value that is not a list
     of numbers is passed through unchanged for the parser to refuse with the key's name.
+
+    Parameters
+    ----------
+    c : list of float or object
+        The lab's ``C`` polynomial coefficients [rad, rad/m, ...].
+
+    Returns
+    -------
+    list of float or object
+        riskplan's ``theta`` coefficients, or ``c`` unchanged when it is not a list of numbers.
     """
     if not isinstance(c, list) or not c:
         return c
@@ -84,7 +94,18 @@ def lab_angle_to_theta(c):
 
 
 def is_lab_layout(doc: dict) -> bool:
-    """True for a document in one of the lab's two layouts."""
+    """True for a document in one of the lab's two layouts.
+
+    Parameters
+    ----------
+    doc : dict
+        A parsed TOML document.
+
+    Returns
+    -------
+    bool
+        Whether it has ``backbone_specs`` (top level or under ``[robot]``) or ``tendon_robot``.
+    """
     return (
         "backbone_specs" in doc
         or "tendon_robot" in doc
@@ -94,7 +115,20 @@ def is_lab_layout(doc: dict) -> bool:
 
 def lab_robot_table(doc: dict) -> tuple[dict, str]:
     """``(table, prefix)``: the table holding ``backbone_specs``/``tendons`` and the key prefix
-    (``""`` for the top-level layout, ``"robot."`` for the nested one). Checks top-level keys."""
+    (``""`` for the top-level layout, ``"robot."`` for the nested one). Checks top-level keys.
+
+    Parameters
+    ----------
+    doc : dict
+        A parsed lab document.
+
+    Returns
+    -------
+    table : dict
+        The table holding ``backbone_specs`` and ``tendons``.
+    prefix : str
+        ``""`` or ``"robot."``.
+    """
     if isinstance(doc.get("robot"), dict) and "backbone_specs" in doc["robot"]:
         check_unknown_keys(doc, {"robot"} | PROBLEM_TABLES | _NESTED_PROBLEM_KEYS, "")
         robot = doc["robot"]
@@ -112,7 +146,20 @@ def lab_robot_table(doc: dict) -> tuple[dict, str]:
 
 
 def parse_lab_document(doc: dict, *, default_name: str = "robot") -> RobotParams:
-    """A :class:`RobotParams` from a parsed lab document (either layout)."""
+    """A :class:`RobotParams` from a parsed lab document (either layout).
+
+    Parameters
+    ----------
+    doc : dict
+        A parsed lab document.
+    default_name : str
+        The robot's name when the document gives none.
+
+    Returns
+    -------
+    RobotParams
+        The robot's parameters (SI units).
+    """
     robot, prefix = lab_robot_table(doc)
     robot_path = "robot" if prefix else "tendon_robot"
     bb = robot.get("backbone_specs")

@@ -20,14 +20,39 @@ SHOOT_MAXIT = 30
 
 
 def gravity_base(robot) -> np.ndarray:
-    """Distributed force per unit length in the base frame [N/m]."""
+    """Distributed force per unit length in the base frame [N/m].
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot (its mass per length, base pose and gravity).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(3,)`` force per length ``λ Rᵀ g`` [N/m].
+    """
     return robot._lam * (
         robot.params.base.matrix.T @ np.asarray(robot.params.gravity.vector, dtype=float)
     )
 
 
 def shoot(robot, tau) -> np.ndarray:
-    """States ``(n+1, 18+m)`` of the loaded rod: ``N(0) = f L`` exactly, ``M(0)`` by Newton."""
+    """States ``(n+1, 18+m)`` of the loaded rod: ``N(0) = f L`` exactly, ``M(0)`` by Newton.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        A robot with gravity on.
+    tau : array_like, shape (m,)
+        Tensions [N].
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(n + 1, 18 + m)`` rod states per node, the tendon lengths [m] in the last ``m``
+        columns.
+    """
     m, n, L = robot.n_tendons, robot._n, robot._L
     f = gravity_base(robot)
     N0 = f * L
@@ -75,7 +100,21 @@ def shoot(robot, tau) -> np.ndarray:
 
 
 def tensions_loaded(robot, d) -> np.ndarray:
-    """Semismooth Newton on ``min(tau, g(tau)) = 0`` with finite differences (gravity on)."""
+    """Semismooth Newton on ``min(tau, g(tau)) = 0`` with finite differences (gravity on).
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        A robot with gravity on.
+    d : numpy.ndarray
+        ``(m,)`` tendon displacements [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(m,)`` tensions [N] with ``tau >= 0`` and ``g(tau) = l0 − l(tau) + tau / k − d >= 0``,
+        complementary.
+    """
     m = robot.n_tendons
     tau = np.maximum(robot._A0pinv @ d, 0.0)
 

@@ -35,7 +35,18 @@ __all__ = [
 
 def configuration_limits(robot) -> np.ndarray:
     """``(n_config, 2)`` ``[low, high]``: tendon displacements [m], then rotation [rad] and
-    retraction [m] where enabled (the lab's configuration order)."""
+    retraction [m] where enabled (the lab's configuration order).
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(n_config, 2)`` limits ``[low, high]``.
+    """
     rows = [robot.displacement_limits]
     bm = robot.base_motion
     if bm.rotation:
@@ -47,7 +58,23 @@ def configuration_limits(robot) -> np.ndarray:
 
 def split_configuration(robot, q, validate: bool = True):
     """``(tendon part (..., m), rotation (...) or None, retraction (...) or None)`` of
-    configurations ``q (..., n_config)`` in the lab's order (tendons, rotation, retraction)."""
+    configurations ``q (..., n_config)`` in the lab's order (tendons, rotation, retraction).
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    q : array_like, shape (..., n_config)
+        Configurations.
+    validate : bool
+        Check ``q`` (finite numbers, its last dimension).
+
+    Returns
+    -------
+    tuple
+        Tendon displacements ``(..., m)`` [m], rotation ``(...)`` [rad] or None, retraction
+        ``(...)`` [m] or None.
+    """
     q = as_array(q, "configuration", min_ndim=1) if validate else np.asarray(q, dtype=float)
     if q.shape[-1] != robot.n_config:
         raise InvalidInputError(
@@ -62,7 +89,24 @@ def split_configuration(robot, q, validate: bool = True):
 
 
 def with_base_pose(robot, position=(0.0, 0.0, 0.0), *, rotation=None, rpy=None, quaternion=None):
-    """:meth:`TendonRobot.with_base_pose` of ``robot``."""
+    """:meth:`TendonRobot.with_base_pose` of ``robot``.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    position : array_like, shape (3,)
+        Base position [m] in the world frame.
+    rotation, rpy, quaternion : array_like, optional
+        One orientation: a rotation matrix ``(3, 3)``, roll-pitch-yaw ``(3,)`` [rad]
+        (:func:`~riskplan.robots.params.rpy_to_matrix`) or a quaternion ``(4,)``; default
+        the identity.
+
+    Returns
+    -------
+    TendonRobot
+        A robot of the same type with that base pose.
+    """
     given = [
         k
         for k, v in (("rotation", rotation), ("rpy", rpy), ("quaternion", quaternion))
@@ -89,7 +133,22 @@ def with_base_pose(robot, position=(0.0, 0.0, 0.0), *, rotation=None, rpy=None, 
 
 
 def with_gravity(robot, enabled: bool = True, vector=None):
-    """:meth:`TendonRobot.with_gravity` of ``robot``."""
+    """:meth:`TendonRobot.with_gravity` of ``robot``.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    enabled : bool
+        Gravity on or off.
+    vector : array_like, shape (3,), optional
+        Gravitational acceleration [m/s²] in the world frame (default the robot's).
+
+    Returns
+    -------
+    TendonRobot
+        A robot of the same type with that gravity.
+    """
     if not isinstance(enabled, (bool, np.bool_)):
         raise InvalidInputError(
             f"enabled: expected True or False, got {enabled!r} ({type(enabled).__name__})"
@@ -103,7 +162,23 @@ def with_gravity(robot, enabled: bool = True, vector=None):
 
 
 def interpolate_configurations(robot, a, b, t) -> np.ndarray:
-    """:meth:`TendonRobot.interpolate_configurations` of ``robot``."""
+    """:meth:`TendonRobot.interpolate_configurations` of ``robot``.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    a, b : array_like, shape (..., n_config)
+        End configurations.
+    t : array_like
+        Fractions, broadcast against the batch shape.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``a + t (b − a)``; a full-turn rotation interpolates along the shorter arc, wrapped to
+        ``[−π, π)``.
+    """
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     t = np.asarray(t, dtype=np.float64)[..., None]
@@ -117,12 +192,42 @@ def interpolate_configurations(robot, a, b, t) -> np.ndarray:
 
 
 def configuration_to_displacements(robot, q, *, validate: bool = True) -> np.ndarray:
-    """:meth:`TendonRobot.configuration_to_displacements` of ``robot``."""
+    """:meth:`TendonRobot.configuration_to_displacements` of ``robot``.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    q : array_like, shape (..., n_config)
+        Configurations whose tendon part is tensions [N].
+    validate : bool
+        Check ``q``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``q`` with the tendon part as displacements [m] at each configuration's retraction.
+    """
     return _convert_tendon_part(robot, q, robot.displacements_for_tensions, validate)
 
 
 def configuration_to_tensions(robot, q, *, validate: bool = True) -> np.ndarray:
-    """:meth:`TendonRobot.configuration_to_tensions` of ``robot``."""
+    """:meth:`TendonRobot.configuration_to_tensions` of ``robot``.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    q : array_like, shape (..., n_config)
+        Configurations whose tendon part is displacements [m].
+    validate : bool
+        Check ``q``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``q`` with the tendon part as tensions [N] at each configuration's retraction.
+    """
     return _convert_tendon_part(robot, q, robot.tensions_for_displacements, validate)
 
 
@@ -137,7 +242,25 @@ def _convert_tendon_part(robot, q, convert, validate: bool) -> np.ndarray:
 
 
 def check_base_motion(robot, rotation, retraction, batch_shape) -> tuple:
-    """:meth:`TendonRobot.check_base_motion` of ``robot``."""
+    """:meth:`TendonRobot.check_base_motion` of ``robot``.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    rotation : array_like or None
+        Base rotation [rad], scalar or of ``batch_shape``.
+    retraction : array_like or None
+        Retraction [m], scalar or of ``batch_shape``.
+    batch_shape : tuple of int
+        The batch shape to broadcast to.
+
+    Returns
+    -------
+    tuple
+        ``(rotation, retraction)``, each a float64 array of ``batch_shape`` within its limits,
+        or None where not given.
+    """
     bm = robot.base_motion
     out = []
     for name, value, enabled, lim, unit in (
@@ -164,7 +287,20 @@ def check_base_motion(robot, rotation, retraction, batch_shape) -> tuple:
 
 
 def retracted(robot, retraction: float):
-    """:meth:`TendonRobot.retracted` of ``robot``."""
+    """:meth:`TendonRobot.retracted` of ``robot``.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    retraction : float
+        Retracted length [m].
+
+    Returns
+    -------
+    TendonRobot
+        The exposed part (cached per value, at most 256).
+    """
     rho = float(retraction)
     cache = robot.__dict__.setdefault("_retracted", {})
     if rho in cache:
@@ -214,7 +350,26 @@ def per_retraction(robot, method: str, values, retraction, validate: bool) -> np
 
 
 def solve_moved(robot, by_tension: bool, values, rotation, retraction, validate) -> RodShape:
-    """Shapes with base rotation and/or retraction (see :meth:`solve_tensions`)."""
+    """Shapes with base rotation and/or retraction (see :meth:`solve_tensions`).
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot (gravity off).
+    by_tension : bool
+        ``values`` are tensions [N] (else displacements [m]).
+    values : array_like, shape (..., m)
+        Tendon tensions or displacements.
+    rotation, retraction : array_like or None
+        Base rotation [rad] and retraction [m] per configuration.
+    validate : bool
+        Check the inputs.
+
+    Returns
+    -------
+    RodShape
+        The shapes in the world frame.
+    """
     if robot.loaded:
         raise InvalidInputError(
             "base rotation/retraction with gravity is not modelled (the exposed part's "

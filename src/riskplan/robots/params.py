@@ -178,7 +178,18 @@ MAX_POLY_TERMS = 16
 
 
 def rpy_to_matrix(rpy) -> np.ndarray:
-    """Roll-pitch-yaw (extrinsic x, then y, then z): ``R = Rz(yaw) Ry(pitch) Rx(roll)``."""
+    """Roll-pitch-yaw (extrinsic x, then y, then z): ``R = Rz(yaw) Ry(pitch) Rx(roll)``.
+
+    Parameters
+    ----------
+    rpy : array_like, shape (3,)
+        Roll, pitch, yaw [rad].
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(3, 3)`` rotation matrix.
+    """
     r, p, y = (float(a) for a in rpy)
     cr, sr, cp, sp, cy, sy = (
         math.cos(r),

@@ -70,6 +70,18 @@ def shift_polynomial(coefficients, offset: float) -> tuple[float, ...]:
 
     A retracted robot's routing ``theta(s)``, ``r(s)`` at absolute arc length ``s = s' + rho``
     is the same-degree polynomial of the exposed arc length ``s'``.
+
+    Parameters
+    ----------
+    coefficients : sequence of float
+        ``c_0, c_1, ...`` of ``p`` (ascending powers).
+    offset : float
+        The shift of the argument.
+
+    Returns
+    -------
+    tuple of float
+        The coefficients of ``q``, same length.
     """
     P = np.polynomial.Polynomial(np.asarray(coefficients, dtype=np.float64))
     q = P(np.polynomial.Polynomial([float(offset), 1.0])).coef
@@ -79,7 +91,18 @@ def shift_polynomial(coefficients, offset: float) -> tuple[float, ...]:
 
 
 def rotation_z(angle) -> np.ndarray:
-    """``(..., 3, 3)`` rotations about z by ``angle (...)`` [rad] (right-handed)."""
+    """``(..., 3, 3)`` rotations about z by ``angle (...)`` [rad] (right-handed).
+
+    Parameters
+    ----------
+    angle : array_like
+        Angles [rad], any shape.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(..., 3, 3)`` rotation matrices.
+    """
     a = np.asarray(angle, dtype=np.float64)
     c, s_ = np.cos(a), np.sin(a)
     out = np.zeros(a.shape + (3, 3))

@@ -24,7 +24,28 @@ def field_number(
     table: dict, key: str, path: str, *, default=None, positive=False, nonneg=False, allow_inf=False
 ) -> float:
     """``table[key]`` as a float (``default`` when missing and not None), finite unless
-    ``allow_inf``, and ``> 0`` / ``>= 0`` when asked; ``path`` is the table's key."""
+    ``allow_inf``, and ``> 0`` / ``>= 0`` when asked; ``path`` is the table's key.
+
+    Parameters
+    ----------
+    table : dict
+        A parsed TOML table.
+    key : str
+        The key to read.
+    path : str
+        The table's dotted key, for messages (``""`` at the top).
+    default : float, optional
+        Value when the key is missing (else a missing key is an error).
+    positive, nonneg : bool
+        Require ``> 0`` / ``>= 0``.
+    allow_inf : bool
+        Accept ``±inf``.
+
+    Returns
+    -------
+    float
+        The value; :class:`~riskplan.errors.RobotDescriptionError` naming the key otherwise.
+    """
     full = f"{path}.{key}" if path else key
     if key not in table:
         if default is None:
@@ -53,7 +74,26 @@ def field_vector(
     table: dict, key: str, path: str, n: int | None, *, default=None
 ) -> tuple[float, ...]:
     """``table[key]``: a non-empty list of ``n`` (any number if None) finite numbers, as a
-    tuple of floats (``default`` when missing and not None)."""
+    tuple of floats (``default`` when missing and not None).
+
+    Parameters
+    ----------
+    table : dict
+        A parsed TOML table.
+    key : str
+        The key to read.
+    path : str
+        The table's dotted key, for messages.
+    n : int or None
+        Required length (None: any non-empty length).
+    default : sequence of float, optional
+        Value when the key is missing.
+
+    Returns
+    -------
+    tuple of float
+        The finite numbers.
+    """
     full = f"{path}.{key}" if path else key
     if key not in table:
         if default is None:
@@ -82,7 +122,22 @@ def field_vector(
 
 def field_integer(value, key: str, low: int, high: int) -> int:
     """``value`` of ``key`` as an ``int`` in ``[low, high]``, else
-    :class:`RobotDescriptionError` naming the key."""
+    :class:`RobotDescriptionError` naming the key.
+
+    Parameters
+    ----------
+    value : object
+        The value read.
+    key : str
+        Its key, for messages.
+    low, high : int
+        Inclusive bounds.
+
+    Returns
+    -------
+    int
+        The value.
+    """
     return check_count(
         value,
         f"robot description: {key!r}",
@@ -93,7 +148,22 @@ def field_integer(value, key: str, low: int, high: int) -> int:
 
 
 def field_table(doc: dict, key: str, *, required=True) -> dict:
-    """The table ``doc[key]`` (``{}`` when missing and not ``required``)."""
+    """The table ``doc[key]`` (``{}`` when missing and not ``required``).
+
+    Parameters
+    ----------
+    doc : dict
+        A parsed TOML document or table.
+    key : str
+        The sub-table's key.
+    required : bool
+        A missing table is an error (else ``{}``).
+
+    Returns
+    -------
+    dict
+        The sub-table.
+    """
     if key not in doc:
         if required:
             raise RobotDescriptionError(f"robot description: missing table '[{key}]'", key=key)
@@ -107,8 +177,20 @@ def field_table(doc: dict, key: str, *, required=True) -> dict:
 def suggest_key(key: str, known) -> str:
     """``" (did you mean 'x'?)"`` naming the known key closest to ``key``, or ``""``.
 
-    Closeness is :func:`difflib.get_close_matches` on the lower-cased names (cut-off 0.6),
+    Closeness is ``difflib.get_close_matches`` on the lower-cased names (cut-off 0.6),
     falling back to a known key that contains ``key`` or is contained in it.
+
+    Parameters
+    ----------
+    key : str
+        The unknown key.
+    known : iterable of str
+        The known keys.
+
+    Returns
+    -------
+    str
+        The suggestion, or ``""``.
     """
     import difflib
 
@@ -123,7 +205,19 @@ def suggest_key(key: str, known) -> str:
 def check_unknown_keys(
     table: dict, allowed: set[str], path: str, *, what="robot description"
 ) -> None:
-    """Refuse the first key of ``table`` not in ``allowed``, suggesting the closest one."""
+    """Refuse the first key of ``table`` not in ``allowed``, suggesting the closest one.
+
+    Parameters
+    ----------
+    table : dict
+        A parsed TOML table.
+    allowed : set of str
+        Its known keys.
+    path : str
+        The table's dotted key, for messages.
+    what : str
+        What the table belongs to, for messages.
+    """
     for k in table:
         if k not in allowed:
             full = f"{path}.{k}" if path else k

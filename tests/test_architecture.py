@@ -25,6 +25,7 @@ CORE = {
     "budget",
     "parsing",
     "gaussian_mixture",
+    "kinematics_model",
     "geometry2d",
     "geometry3d",
     "robots",

@@ -47,6 +47,7 @@ PUBLIC = {
     "TendonRobot": "riskplan.robots",
     "RobotParams": "riskplan.robots",
     "NumpyMixture": "riskplan.gaussian_mixture",
+    "KinematicsModel": "riskplan.kinematics_model",
     "Environment": "riskplan.collision",
     "load_environment": "riskplan.collision",
     "probability_of_collision": "riskplan.collision",

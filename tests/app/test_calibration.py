@@ -46,7 +46,7 @@ def test_key_numbers(reference):
     from riskplan.control.lqg import execute
     from riskplan.parallel import spawn_seeds
     from riskplan.scenarios.registry import make_scenario
-    from riskplan.tissue_planning.select import calibration_metrics, evenly_spaced_ranks
+    from riskplan.tissue_planning.calibration import calibration_metrics, evenly_spaced_ranks
 
     root, cal = reference
     rows = cal["rows"]

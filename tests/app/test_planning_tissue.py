@@ -10,8 +10,9 @@ from PIL import Image
 
 from riskplan.app.outputs.tissue_plan import _pack, summary_rows, write_outputs
 from riskplan.scenarios.uncertainty import get_case
+from riskplan.tissue_planning.calibration import CalibrationRow
 from riskplan.tissue_planning.plan import TissuePlanningResult
-from riskplan.tissue_planning.select import CalibrationRow, select_plan
+from riskplan.tissue_planning.select import select_plan
 from tests.conftest import TOL
 from tests.planning.conftest import SMALL_MESH, near_needle, needle_result  # noqa: F401 (fixtures)
 

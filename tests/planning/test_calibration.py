@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from riskplan.errors import InvalidInputError
-from riskplan.tissue_planning.select import SATURATED, calibration_metrics, evenly_spaced_ranks
+from riskplan.tissue_planning.calibration import SATURATED, calibration_metrics, evenly_spaced_ranks
 from tests.conftest import TOL
 
 

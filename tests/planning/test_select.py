@@ -10,12 +10,8 @@ import riskplan.control
 from riskplan.control.lqgmp import lqgmp
 from riskplan.errors import InvalidInputError, SimulationError
 from riskplan.scenarios.uncertainty import get_case
-from riskplan.tissue_planning.select import (
-    calibration_check,
-    common_draws,
-    evaluate_plan,
-    select_plan,
-)
+from riskplan.tissue_planning.calibration import calibration_check
+from riskplan.tissue_planning.select import common_draws, evaluate_plan, select_plan
 from tests.conftest import approx_tol
 from tests.planning.conftest import SMALL_MESH
 

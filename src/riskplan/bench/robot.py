@@ -35,6 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
+from riskplan.errors import InvalidInputError
+
 N_BATCH = 10_000
 
 
@@ -70,15 +72,43 @@ def _first_call_s(cache_dir: str | None) -> tuple[float, float]:
     return wall, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
 
 
-def first_call_figures() -> dict:
-    """``first_call_cold_s``, ``first_call_installed_s`` (wall), their CPU times
-    ``first_call_cold_cpu_s``, ``first_call_installed_cpu_s`` and ``kernel_cache_complete``."""
+def first_call_figures(cold_cache_dir=None) -> dict:
+    """The first-call figures, each from a fresh process that imports riskplan and solves one
+    shape.
+
+    Parameters
+    ----------
+    cold_cache_dir : str or path, optional
+        An empty folder for the cold run's numba cache (``NUMBA_CACHE_DIR``), kept afterwards
+        with what the run compiled into it; default a temporary folder, removed.
+
+    Returns
+    -------
+    dict
+        ``first_call_cold_s``, ``first_call_installed_s`` (wall, s), their CPU times
+        ``first_call_cold_cpu_s``, ``first_call_installed_cpu_s`` (user + system, s) and
+        ``kernel_cache_complete`` (bool, :func:`riskplan.kernels.cold` empty before the runs).
+
+    Raises
+    ------
+    InvalidInputError
+        ``cold_cache_dir`` is not an empty folder (the run would not be cold).
+    """
     from riskplan.kernels import cold
 
+    if cold_cache_dir is not None:
+        folder = Path(cold_cache_dir)
+        if not folder.is_dir() or any(folder.iterdir()):
+            raise InvalidInputError(
+                f"cold_cache_dir: expected an empty folder, got {str(folder)!r}"
+            )
     complete = not cold()
     installed, installed_cpu = _first_call_s(None)
-    with tempfile.TemporaryDirectory() as tmp:
-        cold_s, cold_cpu = _first_call_s(tmp)
+    if cold_cache_dir is not None:
+        cold_s, cold_cpu = _first_call_s(str(cold_cache_dir))
+    else:
+        with tempfile.TemporaryDirectory() as tmp:
+            cold_s, cold_cpu = _first_call_s(tmp)
     return {
         "first_call_cold_s": cold_s,
         "first_call_cold_cpu_s": cold_cpu,

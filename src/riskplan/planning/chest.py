@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from riskplan.errors import InvalidInputError
+from riskplan.kinematics_model import KinematicsModel, check_kinematics_model
 from riskplan.planning.bo import OptimiserConfig
 from riskplan.planning.prm import (
     DEFAULT_MILESTONES,
@@ -53,7 +54,7 @@ ChestPlan = RobotPlan
 
 
 def plan_chest(
-    model,
+    model: KinematicsModel,
     environment,
     *,
     start=None,
@@ -83,8 +84,11 @@ def plan_chest(
 
     Parameters
     ----------
-    model : MDNModel
-        The learned kinematics (inputs ``(m,)`` tendon displacements, m).
+    model : KinematicsModel
+        The robot's kinematics model: the learned :class:`~riskplan.kinematics.MDNModel`
+        (inputs ``(m,)`` tendon displacements, m) or any object with the members of
+        :class:`~riskplan.kinematics_model.KinematicsModel` (docs/planning.md, "Your own
+        model"); :class:`InvalidInputError` if it lacks them.
     environment : Environment
         3-D obstacles in the robot base frame (m).
     start, goal : array_like, (m,), optional
@@ -127,8 +131,9 @@ def plan_chest(
     """
     if risk not in RISKS:  # before the goal: a bad option is named first
         raise InvalidInputError(f"risk: expected one of {RISKS}, got {risk!r}")
+    limits = check_kinematics_model(model)
     if goal is None and goal_tip is None:
-        m = len(model.limits)
+        m = len(limits)
         if m != len(DEFAULT_GOAL):
             raise InvalidInputError(
                 f"goal: the default goal has {len(DEFAULT_GOAL)} tendons, the model {m}; "

@@ -47,6 +47,7 @@ import numpy as np
 
 from riskplan._validation import as_array
 from riskplan.errors import InvalidInputError
+from riskplan.kinematics_model import KinematicsModel, check_kinematics_model
 from riskplan.planning.bo import OptimisationResult, OptimiserConfig, optimise_trajectory
 from riskplan.planning.prm import (
     DEFAULT_MILESTONES,
@@ -103,7 +104,8 @@ class ScaledModel:
         box = np.asarray(model.limits if box is None else box, dtype=np.float64)
         self.box = box
         self.limits = box * self.weights[:, None]
-        self.n_tendons = model.n_tendons
+        # optional members of a kinematics model (riskplan.kinematics_model)
+        self.n_tendons = getattr(model, "n_tendons", box.shape[0])
         self.robot = getattr(model, "robot", None)
 
     def to_model(self, y) -> np.ndarray:
@@ -261,7 +263,7 @@ def check_plan_budget(
 
 
 def plan_robot(
-    model,
+    model: KinematicsModel,
     environment,
     *,
     start=None,
@@ -295,8 +297,11 @@ def plan_robot(
 
     Parameters
     ----------
-    model : MDNModel
-        The learned kinematics (inputs ``(n,)``, see the module docs).
+    model : KinematicsModel
+        The robot's kinematics model (inputs ``(n,)``, see the module docs): the learned
+        :class:`~riskplan.kinematics.MDNModel` or any object with the members of
+        :class:`~riskplan.kinematics_model.KinematicsModel` (:class:`InvalidInputError` if it
+        lacks them).
     environment : Environment or WallEnvironment
         Obstacles in the robot base frame (m).
     start, goal : array_like, shape (n,), optional
@@ -425,6 +430,7 @@ def _check_plan_arguments(
     optimiser.validate()
     if risk not in RISKS:
         raise InvalidInputError(f"risk: expected one of {RISKS}, got {risk!r}")
+    full = check_kinematics_model(model)
     for name, v in (("step", step), ("resolution", resolution), ("tip_tolerance", tip_tolerance)):
         _finite_positive(v, name)
     if goal is not None and goal_tip is not None:
@@ -433,7 +439,6 @@ def _check_plan_arguments(
         )
     if goal is None and goal_tip is None:
         raise InvalidInputError("give a goal (configuration) or a goal_tip (tip target)")
-    full = np.asarray(model.limits, dtype=np.float64)
     n = full.shape[0]
     box = full if box is None else as_array(box, "box", shape=(n, 2))
     if (

@@ -1,6 +1,7 @@
 """Planning in deformable tissue (Patil, van den Berg & Alterovitz, RSS 2011): the simulator
 RRT (:mod:`~riskplan.tissue_planning.rrt`), LQG-MP plan selection
-(:mod:`~riskplan.tissue_planning.select`) and the method end to end
+(:mod:`~riskplan.tissue_planning.select`), its estimates against closed-loop executions
+(:mod:`~riskplan.tissue_planning.calibration`) and the method end to end
 (:func:`~riskplan.tissue_planning.plan.plan_tissue`); the 3-D needle's planning
 (:func:`~riskplan.tissue_planning.needle3d.plan_needle3d`: candidates, LQG-MP estimators in 3-D,
 the check against executions, :mod:`~riskplan.tissue_planning.needle3d_checks`).
@@ -8,6 +9,14 @@ the check against executions, :mod:`~riskplan.tissue_planning.needle3d_checks`).
 The tissue wing's top: it imports ``scenarios`` and ``control`` and never the kinematic wing.
 """
 
+from riskplan.tissue_planning.calibration import (
+    SATURATED,
+    Calibration,
+    CalibrationRow,
+    calibration_check,
+    calibration_metrics,
+    evenly_spaced_ranks,
+)
 from riskplan.tissue_planning.needle3d import (
     ESTIMATORS,
     GOAL_SE,
@@ -49,16 +58,10 @@ from riskplan.tissue_planning.rrt import (
     sampling_bounds,
 )
 from riskplan.tissue_planning.select import (
-    SATURATED,
-    Calibration,
-    CalibrationRow,
     PlanScore,
     Selection,
-    calibration_check,
-    calibration_metrics,
     common_draws,
     evaluate_plan,
-    evenly_spaced_ranks,
     select_plan,
     tie_note,
 )

@@ -146,8 +146,9 @@ def plan_tissue(
     from riskplan._validation import check_count
     from riskplan.control.lqgmp import METHODS
     from riskplan.scenarios.registry import make_scenario
+    from riskplan.tissue_planning.calibration import calibration_check
     from riskplan.tissue_planning.rrt import RRTOptions, rrt_plans
-    from riskplan.tissue_planning.select import calibration_check, select_plan
+    from riskplan.tissue_planning.select import select_plan
 
     # every argument checked before the trees grow (a bad method used to fail after them)
     if method is not None and method not in METHODS:

@@ -18,7 +18,8 @@ are built once per worker instead of once per plan).
 A plan whose linearisation fails (a solver that does not converge along it, a non-finite
 state) gets ``P(success) = 0`` and its error message; it is never selected.
 
-The paper never says how good the LQG-MP estimate is. :func:`calibration_check`
+The paper never says how good the LQG-MP estimate is.
+:func:`~riskplan.tissue_planning.calibration_check`
 (:mod:`riskplan.tissue_planning.calibration`) puts it next to the success rate of
 ``n ≥ 1000`` closed-loop executions on the true simulator (each with its own ``s ~ S``,
 actuation and sensing noise; :func:`riskplan.control.lqg.monte_carlo_success`) with a 95 %
@@ -40,28 +41,14 @@ from riskplan.errors import (
     NumericalError,
     SimulationError,
 )
-from riskplan.tissue_planning.calibration import (
-    SATURATED,
-    Calibration,
-    CalibrationRow,
-    calibration_check,
-    calibration_metrics,
-    evenly_spaced_ranks,
-)
 
 log = logging.getLogger(__name__)
 
 __all__ = [
-    "SATURATED",
-    "Calibration",
-    "CalibrationRow",
     "PlanScore",
     "Selection",
-    "calibration_check",
-    "calibration_metrics",
     "common_draws",
     "evaluate_plan",
-    "evenly_spaced_ranks",
     "select_plan",
     "tie_note",
 ]

@@ -19,7 +19,7 @@ Rules, fixed before any number was seen:
   expected parameters (as Fig. 6's "ours"), ranked per case by the paper's σ estimate
   (highest first, ties by index; a candidate whose linearisation fails is left out of the
   ranking and counted); measured are ``n_plans`` of them at evenly spaced ranks
-  (:func:`riskplan.tissue_planning.select.evenly_spaced_ranks`: the first and the last included;
+  (:func:`riskplan.tissue_planning.evenly_spaced_ranks`: the first and the last included;
   all of them when ``n_plans ≥`` the usable candidates).
 * **Cases** (:data:`CALIBRATION_CASES`): per scenario the two uncertainty cases of the
   paper's single-execution figures, where the paper shows what feedback does — needle:
@@ -31,7 +31,7 @@ Rules, fixed before any number was seen:
   intervals (:func:`riskplan.collision.binomial_interval`).
 * **Metrics** per estimator, over all measured (case, plan) pairs of a scenario and per
   case: mean absolute error, Spearman rank correlation, the spread of the measured rates
-  (:func:`riskplan.tissue_planning.select.calibration_metrics`). A set whose measured rates are
+  (:func:`riskplan.tissue_planning.calibration_metrics`). A set whose measured rates are
   all ``≥ 0.98`` or whose rank correlation is undefined is reported as not informative.
   Goal: ``mae ≤ 0.05`` and ``spearman ≥ 0.8``.
 
@@ -397,7 +397,7 @@ def _picks(cases, n_candidates: int, sig: dict, n_plans: int) -> tuple[dict, dic
     """The measured candidates per case, ``picks[case] = [(rank, candidate), ...]`` at evenly
     spaced ranks of the σ ranking (highest first, ties by index; candidates whose
     linearisation failed left out), with ``n_usable[case]`` and ``failed[case]``."""
-    from riskplan.tissue_planning.select import evenly_spaced_ranks
+    from riskplan.tissue_planning.calibration import evenly_spaced_ranks
 
     picks: dict = {}
     n_usable, failed = {}, {}
@@ -485,7 +485,7 @@ def _rows(cases, picks, full, flags, n_batches: int, ctrls, plans) -> list[dict]
 def _metrics(ests, rows: list[dict], cases) -> dict:
     """``{estimator: metrics with by_case}`` over ``rows`` (``None`` without rows) and
     ``best``: the estimator of lowest mae among those meeting the goal, else ``None``."""
-    from riskplan.tissue_planning.select import calibration_metrics
+    from riskplan.tissue_planning.calibration import calibration_metrics
 
     def metrics(e, sel):
         return calibration_metrics(

@@ -27,6 +27,7 @@ CORE = {
     "gaussian_mixture",
     "kinematics_model",
     "geometry2d",
+    "_triangles",
     "geometry3d",
     "robots",
     "collision",

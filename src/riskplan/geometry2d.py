@@ -43,6 +43,7 @@ import math
 import numba as nb
 import numpy as np
 
+from riskplan._triangles import BARYCENTRIC_TOL, TriangleLocator, barycentric_maps
 from riskplan.errors import InvalidInputError
 
 __all__ = [
@@ -70,35 +71,82 @@ __all__ = [
     "winding_numbers",
 ]
 
-#: A point is in a triangle when its smallest barycentric coordinate is >= -BARYCENTRIC_TOL.
-BARYCENTRIC_TOL = 1e-10
-
 
 # ------------------------------------------------------------------ constructors
 
 
 def circle_polygon(center, radius: float, n: int = 24) -> np.ndarray:
-    """``(n, 2)`` counter-clockwise regular polygon inscribed in a circle."""
+    """``(n, 2)`` counter-clockwise regular polygon inscribed in a circle.
+
+    Parameters
+    ----------
+    center : array_like, shape (2,)
+        Centre.
+    radius : float
+        Circumradius.
+    n : int
+        Vertices.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(n, 2)`` vertices.
+    """
     a = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
     c = np.asarray(center, dtype=np.float64)
     return c + radius * np.stack([np.cos(a), np.sin(a)], axis=1)
 
 
 def rectangle_polygon(lower, upper) -> np.ndarray:
-    """``(4, 2)`` counter-clockwise axis-aligned rectangle ``[lower, upper]``."""
+    """``(4, 2)`` counter-clockwise axis-aligned rectangle ``[lower, upper]``.
+
+    Parameters
+    ----------
+    lower, upper : array_like, shape (2,)
+        Opposite corners, ``lower <= upper``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(4, 2)`` vertices.
+    """
     (x0, y0), (x1, y1) = lower, upper
     return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=np.float64)
 
 
 def polygon_area(poly) -> float:
-    """Signed area (shoelace formula): positive when ``poly (k, 2)`` is counter-clockwise."""
+    """Signed area (shoelace formula): positive when ``poly (k, 2)`` is counter-clockwise.
+
+    Parameters
+    ----------
+    poly : array_like, shape (k, 2)
+        Vertices.
+
+    Returns
+    -------
+    float
+        ``½ Σ_i (x_i y_{i+1} − x_{i+1} y_i)``.
+    """
     p = np.asarray(poly, dtype=np.float64)
     x, y = p[:, 0], p[:, 1]
     return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
 
 
 def polygon_edges(k: int, offset: int = 0) -> np.ndarray:
-    """``(k, 2)`` int64 directed edges ``i -> i + 1 (mod k)`` of a ``k``-gon, plus ``offset``."""
+    """``(k, 2)`` int64 directed edges ``i -> i + 1 (mod k)`` of a ``k``-gon, plus ``offset``.
+
+    Parameters
+    ----------
+    k : int
+        Vertices.
+    offset : int
+        Added to every index (the polygon's first vertex in a shared array).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(k, 2)`` int64 edges.
+    """
     i = np.arange(k, dtype=np.int64)
     return np.column_stack([i, (i + 1) % k]) + offset
 
@@ -204,13 +252,37 @@ def _ring_segments(poly):
 
 
 def polygon_segments(poly) -> np.ndarray:
-    """``(k, 4)`` rows ``(x0, y0, x1, y1)`` of the edges ``i -> i + 1`` of ``poly (k, 2)``."""
+    """``(k, 4)`` rows ``(x0, y0, x1, y1)`` of the edges ``i -> i + 1`` of ``poly (k, 2)``.
+
+    Parameters
+    ----------
+    poly : array_like, shape (k, 2)
+        Vertices.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(k, 4)`` segments.
+    """
     return _ring_segments(_f64(poly))
 
 
 def edge_segments(vertices, edges) -> np.ndarray:
     """``(E, 4)`` rows ``(x0, y0, x1, y1)`` of the directed ``edges (E, 2)`` over
-    ``vertices (V, 2)``: the layout the edge-soup kernels read."""
+    ``vertices (V, 2)``: the layout the edge-soup kernels read.
+
+    Parameters
+    ----------
+    vertices : array_like, shape (V, 2)
+        Vertices.
+    edges : array_like, shape (E, 2)
+        Directed edges as vertex indices.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(E, 4)`` contiguous float64 segments.
+    """
     v = np.asarray(vertices, dtype=np.float64)
     e = np.asarray(edges)
     return np.ascontiguousarray(np.concatenate([v[e[:, 0]], v[e[:, 1]]], axis=1))
@@ -219,7 +291,20 @@ def edge_segments(vertices, edges) -> np.ndarray:
 def winding_numbers(segments, points) -> np.ndarray:
     """Integer winding numbers ``(P,)`` of ``points (P, 2)`` w.r.t. closed, oriented loops
     of ``segments (E, 4)`` (:func:`edge_segments`), by the half-open crossing rule (see
-    the module docstring): counter-clockwise loops count +1, clockwise loops -1."""
+    the module docstring): counter-clockwise loops count +1, clockwise loops -1.
+
+    Parameters
+    ----------
+    segments : numpy.ndarray
+        ``(E, 4)`` segments of closed, oriented loops.
+    points : array_like, shape (P, 2)
+        Query points.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(P,)`` int64 winding numbers.
+    """
     c = _crossing_counts(segments, _f64(points))
     return c - _ON_EDGE * ((c + _ON_EDGE // 2) // _ON_EDGE)
 
@@ -227,13 +312,39 @@ def winding_numbers(segments, points) -> np.ndarray:
 def contains_points(segments, points) -> np.ndarray:
     """``(P,)`` bool: ``points (P, 2)`` in the closed region bounded by the loops of
     ``segments (E, 4)``: winding number > 0, or on a segment. Clockwise loops (holes)
-    subtract; their edges belong to the region."""
+    subtract; their edges belong to the region.
+
+    Parameters
+    ----------
+    segments : numpy.ndarray
+        ``(E, 4)`` segments of closed, oriented loops.
+    points : array_like, shape (P, 2)
+        Query points.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(P,)`` bool.
+    """
     return _crossing_counts(segments, _f64(points)) > 0
 
 
 def points_in_polygon(points, poly) -> np.ndarray:
     """``(P,)`` bool: True where a point of ``points (P, 2)`` is inside ``poly (k, 2)`` or on
-    its boundary (a simple polygon in either orientation)."""
+    its boundary (a simple polygon in either orientation).
+
+    Parameters
+    ----------
+    points : array_like, shape (P, 2)
+        Query points.
+    poly : array_like, shape (k, 2)
+        A simple polygon.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(P,)`` bool.
+    """
     return _crossing_counts(_ring_segments(_f64(poly)), _f64(points)) != 0
 
 
@@ -250,7 +361,20 @@ def _segments_pairwise(a0, a1, b0, b1):
 
 def segments_intersect(a0, a1, b0, b1) -> np.ndarray:
     """``(A, B)`` bool: segment ``a0[i] -> a1[i]`` (``(A, 2)`` each) meets segment
-    ``b0[j] -> b1[j]`` (``(B, 2)`` each); touching and collinear overlaps count."""
+    ``b0[j] -> b1[j]`` (``(B, 2)`` each); touching and collinear overlaps count.
+
+    Parameters
+    ----------
+    a0, a1 : array_like, shape (A, 2)
+        Start and end points of the first segments.
+    b0, b1 : array_like, shape (B, 2)
+        Start and end points of the second segments.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(A, B)`` bool.
+    """
     return _segments_pairwise(_f64(a0), _f64(a1), _f64(b0), _f64(b1))
 
 
@@ -290,7 +414,18 @@ def _polygons_meet(p, q):
 
 def polygons_intersect(p, q) -> bool:
     """True if two simple polygons ``(k, 2)`` overlap or touch (an edge contact, or one
-    inside the other)."""
+    inside the other).
+
+    Parameters
+    ----------
+    p, q : array_like, shape (k, 2)
+        Simple polygons.
+
+    Returns
+    -------
+    bool
+        Whether they overlap or touch.
+    """
     return bool(_polygons_meet(_f64(p), _f64(q)))
 
 
@@ -326,6 +461,18 @@ def check_simple_polygon(poly, name: str) -> np.ndarray:
     vertices (an edge shorter than ``1e-12`` of the extent), zero area (below ``1e-12``
     of the squared extent) and self-intersection: non-adjacent edges that touch
     (closed rule of this module). Finiteness is the caller's check.
+
+    Parameters
+    ----------
+    poly : array_like, shape (k, 2)
+        Vertices, finite.
+    name : str
+        The argument, for messages.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(k, 2)`` float64 vertices, counter-clockwise.
     """
     p = np.asarray(poly, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 2 or p.shape[0] < 3:
@@ -378,152 +525,42 @@ def closest_points_on_segments(segments, points):
 
 def point_polygon_distance(points, poly) -> np.ndarray:
     """``(P,)`` Euclidean distance from each point ``(P, 2)`` to the boundary of
-    ``poly (k, 2)`` (0 on it)."""
+    ``poly (k, 2)`` (0 on it).
+
+    Parameters
+    ----------
+    points : array_like, shape (P, 2)
+        Query points.
+    poly : array_like, shape (k, 2)
+        A polygon.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(P,)`` distances.
+    """
     return closest_points_on_segments(polygon_segments(poly), _f64(points))[0]
 
 
 def signed_distance_to_polygon(points, poly) -> np.ndarray:
     """``(P,)`` signed distance to ``poly``'s boundary: negative inside, 0 on the boundary,
-    positive outside."""
+    positive outside.
+
+    Parameters
+    ----------
+    points : array_like, shape (P, 2)
+        Query points.
+    poly : array_like, shape (k, 2)
+        A simple polygon.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(P,)`` signed distances.
+    """
     pts = _f64(points)
     d = point_polygon_distance(pts, poly)
     return np.where(points_in_polygon(pts, poly), -d, d)
-
-
-# --------------------------------------------------------- triangle meshes
-
-
-def barycentric_maps(nodes, triangles) -> np.ndarray:
-    """``(T, 3, 3)`` matrices ``M_e`` with ``λ = M_e @ [x, y, 1]`` (inverse of the affine
-    map ``[x; y; 1] = [[x_a], [y_a], [1]] λ``) of triangles ``(T, 3)`` over ``nodes (N, 2)``."""
-    p = np.asarray(nodes, dtype=np.float64)[np.asarray(triangles)]  # (T, 3, 2)
-    A = np.ones((len(p), 3, 3))
-    A[:, 0, :] = p[:, :, 0]
-    A[:, 1, :] = p[:, :, 1]
-    return np.linalg.inv(A)
-
-
-@nb.njit(cache=True)
-def _best_in(maps, cand, x, y):
-    """Among elements ``cand``, the one whose smallest barycentric coordinate of ``(x, y)``
-    is largest: ``(element, that coordinate, λ (3,))``; ``(-1, -inf, 0)`` for no candidates."""
-    best_e = -1
-    best_w = -np.inf
-    l0 = l1 = l2 = 0.0
-    for c in cand:
-        a0 = maps[c, 0, 0] * x + maps[c, 0, 1] * y + maps[c, 0, 2]
-        a1 = maps[c, 1, 0] * x + maps[c, 1, 1] * y + maps[c, 1, 2]
-        a2 = maps[c, 2, 0] * x + maps[c, 2, 1] * y + maps[c, 2, 2]
-        w = min(a0, min(a1, a2))
-        if w > best_w:
-            best_w, best_e, l0, l1, l2 = w, c, a0, a1, a2
-    out = np.empty(3)
-    out[0] = l0
-    out[1] = l1
-    out[2] = l2
-    return best_e, best_w, out
-
-
-@nb.njit(cache=True)
-def _locate_batch(maps, start, items, lower, size, cells, points, tol):
-    n = points.shape[0]
-    elem = np.full(n, -1, dtype=np.int64)
-    lam = np.zeros((n, 3))
-    for p in range(n):
-        x, y = points[p, 0], points[p, 1]
-        fi = math.floor((x - lower[0]) / size[0])
-        fj = math.floor((y - lower[1]) / size[1])
-        # compare as floats: int() of a huge or infinite float is undefined
-        if not (-1.0 <= fi <= cells and -1.0 <= fj <= cells):
-            continue
-        i = min(max(int(fi), 0), cells - 1)
-        j = min(max(int(fj), 0), cells - 1)
-        c = i * cells + j
-        e, w, lm = _best_in(maps, items[start[c] : start[c + 1]], x, y)
-        if e >= 0 and w >= -tol:
-            elem[p] = e
-            lam[p] = lm
-    return elem, lam
-
-
-class TriangleLocator:
-    """Point location in a triangle mesh through a uniform grid (a few µs per query).
-
-    Each of the ``cells x cells`` grid cells over the nodes' bounding box lists the
-    elements whose bounding box meets it (CSR arrays ``start``, ``items``); a query
-    evaluates the barycentric coordinates ``λ = M_e [x, y, 1]`` of those elements only and
-    keeps the one whose smallest coordinate is largest. The point is in the mesh when that
-    coordinate is ``>= -tol`` (closed convention; a point on an edge shared by two
-    elements gets one of them, and either gives the same P1 interpolant). Points within
-    one cell outside the bounding box are tested against the nearest cell, so the
-    tolerance works on the mesh boundary too.
-
-    ``maps``: the elements' ``(T, 3, 3)`` barycentric maps when already computed
-    (``TissueMesh.barycentric_maps``).
-    """
-
-    def __init__(
-        self,
-        nodes,
-        triangles,
-        cells: int | None = None,
-        tol: float = BARYCENTRIC_TOL,
-        maps=None,
-    ):
-        nodes = np.asarray(nodes, dtype=np.float64)
-        triangles = np.asarray(triangles, dtype=np.int64)
-        n_tri = len(triangles)
-        if cells is None:
-            cells = max(2, int(np.sqrt(n_tri / 2.0)))
-        self.cells = int(cells)
-        self.tol = float(tol)
-        self.lower = nodes.min(0)
-        upper = nodes.max(0)
-        self.size = np.maximum((upper - self.lower) / self.cells, 1e-300)
-        self.maps = np.ascontiguousarray(
-            barycentric_maps(nodes, triangles) if maps is None else maps, dtype=np.float64
-        )
-        p = nodes[triangles]
-        lo = (np.floor((p.min(1) - self.lower) / self.size - 1e-9).astype(np.int64)).clip(
-            0, self.cells - 1
-        )
-        hi = (np.floor((p.max(1) - self.lower) / self.size + 1e-9).astype(np.int64)).clip(
-            0, self.cells - 1
-        )
-        ny = hi[:, 1] - lo[:, 1] + 1
-        count = (hi[:, 0] - lo[:, 0] + 1) * ny
-        elem = np.repeat(np.arange(n_tri, dtype=np.int64), count)
-        k = np.arange(len(elem), dtype=np.int64) - np.repeat(np.cumsum(count) - count, count)
-        cell = (lo[elem, 0] + k // ny[elem]) * self.cells + lo[elem, 1] + k % ny[elem]
-        order = np.argsort(cell, kind="stable")  # ascending element index within a cell
-        self.items = elem[order]
-        self.start = np.searchsorted(cell[order], np.arange(self.cells * self.cells + 1))
-        # one view per cell for the scalar path (indexing a list is cheaper than slicing)
-        self._cand = [
-            self.items[self.start[c] : self.start[c + 1]] for c in range(self.cells * self.cells)
-        ]
-
-    def locate(self, point) -> tuple[int, np.ndarray | None]:
-        """``(element, λ (3,))`` of one ``point (2,)``, or ``(-1, None)`` outside the mesh."""
-        x, y = float(point[0]), float(point[1])
-        fi = math.floor((x - self.lower[0]) / self.size[0])
-        fj = math.floor((y - self.lower[1]) / self.size[1])
-        n = self.cells
-        if not (-1 <= fi <= n and -1 <= fj <= n):
-            return -1, None
-        c = min(max(fi, 0), n - 1) * n + min(max(fj, 0), n - 1)
-        e, worst, lam = _best_in(self.maps, self._cand[c], x, y)
-        if e < 0 or worst < -self.tol:
-            return -1, None
-        return int(e), lam
-
-    def locate_points(self, points) -> tuple[np.ndarray, np.ndarray]:
-        """Containing element ``(P,)`` (``-1`` outside) and barycentric weights ``(P, 3)``
-        (zeros outside) of ``points (P, 2)``."""
-        pts = _f64(points).reshape(-1, 2)
-        return _locate_batch(
-            self.maps, self.start, self.items, self.lower, self.size, self.cells, pts, self.tol
-        )
 
 
 def _f64(a) -> np.ndarray:

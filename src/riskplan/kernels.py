@@ -40,6 +40,7 @@ KERNEL_MODULES = (
     "riskplan.robots.batch_kernel",
     "riskplan.collision._kernels",
     "riskplan.geometry2d",
+    "riskplan._triangles",
     "riskplan.deformable.nhkernels",
     "riskplan.deformable.tetfactor",
     "riskplan.deformable.tetlocate",

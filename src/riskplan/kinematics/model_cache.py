@@ -166,6 +166,32 @@ def _default_train_config():
     return TrainConfig()
 
 
+def _train_stage(model_dir, train_path, cfg, say) -> None:
+    """The training stage of :func:`ensure_model`: train into ``model_dir`` (resuming its
+    checkpoint) unless a finished model is there; ``trained.json`` records the data's hash."""
+    from riskplan.io import write_json_atomic
+    from riskplan.kinematics.data import read_point_clouds
+    from riskplan.kinematics.training import train
+
+    trained = model_dir / "trained.json"
+    if not trained.is_file() and _finished_model(model_dir):
+        # killed after training saved its final model: nothing left to train
+        write_json_atomic(trained, {"data_hash": read_point_clouds(train_path).content_hash})
+    if not trained.is_file():
+        data = read_point_clouds(train_path)
+        resume = (model_dir / "checkpoint.pt").is_file()
+        train(
+            data,
+            cfg,
+            out=model_dir,
+            resume=resume,
+            overwrite=not resume,
+            on_epoch=lambda rec: say("training", rec.epoch + 1, cfg.epochs),
+        )
+        write_json_atomic(trained, {"data_hash": data.content_hash})
+    say("training", cfg.epochs, cfg.epochs)
+
+
 def ensure_model(
     robot,
     *,
@@ -181,15 +207,27 @@ def ensure_model(
 
     Parameters
     ----------
-    robot: a :class:`~riskplan.robots.TendonRobot`.
-    preset: data-set preset (``tiny``, ``small``, ``paper``; adapted to the robot by
+    robot : TendonRobot
+        The robot.
+    preset : str
+        Data-set preset (``tiny``, ``small``, ``paper``; adapted to the robot by
         :func:`~riskplan.datasets.protocol.protocol_for_robot`) or a protocol JSON.
-    cache: cache folder (default :func:`cache_root`).
-    seed: seed of the data set and of training.
-    train_config: :class:`~riskplan.kinematics.training.TrainConfig` (default: its defaults,
-        with ``seed``).
-    workers, backend: data-set generation's parallel map (default: this process).
-    progress: ``progress(stage, done, total)`` with ``stage`` in :data:`STAGES`.
+    cache : str or pathlib.Path, optional
+        Cache folder (default :func:`cache_root`).
+    seed : int
+        Seed of the data set and of training.
+    train_config : TrainConfig, optional
+        Training settings (default: their defaults, with ``seed``).
+    workers, backend
+        Data-set generation's parallel map (default: this process).
+    progress : callable, optional
+        ``progress(stage, done, total)``, ``stage`` one of ``STAGES`` (dataset, training,
+        evaluation).
+
+    Returns
+    -------
+    ModelBuild
+        The model, its folder, whether it was cached, timings and the test-split figures.
 
     Raises :class:`InvalidInputError` for a bad preset before anything is written.
     """
@@ -201,7 +239,6 @@ def ensure_model(
     from riskplan.kinematics.data import read_point_clouds
     from riskplan.kinematics.evaluation import evaluate
     from riskplan.kinematics.model_io import load_model
-    from riskplan.kinematics.training import train
 
     check_count(seed, "seed", 0)
     protocol = protocol_for_robot(preset, robot)
@@ -247,23 +284,7 @@ def ensure_model(
     timings["dataset_s"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    trained = model_dir / "trained.json"
-    if not trained.is_file() and _finished_model(model_dir):
-        # killed after training saved its final model: nothing left to train
-        write_json_atomic(trained, {"data_hash": read_point_clouds(paths["train"]).content_hash})
-    if not trained.is_file():
-        data = read_point_clouds(paths["train"])
-        resume = (model_dir / "checkpoint.pt").is_file()
-        train(
-            data,
-            cfg,
-            out=model_dir,
-            resume=resume,
-            overwrite=not resume,
-            on_epoch=lambda rec: say("training", rec.epoch + 1, cfg.epochs),
-        )
-        write_json_atomic(trained, {"data_hash": data.content_hash})
-    say("training", cfg.epochs, cfg.epochs)
+    _train_stage(model_dir, paths["train"], cfg, say)
     timings["training_s"] = time.perf_counter() - t
 
     t = time.perf_counter()

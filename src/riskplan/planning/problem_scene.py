@@ -99,6 +99,20 @@ def problem_environment(problem, *, check_units: bool = True, voxels: str = "aut
     has an opening where the robot enters): a :class:`WallEnvironment` of all surfaces, the
     closed ones solid. A problem with no obstacle the planner uses is refused. Raises
     :class:`InvalidInputError` naming the file and field.
+
+    Parameters
+    ----------
+    problem : Problem
+        The planning problem.
+    check_units : bool
+        Check the meshes' units against the robot's length.
+    voxels : str
+        Voxel policy (:data:`VOXEL_POLICIES`).
+
+    Returns
+    -------
+    Environment or WallEnvironment
+        The scene in the robot frame.
     """
     import trimesh
 
@@ -134,30 +148,7 @@ def problem_environment(problem, *, check_units: bool = True, voxels: str = "aut
         for k, pt in enumerate(np.asarray(problem.points, dtype=np.float64).reshape(-1, 3)):
             parts.append(_icosphere(pt, r))
             names.append(f"point{k}")
-    extra = []
-    if use_voxels:
-        from riskplan.collision.voxels import voxel_environment
-
-        ve = problem.voxel_environment
-        grid = ve.load()
-        if len(grid.occupied) == 0:
-            raise InvalidInputError(
-                f"{where}voxel_environment: the voxel file has no occupied cell"
-            )
-        extra.append(
-            voxel_environment(
-                grid.occupied, grid.limits[:, 0], grid.spacing, transform=ve.voxel_to_robot
-            )
-        )
-        if check_units:
-            from riskplan.collision.geometry import check_metre_scale
-
-            try:
-                check_metre_scale(
-                    extra[-1].vertices, problem.robot.params.backbone.length, source="voxels"
-                )
-            except InvalidInputError as exc:
-                raise InvalidInputError(f"{where}voxel_environment.filename: {exc}") from None
+    extra = [_voxel_part(problem, where, check_units)] if use_voxels else []
     closed = []
     for m in parts:
         try:
@@ -196,6 +187,28 @@ def problem_environment(problem, *, check_units: bool = True, voxels: str = "aut
     return WallEnvironment(
         np.vstack(V), np.vstack(F), np.concatenate(owner), all_names, solid=solid
     )
+
+
+def _voxel_part(problem, where: str, check_units: bool):
+    """The environment of ``problem``'s occupied voxels (robot frame) for
+    :func:`problem_environment`; its vertices' scale checked against the robot's length."""
+    from riskplan.collision.voxels import voxel_environment
+
+    ve = problem.voxel_environment
+    grid = ve.load()
+    if len(grid.occupied) == 0:
+        raise InvalidInputError(f"{where}voxel_environment: the voxel file has no occupied cell")
+    env = voxel_environment(
+        grid.occupied, grid.limits[:, 0], grid.spacing, transform=ve.voxel_to_robot
+    )
+    if check_units:
+        from riskplan.collision.geometry import check_metre_scale
+
+        try:
+            check_metre_scale(env.vertices, problem.robot.params.backbone.length, source="voxels")
+        except InvalidInputError as exc:
+            raise InvalidInputError(f"{where}voxel_environment.filename: {exc}") from None
+    return env
 
 
 def problem_configurations(problem) -> tuple[np.ndarray, np.ndarray]:

@@ -70,6 +70,10 @@ from riskplan.collision.trajectory import trajectory_bound
 from riskplan.errors import InvalidInputError
 from riskplan.gaussian_mixture import as_numpy_mixture
 from riskplan.parallel import BACKENDS, map_tasks, spawn_seeds
+from riskplan.planning._validate_report import (  # noqa: F401 - their home before the split
+    endpoint_warnings,
+    validation_markdown,
+)
 from riskplan.planning.clearance import RESOLUTION, disk_clearance, tube_clearance
 
 log = logging.getLogger(__name__)
@@ -160,7 +164,18 @@ def _check_trajectory(trajectory, robot) -> np.ndarray:
 def default_radius(robot) -> float:
     """Outer body radius of ``robot`` [m]: the ``collision_radius`` its description gives (the
     Kuntz lab's ``tendon_robot.radius``, a robot with no separator disks), else the
-    separator-disk radius of its point-cloud geometry."""
+    separator-disk radius of its point-cloud geometry.
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+
+    Returns
+    -------
+    float
+        The radius [m].
+    """
     r = getattr(robot.params, "collision_radius", None)
     if r is not None:
         return float(r)
@@ -175,9 +190,25 @@ def simulate_executions(robot, trajectory, seeds, *, return_frames: bool = False
     Protocol in the module docstring. A robot with base rotation/retraction takes
     ``(T, n_config)`` configurations (tendons, then rotation, then retraction): the tendons go
     through the play operator as above, the base arrives as commanded (as in the data-set
-    protocol, :func:`riskplan.datasets.generate.simulate_target`). Returns backbone positions
-    ``(B, T, n, 3)`` in the robot's base frame [m], and with ``return_frames`` also the body
-    frames ``(B, T, n, 3, 3)``. Inputs are trusted (validated by :func:`execute_on_robot`).
+    protocol, :func:`riskplan.datasets.generate.simulate_target`). Inputs are trusted
+    (validated by :func:`execute_on_robot`).
+
+    Parameters
+    ----------
+    robot : TendonRobot
+        The robot.
+    trajectory : array_like, shape (T, m) or (T, n_config)
+        Commanded configurations.
+    seeds : sequence of int
+        One seed per execution (``B``).
+    return_frames : bool
+        Also return the body frames.
+
+    Returns
+    -------
+    numpy.ndarray or tuple of numpy.ndarray
+        Backbone positions ``(B, T, n, 3)`` [m], robot base frame; with ``return_frames``
+        also the frames ``(B, T, n, 3, 3)``.
     """
     from riskplan.datasets.generate import to_base_frame
     from riskplan.planning.executions import execution_displacements
@@ -531,53 +562,3 @@ def _execution_columns(prefix: str, rob) -> dict:
     values = (float(t.probability), float(t.low), float(t.high), int(t.hits))
     values += (rob.per_configuration.probability.tolist(),)
     return {f"{prefix}_{k}": v for k, v in zip(keys, values)}
-
-
-def validation_markdown(rows: list[dict]) -> str:
-    """Markdown table of :func:`validation_table` rows (probabilities in %)."""
-    head = (
-        "| trajectory | eq.-10 bound | eq. 10, any-component bound | MC of the MDN mixtures (95 % CI) "
-        "| MC on the robot, tube (95 % CI) | MC on the robot, backbone + disks (95 % CI) |\n"
-        "|---|---|---|---|---|---|"
-    )
-    lines = [head]
-    for r in rows:
-        lines.append(
-            f"| {r['name']} | {100 * r['bound']:.1f} % | {100 * r['bound_union']:.1f} % | {100 * r['mixture_mc']:.1f} % "
-            f"[{100 * r['mixture_low']:.1f}, {100 * r['mixture_high']:.1f}] (n = {r['n_mixture']}) | "
-            f"{100 * r['robot_mc']:.1f} % [{100 * r['robot_low']:.1f}, {100 * r['robot_high']:.1f}] "
-            f"(n = {r['n_robot']}, radius {1000 * r['radius']:.0f} mm) | "
-            + (
-                f"{100 * r['robot_disks_mc']:.1f} % "
-                f"[{100 * r['robot_disks_low']:.1f}, {100 * r['robot_disks_high']:.1f}] |"
-                if r.get("robot_disks_mc") is not None
-                else "– (retracting base: tube only) |"
-            )
-        )
-    return "\n".join(lines) + "\n"
-
-
-def endpoint_warnings(rows: list[dict], threshold: float = 0.5) -> list[str]:
-    """Warnings for :func:`validation_table` rows whose first or last configuration collides
-    on the robot in at least ``threshold`` of the executions.
-
-    Start and goal stay fixed while a trajectory is optimised, so when the robot's body already
-    touches an obstacle there, no trajectory between them can do better on the robot, whatever
-    its eq.-10 bound: the remedy is a start or goal with clearance. Returns one line per
-    affected end point (empty list: nothing to say).
-    """
-    if not 0.0 < float(threshold) <= 1.0:
-        raise InvalidInputError(f"threshold: expected a fraction in (0, 1], got {threshold!r}")
-    out = []
-    for row in rows:
-        per = row.get("robot_per_config") or []
-        for label, k in (("start", 0), ("goal", len(per) - 1)):
-            if per and per[k] >= threshold:
-                out.append(
-                    f"{row['name']}: the {label} configuration itself collides in "
-                    f"{100 * per[k]:.0f} % of {row['n_robot']} robot executions; no trajectory "
-                    f"with this {label} can avoid that (choose one with clearance)"
-                )
-            if len(per) == 1:
-                break
-    return out

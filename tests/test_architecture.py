@@ -22,6 +22,7 @@ CORE = {
     "_validation",
     "threads",
     "parallel",
+    "_workers",
     "budget",
     "parsing",
     "gaussian_mixture",

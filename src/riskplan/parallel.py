@@ -32,12 +32,19 @@ import contextvars
 import logging
 import os
 import socket
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 import numpy as np
 
 from riskplan._validation import check_workers, seed_sequence
+from riskplan._workers import (
+    PARENT_POLL_SECONDS,
+    cpu_seconds,
+    init_worker,
+    run_chunk,
+    terminate_pool,
+)
 from riskplan.errors import BackendUnavailableError, InvalidInputError, require
 
 __all__ = [
@@ -68,12 +75,31 @@ def spawn_seeds(seed: int | None, n: int) -> list[int]:
 
     A seed NumPy cannot use (a negative integer, a float, a string) raises
     :class:`~riskplan.errors.InvalidInputError` naming ``seed``.
+
+    Parameters
+    ----------
+    seed : int or None
+        The root seed.
+    n : int
+        Seeds to derive.
+
+    Returns
+    -------
+    list of int
+        ``n`` seeds in ``[0, 2^63)``.
     """
     ss = seed_sequence(seed)
     return [int(c.generate_state(2, dtype=np.uint64)[0] >> np.uint64(1)) for c in ss.spawn(n)]
 
 
 def default_workers() -> int:
+    """The cores this process may run on (its CPU affinity; the CPU count elsewhere).
+
+    Returns
+    -------
+    int
+        At least 1.
+    """
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - non-Linux
@@ -87,7 +113,22 @@ def effective_workers(backend: str, workers: int | None, ray_address: str | None
     """The worker count a pool runs with: ``workers`` (``None``: one per core), capped at the
     cores available unless the work goes to a Ray cluster (``backend="ray"`` with an
     address), whose size this machine does not bound. More processes than cores only
-    contend (20 processes on 2 cores ran a reproduction 10x slower); the cap is logged."""
+    contend (20 processes on 2 cores ran a reproduction 10x slower); the cap is logged.
+
+    Parameters
+    ----------
+    backend : str
+        The backend the pool runs on.
+    workers : int or None
+        Requested workers.
+    ray_address : str, optional
+        A Ray cluster's address.
+
+    Returns
+    -------
+    int
+        The worker count.
+    """
     n = int(workers or default_workers())
     cores = default_workers()
     if n > cores and not (backend == "ray" and ray_address):
@@ -154,88 +195,6 @@ def chunk_size(n_items: int, backend: str, workers: int | None, *, most: int = 8
     if n_items <= 0:
         return 1
     return max(1, min(most, n_items // chunk_count(n_items, backend, workers)))
-
-
-def _run_chunk(fn: Callable, chunk: Sequence[tuple[int, Any]]) -> list[tuple[int, Any]]:
-    return [(i, fn(item)) for i, item in chunk]
-
-
-PARENT_POLL_SECONDS = 0.25
-
-
-def _parent_gone(parent_pid: int, ppid: int) -> bool:
-    """True when the pool's parent has exited (or our own parent, the forkserver, has)."""
-    if os.getppid() != ppid:
-        return True
-    try:
-        os.kill(parent_pid, 0)
-    except ProcessLookupError:
-        return True
-    except PermissionError:  # pragma: no cover - alive, another user
-        return False
-    try:  # a killed parent that its own parent has not reaped yet is a zombie
-        with open(f"/proc/{parent_pid}/stat", "rb") as fh:
-            return fh.read().rsplit(b")", 1)[1].split()[0] in (b"Z", b"X")
-    except OSError:
-        return False
-
-
-def _cpu_seconds(pid: int) -> float | None:
-    """User + system CPU seconds process ``pid`` has used so far: fields 14 and 15 of Linux's
-    ``/proc/<pid>/stat`` (clock ticks); ``None`` without that file (another system, or the
-    process is gone). A pool's workers are children of the forkserver, not of this process,
-    so ``resource.getrusage(RUSAGE_CHILDREN)`` never counts them."""
-    try:
-        with open(f"/proc/{pid}/stat", "rb") as fh:
-            fields = fh.read().rsplit(b")", 1)[1].split()  # the name (field 2) may hold spaces
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-    except (OSError, IndexError, ValueError):
-        return None
-
-
-def _watch_parent(parent_pid: int, ppid: int) -> None:
-    import time
-
-    while not _parent_gone(parent_pid, ppid):
-        time.sleep(PARENT_POLL_SECONDS)
-    os._exit(1)  # no cleanup to do: results belong to the parent, which is gone
-
-
-def _init_worker(parent_pid: int) -> None:
-    """Worker start: one thread per library, Ctrl-C left to the parent, exit with the parent."""
-    import signal
-    import threading
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    threading.Thread(
-        target=_watch_parent,
-        args=(parent_pid, os.getppid()),
-        daemon=True,
-        name="riskplan-parent-watch",
-    ).start()
-    _limit_threads()
-
-
-def _terminate_pool(pool) -> None:
-    """Cancel what has not started and stop the workers now (their results are not wanted)."""
-    # ProcessPoolExecutor has no public way to stop running tasks; its worker table (taken
-    # before shutdown, which clears it) is stable across CPython 3.9-3.13.
-    procs = list((getattr(pool, "_processes", None) or {}).values())
-    pool.shutdown(wait=False, cancel_futures=True)
-    for proc in procs:
-        try:
-            proc.terminate()
-        except Exception:  # already gone
-            pass
-    for proc in procs:
-        proc.join(timeout=5)
-
-
-def _limit_threads() -> None:
-    # Worker processes share few cores: one BLAS/torch thread each avoids oversubscription.
-    from riskplan.threads import limit_process_threads
-
-    limit_process_threads(1)
 
 
 #: The :class:`TaskPool` whose ``with`` block is running in this context (thread, task).
@@ -310,18 +269,33 @@ class TaskPool:
         if self._executor is not None:
             ex, self._executor = self._executor, None
             self._count_cpu(ex)
-            _terminate_pool(ex)
+            terminate_pool(ex)
 
     def _count_cpu(self, ex) -> None:
         """Add the CPU seconds of executor ``ex``'s workers to ``workers_cpu_s``."""
         for proc in list((getattr(ex, "_processes", None) or {}).values()):
-            cpu = _cpu_seconds(proc.pid)
+            cpu = cpu_seconds(proc.pid)
             self.workers_cpu_s = (
                 None if cpu is None or self.workers_cpu_s is None else (self.workers_cpu_s + cpu)
             )
 
     def accepts(self, backend: str, workers: int | None, ray_address: str | None) -> bool:
-        """Whether a call asking for ``backend`` / ``workers`` / ``ray_address`` can run here."""
+        """Whether a call asking for ``backend`` / ``workers`` / ``ray_address`` can run here.
+
+        Parameters
+        ----------
+        backend : str
+            The backend asked for.
+        workers : int or None
+            The workers asked for (None: any).
+        ray_address : str or None
+            The Ray address asked for (None: any).
+
+        Returns
+        -------
+        bool
+            Whether the call can run on this pool.
+        """
         return (
             not self._closed
             and backend == self.backend
@@ -340,7 +314,7 @@ class TaskPool:
             self._executor = ProcessPoolExecutor(
                 max_workers=self.workers,
                 mp_context=ctx,
-                initializer=_init_worker,
+                initializer=init_worker,
                 initargs=(os.getpid(),),
             )
             self.pools_started += 1
@@ -374,7 +348,18 @@ class TaskPool:
     def imap(
         self, fn: Callable[[Any], Any], items: Iterable[Any], *, chunksize: int | None = None
     ) -> Iterator[tuple[int, Any]]:
-        """Yield ``(index, fn(item))`` as tasks complete (see :func:`imap_tasks`)."""
+        """Yield ``(index, fn(item))`` as tasks complete (see :func:`imap_tasks`).
+
+        Parameters
+        ----------
+        fn, items, chunksize
+            As :func:`imap_tasks`.
+
+        Yields
+        ------
+        tuple
+            ``(index, fn(items[index]))``.
+        """
         if self._closed:
             raise InvalidInputError("TaskPool: used after close()")
         indexed = list(enumerate(items))
@@ -386,7 +371,7 @@ class TaskPool:
 
         if self.backend == "serial" or (self.backend == "local" and self.workers == 1):
             for chunk in chunks:
-                yield from _run_chunk(fn, chunk)
+                yield from run_chunk(fn, chunk)
             return
 
         if self.backend == "local":
@@ -394,7 +379,7 @@ class TaskPool:
 
             pool = self._ensure_executor()
             try:
-                pending = {pool.submit(_run_chunk, fn, c) for c in chunks}
+                pending = {pool.submit(run_chunk, fn, c) for c in chunks}
                 while pending:
                     done, pending = wait(pending, return_when=FIRST_COMPLETED)
                     for fut in done:
@@ -405,7 +390,7 @@ class TaskPool:
             return
 
         ray = self._ensure_ray()
-        remote = ray.remote(_run_chunk)
+        remote = ray.remote(run_chunk)
         refs = [remote.remote(fn, c) for c in chunks]
         while refs:
             done, refs = ray.wait(refs, num_returns=1)
@@ -420,7 +405,18 @@ class TaskPool:
         chunksize: int | None = None,
         on_result: Callable[[int, Any], None] | None = None,
     ) -> list[Any]:
-        """``[fn(item) for item in items]`` in task order (see :func:`map_tasks`)."""
+        """``[fn(item) for item in items]`` in task order (see :func:`map_tasks`).
+
+        Parameters
+        ----------
+        fn, items, chunksize, on_result
+            As :func:`map_tasks`.
+
+        Returns
+        -------
+        list
+            The results in item order.
+        """
         items = list(items)
         out: list[Any] = [None] * len(items)
         for i, r in self.imap(fn, items, chunksize=chunksize):
@@ -431,7 +427,12 @@ class TaskPool:
 
 
 def active_pool() -> TaskPool | None:
-    """The :class:`TaskPool` whose ``with`` block encloses this call, if any."""
+    """The :class:`TaskPool` whose ``with`` block encloses this call, if any.
+
+    Returns
+    -------
+    TaskPool or None
+    """
     return _ACTIVE_POOL.get()
 
 
@@ -454,6 +455,28 @@ def imap_tasks(
     then the pool's). Without it, the enclosing ``with TaskPool(...)`` block's pool is used
     when it accepts the call (:meth:`TaskPool.accepts`), else a pool is started for this
     call and stopped at its end.
+
+    Parameters
+    ----------
+    fn : callable
+        The task, ``fn(item)``.
+    items : iterable
+        The items.
+    backend : {"serial", "local", "ray"}
+        Where the tasks run.
+    workers : int or None
+        Worker processes (:func:`effective_workers`).
+    chunksize : int, optional
+        Items per task (default: four tasks per worker).
+    ray_address : str, optional
+        A Ray cluster's address (``backend="ray"``).
+    pool : TaskPool, optional
+        The pool to run on.
+
+    Yields
+    ------
+    tuple
+        ``(index, fn(items[index]))``.
     """
     if backend not in BACKENDS:
         raise InvalidInputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
@@ -479,7 +502,18 @@ def imap_tasks(
 
 def parse_ray_address(address: str) -> tuple[str, int] | None:
     """``(host, port)`` of a Ray address ``"host:port"`` or ``"ray://host:port"``; ``None`` for
-    ``"auto"`` / ``"local"`` (Ray finds or starts the cluster itself)."""
+    ``"auto"`` / ``"local"`` (Ray finds or starts the cluster itself).
+
+    Parameters
+    ----------
+    address : str
+        The address.
+
+    Returns
+    -------
+    tuple or None
+        ``(host, port)``.
+    """
     if not isinstance(address, str) or not address.strip():
         raise InvalidInputError(
             f"ray_address: expected 'host:port', 'ray://host:port' or 'auto', got {address!r}"
@@ -501,6 +535,13 @@ def check_ray_address(address: str, timeout: float = RAY_CONNECT_TIMEOUT_S) -> N
 
     Raises :class:`~riskplan.errors.BackendUnavailableError` within ``timeout`` seconds when the
     head's port does not accept a TCP connection.
+
+    Parameters
+    ----------
+    address : str
+        The address.
+    timeout : float
+        Seconds to wait for the connection.
     """
     hp = parse_ray_address(address)
     if hp is None:
@@ -529,6 +570,18 @@ def map_tasks(
 
     ``on_result(index, result)`` is called as each task completes (for progress
     bars or incremental saving). ``pool``: see :func:`imap_tasks`.
+
+    Parameters
+    ----------
+    fn, items, backend, workers, chunksize, ray_address, pool
+        As :func:`imap_tasks`.
+    on_result : callable, optional
+        ``on_result(index, result)``.
+
+    Returns
+    -------
+    list
+        The results in item order.
     """
     items = list(items)
     out: list[Any] = [None] * len(items)

@@ -7,7 +7,9 @@ shrink: a name on it that has gained its sections fails the test until it is rem
 
 from __future__ import annotations
 
+import ast
 import inspect
+import textwrap
 from pathlib import Path
 
 import pytest
@@ -38,9 +40,31 @@ def _problems(fn) -> list[str]:
     elif set(params) - documented:
         out.append(f"Parameters lack {sorted(set(params) - documented)}")
     ret = sig.return_annotation
-    if ret not in (inspect.Signature.empty, None, "None") and not (doc["Returns"] or doc["Yields"]):
+    annotated = ret not in (inspect.Signature.empty, None, "None")
+    if (annotated or _returns_a_value(fn)) and not (doc["Returns"] or doc["Yields"]):
         out.append("no Returns")
     return out
+
+
+def _returns_a_value(fn) -> bool:
+    """Whether the body of ``fn`` (not of functions nested in it) returns something other
+    than None or yields: a function without a return annotation still needs ``Returns``."""
+    try:
+        tree = ast.parse(textwrap.dedent(inspect.getsource(inspect.unwrap(fn)))).body[0]
+    except (OSError, TypeError, SyntaxError, IndexError):
+        return False
+    stack = list(ast.iter_child_nodes(tree))
+    while stack:
+        node = stack.pop()
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda, ast.ClassDef)):
+            continue
+        if isinstance(node, (ast.Yield, ast.YieldFrom)):
+            return True
+        if isinstance(node, ast.Return) and node.value is not None:
+            if not (isinstance(node.value, ast.Constant) and node.value.value is None):
+                return True
+        stack.extend(ast.iter_child_nodes(node))
+    return False
 
 
 def _pending() -> set[str]:

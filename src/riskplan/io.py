@@ -257,6 +257,11 @@ def output_lock(path, what: str = "output"):
         The output being written.
     what : str
         What it is, for messages.
+
+    Yields
+    ------
+    pathlib.Path
+        The lock file.
     """
     from riskplan.errors import InvalidInputError, OutputLockedError
 

@@ -115,7 +115,14 @@ class LQGController:
 
     def model(self):
         """``(A, B, H, M, N)`` of the model the filter and LQG-MP use: the linearisation's
-        (paper) or :func:`augmented_model` (``disturbance=True``)."""
+        (paper) or :func:`augmented_model` (``disturbance=True``).
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+            ``A (T, n, n)``, ``B (T, n, q)``, ``H (T, m, n)``, ``M (T, n, n)``, ``N (T, m, m)``
+            with ``n = p`` (``p + q`` with the disturbance state).
+        """
         if self.disturbance:
             return augmented_model(self.lin)
         lin = self.lin

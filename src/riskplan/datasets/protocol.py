@@ -144,6 +144,13 @@ class Protocol:
         return {"train": self.n_train, "test": self.n_test}[_check_split(split)]
 
     def camera_objects(self):
+        """The protocol's cameras as camera objects.
+
+        Returns
+        -------
+        tuple of PinholeCamera
+            One per entry of ``cameras``.
+        """
         from riskplan.robots.cameras import PinholeCamera
 
         return tuple(PinholeCamera.from_dict(c) for c in self.cameras)

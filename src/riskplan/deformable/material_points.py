@@ -140,7 +140,13 @@ class Interpolator:
         return out
 
     def matrix(self):
-        """``scipy.sparse.csr_matrix (P, N)`` with ``matrix @ u[:, k] = interpolate(u)[:, k]``."""
+        """``scipy.sparse.csr_matrix (P, N)`` with ``matrix @ u[:, k] = interpolate(u)[:, k]``.
+
+        Returns
+        -------
+        scipy.sparse.csr_matrix
+            ``(P, N)``.
+        """
         from scipy import sparse
 
         rows = np.repeat(np.arange(self.n_points), self.weights.shape[1])

@@ -175,7 +175,13 @@ class TissueMesh:
         return idx
 
     def to_skfem(self):
-        """The same mesh as a ``skfem.MeshTri``."""
+        """The same mesh as a ``skfem.MeshTri``.
+
+        Returns
+        -------
+        skfem.MeshTri
+            The mesh.
+        """
         skfem = require("skfem", "fem")
         return skfem.MeshTri(
             np.ascontiguousarray(self.nodes.T), np.ascontiguousarray(self.triangles.T)

@@ -261,7 +261,13 @@ class TetMesh:
         return np.flatnonzero(np.all((self.nodes >= lo) & (self.nodes <= hi), axis=1))
 
     def to_skfem(self):
-        """The same mesh as a ``skfem.MeshTet`` (same node and element order)."""
+        """The same mesh as a ``skfem.MeshTet`` (same node and element order).
+
+        Returns
+        -------
+        skfem.MeshTet
+            The mesh.
+        """
         skfem = require("skfem", "fem")
         return skfem.MeshTet(np.ascontiguousarray(self.nodes.T), np.ascontiguousarray(self.tets.T))
 

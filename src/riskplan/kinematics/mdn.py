@@ -188,6 +188,11 @@ class MDN(nn.Module):
         Parameters
         ----------
         x : torch.Tensor, (..., n_inputs)
+
+        Returns
+        -------
+        tuple of torch.Tensor
+            ``logits (..., K)``, ``means (..., K*d)``, ``u_raw (..., K*T)``.
         """
         h = self.trunk(self.features(x))
         return self.weight_head(h), self.mean_head(h), self.chol_head(h)

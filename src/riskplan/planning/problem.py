@@ -172,6 +172,11 @@ class Problem:
         ----------
         q : array_like, (..., n_config)
             Configurations (N of tension, then rad and m).
+
+        Returns
+        -------
+        tuple
+            ``tensions (..., m)``, ``rotation (...)`` or None, ``retraction (...)`` or None.
         """
         return self.robot.split_configuration(q)
 
@@ -182,6 +187,11 @@ class Problem:
         ----------
         q : array_like, (..., n_config)
             Configurations (N of tension, then rad and m).
+
+        Returns
+        -------
+        RodShape
+            The shapes.
         """
         tau, rot, ret = self.split(q)
         if rot is None and ret is None:
@@ -197,6 +207,11 @@ class Problem:
             Refuse a mesh whose bounding box is more than ``MILLIMETRE_FACTOR`` robot lengths across
             (:func:`~riskplan.collision.geometry.check_metre_scale`): its units are most likely
             millimetres where metres are expected.
+
+        Returns
+        -------
+        trimesh.Trimesh or None
+            The meshes concatenated; None without meshes.
         """
         if not self.meshes:
             return None

@@ -160,20 +160,23 @@ class Needle3DScenario(Needle3DMoments, Needle3DFrames, FEMScenario):
 
     @property
     def state_scale(self) -> np.ndarray:
-        """``(12,)``: the target radius for the position and ``κ r`` for each frame
-        component (the frame error that, turned at the needle's curvature, moves the tip by
-        one target radius)."""
+        """``(12,)``: the target radius for the position and ``κ r`` for each frame component
+        (the frame error that, turned at the needle's curvature, moves the tip one radius)."""
         r = self.config.target_radius
         return np.concatenate([np.full(3, r), np.full(9, r * self.config.curvature)])
 
     def mesh_data(self, n_elements: int):
-        """The block and tracked-point layout, cached per grid (element counts that give
-        the same grid share it).
+        """The block and tracked-point layout, cached per grid (counts of one grid share it).
 
         Parameters
         ----------
         n_elements : int
             Requested number of tetrahedra (rounded to a grid by :func:`~riskplan.scenarios.tissue3d.grid_for`).
+
+        Returns
+        -------
+        object
+            ``block`` (a ``TetBlock``) and the tracked points' layout.
         """
         d = self._meshes.get(n_elements)
         if d is not None:  # the hot path: before any import
@@ -509,6 +512,11 @@ class Needle3DScenario(Needle3DMoments, Needle3DFrames, FEMScenario):
             The full state.
         params : SimParams or None
             The simulation parameters (``None``: :attr:`nominal_params`).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(N, 3)`` [m].
         """
         params = params or self.nominal_params
         self._check_state(state, params)
@@ -573,9 +581,8 @@ class Needle3DScenario(Needle3DMoments, Needle3DFrames, FEMScenario):
         return self._tissue_response(mat, params)[1][:3]
 
     def planning_space(self) -> Needle3DSpace:
-        """The RRT's space (:class:`Needle3DSpace`): the block, the needle's curvature, the
-        expected goal point (:meth:`expected_goal_point`), 3 steps per edge and the
-        kinematic steering rule.
+        """The RRT's space (:class:`Needle3DSpace`): the block, the needle's curvature, the expected
+        goal point (:meth:`expected_goal_point`), 3 steps per edge and the kinematic steering.
 
         Returns
         -------

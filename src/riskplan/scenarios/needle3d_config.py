@@ -163,7 +163,13 @@ class Needle3DConfig:
     def bodies(self):
         """``[(kind, centre (3,), A (3, 3))]`` of the obstacles then the target, and the
         sample offsets of each (the material points whose displacement fixes its affine
-        image)."""
+        image).
+
+        Returns
+        -------
+        list of tuple
+            ``(kind, centre (3,), A (3, 3), offsets (s, 3))`` per body.
+        """
         out = []
         for o in self.obstacles:
             if o[0] == "sphere":

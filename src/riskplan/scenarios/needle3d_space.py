@@ -82,6 +82,11 @@ def needle3d_steer(x_from, x_to, bounds, n_steps: int, *, tau: float, kappa: flo
         Needle curvature κ (1 / length).
     duty : bool
         Whether the control carries a duty-cycle fraction ρ (q = 3).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(q,)`` the chosen control.
     """
     p = np.asarray(x_from[:3], dtype=np.float64)
     R = np.asarray(x_from[3:12], dtype=np.float64).reshape(3, 3).T

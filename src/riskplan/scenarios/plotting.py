@@ -50,6 +50,13 @@ def figure_for(sim, size: float = 4.8):
         A 2-D tissue scenario.
     size : float
         Figure side (inches).
+
+    Returns
+    -------
+    fig : matplotlib.figure.Figure
+        The figure.
+    ax : matplotlib.axes.Axes
+        Its axes.
     """
     plt = require("matplotlib.pyplot", "viz")
     fig, ax = plt.subplots(figsize=(size, size))
@@ -77,6 +84,11 @@ def draw_frame(
     title : str, optional
     show_undeformed : bool
         Draw the undeformed outline.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        ``ax``.
     """
     from matplotlib.patches import Polygon
 

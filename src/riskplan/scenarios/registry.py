@@ -29,6 +29,11 @@ def make_scenario(name: str, case: str = "nominal"):
         (:mod:`riskplan.scenarios.files`).
     case : str
         One of :data:`riskplan.scenarios.uncertainty.CASE_NAMES`.
+
+    Returns
+    -------
+    Simulator
+        The scenario, with the case's parameter distribution.
     """
     if name == "needle":
         from riskplan.scenarios.needle import NeedleConfig
@@ -60,6 +65,11 @@ def scenario_from_config(kind: str, config, case: str = "nominal"):
         The kind's configuration (``None``: the default).
     case : str
         An uncertainty case name.
+
+    Returns
+    -------
+    Simulator
+        The scenario.
     """
     from riskplan.scenarios.uncertainty import get_case
 
@@ -99,6 +109,11 @@ def load_scenario_file(path, case: str = "nominal"):
         A scenario TOML file.
     case : str
         An uncertainty case name.
+
+    Returns
+    -------
+    Simulator
+        The scenario.
     """
     from riskplan.scenarios.files import read_scenario_config
 

@@ -348,7 +348,12 @@ class Environment:
         )
 
     def to_trimesh(self):
-        """All obstacles as one ``trimesh.Trimesh`` (3-D only)."""
+        """All obstacles as one mesh (3-D only).
+
+        Returns
+        -------
+        trimesh.Trimesh
+        """
         import trimesh
 
         if self.dim != 3:
@@ -447,30 +452,14 @@ class Environment:
     def _ray_grid(self):
         Vr = np.ascontiguousarray(self.vertices @ self._rotation.T)
         t = Vr[self.faces][:, :, 1:]
-        lo, hi = t.min(axis=1), t.max(axis=1)
-        origin = lo.min(axis=0)
-        ext = np.maximum(hi.max(axis=0) - origin, 1e-12)
         side = int(min(512, max(1, math.ceil(math.sqrt(self.n_faces / 2)))))
-        shape = np.array([side, side], dtype=np.int64)
-        cell = ext / side * (1 + 1e-9)
-        start, items = K.build_grid(
-            np.ascontiguousarray(lo), np.ascontiguousarray(hi), origin, cell, shape
-        )
-        return Vr, origin, cell, shape, start, items
+        return (Vr, *_face_grid(t.min(axis=1), t.max(axis=1), side, 2))
 
     @cached_property
     def _box_grid(self):
         t = self.vertices[self.faces]
-        lo, hi = t.min(axis=1), t.max(axis=1)
-        origin = lo.min(axis=0)
-        ext = np.maximum(hi.max(axis=0) - origin, 1e-12)
         side = int(min(128, max(1, math.ceil((self.n_faces / 2) ** (1 / 3)))))
-        shape = np.full(3, side, dtype=np.int64)
-        cell = ext / side * (1 + 1e-9)
-        start, items = K.build_grid(
-            np.ascontiguousarray(lo), np.ascontiguousarray(hi), origin, cell, shape
-        )
-        return origin, cell, shape, start, items
+        return _face_grid(t.min(axis=1), t.max(axis=1), side, 3)
 
     @cached_property
     def _aabb(self):
@@ -597,3 +586,15 @@ def check_environment(environment, name: str = "environment", dim=None) -> Envir
     if dim is not None and environment.dim != dim:
         raise InvalidInputError(f"{name}: expected {want}, got a {environment.dim}-D one")
     return environment
+
+
+def _face_grid(lo, hi, side: int, dims: int):
+    """The uniform grid (``side`` cells a side) over the faces' boxes ``lo, hi (F, dims)``."""
+    origin = lo.min(axis=0)
+    ext = np.maximum(hi.max(axis=0) - origin, 1e-12)
+    shape = np.full(dims, side, dtype=np.int64)
+    cell = ext / side * (1 + 1e-9)
+    start, items = K.build_grid(
+        np.ascontiguousarray(lo), np.ascontiguousarray(hi), origin, cell, shape
+    )
+    return origin, cell, shape, start, items

@@ -337,8 +337,9 @@ def tip_positions(model, configs) -> np.ndarray:
 
     Parameters
     ----------
-    model : MDNModel
-        The learned kinematics.
+    model : KinematicsModel
+        The kinematics model (:class:`~riskplan.kinematics_model.KinematicsModel`; the
+        learned :class:`~riskplan.kinematics.MDNModel` is one).
     configs : array_like
         ``(N, m)`` configurations.
 
@@ -371,8 +372,8 @@ def goal_from_tip(
     ----------
     roadmap : Roadmap
         Its milestones are candidates and its validity check filters them.
-    model : MDNModel
-        The learned kinematics (:func:`tip_positions`).
+    model : KinematicsModel
+        The kinematics model (:func:`tip_positions`).
     target : array_like
         ``(3,)`` tip position in the base frame.
     tolerance : float

@@ -75,3 +75,28 @@ def test_step_cost_keys():
             f"manipulation_reduced_us_{n}",
         ):
             assert out[key] > 0
+
+
+def test_sfepy_prints_nothing_on_stdout():
+    # `riskplan bench tissue --json` owns stdout: SfePy's import-time notes (e.g. on its
+    # optional jax terms) must not land there. A fresh process, since SfePy prints once.
+    import subprocess
+    import sys
+
+    import pytest
+
+    pytest.importorskip("sfepy")
+    code = (
+        "from riskplan.bench import tissue3d\n"
+        "from riskplan.deformable.tetmesh import tet_block\n"
+        "from riskplan.deformable import Material\n"
+        "import numpy as np\n"
+        "assert tissue3d.sfepy_available()\n"
+        "m = tet_block((1.0, 1.0, 1.0), n_elements=48)\n"
+        "u = tissue3d.sfepy_linear_problem(m, Material(50.0, 0.4), m.face_nodes('z-'),"
+        " np.array([0.0, 0.0, -1.0]))()\n"
+        "assert u.shape == (m.n_nodes, 3)\n"
+    )
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout == ""

@@ -48,20 +48,25 @@ def sfepy_linear_problem(mesh, material, fixed_nodes, body_force):
     """A callable ``solve() -> u (N, 3)``: SfePy's linear elasticity on ``mesh`` (same node
     order) with ``fixed_nodes`` held and a uniform body force ``(3,)``; the problem (domain,
     field, terms, boundary conditions, solvers) is built once here."""
+    import contextlib
     import logging
+    import sys
 
-    from sfepy.base.base import output
+    # SfePy prints notes on stdout while it imports (e.g. that its optional jax terms are
+    # missing); `bench --json` owns stdout, so they go to stderr
+    with contextlib.redirect_stdout(sys.stderr):
+        from sfepy.base.base import output
 
-    output.set_output(quiet=True)
-    logging.getLogger("sfepy").setLevel(logging.ERROR)
-    from sfepy.discrete import Equation, Equations, FieldVariable, Integral, Problem
-    from sfepy.discrete import Material as SMaterial
-    from sfepy.discrete.conditions import Conditions, EssentialBC
-    from sfepy.discrete.fem import FEDomain, Field, Mesh
-    from sfepy.mechanics.matcoefs import stiffness_from_lame
-    from sfepy.solvers.ls import ScipyDirect
-    from sfepy.solvers.nls import Newton
-    from sfepy.terms import Term
+        output.set_output(quiet=True)
+        logging.getLogger("sfepy").setLevel(logging.ERROR)
+        from sfepy.discrete import Equation, Equations, FieldVariable, Integral, Problem
+        from sfepy.discrete import Material as SMaterial
+        from sfepy.discrete.conditions import Conditions, EssentialBC
+        from sfepy.discrete.fem import FEDomain, Field, Mesh
+        from sfepy.mechanics.matcoefs import stiffness_from_lame
+        from sfepy.solvers.ls import ScipyDirect
+        from sfepy.solvers.nls import Newton
+        from sfepy.terms import Term
 
     smesh = Mesh.from_data(
         "tissue",
@@ -98,8 +103,12 @@ def sfepy_linear_problem(mesh, material, fixed_nodes, body_force):
 
 
 def sfepy_available() -> bool:
+    import contextlib
+    import sys
+
     try:
-        import sfepy  # noqa: F401
+        with contextlib.redirect_stdout(sys.stderr):
+            import sfepy  # noqa: F401
     except ImportError:
         return False
     return True

@@ -180,11 +180,7 @@ class TriangleLocator:
         weights : numpy.ndarray
             ``(P, 3)`` barycentric coordinates, zeros outside.
         """
-        pts = _f64(points).reshape(-1, 2)
+        pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
         return _locate_batch(
             self.maps, self.start, self.items, self.lower, self.size, self.cells, pts, self.tol
         )
-
-
-def _f64(a) -> np.ndarray:
-    return np.ascontiguousarray(a, dtype=np.float64)

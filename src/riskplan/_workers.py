@@ -28,10 +28,17 @@ def parent_gone(parent_pid: int, ppid: int) -> bool:
     except PermissionError:  # pragma: no cover - alive, another user
         return False
     try:  # a killed parent that its own parent has not reaped yet is a zombie
-        with open(f"/proc/{parent_pid}/stat", "rb") as fh:
-            return fh.read().rsplit(b")", 1)[1].split()[0] in (b"Z", b"X")
+        return stat_fields(parent_pid)[0] in (b"Z", b"X")
     except OSError:
         return False
+
+
+def stat_fields(pid: int) -> list[bytes]:
+    """The fields of Linux's ``/proc/<pid>/stat`` from the third (the state) on: the name
+    (field 2) may hold spaces and parentheses, so the split starts after its last ``)``.
+    Raises ``OSError`` without that file."""
+    with open(f"/proc/{pid}/stat", "rb") as fh:
+        return fh.read().rsplit(b")", 1)[1].split()
 
 
 def cpu_seconds(pid: int) -> float | None:
@@ -40,8 +47,7 @@ def cpu_seconds(pid: int) -> float | None:
     process is gone). A pool's workers are children of the forkserver, not of this process,
     so ``resource.getrusage(RUSAGE_CHILDREN)`` never counts them."""
     try:
-        with open(f"/proc/{pid}/stat", "rb") as fh:
-            fields = fh.read().rsplit(b")", 1)[1].split()  # the name (field 2) may hold spaces
+        fields = stat_fields(pid)
         return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
     except (OSError, IndexError, ValueError):
         return None
@@ -70,11 +76,16 @@ def init_worker(parent_pid: int) -> None:
     limit_threads()
 
 
+def pool_processes(pool) -> list:
+    """The worker processes of a ``ProcessPoolExecutor`` ``pool`` (empty when it has none)."""
+    # ProcessPoolExecutor has no public way to reach its workers; its worker table is stable
+    # across CPython 3.9-3.13.
+    return list((getattr(pool, "_processes", None) or {}).values())
+
+
 def terminate_pool(pool) -> None:
     """Cancel what has not started and stop the workers now (their results are not wanted)."""
-    # ProcessPoolExecutor has no public way to stop running tasks; its worker table (taken
-    # before shutdown, which clears it) is stable across CPython 3.9-3.13.
-    procs = list((getattr(pool, "_processes", None) or {}).values())
+    procs = pool_processes(pool)  # taken before shutdown, which clears the table
     pool.shutdown(wait=False, cancel_futures=True)
     for proc in procs:
         try:

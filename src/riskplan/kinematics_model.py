@@ -103,6 +103,43 @@ def check_kinematics_model(model, name: str = "model") -> np.ndarray:
     InvalidInputError
         A member missing, malformed limits or a prediction of the wrong kind.
     """
+    lim = _checked_limits(model, name)
+    probe = lim.mean(axis=1)[None]
+    try:
+        gm = as_numpy_mixture(model.predict(probe))
+    except InvalidInputError as e:
+        raise InvalidInputError(f"{name}.predict: at the box's centre, {e}") from e
+    if gm.batch_shape != (1,) or gm.dim != 3:
+        raise InvalidInputError(
+            f"{name}.predict: for configurations (1, {len(lim)}) expected a mixture of batch "
+            f"shape (1,) in 3 dimensions, got batch shape {gm.batch_shape}, dimension {gm.dim}"
+        )
+    return lim
+
+
+def _checked_limits(model, name: str = "model") -> np.ndarray:
+    """The members and limits checks of ``check_kinematics_model``, without its prediction.
+
+    For a caller that needs the limits before handing the model on to a planner that makes the
+    full check (``plan_chest``'s default goal), so that the model is predicted once.
+
+    Parameters
+    ----------
+    model : object
+        The candidate model.
+    name : str
+        The argument's name in error messages.
+
+    Returns
+    -------
+    numpy.ndarray, shape (m, 2)
+        The limits as float64.
+
+    Raises
+    ------
+    InvalidInputError
+        A member missing or malformed limits.
+    """
     missing = [m for m in ("limits", "predict") if not hasattr(model, m)]
     if missing or not callable(model.predict):
         lacks = ", ".join(missing) if missing else "a callable predict"
@@ -119,15 +156,5 @@ def check_kinematics_model(model, name: str = "model") -> np.ndarray:
     if not np.all(np.isfinite(lim)) or np.any(lim[:, 0] > lim[:, 1]):
         raise InvalidInputError(
             f"{name}.limits: expected finite bounds with lower <= upper, got {lim.tolist()}"
-        )
-    probe = lim.mean(axis=1)[None]
-    try:
-        gm = as_numpy_mixture(model.predict(probe))
-    except InvalidInputError as e:
-        raise InvalidInputError(f"{name}.predict: at the box's centre, {e}") from e
-    if gm.batch_shape != (1,) or gm.dim != 3:
-        raise InvalidInputError(
-            f"{name}.predict: for configurations (1, {len(lim)}) expected a mixture of batch "
-            f"shape (1,) in 3 dimensions, got batch shape {gm.batch_shape}, dimension {gm.dim}"
         )
     return lim

@@ -42,6 +42,7 @@ from riskplan._workers import (
     PARENT_POLL_SECONDS,
     cpu_seconds,
     init_worker,
+    pool_processes,
     run_chunk,
     terminate_pool,
 )
@@ -273,11 +274,9 @@ class TaskPool:
 
     def _count_cpu(self, ex) -> None:
         """Add the CPU seconds of executor ``ex``'s workers to ``workers_cpu_s``."""
-        for proc in list((getattr(ex, "_processes", None) or {}).values()):
-            cpu = cpu_seconds(proc.pid)
-            self.workers_cpu_s = (
-                None if cpu is None or self.workers_cpu_s is None else (self.workers_cpu_s + cpu)
-            )
+        for proc in pool_processes(ex):
+            total, cpu = self.workers_cpu_s, cpu_seconds(proc.pid)
+            self.workers_cpu_s = None if cpu is None or total is None else total + cpu
 
     def accepts(self, backend: str, workers: int | None, ray_address: str | None) -> bool:
         """Whether a call asking for ``backend`` / ``workers`` / ``ray_address`` can run here.

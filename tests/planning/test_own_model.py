@@ -183,3 +183,25 @@ def test_an_object_without_the_members_is_refused():
     bad.limits = np.array([[0.01, -0.01], [-0.01, 0.01]])
     with pytest.raises(InvalidInputError, match="limits"):
         plan_chest(bad, _scene(), start=[0.0, 0.0], goal=[0.0, 0.0])
+
+
+def test_plan_chest_probes_the_model_once():
+    # the boundary check predicts at the box's centre; plan_chest hands the model on to
+    # plan_robot, whose check it is: one probe per call, not one per layer
+    class Recording(ConstantCurvatureModel):
+        def __init__(self):
+            super().__init__()
+            self.limits = np.array([[-0.01, 0.006], [-0.01, 0.01]])  # centre (-0.002, 0)
+            self.seen = []
+
+        def predict(self, configurations):
+            self.seen.append(np.array(configurations, dtype=np.float64))
+            return super().predict(configurations)
+
+    model = Recording()
+    centre = model.limits.mean(axis=1)
+    # the straight robot's start is invalid: the call stops after the boundary checks
+    with pytest.raises(InvalidInputError, match=r"start: .* is invalid"):
+        plan_chest(model, _scene(), start=[0.0, 0.0], goal=[-0.008, 0.0])
+    probes = [q for q in model.seen if q.shape == (1, 2) and np.array_equal(q[0], centre)]
+    assert len(probes) == 1

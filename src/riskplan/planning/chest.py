@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from riskplan.errors import InvalidInputError
-from riskplan.kinematics_model import KinematicsModel, check_kinematics_model
+from riskplan.kinematics_model import KinematicsModel, _checked_limits
 from riskplan.planning.bo import OptimiserConfig
 from riskplan.planning.prm import (
     DEFAULT_MILESTONES,
@@ -131,7 +131,9 @@ def plan_chest(
     """
     if risk not in RISKS:  # before the goal: a bad option is named first
         raise InvalidInputError(f"risk: expected one of {RISKS}, got {risk!r}")
-    limits = check_kinematics_model(model)
+    # the members and limits now (the default goal needs m), the prediction in plan_robot's
+    # full check: one probe per call
+    limits = _checked_limits(model)
     if goal is None and goal_tip is None:
         m = len(limits)
         if m != len(DEFAULT_GOAL):

@@ -57,7 +57,7 @@ from riskplan._validation import (
     check_instance,
     check_psd,
 )
-from riskplan.control.lqgmp3d import _goal, _obstacles, binomial_se
+from riskplan.control.lqgmp3d import _goal, _obstacles, binomial_se, draw_until
 from riskplan.control.lqgmp3d_moments import SecondOrderModel
 from riskplan.control.lqgmp_common import LQGMPResult, _factor
 from riskplan.errors import InvalidInputError
@@ -110,40 +110,6 @@ def _material_step(sim, plan, t, dm, du, step, derivs):
             for j in range(q):
                 new += 0.5 * (du[:, k] * du[:, j])[:, None] * (d2K[k, j] @ ms)[None]
     return new
-
-
-def draw_until(run_batch, batch: int, p_se: float | None, max_n: int):
-    """Batches of Monte Carlo draws until the binomial standard error of the hit fraction is
-    at most ``p_se``.
-
-    Parameters
-    ----------
-    run_batch : callable
-        ``run_batch(m) -> (k, extra)``: ``k`` hits among ``m`` new independent draws, and
-        whatever else the batch returns.
-    batch : int
-        Draws per batch (the last one cut to ``max_n``).
-    p_se : float or None
-        Target standard error ``riskplan.control.lqgmp3d.binomial_se`` ``(k, n)``;
-        ``None``: one batch of ``max_n``.
-    max_n : int
-        Cap on the draws.
-
-    Returns
-    -------
-    tuple
-        ``(k, n, extras)``: hits, draws and the batches' ``extra`` in order. Stops after the
-        first batch at which ``binomial_se(k, n) <= p_se`` or ``n = max_n``.
-    """
-    k = n = 0
-    extras = []
-    while True:
-        m = max_n if p_se is None else min(batch, max_n - n)
-        hits, extra = run_batch(m)
-        k, n = k + int(hits), n + m
-        extras.append(extra)
-        if p_se is None or n >= max_n or binomial_se(k, n) <= p_se:
-            return k, n, extras
 
 
 def lqgmp_particles(

@@ -211,24 +211,26 @@ def evaluate_candidates(
 def _evaluate_one(sim, plan, i, s, W, n_samples, kw, kw_se):
     """Candidate ``i`` of :func:`evaluate_candidates` (seed ``s``, ``W`` the actuation
     covariance or ``None``): ``(controller or None, PlanRow)``."""
+    from riskplan.control import linearize
+    from riskplan.control.lqg import lqg_controller
     from riskplan.control.lqgmp3d import lqgmp_3d
     from riskplan.control.lqgmp3d_moments import second_order_model
     from riskplan.control.lqgmp3d_particles import lqgmp_particles
+    from riskplan.parallel import spawn_seeds
     from riskplan.tissue_planning.needle3d_checks import drawn_estimate, repeat_cpu
-    from riskplan.tissue_planning.select import _FAILURES, evaluate_plan
+    from riskplan.tissue_planning.select import _FAILURES
 
     c0 = time.process_time()
     try:
-        ctrl, _ = evaluate_plan(sim, plan, method="truncation", n_samples=n_samples, seed=s, **kw)
+        # evaluate_plan's linearisation and gains (its seed split), without its estimate
+        lin = linearize(sim, plan, n_samples=n_samples, seed=spawn_seeds(s, 2)[0])
+        ctrl = lqg_controller(lin)
+        c_lin = time.process_time() - c0
+        c0 = time.process_time()
+        got = {"linear": lqgmp_3d(sim, plan, ctrl, method="truncation", seed=s, **kw_se)}
     except _FAILURES as exc:
         log.warning("needle3d: candidate %d not linearised (%s)", i, exc)
         return None, PlanRow(i, plan.n_steps, dict.fromkeys(ESTIMATORS, 0.0), {})
-    c_lin = time.process_time() - c0
-    c0 = time.process_time()
-    lqgmp_3d(sim, plan, ctrl, method="truncation", seed=s, **kw)  # evaluate_plan's share
-    c_lin -= time.process_time() - c0
-    c0 = time.process_time()
-    got = {"linear": lqgmp_3d(sim, plan, ctrl, method="truncation", seed=s, **kw_se)}
     cpu = {"linear": time.process_time() - c0}
     c0 = time.process_time()
     mo = None if W is None else second_order_model(sim, plan, ctrl, W)

@@ -108,7 +108,7 @@ def measure_structured(sim, plan, row, *, n: int, seed=0):
         ``closed_cpu_s`` (empty for a case it does not apply to).
     """
     from riskplan.collision import binomial_interval
-    from riskplan.control.lqg import execute, lqg_controller
+    from riskplan.control.lqg import lqg_controller
     from riskplan.control.lqgmp3d import lqgmp_3d
     from riskplan.control.lqgmp3d_moments import second_order_model, structured_linearization
     from riskplan.parallel import spawn_seeds
@@ -123,11 +123,8 @@ def measure_structured(sim, plan, row, *, n: int, seed=0):
         sim, plan, ctrl, method="truncation", moments=second_order_model(sim, plan, ctrl, W)
     )
     c2 = time.process_time()
-    k = 0
-    for s in spawn_seeds(seed, n):
-        gen = np.random.default_rng(s)
-        ex = execute(sim, plan, ctrl, sim.sample_params(gen), seed=gen, keep_states=False)
-        k += ex.outcome == "success"
+    runs = execute_draws((sim, plan, ctrl, spawn_seeds(seed, n), 0))["closed"]
+    k = sum(outcome == "success" for outcome, _, _ in runs)
     lo, hi = binomial_interval(k, n)
     row.structured = dict(
         prediction=pred.p_success,
